@@ -1,0 +1,441 @@
+"""Figures of a plan: robot shapes and obstacles, the friction bound along the path, joint
+trajectories.
+
+Matplotlib with the Agg backend (no window, no ``plt.show``). Every function writes one PNG
+atomically (a temporary file in the same folder, then ``os.replace``), so an interrupted run never
+leaves a half-written figure. Inputs are in SI units (m, rad); figures show mm and degrees, with
+units in the axis labels.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
+
+from .io.atomic import atomic_path  # noqa: E402
+from .trajectory import ROTATION, TRANSLATION, Trajectory  # noqa: E402
+
+__all__ = ["plot_robot_shapes", "plot_bound_along_path", "plot_joint_trajectories", "plot_xy"]
+
+M_TO_MM = 1e3
+DPI = 120
+# Background colour of each motion phase in time and path plots.
+PHASE_COLORS = {ROTATION: "tab:blue", TRANSLATION: "tab:orange"}
+PHASE_ALPHA = 0.12
+# Resolution of spheres and capsule caps (points per great circle).
+SPHERE_RESOLUTION = 16
+
+
+# ---------------------------------------------------------------------------------- robot shapes
+def plot_robot_shapes(path, shapes: Sequence, obstacles: Sequence = (), friction_tips: Sequence = (),
+                      title: str = "", *, labels: Sequence[str] | None = None) -> Path:
+    """3-D robot centerlines at the waypoints, obstacles and the tips of the friction solutions.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output PNG.
+    shapes : sequence of array-like, shape (K_j, 3)
+        Centerline of the robot at each waypoint [m]; drawn in mm, coloured from first to last.
+    obstacles : sequence of obstacles
+        Dataclasses of :mod:`ctrplan.planning.collision` or dicts with a ``type`` key:
+        ``sphere`` (``center_m``, ``radius_m``), ``capsule`` (``a_m``, ``b_m``, ``radius_m``),
+        ``box`` (``center_m``, ``size_m``, ``rpy_rad``), ``mesh`` (either ``vertices`` shape (V, 3)
+        [m] and ``faces`` shape (F, 3) of int, or a mesh file as in
+        :class:`ctrplan.planning.collision.MeshObstacle`).
+    friction_tips : sequence of array-like, shape (m_j, 3)
+        Tip positions of the friction-model solutions at waypoint j [m]; drawn as markers.
+    title : str
+    labels : sequence of str, optional
+        Legend entry per shape (default: only first and last are labelled ``waypoint k``).
+
+    Returns
+    -------
+    Path
+        The written file.
+
+    Raises
+    ------
+    ValueError
+        A shape or tip array with the wrong shape, or an unknown obstacle type.
+    """
+    fig = plt.figure(figsize=(7.5, 6.5))
+    ax = fig.add_subplot(projection="3d")
+    pts_mm = []
+    colors = plt.cm.viridis(np.linspace(0.0, 1.0, max(len(shapes), 1)))
+    for j, shape in enumerate(shapes):
+        xyz = _points(shape, f"shapes[{j}]") * M_TO_MM
+        pts_mm.append(xyz)
+        if labels is not None:
+            label = labels[j]
+        else:
+            label = f"waypoint {j}" if j in (0, len(shapes) - 1) else None
+        ax.plot(xyz[:, 0], xyz[:, 1], xyz[:, 2], color=colors[j], lw=1.5, label=label)
+    for j, tips in enumerate(friction_tips):
+        xyz = _points(tips, f"friction_tips[{j}]") * M_TO_MM
+        if xyz.size == 0:
+            continue
+        pts_mm.append(xyz)
+        ax.scatter(xyz[:, 0], xyz[:, 1], xyz[:, 2], marker="x", s=18, color="tab:red",
+                   label="friction-model tips" if j == 0 else None)
+    for k, obstacle in enumerate(obstacles):
+        pts_mm.append(_draw_obstacle(ax, obstacle, k) * M_TO_MM)
+    _equal_3d(ax, pts_mm)
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_zlabel("z [mm]")
+    if title:
+        ax.set_title(title)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper left", fontsize="small")
+    return _save(fig, path)
+
+
+def _points(values, label: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=float)
+    if arr.size == 0:
+        return arr.reshape(0, 3)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{label} needs shape (N, 3) [m], got {arr.shape}")
+    return arr
+
+
+def _field(obj, *names):
+    """First present field among ``names`` of a dict or a dataclass (None if none)."""
+    for name in names:
+        if isinstance(obj, dict):
+            if name in obj:
+                return obj[name]
+        elif hasattr(obj, name):
+            return getattr(obj, name)
+    return None
+
+
+def _obstacle_type(obj) -> str:
+    kind = _field(obj, "type", "kind")
+    if kind is None:
+        name = type(obj).__name__.lower()
+        kind = next((k for k in _OBSTACLE_DRAWERS if k in name), name)
+    return str(kind).lower()
+
+
+def _draw_obstacle(ax, obstacle, k: int) -> np.ndarray:
+    """Draw one obstacle; return points of its extent [m], shape (N, 3)."""
+    kind = _obstacle_type(obstacle)
+    if kind not in _OBSTACLE_DRAWERS:
+        raise ValueError(f"obstacle {k}: unknown type {kind!r} (known: {', '.join(_OBSTACLE_DRAWERS)})")
+    return _OBSTACLE_DRAWERS[kind](ax, obstacle)
+
+
+def _surface(ax, x, y, z):
+    ax.plot_surface(x * M_TO_MM, y * M_TO_MM, z * M_TO_MM, color="0.55", alpha=0.35, linewidth=0)
+    return np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+
+
+def _draw_sphere(ax, obs) -> np.ndarray:
+    c = np.asarray(_field(obs, "center_m"), dtype=float)
+    r = float(_field(obs, "radius_m"))
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, SPHERE_RESOLUTION),
+                       np.linspace(0, np.pi, SPHERE_RESOLUTION // 2 + 1))
+    return _surface(ax, c[0] + r * np.cos(u) * np.sin(v), c[1] + r * np.sin(u) * np.sin(v),
+                    c[2] + r * np.cos(v))
+
+
+def _draw_capsule(ax, obs) -> np.ndarray:
+    a = np.asarray(_field(obs, "a_m"), dtype=float)
+    b = np.asarray(_field(obs, "b_m"), dtype=float)
+    r = float(_field(obs, "radius_m"))
+    length = float(np.linalg.norm(b - a))
+    rot = _frame_along(b - a)
+    # Profile of the capsule in its own frame (axis z from 0 to length): cap, cylinder, cap.
+    th = np.linspace(0.0, np.pi / 2, SPHERE_RESOLUTION // 4 + 1)
+    z_prof = np.concatenate([-r * np.cos(th), length + r * np.sin(th)])
+    rho = np.concatenate([r * np.sin(th), r * np.cos(th)])
+    u = np.linspace(0, 2 * np.pi, SPHERE_RESOLUTION)
+    local = np.stack([rho[:, None] * np.cos(u), rho[:, None] * np.sin(u),
+                      np.broadcast_to(z_prof[:, None], (z_prof.size, u.size))], axis=-1)
+    world = local @ rot.T + a
+    return _surface(ax, world[..., 0], world[..., 1], world[..., 2])
+
+
+def _frame_along(axis) -> np.ndarray:
+    """Rotation matrix, shape (3, 3), whose third column is the unit vector along ``axis``
+    (identity for a zero axis)."""
+    norm = float(np.linalg.norm(axis))
+    if norm == 0.0:
+        return np.eye(3)
+    z = np.asarray(axis, dtype=float) / norm
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def _draw_box(ax, obs) -> np.ndarray:
+    from .planning.collision import rotation_from_rpy
+
+    c = np.asarray(_field(obs, "center_m"), dtype=float)
+    size = np.asarray(_field(obs, "size_m"), dtype=float)
+    rpy = _field(obs, "rpy_rad")
+    rot = rotation_from_rpy((0.0, 0.0, 0.0) if rpy is None else rpy)
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+    verts = (corners * size) @ rot.T + c
+    faces = [[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4], [1, 3, 7, 5]]
+    _polys(ax, verts, faces)
+    return verts
+
+
+def _draw_mesh(ax, obs) -> np.ndarray:
+    verts = _field(obs, "vertices", "vertices_m")
+    if verts is not None:
+        verts = np.asarray(verts, dtype=float)
+        faces = np.asarray(_field(obs, "faces"), dtype=int)
+    else:
+        import trimesh
+
+        from .planning.collision import rotation_from_rpy
+
+        mesh = trimesh.load(str(_field(obs, "path")), force="mesh")
+        scale = _field(obs, "scale")
+        rpy = _field(obs, "rpy_rad")
+        shift = _field(obs, "translation_m")
+        # Same placement as MeshObstacle: R(rpy) @ (scale * p_file) + translation.
+        verts = (1.0 if scale is None else float(scale)) * np.asarray(mesh.vertices, dtype=float)
+        verts = verts @ rotation_from_rpy((0.0, 0.0, 0.0) if rpy is None else rpy).T
+        verts = verts + (np.zeros(3) if shift is None else np.asarray(shift, dtype=float))
+        faces = np.asarray(mesh.faces, dtype=int)
+    if verts.ndim != 2 or verts.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
+        raise ValueError(f"mesh obstacle needs vertices (V, 3) and faces (F, 3), got {verts.shape} "
+                         f"and {faces.shape}")
+    _polys(ax, verts, faces)
+    return verts
+
+
+def _polys(ax, verts, faces):
+    polys = [verts[list(f)] * M_TO_MM for f in faces]
+    ax.add_collection3d(Poly3DCollection(polys, facecolor="0.55", edgecolor="0.35", alpha=0.3,
+                                         linewidths=0.3))
+
+
+_OBSTACLE_DRAWERS = {"sphere": _draw_sphere, "capsule": _draw_capsule, "box": _draw_box,
+                     "mesh": _draw_mesh}
+
+
+def _equal_3d(ax, pts_mm):
+    pts = np.concatenate([p.reshape(-1, 3) for p in pts_mm]) if pts_mm else np.zeros((0, 3))
+    if pts.shape[0] == 0:
+        return
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    mid, half = 0.5 * (lo + hi), 0.5 * max(float(np.max(hi - lo)), 1e-3)
+    ax.set_xlim(mid[0] - half, mid[0] + half)
+    ax.set_ylim(mid[1] - half, mid[1] + half)
+    ax.set_zlim(mid[2] - half, mid[2] + half)
+    ax.set_box_aspect((1, 1, 1))
+
+
+# ---------------------------------------------------------------------------------- bound
+def plot_bound_along_path(path, s_path: Sequence, bound_mm: Sequence, translation_last_mm: Sequence,
+                          motions: Sequence[Sequence[str]],
+                          labels: Sequence[str] = ("bound-aware plan", "bound-blind plan"), *,
+                          threshold_mm: float | None = None, s_label: str = "path parameter s [-]",
+                          title: str = "") -> Path:
+    """Friction-induced tip error bound along one or more plans, side by side.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output PNG.
+    s_path : sequence of array-like, shape (K_j,)
+        Path parameter of each waypoint of plan j (e.g. normalized arc length) [-, or see
+        ``s_label``].
+    bound_mm : sequence of array-like, shape (K_j,)
+        Tip error bound b(q) at each waypoint of plan j [mm] (friction model, Section III of
+        Ha, Fagogenis & Dupont 2019).
+    translation_last_mm : sequence of array-like, shape (K_j,)
+        Bound at each waypoint of plan j when reached by a translation last [mm]; NaN where not
+        available.
+    motions : sequence of sequence of str, length K_j
+        Motion that reaches each waypoint (``"start"``, ``"rotation"``, ``"translation"``); the
+        interval before waypoint k is shaded by ``motions[j][k]``.
+    labels : sequence of str
+        Title of each panel.
+    threshold_mm : float, optional
+        Allowed bound, drawn as a horizontal line [mm].
+    s_label : str
+        Label of the horizontal axis, with its unit.
+    title : str
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        If the arrays of one plan have different lengths, or the number of plans differs between
+        arguments.
+    """
+    if len(s_path) and np.ndim(s_path[0]) == 0:  # a single plan given as flat arrays
+        s_path, bound_mm, translation_last_mm = [s_path], [bound_mm], [translation_last_mm]
+        motions = [motions]
+    n_plans = len(s_path)
+    if not (len(bound_mm) == len(translation_last_mm) == len(motions) == n_plans) or n_plans == 0:
+        raise ValueError(f"need the same number (>= 1) of plans in s_path, bound_mm, translation_last_mm "
+                         f"and motions, got {len(s_path)}, {len(bound_mm)}, {len(translation_last_mm)}, "
+                         f"{len(motions)}")
+    fig, axes = plt.subplots(1, n_plans, figsize=(5.5 * n_plans, 4.0), sharey=True, squeeze=False)
+    for j, ax in enumerate(axes[0]):
+        s = np.asarray(s_path[j], dtype=float)
+        b = np.asarray(bound_mm[j], dtype=float)
+        tl = np.asarray(translation_last_mm[j], dtype=float)
+        if not (b.shape == tl.shape == s.shape and len(motions[j]) == s.size):
+            raise ValueError(f"plan {j}: s_path, bound_mm, translation_last_mm and motions need equal "
+                             f"lengths, got {s.shape}, {b.shape}, {tl.shape}, {len(motions[j])}")
+        _shade_phases(ax, [(s[k - 1], s[k], motions[j][k]) for k in range(1, s.size)])
+        ax.plot(s, b, "o-", ms=3, color="tab:red", label="friction bound")
+        if np.any(np.isfinite(tl)):
+            ax.plot(s, tl, "s--", ms=3, color="tab:purple", label="translation-last bound")
+        if threshold_mm is not None:
+            ax.axhline(threshold_mm, color="k", ls=":", lw=1, label=f"limit {threshold_mm:.3g} mm")
+        peak = np.nanmax(b) if np.any(np.isfinite(b)) else float("nan")
+        ax.set_title(f"{labels[j] if j < len(labels) else f'plan {j}'} (max {peak:.3g} mm)")
+        ax.set_xlabel(s_label)
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("tip error bound [mm]")
+    handles = {}  # one legend entry per label over all panels
+    for ax in axes[0]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(lab, h)
+    axes[0, -1].legend(handles=list(handles.values()) + _phase_handles(), fontsize="small")
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path)
+
+
+# ---------------------------------------------------------------------------------- trajectory
+def plot_joint_trajectories(path, traj: Trajectory, joint_names: Sequence[str] | None = None,
+                            joint_kinds: Sequence[str] | None = None, *, title: str = "") -> Path:
+    """Position, velocity and acceleration of every joint over time, motion phases shaded.
+
+    Rotations are shown in degrees (deg, deg/s, deg/s^2), translations in millimetres
+    (mm, mm/s, mm/s^2).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output PNG.
+    traj : ctrplan.trajectory.Trajectory
+        Arrays ``t`` (T,) [s] and ``position``, ``velocity``, ``acceleration`` (T, n_joints)
+        [rad or m, per s, per s^2].
+    joint_names, joint_kinds : sequence of str, length n_joints, optional
+        Default: ``traj.joint_names`` and ``traj.joint_kinds``.
+    title : str
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        If names or kinds do not match the number of joints.
+    """
+    n = traj.position.shape[1]
+    names = list(traj.joint_names if joint_names is None else joint_names)
+    kinds = list(traj.joint_kinds if joint_kinds is None else joint_kinds)
+    if len(names) != n or len(kinds) != n:
+        raise ValueError(f"need {n} joint names and kinds, got {len(names)} and {len(kinds)}")
+    fig, axes = plt.subplots(n, 3, figsize=(12, 2.2 * n + 0.8), sharex=True, squeeze=False)
+    phases = [(s.t_start, s.t_end, s.motion) for s in traj.segments]
+    for i in range(n):
+        scale, unit = (np.degrees(1.0), "deg") if kinds[i] == ROTATION else (M_TO_MM, "mm")
+        for col, (values, suffix) in enumerate(((traj.position, ""), (traj.velocity, "/s"),
+                                                (traj.acceleration, "/s^2"))):
+            ax = axes[i, col]
+            _shade_phases(ax, phases)
+            ax.plot(traj.t, values[:, i] * scale, color="k", lw=1.0)
+            ax.set_ylabel(f"{names[i]} [{unit}{suffix}]")
+            ax.grid(alpha=0.3)
+    for col, label in enumerate(("position", "velocity", "acceleration")):
+        axes[0, col].set_title(label)
+        axes[-1, col].set_xlabel("time t [s]")
+    axes[0, -1].legend(handles=_phase_handles(), fontsize="small", loc="upper right")
+    fig.suptitle(title or f"joint trajectories, duration {traj.duration:.3f} s")
+    return _save(fig, path)
+
+
+def plot_xy(path, x, ys, *, xlabel: str, ylabel: str, labels: Sequence[str] | None = None,
+            title: str = "", style: str = "-") -> Path:
+    """Generic line plot of one or more curves against a common x.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output PNG.
+    x : array-like, shape (N,)
+        In the unit named by ``xlabel``.
+    ys : array-like, shape (N,) or (M, N)
+        One or M curves, in the unit named by ``ylabel``.
+    xlabel, ylabel : str
+        Axis labels with units, e.g. ``"time t [s]"``.
+    labels : sequence of str, length M, optional
+    title, style : str
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        If a curve's length differs from ``x``.
+    """
+    x = np.asarray(x, dtype=float)
+    ys = np.atleast_2d(np.asarray(ys, dtype=float))
+    if ys.shape[1] != x.size:
+        raise ValueError(f"ys needs shape ({x.size},) or (M, {x.size}), got {ys.shape}")
+    fig, ax = plt.subplots(figsize=(6.5, 4.0))
+    for m, y in enumerate(ys):
+        ax.plot(x, y, style, label=None if labels is None else labels[m])
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    if labels is not None:
+        ax.legend(fontsize="small")
+    if title:
+        ax.set_title(title)
+    return _save(fig, path)
+
+
+# ---------------------------------------------------------------------------------- helpers
+def _shade_phases(ax, phases):
+    for start, end, motion in phases:
+        if motion in PHASE_COLORS and end > start:
+            ax.axvspan(start, end, color=PHASE_COLORS[motion], alpha=PHASE_ALPHA, lw=0)
+
+
+def _phase_handles():
+    from matplotlib.patches import Patch
+
+    return [Patch(color=c, alpha=3 * PHASE_ALPHA, label=f"{m} phase") for m, c in PHASE_COLORS.items()]
+
+
+def _save(fig, path) -> Path:
+    """Write ``fig`` as PNG atomically and close it."""
+    path = Path(path)
+    try:
+        fig.tight_layout()
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", dpi=DPI)
+    finally:
+        plt.close(fig)
+    return path
+

@@ -1,0 +1,253 @@
+"""Output files of a plan: ``path.csv``, ``trajectory.csv``, ``summary.json`` and figures, plus a
+short human-readable summary.
+
+Every file is written atomically (:mod:`ctrplan.io.atomic`: temporary file in the same folder, then
+``os.replace``), so an interrupted run leaves either the complete file or none. ``summary.json`` is
+written last: its presence means every other output of the run is complete.
+
+Column schema (SI units, full float precision):
+
+``path.csv``
+    ``waypoint`` (0-based index), ``motion`` (``start``, ``rotation``, ``translation``), one column
+    per joint (``alpha_i`` [rad], ``beta_i`` [m]), ``tip_x``, ``tip_y``, ``tip_z`` [m],
+    ``bound_position_m`` [m], ``bound_angle_rad`` [rad], ``bound_kind`` (``friction`` or
+    ``translation_last``).
+``trajectory.csv``
+    ``t`` [s], then per joint ``<name>`` [rad or m], ``<name>_vel`` [per s], ``<name>_acc``
+    [per s^2].
+``summary.json``
+    Flat or nested dict; numeric keys carry their unit as a suffix (``max_bound_mm``,
+    ``duration_s``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from .io.atomic import atomic_write_text
+from .trajectory import START, Trajectory
+
+__all__ = ["PATH_FILE", "TRAJECTORY_FILE", "SUMMARY_FILE", "BOUND_KINDS", "path_columns",
+           "write_plan_outputs", "format_summary"]
+
+PATH_FILE = "path.csv"
+TRAJECTORY_FILE = "trajectory.csv"
+SUMMARY_FILE = "summary.json"
+BOUND_KINDS = ("friction", "translation_last")
+_MOTIONS = (START, "rotation", "translation")
+_TIP_COLUMNS = ("tip_x", "tip_y", "tip_z")
+_BOUND_COLUMNS = ("bound_position_m", "bound_angle_rad", "bound_kind")
+
+# Unit suffixes of summary keys -> (unit shown, factor from the key's unit to the shown unit).
+# Longest suffix first; lengths in m are shown in mm and angles in rad in degrees.
+_SUMMARY_UNITS = (
+    ("_rad_s", "deg/s", math.degrees(1.0)),
+    ("_m_s", "mm/s", 1e3),
+    ("_mm", "mm", 1.0),
+    ("_deg", "deg", 1.0),
+    ("_rad", "deg", math.degrees(1.0)),
+    ("_hz", "Hz", 1.0),
+    ("_ms", "ms", 1.0),
+    ("_m", "mm", 1e3),
+    ("_s", "s", 1.0),
+)
+
+
+def path_columns(joint_names: Sequence[str]) -> list[str]:
+    """Columns of ``path.csv`` for the given joints, in order."""
+    return ["waypoint", "motion", *joint_names, *_TIP_COLUMNS, *_BOUND_COLUMNS]
+
+
+def write_plan_outputs(out_dir, ordered_path_rows: Sequence[Mapping[str, Any]],
+                       trajectory: Trajectory | None, summary: Mapping[str, Any], *,
+                       joint_names: Sequence[str] | None = None,
+                       figures: Mapping[str, Callable[[Path], Any]] | None = None) -> dict[str, Path]:
+    """Write ``path.csv``, ``trajectory.csv``, the figures and ``summary.json`` into ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Output folder (created if missing).
+    ordered_path_rows : sequence of mapping
+        One per waypoint, in path order, with keys ``motion``; the joint values, either ``q``
+        (array-like, shape (n_joints,), [rad or m], in the order of ``joint_names``) or one key per
+        joint name; the tip position, either ``tip`` (shape (3,) [m]) or ``tip_x``, ``tip_y``,
+        ``tip_z`` [m]; ``bound_position_m`` [m]; ``bound_angle_rad`` [rad]; ``bound_kind``
+        (``"friction"`` or ``"translation_last"``). An optional ``waypoint`` index defaults to the
+        row number. Other keys are ignored.
+    trajectory : Trajectory or None
+        Written to ``trajectory.csv`` (skipped when None).
+    summary : mapping
+        JSON-serializable after converting numpy scalars and arrays; non-finite numbers are
+        written as ``null``. ``duration_s``, ``n_waypoints`` and ``n_segments`` are added from the
+        trajectory when missing.
+    joint_names : sequence of str, optional
+        Default ``trajectory.joint_names``; required without a trajectory.
+    figures : mapping of str to callable, optional
+        File name -> function that writes that figure to the path it is given (e.g. a partial
+        of :func:`ctrplan.plots.plot_joint_trajectories`); called with ``out_dir / name``.
+
+    Returns
+    -------
+    dict of str to Path
+        Written files by name.
+
+    Raises
+    ------
+    ValueError
+        A row lacks a key or has a bad motion or bound kind (naming the row and the key), or the
+        joint names are missing.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if joint_names is None:
+        if trajectory is None:
+            raise ValueError("joint_names is required when no trajectory is given")
+        joint_names = trajectory.joint_names
+    names = list(joint_names)
+    written: dict[str, Path] = {}
+
+    atomic_write_text(out / PATH_FILE, _path_csv(ordered_path_rows, names))
+    written[PATH_FILE] = out / PATH_FILE
+    if trajectory is not None:
+        atomic_write_text(out / TRAJECTORY_FILE, _trajectory_csv(trajectory))
+        written[TRAJECTORY_FILE] = out / TRAJECTORY_FILE
+    for name, draw in (figures or {}).items():
+        draw(out / name)
+        written[name] = out / name
+
+    data = dict(summary)
+    if trajectory is not None:
+        data.setdefault("duration_s", trajectory.duration)
+        data.setdefault("n_waypoints", int(trajectory.waypoints.shape[0]))
+        data.setdefault("n_segments", len(trajectory.segments))
+    atomic_write_text(out / SUMMARY_FILE, json.dumps(_jsonable(data), indent=2) + "\n")
+    written[SUMMARY_FILE] = out / SUMMARY_FILE
+    return written
+
+
+def format_summary(summary: Mapping[str, Any], indent: int = 0) -> str:
+    """Human-readable summary, one ``label: value unit`` line per key.
+
+    Keys ending in a unit suffix are converted for reading: ``_m`` is shown in mm, ``_rad`` in
+    degrees, ``_mm``, ``_deg``, ``_s``, ``_ms``, ``_hz`` as they are (e.g. ``max_bound_m = 0.0012``
+    prints ``max bound: 1.2 mm``). Nested mappings are indented.
+
+    Parameters
+    ----------
+    summary : mapping
+    indent : int
+        Spaces before each line.
+
+    Returns
+    -------
+    str
+    """
+    pad = " " * indent
+    lines = []
+    for key, value in summary.items():
+        if isinstance(value, Mapping):
+            lines.append(f"{pad}{key}:")
+            lines.append(format_summary(value, indent + 2))
+            continue
+        label, unit, factor = _unit_of(str(key))
+        lines.append(f"{pad}{label}: {_format_value(value, factor)}{' ' + unit if unit else ''}")
+    return "\n".join(line for line in lines if line)
+
+
+# ---------------------------------------------------------------------------------- helpers
+def _path_csv(rows: Sequence[Mapping[str, Any]], names: list[str]) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(path_columns(names))
+    for r, row in enumerate(rows):
+        motion = _require(row, "motion", r)
+        if motion not in _MOTIONS:
+            raise ValueError(f"path row {r}: motion must be one of {_MOTIONS}, got {motion!r}")
+        if "q" in row:
+            q = np.asarray(row["q"], dtype=float).reshape(-1)
+            if q.size != len(names):
+                raise ValueError(f"path row {r}: q needs {len(names)} values ({', '.join(names)}), got {q.size}")
+        else:
+            q = np.array([_require(row, nm, r) for nm in names], dtype=float)
+        if "tip" in row:
+            tip = np.asarray(row["tip"], dtype=float).reshape(-1)
+            if tip.size != 3:
+                raise ValueError(f"path row {r}: tip needs 3 values [m], got {tip.size}")
+        else:
+            tip = np.array([_require(row, c, r) for c in _TIP_COLUMNS], dtype=float)
+        kind = _require(row, "bound_kind", r)
+        if kind not in BOUND_KINDS:
+            raise ValueError(f"path row {r}: bound_kind must be one of {BOUND_KINDS}, got {kind!r}")
+        writer.writerow([int(row.get("waypoint", r)), motion, *map(_num, q), *map(_num, tip),
+                         _num(_require(row, "bound_position_m", r)),
+                         _num(_require(row, "bound_angle_rad", r)), kind])
+    return buf.getvalue()
+
+
+def _trajectory_csv(traj: Trajectory) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    header = ["t"]
+    for name in traj.joint_names:
+        header += [name, f"{name}_vel", f"{name}_acc"]
+    writer.writerow(header)
+    # Columns per joint interleaved: position, velocity, acceleration.
+    table = np.stack([traj.position, traj.velocity, traj.acceleration], axis=2).reshape(len(traj.t), -1)
+    for tk, values in zip(traj.t, table):
+        writer.writerow([_num(tk), *map(_num, values)])
+    return buf.getvalue()
+
+
+def _require(row: Mapping[str, Any], key: str, r: int):
+    if key not in row:
+        raise ValueError(f"path row {r}: missing key {key!r}")
+    return row[key]
+
+
+def _num(x) -> str:
+    """Shortest text that reads back to the same float."""
+    return repr(float(x))
+
+
+def _jsonable(value):
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def _unit_of(key: str) -> tuple[str, str, float]:
+    low = key.lower()
+    for suffix, unit, factor in _SUMMARY_UNITS:
+        if low.endswith(suffix) and len(key) > len(suffix):
+            return key[: -len(suffix)].replace("_", " "), unit, factor
+    return key.replace("_", " "), "", 1.0
+
+
+def _format_value(value, factor: float) -> str:
+    if isinstance(value, (bool, np.bool_)) or value is None or isinstance(value, str):
+        return str(value)
+    if isinstance(value, (int, np.integer)) and factor == 1.0:
+        return str(int(value))
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        return f"{float(value) * factor:.4g}"
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_format_value(v, factor) for v in value) + "]"
+    return str(value)

@@ -1,0 +1,555 @@
+"""Time-parameterization of an ordered joint-space path with ruckig, and its checks.
+
+The planner returns an ordered path: a start waypoint followed by waypoints each reached by a
+pure rotation phase or a pure translation phase (the rotate-then-translate motions that keep the
+friction-induced tip error bounded, Section IV of Ha, Fagogenis & Dupont 2019,
+doi:10.1109/TRO.2018.2878906). The drive follows each straight joint-space segment from rest to
+rest, so it stops between a rotation phase and the following translation phase.
+
+ruckig (community edition, Berscheid & Kroeger 2021, "Jerk-limited real-time trajectory generation
+with arbitrary target states", RSS, doi:10.15607/RSS.2021.XVII.015) computes one jerk-limited
+rest-to-rest trajectory per segment with Phase synchronization, which keeps the joint-space path on
+the straight segment that the planner validated. Segment durations are rounded up to whole control
+periods (ruckig's discrete duration discretization), so every waypoint is a sample and is reached
+exactly, at rest.
+
+Facts about ruckig used here (``shared/notes/ompl-ruckig.md``): intermediate waypoints are not
+available offline (one calculation per segment instead); ``min_position``/``max_position`` are
+ignored offline (position extrema are checked here instead); a segment must start from exactly zero
+velocity and acceleration, or Phase synchronization silently becomes Time synchronization.
+
+Units: rotations in rad, translations in m, time in s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+import ruckig
+
+from .errors import JointLimitError
+
+__all__ = [
+    "ROTATION",
+    "TRANSLATION",
+    "START",
+    "TrajectorySegment",
+    "Trajectory",
+    "LimitViolation",
+    "time_parameterize",
+    "time_parameterize_robot",
+    "check_trajectory",
+]
+
+ROTATION = "rotation"
+TRANSLATION = "translation"
+START = "start"
+_UNITS = {ROTATION: "rad", TRANSLATION: "m"}
+
+# A joint outside the moving group may differ between consecutive waypoints by at most this much
+# [rad or m] (round-off of the planner); the value is then snapped to the previous waypoint's
+# exactly. Larger changes are an error: the segment would move two joint groups.
+GROUP_SNAP_TOL = 1e-9
+
+# Relative tolerance on the velocity and acceleration limits of the samples [-] (ruckig's own
+# profiles meet the limits to about 1e-12).
+LIMIT_RTOL = 1e-6
+
+# Relative tolerance on the jerk limit of finite differences of the sampled acceleration [-]
+# (the difference quotient of a jerk-limited acceleration cannot exceed the limit, up to round-off
+# amplified by 1 / dt).
+JERK_RTOL = 0.05
+
+# Absolute tolerance on "at rest", on joint limits and on "does not move" [rad or m, per s, per s^2].
+ABS_TOL = 1e-9
+
+# Largest deviation of a segment's samples from its straight joint-space segment, relative to the
+# segment length [-]. Phase synchronization keeps it at round-off level.
+STRAIGHT_RTOL = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class TrajectorySegment:
+    """One rest-to-rest phase of a trajectory.
+
+    Attributes
+    ----------
+    index : int
+        Zero-based segment index; segment ``k`` goes from waypoint ``k`` to waypoint ``k + 1``.
+    motion : {"rotation", "translation"}
+        The joint group that moves.
+    t_start, t_end : float
+        Start and end time [s].
+    i_start, i_end : int
+        Indices of the samples at ``t_start`` and ``t_end`` (inclusive) in ``Trajectory.t``.
+    q_start, q_end : ndarray, shape (n_joints,)
+        Waypoints at both ends [rad or m] (periodic angles unwrapped).
+    position_min, position_max : ndarray, shape (n_joints,)
+        Position extrema of the continuous segment reported by ruckig [rad or m].
+    """
+
+    index: int
+    motion: str
+    t_start: float
+    t_end: float
+    i_start: int
+    i_end: int
+    q_start: np.ndarray
+    q_end: np.ndarray
+    position_min: np.ndarray
+    position_max: np.ndarray
+
+    @property
+    def duration(self) -> float:
+        """Segment duration [s]."""
+        return self.t_end - self.t_start
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A sampled, jerk-limited trajectory through an ordered path.
+
+    Attributes
+    ----------
+    t : ndarray, shape (T,)
+        Sample times [s], ``t[i] = i / control_rate_hz``; the last sample is at the end.
+    position : ndarray, shape (T, n_joints)
+        Joint positions [rad or m]; periodic rotations are unwrapped (continuous).
+    velocity : ndarray, shape (T, n_joints)
+        [rad/s or m/s]
+    acceleration : ndarray, shape (T, n_joints)
+        [rad/s^2 or m/s^2]
+    segments : tuple of TrajectorySegment
+        One per segment of the ordered path, in order.
+    waypoints : ndarray, shape (K, n_joints)
+        Waypoints as followed (periodic angles unwrapped) [rad or m].
+    joint_names : tuple of str
+        E.g. ``("alpha_2", "alpha_3", "beta_3")``.
+    joint_kinds : tuple of str
+        ``"rotation"`` or ``"translation"`` per joint.
+    control_rate_hz : float
+        Sample rate [Hz].
+    max_velocity, max_acceleration, max_jerk : ndarray, shape (n_joints,)
+        Limits the trajectory was computed with [unit/s, unit/s^2, unit/s^3].
+    lower, upper : ndarray, shape (n_joints,)
+        Joint limits [rad or m] (ignored for periodic joints).
+    periodic : ndarray of bool, shape (n_joints,)
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    segments: tuple[TrajectorySegment, ...]
+    waypoints: np.ndarray
+    joint_names: tuple[str, ...]
+    joint_kinds: tuple[str, ...]
+    control_rate_hz: float
+    max_velocity: np.ndarray
+    max_acceleration: np.ndarray
+    max_jerk: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    periodic: np.ndarray
+
+    @property
+    def duration(self) -> float:
+        """Total duration [s]."""
+        return float(self.t[-1] - self.t[0])
+
+    @property
+    def n_joints(self) -> int:
+        return self.position.shape[1]
+
+
+@dataclass(frozen=True)
+class LimitViolation:
+    """One failed check of :func:`check_trajectory`.
+
+    Attributes
+    ----------
+    check : str
+        ``"velocity"``, ``"acceleration"``, ``"jerk"``, ``"position"``, ``"group"``,
+        ``"straight"``, ``"rest"``, ``"waypoint"`` or ``"sampling"``.
+    joint : str or None
+        Joint name, if the violation concerns one joint.
+    segment : int or None
+        Segment index, if the violation concerns one segment.
+    time_s : float or None
+        Time of the worst sample [s].
+    value, limit : float
+        Offending value and the limit it breaks, in ``unit``.
+    unit : str
+    message : str
+        Human-readable description with units.
+    """
+
+    check: str
+    joint: str | None
+    segment: int | None
+    time_s: float | None
+    value: float
+    limit: float
+    unit: str
+    message: str
+
+    def __str__(self) -> str:
+        return self.message
+
+
+# ---------------------------------------------------------------------------------- parameterize
+def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[str], max_velocity,
+                      max_acceleration, max_jerk, control_rate_hz: float, lower, upper, periodic,
+                      *, joint_names: Sequence[str] | None = None) -> Trajectory:
+    """Jerk-limited rest-to-rest trajectory through an ordered path, sampled at the control rate.
+
+    Periodic rotations are first unwrapped along the path (``numpy.unwrap``) so that each segment
+    turns the short way, as OMPL's SO2 state space interpolates. Each segment is then one ruckig
+    calculation from rest to rest with Phase synchronization (a straight joint-space segment) and a
+    duration rounded up to a whole number of control periods.
+
+    Parameters
+    ----------
+    waypoints : array-like, shape (K, n_joints)
+        Ordered path [rad or m], K >= 1.
+    motions : sequence of str, length K
+        ``motions[0] == "start"``; ``motions[k]`` (k >= 1) is ``"rotation"`` or
+        ``"translation"``: the joint group that moves from waypoint k-1 to waypoint k.
+    joint_kinds : sequence of str, length n_joints
+        ``"rotation"`` or ``"translation"`` per joint.
+    max_velocity, max_acceleration, max_jerk : array-like, shape (n_joints,)
+        Drive limits, > 0 [rad/s or m/s, per s^2, per s^3].
+    control_rate_hz : float
+        Sample rate of the drive controller [Hz], > 0.
+    lower, upper : array-like, shape (n_joints,)
+        Joint limits [rad or m]; kept for :func:`check_trajectory` (ruckig ignores position limits
+        offline).
+    periodic : array-like of bool, shape (n_joints,)
+        Rotations without limits; only these are unwrapped.
+    joint_names : sequence of str, optional
+        Names used in messages (default ``"joint 0"``, ...).
+
+    Returns
+    -------
+    Trajectory
+        Starts and ends at rest; stops at rest at every waypoint.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, unknown motion or joint kind, non-finite waypoint, a non-positive or
+        non-finite limit (naming the joint), or a segment that moves a joint outside its group by
+        more than ``GROUP_SNAP_TOL``.
+    ruckig.RuckigError
+        If ruckig fails on a segment (re-raised with the segment and its waypoints).
+    """
+    q = np.array(waypoints, dtype=float)
+    if q.ndim != 2 or q.shape[0] < 1:
+        raise ValueError(f"waypoints must have shape (K, n_joints) with K >= 1, got {q.shape}")
+    n_wp, n = q.shape
+    kinds = tuple(joint_kinds)
+    names = tuple(joint_names) if joint_names is not None else tuple(f"joint {i}" for i in range(n))
+    if len(kinds) != n or len(names) != n:
+        raise ValueError(f"joint_kinds and joint_names need {n} entries, got {len(kinds)} and {len(names)}")
+    for name, kind in zip(names, kinds):
+        if kind not in _UNITS:
+            raise ValueError(f"joint {name}: kind must be 'rotation' or 'translation', got {kind!r}")
+    motions = list(motions)
+    if len(motions) != n_wp:
+        raise ValueError(f"motions needs one entry per waypoint ({n_wp}), got {len(motions)}")
+    if motions[0] != START:
+        raise ValueError(f"motions[0] must be 'start', got {motions[0]!r}")
+    for k, m in enumerate(motions[1:], start=1):
+        if m not in _UNITS:
+            raise ValueError(f"motions[{k}] must be 'rotation' or 'translation', got {m!r}")
+    if not np.all(np.isfinite(q)):
+        k, i = np.argwhere(~np.isfinite(q))[0]
+        raise ValueError(f"waypoint {k}: joint {names[i]} = {q[k, i]!r} is not finite")
+    vmax = _positive_limits(max_velocity, n, names, kinds, "max_velocity", "/s")
+    amax = _positive_limits(max_acceleration, n, names, kinds, "max_acceleration", "/s^2")
+    jmax = _positive_limits(max_jerk, n, names, kinds, "max_jerk", "/s^3")
+    rate = float(control_rate_hz)
+    if not np.isfinite(rate) or rate <= 0.0:
+        raise ValueError(f"control_rate_hz must be > 0 Hz, got {control_rate_hz!r}")
+    lo = _vector(lower, n, "lower")
+    hi = _vector(upper, n, "upper")
+    per = np.asarray(periodic, dtype=bool).reshape(-1)
+    if per.shape != (n,):
+        raise ValueError(f"periodic needs shape ({n},), got {per.shape}")
+
+    if np.any(per):
+        q[:, per] = np.unwrap(q[:, per], axis=0)
+    _snap_groups(q, motions, kinds, names)
+
+    dt = 1.0 / rate
+    otg = ruckig.Ruckig(n, dt)
+    inp = ruckig.InputParameter(n)
+    inp.max_velocity = vmax.tolist()
+    inp.max_acceleration = amax.tolist()
+    inp.max_jerk = jmax.tolist()
+    inp.synchronization = ruckig.Synchronization.Phase
+    inp.duration_discretization = ruckig.DurationDiscretization.Discrete
+    zeros = [0.0] * n
+    out = ruckig.Trajectory(n)
+
+    t_chunks = [np.zeros(1)]
+    p_chunks, v_chunks, a_chunks = [q[:1].copy()], [np.zeros((1, n))], [np.zeros((1, n))]
+    segments = []
+    i0 = 0
+    for k in range(n_wp - 1):
+        q0, q1 = q[k], q[k + 1]
+        inp.current_position = q0.tolist()
+        inp.current_velocity = zeros
+        inp.current_acceleration = zeros
+        inp.target_position = q1.tolist()
+        inp.target_velocity = zeros
+        inp.target_acceleration = zeros
+        try:
+            otg.calculate(inp, out)
+        except ruckig.RuckigError as exc:
+            moved = ", ".join(f"{names[i]} {q0[i]:.6g} -> {q1[i]:.6g} {_UNITS[kinds[i]]}"
+                              for i in range(n) if q0[i] != q1[i])
+            raise ruckig.RuckigError(
+                f"ruckig failed on segment {k} ({motions[k + 1]}: {moved or 'no motion'}): {exc}") from exc
+        n_steps = int(round(out.duration * rate))
+        if abs(n_steps - out.duration * rate) > 1e-6:  # discrete durations are whole periods
+            raise RuntimeError(f"segment {k}: ruckig duration {out.duration!r} s is not a multiple "
+                               f"of the control period {dt!r} s")
+        # Samples strictly inside the segment; both ends are set exactly (at rest).
+        local = np.arange(1, n_steps) * dt
+        p = np.empty((n_steps, n))
+        v = np.zeros((n_steps, n))
+        a = np.zeros((n_steps, n))
+        for j, tj in enumerate(local):
+            p[j], v[j], a[j] = out.at_time(tj)
+        if n_steps > 0:
+            p[-1] = q1
+        extrema = out.position_extrema
+        segments.append(TrajectorySegment(
+            index=k, motion=motions[k + 1], t_start=i0 * dt, t_end=(i0 + n_steps) * dt,
+            i_start=i0, i_end=i0 + n_steps, q_start=q0.copy(), q_end=q1.copy(),
+            position_min=np.array([b.min for b in extrema]),
+            position_max=np.array([b.max for b in extrema])))
+        t_chunks.append((i0 + np.arange(1, n_steps + 1)) * dt)
+        p_chunks.append(p)
+        v_chunks.append(v)
+        a_chunks.append(a)
+        i0 += n_steps
+
+    return Trajectory(
+        t=np.concatenate(t_chunks), position=np.concatenate(p_chunks),
+        velocity=np.concatenate(v_chunks), acceleration=np.concatenate(a_chunks),
+        segments=tuple(segments), waypoints=q, joint_names=names, joint_kinds=kinds,
+        control_rate_hz=rate, max_velocity=vmax, max_acceleration=amax, max_jerk=jmax,
+        lower=lo, upper=hi, periodic=per)
+
+
+def time_parameterize_robot(robot, waypoints, motions: Sequence[str], *,
+                            max_velocity: Mapping[str, float], max_acceleration: Mapping[str, float],
+                            max_jerk: Mapping[str, float], control_rate_hz: float) -> Trajectory:
+    """:func:`time_parameterize` with joint kinds, names and limits taken from a robot.
+
+    Parameters
+    ----------
+    robot : ctrplan.robot.Robot
+    waypoints : array-like, shape (K, n_joints)
+        Ordered path in the order of ``robot.joints`` [rad or m].
+    motions : sequence of str, length K
+        As in :func:`time_parameterize`.
+    max_velocity, max_acceleration, max_jerk : mapping of str to float
+        Drive limits by joint name (e.g. ``{"alpha_2": 1.0, "beta_3": 0.01}``) [unit/s, unit/s^2,
+        unit/s^3], as in a scenario file.
+    control_rate_hz : float
+        [Hz]
+
+    Returns
+    -------
+    Trajectory
+
+    Raises
+    ------
+    ValueError
+        If a joint has no limit in one of the mappings (naming it), or as :func:`time_parameterize`.
+    """
+    names = [j.name for j in robot.joints]
+    limits = []
+    for label, table in (("max_velocity", max_velocity), ("max_acceleration", max_acceleration),
+                         ("max_jerk", max_jerk)):
+        missing = [nm for nm in names if nm not in table]
+        if missing:
+            raise ValueError(f"{label} has no value for joint(s) {', '.join(missing)}")
+        limits.append([table[nm] for nm in names])
+    return time_parameterize(
+        waypoints, motions, [j.kind for j in robot.joints], *limits, control_rate_hz,
+        robot.joint_lower, robot.joint_upper, [j.periodic for j in robot.joints], joint_names=names)
+
+
+# ---------------------------------------------------------------------------------- checks
+def check_trajectory(traj: Trajectory, max_velocity=None, max_acceleration=None, max_jerk=None,
+                     lower=None, upper=None, periodic=None, *, strict: bool = False,
+                     limit_rtol: float = LIMIT_RTOL, jerk_rtol: float = JERK_RTOL,
+                     abs_tol: float = ABS_TOL) -> list[LimitViolation]:
+    """Check a sampled trajectory against drive and joint limits.
+
+    Checks, per joint: sampled velocity and acceleration within the limits (relative tolerance
+    ``limit_rtol``); jerk from finite differences of the sampled acceleration within the limit
+    (loose tolerance ``jerk_rtol``); positions of non-periodic joints within their limits, on the
+    samples and on ruckig's position extrema of each segment. Per segment: only the segment's joint
+    group moves, the moving group stays on the straight segment, the end waypoint is reached, and
+    the drive is at rest at both ends. Samples must be spaced by one control period.
+
+    Parameters
+    ----------
+    traj : Trajectory
+    max_velocity, max_acceleration, max_jerk : array-like, shape (n_joints,), optional
+        Limits [unit/s, unit/s^2, unit/s^3]; default: those ``traj`` was computed with.
+    lower, upper : array-like, shape (n_joints,), optional
+        Joint limits [rad or m]; default: ``traj.lower``, ``traj.upper``.
+    periodic : array-like of bool, shape (n_joints,), optional
+        Joints without position limits; default ``traj.periodic``.
+    strict : bool
+        Raise instead of returning violations.
+    limit_rtol, jerk_rtol : float
+        Relative tolerances on the velocity/acceleration and on the jerk limits [-].
+    abs_tol : float
+        Absolute tolerance on rest, position limits and non-moving joints [rad or m (per s^k)].
+
+    Returns
+    -------
+    list of LimitViolation
+        Empty when every check passes.
+
+    Raises
+    ------
+    JointLimitError
+        If ``strict`` and a check fails; the message lists every violation.
+    """
+    n = traj.n_joints
+    vmax = _vector(traj.max_velocity if max_velocity is None else max_velocity, n, "max_velocity")
+    amax = _vector(traj.max_acceleration if max_acceleration is None else max_acceleration, n, "max_acceleration")
+    jmax = _vector(traj.max_jerk if max_jerk is None else max_jerk, n, "max_jerk")
+    lo = _vector(traj.lower if lower is None else lower, n, "lower")
+    hi = _vector(traj.upper if upper is None else upper, n, "upper")
+    per = np.asarray(traj.periodic if periodic is None else periodic, dtype=bool).reshape(n)
+    names, kinds = traj.joint_names, traj.joint_kinds
+    units = [_UNITS[k] for k in kinds]
+    t, p, v, a = traj.t, traj.position, traj.velocity, traj.acceleration
+    out: list[LimitViolation] = []
+
+    def add(check, i, seg, k, value, limit, unit, text):
+        joint = None if i is None else names[i]
+        time_s = None if k is None else float(t[k])
+        out.append(LimitViolation(check, joint, seg, time_s, float(value), float(limit), unit, text))
+
+    # Sampling at the control rate.
+    dt = np.diff(t)
+    period = 1.0 / traj.control_rate_hz
+    if dt.size and np.max(np.abs(dt - period)) > 1e-9 * period:
+        k = int(np.argmax(np.abs(dt - period)))
+        add("sampling", None, None, k, dt[k], period, "s",
+            f"sample spacing {dt[k]:.6g} s at t = {t[k]:.6g} s differs from the control period "
+            f"{period:.6g} s")
+
+    # Velocity, acceleration, jerk: worst sample per joint.
+    jerk = np.diff(a, axis=0) / dt[:, None] if dt.size and np.all(dt > 0) else np.zeros((0, n))
+    for check, values, limits, rtol, suffix in (("velocity", v, vmax, limit_rtol, "/s"),
+                                                ("acceleration", a, amax, limit_rtol, "/s^2"),
+                                                ("jerk", jerk, jmax, jerk_rtol, "/s^3")):
+        if values.shape[0] == 0:
+            continue
+        for i in range(n):
+            k = int(np.argmax(np.abs(values[:, i])))
+            worst = abs(values[k, i])
+            if worst > limits[i] * (1.0 + rtol) + abs_tol:
+                add(check, i, None, k, worst, limits[i], units[i] + suffix,
+                    f"{names[i]}: |{check}| {worst:.6g} {units[i]}{suffix} at t = {t[k]:.6g} s exceeds "
+                    f"the limit {limits[i]:.6g} {units[i]}{suffix}")
+
+    # Joint limits of non-periodic joints: samples and ruckig's extrema of each segment.
+    for i in np.flatnonzero(~per):
+        seg_min = [s.position_min[i] for s in traj.segments]
+        seg_max = [s.position_max[i] for s in traj.segments]
+        low = min([float(np.min(p[:, i]))] + seg_min)
+        high = max([float(np.max(p[:, i]))] + seg_max)
+        if low < lo[i] - abs_tol:
+            add("position", i, None, int(np.argmin(p[:, i])), low, lo[i], units[i],
+                f"{names[i]} reaches {low:.6g} {units[i]}, below its lower limit {lo[i]:.6g} {units[i]}")
+        if high > hi[i] + abs_tol:
+            add("position", i, None, int(np.argmax(p[:, i])), high, hi[i], units[i],
+                f"{names[i]} reaches {high:.6g} {units[i]}, above its upper limit {hi[i]:.6g} {units[i]}")
+
+    # Per segment: one joint group, straight, waypoint reached, at rest at both ends.
+    kinds_arr = np.array(kinds)
+    for seg in traj.segments:
+        sl = slice(seg.i_start, seg.i_end + 1)
+        moving = kinds_arr == seg.motion
+        for i in np.flatnonzero(~moving):
+            drift = max(float(np.max(np.abs(p[sl, i] - seg.q_start[i]))),
+                        seg.position_max[i] - seg.q_start[i], seg.q_start[i] - seg.position_min[i])
+            if drift > abs_tol:
+                add("group", i, seg.index, None, drift, abs_tol, units[i],
+                    f"segment {seg.index} ({seg.motion}) moves {kinds[i]} joint {names[i]} by "
+                    f"{drift:.6g} {units[i]}")
+        d = seg.q_end[moving] - seg.q_start[moving]
+        length = float(np.linalg.norm(d))
+        if length > 0.0:
+            rel = p[sl][:, moving] - seg.q_start[moving]
+            s = rel @ d / length**2
+            dev = float(np.max(np.linalg.norm(rel - s[:, None] * d, axis=1)))
+            unit = _UNITS[seg.motion]
+            if dev > STRAIGHT_RTOL * length + abs_tol:
+                add("straight", None, seg.index, None, dev, STRAIGHT_RTOL * length, unit,
+                    f"segment {seg.index} ({seg.motion}) leaves its straight joint-space segment by "
+                    f"{dev:.6g} {unit}")
+        miss = np.abs(p[seg.i_end] - seg.q_end)
+        if np.max(miss) > abs_tol:
+            i = int(np.argmax(miss))
+            add("waypoint", i, seg.index, seg.i_end, miss[i], abs_tol, units[i],
+                f"segment {seg.index} ends {miss[i]:.6g} {units[i]} away from waypoint {seg.index + 1} "
+                f"in {names[i]}")
+    rest_idx = sorted({0, len(t) - 1} | {s.i_start for s in traj.segments} | {s.i_end for s in traj.segments})
+    for k in rest_idx:
+        for label, values, suffix in (("velocity", v, "/s"), ("acceleration", a, "/s^2")):
+            i = int(np.argmax(np.abs(values[k])))
+            if abs(values[k, i]) > abs_tol:
+                add("rest", i, None, k, abs(values[k, i]), abs_tol, units[i] + suffix,
+                    f"not at rest at t = {t[k]:.6g} s: {names[i]} {label} {values[k, i]:.6g} "
+                    f"{units[i]}{suffix}")
+
+    if strict and out:
+        raise JointLimitError("trajectory violates its limits:\n" + "\n".join(f"- {x}" for x in out))
+    return out
+
+
+# ---------------------------------------------------------------------------------- helpers
+def _vector(values, n: int, label: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=float).reshape(-1)
+    if arr.shape != (n,):
+        raise ValueError(f"{label} needs shape ({n},), got {np.shape(values)}")
+    return arr
+
+
+def _positive_limits(values, n, names, kinds, label, suffix) -> np.ndarray:
+    arr = _vector(values, n, label)
+    for i, x in enumerate(arr):
+        if not np.isfinite(x) or x <= 0.0:
+            raise ValueError(f"joint {names[i]}: {label} must be finite and > 0 {_UNITS[kinds[i]]}{suffix}, "
+                             f"got {float(x)!r}")
+    return arr
+
+
+def _snap_groups(q: np.ndarray, motions: Sequence[str], kinds: Sequence[str], names: Sequence[str]) -> None:
+    """In place: joints outside each segment's moving group keep the previous waypoint's value
+    exactly; raise if one of them changes by more than ``GROUP_SNAP_TOL``."""
+    kinds_arr = np.array(kinds)
+    for k in range(1, q.shape[0]):
+        still = kinds_arr != motions[k]
+        step = np.abs(q[k, still] - q[k - 1, still])
+        if step.size and np.max(step) > GROUP_SNAP_TOL:
+            i = int(np.flatnonzero(still)[np.argmax(step)])
+            raise ValueError(
+                f"waypoint {k} is reached by a {motions[k]} phase but joint {names[i]} changes by "
+                f"{q[k, i] - q[k - 1, i]:.6g} {_UNITS[kinds[i]]}")
+        q[k, still] = q[k - 1, still]

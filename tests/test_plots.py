@@ -1,0 +1,184 @@
+"""Figures (ctrplan.plots) and output files (ctrplan.report)."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+import ctrplan.io.atomic as atomic
+from ctrplan.plots import plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes, plot_xy
+from ctrplan.report import format_summary, path_columns, write_plan_outputs
+from ctrplan.trajectory import time_parameterize
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+NAMES = ["alpha_2", "alpha_3", "beta_3"]
+KINDS = ["rotation", "rotation", "translation"]
+WAYPOINTS = np.array([[3.0, -1.0, -0.090], [-3.0, 0.5, -0.090], [-3.0, 0.5, -0.050], [-2.0, 0.2, -0.050]])
+MOTIONS = ["start", "rotation", "translation", "rotation"]
+
+
+@pytest.fixture(scope="module")
+def traj():
+    return time_parameterize(WAYPOINTS, MOTIONS, KINDS, [1.0, 1.5, 0.01], [2.0, 3.0, 0.05],
+                             [20.0, 30.0, 1.0], 100.0, [-np.pi, -np.pi, -0.104], [np.pi, np.pi, -0.034],
+                             [True, True, False], joint_names=NAMES)
+
+
+def _is_png(path):
+    data = path.read_bytes()
+    return len(data) > 1000 and data.startswith(PNG_MAGIC)
+
+
+def _no_temp_files(folder):
+    return [p.name for p in folder.iterdir() if p.name.endswith(".tmp")] == []
+
+
+def _shapes():
+    s = np.linspace(0.0, 0.1, 30)
+    return [np.column_stack([0.02 * k * s**2, np.zeros_like(s), s]) for k in range(4)]
+
+
+# ---------------------------------------------------------------------------------- plots
+def test_robot_shapes_with_every_obstacle_type(tmp_path):
+    obstacles = [
+        {"type": "sphere", "center_m": [0.02, 0.0, 0.08], "radius_m": 0.005},
+        {"type": "capsule", "a_m": [-0.02, 0.0, 0.05], "b_m": [-0.02, 0.01, 0.09], "radius_m": 0.003},
+        {"type": "box", "center_m": [0.0, 0.03, 0.06], "size_m": [0.01, 0.02, 0.005],
+         "rpy_rad": [0.1, 0.2, 0.3]},
+        {"type": "mesh", "vertices": [[0, 0, 0.1], [0.01, 0, 0.1], [0, 0.01, 0.1], [0, 0, 0.11]],
+         "faces": [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]},
+    ]
+    tips = [np.array([[0.0, 0.0, 0.1], [0.001, 0.0, 0.1]]), np.zeros((0, 3))]
+    out = plot_robot_shapes(tmp_path / "shapes.png", _shapes(), obstacles, tips, "test")
+    assert out == tmp_path / "shapes.png" and _is_png(out)
+    assert _no_temp_files(tmp_path)
+
+
+def test_robot_shapes_accepts_obstacle_dataclasses(tmp_path):
+    collision = pytest.importorskip("ctrplan.planning.collision")
+    obstacles = [collision.obstacle_from_dict({"type": "sphere", "center_m": [0.0, 0.0, 0.05],
+                                               "radius_m": 0.004}),
+                 collision.obstacle_from_dict({"type": "box", "center_m": [0.01, 0.0, 0.05],
+                                               "size_m": [0.01, 0.01, 0.01]})]
+    assert _is_png(plot_robot_shapes(tmp_path / "s.png", _shapes(), obstacles))
+
+
+def test_unknown_obstacle_raises_and_writes_nothing(tmp_path):
+    with pytest.raises(ValueError, match="obstacle 0: unknown type 'cone'"):
+        plot_robot_shapes(tmp_path / "x.png", _shapes(), [{"type": "cone"}])
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bound_along_two_plans_and_one_plan(tmp_path):
+    s = [np.linspace(0, 1, 4), np.linspace(0, 1, 3)]
+    bound = [np.array([0.5, 1.0, 0.8, 0.6]), np.array([0.5, 2.5, 1.1])]
+    tl = [np.array([np.nan, np.nan, 0.4, np.nan]), np.full(3, np.nan)]
+    motions = [MOTIONS, ["start", "rotation", "translation"]]
+    assert _is_png(plot_bound_along_path(tmp_path / "b2.png", s, bound, tl, motions, threshold_mm=1.5))
+    assert _is_png(plot_bound_along_path(tmp_path / "b1.png", s[0], bound[0], tl[0], MOTIONS,
+                                         labels=("plan",)))
+    with pytest.raises(ValueError, match="plan 1"):
+        plot_bound_along_path(tmp_path / "bad.png", s, [bound[0], bound[0]], tl, motions)
+
+
+def test_joint_trajectories_and_xy(tmp_path, traj):
+    assert _is_png(plot_joint_trajectories(tmp_path / "joints.png", traj))
+    assert _is_png(plot_xy(tmp_path / "xy.png", traj.t, traj.position[:, 2] * 1e3,
+                           xlabel="time t [s]", ylabel="beta_3 [mm]"))
+    with pytest.raises(ValueError, match="3 joint names"):
+        plot_joint_trajectories(tmp_path / "j.png", traj, joint_names=["a"])
+
+
+# ---------------------------------------------------------------------------------- report
+def _rows():
+    rows = []
+    for k, (q, m) in enumerate(zip(WAYPOINTS, MOTIONS)):
+        rows.append({"motion": m, "q": q, "tip": [0.001 * k, 0.0, 0.1],
+                     "bound_position_m": 1e-3 * (k + 1), "bound_angle_rad": 0.01,
+                     "bound_kind": "translation_last" if m == "translation" else "friction"})
+    return rows
+
+
+SUMMARY = {"max_bound_mm": np.float64(1.25), "planner": "RRTstar", "solved": np.bool_(True),
+           "bound_per_waypoint_mm": np.array([0.5, np.nan])}
+
+
+def test_write_plan_outputs(tmp_path, traj):
+    out = tmp_path / "run"
+    figures = {"joints.png": lambda p: plot_joint_trajectories(p, traj)}
+    written = write_plan_outputs(out, _rows(), traj, SUMMARY, figures=figures)
+    assert set(written) == {"path.csv", "trajectory.csv", "summary.json", "joints.png"}
+    assert _is_png(out / "joints.png") and _no_temp_files(out)
+
+    with open(out / "path.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == path_columns(NAMES)
+    assert [r["motion"] for r in rows] == MOTIONS
+    assert [float(r["beta_3"]) for r in rows] == list(WAYPOINTS[:, 2])  # full precision
+    assert rows[2]["bound_kind"] == "translation_last" and float(rows[3]["tip_x"]) == 0.003
+
+    with open(out / "trajectory.csv", newline="") as fh:
+        table = list(csv.reader(fh))
+    assert table[0][:4] == ["t", "alpha_2", "alpha_2_vel", "alpha_2_acc"] and len(table[0]) == 10
+    assert len(table) == len(traj.t) + 1
+    last = np.array(table[-1], dtype=float)
+    assert last[0] == traj.t[-1] and last[7] == traj.waypoints[-1, 2]
+
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["max_bound_mm"] == 1.25 and summary["solved"] is True
+    assert summary["bound_per_waypoint_mm"] == [0.5, None]
+    assert summary["duration_s"] == pytest.approx(traj.duration) and summary["n_segments"] == 3
+
+
+def test_failure_inside_the_atomic_writer_leaves_no_partial_file(tmp_path, traj, monkeypatch):
+    def broken_replace(src, dst):
+        raise OSError("disk full (simulated)")
+
+    monkeypatch.setattr(atomic.os, "replace", broken_replace)
+    with pytest.raises(OSError, match="simulated"):
+        write_plan_outputs(tmp_path, _rows(), traj, SUMMARY)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_interrupted_run_keeps_the_previous_files(tmp_path, traj):
+    write_plan_outputs(tmp_path, _rows(), traj, SUMMARY)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    rows = _rows()
+    del rows[2]["bound_kind"]  # fails while building path.csv
+    with pytest.raises(ValueError, match="path row 2: missing key 'bound_kind'"):
+        write_plan_outputs(tmp_path, rows, traj, {"max_bound_mm": 9.0})
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_figure_failure_leaves_no_summary(tmp_path, traj):
+    def broken(path):
+        raise RuntimeError("plot failed")
+
+    with pytest.raises(RuntimeError):
+        write_plan_outputs(tmp_path, _rows(), traj, SUMMARY, figures={"f.png": broken})
+    assert not (tmp_path / "summary.json").exists() and not (tmp_path / "f.png").exists()
+
+
+def test_rows_with_joint_columns_and_bad_values(tmp_path):
+    row = {"motion": "start", "alpha_2": 0.1, "alpha_3": 0.2, "beta_3": -0.05, "tip_x": 0.0,
+           "tip_y": 0.0, "tip_z": 0.1, "bound_position_m": 0.001, "bound_angle_rad": 0.0,
+           "bound_kind": "friction"}
+    write_plan_outputs(tmp_path, [row], None, {}, joint_names=NAMES)
+    assert not (tmp_path / "trajectory.csv").exists()
+    assert (tmp_path / "path.csv").read_text().splitlines()[1].startswith("0,start,0.1,0.2,-0.05,")
+    with pytest.raises(ValueError, match="bound_kind"):
+        write_plan_outputs(tmp_path, [dict(row, bound_kind="other")], None, {}, joint_names=NAMES)
+    with pytest.raises(ValueError, match="joint_names"):
+        write_plan_outputs(tmp_path, [row], None, {})
+
+
+def test_format_summary_prints_units():
+    text = format_summary({"max_bound_mm": 1.25, "max_bound_m": 0.0012, "bound_angle_rad": np.pi / 2,
+                           "duration_s": 3.5, "n_segments": 3, "planner": "RRTstar",
+                           "limits": {"control_rate_hz": 500.0}})
+    lines = text.splitlines()
+    assert "max bound: 1.25 mm" in lines and "max bound: 1.2 mm" in lines
+    assert "bound angle: 90 deg" in lines and "duration: 3.5 s" in lines
+    assert "n segments: 3" in lines and "planner: RRTstar" in lines
+    assert "  control rate: 500 Hz" in lines
