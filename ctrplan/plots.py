@@ -1,7 +1,8 @@
 """Figures of a plan: robot shapes and obstacles, the friction bound along the path, joint
 trajectories.
 
-Matplotlib with the Agg backend (no window, no ``plt.show``). Every function writes one PNG
+Matplotlib figures rendered by the Agg canvas (``matplotlib.figure.Figure`` without pyplot: no
+window, no ``plt.show``, no change to the user's backend). Every function writes one PNG
 atomically (a temporary file in the same folder, then ``os.replace``), so an interrupted run never
 leaves a half-written figure. Inputs are in SI units (m, rad); figures show mm and degrees, with
 units in the axis labels.
@@ -13,15 +14,14 @@ from pathlib import Path
 from typing import Sequence
 
 import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-matplotlib.use("Agg")
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
-
-from .io.atomic import atomic_path  # noqa: E402
-from .trajectory import ROTATION, TRANSLATION, Trajectory  # noqa: E402
+from .io.atomic import atomic_path
+from .trajectory import ROTATION, TRANSLATION, Trajectory
 
 __all__ = ["plot_robot_shapes", "plot_bound_along_path", "plot_joint_trajectories", "plot_xy"]
 
@@ -67,10 +67,10 @@ def plot_robot_shapes(path, shapes: Sequence, obstacles: Sequence = (), friction
     ValueError
         A shape or tip array with the wrong shape, or an unknown obstacle type.
     """
-    fig = plt.figure(figsize=(7.5, 6.5))
+    fig = _figure((7.5, 6.5))
     ax = fig.add_subplot(projection="3d")
     pts_mm = []
-    colors = plt.cm.viridis(np.linspace(0.0, 1.0, max(len(shapes), 1)))
+    colors = matplotlib.colormaps["viridis"](np.linspace(0.0, 1.0, max(len(shapes), 1)))
     for j, shape in enumerate(shapes):
         xyz = _points(shape, f"shapes[{j}]") * M_TO_MM
         pts_mm.append(xyz)
@@ -291,7 +291,8 @@ def plot_bound_along_path(path, s_path: Sequence, bound_mm: Sequence, translatio
         raise ValueError(f"need the same number (>= 1) of plans in s_path, bound_mm, translation_last_mm "
                          f"and motions, got {len(s_path)}, {len(bound_mm)}, {len(translation_last_mm)}, "
                          f"{len(motions)}")
-    fig, axes = plt.subplots(1, n_plans, figsize=(5.5 * n_plans, 4.0), sharey=True, squeeze=False)
+    fig = _figure((5.5 * n_plans, 4.0))
+    axes = fig.subplots(1, n_plans, sharey=True, squeeze=False)
     for j, ax in enumerate(axes[0]):
         s = np.asarray(s_path[j], dtype=float)
         b = np.asarray(bound_mm[j], dtype=float)
@@ -353,7 +354,8 @@ def plot_joint_trajectories(path, traj: Trajectory, joint_names: Sequence[str] |
     kinds = list(traj.joint_kinds if joint_kinds is None else joint_kinds)
     if len(names) != n or len(kinds) != n:
         raise ValueError(f"need {n} joint names and kinds, got {len(names)} and {len(kinds)}")
-    fig, axes = plt.subplots(n, 3, figsize=(12, 2.2 * n + 0.8), sharex=True, squeeze=False)
+    fig = _figure((12, 2.2 * n + 0.8))
+    axes = fig.subplots(n, 3, sharex=True, squeeze=False)
     phases = [(s.t_start, s.t_end, s.motion) for s in traj.segments]
     for i in range(n):
         scale, unit = (np.degrees(1.0), "deg") if kinds[i] == ROTATION else (M_TO_MM, "mm")
@@ -402,7 +404,8 @@ def plot_xy(path, x, ys, *, xlabel: str, ylabel: str, labels: Sequence[str] | No
     ys = np.atleast_2d(np.asarray(ys, dtype=float))
     if ys.shape[1] != x.size:
         raise ValueError(f"ys needs shape ({x.size},) or (M, {x.size}), got {ys.shape}")
-    fig, ax = plt.subplots(figsize=(6.5, 4.0))
+    fig = _figure((6.5, 4.0))
+    ax = fig.subplots()
     for m, y in enumerate(ys):
         ax.plot(x, y, style, label=None if labels is None else labels[m])
     ax.set_xlabel(xlabel)
@@ -423,19 +426,20 @@ def _shade_phases(ax, phases):
 
 
 def _phase_handles():
-    from matplotlib.patches import Patch
-
     return [Patch(color=c, alpha=3 * PHASE_ALPHA, label=f"{m} phase") for m, c in PHASE_COLORS.items()]
 
 
-def _save(fig, path) -> Path:
-    """Write ``fig`` as PNG atomically and close it."""
-    path = Path(path)
-    try:
-        fig.tight_layout()
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png", dpi=DPI)
-    finally:
-        plt.close(fig)
-    return path
+def _figure(size) -> Figure:
+    """A figure attached to an Agg canvas (not registered with pyplot, so nothing to close)."""
+    fig = Figure(figsize=size)
+    FigureCanvasAgg(fig)
+    return fig
 
+
+def _save(fig, path) -> Path:
+    """Write ``fig`` as PNG atomically."""
+    path = Path(path)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=DPI)
+    return path

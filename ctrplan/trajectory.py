@@ -227,7 +227,9 @@ def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[s
         Joint limits [rad or m]; kept for :func:`check_trajectory` (ruckig ignores position limits
         offline).
     periodic : array-like of bool, shape (n_joints,)
-        Rotations without limits; only these are unwrapped.
+        Rotations without limits; only these are unwrapped. Bounded rotations are interpolated
+        linearly between their waypoint values, as in a bounded real-vector space; a planner
+        that models them as SO2 (which may cross +-pi) would validate a different segment.
     joint_names : sequence of str, optional
         Names used in messages (default ``"joint 0"``, ...).
 
@@ -266,7 +268,7 @@ def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[s
             raise ValueError(f"motions[{k}] must be 'rotation' or 'translation', got {m!r}")
     if not np.all(np.isfinite(q)):
         k, i = np.argwhere(~np.isfinite(q))[0]
-        raise ValueError(f"waypoint {k}: joint {names[i]} = {q[k, i]!r} is not finite")
+        raise ValueError(f"waypoint {k}: joint {names[i]} = {float(q[k, i])!r} is not finite")
     vmax = _positive_limits(max_velocity, n, names, kinds, "max_velocity", "/s")
     amax = _positive_limits(max_acceleration, n, names, kinds, "max_acceleration", "/s^2")
     jmax = _positive_limits(max_jerk, n, names, kinds, "max_jerk", "/s^3")

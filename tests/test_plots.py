@@ -64,6 +64,14 @@ def test_robot_shapes_accepts_obstacle_dataclasses(tmp_path):
     assert _is_png(plot_robot_shapes(tmp_path / "s.png", _shapes(), obstacles))
 
 
+def test_robot_shapes_with_a_mesh_file(tmp_path):
+    trimesh = pytest.importorskip("trimesh")
+    trimesh.creation.box(extents=(10.0, 10.0, 10.0)).export(tmp_path / "cube.stl")
+    obstacle = {"type": "mesh", "path": str(tmp_path / "cube.stl"), "scale": 1e-3,
+                "translation_m": [0.0, 0.0, 0.05], "rpy_rad": [0.0, 0.0, 0.5]}
+    assert _is_png(plot_robot_shapes(tmp_path / "m.png", _shapes(), [obstacle]))
+
+
 def test_unknown_obstacle_raises_and_writes_nothing(tmp_path):
     with pytest.raises(ValueError, match="obstacle 0: unknown type 'cone'"):
         plot_robot_shapes(tmp_path / "x.png", _shapes(), [{"type": "cone"}])
