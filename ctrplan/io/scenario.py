@@ -1,0 +1,523 @@
+"""Scenario files: a robot, a start, goals, obstacles and planner/drive settings (TOML, SI units).
+
+Parsed with pydantic (unknown keys, missing keys and wrong types are errors naming the file and
+the dotted key, list indices 1-based), then checked against the robot named in the file (joint
+names, joint limits) and turned into frozen dataclasses. The format is documented in
+``docs/file-formats.md``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Literal, Mapping, Union
+
+import numpy as np
+from pydantic import Field
+
+from ..errors import JointLimitError, ModelFileError
+from ..robot import Robot
+from .robot_file import _Strict, load_robot, parse_toml, read_text, validate_document
+
+__all__ = [
+    "load_scenario",
+    "scenario_from_toml_text",
+    "Scenario",
+    "JointGoal",
+    "TaskGoal",
+    "Sphere",
+    "Capsule",
+    "Box",
+    "Mesh",
+    "PlannerSettings",
+    "BoundFieldSettings",
+    "DriveLimits",
+]
+
+# Positions [m] beyond this magnitude are taken to be in millimetres (a CTR workspace is far
+# smaller).
+MAX_METRES = 2.0
+
+Positive = Annotated[float, Field(gt=0.0)]
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+
+
+# --------------------------------------------------------------------------- file schema
+class _QDoc(_Strict):
+    q: dict[str, float]
+
+
+class _JointGoalDoc(_Strict):
+    type: Literal["joint"]
+    q: dict[str, float]
+
+
+class _TaskGoalDoc(_Strict):
+    type: Literal["task"]
+    tip_position_m: Vec3
+    tolerance_m: Positive
+
+
+class _SphereDoc(_Strict):
+    type: Literal["sphere"]
+    center_m: Vec3
+    radius_m: Positive
+
+
+class _CapsuleDoc(_Strict):
+    type: Literal["capsule"]
+    a_m: Vec3
+    b_m: Vec3
+    radius_m: Positive
+
+
+class _BoxDoc(_Strict):
+    type: Literal["box"]
+    center_m: Vec3
+    size_m: Annotated[list[Positive], Field(min_length=3, max_length=3)]
+    rpy_rad: Vec3 = [0.0, 0.0, 0.0]
+
+
+class _MeshDoc(_Strict):
+    type: Literal["mesh"]
+    file: Annotated[str, Field(min_length=1)]
+    scale: Positive
+    translation_m: Vec3 = [0.0, 0.0, 0.0]
+    rpy_rad: Vec3 = [0.0, 0.0, 0.0]
+
+
+class _PlannerDoc(_Strict):
+    name: Annotated[str, Field(min_length=1)] = "RRTstar"
+    iterations: Annotated[int, Field(ge=1)] = 3000
+    time_limit_s: Positive | None = None
+    seed: int = 1
+    bound_weight: Annotated[float, Field(ge=0.0)] = 1.0
+    range: Positive | None = None
+
+
+class _BoundFieldDoc(_Strict):
+    resolution: list[Annotated[int, Field(ge=2)]] | None = None
+    ds_m: Positive | None = None
+
+
+class _DriveDoc(_Strict):
+    control_rate_hz: Positive
+    max_velocity: dict[str, Positive]
+    max_acceleration: dict[str, Positive]
+    max_jerk: dict[str, Positive]
+
+
+class _OutputDoc(_Strict):
+    dir: str | None = None
+
+
+_Goal = Annotated[Union[_JointGoalDoc, _TaskGoalDoc], Field(discriminator="type")]
+_Obstacle = Annotated[Union[_SphereDoc, _CapsuleDoc, _BoxDoc, _MeshDoc], Field(discriminator="type")]
+_TAGS = frozenset({"joint", "task", "sphere", "capsule", "box", "mesh"})
+
+
+class ScenarioDocument(_Strict):
+    """Schema of a scenario file (see ``docs/file-formats.md``)."""
+
+    name: Annotated[str, Field(min_length=1)]
+    robot: Annotated[str, Field(min_length=1)]
+    start: _QDoc
+    goals: Annotated[list[_Goal], Field(min_length=1)]
+    obstacles: list[_Obstacle] = []
+    planner: _PlannerDoc = _PlannerDoc()
+    bound_field: _BoundFieldDoc = _BoundFieldDoc()
+    drive: _DriveDoc | None = None
+    output: _OutputDoc = _OutputDoc()
+
+
+# --------------------------------------------------------------------------- result types
+def _frozen_array(values, dtype=float) -> np.ndarray:
+    a = np.array(values, dtype=dtype)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class JointGoal:
+    """Reach a joint configuration.
+
+    Attributes
+    ----------
+    q : ndarray, shape (n_joints,)
+        Joint values in robot joint order [rad or m].
+    """
+
+    q: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class TaskGoal:
+    """Bring the tip within ``tolerance`` of a position.
+
+    Attributes
+    ----------
+    tip_position : ndarray, shape (3,)
+        Target tip position in the robot base frame [m].
+    tolerance : float
+        Allowed distance from the target [m].
+    """
+
+    tip_position: np.ndarray
+    tolerance: float
+
+
+@dataclass(frozen=True, eq=False)
+class Sphere:
+    """Sphere obstacle: ``center`` shape (3,) [m], ``radius`` [m]."""
+
+    center: np.ndarray
+    radius: float
+
+
+@dataclass(frozen=True, eq=False)
+class Capsule:
+    """Capsule obstacle: segment ``a``-``b`` (each shape (3,) [m]) swept by a ball of ``radius`` [m]."""
+
+    a: np.ndarray
+    b: np.ndarray
+    radius: float
+
+
+@dataclass(frozen=True, eq=False)
+class Box:
+    """Box obstacle.
+
+    Attributes
+    ----------
+    center : ndarray, shape (3,)
+        [m].
+    size : ndarray, shape (3,)
+        Edge lengths along the box's own x, y, z axes [m].
+    rpy : ndarray, shape (3,)
+        Roll, pitch, yaw [rad]: box-to-base rotation ``Rz(yaw) Ry(pitch) Rx(roll)``.
+    """
+
+    center: np.ndarray
+    size: np.ndarray
+    rpy: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """Triangle-mesh obstacle (STL), placed by ``p_base = R(rpy) (scale * p_file) + translation``.
+
+    Attributes
+    ----------
+    file : pathlib.Path
+        Resolved path of the mesh file (exists at load time).
+    scale : float
+        Factor from the file's length unit to metres (0.001 for a file in millimetres).
+    translation : ndarray, shape (3,)
+        [m].
+    rpy : ndarray, shape (3,)
+        Roll, pitch, yaw [rad], ``Rz(yaw) Ry(pitch) Rx(roll)``.
+    """
+
+    file: Path
+    scale: float
+    translation: np.ndarray
+    rpy: np.ndarray
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """Planner settings.
+
+    Attributes
+    ----------
+    name : str
+        OMPL planner name (default ``"RRTstar"``).
+    iterations : int
+        Planner iterations (default 3000).
+    time_limit : float or None
+        Wall-clock limit [s].
+    seed : int
+        Random seed (default 1).
+    bound_weight : float
+        Weight w >= 0 of the integral of the friction error bound along the path in the cost
+        ``path length + w * integral(bound)`` (default 1.0).
+    range : float or None
+        Planner step range in joint space (OMPL ``range``); None for the planner's default.
+    """
+
+    name: str = "RRTstar"
+    iterations: int = 3000
+    time_limit: float | None = None
+    seed: int = 1
+    bound_weight: float = 1.0
+    range: float | None = None
+
+
+@dataclass(frozen=True)
+class BoundFieldSettings:
+    """Sampling of the friction-bound field over joint space.
+
+    Attributes
+    ----------
+    resolution : tuple of int or None, shape (n_joints,)
+        Grid points per joint, in robot joint order; None for the default.
+    ds : float or None
+        Arc-length step of the mechanics [m]; None for the default.
+    """
+
+    resolution: tuple[int, ...] | None = None
+    ds: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class DriveLimits:
+    """Limits of the joint drives for time parameterization (ruckig).
+
+    Attributes
+    ----------
+    control_rate_hz : float
+        Control rate [Hz].
+    max_velocity, max_acceleration, max_jerk : ndarray, shape (n_joints,)
+        In robot joint order; rad/s^k for rotations, m/s^k for translations (k = 1, 2, 3).
+    """
+
+    control_rate_hz: float
+    max_velocity: np.ndarray
+    max_acceleration: np.ndarray
+    max_jerk: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """A planning problem read from a scenario file.
+
+    Attributes
+    ----------
+    name : str
+    file : pathlib.Path
+        Resolved scenario file ("<memory>" path when read from text).
+    robot_file : pathlib.Path
+        Resolved robot model file.
+    robot : Robot
+    start : ndarray, shape (n_joints,)
+        Start configuration in robot joint order [rad or m].
+    goals : tuple of JointGoal or TaskGoal
+        Visited in order.
+    obstacles : tuple of Sphere, Capsule, Box or Mesh
+    planner : PlannerSettings
+    bound_field : BoundFieldSettings
+    drive : DriveLimits or None
+        None when the file has no ``[drive]`` table (no time parameterization possible).
+    output_dir : pathlib.Path or None
+        Resolved output directory.
+    """
+
+    name: str
+    file: Path
+    robot_file: Path
+    robot: Robot
+    start: np.ndarray
+    goals: tuple
+    obstacles: tuple = ()
+    planner: PlannerSettings = field(default_factory=PlannerSettings)
+    bound_field: BoundFieldSettings = field(default_factory=BoundFieldSettings)
+    drive: DriveLimits | None = None
+    output_dir: Path | None = None
+
+    @property
+    def joint_names(self) -> list[str]:
+        """Joint names in robot joint order, e.g. ``["alpha_2", "alpha_3", "beta_3"]``."""
+        return self.robot.joint_names
+
+    def joint_array(self, mapping: Mapping[str, float]) -> np.ndarray:
+        """Turn a joint-name -> value mapping into an array in robot joint order.
+
+        Parameters
+        ----------
+        mapping : mapping of str to float
+            One value per robot joint [rad or m].
+
+        Returns
+        -------
+        ndarray, shape (n_joints,)
+
+        Raises
+        ------
+        KeyError
+            Unknown or missing joint name.
+        """
+        return joint_array(self.robot, mapping)
+
+    def joint_dict(self, q) -> dict[str, float]:
+        """Inverse of :meth:`joint_array`: ``{name: value}`` from an array shape (n_joints,)."""
+        q = np.asarray(q, dtype=float).reshape(-1)
+        if q.size != len(self.joint_names):
+            raise ValueError(f"expected {len(self.joint_names)} joint values, got {q.size}")
+        return dict(zip(self.joint_names, q.tolist()))
+
+
+def joint_array(robot: Robot, mapping: Mapping[str, float]) -> np.ndarray:
+    """Array shape (n_joints,) in ``robot``'s joint order from ``{joint name: value}``.
+
+    Raises
+    ------
+    KeyError
+        Naming unknown and missing joints.
+    """
+    names = robot.joint_names
+    unknown = sorted(set(mapping) - set(names))
+    missing = [n for n in names if n not in mapping]
+    if unknown or missing:
+        parts = []
+        if unknown:
+            parts.append(f"unknown joint(s) {', '.join(unknown)}")
+        if missing:
+            parts.append(f"missing joint(s) {', '.join(missing)}")
+        raise KeyError(f"{'; '.join(parts)}; robot {robot.name!r} has joints {', '.join(names)}")
+    return np.array([float(mapping[n]) for n in names])
+
+
+# --------------------------------------------------------------------------- loading
+def load_scenario(path: str | os.PathLike) -> Scenario:
+    """Load a scenario file and the robot it names.
+
+    Parameters
+    ----------
+    path : str or path-like
+        TOML scenario file. Relative paths inside it (robot, meshes, output dir) are relative
+        to the scenario file's directory.
+
+    Returns
+    -------
+    Scenario
+
+    Raises
+    ------
+    ModelFileError
+        Malformed scenario (unknown/missing key, wrong type, bad value, unknown or missing joint
+        name, start or goal outside the joint limits, missing mesh file). Errors in the robot
+        file are raised by :func:`~ctrplan.io.robot_file.load_robot` and name that file.
+    PhysicalParameterError
+        Physically impossible robot.
+    """
+    path = Path(path)
+    return scenario_from_toml_text(read_text(path), file=str(path), base_dir=path.resolve().parent)
+
+
+def scenario_from_toml_text(text: str, file: str = "<memory>",
+                            base_dir: str | os.PathLike | None = None) -> Scenario:
+    """Build a :class:`Scenario` from TOML text.
+
+    Parameters
+    ----------
+    text : str
+    file : str
+        Name used in error messages.
+    base_dir : path-like or None
+        Directory that relative paths are resolved against (default: current directory).
+
+    Raises
+    ------
+    ModelFileError, PhysicalParameterError
+        As :func:`load_scenario`.
+    """
+    base = Path(base_dir) if base_dir is not None else Path.cwd()
+    doc = validate_document(ScenarioDocument, parse_toml(text, file), file, drop_tags=_TAGS)
+
+    robot_file = (base / doc.robot).resolve()
+    if not robot_file.is_file():
+        raise ModelFileError(file, "robot", f"robot file {doc.robot!r} not found (looked for {robot_file})")
+    robot = load_robot(robot_file)
+    n_joints = len(robot.joints)
+
+    start = _joint_values(robot, doc.start.q, file, "start.q")
+
+    goals = []
+    for k, g in enumerate(doc.goals, start=1):
+        if isinstance(g, _JointGoalDoc):
+            goals.append(JointGoal(q=_frozen_array(_joint_values(robot, g.q, file, f"goals[{k}].q"))))
+        else:
+            _check_metres(g.tip_position_m, file, f"goals[{k}].tip_position_m")
+            _check_metres([g.tolerance_m], file, f"goals[{k}].tolerance_m")
+            goals.append(TaskGoal(tip_position=_frozen_array(g.tip_position_m), tolerance=g.tolerance_m))
+
+    obstacles = []
+    for k, o in enumerate(doc.obstacles, start=1):
+        key = f"obstacles[{k}]"
+        if isinstance(o, _SphereDoc):
+            obstacles.append(Sphere(center=_frozen_array(o.center_m), radius=o.radius_m))
+        elif isinstance(o, _CapsuleDoc):
+            obstacles.append(Capsule(a=_frozen_array(o.a_m), b=_frozen_array(o.b_m), radius=o.radius_m))
+        elif isinstance(o, _BoxDoc):
+            obstacles.append(Box(center=_frozen_array(o.center_m), size=_frozen_array(o.size_m),
+                                 rpy=_frozen_array(o.rpy_rad)))
+        else:
+            mesh_file = (base / o.file).resolve()
+            if not mesh_file.is_file():
+                raise ModelFileError(file, f"{key}.file", f"mesh file {o.file!r} not found (looked for {mesh_file})")
+            obstacles.append(Mesh(file=mesh_file, scale=o.scale, translation=_frozen_array(o.translation_m),
+                                  rpy=_frozen_array(o.rpy_rad)))
+
+    p = doc.planner
+    planner = PlannerSettings(name=p.name, iterations=p.iterations, time_limit=p.time_limit_s,
+                              seed=p.seed, bound_weight=p.bound_weight, range=p.range)
+
+    bf = doc.bound_field
+    if bf.resolution is not None and len(bf.resolution) != n_joints:
+        raise ModelFileError(file, "bound_field.resolution",
+                             f"needs one value per joint ({', '.join(robot.joint_names)}), got {bf.resolution!r}")
+    bound_field = BoundFieldSettings(resolution=None if bf.resolution is None else tuple(bf.resolution),
+                                     ds=bf.ds_m)
+
+    drive = None
+    if doc.drive is not None:
+        d = doc.drive
+        drive = DriveLimits(
+            control_rate_hz=d.control_rate_hz,
+            max_velocity=_frozen_array(_named(robot, d.max_velocity, file, "drive.max_velocity")),
+            max_acceleration=_frozen_array(_named(robot, d.max_acceleration, file, "drive.max_acceleration")),
+            max_jerk=_frozen_array(_named(robot, d.max_jerk, file, "drive.max_jerk")))
+
+    output_dir = None if doc.output.dir is None else (base / doc.output.dir).resolve()
+    scenario_path = Path(file) if file == "<memory>" else Path(file).resolve()
+    return Scenario(name=doc.name, file=scenario_path, robot_file=robot_file, robot=robot,
+                    start=_frozen_array(start), goals=tuple(goals), obstacles=tuple(obstacles),
+                    planner=planner, bound_field=bound_field, drive=drive, output_dir=output_dir)
+
+
+def _named(robot: Robot, mapping: Mapping[str, float], file: str, key: str) -> np.ndarray:
+    """Array in joint order from a name->value table; unknown/missing names -> ModelFileError."""
+    names = robot.joint_names
+    for name in mapping:
+        if name not in names:
+            raise ModelFileError(file, f"{key}.{name}",
+                                 f"unknown joint (value {mapping[name]!r}); robot {robot.name!r} has "
+                                 f"joints {', '.join(names)}")
+    for name in names:
+        if name not in mapping:
+            raise ModelFileError(file, f"{key}.{name}",
+                                 f"missing required key: every joint of robot {robot.name!r} needs a "
+                                 f"value ({', '.join(names)})")
+    return np.array([mapping[n] for n in names], dtype=float)
+
+
+def _joint_values(robot: Robot, mapping: Mapping[str, float], file: str, key: str) -> np.ndarray:
+    """Joint array checked against limits and kinematic feasibility."""
+    q = _named(robot, mapping, file, key)
+    for j, v in zip(robot.joints, q):
+        if not j.periodic and not (j.lower <= v <= j.upper):
+            unit = "rad" if j.kind == "rotation" else "m"
+            raise ModelFileError(file, f"{key}.{j.name}",
+                                 f"{v!r} {unit} is outside the joint limits [{j.lower!r}, {j.upper!r}] {unit}")
+    try:
+        alpha, beta = robot.configuration(q)
+        robot.check_configuration(alpha, beta)
+    except JointLimitError as exc:
+        raise ModelFileError(file, key, f"{exc} (values {dict(mapping)!r})") from None
+    return q
+
+
+def _check_metres(values, file: str, key: str) -> None:
+    if max(abs(v) for v in values) > MAX_METRES:
+        raise ModelFileError(file, key, f"{values!r} looks like millimetres; positions are in metres")

@@ -1,0 +1,182 @@
+"""Scenario files: good scenarios load into arrays in joint order; bad ones name file and key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ctrplan.errors import ModelFileError
+from ctrplan.io.scenario import (Box, Capsule, JointGoal, Mesh, Sphere, TaskGoal, load_scenario)
+
+TABLE2 = Path(__file__).resolve().parents[1] / "model" / "ha2019-table2-nominal.toml"
+
+STL = """solid t
+facet normal 0 0 1
+outer loop
+vertex 0 0 0
+vertex 10 0 0
+vertex 0 10 0
+endloop
+endfacet
+endsolid t
+"""
+
+GOOD = f"""
+name = "demo"
+robot = "{TABLE2.as_posix()}"
+
+[start]
+q = {{alpha_2 = 0.0, alpha_3 = 0.5, beta_3 = -0.05}}
+
+[[goals]]
+type = "joint"
+q = {{beta_3 = -0.04, alpha_3 = -0.5, alpha_2 = 1.0}}
+
+[[goals]]
+type = "task"
+tip_position_m = [0.02, 0.01, 0.18]
+tolerance_m = 1e-3
+
+[[obstacles]]
+type = "sphere"
+center_m = [0.03, 0.0, 0.15]
+radius_m = 0.01
+
+[[obstacles]]
+type = "capsule"
+a_m = [0.0, 0.0, 0.2]
+b_m = [0.0, 0.05, 0.2]
+radius_m = 0.002
+
+[[obstacles]]
+type = "box"
+center_m = [0.0, 0.05, 0.15]
+size_m = [0.1, 0.01, 0.1]
+rpy_rad = [0.0, 0.0, 0.3]
+
+[[obstacles]]
+type = "mesh"
+file = "meshes/tri.stl"
+scale = 0.001
+
+[planner]
+iterations = 500
+time_limit_s = 10.0
+bound_weight = 2.5
+
+[bound_field]
+resolution = [9, 9, 5]
+ds_m = 0.002
+
+[drive]
+control_rate_hz = 100.0
+max_velocity = {{alpha_2 = 1.0, alpha_3 = 2.0, beta_3 = 0.01}}
+max_acceleration = {{alpha_2 = 5.0, alpha_3 = 5.0, beta_3 = 0.05}}
+max_jerk = {{alpha_2 = 50.0, alpha_3 = 50.0, beta_3 = 0.5}}
+
+[output]
+dir = "out"
+"""
+
+
+def _write(tmp_path, text, name="scenario.toml"):
+    (tmp_path / "meshes").mkdir(exist_ok=True)
+    (tmp_path / "meshes" / "tri.stl").write_text(STL)
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def _error(tmp_path, text):
+    p = _write(tmp_path, text)
+    with pytest.raises(ModelFileError) as info:
+        load_scenario(p)
+    assert info.value.file == str(p)
+    return info.value
+
+
+def test_good_scenario(tmp_path):
+    s = load_scenario(_write(tmp_path, GOOD))
+    assert s.name == "demo" and s.robot.name == "ha2019-table2-nominal"
+    assert s.robot_file == TABLE2
+    np.testing.assert_array_equal(s.start, [0.0, 0.5, -0.05])
+    assert isinstance(s.goals[0], JointGoal) and isinstance(s.goals[1], TaskGoal)
+    np.testing.assert_array_equal(s.goals[0].q, [1.0, -0.5, -0.04])    # reordered to joint order
+    assert s.goals[1].tolerance == 1e-3
+    kinds = [type(o) for o in s.obstacles]
+    assert kinds == [Sphere, Capsule, Box, Mesh]
+    assert s.obstacles[3].file == (tmp_path / "meshes" / "tri.stl").resolve()
+    assert s.obstacles[3].scale == 0.001
+    np.testing.assert_array_equal(s.obstacles[2].rpy, [0.0, 0.0, 0.3])
+    assert s.planner.name == "RRTstar" and s.planner.iterations == 500 and s.planner.seed == 1
+    assert s.planner.time_limit == 10.0 and s.planner.bound_weight == 2.5 and s.planner.range is None
+    assert s.bound_field.resolution == (9, 9, 5) and s.bound_field.ds == 0.002
+    np.testing.assert_array_equal(s.drive.max_velocity, [1.0, 2.0, 0.01])
+    assert s.output_dir == (tmp_path / "out").resolve()
+    with pytest.raises(ValueError):
+        s.start[0] = 1.0                                                    # read-only
+
+
+def test_relative_robot_path_and_defaults(tmp_path):
+    text = f"""
+name = "minimal"
+robot = "model.toml"
+[start]
+q = {{alpha_2 = 0.0, alpha_3 = 0.0, beta_3 = -0.034}}
+[[goals]]
+type = "joint"
+q = {{alpha_2 = 0.0, alpha_3 = 1.0, beta_3 = -0.034}}
+"""
+    (tmp_path / "model.toml").write_text(TABLE2.read_text())
+    s = load_scenario(_write(tmp_path, text))
+    assert s.robot_file == (tmp_path / "model.toml").resolve()
+    assert s.obstacles == () and s.drive is None and s.output_dir is None
+    assert s.planner.iterations == 3000 and s.planner.name == "RRTstar"
+    assert s.bound_field.resolution is None
+
+
+def test_joint_array_helpers(tmp_path):
+    s = load_scenario(_write(tmp_path, GOOD))
+    q = s.joint_array({"beta_3": -0.06, "alpha_2": 0.1, "alpha_3": 0.2})
+    np.testing.assert_array_equal(q, [0.1, 0.2, -0.06])
+    assert s.joint_dict(q) == {"alpha_2": 0.1, "alpha_3": 0.2, "beta_3": -0.06}
+    with pytest.raises(KeyError, match="unknown joint.*alpha_1.*missing joint.*beta_3"):
+        s.joint_array({"alpha_1": 0.0, "alpha_2": 0.1, "alpha_3": 0.2})
+
+
+@pytest.mark.parametrize("old,new,key", [
+    ("bound_weight = 2.5", "bound_weight = 2.5\nbound_wieght = 1.0", "planner.bound_wieght"),
+    ("tolerance_m = 1e-3\n", "", "goals[2].tolerance_m"),
+    ("iterations = 500", 'iterations = "500"', "planner.iterations"),
+    ("iterations = 500", "iterations = 5.5", "planner.iterations"),
+    ("alpha_3 = 0.5, beta_3 = -0.05}", "alpha_3 = 0.5, beta_3 = -0.05, alpha_9 = 0.0}", "start.q.alpha_9"),
+    ("alpha_3 = 0.5, beta_3 = -0.05}", "alpha_3 = 0.5}", "start.q.beta_3"),
+    ("beta_3 = -0.04,", "beta_3 = -40.0,", "goals[1].q.beta_3"),            # outside limits (mm)
+    ("tip_position_m = [0.02, 0.01, 0.18]", "tip_position_m = [20.0, 10.0, 180.0]", "goals[2].tip_position_m"),
+    ("tip_position_m = [0.02, 0.01, 0.18]", "tip_position_m = [0.02, 0.01]", "goals[2].tip_position_m"),
+    ("radius_m = 0.01", "radius_m = -0.01", "obstacles[1].radius_m"),
+    ('type = "sphere"', 'type = "cylinder"', "obstacles[1]"),
+    ('file = "meshes/tri.stl"', 'file = "meshes/missing.stl"', "obstacles[4].file"),
+    ("scale = 0.001\n", "", "obstacles[4].scale"),
+    ("resolution = [9, 9, 5]", "resolution = [9, 9]", "bound_field.resolution"),
+    ("max_jerk = {alpha_2 = 50.0, ", "max_jerk = {", "drive.max_jerk.alpha_2"),
+    ("max_velocity = {alpha_2 = 1.0,", "max_velocity = {alpha_2 = 0.0,", "drive.max_velocity.alpha_2"),
+    ('dir = "out"', "dir = 3", "output.dir"),
+    ('name = "demo"\n', "", "name"),
+])
+def test_bad_scenarios(tmp_path, old, new, key):
+    assert old in GOOD
+    err = _error(tmp_path, GOOD.replace(old, new))
+    assert err.key == key, str(err)
+
+
+def test_missing_robot_file(tmp_path):
+    err = _error(tmp_path, GOOD.replace(TABLE2.as_posix(), "no-such-robot.toml"))
+    assert err.key == "robot" and "not found" in str(err)
+
+
+def test_value_in_message(tmp_path):
+    err = _error(tmp_path, GOOD.replace("radius_m = 0.01", "radius_m = -0.01"))
+    assert "-0.01" in str(err) and str(tmp_path) in str(err)
