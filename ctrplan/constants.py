@@ -1,0 +1,12 @@
+"""Numerical constants shared by the mechanics (one place, never inline)."""
+
+# Below this rotation angle [rad] the closed forms of exp, its left Jacobian and their
+# derivatives switch to Taylor series (closed forms lose digits to cancellation there;
+# the series are truncated after the theta^4 term, error < 1e-12 at this threshold).
+SMALL_ANGLE = 0.1
+
+# Two equilibria whose tip positions differ by more than this are distinct [m].
+DISTINCT_EQUILIBRIUM_TOL = 1e-6
+
+# Grid points closer than this are merged when building the arc-length grid [m].
+GRID_MERGE_TOL = 1e-9

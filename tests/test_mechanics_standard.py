@@ -1,0 +1,108 @@
+"""Standard zero-clearance model: closed forms, symmetries, convergence, stability."""
+
+import numpy as np
+import pytest
+
+from ctrplan.errors import ElasticInstabilityError, JointLimitError
+from ctrplan.mechanics import ModelSettings, solve_standard
+from ctrplan.robot import Joint, Robot, Section, Tube
+
+from _robots import table1_pair, table2_robot
+
+
+def _arc(p, R, kappa, length):
+    """Advance a planar arc bending about the local y axis (closed form)."""
+    th = kappa * length
+    if kappa == 0:
+        return p + R[:, 2] * length, R
+    local = np.array([(1 - np.cos(th)) / kappa, 0.0, np.sin(th) / kappa])
+    Ry = np.array([[np.cos(th), 0, np.sin(th)], [0, 1, 0], [-np.sin(th), 0, np.cos(th)]])
+    return p + R @ local, R @ Ry
+
+
+def test_aligned_tubes_follow_constant_curvature_arcs():
+    """All precurvatures aligned: no torsion; the shape is a chain of arcs whose curvature is
+    the stiffness-weighted mean (Eq. (2) with u_xy = sum k_i uhat_i / sum k_i)."""
+    robot = table2_robot()
+    alpha, beta = robot.configuration([0.0, 0.0, -0.034])
+    sol = solve_standard(robot, alpha, beta, ModelSettings(ds=1e-3))
+    k1 = k2 = 5.07e-2
+    k3 = 1.45e-2
+    kap12 = (k1 + k2) * (1 / 0.265) / (k1 + k2 + k3)
+    p, R = np.array([0.0, 0.0, 0.0]), np.eye(3)
+    p, R = _arc(p, R, kap12, 0.150)
+    p, R = _arc(p, R, 1 / 0.055, 0.0864)
+    np.testing.assert_allclose(sol.tip_position, p, atol=1e-9)
+    np.testing.assert_allclose(sol.tip_tangent, R[:, 2], atol=1e-9)
+    assert np.nanmax(np.abs(sol.torsion)) < 1e-9
+
+
+def test_base_rotation_of_all_tubes_rotates_the_robot():
+    """Rotating every base by the same angle rotates the shape about z (invariance)."""
+    robot = table2_robot()
+    alpha, beta = robot.configuration([1.1, -2.0, -0.06])
+    a = solve_standard(robot, alpha, beta)
+    b = solve_standard(robot, alpha + 0.7, beta)
+    Rz = np.array([[np.cos(0.7), -np.sin(0.7), 0], [np.sin(0.7), np.cos(0.7), 0], [0, 0, 1]])
+    np.testing.assert_allclose(b.tip_position, Rz @ a.tip_position, atol=1e-9)
+
+
+def test_mirror_symmetry_of_the_tube_pair():
+    """Base angle +theta and -theta give tips mirrored about the xz plane."""
+    robot = table1_pair()
+    for th in (0.5, 2.0, 3.0):
+        a = solve_standard(robot, *robot.configuration([th]))
+        b = solve_standard(robot, *robot.configuration([-th]))
+        np.testing.assert_allclose(b.tip_position, a.tip_position * [1, -1, 1], atol=1e-9)
+
+
+def test_converges_as_the_step_shrinks():
+    robot = table2_robot()
+    alpha, beta = robot.configuration([2.5, 1.0, -0.05])
+    tips = [solve_standard(robot, alpha, beta, ModelSettings(ds=ds)).tip_position for ds in (4e-3, 2e-3, 1e-3, 0.25e-3)]
+    errs = [np.linalg.norm(t - tips[-1]) for t in tips[:-1]]
+    assert errs[0] > errs[1] > errs[2]
+    assert errs[2] < 1e-5  # 1 mm step within 0.01 mm of the 0.25 mm reference
+
+
+def _long_pair(kappa):
+    k = 5.07e-2
+    t1 = Tube("tube 1", (Section(0.15, (0.0, kappa)),), k, 0.3, inner_diameter=1.1e-3)
+    t2 = Tube("tube 2", (Section(0.15, (0.0, kappa)),), k, 0.3, outer_diameter=1.0e-3)
+    return Robot("pair", (t1, t2), (0.0,), (Joint("rotation", 1, -np.pi, np.pi),))
+
+
+def test_detects_elastic_instability():
+    """Equal tubes of length L and curvature kappa: the 180 deg configuration bifurcates when
+    L^2 kappa^2 (1 + nu) > (pi/2)^2 (Dupont et al. 2010; Ha et al. 2015)."""
+    stable = _long_pair(1 / 0.15)     # lambda = 1.3 < 2.47
+    unstable = _long_pair(1 / 0.06)   # lambda = 8.1 > 2.47
+    sol = solve_standard(stable, *stable.configuration([np.pi - 0.05]))
+    assert sol.diagnostics.converged and not sol.diagnostics.unstable
+    sol = solve_standard(unstable, *unstable.configuration([np.pi - 0.05]))
+    assert sol.diagnostics.unstable
+    with pytest.raises(ElasticInstabilityError):
+        solve_standard(unstable, *unstable.configuration([np.pi - 0.05]), raise_on_failure=True)
+
+
+def test_follows_a_branch_from_an_initial_guess():
+    """Continuation in the base angle with the previous base torsion keeps the solution on
+    one branch: the tip moves continuously."""
+    robot = _long_pair(1 / 0.06)
+    guess = None
+    prev = None
+    for th in np.linspace(2.0, 3.0, 11):
+        sol = solve_standard(robot, *robot.configuration([th]), initial_guess=guess, check_stability=False)
+        if prev is not None:
+            assert np.linalg.norm(sol.tip_position - prev) < 0.02
+        prev, guess = sol.tip_position, sol.base_torsion
+
+
+def test_rejects_impossible_configurations():
+    robot = table2_robot()
+    with pytest.raises(JointLimitError, match="beta_3"):
+        robot.configuration([0.0, 0.0, -0.2])
+    alpha, beta = robot.configuration([0.0, 0.0, -0.05])
+    beta[2] = 0.01  # inner base in front of the outer bases
+    with pytest.raises(JointLimitError, match="tube 3"):
+        solve_standard(robot, alpha, beta)
