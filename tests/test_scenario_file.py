@@ -180,3 +180,16 @@ def test_missing_robot_file(tmp_path):
 def test_value_in_message(tmp_path):
     err = _error(tmp_path, GOOD.replace("radius_m = 0.01", "radius_m = -0.01"))
     assert "-0.01" in str(err) and str(tmp_path) in str(err)
+
+
+def test_obstacles_and_drive_feed_the_planning_and_trajectory_modules(tmp_path):
+    s = load_scenario(_write(tmp_path, GOOD))
+    dicts = [o.as_dict() for o in s.obstacles]
+    assert [d["type"] for d in dicts] == ["sphere", "capsule", "box", "mesh"]
+    assert dicts[3]["path"] == str((tmp_path / "meshes" / "tri.stl").resolve())
+    kw = s.drive.as_kwargs()
+    assert kw["max_velocity"] == {"alpha_2": 1.0, "alpha_3": 2.0, "beta_3": 0.01}
+    assert kw["control_rate_hz"] == 100.0
+    collision = pytest.importorskip("ctrplan.planning.collision")
+    built = [collision.obstacle_from_dict(dict(d)) for d in dicts]
+    assert len(built) == 4

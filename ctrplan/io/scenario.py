@@ -174,6 +174,10 @@ class Sphere:
     center: np.ndarray
     radius: float
 
+    def as_dict(self) -> dict:
+        """Plain dict in the scenario-file keys (``ctrplan.planning.obstacle_from_dict`` input)."""
+        return {"type": "sphere", "center_m": tuple(self.center.tolist()), "radius_m": self.radius}
+
 
 @dataclass(frozen=True, eq=False)
 class Capsule:
@@ -182,6 +186,11 @@ class Capsule:
     a: np.ndarray
     b: np.ndarray
     radius: float
+
+    def as_dict(self) -> dict:
+        """Plain dict in the scenario-file keys (``ctrplan.planning.obstacle_from_dict`` input)."""
+        return {"type": "capsule", "a_m": tuple(self.a.tolist()), "b_m": tuple(self.b.tolist()),
+                "radius_m": self.radius}
 
 
 @dataclass(frozen=True, eq=False)
@@ -201,6 +210,11 @@ class Box:
     center: np.ndarray
     size: np.ndarray
     rpy: np.ndarray
+
+    def as_dict(self) -> dict:
+        """Plain dict in the scenario-file keys (``ctrplan.planning.obstacle_from_dict`` input)."""
+        return {"type": "box", "center_m": tuple(self.center.tolist()), "size_m": tuple(self.size.tolist()),
+                "rpy_rad": tuple(self.rpy.tolist())}
 
 
 @dataclass(frozen=True, eq=False)
@@ -223,6 +237,12 @@ class Mesh:
     scale: float
     translation: np.ndarray
     rpy: np.ndarray
+
+    def as_dict(self) -> dict:
+        """Plain dict for ``ctrplan.planning.obstacle_from_dict`` (the file is under ``path``,
+        resolved)."""
+        return {"type": "mesh", "path": str(self.file), "scale": self.scale,
+                "translation_m": tuple(self.translation.tolist()), "rpy_rad": tuple(self.rpy.tolist())}
 
 
 @dataclass(frozen=True)
@@ -280,12 +300,23 @@ class DriveLimits:
         Control rate [Hz].
     max_velocity, max_acceleration, max_jerk : ndarray, shape (n_joints,)
         In robot joint order; rad/s^k for rotations, m/s^k for translations (k = 1, 2, 3).
+    joint_names : tuple of str
+        Robot joint names, the order of the arrays.
     """
 
     control_rate_hz: float
     max_velocity: np.ndarray
     max_acceleration: np.ndarray
     max_jerk: np.ndarray
+    joint_names: tuple[str, ...] = ()
+
+    def as_kwargs(self) -> dict:
+        """Keyword arguments of ``ctrplan.trajectory.time_parameterize_robot``: the three limit
+        tables as ``{joint name: value}`` and ``control_rate_hz``."""
+        return {"max_velocity": dict(zip(self.joint_names, self.max_velocity.tolist())),
+                "max_acceleration": dict(zip(self.joint_names, self.max_acceleration.tolist())),
+                "max_jerk": dict(zip(self.joint_names, self.max_jerk.tolist())),
+                "control_rate_hz": self.control_rate_hz}
 
 
 @dataclass(frozen=True, eq=False)
@@ -477,7 +508,8 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
             control_rate_hz=d.control_rate_hz,
             max_velocity=_frozen_array(_named(robot, d.max_velocity, file, "drive.max_velocity")),
             max_acceleration=_frozen_array(_named(robot, d.max_acceleration, file, "drive.max_acceleration")),
-            max_jerk=_frozen_array(_named(robot, d.max_jerk, file, "drive.max_jerk")))
+            max_jerk=_frozen_array(_named(robot, d.max_jerk, file, "drive.max_jerk")),
+            joint_names=tuple(robot.joint_names))
 
     output_dir = None if doc.output.dir is None else (base / doc.output.dir).resolve()
     scenario_path = Path(file) if file == "<memory>" else Path(file).resolve()
