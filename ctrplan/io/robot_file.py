@@ -29,6 +29,12 @@ __all__ = ["load_robot", "robot_from_toml_text", "robot_from_document", "file_ha
 
 MEMORY = "<memory>"
 
+#: Lengths [m] above this magnitude are taken to be millimetres: a concentric tube robot and its
+#: workspace are far smaller than 2 m. Shared by the robot, scenario and CSV readers.
+MAX_METRES = 2.0
+#: Tube diameters [m] above this are taken to be millimetres.
+MAX_DIAMETER_M = 0.1
+
 #: Joint names of the robot file and of the CSV schema: ``alpha_i`` [rad] or ``beta_i`` [m], 1-based.
 JOINT_NAME = re.compile(r"^(alpha|beta)_([1-9][0-9]*)$")
 
@@ -295,7 +301,7 @@ def robot_from_document(doc: RobotDocument, file: str = MEMORY) -> Robot:
         for key, seq in (("home.alpha_rad", doc.home.alpha_rad), ("home.beta_m", doc.home.beta_m)):
             if len(seq) != n:
                 raise ModelFileError(file, key, f"needs {n} values (one per tube), got {seq!r}")
-        if max(abs(b) for b in doc.home.beta_m) > 2.0:
+        if max(abs(b) for b in doc.home.beta_m) > MAX_METRES:
             raise ModelFileError(file, "home.beta_m",
                                  f"{doc.home.beta_m!r} looks like millimetres; beta is in metres")
         home_alpha, home_beta = tuple(doc.home.alpha_rad), tuple(doc.home.beta_m)
@@ -321,7 +327,7 @@ def robot_from_document(doc: RobotDocument, file: str = MEMORY) -> Robot:
             raise ModelFileError(file, f"joints[{k}].upper",
                                  f"lower limit {jd.lower!r} must be below upper limit {jd.upper!r}")
         kind = ROTATION if m.group(1) == "alpha" else TRANSLATION
-        if kind == TRANSLATION and max(abs(jd.lower), abs(jd.upper)) > 2.0:
+        if kind == TRANSLATION and max(abs(jd.lower), abs(jd.upper)) > MAX_METRES:
             raise ModelFileError(file, f"joints[{k}]",
                                  f"limits [{jd.lower!r}, {jd.upper!r}] look like millimetres; "
                                  f"translations are in metres")
@@ -357,12 +363,12 @@ def _build_tube(doc: RobotDocument, i: int, file: str) -> Tube:
         k_xy = td.k_xy_N_m2
     for dkey in ("outer_diameter_m", "inner_diameter_m"):
         v = getattr(td, dkey)
-        if v is not None and v > 0.1:
+        if v is not None and v > MAX_DIAMETER_M:
             raise ModelFileError(file, f"{key}.{dkey}",
                                  f"{v!r} m looks like millimetres; diameters are in metres")
     sections = []
     for j, sd in enumerate(td.sections, start=1):
-        if sd.length_m > 2.0:
+        if sd.length_m > MAX_METRES:
             raise ModelFileError(file, f"{key}.sections[{j}].length_m",
                                  f"{sd.length_m!r} m looks like millimetres; lengths are in metres")
         sections.append(Section(length=sd.length_m,

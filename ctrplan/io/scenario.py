@@ -18,7 +18,7 @@ from pydantic import Field
 
 from ..errors import JointLimitError, ModelFileError
 from ..robot import Robot
-from .robot_file import _Strict, load_robot, parse_toml, read_text, validate_document
+from .robot_file import MAX_METRES, _Strict, load_robot, parse_toml, read_text, validate_document
 
 __all__ = [
     "load_scenario",
@@ -34,10 +34,6 @@ __all__ = [
     "BoundFieldSettings",
     "DriveLimits",
 ]
-
-# Positions [m] beyond this magnitude are taken to be in millimetres (a CTR workspace is far
-# smaller).
-MAX_METRES = 2.0
 
 Positive = Annotated[float, Field(gt=0.0)]
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
@@ -397,8 +393,7 @@ def joint_array(robot: Robot, mapping: Mapping[str, float]) -> np.ndarray:
         Naming unknown and missing joints.
     """
     names = robot.joint_names
-    unknown = sorted(set(mapping) - set(names))
-    missing = [n for n in names if n not in mapping]
+    unknown, missing = _unknown_missing(names, mapping)
     if unknown or missing:
         parts = []
         if unknown:
@@ -518,19 +513,23 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
                     planner=planner, bound_field=bound_field, drive=drive, output_dir=output_dir)
 
 
+def _unknown_missing(names: list[str], mapping: Mapping[str, float]) -> tuple[list[str], list[str]]:
+    """Names in ``mapping`` that are not joints (file order), and joints missing from it."""
+    return [n for n in mapping if n not in names], [n for n in names if n not in mapping]
+
+
 def _named(robot: Robot, mapping: Mapping[str, float], file: str, key: str) -> np.ndarray:
     """Array in joint order from a name->value table; unknown/missing names -> ModelFileError."""
     names = robot.joint_names
-    for name in mapping:
-        if name not in names:
-            raise ModelFileError(file, f"{key}.{name}",
-                                 f"unknown joint (value {mapping[name]!r}); robot {robot.name!r} has "
-                                 f"joints {', '.join(names)}")
-    for name in names:
-        if name not in mapping:
-            raise ModelFileError(file, f"{key}.{name}",
-                                 f"missing required key: every joint of robot {robot.name!r} needs a "
-                                 f"value ({', '.join(names)})")
+    unknown, missing = _unknown_missing(names, mapping)
+    if unknown:
+        raise ModelFileError(file, f"{key}.{unknown[0]}",
+                             f"unknown joint (value {mapping[unknown[0]]!r}); robot {robot.name!r} "
+                             f"has joints {', '.join(names)}")
+    if missing:
+        raise ModelFileError(file, f"{key}.{missing[0]}",
+                             f"missing required key: every joint of robot {robot.name!r} needs a "
+                             f"value ({', '.join(names)})")
     return np.array([mapping[n] for n in names], dtype=float)
 
 

@@ -36,13 +36,13 @@ from __future__ import annotations
 import os
 import re
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from ..errors import DataFileError
 from .atomic import atomic_path
+from .robot_file import MAX_METRES
 
 __all__ = [
     "SCHEMA",
@@ -70,9 +70,6 @@ SCHEMA: dict[str, tuple[str, str]] = {
     "bound_tangent_rad": ("rad", "friction-induced tip tangent error bound"),
 }
 
-# Above this magnitude a length that should be in metres is taken to be in millimetres: a
-# concentric tube robot is well under 2 m long.
-MAX_METRES = 2.0
 # Above this magnitude a base rotation [rad] is taken to be in degrees (16 turns).
 MAX_RADIANS = 100.0
 # Allowed deviation of a measured tangent's norm from 1 and of R^T R from I.
