@@ -1,0 +1,37 @@
+"""Friction-bounded motion planning in the joint space of a concentric tube robot.
+
+Building blocks (each usable on its own in an OMPL setup, see ``docs/planning.md``):
+
+- :class:`JointStateSpace`: OMPL compound space (SO2 per periodic rotation, bounded reals for
+  translations) with numpy conversions; :func:`unwrap_path`.
+- :class:`CollisionChecker`: robot body (capsule chain) versus spheres, capsules, boxes, meshes
+  with python-fcl.
+- :class:`BoundField`: precomputed, resumable grid of the friction bound of Ha, Fagogenis &
+  Dupont 2019 (doi:10.1109/TRO.2018.2878906), interpolated multilinearly.
+- :class:`BoundCostObjective`: ``ob.OptimizationObjective`` = length + weight x integral of bound.
+- :func:`plan` with :data:`PLANNERS`, :class:`ValidityChecker`, :class:`PlanResult`.
+- :func:`order_path` (rotate, then translate) and :func:`bounds_given_last_motion`.
+- :func:`resolve_goal` for joint or tip-position goals.
+"""
+
+from .bound_field import (QUANTITIES, BoundField, BoundFieldKeyError, InterpolationError, field_key,
+                          grid_axes, interpolation_error)
+from .collision import (BoxObstacle, CapsuleObstacle, CollisionChecker, CollisionReport, MeshObstacle,
+                        SphereObstacle, obstacle_from_dict)
+from .goals import GoalSolution, JointGoal, TaskSpaceGoal, resolve_goal
+from .objective import DEFAULT_BOUND_WEIGHT, BoundCostObjective
+from .ordering import LastMotionBounds, OrderedPath, OrderedWaypoint, bounds_given_last_motion, order_path
+from .planners import PLANNERS, PlanResult, ValidityChecker, plan
+from .space import DEFAULT_METERS_PER_RADIAN, JointStateSpace, unwrap_path, wrap_angle
+
+__all__ = [
+    "JointStateSpace", "DEFAULT_METERS_PER_RADIAN", "unwrap_path", "wrap_angle",
+    "CollisionChecker", "CollisionReport", "SphereObstacle", "CapsuleObstacle", "BoxObstacle",
+    "MeshObstacle", "obstacle_from_dict",
+    "BoundField", "BoundFieldKeyError", "InterpolationError", "QUANTITIES", "field_key", "grid_axes",
+    "interpolation_error",
+    "BoundCostObjective", "DEFAULT_BOUND_WEIGHT",
+    "PLANNERS", "PlanResult", "ValidityChecker", "plan",
+    "OrderedPath", "OrderedWaypoint", "LastMotionBounds", "order_path", "bounds_given_last_motion",
+    "JointGoal", "TaskSpaceGoal", "GoalSolution", "resolve_goal",
+]

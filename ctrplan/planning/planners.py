@@ -1,0 +1,340 @@
+"""Sampling-based planning in the joint space with OMPL (asymptotically optimal planners).
+
+:func:`plan` runs one OMPL planner from :data:`PLANNERS` with a Python optimization objective
+(e.g. :class:`~ctrplan.planning.objective.BoundCostObjective`) and a Python validity function,
+terminates on an iteration count for reproducibility (``ou.RNG.setSeed`` is called before any
+planner or sampler is created), shortcuts the path with the cost-aware
+``og.PathSimplifier(si, goal, objective).partialShortcutPath`` and returns numpy waypoints.
+
+Only planners known to work with Python callbacks in OMPL 2.0.1 are registered (project notes
+``ompl-ruckig.md``): ``PRM``/``PRMstar`` deadlock with a Python cost or validity checker.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from ompl import base as ob, geometric as og, util as ou
+
+from ..errors import CtrplanError, UnreachableGoalError
+from .space import JointStateSpace
+
+__all__ = ["PLANNERS", "PlanResult", "ValidityChecker", "plan", "DEFAULT_ITERATIONS",
+           "DEFAULT_VALIDITY_RESOLUTION"]
+
+# Planner registry: name -> constructor taking an ob.SpaceInformation.
+# BITstar segfaulted with a *time-based* termination condition in a probe (OMPL 2.0.1 wheels);
+# plan() always terminates it on an iteration count, which ran fine.
+PLANNERS = {
+    "RRTstar": og.RRTstar,
+    "InformedRRTstar": og.InformedRRTstar,
+    "SORRTstar": og.SORRTstar,
+    "BITstar": og.BITstar,
+}
+
+# Default planner iterations (RRT* finds a first solution on the paper's 3-joint space within a
+# few hundred iterations; more iterations only improve the cost).
+DEFAULT_ITERATIONS = 2000
+
+# Default spacing of validity checks along a motion [m of the weighted joint metric]: 2 mm is
+# 0.1 rad of rotation at 0.02 m/rad, small against the bound field's cells and obstacles.
+DEFAULT_VALIDITY_RESOLUTION = 2e-3
+
+# Rounds of cost-aware partial shortcutting after planning.
+DEFAULT_SHORTCUT_ROUNDS = 5
+
+
+class ValidityChecker:
+    """Joint limits, kinematic feasibility, elastic stability and collisions, cached per state.
+
+    A configuration is valid when ``robot.configuration(q)`` and ``robot.check_configuration``
+    accept it, the bound field (if given) is valid there, the standard model (if a solver is
+    given) converges to a unique, stable equilibrium (``diagnostics.ok``) and its body does not
+    touch an obstacle (if a collision checker is given).
+
+    Parameters
+    ----------
+    robot : Robot
+    collision : CollisionChecker, optional
+    field : BoundField, optional
+        Its :meth:`~ctrplan.planning.BoundField.is_valid` flag rejects configurations near
+        unstable or non-converged grid nodes.
+    solve_standard : callable, optional
+        ``solve_standard(robot, alpha, beta, settings) -> StandardSolution``; required when
+        ``collision`` is given or ``check_stability`` is True. Default:
+        :func:`ctrplan.mechanics.solve_standard` when needed.
+    settings : ModelSettings, optional
+    check_stability : bool, keyword-only
+        Reject states whose standard solution has ``diagnostics.ok`` False.
+
+    Attributes
+    ----------
+    n_calls, n_evaluations : int
+        Calls and cache misses.
+    """
+
+    def __init__(self, robot, collision=None, field=None, solve_standard=None, settings=None, *,
+                 check_stability: bool = True):
+        self.robot = robot
+        self.collision = collision
+        self.field = field
+        self.settings = settings
+        self.check_stability = bool(check_stability)
+        need_model = collision is not None or self.check_stability
+        if need_model and solve_standard is None:
+            from ..mechanics import solve_standard as _solve  # noqa: PLC0415 (optional, heavy)
+            solve_standard = _solve
+        self.solve_standard = solve_standard if need_model else None
+        self._cache: dict[bytes, bool] = {}
+        self.n_calls = 0
+        self.n_evaluations = 0
+
+    def __call__(self, q) -> bool:
+        self.n_calls += 1
+        q = np.asarray(q, dtype=float)
+        k = q.tobytes()
+        v = self._cache.get(k)
+        if v is None:
+            self.n_evaluations += 1
+            v = self._evaluate(q)
+            self._cache[k] = v
+        return v
+
+    def _evaluate(self, q) -> bool:
+        try:
+            alpha, beta = self.robot.configuration(q)
+            self.robot.check_configuration(alpha, beta)
+        except CtrplanError:
+            return False
+        if self.field is not None and not self.field.is_valid(q):
+            return False
+        if self.solve_standard is None:
+            return True
+        try:
+            sol = self.solve_standard(self.robot, alpha, beta, self.settings)
+        except (CtrplanError, np.linalg.LinAlgError, FloatingPointError):
+            return False
+        if self.check_stability and not sol.diagnostics.ok:
+            return False
+        if self.collision is not None and self.collision.collides(sol, self.robot):
+            return False
+        return True
+
+
+@dataclass
+class PlanResult:
+    """Outcome of :func:`plan`.
+
+    Attributes
+    ----------
+    waypoints : ndarray, shape (K, n_joints)
+        Path in robot joint order [rad or m]; periodic angles are continuous (unwrapped) and the
+        first row equals ``start_q``.
+    cost : float
+        Objective cost of the returned (shortcut) path [objective units, m for
+        :class:`BoundCostObjective`].
+    cost_before_simplification : float
+    solved : bool
+        An exact solution was found (always True for a returned result).
+    approximate : bool
+    planner : str
+    iterations : int
+        Planner iterations run.
+    n_vertices : int
+        Vertices in the planner's graph.
+    solve_time : float
+        Wall time of ``solve`` [s].
+    simplify_time : float
+        Wall time of shortcutting [s].
+    seed : int
+    status : str
+        OMPL planner status.
+    extra : dict
+        Counters of the validity function when it has them (``n_calls``, ``n_evaluations``).
+    """
+
+    waypoints: np.ndarray
+    cost: float
+    cost_before_simplification: float
+    solved: bool
+    approximate: bool
+    planner: str
+    iterations: int
+    n_vertices: int
+    solve_time: float
+    simplify_time: float
+    seed: int
+    status: str
+    extra: dict = field(default_factory=dict)
+
+
+def _set_seed(seed: int) -> None:
+    # OMPL logs an error when the seed changes after sampling started; in OMPL 2.0.1 the new seed
+    # is nevertheless applied to RNGs created afterwards (checked: equal seeds give equal plans
+    # in one process, different seeds different plans), so silence that message.
+    level = ou.getLogLevel()
+    ou.setLogLevel(ou.LOG_NONE)
+    try:
+        ou.RNG.setSeed(int(seed))
+    finally:
+        ou.setLogLevel(level)
+
+
+def _path_to_numpy(joint_space, path) -> np.ndarray:
+    return np.array([joint_space.to_numpy(path.getState(i)) for i in range(path.getStateCount())])
+
+
+def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar",
+         iterations: int = DEFAULT_ITERATIONS, time_limit: float | None = None, seed: int = 1, *,
+         joint_space: JointStateSpace | None = None, validity_resolution: float = DEFAULT_VALIDITY_RESOLUTION,
+         range_: float | None = None, goal_bias: float | None = None,
+         shortcut_rounds: int = DEFAULT_SHORTCUT_ROUNDS, quiet: bool = True) -> PlanResult:
+    """Plan a valid, low-cost joint-space path from ``start_q`` to ``goal_q``.
+
+    Parameters
+    ----------
+    robot : Robot
+    start_q, goal_q : array-like, shape (n_joints,)
+        Joint vectors in robot joint order [rad or m].
+    validity_fn : callable
+        ``validity_fn(q (n_joints,)) -> bool`` (e.g. a :class:`ValidityChecker`); wrapped so OMPL
+        receives a real ``bool``. Checked along motions every ``validity_resolution``.
+    objective : callable or ob.OptimizationObjective
+        ``objective(si, joint_space) -> ob.OptimizationObjective`` (e.g.
+        ``BoundCostObjective.factory(field)``), or an objective already built on
+        ``joint_space`` (then ``joint_space`` must be passed and its space information is
+        re-used).
+    planner : str
+        Key of :data:`PLANNERS`.
+    iterations : int
+        Planner iterations (termination condition, reproducible).
+    time_limit : float, optional
+        Additional wall-time limit [s]; runs stopped by it are not reproducible.
+    seed : int
+        OMPL RNG seed (> 0), set before any planner or sampler is created.
+    joint_space : JointStateSpace, optional
+        Default ``JointStateSpace(robot)``.
+    validity_resolution : float, keyword-only
+        Spacing of validity checks along motions [m of the weighted metric].
+    range_ : float, optional
+        Planner's maximum motion length [m of the metric] (RRT* family only).
+    goal_bias : float, optional
+        Goal sampling probability (RRT* family only).
+    shortcut_rounds : int, keyword-only
+        Rounds of cost-aware ``partialShortcutPath``; 0 disables.
+    quiet : bool, keyword-only
+        Raise OMPL's log level to warnings during this call (restored afterwards).
+
+    Returns
+    -------
+    PlanResult
+
+    Raises
+    ------
+    ValueError
+        Unknown planner name or bad arguments.
+    UnreachableGoalError
+        Start or goal invalid, or no exact solution within the iterations.
+    """
+    if planner not in PLANNERS:
+        raise ValueError(f"unknown planner {planner!r}; available: {', '.join(PLANNERS)}")
+    if int(iterations) < 1:
+        raise ValueError(f"iterations must be >= 1, got {iterations!r}")
+    if int(seed) <= 0:
+        raise ValueError(f"seed must be a positive integer (OMPL treats 0 as 'random'), got {seed!r}")
+    level = ou.getLogLevel()
+    if quiet:
+        ou.setLogLevel(ou.LOG_WARN)
+    try:
+        return _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, time_limit, seed,
+                     joint_space, validity_resolution, range_, goal_bias, shortcut_rounds)
+    finally:
+        ou.setLogLevel(level)
+
+
+def _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, time_limit, seed,
+          joint_space, validity_resolution, range_, goal_bias, shortcut_rounds):
+    _set_seed(seed)
+    prebuilt = isinstance(objective, ob.OptimizationObjective)
+    if prebuilt and joint_space is None:
+        joint_space = getattr(objective, "joint_space", None)
+        if joint_space is None:
+            raise ValueError("a pre-built objective needs the joint_space it was built on")
+    js = joint_space if joint_space is not None else JointStateSpace(robot)
+    start_q = js._check_q(start_q)
+    goal_q = js._check_q(goal_q)
+    for label, q in (("start", start_q), ("goal", goal_q)):
+        if not bool(validity_fn(q)):
+            raise UnreachableGoalError(
+                f"{label} configuration {_fmt_q(robot, q)} is invalid (joint limits, elastic "
+                "stability, collision or bound field validity)")
+
+    si = objective.getSpaceInformation() if prebuilt else ob.SpaceInformation(js.space)
+    si.setStateValidityChecker(lambda s: bool(validity_fn(js.to_numpy(s))))
+    extent = js.space.getMaximumExtent()
+    si.setStateValidityCheckingResolution(min(1.0, float(validity_resolution) / extent))
+    si.setup()
+    obj = objective if prebuilt else objective(si, js)
+
+    start = js.from_numpy(start_q)
+    goal = js.from_numpy(goal_q)
+    pdef = ob.ProblemDefinition(si)
+    pdef.setStartAndGoalStates(start, goal)
+    pdef.setOptimizationObjective(obj)
+    pl = PLANNERS[planner](si)
+    if range_ is not None and hasattr(pl, "setRange"):
+        pl.setRange(float(range_))
+    if goal_bias is not None and hasattr(pl, "setGoalBias"):
+        pl.setGoalBias(float(goal_bias))
+    pl.setProblemDefinition(pdef)
+    pl.setup()
+
+    n_iter = int(iterations)
+    ptc = ob.PlannerTerminationCondition(lambda: pl.numIterations() >= n_iter)
+    if time_limit is not None:
+        ptc = ob.plannerOrTerminationCondition(ptc, ob.timedPlannerTerminationCondition(float(time_limit)))
+    t0 = time.perf_counter()
+    status = pl.solve(ptc)
+    solve_time = time.perf_counter() - t0
+
+    pd = ob.PlannerData(si)
+    pl.getPlannerData(pd)
+    n_vertices = int(pd.numVertices())
+    exact = bool(pdef.hasExactSolution())
+    if not exact:
+        raise UnreachableGoalError(
+            f"{planner} found no exact path from {_fmt_q(robot, start_q)} to {_fmt_q(robot, goal_q)} in "
+            f"{pl.numIterations()} iterations ({n_vertices} vertices, status '{status}'); the goal may be "
+            "disconnected by obstacles, joint limits or unstable regions: raise iterations or check the goal")
+    path = pdef.getSolutionPath()
+    cost0 = float(path.cost(obj).value())
+    t1 = time.perf_counter()
+    if shortcut_rounds > 0 and path.getStateCount() > 2:
+        simplifier = og.PathSimplifier(si, pdef.getGoal(), obj)
+        for _ in range(int(shortcut_rounds)):
+            if not simplifier.partialShortcutPath(path):
+                break
+    simplify_time = time.perf_counter() - t1
+    cost = float(path.cost(obj).value())
+    w = _path_to_numpy(js, path)
+    # continuous angles starting exactly at start_q
+    for j in np.flatnonzero(js.periodic):
+        w[:, j] = np.unwrap(w[:, j])
+    w += np.where(js.periodic, start_q - w[0], 0.0)[None, :]
+    w[0] = start_q
+    w[-1] = np.where(js.periodic, w[-1], goal_q)
+    return PlanResult(waypoints=w, cost=cost, cost_before_simplification=cost0, solved=True,
+                      approximate=bool(pdef.hasApproximateSolution()), planner=planner,
+                      iterations=int(pl.numIterations()), n_vertices=n_vertices, solve_time=solve_time,
+                      simplify_time=simplify_time, seed=int(seed), status=str(status),
+                      extra={"n_validity_calls": getattr(validity_fn, "n_calls", None),
+                             "n_validity_evaluations": getattr(validity_fn, "n_evaluations", None)})
+
+
+def _fmt_q(robot, q) -> str:
+    parts = []
+    for j, v in zip(robot.joints, np.asarray(q, dtype=float)):
+        parts.append(f"{j.name}={v:.4g} rad" if j.kind == "rotation" else f"{j.name}={v * 1e3:.4g} mm")
+    return "(" + ", ".join(parts) + ")"

@@ -1,0 +1,42 @@
+import numpy as np
+import pytest
+
+from ctrplan.errors import UnreachableGoalError
+from ctrplan.planning import BoundField, TaskSpaceGoal, resolve_goal
+from test_planning_helpers import fake_robot, fake_solve_standard, fake_tip
+
+
+def test_ik_finds_both_elbows_and_picks_lowest_bound():
+    robot = fake_robot()
+    q_true = np.array([0.4, 1.6, -0.06])
+    target = fake_tip(*robot.configuration(q_true))
+
+    # bound grows with alpha_2: the IK branch with the smaller alpha_2 must win
+    def bound(robot_, alpha, beta, settings=None):
+        from types import SimpleNamespace
+        p = 1e-3 * (2.0 + np.sin(alpha[1]))
+        return SimpleNamespace(position=p, angle=p, translation_last_position=p, translation_last_angle=p,
+                               diagnostics=SimpleNamespace(converged=True, unstable=False))
+
+    field = BoundField.compute(robot, bound, (24, 8, 3), progress=False)
+    sol = resolve_goal(TaskSpaceGoal(tuple(target), 1e-4), robot, lambda q: True, field=field,
+                       solve_standard=fake_solve_standard, seed=0)
+    assert sol.tip_error < 1e-4
+    np.testing.assert_allclose(fake_tip(*robot.configuration(sol.q)), target, atol=1e-4)
+    assert len(sol.candidates) >= 2  # the mirrored elbow also reaches the target
+    assert sol.bound == pytest.approx(np.nanmin(sol.candidate_bounds))
+
+
+def test_unreachable_names_target_in_mm():
+    robot = fake_robot()
+    with pytest.raises(UnreachableGoalError, match=r"\(100\.00, 0\.00, 50\.00\) mm; best distance reached"):
+        resolve_goal({"tip_position_m": [0.1, 0.0, 0.05], "tolerance_m": 1e-3}, robot,
+                     solve_standard=fake_solve_standard, starts_per_joint=2)
+
+
+def test_joint_goal_passthrough():
+    robot = fake_robot()
+    sol = resolve_goal([0.1, 0.2, -0.05], robot, lambda q: True)
+    np.testing.assert_array_equal(sol.q, [0.1, 0.2, -0.05])
+    with pytest.raises(UnreachableGoalError):
+        resolve_goal([0.1, 0.2, -0.05], robot, lambda q: False)

@@ -1,0 +1,98 @@
+import numpy as np
+import pytest
+
+from ctrplan.errors import UnreachableGoalError
+from ctrplan.planning import (PLANNERS, BoundCostObjective, BoundField, JointStateSpace, ValidityChecker,
+                              order_path, plan)
+from test_planning_helpers import fake_bound, fake_robot, fake_solve_standard
+
+START = np.array([-1.2, 0.0, -0.07])
+GOAL = np.array([1.2, 0.0, -0.07])
+
+
+@pytest.fixture(scope="module")
+def setup():
+    robot = fake_robot()
+    field = BoundField.compute(robot, fake_bound, (16, 16, 3), progress=False)
+    return robot, field
+
+
+def dense_max_bound(robot, field, waypoints):
+    js = JointStateSpace(robot)
+    pts = np.vstack([js.interpolate(a, b, np.linspace(0, 1, 40)) for a, b in zip(waypoints[:-1], waypoints[1:])])
+    return field(pts).max()
+
+
+def test_reproducible_and_bound_aware(setup):
+    robot, field = setup
+    valid = ValidityChecker(robot, check_stability=False)
+    aware = BoundCostObjective.factory(field, bound_weight=1000.0)
+    r1 = plan(robot, START, GOAL, valid, aware, iterations=300, seed=3)
+    r2 = plan(robot, START, GOAL, valid, aware, iterations=300, seed=3)
+    np.testing.assert_array_equal(r1.waypoints, r2.waypoints)
+    assert r1.cost == r2.cost and r1.iterations == 300 and r1.solved
+    assert r1.cost <= r1.cost_before_simplification + 1e-12
+    np.testing.assert_array_equal(r1.waypoints[0], START)
+    blind = plan(robot, START, GOAL, valid, BoundCostObjective.factory(None, bound_weight=0.0),
+                 iterations=300, seed=3)
+    # the bump (10.5 mm) sits between start and goal; the bound-aware path goes round it
+    assert dense_max_bound(robot, field, blind.waypoints) > 8e-3
+    assert dense_max_bound(robot, field, r1.waypoints) < 3e-3
+    # goal reached modulo 2 pi on the periodic joints
+    d = JointStateSpace(robot).difference(r1.waypoints[-1], GOAL)
+    np.testing.assert_allclose(d, 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", sorted(PLANNERS))
+def test_every_registered_planner_runs(setup, name):
+    robot, field = setup
+    valid = ValidityChecker(robot, check_stability=False)
+    r = plan(robot, START, GOAL, valid, BoundCostObjective.factory(field, bound_weight=1000.0),
+             planner=name, iterations=60, seed=5)
+    assert r.solved and r.planner == name and r.n_vertices >= 2
+
+
+def test_validity_with_model_and_unreachable(setup):
+    robot, _ = setup
+
+    class Wall(ValidityChecker):
+        def _evaluate(self, q):
+            return super()._evaluate(q) and not (-0.06 < q[2] < -0.05)
+
+    wall = Wall(robot, solve_standard=fake_solve_standard)
+    with pytest.raises(UnreachableGoalError, match="no exact path"):
+        plan(robot, [0, 0, -0.04], [0, 0, -0.09], wall, BoundCostObjective.factory(None, bound_weight=0.0),
+             iterations=80, seed=1)
+    with pytest.raises(UnreachableGoalError, match="goal configuration"):
+        plan(robot, [0, 0, -0.04], [0, 0, -0.055], wall, BoundCostObjective.factory(None, bound_weight=0.0),
+             iterations=10, seed=1)
+    with pytest.raises(ValueError, match="unknown planner"):
+        plan(robot, START, GOAL, wall, BoundCostObjective.factory(None, bound_weight=0.0), planner="PRM")
+    assert wall([0, 0, -0.04]) and not wall([0, 0, -0.2])  # joint limit
+    assert wall.n_evaluations <= wall.n_calls
+
+
+def test_ordered_segments_rotate_before_translating(setup):
+    robot, field = setup
+    valid = ValidityChecker(robot, check_stability=False)
+    goal = np.array([1.0, 0.5, -0.04])
+    r = plan(robot, START, goal, valid, BoundCostObjective.factory(field), iterations=150, seed=2)
+    js = JointStateSpace(robot)
+    ordered = order_path(r.waypoints, robot, valid, joint_space=js)
+    q = ordered.q
+    assert ordered.motions[0] == "start"
+    for k in range(1, len(q)):
+        dq = q[k] - q[k - 1]
+        if ordered.motions[k] == "rotation":
+            assert np.all(dq[~js.is_rotation] == 0.0)
+            assert k + 1 == len(q) or ordered.motions[k + 1] in ("translation", "rotation")
+        else:
+            assert np.all(dq[js.is_rotation] == 0.0)
+    # every planned waypoint appears, and each segment is rotation then translation
+    plan_pts = [tuple(p) for p in r.waypoints]
+    idx = [i for i, p in enumerate(map(tuple, q)) if p in plan_pts]
+    assert len(idx) == len(r.waypoints)
+    for a, b in zip(idx[:-1], idx[1:]):
+        seg = ordered.motions[a + 1:b + 1]
+        assert seg in (["rotation", "translation"], ["rotation"], ["translation"])
+    np.testing.assert_allclose(js.difference(q[-1], goal), 0.0, atol=1e-9)
