@@ -40,3 +40,16 @@ def test_joint_goal_passthrough():
     np.testing.assert_array_equal(sol.q, [0.1, 0.2, -0.05])
     with pytest.raises(UnreachableGoalError):
         resolve_goal([0.1, 0.2, -0.05], robot, lambda q: False)
+
+
+def test_scenario_goal_objects():
+    from types import SimpleNamespace
+
+    robot = fake_robot()
+    q_true = np.array([0.4, 1.6, -0.06])
+    target = fake_tip(*robot.configuration(q_true))
+    sol = resolve_goal(SimpleNamespace(tip_position=target, tolerance=1e-4), robot,
+                       solve_standard=fake_solve_standard)
+    assert sol.tip_error < 1e-4
+    sol = resolve_goal(SimpleNamespace(q=np.array([0.1, 0.2, -0.05])), robot)
+    np.testing.assert_array_equal(sol.q, [0.1, 0.2, -0.05])

@@ -96,3 +96,36 @@ def test_ordered_segments_rotate_before_translating(setup):
         seg = ordered.motions[a + 1:b + 1]
         assert seg in (["rotation", "translation"], ["rotation"], ["translation"])
     np.testing.assert_allclose(js.difference(q[-1], goal), 0.0, atol=1e-9)
+
+
+def test_objective_in_a_plain_ompl_setup(setup):
+    """The docs/planning.md recipe: BoundCostObjective in a hand-built OMPL problem."""
+    from ompl import base as ob, geometric as og, util as ou
+
+    robot, field = setup
+    js = JointStateSpace(robot)
+    ou.setLogLevel(ou.LOG_WARN)
+    ou.RNG.setSeed(1)
+    si = ob.SpaceInformation(js.space)
+    si.setStateValidityChecker(lambda s: bool(field.is_valid(js.to_numpy(s))))
+    si.setup()
+    objective = BoundCostObjective(si, js, field, bound_weight=1000.0)
+    pdef = ob.ProblemDefinition(si)
+    pdef.setStartAndGoalStates(js.from_numpy(START), js.from_numpy(GOAL))
+    pdef.setOptimizationObjective(objective)
+    planner = og.InformedRRTstar(si)
+    planner.setProblemDefinition(pdef)
+    planner.setup()
+    planner.solve(ob.PlannerTerminationCondition(lambda: planner.numIterations() >= 100))
+    assert pdef.hasExactSolution()
+    path = pdef.getSolutionPath()
+    before = path.cost(objective).value()
+    og.PathSimplifier(si, pdef.getGoal(), objective).partialShortcutPath(path)
+    after = path.cost(objective).value()
+    assert after <= before + 1e-12
+    w = np.array([js.to_numpy(path.getState(i)) for i in range(path.getStateCount())])
+    # OMPL's path cost equals the numpy cost of the same waypoints
+    assert objective.path_cost(w) == pytest.approx(after, rel=1e-9)
+    # and a pre-built objective can be handed to plan()
+    r = plan(robot, START, GOAL, lambda q: True, objective, iterations=50, seed=4, joint_space=js)
+    assert r.solved

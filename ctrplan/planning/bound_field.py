@@ -1,6 +1,8 @@
 """Precomputed friction-bound map over the joint space with multilinear interpolation.
 
-The friction bound of Ha, Fagogenis & Dupont 2019 (Section IV, Eq. (45)-(47);
+The friction bound of Ha, Fagogenis & Dupont 2019 (largest tip deviation of the 2^(n-1) bounding
+friction solutions of Section III from the standard model, as computed by
+:func:`ctrplan.mechanics.evaluate_bound`;
 doi:10.1109/TRO.2018.2878906) costs 0.2-2 s per configuration, far too slow inside a sampling
 planner that queries ~10^5 states. :class:`BoundField` evaluates it once on a regular grid of the
 joint space and interpolates multilinearly:

@@ -95,8 +95,10 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
 
     Parameters
     ----------
-    goal : JointGoal, TaskSpaceGoal, array-like of shape (n_joints,), or dict
-        Dicts: ``{"q": [...]}`` or ``{"tip_position_m": [...], "tolerance_m": ...}``.
+    goal : JointGoal, TaskSpaceGoal, array-like of shape (n_joints,), dict, or scenario goal
+        Dicts: ``{"q": [...]}`` or ``{"tip_position_m": [...], "tolerance_m": ...}``; objects
+        with ``tip_position`` [m] and ``tolerance`` [m] (``ctrplan.io.scenario.TaskGoal``) or
+        with ``q`` (``ctrplan.io.scenario.JointGoal``) are accepted too.
     robot : Robot
     validity_fn : callable, optional
         ``validity_fn(q) -> bool``; invalid IK solutions are discarded.
@@ -127,6 +129,10 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
     """
     if isinstance(goal, dict):
         goal = TaskSpaceGoal(**goal) if "tip_position_m" in goal else JointGoal(**goal)
+    elif hasattr(goal, "tip_position") and hasattr(goal, "tolerance"):  # ctrplan.io.scenario.TaskGoal
+        goal = TaskSpaceGoal(tuple(np.asarray(goal.tip_position, dtype=float)), float(goal.tolerance))
+    elif not isinstance(goal, JointGoal) and hasattr(goal, "q"):  # ctrplan.io.scenario.JointGoal
+        goal = JointGoal(tuple(np.asarray(goal.q, dtype=float)))
     if not isinstance(goal, (JointGoal, TaskSpaceGoal)):
         goal = JointGoal(tuple(np.asarray(goal, dtype=float).reshape(-1)))
     if isinstance(goal, JointGoal):

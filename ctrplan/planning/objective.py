@@ -5,7 +5,7 @@ of :class:`~ctrplan.planning.space.JointStateSpace`, [m]) the motion cost is
 
 .. math:: c = L + w \\int_0^L b(q(\\ell))\\, d\\ell ,
 
-with :math:`b` the friction bound on the tip position (Eq. (45)-(47) of Ha, Fagogenis & Dupont
+with :math:`b` the friction bound on the tip position (Section III of Ha, Fagogenis & Dupont
 2019, doi:10.1109/TRO.2018.2878906) interpolated from a :class:`~ctrplan.planning.BoundField`
 [m], and :math:`w` = ``bound_weight`` [1/m]. The integral is the trapezoid rule on samples spaced
 at most ``sample_spacing`` apart along the segment. With ``bound_weight = 0`` the objective is
