@@ -5,8 +5,9 @@
 # the series are truncated after the theta^4 term, error < 1e-12 at this threshold).
 SMALL_ANGLE = 0.1
 
-# Two equilibria whose tip positions differ by more than this are distinct [m].
-DISTINCT_EQUILIBRIUM_TOL = 1e-6
+# Two standard-model equilibria whose base torsions differ by more than this twist over a tube's
+# length are distinct [rad] (the shooting converges to 1e-9 1/m, so same solutions agree to ~1e-9).
+DISTINCT_EQUILIBRIUM_TWIST = 1e-5
 
 # Grid points closer than this are merged when building the arc-length grid [m].
 GRID_MERGE_TOL = 1e-9

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..constants import DISTINCT_EQUILIBRIUM_TOL
+from ..constants import DISTINCT_EQUILIBRIUM_TWIST
 from ..errors import ConvergenceError, ElasticInstabilityError
 from ._lie import exp_so3, left_jacobian_so3, rot_z
 from .grid import build_grid
@@ -182,11 +182,6 @@ class _Problem:
         return sig0, res_norm, settings.max_shooting_iterations, res_norm < settings.shooting_tol, float(np.linalg.det(Ss))
 
 
-def _tip_of(problem, sig0):
-    """Tip position of a solution (cheap, used to tell equilibria apart)."""
-    return _assemble(problem, sig0, Diagnostics(converged=True)).tip_position
-
-
 def _assemble(problem, sig0, diag) -> StandardSolution:
     g = problem.grid
     s = g.s
@@ -308,17 +303,17 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
     n_eq = 1 if ok else 0
     msg = "converged" if ok else f"shooting did not converge (tip torsion residual {res:.3g} 1/m)"
     if ok and check_stability and settings.multistart > 0:
-        tip0 = _tip_of(problem, sig0)
-        tips = [tip0]
+        # equilibria are told apart by their base torsions (the shooting unknowns): two
+        # solutions of the BVP with the same base torsions are the same solution
+        found = [sig0]
         for guess in _multistart_guesses(problem, sig0, settings.multistart):
             g_sig, g_res, g_it, g_ok, g_det = problem.newton(guess, settings)
             iters += g_it
             if not g_ok or not g_det > 0.0:
                 continue
-            tip = _tip_of(problem, g_sig)
-            if all(np.linalg.norm(tip - t) > DISTINCT_EQUILIBRIUM_TOL for t in tips):
-                tips.append(tip)
-        n_eq = len(tips)
+            if all(np.max(np.abs(g_sig - f) * problem.lengths) > DISTINCT_EQUILIBRIUM_TWIST for f in found):
+                found.append(g_sig)
+        n_eq = len(found)
         if n_eq > 1:
             unstable = True
     if unstable:

@@ -1,0 +1,141 @@
+"""Command line: ``ctrplan evaluate``, ``ctrplan plan``, ``ctrplan boundmap``.
+
+A thin layer over the library: it reads files, sets one BLAS thread per process (the dense
+solves here are small; more threads only oversubscribe the cores), calls the numerics and
+writes outputs atomically.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import click  # noqa: E402
+
+from .errors import CtrplanError  # noqa: E402
+
+
+def _settings(ds):
+    from .mechanics import ModelSettings
+
+    return ModelSettings() if ds is None else ModelSettings(ds=ds)
+
+
+def _limit_threads():
+    try:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
+    except ImportError:  # pragma: no cover
+        pass
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="ctrplan")
+def main():
+    """Friction-bounded motion planning for concentric tube robots.
+
+    Mechanics from Ha, Fagogenis & Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906.
+    """
+    _limit_threads()
+
+
+@main.command()
+@click.option("--robot", "robot_path", required=True, type=click.Path(exists=True, dir_okay=False),
+              help="Robot model file (TOML, SI units).")
+@click.option("--configs", "configs_path", required=True, type=click.Path(exists=True, dir_okay=False),
+              help="CSV with alpha_1..n [rad], beta_1..n [m] and optionally eta_1..n-1.")
+@click.option("--model", type=click.Choice(["standard", "clearance", "friction"]), required=True)
+@click.option("--out", "out_path", type=click.Path(dir_okay=False), default=None,
+              help="Output CSV (default: <configs>-<model>.csv).")
+@click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")
+@click.option("--jobs", type=int, default=None, help="Worker processes (default: all cores).")
+@click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
+def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress):
+    """Evaluate a model at every configuration of a CSV.
+
+    One output row per configuration, and per friction direction eta for the friction model
+    (all 2^(n-1) unless the input gives eta). Interrupted runs resume from
+    <out>.partial.jsonl.
+    """
+    from .batch import evaluate_table, job_key
+    from .io.robot_file import load_robot
+    from .io.tables import read_configurations, write_table
+
+    robot = load_robot(robot_path)
+    alpha, beta, eta, _ = read_configurations(configs_path, robot.n_tubes)
+    for k in range(alpha.shape[0]):
+        try:
+            robot.check_configuration(alpha[k], beta[k])
+        except CtrplanError as exc:
+            raise click.ClickException(f"{configs_path}: row {k + 1}: {exc}") from None
+    settings = _settings(ds)
+    out = Path(out_path) if out_path else Path(configs_path).with_name(Path(configs_path).stem + f"-{model}.csv")
+    key = job_key(Path(robot_path).read_text(), Path(configs_path).read_text(), model, settings)
+    ck = out.with_name(out.name + ".partial.jsonl")
+    frame = evaluate_table(robot, alpha, beta, model, settings, eta, n_jobs=jobs or os.cpu_count() or 1,
+                           checkpoint=ck, progress=not no_progress, job_key=key)
+    write_table(out, frame)
+    ck.unlink(missing_ok=True)
+    bad = frame[frame["status"] != "ok"]
+    click.echo(f"wrote {len(frame)} rows to {out} ({len(bad)} not ok)")
+    if len(bad):
+        for _, r in bad.head(10).iterrows():
+            click.echo(f"  row {int(r['row'])}: {r['status']}: {r['message']}")
+
+
+@main.command()
+@click.argument("scenario_path", type=click.Path(exists=True, dir_okay=False))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Output folder (default: the scenario's [output] dir or out/<name>).")
+@click.option("--jobs", type=int, default=None, help="Worker processes for a bound map (default: all cores).")
+@click.option("--iterations", type=int, default=None, help="Override the planner's iteration budget.")
+@click.option("--no-blind", is_flag=True, help="Skip the bound-blind comparison plan.")
+def plan(scenario_path, out_dir, jobs, iterations, no_blind):
+    """Plan a friction-bound-aware motion for a scenario and write the drive trajectory."""
+    from .pipeline import run_plan
+
+    summary = run_plan(scenario_path, out_dir=out_dir, n_jobs=jobs or os.cpu_count() or 1,
+                       iterations=iterations, compare_blind=not no_blind, echo=click.echo)
+    click.echo(f"outputs in {summary['output_dir']}")
+
+
+@main.command()
+@click.option("--robot", "robot_path", required=True, type=click.Path(exists=True, dir_okay=False))
+@click.option("--resolution", default=None,
+              help="Grid nodes per joint, comma-separated in robot joint order (e.g. 18,18,7).")
+@click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")
+@click.option("--out", "out_path", type=click.Path(dir_okay=False), default=None,
+              help="Output .npz (default: boundmaps/<robot>-<key>.npz next to the robot file).")
+@click.option("--cache-dir", type=click.Path(file_okay=False), default=None,
+              help="Chunk folder for resuming (default: <out>.chunks).")
+@click.option("--jobs", type=int, default=None, help="Worker processes (default: all cores).")
+def boundmap(robot_path, resolution, ds, out_path, cache_dir, jobs):
+    """Compute the friction-bound map of a robot over its joint space (resumable)."""
+    from .pipeline import compute_bound_map, default_resolution
+    from .io.robot_file import load_robot
+
+    robot = load_robot(robot_path)
+    res = tuple(int(x) for x in resolution.split(",")) if resolution else default_resolution(robot)
+    field, path = compute_bound_map(robot_path, res, _settings(ds), out_path=out_path, cache_dir=cache_dir,
+                                    n_jobs=jobs or os.cpu_count() or 1)
+    v = field.values[..., 0][field.valid] * 1e3
+    click.echo(f"wrote {path}: {field.valid.sum()} of {field.valid.size} nodes valid; "
+               f"bound median {float(__import__('numpy').median(v)):.2f} mm, max {v.max():.2f} mm")
+
+
+def run():  # pragma: no cover - entry point wrapper
+    try:
+        main(standalone_mode=True)
+    except CtrplanError as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(2)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,346 @@
+"""The main job: a bound-aware plan for a scenario, ordered, time-parameterized and reported.
+
+``run_plan(scenario)``:
+
+1. load the scenario and its robot; load the robot's bound map (shipped in
+   ``<robot dir>/boundmaps/`` or cached) or compute it (parallel, resumable);
+2. resolve each goal (task-space goals by inverse kinematics preferring the smallest bound);
+3. plan every leg twice with the same planner and seed: bound-aware (length + weight x integral
+   of the bound) and bound-blind (length only);
+4. order every segment into rotations then translations (Section V-B of Ha et al. 2019) and check
+   both phases;
+5. re-run the exact model at the final waypoints and report the bound given the last motion;
+6. time-parameterize with ruckig (rest-to-rest, stop between phases), check the samples;
+7. write path.csv, trajectory.csv, figures and summary.json atomically.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import UnreachableGoalError
+from .io.robot_file import load_robot
+from .io.scenario import load_scenario
+from .mechanics import ModelSettings, evaluate_bound, solve_standard
+from .planning import (BoundCostObjective, BoundField, CollisionChecker, JointStateSpace,
+                       ValidityChecker, bounds_given_last_motion, field_key, order_path, plan,
+                       resolve_goal)
+from .planning.bound_field import BoundFieldKeyError
+
+__all__ = ["run_plan", "compute_bound_map", "load_or_compute_bound_map", "default_resolution"]
+
+# Default grid nodes per joint: periodic rotations, translations (median interpolation error
+# below 0.5 mm on the Table VII robot; see docs/planning.md for the measurement).
+DEFAULT_ROTATION_NODES = 18
+DEFAULT_TRANSLATION_NODES = 7
+# Spacing of interpolated-bound samples along an ordered path for the bound plot and the
+# max-bound comparison [m of the weighted joint metric].
+PATH_SAMPLE_SPACING = 2e-3
+# Length of the capsules that sweep the robot body for collision checking [m].
+COLLISION_SEGMENT = 5e-3
+
+
+def default_resolution(robot) -> tuple[int, ...]:
+    """Default bound-map nodes per joint (rotations 18, translations 7)."""
+    return tuple(DEFAULT_ROTATION_NODES if j.kind == "rotation" else DEFAULT_TRANSLATION_NODES
+                 for j in robot.joints)
+
+
+def _map_paths(robot_path: Path, key: str):
+    shipped = robot_path.parent / "boundmaps" / f"{robot_path.stem}-{key[:12]}.npz"
+    cache = Path(".cache") / "boundmaps" / f"{robot_path.stem}-{key[:12]}"
+    return shipped, cache
+
+
+def compute_bound_map(robot_path, resolution, settings: ModelSettings, *, out_path=None, cache_dir=None,
+                      n_jobs: int = 1, progress: bool = True):
+    """Compute (or resume) the bound map of a robot file and save it.
+
+    Parameters
+    ----------
+    robot_path : path
+        Robot model file; its content is part of the map's key.
+    resolution : sequence of int, shape (n_joints,)
+    settings : ModelSettings
+    out_path : path, optional
+        Default ``<robot dir>/boundmaps/<robot>-<key12>.npz``.
+    cache_dir : path, optional
+        Chunk folder (resume); default ``<out>.chunks``.
+    n_jobs : int
+
+    Returns
+    -------
+    field : BoundField
+    path : Path
+    """
+    robot_path = Path(robot_path)
+    robot = load_robot(robot_path)
+    text = robot_path.read_text()
+    key = field_key(robot, settings, resolution, evaluate_bound, text)
+    shipped, _ = _map_paths(robot_path, key)
+    out = Path(out_path) if out_path else shipped
+    chunks = Path(cache_dir) if cache_dir else out.with_suffix(".chunks")
+    field = BoundField.compute(robot, evaluate_bound, resolution, settings, cache_dir=chunks, n_jobs=n_jobs,
+                               robot_file_text=text, progress=progress)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    field.save(out)
+    return field, out
+
+
+def load_or_compute_bound_map(robot_path, robot, resolution, settings, n_jobs=1, echo=print):
+    """Shipped or cached map with the right key, else compute it (resumable cache).
+
+    Returns
+    -------
+    field : BoundField
+    source : str
+        ``"shipped"``, ``"cache"`` or ``"computed"``.
+    seconds : float
+        Wall time spent loading or computing [s].
+    """
+    t0 = time.perf_counter()
+    robot_path = Path(robot_path)
+    text = robot_path.read_text()
+    key = field_key(robot, settings, resolution, evaluate_bound, text)
+    shipped, cache = _map_paths(robot_path, key)
+    for path, source in ((shipped, "shipped"), (cache.with_suffix(".npz"), "cache")):
+        if path.exists():
+            try:
+                return BoundField.load(path, key=key), source, time.perf_counter() - t0
+            except BoundFieldKeyError as exc:
+                echo(f"ignoring {path}: {exc}")
+    echo(f"computing the bound map of {robot_path.name} at resolution {resolution} "
+         f"(cache {cache}; interrupt and rerun to resume)")
+    field = BoundField.compute(robot, evaluate_bound, resolution, settings, cache_dir=cache, n_jobs=n_jobs,
+                               robot_file_text=text)
+    field.save(cache.with_suffix(".npz"))
+    return field, "computed", time.perf_counter() - t0
+
+
+def _dense_path(ordered_q, motions, joint_space, spacing):
+    """Straight-line samples along each ordered phase, with cumulative joint-space length."""
+    pts, s, seg_motion = [ordered_q[0]], [0.0], [motions[0]]
+    total = 0.0
+    for k in range(1, len(ordered_q)):
+        a, b = ordered_q[k - 1], ordered_q[k]
+        d = joint_space.distance(a, b)
+        m = max(1, int(np.ceil(d / spacing)))
+        for t in np.arange(1, m + 1) / m:
+            pts.append(a + (b - a) * t)
+            s.append(total + d * t)
+            seg_motion.append(motions[k])
+        total += d
+    return np.array(pts), np.array(s), seg_motion
+
+
+def _plan_route(robot, start, goals_q, validity, field, weight, sc, iterations, joint_space):
+    legs, q_prev, waypoints = [], start, [start]
+    for gi, q_goal in enumerate(goals_q):
+        res = plan(robot, q_prev, q_goal, validity, BoundCostObjective.factory(field, bound_weight=weight),
+                   planner=sc.planner.name, iterations=iterations, time_limit=sc.planner.time_limit,
+                   seed=sc.planner.seed + gi, joint_space=joint_space, range_=sc.planner.range)
+        legs.append(res)
+        wp = np.array(res.waypoints)
+        # continue from where the previous leg ended (unwrapped angles stay continuous)
+        offset = waypoints[-1] - wp[0]
+        waypoints.extend(list(wp[1:] + offset))
+        q_prev = waypoints[-1]
+    ordered = order_path(np.array(waypoints), robot, validity, joint_space=joint_space)
+    return legs, ordered
+
+
+def _route_report(ordered, robot, field, settings, joint_space, exact=True):
+    qd, sd, md = _dense_path(ordered.q, ordered.motions, joint_space, PATH_SAMPLE_SPACING)
+    friction = np.asarray(field(qd, "position"))
+    tlast = np.asarray(field(qd, "translation_last_position"))
+    given_last = np.where(np.array(md) == "translation", tlast, friction)
+    # the translation-last bound applies from the end of a translation phase; along a rotation
+    # phase the friction bound applies.
+    out = {"dense_q": qd, "dense_s": sd, "dense_motion": md, "dense_friction": friction,
+           "dense_translation_last": tlast, "dense_given_last": given_last}
+    if exact:
+        lm = bounds_given_last_motion(ordered, robot, evaluate_bound, settings)
+        out["exact"] = lm
+    return out
+
+
+def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | None = None,
+             compare_blind: bool = True, echo=print) -> dict:
+    """Plan, order, time-parameterize and report one scenario (``ctrplan plan``).
+
+    Parameters
+    ----------
+    scenario_path : path
+        Scenario TOML file.
+    out_dir : path, optional
+        Output folder (default: the scenario's ``[output] dir``, else ``out/<scenario name>``).
+    n_jobs : int
+        Worker processes if the bound map must be computed.
+    iterations : int, optional
+        Overrides the scenario's planner iterations.
+    compare_blind : bool
+        Also plan bound-blind (length only, same planner and seed) and compare.
+    echo : callable
+        Progress messages.
+
+    Returns
+    -------
+    dict
+        The summary written to ``summary.json`` (plus ``output_dir``).
+
+    Raises
+    ------
+    ModelFileError
+        Malformed scenario or robot file.
+    UnreachableGoalError
+        Invalid start, unreachable goal, or no valid path within the budget.
+    """
+    from .plots import plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes
+    from .report import format_summary, write_plan_outputs
+    from .trajectory import check_trajectory, time_parameterize_robot
+
+    t_start = time.perf_counter()
+    sc = load_scenario(scenario_path)
+    robot = sc.robot
+    settings = ModelSettings(ds=sc.bound_field.ds) if sc.bound_field.ds else ModelSettings()
+    resolution = tuple(sc.bound_field.resolution) if sc.bound_field.resolution else default_resolution(robot)
+    out = Path(out_dir) if out_dir else (sc.output_dir or Path("out") / sc.name)
+    echo(f"scenario {sc.name}: robot {robot.name} ({', '.join(robot.joint_names)})")
+
+    field, map_source, map_time = load_or_compute_bound_map(sc.robot_file, robot, resolution, settings,
+                                                             n_jobs=n_jobs, echo=echo)
+    echo(f"bound map: {map_source} in {map_time:.1f} s")
+    # 5 mm capsules: chord error 0.06 mm on the tightest precurvature radius (55 mm)
+    collision = CollisionChecker([o.as_dict() for o in sc.obstacles], segment_length=COLLISION_SEGMENT)
+    check_settings = settings.replace(multistart=0)  # the map flags multi-equilibrium regions
+    validity = ValidityChecker(robot, collision=collision, field=field, settings=check_settings)
+    joint_space = JointStateSpace(robot)
+    if not validity(sc.start):
+        raise UnreachableGoalError(f"{sc.file}: start configuration {sc.joint_dict(sc.start)} is invalid "
+                                   "(collision, elastic instability or outside the bound map's valid region)")
+    t0 = time.perf_counter()
+    goals = [resolve_goal(g, robot, validity_fn=validity, field=field, settings=check_settings, seed=k + 1)
+             for k, g in enumerate(sc.goals)]
+    ik_time = time.perf_counter() - t0
+    for k, g in enumerate(goals):
+        echo(f"goal {k + 1}: q = {np.round(g.q, 4).tolist()}, tip error {g.tip_error * 1e3:.3f} mm, "
+             f"field bound {g.bound * 1e3:.2f} mm ({len(g.candidates)} candidates)")
+    iters = iterations or sc.planner.iterations
+    routes = {}
+    modes = [("bound_aware", sc.planner.bound_weight)] + ([("bound_blind", 0.0)] if compare_blind else [])
+    for mode, weight in modes:
+        t0 = time.perf_counter()
+        legs, ordered = _plan_route(robot, sc.start, [g.q for g in goals], validity, field, weight, sc, iters,
+                                    joint_space)
+        plan_time = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        rep = _route_report(ordered, robot, field, settings, joint_space, exact=True)
+        exact_time = time.perf_counter() - t0
+        routes[mode] = dict(legs=legs, ordered=ordered, report=rep, plan_time=plan_time, exact_time=exact_time)
+        lm = rep["exact"]
+        echo(f"{mode}: {len(ordered)} ordered waypoints, planning {plan_time:.1f} s; exact bound at waypoints: "
+             f"max {np.nanmax(lm.position) * 1e3:.2f} mm, final {lm.position[-1] * 1e3:.2f} mm")
+
+    aware = routes["bound_aware"]
+    ordered = aware["ordered"]
+    traj = time_parameterize_robot(robot, ordered.q, ordered.motions, **sc.drive.as_kwargs()) \
+        if sc.drive is not None else None
+    violations = check_trajectory(traj) if traj is not None else []
+    if violations:
+        raise RuntimeError("trajectory violates limits: " + "; ".join(str(v) for v in violations[:5]))
+
+    lm = aware["report"]["exact"]
+    rows = []
+    for k, w in enumerate(ordered.waypoints):
+        res = lm.results[k]
+        tip = res.standard.tip_position if res is not None else np.full(3, np.nan)
+        rows.append({"motion": w.motion, "q": w.q, "tip": tip, "bound_position_m": float(lm.position[k]),
+                     "bound_angle_rad": float(lm.angle[k]),
+                     "bound_kind": "translation_last" if w.motion == "translation" else "friction"})
+
+    def route_summary(r):
+        lmr = r["report"]["exact"]
+        rep = r["report"]
+        return {
+            "cost": float(sum(leg.cost for leg in r["legs"])),
+            "joint_path_length_m": float(rep["dense_s"][-1]),
+            "n_ordered_waypoints": len(r["ordered"]),
+            "max_bound_at_waypoints_mm": float(np.nanmax(lmr.position) * 1e3),
+            "final_bound_mm": float(lmr.position[-1] * 1e3),
+            "final_bound_deg": float(np.degrees(lmr.angle[-1])),
+            "max_interpolated_friction_bound_along_path_mm": float(np.nanmax(rep["dense_friction"]) * 1e3),
+            "max_interpolated_bound_given_last_motion_mm": float(np.nanmax(rep["dense_given_last"]) * 1e3),
+            "mean_interpolated_friction_bound_along_path_mm": float(np.nanmean(rep["dense_friction"]) * 1e3),
+            "planning_time_s": r["plan_time"], "exact_model_time_s": r["exact_time"],
+            "planner": [{"planner": leg.planner, "iterations": leg.iterations, "n_vertices": leg.n_vertices,
+                         "solve_time_s": leg.solve_time, "simplify_time_s": leg.simplify_time,
+                         "seed": leg.seed, "status": leg.status, "cost": leg.cost} for leg in r["legs"]],
+        }
+
+    summary = {
+        "scenario": sc.name, "robot": robot.name, "robot_source": robot.source,
+        "joints": robot.joint_names,
+        "goals": [{"q": g.q.tolist(), "tip_error_mm": g.tip_error * 1e3, "field_bound_mm": g.bound * 1e3,
+                   "n_candidates": int(len(g.candidates))} for g in goals],
+        "bound_map": {"source": map_source, "time_s": map_time, "resolution": list(resolution),
+                      "key": field.key, "ds_m": settings.ds},
+        "bound_aware": route_summary(aware),
+        "duration_s": float(traj.duration) if traj is not None else None,
+        "model_evaluations": {
+            "validity_calls": validity.n_calls, "standard_model_solves": validity.n_evaluations,
+            "ik_model_evaluations": int(sum(g.n_model_evaluations for g in goals)),
+            "exact_bound_evaluations": int(sum(len(r["ordered"]) for r in routes.values())),
+        },
+        "times_s": {"bound_map": map_time, "inverse_kinematics": ik_time,
+                    "total": None},
+        "bound_weight_per_metre": sc.planner.bound_weight,
+    }
+    if "bound_blind" in routes:
+        blind = route_summary(routes["bound_blind"])
+        summary["bound_blind"] = blind
+        a = summary["bound_aware"]
+        summary["comparison"] = {
+            "max_bound_at_waypoints_mm": {"bound_aware": a["max_bound_at_waypoints_mm"],
+                                          "bound_blind": blind["max_bound_at_waypoints_mm"]},
+            "max_interpolated_friction_bound_along_path_mm": {
+                "bound_aware": a["max_interpolated_friction_bound_along_path_mm"],
+                "bound_blind": blind["max_interpolated_friction_bound_along_path_mm"]},
+            "final_bound_mm": {"bound_aware": a["final_bound_mm"], "bound_blind": blind["final_bound_mm"]},
+            "joint_path_length_m": {"bound_aware": a["joint_path_length_m"],
+                                    "bound_blind": blind["joint_path_length_m"]},
+        }
+
+    # figures
+    shapes, tips = [], []
+    for res in lm.results:
+        if res is None:
+            continue
+        shapes.append(res.standard.centerline)
+        tips.append(np.array([f.tip_position for f in res.friction.values()]))
+    obstacles = [o.as_dict() for o in sc.obstacles]
+    plans = [routes[m] for m in routes]
+    labels = [m.replace("_", "-") + " plan" for m in routes]
+
+    def fig_shapes(path):
+        plot_robot_shapes(path, shapes, obstacles, tips, title=f"{sc.name}: robot at the ordered waypoints")
+
+    def fig_bound(path):
+        plot_bound_along_path(path, [p["report"]["dense_s"] for p in plans],
+                              [np.asarray(p["report"]["dense_friction"]) * 1e3 for p in plans],
+                              [np.asarray(p["report"]["dense_translation_last"]) * 1e3 for p in plans],
+                              [p["report"]["dense_motion"] for p in plans], labels=labels,
+                              s_label="joint-space path length [m, weighted metric]",
+                              title=f"{sc.name}: interpolated bound along the ordered path")
+
+    figures = {"robot_shapes.png": fig_shapes, "bound_along_path.png": fig_bound}
+    if traj is not None:
+        figures["joint_trajectories.png"] = lambda path: plot_joint_trajectories(
+            path, traj, robot.joint_names, [j.kind for j in robot.joints], title=f"{sc.name}: drive trajectory")
+    summary["times_s"]["total"] = time.perf_counter() - t_start
+    write_plan_outputs(out, rows, traj, summary, joint_names=robot.joint_names, figures=figures)
+    echo(format_summary(summary))
+    summary["output_dir"] = str(out)
+    return summary
