@@ -315,8 +315,8 @@ class Robot:
         return r_in, r_out
 
     def outer_radius(self, i: int) -> float:
-        """Outer radius of tube i [m] for collision checking (falls back to inner radius of the
-        enclosing tube minus clearance, or 1 mm if nothing is known)."""
+        """Outer radius of tube i [m] for collision checking (falls back to the tube's own inner
+        radius plus 0.2 mm of wall, or 1 mm if no diameter is known)."""
         t = self.tubes[i]
         if t.r_out is not None:
             return t.r_out

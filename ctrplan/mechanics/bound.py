@@ -83,7 +83,7 @@ def evaluate_bound(robot, alpha, beta, settings: ModelSettings | None = None, *,
     tans = np.array([f.tip_tangent for f in friction.values()])
     pos = float(np.max(np.linalg.norm(tips - st.tip_position, axis=1)))
     ang = float(np.max(angle_between(tans, st.tip_tangent)))
-    solves = [cl] + list(cache.values())
+    solves = [cl] + [s for s in cache.values() if s is not cl]
     ok = st.diagnostics.converged and all(s.diagnostics.converged for s in solves)
     msgs = [s.diagnostics.message for s in solves if not s.diagnostics.converged]
     if not st.diagnostics.converged:

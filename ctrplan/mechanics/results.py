@@ -75,7 +75,8 @@ class Diagnostics:
         True when more than one equilibrium was found or the equilibrium is elastically
         unstable; such a result must not be trusted as unique.
     n_equilibria : int
-        Distinct equilibria found by the multistart check (1 when unique, 0 if not checked).
+        Distinct stable-looking equilibria found by the multistart check (1 when unique; 0 when
+        the check did not run: ``check_stability=False``, ``multistart=0`` or no convergence).
     message : str
     residual : float
         Final residual of the solver (units depend on the solver; see ``message``).

@@ -236,11 +236,12 @@ def _assemble(problem, sig0, diag) -> StandardSolution:
 
 
 def _multistart_guesses(problem, sig0, count):
-    """Initial base torsions that put about +-pi of extra twist on each inner tube."""
+    """Initial base torsions that put about +pi, then -pi, of extra twist on each inner tube
+    (round-robin over the tubes, so every inner tube gets a guess once ``count >= n - 1``)."""
     guesses = []
     n = problem.robot.n_tubes
-    for i in range(1, n):
-        for sign in (1.0, -1.0):
+    for sign in (1.0, -1.0):
+        for i in range(1, n):
             g = np.array(sig0, dtype=float)
             g[i] += sign * np.pi / problem.lengths[i]
             guesses.append(g)
@@ -300,7 +301,7 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
         sig0, res, iters2, ok, detJ = problem.newton(np.zeros(n), settings)
         iters += iters2
     unstable = bool(ok and not detJ > 0.0)
-    n_eq = 1 if ok else 0
+    n_eq = 0  # not checked
     msg = "converged" if ok else f"shooting did not converge (tip torsion residual {res:.3g} 1/m)"
     if ok and check_stability and settings.multistart > 0:
         # equilibria are told apart by their base torsions (the shooting unknowns): two
@@ -317,7 +318,7 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
         if n_eq > 1:
             unstable = True
     if unstable:
-        msg = (f"elastically unstable: {n_eq} stable equilibria found" if n_eq > 1
+        msg = (f"elastically unstable: {n_eq} equilibria found by the multistart search" if n_eq > 1
                else f"elastically unstable: shooting Jacobian determinant {detJ:.3g} <= 0")
     diag = Diagnostics(converged=ok, iterations=iters, unstable=unstable, n_equilibria=n_eq,
                        message=msg, residual=res)
