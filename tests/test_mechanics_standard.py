@@ -106,3 +106,34 @@ def test_rejects_impossible_configurations():
     beta[2] = 0.01  # inner base in front of the outer bases
     with pytest.raises(JointLimitError, match="tube 3"):
         solve_standard(robot, alpha, beta)
+
+
+def test_tube_curvatures_and_frames_are_consistent():
+    """Per-tube curvature u_i and frame R_i: z torsion equals psi_i', bending moments balance,
+    R_i(beta_i) = Rz(alpha_i) (Eq. (3)), and tubes share the tangent (zero clearance)."""
+    robot = table2_robot()
+    alpha, beta = robot.configuration([1.2, -2.2, -0.05])
+    sol = solve_standard(robot, alpha, beta, ModelSettings(ds=1e-3))
+    k = np.array([t.k_xy for t in robot.tubes])
+    present = ~np.isnan(sol.psi)
+    moment = np.zeros((sol.s.size, 2))
+    for i, t in enumerate(robot.tubes):
+        u = sol.tube_curvature(i)
+        R = sol.tube_frames(i)
+        first = np.nonzero(present[:, i])[0][0]
+        np.testing.assert_allclose(R[first], np.array([[np.cos(alpha[i]), -np.sin(alpha[i]), 0],
+                                                       [np.sin(alpha[i]), np.cos(alpha[i]), 0], [0, 0, 1]]), atol=1e-12)
+        np.testing.assert_allclose(R[present[:, i], :, 2], sol.frames[present[:, i], :, 2], atol=1e-12)
+        # bending moment of tube i in the common frame: R_z(psi_i) k_i (u_i - uhat_i)
+        s_local = sol.s - beta[i]
+        br = t.section_breaks()
+        idx = np.clip(np.searchsorted(br, s_local, side="right") - 1, 0, len(t.sections) - 1)
+        uhat = np.array([sec.precurvature for sec in t.sections])[idx]
+        m_body = k[i] * (u[:, :2] - uhat)
+        c, s = np.cos(sol.psi[:, i]), np.sin(sol.psi[:, i])
+        m = np.column_stack([c * m_body[:, 0] - s * m_body[:, 1], s * m_body[:, 0] + c * m_body[:, 1]])
+        moment += np.where(present[:, i, None], m, 0.0)
+    # away from section boundaries the tubes' bending moments balance (no external load)
+    breaks = np.concatenate([beta[i] + t.section_breaks() for i, t in enumerate(robot.tubes)])
+    interior = np.min(np.abs(sol.s[:, None] - breaks[None, :]), axis=1) > 2e-3
+    assert np.max(np.abs(moment[interior])) < 1e-9

@@ -150,6 +150,21 @@ class StandardSolution:
     bending_mid: np.ndarray = field(default=None, repr=False)
     grid: object = field(default=None, repr=False)
 
+    def tube_curvature(self, i: int) -> np.ndarray:
+        """Curvature u_i(s) of tube i in its own body frame, shape (K, 3) [1/m]; NaN where the
+        tube is absent: ``u_i = (Rz(-psi_i) u_xy, psi_i')`` (Eq. (2) with the shared centerline).
+        """
+        c, s = np.cos(self.psi[:, i]), np.sin(self.psi[:, i])
+        ux, uy = self.bending[:, 0], self.bending[:, 1]
+        return np.column_stack([c * ux + s * uy, -s * ux + c * uy, self.torsion[:, i]])
+
+    def tube_frames(self, i: int) -> np.ndarray:
+        """Material frames R_i(s) of tube i, shape (K, 3, 3); NaN where the tube is absent."""
+        c, s = np.cos(self.psi[:, i]), np.sin(self.psi[:, i])
+        Rz = np.zeros((c.size, 3, 3))
+        Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
+        return self.frames @ Rz
+
     def body(self, robot) -> tuple[np.ndarray, np.ndarray]:
         """Robot body for collision checking: centerline points distal to the most distal
         tube base (the part outside the drive) and the outer radius of the outermost tube
