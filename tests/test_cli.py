@@ -1,0 +1,355 @@
+"""Command line ``ctrplan evaluate`` and the batch layer under it (``ctrplan.batch``).
+
+Checks the output schema and invariants of the evaluated tables (one row per configuration for
+the standard model, 2^(n-1) per configuration for the friction model; the bound column is the
+largest tip distance of any friction solution from the standard model's tip, Section III of
+Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906), checkpoint resumption, and that bad
+inputs stop with a non-zero exit code and a message naming the offending column, row, key or
+tubes. The robot is the nominal Table II robot at ds = 4 mm to keep each run to seconds.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from ctrplan import batch, cli
+from ctrplan.batch import evaluate_table, job_key
+from ctrplan.io.robot_file import load_robot
+from ctrplan.mechanics import ModelSettings, all_eta, solve_friction, solve_standard
+
+REPO = Path(__file__).resolve().parents[1]
+TABLE2 = REPO / "model" / "ha2019-table2-nominal.toml"
+DS = 0.004  # [m] arc-length step: coarse, for speed
+FAST = ["--ds", str(DS), "--jobs", "1", "--no-progress"]
+
+# Configurations of the Table II robot: (alpha_1..3 [rad], beta_1..3 [m]); tube 2 sits 17 mm
+# behind tube 1 (linked), beta_3 within its joint range [-104, -34] mm.
+CONFIGS = [
+    ((0.0, 0.0, 0.0), (0.0, -0.017, -0.070)),
+    ((0.0, 1.0, 0.5), (0.0, -0.017, -0.050)),
+    ((0.0, 2.0, -1.0), (0.0, -0.017, -0.090)),
+]
+N_TUBES = 3
+ALPHA = [f"alpha_{i}" for i in (1, 2, 3)]
+BETA = [f"beta_{i}" for i in (1, 2, 3)]
+ETA = ["eta_1", "eta_2"]
+TIP = ["tip_x", "tip_y", "tip_z"]
+TANGENT = ["tangent_x", "tangent_y", "tangent_z"]
+HEADER = ",".join(ALPHA + BETA)
+
+
+def _csv_text(configs, eta=None) -> str:
+    head = HEADER + ("," + ",".join(ETA) if eta is not None else "")
+    lines = [head]
+    for k, (a, b) in enumerate(configs):
+        cells = [repr(float(x)) for x in (*a, *b)]
+        if eta is not None:
+            cells += [str(int(e)) for e in eta[k]]
+        lines.append(",".join(cells))
+    return "\n".join(lines) + "\n"
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def _evaluate(configs: Path, model: str, out: Path):
+    res = CliRunner().invoke(cli.main, ["evaluate", "--robot", str(TABLE2), "--configs", str(configs),
+                                        "--model", model, "--out", str(out), *FAST])
+    assert res.exit_code == 0, (res.output, res.exception)
+    return pd.read_csv(out)
+
+
+def _run_entry(monkeypatch, capsys, args):
+    """Run the console entry ``ctrplan.cli.run`` in-process; returns (exit code, stdout, stderr)."""
+    monkeypatch.setattr(sys, "argv", ["ctrplan", *args])
+    with pytest.raises(SystemExit) as info:
+        cli.run()
+    out = capsys.readouterr()
+    code = info.value.code
+    return (0 if code is None else code), out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot(TABLE2)
+
+
+@pytest.fixture(scope="module")
+def evaluated(tmp_path_factory):
+    """The CSV of CONFIGS evaluated with the standard and the friction model through the CLI."""
+    d = tmp_path_factory.mktemp("evaluate")
+    configs = _write(d / "configs.csv", _csv_text(CONFIGS))
+    std = _evaluate(configs, "standard", d / "standard.csv")
+    fr = _evaluate(configs, "friction", d / "friction.csv")
+    return {"dir": d, "standard": std, "friction": fr}
+
+
+# --------------------------------------------------------------------------- output tables
+def test_standard_one_row_per_configuration_matching_solve_standard(evaluated, robot):
+    std = evaluated["standard"]
+    assert len(std) == len(CONFIGS)
+    for col in ALPHA + BETA + TIP + TANGENT + ["status"]:
+        assert col in std.columns, col
+    assert not any(c in std.columns for c in ETA)
+    assert (std["status"] == "ok").all()
+    settings = ModelSettings(ds=DS)
+    for k, (a, b) in enumerate(CONFIGS):
+        row = std.iloc[k]
+        np.testing.assert_array_equal(row[ALPHA].to_numpy(float), a)
+        np.testing.assert_array_equal(row[BETA].to_numpy(float), b)
+        sol = solve_standard(robot, np.array(a), np.array(b), settings)
+        np.testing.assert_allclose(row[TIP].to_numpy(float), sol.tip_position, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(row[TANGENT].to_numpy(float), sol.tip_tangent, rtol=0, atol=1e-12)
+    # distinct configurations give distinct tips (the rows are not copies of one solve)
+    tips = std[TIP].to_numpy(float)
+    assert np.min(np.linalg.norm(tips[:, None] - tips[None], axis=2)[np.triu_indices(len(tips), 1)]) > 1e-3
+
+
+def test_friction_rows_per_configuration_and_bound_is_max_distance_to_standard(evaluated):
+    std, fr = evaluated["standard"], evaluated["friction"]
+    n_eta = 2 ** (N_TUBES - 1)
+    assert len(fr) == n_eta * len(CONFIGS)
+    for col in ALPHA + BETA + ETA + TIP + TANGENT + ["status", "bound_tip_m", "bound_tangent_rad"]:
+        assert col in fr.columns, col
+    assert (fr["status"] == "ok").all()
+    for k in range(len(CONFIGS)):
+        rows = fr[fr["row"] == k + 1]
+        assert len(rows) == n_eta
+        # every direction eta exactly once
+        assert sorted(map(tuple, rows[ETA].to_numpy(int))) == sorted(all_eta(N_TUBES))
+        np.testing.assert_array_equal(rows[ALPHA + BETA].to_numpy(float),
+                                      np.tile(np.r_[CONFIGS[k][0], CONFIGS[k][1]], (n_eta, 1)))
+        std_tip = std.iloc[k][TIP].to_numpy(float)
+        std_tan = std.iloc[k][TANGENT].to_numpy(float)
+        dist = np.linalg.norm(rows[TIP].to_numpy(float) - std_tip, axis=1)
+        ang = np.arccos(np.clip(rows[TANGENT].to_numpy(float) @ std_tan, -1.0, 1.0))
+        # the bound is one value per configuration, repeated on its eta rows
+        assert rows["bound_tip_m"].nunique() == 1
+        np.testing.assert_allclose(rows["bound_tip_m"].iloc[0], dist.max(), rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(rows["bound_tangent_rad"].iloc[0], ang.max(), rtol=1e-4, atol=1e-6)
+        # friction moves the tip (a zero bound would make the comparison above vacuous)
+        assert dist.max() > 1e-4
+
+
+def test_tangents_are_unit_vectors(evaluated):
+    for model in ("standard", "friction"):
+        t = evaluated[model][TANGENT].to_numpy(float)
+        np.testing.assert_allclose(np.linalg.norm(t, axis=1), 1.0, atol=1e-9)
+
+
+def test_given_eta_evaluates_only_that_direction(tmp_path, robot, evaluated):
+    eta = [(1, -1), (-1, 1)]
+    configs = _write(tmp_path / "eta.csv", _csv_text(CONFIGS[:2], eta=eta))
+    out = _evaluate(configs, "friction", tmp_path / "eta-friction.csv")
+    assert len(out) == 2
+    np.testing.assert_array_equal(out[ETA].to_numpy(int), eta)
+    assert (out["status"] == "ok").all()
+    # no bound over all directions when only one direction is evaluated
+    assert "bound_tip_m" not in out.columns or out["bound_tip_m"].isna().all()
+    settings = ModelSettings(ds=DS)
+    full = evaluated["friction"]
+    for k, e in enumerate(eta):
+        a, b = (np.array(x) for x in CONFIGS[k])
+        sol = solve_friction(robot, a, b, np.array(e), settings)
+        np.testing.assert_allclose(out.iloc[k][TIP].to_numpy(float), sol.tip_position, atol=1e-7)
+        # the same direction's row of the all-directions run
+        same = full[(full["row"] == k + 1) & (full["eta_1"] == e[0]) & (full["eta_2"] == e[1])]
+        assert len(same) == 1
+        np.testing.assert_allclose(out.iloc[k][TIP].to_numpy(float), same[TIP].to_numpy(float)[0], atol=1e-7)
+
+
+# --------------------------------------------------------------------------- resumption
+class _Interrupt(Exception):
+    pass
+
+
+def _arrays(configs):
+    return (np.array([c[0] for c in configs], dtype=float), np.array([c[1] for c in configs], dtype=float))
+
+
+RESUME_CONFIGS = CONFIGS + [((0.0, -1.5, 2.5), (0.0, -0.017, -0.060))]
+
+
+def test_resume_after_interruption_computes_only_missing_rows(tmp_path, robot, monkeypatch):
+    alpha, beta = _arrays(RESUME_CONFIGS)
+    settings = ModelSettings(ds=DS)
+    ck = tmp_path / "out.csv.partial.jsonl"
+    real = batch._task
+    calls = []
+
+    def dying(robot_, a, b, model, s, eta, index):
+        if len(calls) == 2:
+            raise _Interrupt("killed")
+        calls.append(index)
+        return real(robot_, a, b, model, s, eta, index)
+
+    monkeypatch.setattr(batch, "_task", dying)
+    with pytest.raises(_Interrupt):
+        evaluate_table(robot, alpha, beta, "standard", settings, checkpoint=ck, progress=False, job_key="job-A")
+    lines = ck.read_text().splitlines()
+    assert json.loads(lines[0]) == {"job_key": "job-A"}
+    assert [json.loads(x)["index"] for x in lines[1:]] == [0, 1]
+
+    # mark the finished rows: a rerun must keep them, not recompute them
+    recs = [json.loads(x) for x in lines[1:]]
+    for rec in recs:
+        rec["rows"][0]["message"] = f"from checkpoint {rec['index']}"
+    ck.write_text("\n".join([lines[0]] + [json.dumps(r) for r in recs]) + "\n")
+
+    calls.clear()
+
+    def counting(robot_, a, b, model, s, eta, index):
+        calls.append(index)
+        return real(robot_, a, b, model, s, eta, index)
+
+    monkeypatch.setattr(batch, "_task", counting)
+    frame = evaluate_table(robot, alpha, beta, "standard", settings, checkpoint=ck, progress=False,
+                           job_key="job-A")
+    assert calls == [3, 4]  # 1-based rows not in the checkpoint
+    assert list(frame["row"]) == [1, 2, 3, 4]
+    assert list(frame["message"][:2]) == ["from checkpoint 0", "from checkpoint 1"]
+    fresh = evaluate_table(robot, alpha, beta, "standard", settings, progress=False)
+    np.testing.assert_array_equal(frame[TIP].to_numpy(float), fresh[TIP].to_numpy(float))
+
+
+def test_checkpoint_of_another_job_is_discarded(tmp_path, robot, monkeypatch):
+    alpha, beta = _arrays(CONFIGS[:2])
+    ck = tmp_path / "ck.jsonl"
+    ck.write_text(json.dumps({"job_key": "old"}) + "\n"
+                  + json.dumps({"index": 0, "rows": [{"tip_x": 9.0, "row": 1}]}) + "\n")
+    calls = []
+    real = batch._task
+
+    def counting(*args):
+        calls.append(args[-1])
+        return real(*args)
+
+    monkeypatch.setattr(batch, "_task", counting)
+    frame = evaluate_table(robot, alpha, beta, "standard", ModelSettings(ds=DS), checkpoint=ck,
+                           progress=False, job_key="new")
+    assert calls == [1, 2]
+    assert np.all(frame["tip_x"].to_numpy(float) < 1.0)
+    assert json.loads(ck.read_text().splitlines()[0]) == {"job_key": "new"}
+
+
+def test_cli_resumes_from_partial_file_and_removes_it(tmp_path):
+    """A checkpoint left next to the output by an interrupted ``ctrplan evaluate`` (same job key)
+    is reused: its rows (sentinel tip) go to the output unchanged, the others are computed."""
+    text = _csv_text(CONFIGS)
+    configs = _write(tmp_path / "configs.csv", text)
+    out = tmp_path / "res.csv"
+    ck = tmp_path / "res.csv.partial.jsonl"
+    key = job_key(TABLE2.read_text(), text, "standard", ModelSettings(ds=DS))
+    a, b = CONFIGS[0]
+    sentinel = {**{c: v for c, v in zip(ALPHA + BETA, (*a, *b))}, "tip_x": 0.123, "tip_y": 0.0,
+                "tip_z": 0.2, "tangent_x": 0.0, "tangent_y": 0.0, "tangent_z": 1.0, "status": "ok",
+                "model": "standard", "message": "sentinel", "row": 1}
+    ck.write_text(json.dumps({"job_key": key}) + "\n"
+                  + json.dumps({"index": 0, "rows": [sentinel]}) + "\n"
+                  + '{"index": 1, "rows": [{"tip_x"')  # a line cut by the interruption
+    frame = _evaluate(configs, "standard", out)
+    assert not ck.exists()
+    assert len(frame) == 3
+    assert frame["tip_x"].iloc[0] == 0.123 and frame["message"].iloc[0] == "sentinel"
+    assert (frame["message"].iloc[1:] != "sentinel").all()
+    assert np.all(np.abs(frame["tip_x"].iloc[1:] - 0.123) > 1e-6)
+
+
+# --------------------------------------------------------------------------- bad inputs
+GOOD_ROW = "0,1,0.5,0,-0.017,-0.05"
+
+
+@pytest.mark.parametrize("name, text, expected", [
+    ("missing-column", ",".join(ALPHA + BETA[:2]) + "\n0,0,0,0,-0.017\n", ["beta_3"]),
+    ("nan", HEADER + "\n" + GOOD_ROW + "\n0,1,nan,0,-0.017,-0.05\n", ["alpha_3", "row 2"]),
+    ("empty-cell", HEADER + "\n" + GOOD_ROW + "\n0,1,,0,-0.017,-0.05\n", ["alpha_3", "row 2"]),
+    ("millimetres", HEADER + "\n" + GOOD_ROW + "\n0,1,0.5,0,-0.017,-50\n", ["beta_3", "row 2", "millimetres"]),
+])
+def test_bad_configuration_file_exits_with_message(tmp_path, monkeypatch, capsys, name, text, expected):
+    configs = _write(tmp_path / f"{name}.csv", text)
+    out = tmp_path / "out.csv"
+    code, _, err = _run_entry(monkeypatch, capsys, ["evaluate", "--robot", str(TABLE2), "--configs", str(configs),
+                                                    "--model", "standard", "--out", str(out), *FAST])
+    assert code == 2
+    assert err.startswith("error: ") and f"{name}.csv" in err
+    for word in expected:
+        assert word in err, (word, err)
+    assert not out.exists()
+
+
+def test_configuration_with_inner_base_in_front_names_the_row(tmp_path):
+    configs = _write(tmp_path / "front.csv", HEADER + "\n" + GOOD_ROW + "\n0,1,0.5,0,-0.017,-0.01\n")
+    out = tmp_path / "out.csv"
+    res = CliRunner().invoke(cli.main, ["evaluate", "--robot", str(TABLE2), "--configs", str(configs),
+                                        "--model", "standard", "--out", str(out), *FAST])
+    assert res.exit_code != 0
+    assert "row 2" in res.output and "tube 3" in res.output and "in front" in res.output
+    assert "row 1" not in res.output
+    assert not out.exists()
+
+
+def test_unknown_model_is_a_usage_error(tmp_path):
+    configs = _write(tmp_path / "c.csv", _csv_text(CONFIGS[:1]))
+    res = CliRunner().invoke(cli.main, ["evaluate", "--robot", str(TABLE2), "--configs", str(configs),
+                                        "--model", "stiffness", *FAST])
+    assert res.exit_code == 2  # click usage error
+    assert "--model" in res.output and "stiffness" in res.output
+    assert not (tmp_path / "c-stiffness.csv").exists()
+
+
+def _robot_text(replace_from: str, replace_to: str) -> str:
+    text = TABLE2.read_text()
+    assert text.count(replace_from) == 1, replace_from
+    return text.replace(replace_from, replace_to)
+
+
+# tube 3's outer diameter 2.0 mm > tube 2's bore 1.95 mm
+WIDE_INNER = ('outer_diameter_m = 1.825e-3', 'outer_diameter_m = 2.0e-3')
+UNKNOWN_KEY = ('name = "tube 2"\n', 'name = "tube 2"\ncolour = "blue"\n')
+
+
+def test_inner_tube_wider_than_outer_bore_names_both_tubes(tmp_path, monkeypatch, capsys):
+    robot_file = _write(tmp_path / "wide.toml", _robot_text(*WIDE_INNER))
+    configs = _write(tmp_path / "c.csv", _csv_text(CONFIGS[:1]))
+    code, _, err = _run_entry(monkeypatch, capsys, ["evaluate", "--robot", str(robot_file), "--configs",
+                                                    str(configs), "--model", "standard", *FAST])
+    assert code == 2
+    assert err.startswith("error: ")
+    assert "wide.toml" in err and "tube 2" in err and "tube 3" in err, err
+
+
+def test_unknown_robot_key_names_file_and_key(tmp_path, monkeypatch, capsys):
+    robot_file = _write(tmp_path / "typo.toml", _robot_text(*UNKNOWN_KEY))
+    configs = _write(tmp_path / "c.csv", _csv_text(CONFIGS[:1]))
+    code, _, err = _run_entry(monkeypatch, capsys, ["evaluate", "--robot", str(robot_file), "--configs",
+                                                    str(configs), "--model", "standard", *FAST])
+    assert code == 2
+    assert "typo.toml" in err and "colour" in err, err
+    assert "tubes[2]" in err, err  # 1-based index of the [[tubes]] table
+
+
+def test_console_script_exit_code(tmp_path):
+    """The installed ``ctrplan`` script (not only the click group) exits 2 with ``error:``."""
+    exe = shutil.which("ctrplan") or str(Path(sys.executable).parent / "ctrplan")
+    if not Path(exe).exists():
+        pytest.skip("the ctrplan console script is not installed (pip install -e .)")
+    robot_file = _write(tmp_path / "wide.toml", _robot_text(*WIDE_INNER))
+    configs = _write(tmp_path / "c.csv", _csv_text(CONFIGS[:1]))
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    proc = subprocess.run([exe, "evaluate", "--robot", str(robot_file), "--configs", str(configs),
+                           "--model", "standard", *FAST], capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 2, (proc.stdout, proc.stderr)
+    assert "error:" in proc.stderr and "tube 3" in proc.stderr
+    assert "Traceback" not in proc.stderr
