@@ -157,12 +157,17 @@ def test_no_path_within_budget_fails_without_outputs(tmp_path, monkeypatch, caps
 
 
 # --------------------------------------------------------------------------- full run (slow)
-def _shipped_map():
-    """(resolution, ds) of a shipped bound map of the Table VII robot, or None."""
+def _shipped_map(prefer=None):
+    """(resolution, ds) of a shipped bound map of the Table VII robot (the one with resolution
+    ``prefer`` if shipped), or None."""
+    found = []
     for path in sorted(BOUNDMAPS.glob(f"{TABLE7.stem}-*.npz")):
-        field = BoundField.load(path)
-        return tuple(int(r) for r in field.metadata["resolution"]), float(field.metadata["settings"]["ds"])
-    return None
+        meta = BoundField.load(path).metadata
+        found.append((tuple(int(r) for r in meta["resolution"]), float(meta["settings"]["ds"])))
+    for res, ds in found:
+        if prefer is not None and res == tuple(prefer):
+            return res, ds
+    return found[0] if found else None
 
 
 def _shipped_scenario_with_map(tmp_path, name, resolution, ds):
@@ -183,7 +188,9 @@ def test_shipped_scenario_bound_aware_beats_bound_blind(tmp_path, monkeypatch):
     robot, RRTstar seed 1, ITERATIONS iterations: the bound-aware plan's max interpolated
     friction bound along the ordered path is strictly below the bound-blind plan's.
     """
-    shipped = _shipped_map()
+    from ctrplan.io.scenario import load_scenario
+
+    shipped = _shipped_map(load_scenario(SCENARIOS / "obstacles.toml").bound_field.resolution)
     if shipped is None:
         pytest.skip(f"no shipped bound map of {TABLE7.name} in {BOUNDMAPS}")
     monkeypatch.chdir(tmp_path)  # a computed map would be cached under ./.cache
@@ -227,6 +234,11 @@ def _check_outputs(out: Path, robot, scenario_path: Path):
         assert changed.any(), f"waypoint {k} repeats waypoint {k - 1}"
         assert np.all(kinds[changed] == motions[k]), (k, motions[k], q[k - 1], q[k])
     np.testing.assert_allclose(q[0], sc.start, atol=1e-12)
+    # the goals change both joint groups, so both phases occur (the checks above are not vacuous)
+    assert {"rotation", "translation"} <= set(motions[1:])
+    # every rotation phase of a planner segment comes before its translation: the last phase
+    # reaching the final goal (which changes beta_3) is a translation
+    assert motions[-1] == "translation"
 
     # trajectory.csv: starts and ends at rest, within the drive limits
     traj = np.genfromtxt(out / "trajectory.csv", delimiter=",", names=True)
@@ -244,3 +256,21 @@ def _check_outputs(out: Path, robot, scenario_path: Path):
         p = out / png
         assert p.exists() and p.stat().st_size > 1000, png
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_short_plan_outputs_are_ordered_at_rest_and_complete(tmp_path, monkeypatch, synthetic_map):
+    """A short joint-space move (no obstacles, constant synthetic bound field, RRTstar 20
+    iterations): path.csv alternates pure rotation / pure translation phases, trajectory.csv is
+    rest-to-rest within the drive limits, summary.json has the comparison, the PNGs exist."""
+    monkeypatch.chdir(tmp_path)
+    sc = _scenario(tmp_path, "{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}")
+    out = tmp_path / "out"
+    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, iterations=20, compare_blind=True,
+                                echo=lambda *a: None)
+    on_disk = json.loads((out / "summary.json").read_text())
+    for key in ("max_bound_at_waypoints_mm", "max_interpolated_friction_bound_along_path_mm", "final_bound_mm",
+                "joint_path_length_m"):
+        assert set(on_disk["comparison"][key]) == {"bound_aware", "bound_blind"}, key
+    assert on_disk["bound_map"]["source"] == "synthetic"
+    assert summary["output_dir"] == str(out)
+    _check_outputs(out, load_robot(TABLE7), sc)
