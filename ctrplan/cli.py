@@ -108,7 +108,7 @@ def plan(scenario_path, out_dir, jobs, iterations, no_blind):
 @main.command()
 @click.option("--robot", "robot_path", required=True, type=click.Path(exists=True, dir_okay=False))
 @click.option("--resolution", default=None,
-              help="Grid nodes per joint, comma-separated in robot joint order (e.g. 18,18,7).")
+              help="Grid nodes per joint, comma-separated in robot joint order (e.g. 16,16,6).")
 @click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")
 @click.option("--out", "out_path", type=click.Path(dir_okay=False), default=None,
               help="Output .npz (default: boundmaps/<robot>-<key>.npz next to the robot file).")

@@ -34,8 +34,8 @@ __all__ = ["run_plan", "compute_bound_map", "load_or_compute_bound_map", "defaul
 
 # Default grid nodes per joint: periodic rotations, translations (median interpolation error
 # below 0.5 mm on the Table VII robot; see docs/planning.md for the measurement).
-DEFAULT_ROTATION_NODES = 18
-DEFAULT_TRANSLATION_NODES = 7
+DEFAULT_ROTATION_NODES = 16
+DEFAULT_TRANSLATION_NODES = 6
 # Spacing of interpolated-bound samples along an ordered path for the bound plot and the
 # max-bound comparison [m of the weighted joint metric].
 PATH_SAMPLE_SPACING = 2e-3
@@ -44,7 +44,7 @@ COLLISION_SEGMENT = 5e-3
 
 
 def default_resolution(robot) -> tuple[int, ...]:
-    """Default bound-map nodes per joint (rotations 18, translations 7)."""
+    """Default bound-map nodes per joint (rotations 16, translations 6)."""
     return tuple(DEFAULT_ROTATION_NODES if j.kind == "rotation" else DEFAULT_TRANSLATION_NODES
                  for j in robot.joints)
 
@@ -270,7 +270,7 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
             "n_ordered_waypoints": len(r["ordered"]),
             "max_bound_at_waypoints_mm": float(np.nanmax(lmr.position) * 1e3),
             "final_bound_mm": float(lmr.position[-1] * 1e3),
-            "final_bound_deg": float(np.degrees(lmr.angle[-1])),
+            "final_bound_angle_deg": float(np.degrees(lmr.angle[-1])),
             "max_interpolated_friction_bound_along_path_mm": float(np.nanmax(rep["dense_friction"]) * 1e3),
             "max_interpolated_bound_given_last_motion_mm": float(np.nanmax(rep["dense_given_last"]) * 1e3),
             "mean_interpolated_friction_bound_along_path_mm": float(np.nanmean(rep["dense_friction"]) * 1e3),
