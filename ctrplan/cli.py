@@ -17,7 +17,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 import click  # noqa: E402
 
-from .errors import CtrplanError  # noqa: E402
+from .errors import CtrplanError, JointLimitError  # noqa: E402
 
 
 def _settings(ds):
@@ -73,7 +73,7 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress):
         try:
             robot.check_configuration(alpha[k], beta[k])
         except CtrplanError as exc:
-            raise click.ClickException(f"{configs_path}: row {k + 1}: {exc}") from None
+            raise JointLimitError(f"{configs_path}: row {k + 1}: {exc}") from None
     settings = _settings(ds)
     out = Path(out_path) if out_path else Path(configs_path).with_name(Path(configs_path).stem + f"-{model}.csv")
     key = job_key(Path(robot_path).read_text(), Path(configs_path).read_text(), model, settings)

@@ -289,14 +289,14 @@ def test_bad_configuration_file_exits_with_message(tmp_path, monkeypatch, capsys
     assert not out.exists()
 
 
-def test_configuration_with_inner_base_in_front_names_the_row(tmp_path):
+def test_configuration_with_inner_base_in_front_names_the_row(tmp_path, monkeypatch, capsys):
     configs = _write(tmp_path / "front.csv", HEADER + "\n" + GOOD_ROW + "\n0,1,0.5,0,-0.017,-0.01\n")
     out = tmp_path / "out.csv"
-    res = CliRunner().invoke(cli.main, ["evaluate", "--robot", str(TABLE2), "--configs", str(configs),
-                                        "--model", "standard", "--out", str(out), *FAST])
-    assert res.exit_code != 0
-    assert "row 2" in res.output and "tube 3" in res.output and "in front" in res.output
-    assert "row 1" not in res.output
+    code, _, err = _run_entry(monkeypatch, capsys, ["evaluate", "--robot", str(TABLE2), "--configs", str(configs),
+                                                    "--model", "standard", "--out", str(out), *FAST])
+    assert code == 2 and err.startswith("error: ")
+    assert "row 2" in err and "tube 3" in err and "in front" in err
+    assert "row 1" not in err
     assert not out.exists()
 
 
