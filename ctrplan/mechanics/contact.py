@@ -196,10 +196,11 @@ class _Complementarity:
         if act.size == 0:
             return r.reshape(-1, 2), None
         idx = (2 * act[:, None] + np.arange(2)[None, :]).ravel()
-        LM = np.zeros((2 * act.size, 2 * act.size))
-        blocks = lam[act, None, None] * self.Mblk[act]
-        for q in range(act.size):
-            LM[2 * q:2 * q + 2, 2 * q:2 * q + 2] = blocks[q]
+        m = act.size
+        LM = np.zeros((m, 2, m, 2))
+        diag = np.arange(m)
+        LM[diag, :, diag, :] = lam[act, None, None] * self.Mblk[act]   # block diagonal
+        LM = LM.reshape(2 * m, 2 * m)
         S = np.eye(idx.size) + self.W[np.ix_(idx, idx)] @ LM
         lu = lu_factor(S, check_finite=False)
         da = lu_solve(lu, r[idx], check_finite=False)
