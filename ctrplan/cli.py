@@ -124,9 +124,11 @@ def boundmap(robot_path, resolution, ds, out_path, cache_dir, jobs):
     res = tuple(int(x) for x in resolution.split(",")) if resolution else default_resolution(robot)
     field, path = compute_bound_map(robot_path, res, _settings(ds), out_path=out_path, cache_dir=cache_dir,
                                     n_jobs=jobs or os.cpu_count() or 1)
+    import numpy as np
+
     v = field.values[..., 0][field.valid] * 1e3
     click.echo(f"wrote {path}: {field.valid.sum()} of {field.valid.size} nodes valid; "
-               f"bound median {float(__import__('numpy').median(v)):.2f} mm, max {v.max():.2f} mm")
+               f"bound median {float(np.median(v)):.2f} mm, max {v.max():.2f} mm")
 
 
 def run():  # pragma: no cover - entry point wrapper

@@ -71,6 +71,15 @@ def _coefficients(theta):
     return s1, a, b, da, db
 
 
+def _quadratic_in_skew(phi, which):
+    """``I + c1 [phi]x + c2 [phi]x^2`` with coefficients chosen by ``which`` ("exp" or "V")."""
+    phi = np.asarray(phi, dtype=float)
+    s1, a, b, _, _ = _coefficients(np.linalg.norm(phi, axis=-1))
+    c1, c2 = (s1, a) if which == "exp" else (a, b)
+    P = skew(phi)
+    return np.eye(3) + c1[..., None, None] * P + c2[..., None, None] * (P @ P)
+
+
 def exp_so3(phi):
     """Rodrigues' formula ``exp([phi]x)``.
 
@@ -83,11 +92,7 @@ def exp_so3(phi):
     -------
     ndarray, shape (..., 3, 3)
     """
-    phi = np.asarray(phi, dtype=float)
-    th = np.linalg.norm(phi, axis=-1)
-    s1, a, _, _, _ = _coefficients(th)
-    P = skew(phi)
-    return np.eye(3) + s1[..., None, None] * P + a[..., None, None] * (P @ P)
+    return _quadratic_in_skew(phi, "exp")
 
 
 def left_jacobian_so3(phi):
@@ -105,11 +110,7 @@ def left_jacobian_so3(phi):
     -------
     ndarray, shape (..., 3, 3)
     """
-    phi = np.asarray(phi, dtype=float)
-    th = np.linalg.norm(phi, axis=-1)
-    _, a, b, _, _ = _coefficients(th)
-    P = skew(phi)
-    return np.eye(3) + a[..., None, None] * P + b[..., None, None] * (P @ P)
+    return _quadratic_in_skew(phi, "V")
 
 
 def d_left_jacobian_ez(phi):
