@@ -193,3 +193,10 @@ def test_obstacles_and_drive_feed_the_planning_and_trajectory_modules(tmp_path):
     collision = pytest.importorskip("ctrplan.planning.collision")
     built = [collision.obstacle_from_dict(dict(d)) for d in dicts]
     assert len(built) == 4
+
+
+def test_default_bound_weight_matches_the_planning_objective():
+    from ctrplan.io.scenario import DEFAULT_BOUND_WEIGHT
+    from ctrplan.planning.objective import DEFAULT_BOUND_WEIGHT as OBJECTIVE_DEFAULT
+
+    assert DEFAULT_BOUND_WEIGHT == OBJECTIVE_DEFAULT

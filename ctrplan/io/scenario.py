@@ -83,12 +83,17 @@ class _MeshDoc(_Strict):
     rpy_rad: Vec3 = [0.0, 0.0, 0.0]
 
 
+# Default weight of the bound in the planning cost [1/m]; equal to
+# ctrplan.planning.objective.DEFAULT_BOUND_WEIGHT (a test keeps them equal).
+DEFAULT_BOUND_WEIGHT = 1000.0
+
+
 class _PlannerDoc(_Strict):
     name: Annotated[str, Field(min_length=1)] = "RRTstar"
     iterations: Annotated[int, Field(ge=1)] = 3000
     time_limit_s: Positive | None = None
     seed: int = 1
-    bound_weight: Annotated[float, Field(ge=0.0)] = 1.0
+    bound_weight: Annotated[float, Field(ge=0.0)] = DEFAULT_BOUND_WEIGHT
     range: Positive | None = None
 
 
@@ -257,7 +262,8 @@ class PlannerSettings:
         Random seed (default 1).
     bound_weight : float
         Weight w >= 0 of the integral of the friction error bound along the path in the cost
-        ``path length + w * integral(bound)`` (default 1.0).
+        ``path length + w * integral(bound)`` [1/m] (default 1000 /m, as
+        :data:`ctrplan.planning.objective.DEFAULT_BOUND_WEIGHT`).
     range : float or None
         Planner step range in joint space (OMPL ``range``); None for the planner's default.
     """
@@ -266,7 +272,7 @@ class PlannerSettings:
     iterations: int = 3000
     time_limit: float | None = None
     seed: int = 1
-    bound_weight: float = 1.0
+    bound_weight: float = DEFAULT_BOUND_WEIGHT
     range: float | None = None
 
 
