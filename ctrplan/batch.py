@@ -20,7 +20,7 @@ from .mechanics import (ModelSettings, all_eta, evaluate_bound, solve_clearance,
                         solve_standard)
 from .mechanics._lie import angle_between
 
-__all__ = ["MODELS", "evaluate_configuration", "evaluate_table"]
+__all__ = ["MODELS", "evaluate_configuration", "evaluate_table", "job_key"]
 
 MODELS = ("standard", "clearance", "friction")
 

@@ -24,7 +24,7 @@ import numpy as np
 from .errors import JointLimitError, UnreachableGoalError
 from .io.robot_file import load_robot
 from .io.scenario import load_scenario
-from .mechanics import ModelSettings, evaluate_bound, solve_standard
+from .mechanics import ModelSettings, evaluate_bound
 from .planning import (BoundCostObjective, BoundField, CollisionChecker, JointStateSpace,
                        ValidityChecker, bounds_given_last_motion, field_key, order_path, plan,
                        resolve_goal)
@@ -75,6 +75,13 @@ def compute_bound_map(robot_path, resolution, settings: ModelSettings, *, out_pa
     -------
     field : BoundField
     path : Path
+
+    Raises
+    ------
+    ModelFileError
+        Malformed robot file.
+    BoundFieldKeyError
+        ``cache_dir`` holds chunks of another robot file, settings or resolution.
     """
     robot_path = Path(robot_path)
     robot = load_robot(robot_path)
@@ -93,6 +100,20 @@ def compute_bound_map(robot_path, resolution, settings: ModelSettings, *, out_pa
 def load_or_compute_bound_map(robot_path, robot, resolution, settings, n_jobs=1, echo=print):
     """Shipped or cached map with the right key, else compute it (resumable cache).
 
+    Parameters
+    ----------
+    robot_path : path
+        Robot model file (its content is part of the key).
+    robot : Robot
+        The robot loaded from ``robot_path``.
+    resolution : sequence of int, shape (n_joints,)
+        Grid nodes per joint.
+    settings : ModelSettings
+    n_jobs : int
+        Worker processes when computing.
+    echo : callable
+        Progress messages.
+
     Returns
     -------
     field : BoundField
@@ -100,6 +121,11 @@ def load_or_compute_bound_map(robot_path, robot, resolution, settings, n_jobs=1,
         ``"shipped"``, ``"cache"`` or ``"computed"``.
     seconds : float
         Wall time spent loading or computing [s].
+
+    Raises
+    ------
+    BoundFieldKeyError
+        The cache folder holds chunks computed with another key.
     """
     t0 = time.perf_counter()
     robot_path = Path(robot_path)
@@ -152,19 +178,17 @@ def _plan_route(robot, start, goals_q, validity, field, weight, sc, iterations, 
     return legs, ordered
 
 
-def _route_report(ordered, robot, field, settings, joint_space, exact=True):
+def _route_report(ordered, robot, field, settings, joint_space):
+    """Interpolated bounds sampled along an ordered path, and the exact bound at its waypoints."""
     qd, sd, md = _dense_path(ordered.q, ordered.motions, joint_space, PATH_SAMPLE_SPACING)
     friction = np.asarray(field(qd, "position"))
     tlast = np.asarray(field(qd, "translation_last_position"))
+    # along a rotation phase the friction bound applies; along (and after) a translation, the
+    # translation-last bound (Section V-B)
     given_last = np.where(np.array(md) == "translation", tlast, friction)
-    # the translation-last bound applies from the end of a translation phase; along a rotation
-    # phase the friction bound applies.
-    out = {"dense_q": qd, "dense_s": sd, "dense_motion": md, "dense_friction": friction,
-           "dense_translation_last": tlast, "dense_given_last": given_last}
-    if exact:
-        lm = bounds_given_last_motion(ordered, robot, evaluate_bound, settings)
-        out["exact"] = lm
-    return out
+    return {"dense_q": qd, "dense_s": sd, "dense_motion": md, "dense_friction": friction,
+            "dense_translation_last": tlast, "dense_given_last": given_last,
+            "exact": bounds_given_last_motion(ordered, robot, evaluate_bound, settings)}
 
 
 def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | None = None,
@@ -237,7 +261,7 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
                                     joint_space)
         plan_time = time.perf_counter() - t0
         t0 = time.perf_counter()
-        rep = _route_report(ordered, robot, field, settings, joint_space, exact=True)
+        rep = _route_report(ordered, robot, field, settings, joint_space)
         exact_time = time.perf_counter() - t0
         routes[mode] = dict(legs=legs, ordered=ordered, report=rep, plan_time=plan_time, exact_time=exact_time)
         lm = rep["exact"]

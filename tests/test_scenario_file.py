@@ -120,14 +120,14 @@ def test_good_scenario(tmp_path):
 
 
 def test_relative_robot_path_and_defaults(tmp_path):
-    text = f"""
+    text = """
 name = "minimal"
 robot = "model.toml"
 [start]
-q = {{alpha_2 = 0.0, alpha_3 = 0.0, beta_3 = -0.034}}
+q = {alpha_2 = 0.0, alpha_3 = 0.0, beta_3 = -0.034}
 [[goals]]
 type = "joint"
-q = {{alpha_2 = 0.0, alpha_3 = 1.0, beta_3 = -0.034}}
+q = {alpha_2 = 0.0, alpha_3 = 1.0, beta_3 = -0.034}
 """
     (tmp_path / "model.toml").write_text(TABLE2.read_text())
     s = load_scenario(_write(tmp_path, text))
