@@ -184,7 +184,7 @@ def test_load_ha_trajectory_synthetic(tmp_path):
     np.testing.assert_allclose(df[["tangent_x", "tangent_y", "tangent_z"]].iloc[0], [0.6, 0.0, 0.8])
     R = df[[f"R_{i}{j}" for i in (1, 2, 3) for j in (1, 2, 3)]].to_numpy().reshape(-1, 3, 3)
     assert np.linalg.det(R[0]) == pytest.approx(1.0)
-    assert list(df["sequence"]) == [0, 1] and list(df["eta_1"]) == [0, 1] and list(df["eta_2"]) == [0, -1]
+    assert list(df["sequence"]) == [0, 0] and list(df["eta_1"]) == [0, 1] and list(df["eta_2"]) == [0, -1]
 
 
 def test_load_ha_trajectory_bad_file(tmp_path):

@@ -7,7 +7,8 @@ results, planned paths) uses the same column names and SI units:
 column                 unit      meaning
 =====================  ========  ==========================================================
 ``time``               s         sample time (optional)
-``sequence``           -         sample index within one continuous motion (optional, int)
+``sequence``           -         id of one continuous motion (optional, int); within a sequence
+                                 the rows are in time order, so each sample keeps its history
 ``alpha_1..alpha_n``   rad       base rotation of tube i (tube 1 outermost), Eq. (3)
 ``beta_1..beta_n``     m         base translation of tube i, Eq. (3)
 ``eta_1..eta_(n-1)``   -         last relative rotation direction of tube i+1 w.r.t. tube i:
@@ -58,7 +59,7 @@ __all__ = [
 # Column name pattern -> (unit, meaning). The order here is the canonical column order.
 SCHEMA: dict[str, tuple[str, str]] = {
     "time": ("s", "sample time"),
-    "sequence": ("-", "sample index within one continuous motion"),
+    "sequence": ("-", "id of one continuous motion (rows in time order within it)"),
     r"alpha_(\d+)": ("rad", "base rotation of tube i"),
     r"beta_(\d+)": ("m", "base translation of tube i"),
     r"eta_(\d+)": ("-", "relative rotation direction of tube i+1 w.r.t. tube i (+1 CCW, -1 CW, 0 unknown)"),
@@ -277,7 +278,7 @@ def load_ha_trajectory(path: str | os.PathLike) -> pd.DataFrame:
     Returns
     -------
     pandas.DataFrame, K rows
-        Columns ``time`` [s], ``sequence`` (0..K-1, one continuous motion), ``alpha_1..n``
+        Columns ``time`` [s], ``sequence`` (0: one continuous motion), ``alpha_1..n``
         [rad], ``beta_1..n`` [m], ``eta_1..n-1`` (from :func:`rotation_directions` on the
         recorded history), ``tip_x..z`` [m], ``tangent_x..z``, ``R_11..R_33``.
 
@@ -308,7 +309,7 @@ def load_ha_trajectory(path: str | os.PathLike) -> pd.DataFrame:
     tip = raw[:, 1 + 2 * n:4 + 2 * n] * 1e-3        # mm -> m
     sensor = raw[:, 4 + 2 * n:13 + 2 * n].reshape(-1, 3, 3)   # rows: sensor x, y, z axes
     rot = np.stack([sensor[:, 2, :], sensor[:, 1, :], -sensor[:, 0, :]], axis=2)
-    data = {"time": time, "sequence": np.arange(len(raw))}
+    data = {"time": time, "sequence": np.zeros(len(raw), dtype=int)}
     for i in range(n):
         data[f"alpha_{i + 1}"] = alpha[:, i]
     for i in range(n):
