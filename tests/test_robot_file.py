@@ -208,3 +208,18 @@ def test_atomic_path_new_file_failure_leaves_nothing(tmp_path):
 def test_atomic_path_missing_directory(tmp_path):
     with pytest.raises(FileNotFoundError):
         atomic_write_text(tmp_path / "no" / "such.txt", "x")
+
+
+def test_robot_to_toml_round_trips_every_shipped_model_with_model_and_registration():
+    from ctrplan.io.robot_file import robot_from_toml_text, robot_to_toml
+
+    reg = {"rotation_vector_rad": [0.01, -0.2, 0.3], "translation_m": [0.001, -0.002, 0.15]}
+    for path in SHIPPED:
+        robot = load_robot(path)
+        back = robot_from_toml_text(robot_to_toml(robot, header='calibrated "x"\nline 2', model="friction",
+                                                  registration=reg))
+        assert back == robot, path.name
+        assert back.metadata["model"] == "friction"
+        assert back.metadata["tracker_registration"] == reg
+    with pytest.raises(ValueError, match="model must be one of"):
+        robot_to_toml(robot, model="magic")

@@ -25,7 +25,11 @@ from pydantic import BaseModel, ConfigDict, Field
 from ..errors import ModelFileError, PhysicalParameterError
 from ..robot import ROTATION, TRANSLATION, Joint, Robot, Section, TranslationLink, Tube
 
-__all__ = ["load_robot", "robot_from_toml_text", "robot_from_document", "file_hash", "RobotDocument"]
+__all__ = ["load_robot", "robot_from_toml_text", "robot_from_document", "robot_to_toml", "file_hash",
+           "RobotDocument", "MODELS"]
+
+#: Mechanics models a file may name as the one its parameters were calibrated for.
+MODELS = ("standard", "clearance", "friction")
 
 MEMORY = "<memory>"
 
@@ -87,11 +91,20 @@ class JointDoc(_Strict):
     upper: float
 
 
+class RegistrationDoc(_Strict):
+    """Tracker frame from robot base frame: ``p_tracker = R p_base + t``."""
+
+    rotation_vector_rad: Annotated[list[float], Field(min_length=3, max_length=3)]
+    translation_m: Annotated[list[float], Field(min_length=3, max_length=3)]
+
+
 class RobotDocument(_Strict):
     """Schema of a robot model file (see ``docs/file-formats.md``)."""
 
     name: Annotated[str, Field(min_length=1)]
     source: str = ""
+    model: typing.Literal["standard", "clearance", "friction"] | None = None
+    tracker_registration: RegistrationDoc | None = None
     k_xy_reference_N_m2: PositiveFloat | None = None
     tubes: Annotated[list[TubeDoc], Field(min_length=1)]
     pairs: list[PairDoc] = []
@@ -338,7 +351,12 @@ def robot_from_document(doc: RobotDocument, file: str = MEMORY) -> Robot:
                      joints=tuple(joints), home_alpha=home_alpha, home_beta=home_beta,
                      links=tuple(links), source=doc.source, clearances_override=clearances,
                      metadata={"file": file,
-                               "k_xy_reference_N_m2": doc.k_xy_reference_N_m2})
+                               "k_xy_reference_N_m2": doc.k_xy_reference_N_m2,
+                               "model": doc.model,
+                               "tracker_registration": (
+                                   None if doc.tracker_registration is None else
+                                   {"rotation_vector_rad": list(doc.tracker_registration.rotation_vector_rad),
+                                    "translation_m": list(doc.tracker_registration.translation_m)})})
     except PhysicalParameterError as exc:
         hint = ""
         if clearances is not None:
@@ -380,3 +398,81 @@ def _build_tube(doc: RobotDocument, i: int, file: str) -> Tube:
                     inner_diameter=td.inner_diameter_m)
     except PhysicalParameterError as exc:
         raise PhysicalParameterError(f"{file}: {exc}") from exc
+
+
+# --------------------------------------------------------------------------- writer
+def _num(x: float) -> str:
+    return repr(float(x))
+
+
+def _vec(v) -> str:
+    return "[" + ", ".join(_num(x) for x in v) + "]"
+
+
+def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
+                  registration: dict | None = None) -> str:
+    """Write a robot as the text of a robot model file (the inverse of :func:`robot_from_toml_text`).
+
+    Stiffnesses are written as absolute ``k_xy_N_m2``; clearances as ``clearance_m`` only when
+    the robot overrides the diameters. ``robot_from_toml_text(robot_to_toml(r))`` equals ``r``
+    (floats are written with ``repr``, so they round-trip exactly).
+
+    Parameters
+    ----------
+    robot : Robot
+    header : str
+        Comment lines put at the top (each line is prefixed with ``# ``), e.g. where the
+        parameters come from.
+    model : {"standard", "clearance", "friction"}, optional
+        The mechanics model the parameters were calibrated for (top-level ``model`` key).
+    registration : dict, optional
+        ``{"rotation_vector_rad": (3,), "translation_m": (3,)}``: tracker frame from robot base
+        frame, ``p_tracker = R p_base + t`` (table ``[tracker_registration]``).
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ValueError
+        ``model`` not one of :data:`MODELS`.
+    """
+    if model is not None and model not in MODELS:
+        raise ValueError(f"model must be one of {MODELS}, got {model!r}")
+    out = [f"# {line}".rstrip() for line in header.splitlines()] if header else []
+    out.append("# ctrplan robot model file. Units: SI (m, rad, N m^2); key suffixes name the unit.")
+    out.append(f"name = {_toml_str(robot.name)}")
+    out.append(f"source = {_toml_str(robot.source)}")
+    if model is not None:
+        out.append(f'model = "{model}"')
+    for tube in robot.tubes:
+        out += ["", "[[tubes]]", f"name = {_toml_str(tube.name)}", f"k_xy_N_m2 = {_num(tube.k_xy)}",
+                f"poisson_ratio = {_num(tube.poisson_ratio)}"]
+        if tube.outer_diameter is not None:
+            out.append(f"outer_diameter_m = {_num(tube.outer_diameter)}")
+        if tube.inner_diameter is not None:
+            out.append(f"inner_diameter_m = {_num(tube.inner_diameter)}")
+        for sec in tube.sections:
+            out += ["[[tubes.sections]]", f"length_m = {_num(sec.length)}",
+                    f"precurvature_per_m = {_vec(sec.precurvature)}"]
+    for k, mu in enumerate(robot.friction_coefficients):
+        out += ["", f"[[pairs]]                          # tubes {k + 1}-{k + 2}",
+                f"friction_coefficient = {_num(mu)}"]
+        if robot.clearances_override is not None:
+            out.append(f"clearance_m = {_num(robot.clearances_override[k])}")
+    out += ["", "[home]", f"alpha_rad = {_vec(robot.home_alpha)}", f"beta_m = {_vec(robot.home_beta)}"]
+    for link in robot.links:
+        out += ["", "[[links]]", f"follower = {link.follower + 1}", f"leader = {link.leader + 1}",
+                f"offset_m = {_num(link.offset)}"]
+    for j in robot.joints:
+        out += ["", "[[joints]]", f'name = "{j.name}"', f"lower = {_num(j.lower)}", f"upper = {_num(j.upper)}"]
+    if registration is not None:
+        out += ["", "[tracker_registration]                # p_tracker = R(rotation_vector) p_base + t",
+                f"rotation_vector_rad = {_vec(registration['rotation_vector_rad'])}",
+                f"translation_m = {_vec(registration['translation_m'])}"]
+    return "\n".join(out) + "\n"
+
+
+def _toml_str(text: str) -> str:
+    return '"' + str(text).replace("\\", "\\\\").replace('"', '\\"') + '"'
