@@ -1,0 +1,1 @@
+"""Frozen slow reference implementations of the mechanics (see each module's docstring)."""

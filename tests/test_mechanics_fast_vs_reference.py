@@ -1,0 +1,123 @@
+"""The fast mechanics path (ctrplan.mechanics) against the frozen slow reference (tests/reference).
+
+The reference modules are verbatim copies of the solvers before the speed work of issue 4. On
+seeded random configurations of the Table II robot (the paper's Section IV-D set-up, default
+settings, ds = 3 mm) the fast path must reproduce
+
+- standard-model tips and base torsions (same algorithm: to 1e-8 m and 1e-6 1/m);
+- clearance and friction tips to 5 um (both stop the outer loop on a 1 um centerline change);
+- every contact force to 1 % of the largest contact force of that solution;
+- the bound (position, angle, translation-last position) to 1 %.
+"""
+
+import numpy as np
+import pytest
+
+from ctrplan.mechanics import (ModelSettings, evaluate_bound, solve_clearance, solve_friction,
+                               solve_standard)
+from reference import bound_reference, contact_reference, standard_reference
+
+from _robots import table1_pair, table2_robot
+
+SETTINGS = ModelSettings()
+TIP_TOL = 5e-6          # [m]
+FORCE_RTOL = 0.01       # of the largest contact force
+BOUND_RTOL = 0.01
+GAP_TOL = 2e-6          # [m], radial centerline offsets (clearances 42.5 and 62.5 um)
+
+
+def _random_configurations(robot, count, seed):
+    """Seeded random joint values inside the limits whose reference standard solution is a
+    unique, converged equilibrium."""
+    rng = np.random.default_rng(seed)
+    out = []
+    while len(out) < count:
+        q = np.array([rng.uniform(j.lower, j.upper) for j in robot.joints])
+        alpha, beta = robot.configuration(q)
+        st = standard_reference.solve_standard(robot, alpha, beta, SETTINGS)
+        if st.diagnostics.ok:
+            out.append(q)
+    return out
+
+
+def _assert_forces_close(fast, ref):
+    np.testing.assert_array_equal(fast.contact_pair, ref.contact_pair)
+    np.testing.assert_allclose(fast.contact_s, ref.contact_s, atol=1e-12)
+    scale = max(float(np.max(ref.contact_force)), 1e-9)
+    assert np.max(np.abs(fast.contact_force - ref.contact_force)) <= FORCE_RTOL * scale
+
+
+def _assert_contact_close(fast, ref):
+    assert fast.diagnostics.converged == ref.diagnostics.converged
+    assert np.linalg.norm(fast.tip_position - ref.tip_position) < TIP_TOL
+    assert np.linalg.norm(fast.tip_tangent - ref.tip_tangent) < 1e-3
+    for pf, pr in zip(fast.centerlines, ref.centerlines):
+        assert np.max(np.linalg.norm(pf - pr, axis=1)) < TIP_TOL
+    _assert_forces_close(fast, ref)
+    np.testing.assert_allclose(fast.contact_gap, ref.contact_gap, atol=GAP_TOL)
+
+
+@pytest.mark.parametrize("q", _random_configurations(table2_robot(), 4, seed=4))
+def test_standard_matches_reference(q):
+    robot = table2_robot()
+    alpha, beta = robot.configuration(q)
+    for check in (True, False):
+        fast = solve_standard(robot, alpha, beta, SETTINGS, check_stability=check)
+        ref = standard_reference.solve_standard(robot, alpha, beta, SETTINGS, check_stability=check)
+        np.testing.assert_allclose(fast.tip_position, ref.tip_position, atol=1e-8)
+        np.testing.assert_allclose(fast.tip_tangent, ref.tip_tangent, atol=1e-8)
+        np.testing.assert_allclose(fast.base_torsion, ref.base_torsion, atol=1e-6)
+        np.testing.assert_allclose(fast.centerline, ref.centerline, atol=1e-8)
+        np.testing.assert_allclose(fast.psi_mid, ref.psi_mid, atol=1e-8)
+        assert fast.diagnostics.unstable == ref.diagnostics.unstable
+        assert fast.diagnostics.n_equilibria == ref.diagnostics.n_equilibria
+
+
+@pytest.mark.parametrize("q", _random_configurations(table2_robot(), 3, seed=11))
+def test_clearance_and_friction_match_reference(q):
+    robot = table2_robot()
+    alpha, beta = robot.configuration(q)
+    st = standard_reference.solve_standard(robot, alpha, beta, SETTINGS)
+    ref_cl = contact_reference.solve_contact(robot, alpha, beta, SETTINGS, standard=st)
+    fast_cl = solve_clearance(robot, alpha, beta, SETTINGS, standard=st)
+    _assert_contact_close(fast_cl, ref_cl)
+    for eta in ((1, -1), (-1, 1)):
+        ref = contact_reference.solve_contact(robot, alpha, beta, SETTINGS, eta=eta, standard=st,
+                                              warm_start=ref_cl)
+        fast = solve_friction(robot, alpha, beta, eta, SETTINGS, standard=st, warm_start=fast_cl)
+        _assert_contact_close(fast, ref)
+        np.testing.assert_array_equal(fast.eta, ref.eta)
+
+
+@pytest.mark.parametrize("q", _random_configurations(table2_robot(), 3, seed=23))
+def test_bound_matches_reference(q):
+    robot = table2_robot()
+    alpha, beta = robot.configuration(q)
+    ref = bound_reference.evaluate_bound(robot, alpha, beta, SETTINGS)
+    fast = evaluate_bound(robot, alpha, beta, SETTINGS)
+    assert fast.diagnostics.converged == ref.diagnostics.converged
+    assert fast.position == pytest.approx(ref.position, rel=BOUND_RTOL)
+    assert fast.angle == pytest.approx(ref.angle, rel=BOUND_RTOL)
+    assert fast.translation_last_position == pytest.approx(ref.translation_last_position, rel=BOUND_RTOL)
+    assert sorted(fast.friction) == sorted(ref.friction)
+    for eta, sol in fast.friction.items():
+        assert np.linalg.norm(sol.tip_position - ref.friction[eta].tip_position) < TIP_TOL
+        _assert_forces_close(sol, ref.friction[eta])
+
+
+def test_tube_pair_friction_matches_reference():
+    """Two-tube robot of Table I (a single pair, other grid sizes) at a large relative angle."""
+    robot = table1_pair(clearance=0.05e-3, mu=0.2)
+    settings = ModelSettings(ds=2e-3)
+    alpha, beta = robot.configuration([2.5])
+    for eta in (None, (1,), (-1,)):
+        ref = contact_reference.solve_contact(robot, alpha, beta, settings, eta=eta)
+        fast = solve_friction(robot, alpha, beta, eta, settings) if eta else solve_clearance(
+            robot, alpha, beta, settings)
+        _assert_contact_close(fast, ref)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("q", _random_configurations(table2_robot(), 12, seed=101))
+def test_bound_matches_reference_many(q):
+    test_bound_matches_reference(q)
