@@ -1,0 +1,16 @@
+"""Model-discrepancy analysis: which effect is missing from a robot model, judged on measured data.
+
+- :mod:`.simulate`: the models along a measured motion history (branch following, friction
+  direction and translation-last from the history; Sections III and V-B of Ha, Fagogenis &
+  Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906).
+- :mod:`.effects`: candidate effects (friction, clearance, off-plane precurvature, Poisson
+  ratios, registration) as modifications of a robot.
+"""
+
+from .effects import Effects, apply_effects, apply_registration, registration_matrix
+from .simulate import History, Simulation, motion_history, simulate
+
+__all__ = [
+    "Effects", "apply_effects", "apply_registration", "registration_matrix",
+    "History", "Simulation", "motion_history", "simulate",
+]

@@ -1,0 +1,501 @@
+"""The robot models evaluated along a measured motion history.
+
+:func:`motion_history` reads, from the joint values of a recorded motion, the direction of the
+last relative rotation of each tube pair (the eta_k of Eq. (38) of Ha, Fagogenis & Dupont,
+IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906) and whether a translation followed it
+(which releases the friction-induced twist, Section V-B). :func:`simulate` evaluates the
+standard, clearance or friction model at every sample, following the elastic branch along each
+motion (each solve starts from the previous sample's solution) and in parallel over independent
+motions or chunks of samples.
+
+Friction model along a history (Section III and V-B): a sample with relative rotation direction
+eta and no translation since the last relative rotation gets the maximal torsional friction
+solution with the robot's friction coefficients; a translation after the last rotation releases
+the twist ("translation-last", close to the frictionless solution), so such a sample gets the
+clearance solution (mu = 0). A pair without history (eta 0) gets mu = 0 for that pair only (the
+other pairs keep their friction); when every pair ends with mu = 0 the sample is solved with the
+clearance model.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import CtrplanError
+from ..io.tables import rotation_directions
+from ..mechanics import ModelSettings, solve_contact, solve_standard
+
+__all__ = ["MODELS", "History", "Simulation", "motion_history", "simulate"]
+
+MODELS = ("standard", "clearance", "friction")
+
+# Rows per parallel task when rows are independent: enough to amortize the inter-process
+# transfer (a contact solve takes ~0.1 s, a task ~1 s), few enough to balance 2-8 workers.
+_ROWS_PER_TASK = 16
+
+
+# --------------------------------------------------------------------------- history
+@dataclass(frozen=True, eq=False)
+class History:
+    """Friction-relevant motion history at each sample.
+
+    Attributes
+    ----------
+    eta : ndarray of int, shape (K, n - 1)
+        Direction of the last relative rotation of tube i+1 with respect to tube i within the
+        sample's sequence: +1 CCW (``alpha_(i+1) - alpha_i`` increasing), -1 CW, 0 none yet.
+    translation_last : ndarray of bool, shape (K,)
+        True when a base translation came after the last relative rotation of the sequence.
+    """
+
+    eta: np.ndarray
+    translation_last: np.ndarray
+
+
+def _sequence_groups(sequence, K: int) -> list[np.ndarray] | None:
+    """Row indices of each sequence (ascending sequence id, rows in table order), or None."""
+    if sequence is None:
+        return None
+    seq = np.asarray(sequence)
+    if seq.shape != (K,):
+        raise ValueError(f"sequence must have shape ({K},), got {seq.shape}")
+    seqf = seq.astype(float)
+    if not np.all(np.isfinite(seqf)) or np.any(seqf != np.round(seqf)):
+        bad = np.flatnonzero(~np.isfinite(seqf) | (seqf != np.round(np.nan_to_num(seqf))))[0]
+        raise ValueError(f"sequence ids must be integers; row {bad + 1} has {seq[bad]!r}")
+    ids = seqf.astype(np.int64)
+    order = np.argsort(ids, kind="stable")
+    cuts = np.flatnonzero(np.diff(ids[order])) + 1
+    return np.split(order, cuts)
+
+
+def _check_joints(alpha, beta):
+    alpha = np.asarray(alpha, dtype=float)
+    beta = np.asarray(beta, dtype=float)
+    if alpha.ndim != 2 or beta.shape != alpha.shape:
+        raise ValueError(f"alpha and beta must both have shape (K, n), got {alpha.shape} and {beta.shape}")
+    return alpha, beta
+
+
+def motion_history(alpha, beta, sequence=None, *, rotation_tol: float = 1e-3,
+                   translation_tol: float = 1e-4) -> History:
+    """Relative rotation directions and translation-last flags along recorded motions.
+
+    Parameters
+    ----------
+    alpha : array-like, shape (K, n)
+        Base rotations [rad], rows in time order within each sequence.
+    beta : array-like, shape (K, n)
+        Base translations [m].
+    sequence : array-like of int, shape (K,), optional
+        Motion id of each row. Rows of one id form one continuous motion, in table order (the
+        ids need not be contiguous); each sequence starts without history. ``None``: every row
+        is independent (no history: eta 0, translation_last False).
+    rotation_tol : float
+        Rotation hysteresis [rad], > 0: eta of a pair flips only once its relative angle has
+        come back more than this from its latest extreme (as
+        :func:`ctrplan.io.tables.rotation_directions`, which computes eta here), and a relative
+        rotation counts as "the last rotation" once any pair's relative angle has moved more
+        than this since the previous one.
+    translation_tol : float
+        [m], > 0: a translation counts once some base has moved more than this since the last
+        relative rotation.
+
+    Returns
+    -------
+    History
+        ``eta`` (K, n - 1) in {-1, 0, +1} (eta_k of Eq. (38) of Ha et al. 2019);
+        ``translation_last`` (K,) (Section V-B). The first sample of a sequence has eta 0 and
+        translation_last False.
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not match, non-integer sequence ids, tolerances <= 0.
+
+    Notes
+    -----
+    Rotating all tubes together (no relative rotation) neither sets eta nor counts as a
+    rotation. Within a sequence, a "rotation event" happens at sample k when some pair's
+    relative angle differs by more than ``rotation_tol`` from its value at the previous event
+    (the first sample is the first reference); ``translation_last[k]`` is True when, after the
+    latest event, some base translation differs by more than ``translation_tol`` from its
+    value at that event.
+    """
+    alpha, beta = _check_joints(alpha, beta)
+    if not rotation_tol > 0 or not translation_tol > 0:
+        raise ValueError(f"tolerances must be > 0, got rotation_tol={rotation_tol!r} rad, "
+                         f"translation_tol={translation_tol!r} m")
+    K, n = alpha.shape
+    eta = np.zeros((K, n - 1), dtype=int)
+    tlast = np.zeros(K, dtype=bool)
+    groups = _sequence_groups(sequence, K)
+    if groups is None:
+        return History(eta=eta, translation_last=tlast)
+    rel_all = np.diff(alpha, axis=1)
+    for idx in groups:
+        eta[idx] = rotation_directions(alpha[idx], tol=rotation_tol)
+        rel = rel_all[idx]
+        b = beta[idx]
+        rel_ref, beta_ref, translated = rel[0], b[0], False
+        for j in range(1, idx.size):
+            if n > 1 and np.max(np.abs(rel[j] - rel_ref)) > rotation_tol:
+                rel_ref, beta_ref, translated = rel[j], b[j], False
+            elif np.max(np.abs(b[j] - beta_ref)) > translation_tol:
+                translated = True
+            tlast[idx[j]] = translated
+    return History(eta=eta, translation_last=tlast)
+
+
+# --------------------------------------------------------------------------- results
+@dataclass(frozen=True, eq=False)
+class Simulation:
+    """Model tip poses along a motion history.
+
+    Attributes
+    ----------
+    tip : ndarray, shape (K, 3)
+        Tip positions in the robot base frame [m]; NaN where the solve failed.
+    tangent : ndarray, shape (K, 3)
+        Unit tip tangents; NaN where the solve failed.
+    ok : ndarray of bool, shape (K,)
+        Solve converged and the equilibrium is not flagged unstable.
+    message : list of str, length K
+        Solver message, or the error of a failed sample.
+    model : str
+        ``"standard"``, ``"clearance"`` or ``"friction"``.
+    eta : ndarray of int, shape (K, n - 1)
+        Friction direction applied per pair (0: that pair frictionless); all 0 except for the
+        friction model.
+    mu : ndarray, shape (K, n - 1)
+        Friction coefficient applied per pair (0 where released or without history).
+    base_torsion : ndarray, shape (K, n)
+        Standard-model base torsions u_(i,z)(beta_i) [1/m] of the branch followed (NaN where
+        the standard solve failed).
+    n_standard : int
+        Standard-model solves.
+    n_contact : int
+        Clearance/friction solves.
+    n_warm : int
+        Contact solves warm-started from another solution at the same configuration.
+    n_reused : int
+        Samples whose configuration and friction state equal the previous sample's in the same
+        task: the solution was reused without solving.
+    n_released : int
+        Friction-model samples solved frictionless (translation-last or no history at all).
+    n_failed : int
+        Samples with ``ok`` False.
+    elapsed : float
+        Wall-clock time [s].
+    """
+
+    tip: np.ndarray
+    tangent: np.ndarray
+    ok: np.ndarray
+    message: list
+    model: str
+    eta: np.ndarray
+    mu: np.ndarray
+    base_torsion: np.ndarray
+    n_standard: int = 0
+    n_contact: int = 0
+    n_warm: int = 0
+    n_reused: int = 0
+    n_released: int = 0
+    n_failed: int = 0
+    elapsed: float = field(default=0.0)
+
+
+# --------------------------------------------------------------------------- kernel
+def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, contact, settings, check_stability):
+    """Solve rows in order (one task; pure, runs in a worker).
+
+    alpha, beta (m, n); guess (m, n) with NaN rows for "none"; follow (m,) bool: start from
+    the previous row's base torsion (same branch) instead of ``guess``; eta (m, n - 1) in
+    {-1, +1} and mu (m, n - 1) (all mu 0: clearance model); contact: solve the contact model.
+    """
+    m, n = alpha.shape
+    tip = np.full((m, 3), np.nan)
+    tan = np.full((m, 3), np.nan)
+    ok = np.zeros(m, dtype=bool)
+    msg = [""] * m
+    torsion = np.full((m, n), np.nan)
+    counts = dict(n_standard=0, n_contact=0, n_warm=0, n_reused=0)
+    prev_std = prev_cont = prev_key = None
+    prev_start = None
+    for k in range(m):
+        a, b = alpha[k], beta[k]
+        if follow[k]:
+            start = prev_std.base_torsion if prev_std is not None else None
+        else:
+            start = None if np.isnan(guess[k, 0]) else guess[k]
+        same_config = (prev_std is not None and np.array_equal(a, prev_std.alpha)
+                       and np.array_equal(b, prev_std.beta))
+        same_start = follow[k] or (start is None and prev_start is None) or (
+            start is not None and prev_start is not None and np.array_equal(start, prev_start))
+        key = (tuple(eta[k]), tuple(mu[k]))
+        try:
+            if same_config and same_start:
+                std = prev_std
+                reused = True
+            else:
+                prev_cont = prev_key = None
+                std = solve_standard(robot, a, b, settings, initial_guess=start,
+                                     check_stability=check_stability)
+                counts["n_standard"] += 1
+                reused = False
+            torsion[k] = std.base_torsion
+            if not std.diagnostics.ok:
+                # no contact solve about an unconverged or unstable linearization point
+                msg[k] = f"standard model: {std.diagnostics.message}"
+                prev_std = std if std.diagnostics.converged else None
+                prev_start = start
+                if not std.diagnostics.converged:
+                    torsion[k] = np.nan
+                continue
+            prev_std, prev_start = std, start
+            sol = std
+            if contact:
+                if prev_cont is not None and key == prev_key:
+                    sol = prev_cont
+                    counts["n_reused"] += 1
+                else:
+                    friction = bool(np.any(mu[k] > 0.0))
+                    sol = solve_contact(robot, a, b, settings, eta=eta[k] if friction else None,
+                                        mu=mu[k] if friction else None, standard=std,
+                                        warm_start=prev_cont)
+                    counts["n_contact"] += 1
+                    counts["n_warm"] += prev_cont is not None
+                    prev_cont, prev_key = sol, key
+            elif reused:
+                counts["n_reused"] += 1
+            ok[k] = sol.diagnostics.ok
+            msg[k] = sol.diagnostics.message
+            tip[k] = sol.tip_position
+            tan[k] = sol.tip_tangent
+        except (CtrplanError, np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+            msg[k] = f"{type(exc).__name__}: {exc}"
+            prev_std = prev_cont = prev_key = prev_start = None
+    return tip, tan, ok, msg, torsion, counts
+
+
+def _tasks_from_groups(groups, size):
+    """Bundle whole sequences (lists of row indices) into tasks of about ``size`` rows."""
+    tasks, cur, cur_n = [], [], 0
+    for g in groups:
+        cur.append(g)
+        cur_n += g.size
+        if cur_n >= size:
+            tasks.append(cur)
+            cur, cur_n = [], 0
+    if cur:
+        tasks.append(cur)
+    return tasks
+
+
+def _chunks(order, alpha, beta, size):
+    """Split a processing order into runs of about ``size`` rows, never inside a run of
+    identical configurations (so the same-configuration reuse is not lost)."""
+    cuts = []
+    k = size
+    while k < order.size:
+        while k < order.size and np.array_equal(alpha[order[k]], alpha[order[k - 1]]) and \
+                np.array_equal(beta[order[k]], beta[order[k - 1]]):
+            k += 1
+        if k < order.size:
+            cuts.append(k)
+        k += size
+    return np.split(order, cuts)
+
+
+def _run(tasks, alpha, beta, guess, follow, eta, mu, contact, robot, settings, check_stability,
+         n_jobs, progress, desc, K):
+    """Run tasks (each an index array in processing order) and scatter results to rows."""
+    n = alpha.shape[1]
+    tip = np.full((K, 3), np.nan)
+    tan = np.full((K, 3), np.nan)
+    ok = np.zeros(K, dtype=bool)
+    msg = [""] * K
+    torsion = np.full((K, n), np.nan)
+    counts = dict(n_standard=0, n_contact=0, n_warm=0, n_reused=0)
+
+    def args(idx):
+        return (robot, alpha[idx], beta[idx], guess[idx], follow[idx], eta[idx], mu[idx], contact,
+                settings, check_stability)
+
+    if n_jobs == 1 or len(tasks) == 1:
+        results = (_solve_rows(*args(idx)) for idx in tasks)
+    else:
+        from joblib import Parallel, delayed, parallel_config
+
+        with parallel_config(backend="loky", inner_max_num_threads=1):
+            results = Parallel(n_jobs=n_jobs, return_as="generator")(
+                delayed(_solve_rows)(*args(idx)) for idx in tasks)
+    from tqdm.auto import tqdm
+
+    with tqdm(total=K, disable=not progress, unit="sample", desc=desc) as bar:
+        for idx, (t, g, o, m, s, c) in zip(tasks, results):
+            tip[idx], tan[idx], ok[idx], torsion[idx] = t, g, o, s
+            for j, k in enumerate(idx):
+                msg[k] = m[j]
+            for name in counts:
+                counts[name] += c[name]
+            bar.update(idx.size)
+    return tip, tan, ok, msg, torsion, counts
+
+
+def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None, sequence=None,
+             settings: ModelSettings | None = None, n_jobs: int = 1, progress: bool = False,
+             check_stability: bool = False, rotation_tol: float = 1e-3,
+             translation_tol: float = 1e-4) -> Simulation:
+    """Evaluate a model at every sample of a motion history, following the elastic branch.
+
+    Parameters
+    ----------
+    robot : Robot
+        Apply candidate effects first with :func:`~ctrplan.discrepancy.effects.apply_effects`.
+    alpha, beta : array-like, shape (K, n)
+        Base rotations [rad] and translations [m].
+    model : {"standard", "clearance", "friction"}
+        Zero-clearance model (Section II-A), clearance model (Sections II-B to II-E) or
+        maximal torsional friction model with the robot's friction coefficients (Section III)
+        of Ha, Fagogenis & Dupont 2019.
+    eta : array-like of int, shape (K, n - 1), optional
+        Friction direction of each pair per sample (+1, -1, 0 unknown; Eq. (38)). Friction
+        model only; default from :func:`motion_history` of ``sequence``.
+    translation_last : array-like of bool, shape (K,), optional
+        Whether a translation followed the last rotation. Friction model only; default from
+        :func:`motion_history` when ``sequence`` is given, else all False.
+    sequence : array-like of int, shape (K,), optional
+        Motion id per row (rows of one id in time order). Rows of a sequence are solved in
+        order, each standard solve starting from the previous sample's base torsions (branch
+        following; ``initial_guess`` of :func:`~ctrplan.mechanics.solve_standard`). ``None``:
+        every row is independent (solved from zero twist).
+    settings : ModelSettings, optional
+    n_jobs : int
+        Worker processes (joblib/loky, one BLAS thread each); 1 solves in this process.
+    progress : bool
+        tqdm progress bar.
+    check_stability : bool
+        Run the multistart search for other equilibria at every standard solve (4 extra
+        shootings each); samples with several equilibria are then flagged not ok. Default
+        False: along a history the followed branch is the answer; the shooting-Jacobian test
+        for equilibria past a bifurcation still runs.
+    rotation_tol, translation_tol : float
+        Passed to :func:`motion_history` [rad], [m].
+
+    Returns
+    -------
+    Simulation
+        Tips and tangents in input row order, ok flags, messages and work counters.
+
+    Raises
+    ------
+    ValueError
+        Unknown model, shapes that do not match, eta outside {-1, 0, 1}, friction model
+        without ``eta`` or ``sequence``, ``n_jobs`` < 1.
+    PhysicalParameterError
+        Contact models without clearances (diameters or override), friction without a
+        diameter per pair (Eq. (41)).
+
+    Notes
+    -----
+    Failed samples (solver not converged, elastic instability, impossible configuration) get
+    ``ok`` False, NaN poses and the message; they never stop the run, and the next sample of
+    the sequence starts from zero twist.
+
+    Branch following runs in two stages when a contact model has sequences: the standard model
+    sequentially along each sequence (about 2 ms a sample), then the contact solves in
+    parallel chunks, each standard solve restarted from the first stage's base torsions (it
+    converges in one Newton step to the same branch). A contact solve is warm-started only from
+    a solution at the same configuration (same grid): the previous sample's when it did not
+    move, e.g. the clearance solution for a friction solve or another friction direction.
+
+    Friction model per sample: ``mu_i = robot.friction_coefficients[i]`` if ``eta_i != 0`` and
+    not ``translation_last``, else 0 (translation-last releases the twist, Section V-B; a pair
+    without history is taken frictionless); if all ``mu_i`` are 0 the clearance model is
+    solved. Pairs with ``mu_i = 0`` are passed to the solver with eta +1 (no effect since the
+    friction terms scale with eta_i mu_i, Eqs. (40)-(41)).
+    """
+    t0 = time.perf_counter()
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    if not isinstance(n_jobs, (int, np.integer)) or n_jobs < 1:
+        raise ValueError(f"n_jobs must be an integer >= 1, got {n_jobs!r}")
+    settings = settings or ModelSettings()
+    alpha, beta = _check_joints(alpha, beta)
+    K, n = alpha.shape
+    if n != robot.n_tubes:
+        raise ValueError(f"alpha has {n} columns but robot {robot.name!r} has {robot.n_tubes} tubes")
+    groups = _sequence_groups(sequence, K)
+    contact = model != "standard"
+    eta_used = np.zeros((K, n - 1), dtype=int)
+    mu_used = np.zeros((K, n - 1))
+    n_released = 0
+    if contact:
+        robot.clearances  # noqa: B018 - raises PhysicalParameterError without clearances
+    if model == "friction":
+        if eta is None:
+            if groups is None:
+                raise ValueError("model 'friction' needs eta or sequence (the motion history)")
+            hist = motion_history(alpha, beta, sequence, rotation_tol=rotation_tol,
+                                  translation_tol=translation_tol)
+            eta = hist.eta
+            if translation_last is None:
+                translation_last = hist.translation_last
+        eta = np.asarray(eta)
+        if eta.shape != (K, n - 1) or not np.all(np.isin(eta, (-1, 0, 1))):
+            raise ValueError(f"eta must have shape ({K}, {n - 1}) with values -1, 0, +1")
+        eta = eta.astype(int)
+        if translation_last is None:
+            translation_last = (motion_history(alpha, beta, sequence, rotation_tol=rotation_tol,
+                                               translation_tol=translation_tol).translation_last
+                                if groups is not None else np.zeros(K, dtype=bool))
+        tl = np.asarray(translation_last, dtype=bool)
+        if tl.shape != (K,):
+            raise ValueError(f"translation_last must have shape ({K},), got {tl.shape}")
+        mu_robot = np.asarray(robot.friction_coefficients, dtype=float)
+        active = (eta != 0) & ~tl[:, None] & (mu_robot[None, :] > 0.0)
+        mu_used = np.where(active, mu_robot[None, :], 0.0)
+        eta_used = np.where(active, eta, 0)
+        n_released = int(np.sum(~np.any(active, axis=1)))
+        if np.any(active):
+            robot.contact_radii()  # raises PhysicalParameterError without diameters
+    eta_solve = np.where(eta_used == 0, 1, eta_used)
+    guess = np.full((K, n), np.nan)
+    follow = np.zeros(K, dtype=bool)
+    counts = dict(n_standard=0, n_contact=0, n_warm=0, n_reused=0)
+    size = max(1, min(_ROWS_PER_TASK, -(-K // max(1, 4 * n_jobs))))
+    if groups is not None and all(g.size == 1 for g in groups):
+        groups = None  # one-sample sequences: nothing to follow
+    if groups is not None:
+        for g in groups:
+            follow[g[1:]] = True
+        order = np.concatenate(groups) if groups else np.zeros(0, dtype=int)
+        # stage 1: standard model along each sequence (branch following)
+        tasks = [np.concatenate(t) for t in _tasks_from_groups(groups, 8 * size if contact else size)]
+        tip, tan, ok, msg, torsion, c = _run(
+            tasks, alpha, beta, guess, follow, eta_solve, mu_used, False, robot, settings,
+            check_stability, n_jobs, progress and not contact, "standard model", K)
+        for name in counts:
+            counts[name] += c[name]
+        if contact:
+            guess = torsion
+            follow = np.zeros(K, dtype=bool)
+            # a sample whose branch solve failed restarts from zero twist, as in stage 1
+    else:
+        order = np.arange(K)
+    if contact or groups is None:
+        tasks = _chunks(order, alpha, beta, size)
+        tip, tan, ok, msg, torsion2, c = _run(
+            tasks, alpha, beta, guess, follow, eta_solve, mu_used, contact, robot, settings,
+            check_stability, n_jobs, progress, f"{model} model", K)
+        for name in counts:
+            counts[name] += c[name]
+        torsion = torsion2 if groups is None else np.where(np.isnan(torsion2), torsion, torsion2)
+    return Simulation(tip=tip, tangent=tan, ok=ok, message=msg, model=model, eta=eta_used,
+                      mu=mu_used, base_torsion=torsion, n_released=n_released if model == "friction" else 0,
+                      n_failed=int(np.sum(~ok)), elapsed=time.perf_counter() - t0, **counts)
