@@ -108,27 +108,64 @@ def plan(scenario_path, out_dir, jobs, iterations, no_blind):
 @main.command()
 @click.option("--robot", "robot_path", required=True, type=click.Path(exists=True, dir_okay=False))
 @click.option("--resolution", default=None,
-              help="Grid nodes per joint, comma-separated in robot joint order (e.g. 16,16,6).")
+              help="Grid nodes per joint, comma-separated in robot joint order (e.g. 16,16,6; "
+                   "default 16 per rotation, 6 per translation).")
 @click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")
-@click.option("--out", "out_path", type=click.Path(dir_okay=False), default=None,
-              help="Output .npz (default: boundmaps/<robot>-<key>.npz next to the robot file).")
-@click.option("--cache-dir", type=click.Path(file_okay=False), default=None,
-              help="Chunk folder for resuming (default: <out>.chunks).")
-@click.option("--jobs", type=int, default=None, help="Worker processes (default: all cores).")
-def boundmap(robot_path, resolution, ds, out_path, cache_dir, jobs):
-    """Compute the friction-bound map of a robot over its joint space (resumable)."""
-    from .pipeline import compute_bound_map, default_resolution
-    from .io.robot_file import load_robot
+@click.option("--out", "out_path", type=click.Path(), default=None,
+              help="The map: a chunked zarr store DIR.zarr (default: boundmaps/<robot>-<key>.zarr next to "
+                   "the robot file) or FILE.npz (exported when its store is complete).")
+@click.option("--store", "--cache-dir", "store_path", type=click.Path(file_okay=False), default=None,
+              help="Chunk store of an .npz output (default: <out>.zarr).")
+@click.option("--jobs", type=int, default=None,
+              help="Local worker processes (default: all cores; 1 computes in this process).")
+@click.option("--scheduler", default=None,
+              help="Address of a running dask.distributed scheduler (e.g. tcp://host:8786); its workers "
+                   "need ctrplan installed. Default: the local cores.")
+@click.option("--chunk-size", type=click.IntRange(min=1), default=None,
+              help="Grid nodes per chunk of a new store (default 64).")
+@click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
+def boundmap(robot_path, resolution, ds, out_path, store_path, jobs, scheduler, chunk_size, no_progress):
+    """Compute the friction-bound map of a robot over its joint space.
 
-    robot = load_robot(robot_path)
-    res = tuple(int(x) for x in resolution.split(",")) if resolution else default_resolution(robot)
-    field, path = compute_bound_map(robot_path, res, _settings(ds), out_path=out_path, cache_dir=cache_dir,
-                                    n_jobs=jobs or os.cpu_count() or 1)
+    Chunks are written to a zarr store as they finish; rerunning the same command after an
+    interruption computes only the missing chunks. The store records the robot file's sha256,
+    the model settings and the resolution, and refuses to resume a map made for others.
+    """
     import numpy as np
 
+    from .io.robot_file import load_robot
+    from .pipeline import compute_bound_map, default_resolution
+
+    robot = load_robot(robot_path)
+    if resolution:
+        try:
+            res = tuple(int(x) for x in resolution.split(","))
+        except ValueError:
+            raise click.BadParameter(f"{resolution!r} is not a comma-separated list of integers",
+                                     param_hint="--resolution") from None
+        if len(res) not in (1, len(robot.joints)) or min(res) < 2:
+            raise click.BadParameter(
+                f"{resolution!r}: needs 1 or {len(robot.joints)} integers >= 2 "
+                f"({', '.join(robot.joint_names)} of {robot_path})", param_hint="--resolution")
+    else:
+        res = default_resolution(robot)
+    if out_path and Path(out_path).suffix not in (".zarr", ".npz"):
+        raise click.BadParameter(f"{out_path!r} must end in .zarr (chunked store) or .npz", param_hint="--out")
+    if store_path and not (out_path and Path(out_path).suffix == ".npz"):
+        raise click.BadParameter(f"{store_path!r}: a separate store needs an .npz --out (a .zarr --out is the "
+                                 "store)", param_hint="--store")
+    n_jobs = 1 if scheduler else (jobs or os.cpu_count() or 1)
+    run, path = compute_bound_map(robot_path, res, _settings(ds), out_path=out_path, store_path=store_path,
+                                  n_jobs=n_jobs, scheduler=scheduler, chunk_size=chunk_size,
+                                  progress=not no_progress)
+    field = run.field
+    secs = np.asarray(run.chunk_seconds)
+    timing = (f"; chunk time mean {secs.mean():.2f} s, max {secs.max():.2f} s" if secs.size else "")
+    click.echo(f"{run.executor}: {run.n_computed} chunks computed, {run.n_reused} reused of {run.n_chunks} "
+               f"in {run.wall_seconds:.1f} s{timing}")
     v = field.values[..., 0][field.valid] * 1e3
-    click.echo(f"wrote {path}: {field.valid.sum()} of {field.valid.size} nodes valid; "
-               f"bound median {float(np.median(v)):.2f} mm, max {v.max():.2f} mm")
+    stats = (f"bound median {float(np.median(v)):.2f} mm, max {v.max():.2f} mm" if v.size else "no valid node")
+    click.echo(f"wrote {path}: {int(field.valid.sum())} of {field.valid.size} nodes valid; {stats}")
 
 
 def run():  # pragma: no cover - entry point wrapper

@@ -3,7 +3,8 @@
 ``run_plan(scenario)``:
 
 1. load the scenario and its robot; load the robot's bound map (shipped in
-   ``<robot dir>/boundmaps/`` or cached) or compute it (parallel, resumable);
+   ``<robot dir>/boundmaps/`` as ``.npz`` or ``.zarr``, or cached) or compute it into a zarr store
+   (local cores or a Dask cluster, resumable);
 2. resolve each goal (task-space goals by inverse kinematics preferring the smallest bound);
 3. plan every leg twice with the same planner and seed: bound-aware (length + weight x integral
    of the bound) and bound-blind (length only);
@@ -50,55 +51,93 @@ def default_resolution(robot) -> tuple[int, ...]:
 
 
 def _map_paths(robot_path: Path, key: str):
-    shipped = robot_path.parent / "boundmaps" / f"{robot_path.stem}-{key[:12]}.npz"
+    """(shipped map without suffix, cache map without suffix) of a robot file and map key."""
+    shipped = robot_path.parent / "boundmaps" / f"{robot_path.stem}-{key[:12]}"
     cache = Path(".cache") / "boundmaps" / f"{robot_path.stem}-{key[:12]}"
     return shipped, cache
 
 
-def compute_bound_map(robot_path, resolution, settings: ModelSettings, *, out_path=None, cache_dir=None,
-                      n_jobs: int = 1, progress: bool = True):
-    """Compute (or resume) the bound map of a robot file and save it.
+def compute_bound_map(robot_path, resolution, settings: ModelSettings, *, out_path=None, store_path=None,
+                      n_jobs: int = 1, scheduler=None, chunk_size: int | None = None, progress: bool = True,
+                      max_chunks: int | None = None, on_chunk=None):
+    """Compute (or resume) the bound map of a robot file into a zarr store.
 
     Parameters
     ----------
     robot_path : path
-        Robot model file; its content is part of the map's key.
+        Robot model file; its sha256 is recorded in the map and is part of the map's key.
     resolution : sequence of int, shape (n_joints,)
+        Grid nodes per joint.
     settings : ModelSettings
     out_path : path, optional
-        Default ``<robot dir>/boundmaps/<robot>-<key12>.npz``.
-    cache_dir : path, optional
-        Chunk folder (resume); default ``<out>.chunks``.
+        The map: a zarr store ``*.zarr`` (default ``<robot dir>/boundmaps/<robot>-<key12>.zarr``),
+        or an ``.npz`` file, written once the store ``store_path`` is complete.
+    store_path : path, optional
+        Chunk store of an ``.npz`` output (default: ``out_path`` with suffix ``.zarr``); must
+        be None or equal to ``out_path`` for a ``.zarr`` output.
     n_jobs : int
+        Local worker processes (1: this process) when no ``scheduler`` is given.
+    scheduler : str or distributed.Client, optional
+        Dask scheduler address, e.g. ``"tcp://host:8786"``.
+    chunk_size : int, optional
+        Nodes per chunk of a new store (default
+        :data:`~ctrplan.planning.bound_field.DEFAULT_CHUNK_SIZE`).
+    progress : bool
+        Progress bar.
+    max_chunks, on_chunk
+        See :func:`ctrplan.planning.bound_store.compute_bound_map_store`.
 
     Returns
     -------
-    field : BoundField
+    run : BoundMapRun
+        ``run.field`` is the map (None if ``max_chunks`` stopped the run), ``run.store`` the
+        store, ``run.n_reused`` / ``run.n_computed`` the chunks found / computed.
     path : Path
+        The map written (the store, or the ``.npz``).
 
     Raises
     ------
     ModelFileError
         Malformed robot file.
-    BoundFieldKeyError
-        ``cache_dir`` holds chunks of another robot file, settings or resolution.
+    BoundMapMismatchError
+        The store holds a map of another robot file, settings or resolution.
+    ValueError
+        ``store_path`` given with a ``.zarr`` output, or an output suffix other than ``.zarr``
+        or ``.npz``.
     """
+    from .planning.bound_field import DEFAULT_CHUNK_SIZE
+    from .planning.bound_store import STORE_SUFFIX, compute_bound_map_store
+
     robot_path = Path(robot_path)
     robot = load_robot(robot_path)
     text = robot_path.read_text()
     key = field_key(robot, settings, resolution, evaluate_bound, text)
     shipped, _ = _map_paths(robot_path, key)
-    out = Path(out_path) if out_path else shipped
-    chunks = Path(cache_dir) if cache_dir else out.with_suffix(".chunks")
-    field = BoundField.compute(robot, evaluate_bound, resolution, settings, cache_dir=chunks, n_jobs=n_jobs,
-                               robot_file_text=text, progress=progress)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    field.save(out)
-    return field, out
+    out = Path(out_path) if out_path else shipped.with_suffix(STORE_SUFFIX)
+    if out.suffix == STORE_SUFFIX:
+        if store_path is not None and Path(store_path) != out:
+            raise ValueError(f"--store {store_path} cannot differ from a .zarr output {out} (the store is the map)")
+        store = out
+    elif out.suffix == ".npz":
+        store = Path(store_path) if store_path else out.with_suffix(STORE_SUFFIX)
+    else:
+        raise ValueError(f"bound map output {out} must end in {STORE_SUFFIX} (chunked store) or .npz")
+    store.parent.mkdir(parents=True, exist_ok=True)
+    run = compute_bound_map_store(
+        robot, evaluate_bound, resolution, settings, store, n_jobs, scheduler=scheduler,
+        chunk_size=chunk_size or DEFAULT_CHUNK_SIZE, progress=progress, robot_file_text=text,
+        metadata={"robot_file": robot_path.name}, max_chunks=max_chunks, on_chunk=on_chunk)
+    if run.field is not None and out.suffix == ".npz":
+        run.field.save(out)
+    return run, out
 
 
-def load_or_compute_bound_map(robot_path, robot, resolution, settings, n_jobs=1, echo=print):
-    """Shipped or cached map with the right key, else compute it (resumable cache).
+def load_or_compute_bound_map(robot_path, robot, resolution, settings, n_jobs=1, echo=print, *, scheduler=None):
+    """Shipped or cached map with the right key, else compute it (resumable zarr store).
+
+    Looks for ``<robot dir>/boundmaps/<robot>-<key12>.npz`` or ``.zarr`` (shipped), then
+    ``.cache/boundmaps/<robot>-<key12>.zarr`` or ``.npz`` (computed earlier); a cached store that
+    is incomplete is resumed.
 
     Parameters
     ----------
@@ -110,9 +149,11 @@ def load_or_compute_bound_map(robot_path, robot, resolution, settings, n_jobs=1,
         Grid nodes per joint.
     settings : ModelSettings
     n_jobs : int
-        Worker processes when computing.
+        Local worker processes when computing.
     echo : callable
         Progress messages.
+    scheduler : str or distributed.Client, optional, keyword-only
+        Dask scheduler address for computing.
 
     Returns
     -------
@@ -124,26 +165,32 @@ def load_or_compute_bound_map(robot_path, robot, resolution, settings, n_jobs=1,
 
     Raises
     ------
-    BoundFieldKeyError
-        The cache folder holds chunks computed with another key.
+    BoundMapMismatchError
+        The cache store holds a map computed with another key.
     """
+    from .planning.bound_store import IncompleteBoundMapError, compute_bound_map_store
+
     t0 = time.perf_counter()
     robot_path = Path(robot_path)
     text = robot_path.read_text()
     key = field_key(robot, settings, resolution, evaluate_bound, text)
     shipped, cache = _map_paths(robot_path, key)
-    for path, source in ((shipped, "shipped"), (cache.with_suffix(".npz"), "cache")):
+    for path, source in ((shipped.with_suffix(".npz"), "shipped"), (shipped.with_suffix(".zarr"), "shipped"),
+                         (cache.with_suffix(".zarr"), "cache"), (cache.with_suffix(".npz"), "cache")):
         if path.exists():
             try:
                 return BoundField.load(path, key=key), source, time.perf_counter() - t0
+            except IncompleteBoundMapError:
+                continue
             except BoundFieldKeyError as exc:
                 echo(f"ignoring {path}: {exc}")
+    store = cache.with_suffix(".zarr")
     echo(f"computing the bound map of {robot_path.name} at resolution {resolution} "
-         f"(cache {cache}; interrupt and rerun to resume)")
-    field = BoundField.compute(robot, evaluate_bound, resolution, settings, cache_dir=cache, n_jobs=n_jobs,
-                               robot_file_text=text)
-    field.save(cache.with_suffix(".npz"))
-    return field, "computed", time.perf_counter() - t0
+         f"(store {store}; interrupt and rerun to resume)")
+    store.parent.mkdir(parents=True, exist_ok=True)
+    run = compute_bound_map_store(robot, evaluate_bound, resolution, settings, store, n_jobs, scheduler=scheduler,
+                                  robot_file_text=text, metadata={"robot_file": robot_path.name})
+    return run.field, "computed", time.perf_counter() - t0
 
 
 def _dense_path(ordered_q, motions, joint_space, spacing):

@@ -99,24 +99,27 @@ def test_save_load_and_key(field, tmp_path):
 
 def test_resume_computes_only_missing_chunks(tmp_path):
     robot = fake_robot()
-    n_nodes = int(np.prod(RES))  # 192 nodes, chunks of 20 -> 10 chunks
-    partial = BoundField.compute(robot, fake_bound, RES, cache_dir=tmp_path, chunk_size=20,
+    store = tmp_path / "map.zarr"
+    n_nodes = int(np.prod(RES))  # 192 nodes, chunks of (1, 3, 4) = 12 nodes -> 16 chunks
+    partial = BoundField.compute(robot, fake_bound, RES, store=store, chunk_size=12,
                                  progress=False, max_chunks=5)
     assert partial is None  # interrupted
     counter = CountingBound()
-    full = BoundField.compute(robot, counter, RES, cache_dir=tmp_path, chunk_size=20, progress=False)
-    assert counter.calls == n_nodes - 5 * 20
+    full = BoundField.compute(robot, counter, RES, store=store, chunk_size=12, progress=False)
+    assert counter.calls == n_nodes - 5 * 12
     ref = BoundField.compute(robot, fake_bound, RES, progress=False)
     np.testing.assert_array_equal(full.values, ref.values)
     assert full.key == ref.key
-    # a finished cache evaluates nothing
+    # the finished store is a map the planner reads
+    np.testing.assert_array_equal(BoundField.load(store, key=ref.key).values, ref.values)
+    # a finished store evaluates nothing
     counter2 = CountingBound()
-    BoundField.compute(robot, counter2, RES, cache_dir=tmp_path, chunk_size=20, progress=False)
+    BoundField.compute(robot, counter2, RES, store=store, chunk_size=12, progress=False)
     assert counter2.calls == 0
-    # another model setting with the same cache dir raises
-    with pytest.raises(BoundFieldKeyError, match="cache_dir"):
-        BoundField.compute(robot, fake_bound, RES, settings=ModelSettings(ds=2e-3), cache_dir=tmp_path,
-                           chunk_size=20, progress=False)
+    # another model setting with the same store raises, naming the store and the setting
+    with pytest.raises(BoundFieldKeyError, match="settings.ds"):
+        BoundField.compute(robot, fake_bound, RES, settings=ModelSettings(ds=2e-3), store=store,
+                           chunk_size=12, progress=False)
 
 
 def test_failed_and_unstable_points_are_invalid():
@@ -133,14 +136,6 @@ def test_failed_and_unstable_points_are_invalid():
     f = BoundField.compute(fake_robot(), flaky, (4, 4, 3), progress=False)
     assert not f.valid[0, 0, 0] and not f.valid[1, 1, 2] and f.valid[1, 1, 1]
     assert f.metadata["n_invalid"] == 4 * 4 + 3 - 1
-
-
-def test_parallel_matches_serial(tmp_path):
-    robot = fake_robot()
-    par = BoundField.compute(robot, fake_bound, (4, 4, 3), cache_dir=tmp_path, n_jobs=2, chunk_size=12,
-                             progress=False)
-    ser = BoundField.compute(robot, fake_bound, (4, 4, 3), progress=False)
-    np.testing.assert_array_equal(par.values, ser.values)
 
 
 def test_interpolation_error_reports(field):

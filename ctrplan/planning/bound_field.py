@@ -18,15 +18,16 @@ raised, did not converge, or reported an elastically unstable standard model are
 interpolated value that draws on an invalid node is ``invalid_value`` (default +inf) and
 :meth:`BoundField.is_valid` is False there.
 
-Computing runs the nodes in chunks with joblib (loky processes). Each finished chunk is written
-atomically (temporary file + ``os.replace``) to ``cache_dir`` with the field's key, so an
-interrupted run resumes with only the missing chunks.
+Computing runs the nodes in chunks, in this process, on a local Dask cluster or on a Dask
+cluster given by its scheduler address, and writes each finished chunk to a zarr store as it
+arrives, so an interrupted run resumes with only the missing chunks
+(:mod:`ctrplan.planning.bound_store`). A finished field is read from the store or from one
+``.npz`` file (:meth:`BoundField.save`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import datetime
 import hashlib
 import json
 import os
@@ -180,16 +181,6 @@ def _evaluate_node(robot, evaluator, q, settings):
     if diag is not None:
         ok = ok and bool(diag.converged) and not bool(diag.unstable)
     return vals, ok
-
-
-def _compute_chunk(robot, evaluator, settings, q_nodes, flat_idx, chunk_path, key):
-    vals = np.empty((len(flat_idx), len(QUANTITIES)))
-    valid = np.empty(len(flat_idx), dtype=bool)
-    for m, q in enumerate(q_nodes):
-        vals[m], valid[m] = _evaluate_node(robot, evaluator, q, settings)
-    _atomic_savez(chunk_path, key=np.array(key), flat_index=np.asarray(flat_idx, dtype=np.int64),
-                  values=vals, valid=valid)
-    return len(flat_idx)
 
 
 @dataclass
@@ -375,11 +366,13 @@ class BoundField:
 
     @classmethod
     def load(cls, path, key: str | None = None, **kwargs) -> "BoundField":
-        """Read a field written by :meth:`save`.
+        """Read a field from an ``.npz`` written by :meth:`save` or a complete zarr store.
 
         Parameters
         ----------
         path : str or Path
+            ``*.npz`` file, or ``*.zarr`` store directory written by :meth:`compute` /
+            ``ctrplan boundmap``.
         key : str, optional
             Expected key (:func:`field_key`); a mismatch raises.
         **kwargs
@@ -389,8 +382,14 @@ class BoundField:
         ------
         BoundFieldKeyError
             If ``key`` is given and differs from the stored key.
+        IncompleteBoundMapError
+            The zarr store still misses chunks (``ctrplan.planning.bound_store``).
         FileNotFoundError
         """
+        from .bound_store import BoundMapStore, is_store_path
+
+        if is_store_path(path):
+            return BoundMapStore.open(path).to_field(key=key, **kwargs)
         with np.load(Path(path), allow_pickle=False) as z:
             stored = str(z["key"])
             if key is not None and stored != key:
@@ -404,35 +403,46 @@ class BoundField:
 
     # ------------------------------------------------------------------ computing
     @classmethod
-    def compute(cls, robot, evaluator, resolution, settings=None, cache_dir=None, n_jobs: int = 1,
-                *, chunk_size: int = DEFAULT_CHUNK_SIZE, progress: bool = True,
-                robot_file_text: str | None = None, max_chunks: int | None = None) -> "BoundField":
+    def compute(cls, robot, evaluator, resolution, settings=None, store=None, n_jobs: int = 1,
+                *, scheduler=None, chunk_size: int = DEFAULT_CHUNK_SIZE, progress: bool = True,
+                robot_file_text: str | None = None, max_chunks: int | None = None,
+                on_chunk=None) -> "BoundField | None":
         """Evaluate the bound at every grid node (in parallel, resumable) and build the field.
+
+        A thin wrapper of :func:`ctrplan.planning.bound_store.compute_bound_map_store`, which
+        also reports how many chunks were reused and computed.
 
         Parameters
         ----------
         robot : Robot
         evaluator : callable
             ``evaluator(robot, alpha (n,) [rad], beta (n,) [m], settings) -> BoundResult`` (e.g.
-            :func:`ctrplan.mechanics.evaluate_bound`); must be picklable (a module-level
-            function) when ``n_jobs != 1``.
+            :func:`ctrplan.mechanics.evaluate_bound`); must be importable by the workers (a
+            module-level function of an installed package) when ``n_jobs != 1`` or
+            ``scheduler`` is given.
         resolution : int or sequence of int, shape (n_joints,)
             Nodes per joint (>= 2).
         settings : ModelSettings, optional
-        cache_dir : str or Path, optional
-            Directory of chunk files ``chunk_XXXXXX.npz``. Existing chunks with this field's key
-            are reused; None computes in memory only.
+        store : str or Path, optional
+            zarr store directory (``*.zarr``) written chunk by chunk as chunks finish; a rerun
+            with the same arguments after an interruption computes only the missing chunks.
+            None computes in memory.
         n_jobs : int
-            joblib workers (loky processes); 1 runs in this process.
+            Without ``scheduler``: 1 runs in this process, k > 1 on a local Dask cluster of k
+            single-threaded worker processes.
+        scheduler : str or distributed.Client, optional, keyword-only
+            Dask scheduler address (``"tcp://host:8786"``) or a connected client.
         chunk_size : int, keyword-only
-            Nodes per chunk file.
+            Nodes per chunk of a new store.
         progress : bool, keyword-only
             Show a tqdm progress bar (counts nodes).
         robot_file_text : str, optional
-            Robot file content for the key (see :func:`field_key`).
+            Robot file content for the key (see :func:`field_key`) and the store's robot hash.
         max_chunks : int, optional
             Compute at most this many missing chunks and return None if the grid is still
             incomplete (for batch jobs and tests of resumption).
+        on_chunk : callable, optional, keyword-only
+            ``on_chunk(n_written, chunk)`` after each written chunk.
 
         Returns
         -------
@@ -442,115 +452,14 @@ class BoundField:
         Raises
         ------
         BoundFieldKeyError
-            If ``cache_dir`` holds a chunk computed with another key (use another directory).
+            ``store`` holds a map of another robot, settings, resolution or evaluator
+            (:class:`~ctrplan.planning.bound_store.BoundMapMismatchError`).
         """
-        res = _resolution(robot, resolution)
-        key = field_key(robot, settings, res, evaluator, robot_file_text)
-        axes = grid_axes(robot, res)
-        periodic = [j.periodic for j in robot.joints]
-        mesh = np.meshgrid(*axes, indexing="ij")
-        nodes = np.stack([g.reshape(-1) for g in mesh], axis=1)
-        n_nodes = nodes.shape[0]
-        n_chunks = -(-n_nodes // chunk_size)
-        values = np.full((n_nodes, len(QUANTITIES)), np.nan)
-        valid = np.zeros(n_nodes, dtype=bool)
-        done = np.zeros(n_chunks, dtype=bool)
-        cache = Path(cache_dir) if cache_dir is not None else None
+        from .bound_store import compute_bound_map_store
 
-        def chunk_path(c):
-            return cache / f"chunk_{c:06d}.npz"
-
-        def read_chunk(c):
-            with np.load(chunk_path(c), allow_pickle=False) as z:
-                if str(z["key"]) != key:
-                    raise BoundFieldKeyError(
-                        f"{chunk_path(c)}: chunk was computed with key {str(z['key'])[:12]}..., not "
-                        f"{key[:12]}... (another robot, settings, resolution or evaluator); "
-                        "use another cache_dir")
-                idx = z["flat_index"]
-                values[idx] = z["values"]
-                valid[idx] = z["valid"]
-            done[c] = True
-
-        if cache is not None:
-            cache.mkdir(parents=True, exist_ok=True)
-            for c in range(n_chunks):
-                if chunk_path(c).is_file():
-                    read_chunk(c)
-        todo = [c for c in range(n_chunks) if not done[c]]
-        if max_chunks is not None:
-            todo = todo[:max_chunks]
-
-        def chunk_slice(c):
-            return np.arange(c * chunk_size, min((c + 1) * chunk_size, n_nodes))
-
-        with _progress(total=n_nodes, initial=int(n_nodes - sum(len(chunk_slice(c)) for c in range(n_chunks) if not done[c])),
-                       enable=progress) as bar:
-            if n_jobs == 1 or len(todo) <= 1:
-                for c in todo:
-                    idx = chunk_slice(c)
-                    if cache is not None:
-                        _compute_chunk(robot, evaluator, settings, nodes[idx], idx, chunk_path(c), key)
-                        read_chunk(c)
-                    else:
-                        for m, k in enumerate(idx):
-                            values[k], valid[k] = _evaluate_node(robot, evaluator, nodes[k], settings)
-                        done[c] = True
-                    bar.update(len(idx))
-            else:
-                from joblib import Parallel, delayed
-
-                tmpdir = None
-                if cache is None:
-                    tmpdir = tempfile.TemporaryDirectory(prefix="ctrplan-boundfield-")
-                    cache = Path(tmpdir.name)
-                try:
-                    par = Parallel(n_jobs=n_jobs, backend="loky", return_as="generator_unordered")
-                    jobs = (delayed(_chunk_job)(robot, evaluator, settings, nodes[chunk_slice(c)],
-                                                chunk_slice(c), str(chunk_path(c)), key, c) for c in todo)
-                    for c in par(jobs):
-                        read_chunk(c)
-                        bar.update(len(chunk_slice(c)))
-                finally:
-                    if tmpdir is not None:
-                        tmpdir.cleanup()
-        if not np.all(done):
-            return None
-        meta = {
-            "robot": robot.name, "joint_names": list(robot.joint_names), "resolution": list(res),
-            "evaluator": evaluator_name(evaluator), "settings": _settings_dict(settings),
-            "units": [UNITS[q] for q in QUANTITIES], "quantities": list(QUANTITIES),
-            "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            "n_invalid": int(np.count_nonzero(~valid)),
-        }
-        return cls(axes, periodic, values.reshape(res + (len(QUANTITIES),)), valid.reshape(res), key, meta)
-
-
-def _chunk_job(robot, evaluator, settings, q_nodes, flat_idx, path, key, c):
-    _compute_chunk(robot, evaluator, settings, q_nodes, flat_idx, Path(path), key)
-    return c
-
-
-class _progress:
-    """tqdm bar, or a no-op when disabled (tqdm is imported lazily)."""
-
-    def __init__(self, total, initial, enable):
-        self._bar = None
-        if enable:
-            from tqdm.auto import tqdm
-            self._bar = tqdm(total=total, initial=initial, unit="node", desc="friction bound field")
-
-    def __enter__(self):
-        return self
-
-    def update(self, n):
-        if self._bar is not None:
-            self._bar.update(n)
-
-    def __exit__(self, *exc):
-        if self._bar is not None:
-            self._bar.close()
-        return False
+        return compute_bound_map_store(robot, evaluator, resolution, settings, store, n_jobs, scheduler=scheduler,
+                                       chunk_size=chunk_size, progress=progress, robot_file_text=robot_file_text,
+                                       max_chunks=max_chunks, on_chunk=on_chunk).field
 
 
 def interpolation_error(field: BoundField, robot, evaluator, n: int = 100, seed: int = 0, settings=None,
