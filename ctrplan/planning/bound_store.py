@@ -11,6 +11,7 @@ array                shape                       content
 ``valid``            ``(n_1, ..., n_d)``         False where the model failed or was unstable
 ``done``             ``(b_1, ..., b_d)``         True once a chunk is written (last write)
 ``chunk_seconds``    ``(b_1, ..., b_d)``         evaluation wall time of each chunk [s]
+``chunk_cpu_seconds`` ``(b_1, ..., b_d)``        CPU time of the evaluating thread [s]
 ``chunk_cold``       ``(b_1, ..., b_d)``         the chunk was the first one of its process
                                                  (its time includes imports and warm-up)
 ``chunk_run``        ``(b_1, ..., b_d)``         number of the run that computed the chunk
@@ -315,6 +316,8 @@ class BoundMapStore:
         group.create_array("valid", shape=res, chunks=chunks, dtype="bool", fill_value=False)
         group.create_array("done", shape=nb, chunks=(1,) * len(nb), dtype="bool", fill_value=False)
         group.create_array("chunk_seconds", shape=nb, chunks=(1,) * len(nb), dtype="float64", fill_value=np.nan)
+        group.create_array("chunk_cpu_seconds", shape=nb, chunks=(1,) * len(nb), dtype="float64",
+                           fill_value=np.nan)
         group.create_array("chunk_cold", shape=nb, chunks=(1,) * len(nb), dtype="bool", fill_value=False)
         group.create_array("chunk_run", shape=nb, chunks=(1,) * len(nb), dtype="int32", fill_value=0)
         for j, a in enumerate(axes):
@@ -375,6 +378,11 @@ class BoundMapStore:
         """Evaluation wall time of each chunk, shape (n_chunks,) [s] (NaN if missing)."""
         return np.asarray(self.group["chunk_seconds"][...], dtype=float).reshape(-1)
 
+    def chunk_cpu_seconds(self) -> np.ndarray:
+        """CPU time of the thread that evaluated each chunk, shape (n_chunks,) [s]; below the wall
+        time when the worker shared its core."""
+        return np.asarray(self.group["chunk_cpu_seconds"][...], dtype=float).reshape(-1)
+
     def chunk_cold(self) -> np.ndarray:
         """First chunk of its process (time includes warm-up), shape (n_chunks,)."""
         return np.asarray(self.group["chunk_cold"][...], dtype=bool).reshape(-1)
@@ -396,7 +404,19 @@ class BoundMapStore:
         self.attrs["runs"] = runs
         return len(runs)
 
-    def write_chunk(self, flat: int, values, valid, seconds: float, cold: bool, run: int) -> None:
+    def end_run(self, run: int, info: dict) -> None:
+        """Add ``info`` (end time, wall time, chunks computed, ...) to the record of run ``run``."""
+        runs = list(self.group.attrs.get("runs", []))
+        runs[run - 1] = _json_roundtrip({**runs[run - 1], "finished_utc": _now(), **info})
+        self.group.attrs.update({"runs": runs})
+        self.attrs["runs"] = runs
+
+    def runs(self) -> list[dict]:
+        """Records of the computing runs: start and end time, executor, wall time [s], chunks."""
+        return list(self.group.attrs.get("runs", []))
+
+    def write_chunk(self, flat: int, values, valid, seconds: float, cold: bool, run: int,
+                    cpu_seconds: float = float("nan")) -> None:
         """Write one finished chunk; the ``done`` flag is written last.
 
         Parameters
@@ -412,6 +432,8 @@ class BoundMapStore:
             First chunk of its process.
         run : int
             Run number (:meth:`begin_run`).
+        cpu_seconds : float
+            CPU time of the evaluating thread [s].
         """
         sl = self.chunk_slices(flat)
         shape = tuple(s.stop - s.start for s in sl)
@@ -419,6 +441,7 @@ class BoundMapStore:
         self.group["values"][sl + (slice(None),)] = np.asarray(values, dtype=float).reshape(shape + (len(QUANTITIES),))
         self.group["valid"][sl] = np.asarray(valid, dtype=bool).reshape(shape)
         self.group["chunk_seconds"][idx] = float(seconds)
+        self.group["chunk_cpu_seconds"][idx] = float(cpu_seconds)
         self.group["chunk_cold"][idx] = bool(cold)
         self.group["chunk_run"][idx] = int(run)
         self.group["done"][idx] = True
@@ -502,15 +525,18 @@ class BoundMapRun:
 
 
 def _compute_chunk(robot, evaluator, settings, q_nodes):
-    """Evaluate one chunk (runs on a worker). Returns (values (m, 4), valid (m,), seconds, cold)."""
+    """Evaluate one chunk (runs on a worker).
+
+    Returns (values (m, 4), valid (m,), wall seconds, thread CPU seconds, first chunk of the process).
+    """
     global _CHUNKS_IN_THIS_PROCESS
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     values = np.empty((len(q_nodes), len(QUANTITIES)))
     valid = np.empty(len(q_nodes), dtype=bool)
     for m, q in enumerate(q_nodes):
         values[m], valid[m] = _evaluate_node(robot, evaluator, q, settings)
     _CHUNKS_IN_THIS_PROCESS += 1
-    return values, valid, time.perf_counter() - t0, _CHUNKS_IN_THIS_PROCESS == 1
+    return values, valid, time.perf_counter() - t0, time.thread_time() - c0, _CHUNKS_IN_THIS_PROCESS == 1
 
 
 class _Progress:
@@ -621,8 +647,8 @@ def compute_bound_map_store(robot, evaluator, resolution, settings=None, store=N
         bar = _Progress(n_nodes, done_nodes, progress, f"bound map {robot.name}")
 
         def finish(c, result):
-            values, valid, secs, cold = result
-            st.write_chunk(c, values, valid, secs, cold, run)
+            values, valid, secs, cpu, cold = result
+            st.write_chunk(c, values, valid, secs, cold, run, cpu)
             computed.append(float(secs))
             bar.update(int(sizes[c]))
             if on_chunk is not None:
@@ -654,6 +680,8 @@ def compute_bound_map_store(robot, evaluator, resolution, settings=None, store=N
                 client.close()
             if cluster is not None:
                 cluster.close()
+            st.end_run(run, {"wall_seconds": time.perf_counter() - t_start, "chunks_computed": len(computed),
+                             "stopped_early": len(computed) < len(todo)})
     complete = not st.missing_chunks()
     field = st.to_field() if complete else None
     return BoundMapRun(field=field, store=st, n_chunks=st.n_chunks, n_reused=n_reused, n_computed=len(computed),

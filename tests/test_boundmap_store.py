@@ -1,0 +1,171 @@
+"""Bound-map stores: chunk layout, identity checks (maps are never mixed), formats the planner
+reads, and the ``ctrplan boundmap`` command. Serial and fast (fake bound or a coarse real map)."""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from test_planning_helpers import fake_bound, fake_robot
+
+from ctrplan import cli
+from ctrplan.io.robot_file import load_robot
+from ctrplan.mechanics import ModelSettings, evaluate_bound
+from ctrplan.pipeline import compute_bound_map, load_or_compute_bound_map
+from ctrplan.planning import BoundField, field_key
+from ctrplan.planning.bound_store import (BoundMapMismatchError, BoundMapStore, IncompleteBoundMapError,
+                                          chunk_shape_for, compute_bound_map_store)
+
+REPO = Path(__file__).resolve().parents[1]
+SETTINGS = ModelSettings(ds=2e-2)
+
+
+def pair_file(tmp_path: Path, mu: float = 0.2) -> Path:
+    """Table I tube pair plus a beta_2 joint, with friction coefficient ``mu``."""
+    text = (REPO / "model" / "ha2019-table1-tube-pair.toml").read_text()
+    text = text.replace("friction_coefficient = 0.2 ", f"friction_coefficient = {mu} ")
+    text += '\n[[joints]]\nname = "beta_2"\nlower = -0.017\nupper = -0.005\n'
+    path = tmp_path / "pair.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("res, size", [((16, 16, 6), 64), ((4, 4, 4, 2, 2, 2), 8), ((5, 7), 3), ((3,), 100),
+                                       ((16, 16, 16, 6, 6, 6), 64)])
+def test_chunk_shape(res, size):
+    c = chunk_shape_for(res, size)
+    assert len(c) == len(res) and all(1 <= cj <= nj for cj, nj in zip(c, res))
+    assert int(np.prod(c)) <= size
+    # equal pieces: the chunks of one axis differ by at most one node
+    for cj, nj in zip(c, res):
+        pieces = -(-nj // cj)
+        assert nj - (pieces - 1) * cj >= cj - pieces
+    with pytest.raises(ValueError, match="chunk_size"):
+        chunk_shape_for(res, 0)
+
+
+def test_fake_map_chunks_cover_the_grid_once(tmp_path):
+    robot = fake_robot()
+    run = compute_bound_map_store(robot, fake_bound, (5, 7, 3), store=tmp_path / "m.zarr", chunk_size=10,
+                                  progress=False)
+    st = run.store
+    assert st.chunks == chunk_shape_for((5, 7, 3), 10)
+    assert st.chunk_sizes().sum() == 5 * 7 * 3
+    covered = np.zeros((5, 7, 3), dtype=int)
+    for c in range(st.n_chunks):
+        covered[st.chunk_slices(c)] += 1
+        np.testing.assert_array_equal(st.chunk_nodes(c), run.field.nodes().reshape(5, 7, 3, 3)[st.chunk_slices(c)]
+                                      .reshape(-1, 3))
+    assert np.all(covered == 1)
+    ref = BoundField.compute(robot, fake_bound, (5, 7, 3), progress=False)
+    np.testing.assert_array_equal(run.field.values, ref.values)
+    assert np.all(np.isfinite(st.chunk_seconds())) and st.chunk_cold().sum() <= 1
+
+
+def test_store_records_robot_file_hash_and_settings(tmp_path):
+    robot_file = pair_file(tmp_path)
+    run, path = compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=tmp_path / "m.zarr", progress=False)
+    attrs = BoundMapStore.open(path).attrs
+    assert attrs["robot_sha256"] == hashlib.sha256(robot_file.read_bytes()).hexdigest()
+    assert attrs["robot_hash_of"] == "robot file"
+    assert attrs["settings"] == SETTINGS.as_dict() and attrs["resolution"] == [4, 3]
+    assert attrs["evaluator"].endswith("evaluate_bound")
+    assert attrs["key"] == run.field.key == field_key(load_robot(robot_file), SETTINGS, (4, 3), evaluate_bound,
+                                                       robot_file.read_text())
+    assert run.field.metadata["robot_file"] == "pair.toml"
+
+
+def test_resuming_into_another_map_is_refused(tmp_path):
+    robot_file = pair_file(tmp_path)
+    store = tmp_path / "m.zarr"
+    compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=store, progress=False, max_chunks=1)
+    old_sha = hashlib.sha256(robot_file.read_bytes()).hexdigest()
+    cases = [
+        (dict(resolution=(4, 4)), "resolution", [4, 3], [4, 4]),
+        (dict(settings=ModelSettings(ds=1e-2)), "settings.ds", 0.02, 0.01),
+    ]
+    for change, key, stored, requested in cases:
+        kw = dict(resolution=(4, 3), settings=SETTINGS) | change
+        with pytest.raises(BoundMapMismatchError) as err:
+            compute_bound_map(robot_file, kw["resolution"], kw["settings"], out_path=store, progress=False)
+        e = err.value
+        assert (e.key, e.stored, e.requested) == (key, stored, requested)
+        assert str(store) in str(e) and key in str(e)
+    # the same name, another robot file content (friction coefficient 0.2 -> 0.3)
+    robot_file = pair_file(tmp_path, mu=0.3)
+    new_sha = hashlib.sha256(robot_file.read_bytes()).hexdigest()
+    with pytest.raises(BoundMapMismatchError) as err:
+        compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=store, progress=False)
+    assert (err.value.key, err.value.stored, err.value.requested) == ("robot_sha256", old_sha, new_sha)
+    assert old_sha in str(err.value) and new_sha in str(err.value)
+    # nothing of the refused runs was written
+    assert BoundMapStore.open(store).done().sum() == 1
+
+
+def test_incomplete_store_is_not_a_map(tmp_path):
+    robot = fake_robot()
+    store = tmp_path / "m.zarr"
+    run = compute_bound_map_store(robot, fake_bound, (4, 4, 3), store=store, chunk_size=12, progress=False,
+                                  max_chunks=2)
+    assert run.field is None and run.n_computed == 2
+    with pytest.raises(IncompleteBoundMapError, match=r"m\.zarr.*2 of 4 chunks not computed"):
+        BoundField.load(store)
+    with pytest.raises(FileNotFoundError):
+        BoundField.load(tmp_path / "missing.zarr")
+
+
+def test_npz_output_and_planner_lookup(tmp_path, monkeypatch):
+    """An .npz output goes through its store; the planner finds cached stores and resumes them."""
+    robot_file = pair_file(tmp_path)
+    robot = load_robot(robot_file)
+    run, path = compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=tmp_path / "m.npz", progress=False)
+    assert path == tmp_path / "m.npz" and (tmp_path / "m.zarr").is_dir()
+    np.testing.assert_array_equal(BoundField.load(path, key=run.field.key).values,
+                                  BoundField.load(tmp_path / "m.zarr", key=run.field.key).values)
+    # planner lookup: an interrupted cache store is resumed, then found
+    monkeypatch.chdir(tmp_path)
+    key = run.field.key
+    cache = Path(".cache") / "boundmaps" / f"pair-{key[:12]}.zarr"
+    compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=cache, progress=False, max_chunks=1, chunk_size=3)
+    msgs = []
+    field, source, _ = load_or_compute_bound_map(robot_file, robot, (4, 3), SETTINGS, echo=msgs.append)
+    assert source == "computed" and "store .cache" in msgs[0]
+    st = BoundMapStore.open(cache)  # resumed with its own chunks (4 of 3 nodes), not restarted
+    assert st.n_chunks == 4 and list(st.chunk_run()) == [1, 2, 2, 2]
+    np.testing.assert_array_equal(field.values, run.field.values)
+    field, source, _ = load_or_compute_bound_map(robot_file, robot, (4, 3), SETTINGS, echo=msgs.append)
+    assert source == "cache"
+
+
+def test_shipped_npz_map_is_found_without_computing():
+    """The main job's map (scenarios/obstacles.toml: Table VII robot, 16x16x6, ds 3 mm) is shipped."""
+    robot_file = REPO / "model" / "ha2019-table7-calibrated.toml"
+    t0 = time.perf_counter()
+    field, source, _ = load_or_compute_bound_map(robot_file, load_robot(robot_file), (16, 16, 6),
+                                                 ModelSettings(ds=3e-3), echo=pytest.fail)
+    assert source == "shipped" and field.shape == (16, 16, 6)
+    assert time.perf_counter() - t0 < 10.0
+
+
+def test_cli_boundmap(tmp_path):
+    robot_file = pair_file(tmp_path)
+    runner = CliRunner()
+    out = tmp_path / "cli.zarr"
+    args = ["boundmap", "--robot", str(robot_file), "--resolution", "4,3", "--ds", "0.02", "--jobs", "1",
+            "--chunk-size", "4", "--out", str(out), "--no-progress"]
+    res = runner.invoke(cli.main, args)
+    assert res.exit_code == 0, res.output
+    assert "serial: 4 chunks computed, 0 reused of 4" in res.output and f"wrote {out}" in res.output
+    res = runner.invoke(cli.main, args)
+    assert "0 chunks computed, 4 reused of 4" in res.output
+    # another resolution into the same store: a clear error (exit 2 through ctrplan's entry point)
+    res = runner.invoke(cli.main, args[:4] + ["4,4"] + args[5:])
+    assert isinstance(res.exception, BoundMapMismatchError) and "'resolution'" in str(res.exception)
+    for bad, hint in ((["--resolution", "4,x"], "--resolution"), (["--resolution", "4,3,2"], "--resolution"),
+                      (["--out", str(tmp_path / "m.h5")], "--out")):
+        res = runner.invoke(cli.main, ["boundmap", "--robot", str(robot_file), "--jobs", "1"] + bad)
+        assert res.exit_code == 2 and hint in res.output
