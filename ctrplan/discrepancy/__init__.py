@@ -5,12 +5,15 @@
   Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906).
 - :mod:`.effects`: candidate effects (friction, clearance, off-plane precurvature, Poisson
   ratios, registration) as modifications of a robot.
+- :mod:`.synth`: measured-like data with hidden effects and sensor noise (``ctrplan synth``).
 """
 
 from .effects import Effects, apply_effects, apply_registration, registration_matrix
 from .simulate import History, Simulation, motion_history, simulate
+from .synth import Noise, SynthResult, synthesize, truth_path, write_synth
 
 __all__ = [
     "Effects", "apply_effects", "apply_registration", "registration_matrix",
     "History", "Simulation", "motion_history", "simulate",
+    "Noise", "SynthResult", "synthesize", "truth_path", "write_synth",
 ]
