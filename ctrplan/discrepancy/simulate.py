@@ -326,7 +326,7 @@ def _run(tasks, alpha, beta, guess, follow, eta, mu, contact, robot, settings, c
         return (robot, alpha[idx], beta[idx], guess[idx], follow[idx], eta[idx], mu[idx], contact,
                 settings, check_stability)
 
-    if n_jobs == 1 or len(tasks) == 1:
+    if n_jobs == 1 or len(tasks) <= 1:
         results = (_solve_rows(*args(idx)) for idx in tasks)
     else:
         from joblib import Parallel, delayed, parallel_config
@@ -483,19 +483,26 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None,
         for name in counts:
             counts[name] += c[name]
         if contact:
+            # stage 2 restarts each sample on its branch; samples whose branch failed stay failed
             guess = torsion
             follow = np.zeros(K, dtype=bool)
-            # a sample whose branch solve failed restarts from zero twist, as in stage 1
+            order = order[ok[order]]
     else:
         order = np.arange(K)
     if contact or groups is None:
-        tasks = _chunks(order, alpha, beta, size)
-        tip, tan, ok, msg, torsion2, c = _run(
+        tasks = _chunks(order, alpha, beta, size) if order.size else []
+        tip2, tan2, ok2, msg2, torsion2, c = _run(
             tasks, alpha, beta, guess, follow, eta_solve, mu_used, contact, robot, settings,
             check_stability, n_jobs, progress, f"{model} model", K)
         for name in counts:
             counts[name] += c[name]
-        torsion = torsion2 if groups is None else np.where(np.isnan(torsion2), torsion, torsion2)
+        if groups is None:
+            tip, tan, ok, msg, torsion = tip2, tan2, ok2, msg2, torsion2
+        else:
+            tip, tan, ok = tip2, tan2, ok2
+            solved = np.zeros(K, dtype=bool)
+            solved[order] = True
+            msg = [msg2[k] if solved[k] else msg[k] for k in range(K)]
     return Simulation(tip=tip, tangent=tan, ok=ok, message=msg, model=model, eta=eta_used,
                       mu=mu_used, base_torsion=torsion, n_released=n_released if model == "friction" else 0,
                       n_failed=int(np.sum(~ok)), elapsed=time.perf_counter() - t0, **counts)
