@@ -121,3 +121,55 @@ def test_tube_pair_friction_matches_reference():
 @pytest.mark.parametrize("q", _random_configurations(table2_robot(), 12, seed=101))
 def test_bound_matches_reference_many(q):
     test_bound_matches_reference(q)
+
+
+@pytest.mark.parametrize("eta", [None, (1, -1)])
+def test_compliance_kernels_equal_dense_products(eta):
+    """Prefix-sum compliance W = A K^-1 A^T, torque columns Z = A K^-1 zt^T, force-free
+    displacements and generalized forces A^T phi + zt^T lam of the compiled kernels equal the
+    dense products of the reference linearization (Appendix A, B of Ha et al. 2019)."""
+    from ctrplan.mechanics import _contact_kernels as ck
+    from ctrplan.mechanics._contact_fast import FlatProblem
+
+    robot = table2_robot()
+    alpha, beta = robot.configuration([2.0, -1.0, -0.07])
+    settings = ModelSettings(ds=5e-3)
+    st = solve_standard(robot, alpha, beta, settings, check_stability=False)
+    mu = robot.friction_coefficients if eta else np.zeros(2)
+    ref = contact_reference._Setup(robot, st, eta, mu)
+    rng = np.random.default_rng(3)
+    u_list = [u + rng.normal(scale=5.0, size=u.shape) for u in ref.u0]   # off the standard solution
+    fk = ref.kinematics(u_list)
+    A, b, zt = ref.linearize(u_list, fk)
+    AK = A * ref.kinv[None, :]
+    W_ref, Z_ref = AK @ A.T, AK @ zt.T
+    u_flat = np.concatenate([u.ravel() for u in u_list])
+    dfree_ref = b.ravel() - A @ (u_flat - ref.uhat_flat)
+
+    prob = FlatProblem(robot, st, eta, mu)
+    u = u_flat.reshape(-1, 3)
+    R, p = prob.kinematics(u)
+    np.testing.assert_allclose(p, np.concatenate([x for _, x in fk]), atol=1e-14)
+    ck.linearize(u, prob.uhat, prob.kinv, prob.h, prob.node_off, R, p, prob._Omega, prob._base,
+                 prob._H1, prob._H2, prob._F3, prob._Jpv)
+    ck.contact_frames(R, p, prob.jo, prob.ji, prob._Jpv, prob._B, prob._dfree, prob._diagW,
+                      prob._H1, prob._H2, prob.pair)
+    M = prob.M
+    W = np.zeros((2 * M, 2 * M))
+    Z = np.zeros((2 * M, M))
+    ck.fill_columns(np.arange(M), W, Z, np.zeros(M, dtype=bool), prob.pair, prob.jo, prob.ji, prob._B,
+                    R, p, prob._H1, prob._H2, prob._F3, prob.tq_out, prob.tq_in, prob.friction)
+    scale = np.abs(W_ref).max()
+    assert np.abs(W - W_ref).max() < 1e-10 * scale
+    np.testing.assert_allclose(prob._diagW[:, [0, 1], [0, 1]].ravel(), np.diag(W_ref), rtol=1e-10)
+    if eta:
+        assert np.abs(Z - Z_ref).max() < 1e-10 * np.abs(Z_ref).max()
+    np.testing.assert_allclose(prob._dfree.ravel(), dfree_ref, atol=1e-12 * np.abs(dfree_ref).max() + 1e-15)
+    lam = rng.uniform(0.0, 1.0, M) * (rng.uniform(size=M) < 0.4)
+    d = rng.normal(scale=1e-5, size=(M, 2))
+    g = np.empty_like(u)
+    ck.generalized_curvature(lam, d, prob.Mblk, prob._B, prob.pair, prob.jo, prob.ji, R, p, prob._Omega,
+                             prob._base, prob.node_off, prob.tq_out, prob.tq_in, prob.uhat, prob.kinv, g)
+    phi = -lam[:, None] * np.einsum("kab,kb->ka", ref.Mblk, d)
+    g_ref = ref.uhat_flat + ref.kinv * (A.T @ phi.ravel() + zt.T @ lam)
+    np.testing.assert_allclose(g.ravel(), g_ref, rtol=1e-9, atol=1e-9 * np.abs(g_ref).max())

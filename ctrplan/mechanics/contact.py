@@ -29,234 +29,24 @@ is needed is the contact compliance W = A K^-1 A^T. Without friction this is exa
 optimum of the convex dual (26); with friction, where Q(lambda) of Eq. (45) is not symmetric,
 it solves the equilibrium of Eq. (44) directly. The outer loop re-linearizes about the new
 solution (Section II-E, alpha = 1) until the centerlines stop moving.
+
+The work is done by compiled kernels (``_contact_kernels``, driven by ``_contact_fast``) that
+never form the dense constraint Jacobian: the compliance blocks W_ce come from per-node prefix
+sums of the chain Jacobian factors, only for the contacts the Newton method touches, and the
+generalized forces A^T phi from suffix sums. The slow original is kept as
+tests/reference/contact_reference.py, and the fast path is tested against it.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import lu_factor, lu_solve
 
 from ..errors import ConvergenceError
-from .discrete import TubeChain, chain_jacobians, forward_kinematics
+from ._contact_fast import FlatProblem, run_outer_loop
 from .results import ContactSolution, Diagnostics, ModelSettings
 from .standard import solve_standard
 
 __all__ = ["solve_clearance", "solve_friction", "solve_contact"]
-
-_ROT90 = np.array([[0.0, -1.0], [1.0, 0.0]])
-
-
-class _Setup:
-    """Chains, contact list and linear-algebra data of one configuration."""
-
-    def __init__(self, robot, standard, eta, mu):
-        g = standard.grid
-        n = robot.n_tubes
-        self.robot = robot
-        self.n = n
-        self.chains = []
-        self.u0 = []
-        for i, t in enumerate(robot.tubes):
-            a, b = int(g.first[i]), int(g.last[i])
-            s = g.s[a:b + 1]
-            h = np.diff(s)
-            uhat = np.zeros((h.size, 3))
-            uhat[:, :2] = g.precurvature[a:b, i]
-            stiff = np.column_stack([t.k_xy * h, t.k_xy * h, t.k_z * h])
-            self.chains.append(TubeChain(first=a, s=s, h=h, uhat=uhat, stiffness=stiff,
-                                         alpha=float(standard.alpha[i]), beta=float(standard.beta[i])))
-            # standard solution as linearization point: u_i = Rz(-psi_i) u_xy + psi_i' e_z
-            psi = standard.psi_mid[a:b, i]
-            ub = standard.bending_mid[a:b]
-            c, sn = np.cos(psi), np.sin(psi)
-            u = np.column_stack([c * ub[:, 0] + sn * ub[:, 1], -sn * ub[:, 0] + c * ub[:, 1],
-                                 standard.torsion_mid[a:b, i]])
-            self.u0.append(u)
-        self.offsets = np.concatenate([[0], np.cumsum([3 * ch.n_segments for ch in self.chains])])
-        self.n_u = int(self.offsets[-1])
-        self.uhat_flat = np.concatenate([ch.uhat.ravel() for ch in self.chains])
-        self.kinv = 1.0 / np.concatenate([ch.stiffness.ravel() for ch in self.chains])
-        # contacts: every common grid node of each adjacent pair
-        clear = robot.clearances
-        r_in, r_out = robot.contact_radii() if (np.any(np.asarray(mu) > 0)) else (np.zeros(n - 1), np.zeros(n - 1))
-        pair, node_o, node_i, cvec, svec = [], [], [], [], []
-        for i in range(n - 1):
-            lo = max(g.first[i], g.first[i + 1])
-            hi = min(g.last[i], g.last[i + 1])
-            for gnode in range(lo, hi + 1):
-                pair.append(i)
-                node_o.append(gnode - g.first[i])
-                node_i.append(gnode - g.first[i + 1])
-                cvec.append(clear[i])
-                svec.append(g.s[gnode])
-        self.pair = np.asarray(pair, dtype=int)
-        self.node_o = np.asarray(node_o, dtype=int)
-        self.node_i = np.asarray(node_i, dtype=int)
-        self.c = np.asarray(cvec, dtype=float)
-        self.s_contact = np.asarray(svec, dtype=float)
-        self.M = self.pair.size
-        eta = np.zeros(n - 1) if eta is None else np.asarray(eta, dtype=float)
-        mu = np.asarray(mu, dtype=float)
-        self.eta_pair = eta
-        self.mu_pair = mu
-        em = (eta * mu)[self.pair] if self.M else np.zeros(0)
-        self.Mblk = np.eye(2)[None, :, :] + em[:, None, None] * _ROT90[None, :, :]
-        self.torque_out = em * self.c * (r_in[self.pair] if self.M else 0.0)
-        self.torque_in = -em * self.c * (r_out[self.pair] if self.M else 0.0)
-        self.has_friction = bool(np.any(em != 0.0))
-
-    def split(self, flat):
-        return [flat[self.offsets[i]:self.offsets[i + 1]].reshape(-1, 3) for i in range(self.n)]
-
-    def kinematics(self, u_list):
-        return [forward_kinematics(ch, u) for ch, u in zip(self.chains, u_list)]
-
-    def linearize(self, u_list, fk):
-        """A (2M, n_u), b (2M,), torque matrix Zt (M, n_u) at the linearization point."""
-        M, n_u = self.M, self.n_u
-        A = np.zeros((M, 2, n_u))
-        zt = np.zeros((M, n_u))
-        b = np.zeros((M, 2))
-        for i in range(self.n - 1):
-            ks = np.nonzero(self.pair == i)[0]
-            if ks.size == 0:
-                continue
-            Ro, po = fk[i]
-            Ri, pi = fk[i + 1]
-            ao, ai = self.node_o[ks], self.node_i[ks]
-            Bt = np.swapaxes(Ro[ao][:, :, :2], 1, 2)                 # (m, 2, 3): rows x_i, y_i
-            b[ks] = np.einsum("kab,kb->ka", Bt, po[ao] - pi[ai])
-            for tube, nodes, sign, tq in ((i, ao, 1.0, self.torque_out[ks]),
-                                          (i + 1, ai, -1.0, self.torque_in[ks])):
-                Jp, Jw = chain_jacobians(self.chains[tube], u_list[tube], *fk[tube], rows=nodes)
-                m = nodes.size
-                cols = slice(self.offsets[tube], self.offsets[tube + 1])
-                A[ks, :, cols] = sign * np.einsum("kab,kbc->kac", Bt, Jp.reshape(m, 3, -1))
-                if self.has_friction:
-                    zt[ks, cols] += tq[:, None] * Jw.reshape(m, 3, -1)[:, 2, :]
-        return A.reshape(2 * M, n_u), b, zt
-
-
-class _Anderson:
-    """Anderson acceleration (type II) of the outer fixed-point iteration u <- F(u).
-
-    The re-linearization loop of Section II-E converges linearly (the geometric stiffness of
-    the contact forces is not in the linearization); mixing the last few iterates removes most
-    of that. The history is reset whenever the residual grows.
-    """
-
-    def __init__(self, depth):
-        self.depth = depth
-        self.u_hist, self.f_hist, self.g_hist = [], [], []
-        self.last = np.inf
-
-    def step(self, u, g, residual_size):
-        if self.depth <= 0:
-            return g
-        if residual_size > self.last:
-            self.u_hist, self.f_hist, self.g_hist = [], [], []
-        self.last = residual_size
-        f = g - u
-        self.f_hist.append(f)
-        self.g_hist.append(g)
-        if len(self.f_hist) > self.depth + 1:
-            self.f_hist.pop(0)
-            self.g_hist.pop(0)
-        if len(self.f_hist) < 2:
-            return g
-        dF = np.column_stack([self.f_hist[j + 1] - self.f_hist[j] for j in range(len(self.f_hist) - 1)])
-        dG = np.column_stack([self.g_hist[j + 1] - self.g_hist[j] for j in range(len(self.g_hist) - 1)])
-        gamma = np.linalg.lstsq(dF, f, rcond=None)[0]
-        return g - dG @ gamma
-
-
-def _fb(a, b):
-    r = np.sqrt(a * a + b * b)
-    phi = a + b - r
-    small = r < 1e-300
-    rs = np.where(small, 1.0, r)
-    da = np.where(small, 1.0 - 1.0 / np.sqrt(2.0), 1.0 - a / rs)
-    db = np.where(small, 1.0 - 1.0 / np.sqrt(2.0), 1.0 - b / rs)
-    return phi, da, db
-
-
-class _Complementarity:
-    """Semismooth Newton on the contact complementarity conditions of one linearization."""
-
-    def __init__(self, W, Z, dfree, Mblk, c):
-        self.W, self.Z, self.dfree, self.Mblk, self.c = W, Z, dfree, Mblk, c
-        self.M = c.size
-        dw = np.diag(W)
-        self.kappa = 1.0 / max(float(np.mean(dw)), 1e-300)
-
-    def displacements(self, lam):
-        """Relative displacement d (M, 2) for multipliers lam, plus the active-set factorization."""
-        r = self.dfree + self.Z @ lam
-        act = np.nonzero(lam > 0.0)[0]
-        if act.size == 0:
-            return r.reshape(-1, 2), None
-        idx = (2 * act[:, None] + np.arange(2)[None, :]).ravel()
-        m = act.size
-        LM = np.zeros((m, 2, m, 2))
-        diag = np.arange(m)
-        LM[diag, :, diag, :] = lam[act, None, None] * self.Mblk[act]   # block diagonal
-        LM = LM.reshape(2 * m, 2 * m)
-        S = np.eye(idx.size) + self.W[np.ix_(idx, idx)] @ LM
-        lu = lu_factor(S, check_finite=False)
-        da = lu_solve(lu, r[idx], check_finite=False)
-        d = r - self.W[:, idx] @ (LM @ da)
-        return d.reshape(-1, 2), (lu, idx, LM)
-
-    def residual(self, lam, d):
-        c = self.c
-        gap = (c * c - np.sum(d * d, axis=1)) / (2.0 * c)
-        return _fb(c * lam, self.kappa * gap)
-
-    def jacobian_d(self, d, fact):
-        """d d / d lambda, shape (2M, M)."""
-        M = self.M
-        Md = np.einsum("kab,kb->ka", self.Mblk, d)
-        WE = np.einsum("rkb,kb->rk", self.W.reshape(2 * M, M, 2), Md)
-        C = self.Z - WE
-        if fact is None:
-            return C
-        lu, idx, LM = fact
-        Da = lu_solve(lu, C[idx], check_finite=False)
-        return C - self.W[:, idx] @ (LM @ Da)
-
-    def solve(self, lam0, tol, maxit):
-        lam = np.maximum(np.asarray(lam0, dtype=float), 0.0)
-        c = self.c
-        scale = self.kappa * c
-        d, fact = self.displacements(lam)
-        phi, da, db = self.residual(lam, d)
-        merit = float(phi @ phi)
-        for it in range(1, maxit + 1):
-            err = float(np.max(np.abs(phi) / scale)) if self.M else 0.0
-            if err < tol:
-                return lam, d, True, it - 1, err
-            D = self.jacobian_d(d, fact)
-            dgap = -np.einsum("ka,kal->kl", d, D.reshape(self.M, 2, self.M)) / c[:, None]
-            J = np.diag(da * c) + (db * self.kappa)[:, None] * dgap
-            try:
-                step = np.linalg.solve(J, -phi)
-            except np.linalg.LinAlgError:
-                step = np.linalg.lstsq(J, -phi, rcond=None)[0]
-            t = 1.0
-            for _ in range(40):
-                lam_t = np.maximum(lam + t * step, 0.0)
-                d_t, fact_t = self.displacements(lam_t)
-                phi_t, da_t, db_t = self.residual(lam_t, d_t)
-                m_t = float(phi_t @ phi_t)
-                if m_t <= (1.0 - 1e-4 * t) * merit:
-                    break
-                t *= 0.5
-            else:
-                err = float(np.max(np.abs(phi) / scale))
-                return lam, d, False, it, err
-            lam, d, fact, phi, da, db, merit = lam_t, d_t, fact_t, phi_t, da_t, db_t, m_t
-        err = float(np.max(np.abs(phi) / scale)) if self.M else 0.0
-        return lam, d, err < tol, maxit, err
 
 
 def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, eta=None,
@@ -316,65 +106,30 @@ def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, 
         mu = np.zeros(n - 1) if mu is None else np.asarray(mu, dtype=float)
     if standard is None:
         standard = solve_standard(robot, alpha, beta, settings, check_stability=False)
-    setup = _Setup(robot, standard, eta, mu)
+    prob = FlatProblem(robot, standard, eta, mu)
     if warm_start is not None and len(warm_start.curvatures) == n and all(
-            w.shape == u.shape for w, u in zip(warm_start.curvatures, setup.u0)):
-        u_list = [w.copy() for w in warm_start.curvatures]
-        lam = np.array(warm_start.multipliers, dtype=float) if warm_start.multipliers is not None else np.zeros(setup.M)
+            w.shape == u.shape for w, u in zip(warm_start.curvatures, prob.split_segments(prob.u0))):
+        u = np.concatenate(warm_start.curvatures).astype(float)
+        lam = (np.array(warm_start.multipliers, dtype=float) if warm_start.multipliers is not None
+               else np.zeros(prob.M))
     else:
-        u_list = [u.copy() for u in setup.u0]
-        lam = np.zeros(setup.M)
-    fk = setup.kinematics(u_list)
-    converged = False
-    inner_total = 0
-    inner_ok = True
-    change = np.inf
-    outer = 0
-    anderson = _Anderson(settings.anderson_depth)
-    u_flat = np.concatenate([u.ravel() for u in u_list])
-    for outer in range(1, settings.max_outer_iterations + 1):
-        if setup.M == 0:
-            converged = True
-            break
-        A, b, zt = setup.linearize(u_list, fk)
-        AK = A * setup.kinv[None, :]
-        W = AK @ A.T
-        Z = AK @ zt.T if setup.has_friction else np.zeros((2 * setup.M, setup.M))
-        dfree = b.ravel() - A @ (u_flat - setup.uhat_flat)
-        comp = _Complementarity(W, Z, dfree, setup.Mblk, setup.c)
-        lam, d, inner_ok, its, err = comp.solve(lam, settings.complementarity_tol,
-                                                 settings.max_newton_iterations)
-        inner_total += its
-        phi = -lam[:, None] * np.einsum("kab,kb->ka", setup.Mblk, d)
-        gen = A.T @ phi.ravel() + zt.T @ lam
-        g_flat = setup.uhat_flat + setup.kinv * gen          # fixed-point map u -> F(u)
-        g_list = setup.split(g_flat)
-        fk_g = setup.kinematics(g_list)
-        change = max(float(np.max(np.abs(pn - po))) for (_, pn), (_, po) in zip(fk_g, fk))
-        if change < settings.outer_tol and inner_ok:
-            u_list, fk, u_flat = g_list, fk_g, g_flat
-            converged = True
-            break
-        u_flat = anderson.step(u_flat, g_flat, change)
-        u_list = setup.split(u_flat)
-        fk = setup.kinematics(u_list) if u_flat is not g_flat else fk_g
+        u = prob.u0.copy()
+        lam = np.zeros(prob.M)
+    u, R, p, lam, converged, outer, inner_total, inner_ok, change = run_outer_loop(prob, u, lam, settings)
     # final contact state from the converged kinematics
-    forces = setup.c * lam
-    dirs = np.zeros((setup.M, 3))
-    gaps = np.zeros(setup.M)
-    for k in range(setup.M):
-        i = setup.pair[k]
-        Ro, po = fk[i]
-        _, pi = fk[i + 1]
-        rel = po[setup.node_o[k]] - pi[setup.node_i[k]]
-        t = Ro[setup.node_o[k]][:, 2]
-        rel = rel - t * (t @ rel)
-        gaps[k] = np.linalg.norm(rel)
-        dirs[k] = -rel / gaps[k] if gaps[k] > 0 else 0.0
-    viol = float(np.max(gaps / setup.c - 1.0)) if setup.M else 0.0
+    forces = prob.c * lam
+    rel = p[prob.jo] - p[prob.ji]
+    t_out = R[prob.jo][:, :, 2]
+    rel = rel - t_out * np.sum(t_out * rel, axis=1)[:, None]
+    gaps = np.linalg.norm(rel, axis=1)
+    safe = np.where(gaps > 0, gaps, 1.0)
+    dirs = np.where(gaps[:, None] > 0, -rel / safe[:, None], 0.0)
+    viol = float(np.max(gaps / prob.c - 1.0)) if prob.M else 0.0
     ends = robot.tube_ends(np.asarray(beta, dtype=float))
     tip_tube = int(max(range(n), key=lambda i: (ends[i], i)))
-    Rt, pt = fk[tip_tube]
+    frames = [x.copy() for x in prob.split_nodes(R)]
+    lines = [x.copy() for x in prob.split_nodes(p)]
+    Rt, pt = frames[tip_tube], lines[tip_tube]
     model = "clearance" if eta is None else f"friction eta={eta.astype(int).tolist()}"
     msg = (f"{model}: converged in {outer} outer iterations" if converged else
            f"{model}: not converged after {outer} outer iterations (centerline change "
@@ -385,10 +140,10 @@ def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, 
     if raise_on_failure and not converged:
         raise ConvergenceError(f"at alpha={np.round(alpha, 4)} rad, beta={np.round(np.asarray(beta) * 1e3, 3)} mm: {msg}")
     return ContactSolution(
-        s=[ch.s for ch in setup.chains], centerlines=[p for _, p in fk], frames=[R for R, _ in fk],
-        curvatures=u_list, contact_s=setup.s_contact, contact_pair=setup.pair, contact_force=forces,
-        contact_direction=dirs, contact_gap=gaps,
-        eta=np.zeros(n - 1, dtype=int) if eta is None else eta.astype(int), mu=mu,
+        s=[x.copy() for x in prob.s], centerlines=lines, frames=frames,
+        curvatures=[x.copy() for x in prob.split_segments(u)], contact_s=prob.s_contact,
+        contact_pair=prob.pair.astype(int), contact_force=forces, contact_direction=dirs,
+        contact_gap=gaps, eta=np.zeros(n - 1, dtype=int) if eta is None else eta.astype(int), mu=mu,
         tip_position=pt[-1].copy(), tip_tangent=Rt[-1][:, 2].copy(), tip_rotation=Rt[-1].copy(),
         diagnostics=diag, multipliers=lam)
 

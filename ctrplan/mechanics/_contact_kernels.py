@@ -1,0 +1,811 @@
+"""Compiled kernels of the clearance and friction solvers (numba, ``cache=True``).
+
+The same mathematics as the slow reference (tests/reference/contact_reference.py), organised so
+that nothing of size (number of contacts) x (number of curvature unknowns) is ever formed:
+
+**Chains on one flat array.** The n tubes' nodes are stored one after the other (tube t owns
+global nodes ``node_off[t]:node_off[t + 1]`` and segments ``seg_off[t]:seg_off[t + 1]``,
+``seg_off[t] = node_off[t] - t``), so every kernel is a loop over flat arrays.
+
+**Compliance by prefix sums.** With Omega_k = R_k V(u_k h_k) h_k, the position part
+Pi_k = R_k d(V e_z)/dphi h_k^2 and base_k = Pi_k + [p_(k+1)]x Omega_k, the Jacobian rows of
+Appendix B (Eqs. (59)-(72) of Ha, Fagogenis & Dupont 2019, re-derived in discrete.py) are
+
+    dp_j/du_k = base_k - [p_j]x Omega_k,     domega_j,z/du_k = t_j^T Omega_k     (k < j)
+
+so the 3x3 spatial compliance between nodes j <= l of one tube, with D_k = K_k^-1, is
+
+    J_p,j K^-1 J_p,l^T = H1_j + H2_j [p_l]x,
+    H1_j = F1_j - [p_j]x F2_j,  H2_j = F2_j^T - [p_j]x F3_j,
+    F1_j = sum_(k<j) base_k D_k base_k^T,  F2_j = sum_(k<j) Omega_k D_k base_k^T,
+    F3_j = sum_(k<j) Omega_k D_k Omega_k^T,
+
+and the block W_ce = A_c K^-1 A_e^T of the contact compliance of Appendix A (Eqs. (50)-(56)),
+A_c = B_c^T S_c J_p, is a sum over the (at most two) tubes that contacts c and e share. A
+block costs O(1) instead of O(number of unknowns); blocks are computed column by column only
+for the contacts the semismooth Newton method actually touches (active or violated ones).
+
+**Generalized forces by suffix sums.** A^T phi + zt^T lambda of Eqs. (34)-(36), (41) is, for
+segment k, base_k^T F_k + Omega_k^T (sum p_j x f_j + sum tau_j t_j) over the contacts distal to k:
+the moment of the contact forces about the segment, one backward pass per tube.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..constants import SMALL_ANGLE
+
+_SMALL = SMALL_ANGLE  # module-level constant, frozen into the compiled code
+
+
+@njit(cache=True, inline="always")
+def _coefficients(t):
+    """s1 = sin t / t, a = (1 - cos t)/t^2, b = (t - sin t)/t^3, da = a'(t)/t, db = b'(t)/t
+    with Taylor series below ``SMALL_ANGLE`` (same as ``_lie._coefficients``)."""
+    t2 = t * t
+    if t < _SMALL:
+        s1 = 1.0 - t2 / 6.0 + t2 * t2 / 120.0
+        a = 0.5 - t2 / 24.0 + t2 * t2 / 720.0
+        b = 1.0 / 6.0 - t2 / 120.0 + t2 * t2 / 5040.0
+        da = -1.0 / 12.0 + t2 / 180.0 - t2 * t2 / 6720.0
+        db = -1.0 / 60.0 + t2 / 1260.0 - t2 * t2 / 60480.0
+    else:
+        sn = np.sin(t)
+        cs = np.cos(t)
+        s1 = sn / t
+        a = (1.0 - cs) / t2
+        b = (t - sn) / (t2 * t)
+        da = sn / (t2 * t) - 2.0 * (1.0 - cs) / (t2 * t2)
+        db = (1.0 - cs) / (t2 * t2) - 3.0 * (t - sn) / (t2 * t2 * t)
+    return s1, a, b, da, db
+
+
+@njit(cache=True)
+def chain_kinematics(u, h, alpha, beta, node_off, R, p):
+    """Forward kinematics of all tubes (Eqs. (3), (57)), in place.
+
+    Parameters
+    ----------
+    u : ndarray, shape (S, 3)
+        Segment curvatures of all tubes, tube by tube [1/m].
+    h : ndarray, shape (S,)
+        Segment lengths [m].
+    alpha, beta : ndarray, shape (n,)
+        Base rotations [rad] and translations [m].
+    node_off : ndarray of int, shape (n + 1,)
+        Node offsets of the tubes.
+    R : ndarray, shape (N, 3, 3)
+        Output body frames at the nodes.
+    p : ndarray, shape (N, 3)
+        Output centerline points [m].
+    """
+    n = alpha.shape[0]
+    E = np.empty((3, 3))
+    vz = np.empty(3)
+    for t in range(n):
+        j0 = node_off[t]
+        k0 = j0 - t
+        ca = np.cos(alpha[t])
+        sa = np.sin(alpha[t])
+        for a in range(3):
+            for b in range(3):
+                R[j0, a, b] = 0.0
+        R[j0, 0, 0] = ca
+        R[j0, 0, 1] = -sa
+        R[j0, 1, 0] = sa
+        R[j0, 1, 1] = ca
+        R[j0, 2, 2] = 1.0
+        p[j0, 0] = 0.0
+        p[j0, 1] = 0.0
+        p[j0, 2] = beta[t]
+        for m in range(node_off[t + 1] - j0 - 1):
+            k = k0 + m
+            j = j0 + m
+            hk = h[k]
+            x = u[k, 0] * hk
+            y = u[k, 1] * hk
+            z = u[k, 2] * hk
+            th = np.sqrt(x * x + y * y + z * z)
+            s1, ca_, cb, _, _ = _coefficients(th)
+            th2 = th * th
+            # exp([phi]x) = (1 - a th^2) I + s1 [phi]x + a phi phi^T
+            d0 = 1.0 - ca_ * th2
+            E[0, 0] = d0 + ca_ * x * x
+            E[1, 1] = d0 + ca_ * y * y
+            E[2, 2] = d0 + ca_ * z * z
+            E[0, 1] = -s1 * z + ca_ * x * y
+            E[1, 0] = s1 * z + ca_ * x * y
+            E[0, 2] = s1 * y + ca_ * x * z
+            E[2, 0] = -s1 * y + ca_ * x * z
+            E[1, 2] = -s1 * x + ca_ * y * z
+            E[2, 1] = s1 * x + ca_ * y * z
+            # V e_z h = ((1 - b th^2) e_z + a phi x e_z + b phi phi_z) h
+            vz[0] = (ca_ * y + cb * x * z) * hk
+            vz[1] = (-ca_ * x + cb * y * z) * hk
+            vz[2] = (1.0 - cb * th2 + cb * z * z) * hk
+            for a in range(3):
+                acc = p[j, a]
+                for b in range(3):
+                    acc += R[j, a, b] * vz[b]
+                p[j + 1, a] = acc
+                for b in range(3):
+                    r = 0.0
+                    for q in range(3):
+                        r += R[j, a, q] * E[q, b]
+                    R[j + 1, a, b] = r
+
+
+@njit(cache=True)
+def _skew_mul(v, X, out):
+    """out = [v]x X for X of shape (3, m)."""
+    for b in range(X.shape[1]):
+        out[0, b] = v[1] * X[2, b] - v[2] * X[1, b]
+        out[1, b] = v[2] * X[0, b] - v[0] * X[2, b]
+        out[2, b] = v[0] * X[1, b] - v[1] * X[0, b]
+
+
+@njit(cache=True)
+def linearize(u, uhat, kinv, h, node_off, R, p, Omega, base, H1, H2, F3, Jpv):
+    """Per-segment Jacobian factors and per-node compliance prefix sums at a linearization point.
+
+    Parameters
+    ----------
+    u, uhat, kinv : ndarray, shape (S, 3)
+        Curvatures, precurvatures [1/m] and inverse stiffnesses 1 / (k h) [1/(N m^3)].
+    h : ndarray, shape (S,)
+    node_off : ndarray of int, shape (n + 1,)
+    R, p : ndarray, shape (N, 3, 3), (N, 3)
+        Kinematics at ``u`` (:func:`chain_kinematics`).
+    Omega, base : ndarray, shape (S, 3, 3)
+        Output: Omega_k [m] and base_k [m^2] (see the module docstring).
+    H1, H2, F3 : ndarray, shape (N, 3, 3)
+        Output: compliance prefix sums at every node.
+    Jpv : ndarray, shape (N, 3)
+        Output: J_p (u - uhat) at every node [m] (Eq. (21) with du = uhat - u).
+    """
+    n = node_off.shape[0] - 1
+    V = np.empty((3, 3))
+    dV = np.empty((3, 3))
+    F1 = np.empty((3, 3))
+    F2 = np.empty((3, 3))
+    F3c = np.empty((3, 3))
+    OD = np.empty((3, 3))
+    bv = np.empty(3)
+    ov = np.empty(3)
+    for t in range(n):
+        j0 = node_off[t]
+        k0 = j0 - t
+        F1[:] = 0.0
+        F2[:] = 0.0
+        F3c[:] = 0.0
+        bv[:] = 0.0
+        ov[:] = 0.0
+        nseg = node_off[t + 1] - j0 - 1
+        for m in range(nseg + 1):
+            j = j0 + m
+            # node j: prefix sums over segments k < m
+            P0 = p[j, 0]
+            P1 = p[j, 1]
+            P2 = p[j, 2]
+            for b in range(3):
+                # [p]x X column b: (P1 X2 - P2 X1, P2 X0 - P0 X2, P0 X1 - P1 X0)
+                H1[j, 0, b] = F1[0, b] - (P1 * F2[2, b] - P2 * F2[1, b])
+                H1[j, 1, b] = F1[1, b] - (P2 * F2[0, b] - P0 * F2[2, b])
+                H1[j, 2, b] = F1[2, b] - (P0 * F2[1, b] - P1 * F2[0, b])
+                H2[j, 0, b] = F2[b, 0] - (P1 * F3c[2, b] - P2 * F3c[1, b])
+                H2[j, 1, b] = F2[b, 1] - (P2 * F3c[0, b] - P0 * F3c[2, b])
+                H2[j, 2, b] = F2[b, 2] - (P0 * F3c[1, b] - P1 * F3c[0, b])
+                for a in range(3):
+                    F3[j, a, b] = F3c[a, b]
+            Jpv[j, 0] = bv[0] - (P1 * ov[2] - P2 * ov[1])
+            Jpv[j, 1] = bv[1] - (P2 * ov[0] - P0 * ov[2])
+            Jpv[j, 2] = bv[2] - (P0 * ov[1] - P1 * ov[0])
+            if m == nseg:
+                break
+            # segment k = k0 + m between nodes j and j + 1
+            k = k0 + m
+            hk = h[k]
+            x = u[k, 0] * hk
+            y = u[k, 1] * hk
+            z = u[k, 2] * hk
+            th2 = x * x + y * y + z * z
+            _, a_, b_, da, db = _coefficients(np.sqrt(th2))
+            # V = (1 - b th^2) I + a [phi]x + b phi phi^T
+            d0 = 1.0 - b_ * th2
+            V[0, 0] = d0 + b_ * x * x
+            V[1, 1] = d0 + b_ * y * y
+            V[2, 2] = d0 + b_ * z * z
+            V[0, 1] = -a_ * z + b_ * x * y
+            V[1, 0] = a_ * z + b_ * x * y
+            V[0, 2] = a_ * y + b_ * x * z
+            V[2, 0] = -a_ * y + b_ * x * z
+            V[1, 2] = -a_ * x + b_ * y * z
+            V[2, 1] = a_ * x + b_ * y * z
+            # d(V e_z)/dphi = a (-[e_z]x) + da (phi x e_z) phi^T
+            #                 + b (phi_z I + phi e_z^T - 2 e_z phi^T) + db (phi phi_z - th^2 e_z) phi^T
+            px = (y, -x, 0.0)
+            ppx = (x * z, y * z, z * z - th2)
+            ph = (x, y, z)
+            for a in range(3):
+                for b in range(3):
+                    val = (da * px[a] + db * ppx[a]) * ph[b]
+                    if a == b:
+                        val += b_ * z
+                    if b == 2:
+                        val += b_ * ph[a]
+                    if a == 2:
+                        val -= 2.0 * b_ * ph[b]
+                    dV[a, b] = val
+            dV[0, 1] += a_
+            dV[1, 0] -= a_
+            h2 = hk * hk
+            for a in range(3):
+                for b in range(3):
+                    so = 0.0
+                    sp = 0.0
+                    for q in range(3):
+                        so += R[j, a, q] * V[q, b]
+                        sp += R[j, a, q] * dV[q, b]
+                    Omega[k, a, b] = so * hk
+                    base[k, a, b] = sp * h2
+            # base_k += [p_(k+1)]x Omega_k
+            Q0 = p[j + 1, 0]
+            Q1 = p[j + 1, 1]
+            Q2 = p[j + 1, 2]
+            for b in range(3):
+                o0 = Omega[k, 0, b]
+                o1 = Omega[k, 1, b]
+                o2 = Omega[k, 2, b]
+                base[k, 0, b] += Q1 * o2 - Q2 * o1
+                base[k, 1, b] += Q2 * o0 - Q0 * o2
+                base[k, 2, b] += Q0 * o1 - Q1 * o0
+            # prefix sums
+            for a in range(3):
+                for b in range(3):
+                    OD[a, b] = Omega[k, a, b] * kinv[k, b]
+            for a in range(3):
+                for b in range(3):
+                    s11 = 0.0
+                    s21 = 0.0
+                    s33 = 0.0
+                    for q in range(3):
+                        bd = base[k, a, q] * kinv[k, q]
+                        s11 += bd * base[k, b, q]
+                        s21 += OD[a, q] * base[k, b, q]
+                        s33 += OD[a, q] * Omega[k, b, q]
+                    F1[a, b] += s11
+                    F2[a, b] += s21
+                    F3c[a, b] += s33
+            for a in range(3):
+                sb = 0.0
+                so = 0.0
+                for q in range(3):
+                    v = u[k, q] - uhat[k, q]
+                    sb += base[k, a, q] * v
+                    so += Omega[k, a, q] * v
+                bv[a] += sb
+                ov[a] += so
+
+
+@njit(cache=True)
+def contact_frames(R, p, jo, ji, Jpv, B, dfree, diagW, H1, H2, pair):
+    """Cross-section bases, force-free displacements and diagonal compliance blocks.
+
+    Parameters
+    ----------
+    R, p : ndarray, shape (N, 3, 3), (N, 3)
+    jo, ji : ndarray of int, shape (M,)
+        Global node of each contact on the outer and on the inner tube.
+    Jpv : ndarray, shape (N, 3)
+        From :func:`linearize`.
+    B : ndarray, shape (M, 3, 2)
+        Output: B_c = [x_i, y_i] of the outer tube at the contact (B B^T = P_k, Eq. (22)).
+    dfree : ndarray, shape (M, 2)
+        Output: d_c with no contact force, B_c^T S_c (p* + J_p (uhat - u*)) [m] (Eq. (21)).
+    diagW : ndarray, shape (M, 2, 2)
+        Output: diagonal blocks W_cc [m/N].
+    H1, H2 : ndarray, shape (N, 3, 3)
+    pair : ndarray of int, shape (M,)
+    """
+    M = jo.shape[0]
+    G = np.empty((3, 3))
+    for c in range(M):
+        a = jo[c]
+        b = ji[c]
+        for q in range(2):
+            s = 0.0
+            for r in range(3):
+                B[c, r, q] = R[a, r, q]
+                s += R[a, r, q] * ((p[a, r] - p[b, r]) - (Jpv[a, r] - Jpv[b, r]))
+            dfree[c, q] = s
+        for r in range(3):
+            for q in range(3):
+                G[r, q] = 0.0
+        for node in (a, b):
+            # G(j, j) = H1_j + H2_j [p_j]x
+            P0 = p[node, 0]
+            P1 = p[node, 1]
+            P2 = p[node, 2]
+            for r in range(3):
+                G[r, 0] += H1[node, r, 0] + H2[node, r, 1] * P2 - H2[node, r, 2] * P1
+                G[r, 1] += H1[node, r, 1] - H2[node, r, 0] * P2 + H2[node, r, 2] * P0
+                G[r, 2] += H1[node, r, 2] + H2[node, r, 0] * P1 - H2[node, r, 1] * P0
+        for q1 in range(2):
+            for q2 in range(2):
+                s = 0.0
+                for r in range(3):
+                    for r2 in range(3):
+                        s += B[c, r, q1] * G[r, r2] * B[c, r2, q2]
+                diagW[c, q1, q2] = s
+
+
+@njit(cache=True)
+def fill_columns(cols, W, Z, have, pair, jo, ji, B, R, p, H1, H2, F3, tq_out, tq_in, friction):
+    """Compute the block columns ``e in cols`` of W (2M, 2M) [m/N] and the columns of Z (2M, M)
+    [m/N] (torque terms, friction only) that are not computed yet (``have[e]`` False).
+
+    Z column e is A K^-1 zt_e^T: the displacements caused by the friction torques of contact e
+    (Eq. (41)) per unit multiplier.
+    """
+    M = jo.shape[0]
+    X = np.empty((3, 2))
+    Y = np.empty((3, 2))
+    PB = np.empty((3, 2))
+    U = np.empty((3, 2))
+    Vv = np.empty((3, 2))
+    Gt = np.empty(3)
+    w = np.empty(3)
+    for idx in range(cols.shape[0]):
+        e = cols[idx]
+        if have[e]:
+            continue
+        have[e] = True
+        for r in range(2 * M):
+            W[r, 2 * e] = 0.0
+            W[r, 2 * e + 1] = 0.0
+            if friction:
+                Z[r, e] = 0.0
+        for side in range(2):
+            te = pair[e] + side
+            je = jo[e] if side == 0 else ji[e]
+            se = 1.0 if side == 0 else -1.0
+            tau = tq_out[e] if side == 0 else tq_in[e]
+            pe = p[je]
+            # PB = [p_e]x B_e ; U = H1_je^T B_e ; Vv = H2_je^T B_e
+            for q in range(2):
+                PB[0, q] = pe[1] * B[e, 2, q] - pe[2] * B[e, 1, q]
+                PB[1, q] = pe[2] * B[e, 0, q] - pe[0] * B[e, 2, q]
+                PB[2, q] = pe[0] * B[e, 1, q] - pe[1] * B[e, 0, q]
+                for a in range(3):
+                    su = 0.0
+                    sv = 0.0
+                    for r in range(3):
+                        su += H1[je, r, a] * B[e, r, q]
+                        sv += H2[je, r, a] * B[e, r, q]
+                    U[a, q] = su
+                    Vv[a, q] = sv
+            for c in range(M):
+                if pair[c] == te:
+                    jc = jo[c]
+                    sc = 1.0
+                elif pair[c] + 1 == te:
+                    jc = ji[c]
+                    sc = -1.0
+                else:
+                    continue
+                pc = p[jc]
+                if jc <= je:
+                    # G = H1_jc + H2_jc [p_e]x ; X = G B_e
+                    for q in range(2):
+                        for a in range(3):
+                            s = 0.0
+                            for r in range(3):
+                                s += H1[jc, a, r] * B[e, r, q] + H2[jc, a, r] * PB[r, q]
+                            X[a, q] = s
+                else:
+                    # G = H1_je^T - [p_c]x H2_je^T ; X = U - [p_c]x Vv
+                    _skew_mul(pc, Vv, Y)
+                    for q in range(2):
+                        for a in range(3):
+                            X[a, q] = U[a, q] - Y[a, q]
+                f = sc * se
+                for q1 in range(2):
+                    for q2 in range(2):
+                        s = 0.0
+                        for a in range(3):
+                            s += B[c, a, q1] * X[a, q2]
+                        W[2 * c + q1, 2 * e + q2] += f * s
+                if friction and tau != 0.0:
+                    # J_p,jc K^-1 J_omega,je^T e_z = G3 t_e
+                    te_vec = (R[je, 0, 2], R[je, 1, 2], R[je, 2, 2])
+                    if jc <= je:
+                        for a in range(3):
+                            Gt[a] = H2[jc, a, 0] * te_vec[0] + H2[jc, a, 1] * te_vec[1] + H2[jc, a, 2] * te_vec[2]
+                    else:
+                        # (H2_je - [p_c - p_e]x F3_je) t_e
+                        for a in range(3):
+                            w[a] = F3[je, a, 0] * te_vec[0] + F3[je, a, 1] * te_vec[1] + F3[je, a, 2] * te_vec[2]
+                            Gt[a] = H2[je, a, 0] * te_vec[0] + H2[je, a, 1] * te_vec[1] + H2[je, a, 2] * te_vec[2]
+                        dx = pc[0] - pe[0]
+                        dy = pc[1] - pe[1]
+                        dz = pc[2] - pe[2]
+                        Gt[0] -= dy * w[2] - dz * w[1]
+                        Gt[1] -= dz * w[0] - dx * w[2]
+                        Gt[2] -= dx * w[1] - dy * w[0]
+                    for q1 in range(2):
+                        Z[2 * c + q1, e] += sc * tau * (B[c, 0, q1] * Gt[0] + B[c, 1, q1] * Gt[1] + B[c, 2, q1] * Gt[2])
+
+
+@njit(cache=True)
+def _lu_factor(A, piv):
+    """In-place LU with partial pivoting; returns False on an exactly singular or non-finite
+    pivot."""
+    n = A.shape[0]
+    for k in range(n):
+        m = k
+        big = abs(A[k, k])
+        for i in range(k + 1, n):
+            v = abs(A[i, k])
+            if v > big:
+                big = v
+                m = i
+        piv[k] = m
+        if not (big > 0.0) or not np.isfinite(big):
+            return False
+        if m != k:
+            for j in range(n):
+                tmp = A[k, j]
+                A[k, j] = A[m, j]
+                A[m, j] = tmp
+        inv = 1.0 / A[k, k]
+        for i in range(k + 1, n):
+            A[i, k] *= inv
+            f = A[i, k]
+            if f != 0.0:
+                for j in range(k + 1, n):
+                    A[i, j] -= f * A[k, j]
+    return True
+
+
+@njit(cache=True)
+def _lu_solve(LU, piv, b):
+    """Solve LU x = b in place for one right-hand side, shape (n,)."""
+    n = LU.shape[0]
+    for k in range(n):
+        m = piv[k]
+        if m != k:
+            tmp = b[k]
+            b[k] = b[m]
+            b[m] = tmp
+    for i in range(n):
+        s = b[i]
+        for j in range(i):
+            s -= LU[i, j] * b[j]
+        b[i] = s
+    for i in range(n - 1, -1, -1):
+        s = b[i]
+        for j in range(i + 1, n):
+            s -= LU[i, j] * b[j]
+        b[i] = s / LU[i, i]
+
+
+@njit(cache=True)
+def _lu_solve_matrix(LU, piv, Bm):
+    """Solve LU X = Bm in place for a matrix right-hand side, shape (n, k)."""
+    n = LU.shape[0]
+    k = Bm.shape[1]
+    for r in range(n):
+        m = piv[r]
+        if m != r:
+            for c in range(k):
+                tmp = Bm[r, c]
+                Bm[r, c] = Bm[m, c]
+                Bm[m, c] = tmp
+    for i in range(n):
+        for j in range(i):
+            f = LU[i, j]
+            if f != 0.0:
+                for c in range(k):
+                    Bm[i, c] -= f * Bm[j, c]
+    for i in range(n - 1, -1, -1):
+        for j in range(i + 1, n):
+            f = LU[i, j]
+            if f != 0.0:
+                for c in range(k):
+                    Bm[i, c] -= f * Bm[j, c]
+        inv = 1.0 / LU[i, i]
+        for c in range(k):
+            Bm[i, c] *= inv
+
+
+@njit(cache=True)
+def _active_of(lam):
+    """Indices of the positive multipliers."""
+    return np.nonzero(lam > 0.0)[0]
+
+
+@njit(cache=True)
+def _displacements(lam, act, dfree, Mblk, W, Z, friction, d):
+    """d (M, 2) for multipliers lam that are non-zero only on ``act``:
+    (I + W Lambda M) d = dfree + Z lam reduced to those contacts (Appendix A, Eqs. (50)-(56)
+    on the active set). Returns (ok, LU, piv) with the LU factors of S = I + W_aa L_a."""
+    M = lam.shape[0]
+    n_act = act.shape[0]
+    # r = dfree + Z lam
+    for k in range(M):
+        d[k, 0] = dfree[k, 0]
+        d[k, 1] = dfree[k, 1]
+    if friction:
+        for i in range(n_act):
+            l = act[i]
+            for r in range(M):
+                d[r, 0] += Z[2 * r, l] * lam[l]
+                d[r, 1] += Z[2 * r + 1, l] * lam[l]
+    m2 = 2 * n_act
+    S = np.empty((m2, m2))
+    piv = np.empty(m2, dtype=np.int64)
+    if n_act == 0:
+        return True, S, piv
+    # S = I + W_aa L_a, L_a = blockdiag(lam_l M_l)
+    for i in range(n_act):
+        ci = act[i]
+        for j in range(n_act):
+            cj = act[j]
+            lj = lam[cj]
+            for q1 in range(2):
+                for q2 in range(2):
+                    S[2 * i + q1, 2 * j + q2] = lj * (W[2 * ci + q1, 2 * cj] * Mblk[cj, 0, q2]
+                                                      + W[2 * ci + q1, 2 * cj + 1] * Mblk[cj, 1, q2])
+        S[2 * i, 2 * i] += 1.0
+        S[2 * i + 1, 2 * i + 1] += 1.0
+    da = np.empty(m2)
+    for i in range(n_act):
+        da[2 * i] = d[act[i], 0]
+        da[2 * i + 1] = d[act[i], 1]
+    if not _lu_factor(S, piv):
+        return False, S, piv
+    _lu_solve(S, piv, da)
+    # d = r - W[:, a] (L_a d_a)
+    for j in range(n_act):
+        cj = act[j]
+        lj = lam[cj]
+        y0 = lj * (Mblk[cj, 0, 0] * da[2 * j] + Mblk[cj, 0, 1] * da[2 * j + 1])
+        y1 = lj * (Mblk[cj, 1, 0] * da[2 * j] + Mblk[cj, 1, 1] * da[2 * j + 1])
+        for r in range(M):
+            d[r, 0] -= W[2 * r, 2 * cj] * y0 + W[2 * r, 2 * cj + 1] * y1
+            d[r, 1] -= W[2 * r + 1, 2 * cj] * y0 + W[2 * r + 1, 2 * cj + 1] * y1
+    return True, S, piv
+
+
+@njit(cache=True)
+def _fb_residual(lam, d, c, kappa, phi, da, db):
+    """Fischer-Burmeister residual FB(c lam, kappa (c^2 - |d|^2) / (2 c)) and its partial
+    derivatives; returns the merit |phi|^2."""
+    merit = 0.0
+    for k in range(lam.shape[0]):
+        a = c[k] * lam[k]
+        b = kappa * (c[k] * c[k] - d[k, 0] * d[k, 0] - d[k, 1] * d[k, 1]) / (2.0 * c[k])
+        r = np.sqrt(a * a + b * b)
+        phi[k] = a + b - r
+        if r < 1e-300:
+            da[k] = 1.0 - 1.0 / np.sqrt(2.0)
+            db[k] = 1.0 - 1.0 / np.sqrt(2.0)
+        else:
+            da[k] = 1.0 - a / r
+            db[k] = 1.0 - b / r
+        merit += phi[k] * phi[k]
+    return merit
+
+
+@njit(cache=True)
+def _max_scaled(phi, c, kappa):
+    err = 0.0
+    for k in range(phi.shape[0]):
+        v = abs(phi[k]) / (kappa * c[k])
+        if v > err:
+            err = v
+    return err
+
+
+@njit(cache=True)
+def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
+                    pair, jo, ji, B, R, p, H1, H2, F3, tq_out, tq_in, friction):
+    """Semismooth Fischer-Burmeister Newton on the contact complementarity conditions of one
+    linearization (same iteration as the reference ``_Complementarity.solve``).
+
+    The Newton system is reduced exactly to the contacts whose row is not trivial (active,
+    violated, or with a non-zero residual): a contact with lambda = 0 and a positive gap has
+    phi = 0 and d phi / d b = 0, so its step is zero. Only the W and Z columns of those contacts
+    are ever computed (:func:`fill_columns`).
+
+    Returns
+    -------
+    lam : ndarray, shape (M,)
+    d : ndarray, shape (M, 2)
+    ok : bool
+    iterations : int
+    err : float
+        max_k |Phi_k| / (kappa c_k).
+    """
+    M = c.shape[0]
+    lam = np.maximum(lam0, 0.0)
+    d = np.empty((M, 2))
+    phi = np.empty(M)
+    da = np.empty(M)
+    db = np.empty(M)
+    d_t = np.empty((M, 2))
+    phi_t = np.empty(M)
+    da_t = np.empty(M)
+    db_t = np.empty(M)
+    lam_t = np.empty(M)
+    act = _active_of(lam)
+    fill_columns(act, W, Z, have, pair, jo, ji, B, R, p, H1, H2, F3, tq_out, tq_in, friction)
+    fok, LU, piv = _displacements(lam, act, dfree, Mblk, W, Z, friction, d)
+    merit = _fb_residual(lam, d, c, kappa, phi, da, db)
+    for it in range(1, maxit + 1):
+        err = _max_scaled(phi, c, kappa)
+        if err < tol:
+            return lam, d, True, it - 1, err
+        # reduced set: rows with db != 0, lam > 0 or phi != 0
+        nR = 0
+        for k in range(M):
+            if db[k] != 0.0 or lam[k] > 0.0 or phi[k] != 0.0:
+                nR += 1
+        Rs = np.empty(nR, dtype=np.int64)
+        pos = np.full(M, -1, dtype=np.int64)
+        i = 0
+        for k in range(M):
+            if db[k] != 0.0 or lam[k] > 0.0 or phi[k] != 0.0:
+                Rs[i] = k
+                pos[k] = i
+                i += 1
+        fill_columns(Rs, W, Z, have, pair, jo, ji, B, R, p, H1, H2, F3, tq_out, tq_in, friction)
+        # C[:, l] = Z[:, l] - W[:, l-block] M_l d_l, rows of R (2 nR) and columns of R
+        C = np.empty((2 * nR, nR))
+        for jj in range(nR):
+            l = Rs[jj]
+            e0 = Mblk[l, 0, 0] * d[l, 0] + Mblk[l, 0, 1] * d[l, 1]
+            e1 = Mblk[l, 1, 0] * d[l, 0] + Mblk[l, 1, 1] * d[l, 1]
+            for ii in range(nR):
+                k = Rs[ii]
+                for q in range(2):
+                    v = -(W[2 * k + q, 2 * l] * e0 + W[2 * k + q, 2 * l + 1] * e1)
+                    if friction:
+                        v += Z[2 * k + q, l]
+                    C[2 * ii + q, jj] = v
+        # D_R = C_R - W_(R, a) L_a S^-1 C_a
+        n_act = act.shape[0]
+        if n_act > 0:
+            Ca = np.empty((2 * n_act, nR))
+            for i in range(n_act):
+                ii = pos[act[i]]
+                for jj in range(nR):
+                    Ca[2 * i, jj] = C[2 * ii, jj]
+                    Ca[2 * i + 1, jj] = C[2 * ii + 1, jj]
+            _lu_solve_matrix(LU, piv, Ca)
+            # Y = L_a Ca (block rows)
+            for i in range(n_act):
+                l = act[i]
+                lj = lam[l]
+                for jj in range(nR):
+                    y0 = lj * (Mblk[l, 0, 0] * Ca[2 * i, jj] + Mblk[l, 0, 1] * Ca[2 * i + 1, jj])
+                    y1 = lj * (Mblk[l, 1, 0] * Ca[2 * i, jj] + Mblk[l, 1, 1] * Ca[2 * i + 1, jj])
+                    Ca[2 * i, jj] = y0
+                    Ca[2 * i + 1, jj] = y1
+            for ii in range(nR):
+                k = Rs[ii]
+                for q in range(2):
+                    row = 2 * k + q
+                    for i in range(n_act):
+                        w0 = W[row, 2 * act[i]]
+                        w1 = W[row, 2 * act[i] + 1]
+                        for jj in range(nR):
+                            C[2 * ii + q, jj] -= w0 * Ca[2 * i, jj] + w1 * Ca[2 * i + 1, jj]
+        # J_RR = diag(da c) + db kappa dgap,  dgap[k, l] = -d_k . D[k, l] / c_k
+        J = np.empty((nR, nR))
+        rhs = np.empty(nR)
+        for ii in range(nR):
+            k = Rs[ii]
+            f = -db[k] * kappa / c[k]
+            for jj in range(nR):
+                J[ii, jj] = f * (d[k, 0] * C[2 * ii, jj] + d[k, 1] * C[2 * ii + 1, jj])
+            J[ii, ii] += da[k] * c[k]
+            rhs[ii] = -phi[k]
+        Jc = J.copy()
+        pJ = np.empty(nR, dtype=np.int64)
+        if _lu_factor(J, pJ):
+            _lu_solve(J, pJ, rhs)
+            stepR = rhs
+        else:
+            rr = np.empty(nR)
+            for ii in range(nR):
+                rr[ii] = -phi[Rs[ii]]
+            stepR = np.linalg.lstsq(Jc, rr)[0]
+        t = 1.0
+        accepted = False
+        for _ in range(40):
+            for k in range(M):
+                lam_t[k] = lam[k]
+            for ii in range(nR):
+                k = Rs[ii]
+                lam_t[k] = max(lam[k] + t * stepR[ii], 0.0)
+            act_n = _active_of(lam_t)
+            fill_columns(act_n, W, Z, have, pair, jo, ji, B, R, p, H1, H2, F3, tq_out, tq_in, friction)
+            fok_t, LU_t, piv_t = _displacements(lam_t, act_n, dfree, Mblk, W, Z, friction, d_t)
+            m_t = _fb_residual(lam_t, d_t, c, kappa, phi_t, da_t, db_t)
+            if fok_t and m_t <= (1.0 - 1e-4 * t) * merit:
+                accepted = True
+                break
+            t *= 0.5
+        if not accepted:
+            return lam, d, False, it, _max_scaled(phi, c, kappa)
+        lam[:] = lam_t
+        d[:, :] = d_t
+        phi[:] = phi_t
+        da[:] = da_t
+        db[:] = db_t
+        merit = m_t
+        act = act_n
+        LU = LU_t
+        piv = piv_t
+    err = _max_scaled(phi, c, kappa)
+    return lam, d, err < tol, maxit, err
+
+
+@njit(cache=True)
+def generalized_curvature(lam, d, Mblk, B, pair, jo, ji, R, p, Omega, base, node_off,
+                          tq_out, tq_in, uhat, kinv, out):
+    """Fixed-point map u -> uhat + K^-1 (A^T phi + zt^T lam) of the outer loop (stationarity,
+    Eqs. (34)-(36) and (41)), in place into ``out`` (S, 3) [1/m].
+
+    phi_c = -lam_c M_c d_c; the force on the outer tube's centerline is B_c phi_c and minus that
+    on the inner tube's; friction torques tau lam about each tube's tangent.
+    """
+    N = p.shape[0]
+    n = node_off.shape[0] - 1
+    Fn = np.zeros((N, 3))
+    Tn = np.zeros((N, 3))   # p x f + tau t
+    for c in range(lam.shape[0]):
+        lc = lam[c]
+        if lc == 0.0:
+            continue
+        f0 = -lc * (Mblk[c, 0, 0] * d[c, 0] + Mblk[c, 0, 1] * d[c, 1])
+        f1 = -lc * (Mblk[c, 1, 0] * d[c, 0] + Mblk[c, 1, 1] * d[c, 1])
+        for side in range(2):
+            j = jo[c] if side == 0 else ji[c]
+            s = 1.0 if side == 0 else -1.0
+            tau = (tq_out[c] if side == 0 else tq_in[c]) * lc
+            fx = s * (B[c, 0, 0] * f0 + B[c, 0, 1] * f1)
+            fy = s * (B[c, 1, 0] * f0 + B[c, 1, 1] * f1)
+            fz = s * (B[c, 2, 0] * f0 + B[c, 2, 1] * f1)
+            Fn[j, 0] += fx
+            Fn[j, 1] += fy
+            Fn[j, 2] += fz
+            Tn[j, 0] += p[j, 1] * fz - p[j, 2] * fy + tau * R[j, 0, 2]
+            Tn[j, 1] += p[j, 2] * fx - p[j, 0] * fz + tau * R[j, 1, 2]
+            Tn[j, 2] += p[j, 0] * fy - p[j, 1] * fx + tau * R[j, 2, 2]
+    for t in range(n):
+        j0 = node_off[t]
+        k0 = j0 - t
+        nseg = node_off[t + 1] - j0 - 1
+        sf0 = 0.0
+        sf1 = 0.0
+        sf2 = 0.0
+        st0 = 0.0
+        st1 = 0.0
+        st2 = 0.0
+        for m in range(nseg - 1, -1, -1):
+            j = j0 + m + 1
+            sf0 += Fn[j, 0]
+            sf1 += Fn[j, 1]
+            sf2 += Fn[j, 2]
+            st0 += Tn[j, 0]
+            st1 += Tn[j, 1]
+            st2 += Tn[j, 2]
+            k = k0 + m
+            for q in range(3):
+                g = (base[k, 0, q] * sf0 + base[k, 1, q] * sf1 + base[k, 2, q] * sf2
+                     + Omega[k, 0, q] * st0 + Omega[k, 1, q] * st1 + Omega[k, 2, q] * st2)
+                out[k, q] = uhat[k, q] + kinv[k, q] * g
