@@ -238,6 +238,60 @@ def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane
                f"{t['elapsed_s']:.1f} s); truth in {sidecar}")
 
 
+@main.command()
+@click.option("--robot", "robot_path", required=True, type=click.Path(exists=True, dir_okay=False),
+              help="Robot model file with the candidate effects switched off (TOML, SI units).")
+@click.option("--data", "data_path", required=True, type=click.Path(exists=True, dir_okay=False),
+              help="Measured data: CSV in the project schema (SI units), or Ha's whitespace trajectory "
+                   "format (any other extension).")
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
+              help="Report folder (report.md, results.json, PNG plots, updated model file).")
+@click.option("--fit", default=None,
+              help="Baseline parameters, comma-separated (default: precurvature_y_i of curved tubes, "
+                   "k_xy_relative_2..n, and the registration for tracker-frame data).")
+@click.option("--effects", default=",".join(("friction", "clearance", "offplane", "poisson", "registration")),
+              show_default=True, help="Candidate effects to test and try.")
+@click.option("--frame", type=click.Choice(["robot", "tracker"]), default=None,
+              help="Frame of the measured poses (default: tracker for Ha's format, robot for CSV); "
+                   "tracker fits a rigid registration.")
+@click.option("--calibration-fraction", type=float, default=0.25, show_default=True,
+              help="Share of configurations / sequences / time blocks used for calibration.")
+@click.option("--max-calibration-samples", type=int, default=300, show_default=True)
+@click.option("--significance", type=float, default=0.01, show_default=True)
+@click.option("--permutations", type=int, default=999, show_default=True)
+@click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")
+@click.option("--jobs", type=int, default=None, help="Worker processes (default: all cores).")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--no-progress", is_flag=True, help="Hide progress bars.")
+def discrepancy(robot_path, data_path, out_dir, fit, effects, frame, calibration_fraction,
+                max_calibration_samples, significance, permutations, ds, jobs, seed, no_progress):
+    """Find where model and measurement disagree, name the missing effect, add it, show the gap shrink.
+
+    Interrupted runs resume from <out>/.stages (finished calibrations and evaluations are kept).
+    """
+    from .discrepancy.report import write_report
+    from .discrepancy.workflow import EFFECTS, DiscrepancyOptions, run_discrepancy
+    from .errors import PhysicalParameterError
+
+    chosen = tuple(e.strip() for e in effects.split(",") if e.strip())
+    bad = [e for e in chosen if e not in EFFECTS]
+    if bad:
+        raise PhysicalParameterError(f"option --effects {effects!r}: unknown effect {bad[0]!r}; "
+                                     f"expected some of {', '.join(EFFECTS)}")
+    if not 0.0 < calibration_fraction < 1.0:
+        raise PhysicalParameterError(f"option --calibration-fraction {calibration_fraction!r}: must be in (0, 1)")
+    if ds is not None and not ds > 0:
+        raise PhysicalParameterError(f"option --ds {ds!r}: must be > 0 m")
+    opts = DiscrepancyOptions(
+        fit=tuple(x.strip() for x in fit.split(",")) if fit else None, effects=chosen, frame=frame,
+        calibration_fraction=calibration_fraction, max_calibration_samples=max_calibration_samples,
+        significance=significance, n_permutations=permutations, ds=ds or 3e-3,
+        n_jobs=jobs or os.cpu_count() or 1, seed=seed)
+    results = run_discrepancy(robot_path, data_path, out_dir, opts, echo=click.echo, progress=not no_progress)
+    paths = write_report(results, out_dir)
+    click.echo(f"report: {paths['markdown']}")
+
+
 def run():  # pragma: no cover - entry point wrapper
     try:
         main(standalone_mode=True)

@@ -1,0 +1,430 @@
+"""Model calibration on measured tip poses (Section V-C of Ha, Fagogenis & Dupont 2019).
+
+- :func:`predict`: a model's tip poses along the data's motion history, in the data's frame;
+- :func:`pose_errors`: tip position and tangent errors;
+- :func:`calibrate`: least squares on the weighted sum of Eq. (49), ``|dp| / 1 mm + angle / 1 deg``
+  per sample (1 deg of tangent error weighs as 1 mm of position error), over the chosen
+  parameters (:mod:`ctrplan.discrepancy.parameters`), including the rigid registration of a
+  tracker frame, started from a closed-form (Kabsch) registration;
+- :func:`grid_search_friction`: the friction coefficients by a 2-D (in general (n-1)-D) grid
+  search, as the paper does to avoid local minima, made cheaper by a coarse grid on a subset of
+  whole configuration groups followed by refinement on the whole calibration set.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from ..errors import CtrplanError
+from ..mechanics import ModelSettings
+from .data import MeasuredData
+from .parameters import REGISTRATION, apply_parameters, parameter, registration_transform
+
+__all__ = ["Prediction", "CalibrationResult", "predict", "pose_errors", "eq49_residuals", "calibrate",
+           "grid_search_friction", "kabsch_registration", "information_criterion"]
+
+#: Eq. (49) weighting: this many metres of position error weigh as ...
+POSITION_UNIT = 1e-3
+#: ... this many radians of tangent error (1 mm : 1 deg).
+ANGLE_UNIT = np.pi / 180.0
+#: Eq. (49) residual given to a sample whose model solve failed (50 mm + 0 deg); keeps the
+#: least-squares problem defined without letting failures dominate.
+FAILED_RESIDUAL = 50.0
+#: Relative finite-difference step of the least-squares Jacobian (solver tolerances are ~1e-9).
+DIFF_STEP = 1e-4
+
+
+@dataclass(frozen=True, eq=False)
+class Prediction:
+    """Model tip poses at the data's samples.
+
+    Attributes
+    ----------
+    tip : ndarray, shape (K, 3)
+        [m], in the data's frame (registration applied).
+    tangent : ndarray, shape (K, 3)
+        Unit tangents, in the data's frame.
+    tip_base : ndarray, shape (K, 3)
+        [m], in the robot base frame.
+    ok : ndarray of bool, shape (K,)
+    message : list of str
+    seconds : float
+        Wall time of the model evaluation.
+    """
+
+    tip: np.ndarray
+    tangent: np.ndarray
+    tip_base: np.ndarray
+    ok: np.ndarray
+    message: list
+    seconds: float
+
+
+@dataclass
+class CalibrationResult:
+    """Outcome of a calibration.
+
+    Attributes
+    ----------
+    model : str
+        ``"standard"``, ``"clearance"`` or ``"friction"``.
+    names : tuple of str
+        Fitted parameters.
+    values, initial : ndarray, shape (m,)
+        Fitted and initial values, in the parameters' units.
+    fixed : dict
+        Other parameters held at given values (e.g. the baseline's while fitting friction).
+    cost : float
+        Sum of squared Eq. (49) residuals [(mm + deg)^2] at ``values``.
+    n_samples : int
+        Samples used (failed ones included with :data:`FAILED_RESIDUAL`).
+    n_failed : int
+    evaluations : int
+        Model evaluations over the calibration set.
+    seconds : float
+    message : str
+    """
+
+    model: str
+    names: tuple
+    values: np.ndarray
+    initial: np.ndarray
+    fixed: dict = field(default_factory=dict)
+    cost: float = np.nan
+    n_samples: int = 0
+    n_failed: int = 0
+    evaluations: int = 0
+    seconds: float = 0.0
+    message: str = ""
+
+    def all_parameters(self) -> tuple[tuple, np.ndarray]:
+        """Fixed and fitted parameters together: ``(names, values)``."""
+        names = tuple(self.fixed) + tuple(self.names)
+        values = np.concatenate([np.asarray(list(self.fixed.values()), float), self.values])
+        return names, values
+
+    def as_dict(self) -> dict:
+        return {"model": self.model, "parameters": dict(zip(self.names, map(float, self.values))),
+                "initial": dict(zip(self.names, map(float, self.initial))),
+                "fixed": {k: float(v) for k, v in self.fixed.items()}, "cost": float(self.cost),
+                "n_samples": int(self.n_samples), "n_failed": int(self.n_failed),
+                "evaluations": int(self.evaluations), "seconds": float(self.seconds),
+                "message": self.message}
+
+
+def predict(robot, names, values, data: MeasuredData, model: str, settings: ModelSettings | None = None,
+            *, n_jobs: int = 1, progress: bool = False) -> Prediction:
+    """Evaluate a model with the given parameters at every sample of ``data``.
+
+    Follows each sequence's history (each sample solved from the previous one; friction
+    directions from ``data.eta``, twist released after a translation) through
+    :func:`ctrplan.discrepancy.simulate.simulate`.
+
+    Parameters
+    ----------
+    robot : Robot
+    names : sequence of str
+        Parameters to set (:mod:`ctrplan.discrepancy.parameters`), registration included.
+    values : array-like, shape (m,)
+    data : MeasuredData
+    model : {"standard", "clearance", "friction"}
+    settings : ModelSettings, optional
+    n_jobs : int
+    progress : bool
+
+    Returns
+    -------
+    Prediction
+
+    Raises
+    ------
+    ParameterError, PhysicalParameterError
+        Parameter values that give an impossible robot.
+    """
+    from .simulate import simulate
+
+    t0 = time.perf_counter()
+    names = tuple(names)
+    robot_p = apply_parameters(robot, names, values)
+    sim = simulate(robot_p, data.alpha, data.beta, model=model, eta=data.eta,
+                   translation_last=data.translation_last, sequence=data.sequence, settings=settings,
+                   n_jobs=n_jobs, progress=progress)
+    R, t = registration_transform(names, values)
+    tip_base = np.asarray(sim.tip, float)
+    tip = tip_base @ R.T + t
+    tangent = np.asarray(sim.tangent, float) @ R.T
+    return Prediction(tip=tip, tangent=tangent, tip_base=tip_base, ok=np.asarray(sim.ok, bool),
+                      message=list(sim.message), seconds=time.perf_counter() - t0)
+
+
+def pose_errors(pred: Prediction, data: MeasuredData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tip position and tangent errors of a prediction.
+
+    Returns
+    -------
+    position : ndarray, shape (K,)
+        ``|p_measured - p_model|`` [m]; NaN where the model failed.
+    angle : ndarray, shape (K,)
+        Angle between measured and model tangents [rad]; NaN where failed or not measured.
+    vector : ndarray, shape (K, 3)
+        ``p_measured - p_model`` [m] in the data's frame; NaN where failed.
+    """
+    vec = data.tip - pred.tip
+    vec[~pred.ok] = np.nan
+    pos = np.linalg.norm(vec, axis=1)
+    if data.tangent is None:
+        ang = np.full(pos.shape, np.nan)
+    else:
+        c = np.einsum("ij,ij->i", data.tangent / np.linalg.norm(data.tangent, axis=1, keepdims=True),
+                      pred.tangent / np.linalg.norm(pred.tangent, axis=1, keepdims=True))
+        ang = np.arccos(np.clip(c, -1.0, 1.0))
+        ang[~pred.ok] = np.nan
+    return pos, ang, vec
+
+
+def eq49_residuals(position, angle) -> np.ndarray:
+    """Per-sample residual of Eq. (49): ``|dp| / 1 mm + angle / 1 deg`` (angle term dropped where
+    the tangent is not measured); :data:`FAILED_RESIDUAL` where the model failed.
+
+    Parameters
+    ----------
+    position : ndarray, shape (K,) [m]
+    angle : ndarray, shape (K,) [rad]
+
+    Returns
+    -------
+    ndarray, shape (K,) [mm + deg]
+    """
+    r = position / POSITION_UNIT + np.nan_to_num(angle / ANGLE_UNIT, nan=0.0)
+    return np.where(np.isfinite(position), r, FAILED_RESIDUAL)
+
+
+def kabsch_registration(model_tip, measured_tip) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares rigid registration ``measured ~ R model + t`` (Kabsch / Umeyama, no scale).
+
+    Parameters
+    ----------
+    model_tip, measured_tip : ndarray, shape (K, 3) [m]
+        Rows with NaN are ignored.
+
+    Returns
+    -------
+    rotation_vector : ndarray, shape (3,) [rad]
+    translation : ndarray, shape (3,) [m]
+    """
+    ok = np.all(np.isfinite(model_tip), axis=1) & np.all(np.isfinite(measured_tip), axis=1)
+    a, b = measured_tip[ok], model_tip[ok]
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    rot, _ = Rotation.align_vectors(a - ca, b - cb)
+    R = rot.as_matrix()
+    return rot.as_rotvec(), ca - R @ cb
+
+
+def information_criterion(cost: float, n_samples: int, n_params: int) -> float:
+    """Bayesian information criterion of a least-squares fit with Gaussian residuals:
+    ``N ln(RSS / N) + k ln N``."""
+    return float(n_samples * np.log(max(cost, 1e-300) / n_samples) + n_params * np.log(n_samples))
+
+
+class _Objective:
+    """Eq. (49) residuals as a function of the fitted parameters, with the mechanics cached on
+    the mechanical parameters (a registration step re-uses the last solve)."""
+
+    def __init__(self, robot, data, model, names, fixed, settings, n_jobs):
+        self.robot, self.data, self.model, self.settings, self.n_jobs = robot, data, model, settings, n_jobs
+        self.names = tuple(names)
+        self.fixed = dict(fixed)
+        self.all_names = tuple(self.fixed) + self.names
+        self.mech = [k for k, nm in enumerate(self.all_names) if parameter(robot, nm).mechanical]
+        self._cache: dict = {}
+        self.evaluations = 0
+
+    def full(self, x):
+        return np.concatenate([np.asarray(list(self.fixed.values()), float), np.asarray(x, float)])
+
+    def prediction(self, x) -> Prediction:
+        v = self.full(x)
+        key = tuple(np.round(v[self.mech], 15))
+        base = self._cache.get(key)
+        if base is None:
+            mech_names = [self.all_names[k] for k in self.mech]
+            base = predict(self.robot, mech_names, v[self.mech], self.data, self.model, self.settings,
+                           n_jobs=self.n_jobs)
+            self.evaluations += 1
+            if len(self._cache) > 64:
+                self._cache.clear()
+            self._cache[key] = base
+        R, t = registration_transform(self.all_names, v)
+        return Prediction(tip=base.tip_base @ R.T + t, tangent=base.tangent @ R.T, tip_base=base.tip_base,
+                          ok=base.ok, message=base.message, seconds=base.seconds)
+
+    def residuals(self, x):
+        pos, ang, _ = pose_errors(self.prediction(x), self.data)
+        return eq49_residuals(pos, ang)
+
+
+def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | None = None,
+              initial=None, settings: ModelSettings | None = None, n_jobs: int = 1,
+              register: bool = False, max_evaluations: int = 40) -> CalibrationResult:
+    """Fit parameters by least squares on the Eq. (49) residuals (Section V-C, Eq. (49) of
+    Ha, Fagogenis & Dupont 2019).
+
+    Parameters
+    ----------
+    robot : Robot
+        Starting point of every mechanical parameter not in ``fixed``.
+    data : MeasuredData
+        The calibration samples.
+    model : {"standard", "clearance", "friction"}
+    names : sequence of str
+        Parameters to fit. Registration parameters are started from the Kabsch registration of
+        the initial model when ``register`` is True (and ``initial`` is not given).
+    fixed : dict, optional
+        ``{name: value}`` held fixed (applied before the fitted ones).
+    initial : array-like, shape (m,), optional
+        Starting values (default: the robot's, zero registration).
+    settings : ModelSettings, optional
+    n_jobs : int
+    register : bool
+        Start registration parameters from the closed-form registration.
+    max_evaluations : int
+        Budget of model evaluations over the calibration set (Jacobian columns included).
+
+    Returns
+    -------
+    CalibrationResult
+
+    Raises
+    ------
+    CtrplanError
+        Fewer samples than fitted parameters, or every sample failing at the start.
+    """
+    from .parameters import read_parameters
+
+    t0 = time.perf_counter()
+    names = tuple(names)
+    fixed = dict(fixed or {})
+    k = data.n_samples
+    if k <= len(names):
+        raise CtrplanError(f"{data.file}: {k} calibration samples for {len(names)} parameters "
+                           f"({', '.join(names)}); a calibration needs more samples than parameters")
+    reg = None
+    fixed_reg = {nm: v for nm, v in fixed.items() if nm in REGISTRATION}
+    if fixed_reg:
+        R0, t0r = registration_transform(tuple(fixed_reg), tuple(fixed_reg.values()))
+        reg = (Rotation.from_matrix(R0).as_rotvec(), t0r)
+    x0 = read_parameters(robot, names, reg) if initial is None else np.asarray(initial, float).copy()
+    obj = _Objective(robot, data, model, names, fixed, settings, n_jobs)
+    if register and initial is None and any(nm in REGISTRATION for nm in names):
+        pred = obj.prediction(x0)
+        if not pred.ok.any():
+            raise CtrplanError(f"{data.file}: the {model} model failed at every calibration sample "
+                               f"(first message: {pred.message[0]})")
+        rv, tr = kabsch_registration(pred.tip_base, data.tip)
+        for j, nm in enumerate(names):
+            if nm in REGISTRATION:
+                x0[j] = np.concatenate([rv, tr])[REGISTRATION.index(nm)]
+    specs = [parameter(robot, nm) for nm in names]
+    lower = np.array([p.lower for p in specs])
+    upper = np.array([p.upper for p in specs])
+    x0 = np.clip(x0, lower + 1e-12 * (upper - lower), upper - 1e-12 * (upper - lower))
+    r0 = obj.residuals(x0)
+    if not len(names):
+        return CalibrationResult(model, names, x0, x0.copy(), fixed, float(r0 @ r0), k,
+                                 int((r0 == FAILED_RESIDUAL).sum()), obj.evaluations,
+                                 time.perf_counter() - t0, "nothing to fit: evaluated only")
+    scale = np.array([p.scale for p in specs])
+    max_nfev = max(2, max_evaluations // (len(names) + 1))
+    sol = least_squares(obj.residuals, x0, bounds=(lower, upper), x_scale=scale, diff_step=DIFF_STEP,
+                        method="trf", max_nfev=max_nfev, xtol=1e-6, ftol=1e-6)
+    r = obj.residuals(sol.x)
+    msg = f"least squares: {sol.message} ({sol.nfev} steps)"
+    return CalibrationResult(model, names, sol.x, x0, fixed, float(r @ r), k, int((r == FAILED_RESIDUAL).sum()),
+                             obj.evaluations, time.perf_counter() - t0, msg)
+
+
+def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: ModelSettings | None = None,
+                         n_jobs: int = 1, coarse=(0.0, 0.1, 0.2, 0.3, 0.4), refinements: int = 2,
+                         search_samples: int = 96, seed: int = 0, progress=None) -> CalibrationResult:
+    """Friction coefficients mu_1..mu_(n-1) by grid search (Section V-C: "calibrated during a
+    second pass using a 2-D grid search to avoid local minima"), other parameters ``fixed``.
+
+    The coarse grid (``coarse`` per pair) is scored on at most ``search_samples`` calibration
+    samples made of whole configuration groups; then ``refinements`` rounds of a 3^(n-1) grid
+    with half the previous step around the best point are scored on the whole calibration set.
+
+    Parameters
+    ----------
+    robot : Robot
+    data : MeasuredData
+        Calibration samples (their eta and translation_last select the friction solution).
+    fixed : dict
+        ``{name: value}`` of the other parameters (e.g. the calibrated baseline, registration).
+    settings : ModelSettings, optional
+    n_jobs : int
+    coarse : sequence of float
+        Coarse grid values of every mu [-], increasing, >= 0.
+    refinements : int
+    search_samples : int
+    seed : int
+        Choice of the coarse-search subset.
+    progress : callable, optional
+        ``progress(done, total)`` after each grid point.
+
+    Returns
+    -------
+    CalibrationResult
+        With the score of every grid point in ``message``.
+    """
+    t0 = time.perf_counter()
+    m = robot.n_tubes - 1
+    names = tuple(f"mu_{k + 1}" for k in range(m))
+    coarse = np.asarray(sorted(coarse), float)
+    groups = np.unique(data.config_id)
+    rng = np.random.default_rng(seed)
+    rows_per_group = data.n_samples / groups.size
+    n_groups = max(1, min(groups.size, int(search_samples // max(rows_per_group, 1))))
+    chosen = rng.choice(groups, size=n_groups, replace=False)
+    sub = data.take(np.isin(data.config_id, chosen))
+    obj_sub = _Objective(robot, sub, "friction", names, fixed, settings, n_jobs)
+    obj_all = _Objective(robot, data, "friction", names, fixed, settings, n_jobs)
+    grid = list(itertools.product(coarse, repeat=m))
+    step = float(np.min(np.diff(coarse))) if coarse.size > 1 else 0.05
+    total = len(grid) + refinements * (3 ** m)
+    done = 0
+    scores = {}
+    for mu in grid:
+        r = obj_sub.residuals(np.array(mu))
+        scores[mu] = float(r @ r)
+        done += 1
+        if progress:
+            progress(done, total)
+    best = min(scores, key=scores.get)
+    trail = [f"coarse grid on {sub.n_samples} samples: best mu {best} cost {scores[best]:.4g}"]
+    best_all, best_cost = np.array(best), None
+    for _ in range(refinements):
+        step /= 2.0
+        cand = {}
+        for d in itertools.product((-1, 0, 1), repeat=m):
+            mu = tuple(np.round(np.maximum(best_all + step * np.array(d), 0.0), 6))
+            if mu not in cand:
+                r = obj_all.residuals(np.array(mu))
+                cand[mu] = float(r @ r)
+            done += 1
+            if progress:
+                progress(done, total)
+        mu_best = min(cand, key=cand.get)
+        best_all, best_cost = np.array(mu_best), cand[mu_best]
+        trail.append(f"refined (step {step:.4g}) on {data.n_samples} samples: best mu {mu_best} "
+                     f"cost {best_cost:.4g}")
+    r = obj_all.residuals(best_all)
+    return CalibrationResult("friction", names, best_all, np.zeros(m), dict(fixed), float(r @ r),
+                             data.n_samples, int((r == FAILED_RESIDUAL).sum()),
+                             obj_sub.evaluations + obj_all.evaluations, time.perf_counter() - t0,
+                             "; ".join(trail))

@@ -1,0 +1,276 @@
+"""Measured data for the discrepancy workflow: loading, motion history, grouping and splitting.
+
+Two inputs are accepted:
+
+- a CSV in the project's one column schema (:mod:`ctrplan.io.tables`), SI units: ``alpha_i``
+  [rad], ``beta_i`` [m], ``tip_x..z`` [m], optionally ``tangent_x..z`` or ``R_11..R_33``,
+  ``time`` [s], ``sequence`` (id of one continuous motion), ``eta_i``, and the pass-through
+  columns ``config_id`` (same id = same configuration, e.g. the four approaches of the paper's
+  protocol) and ``subset`` (``calibration`` / ``validation``);
+- the whitespace format of Ha's measured trajectory (``../shared/data/ha-three-tube-trajectory``),
+  read by :func:`ctrplan.io.tables.load_ha_trajectory` (any file not ending in ``.csv``).
+
+Where ``eta`` is missing (or 0) it is derived from the sample order within each sequence, with
+whether a translation came after the last rotation (:func:`ctrplan.discrepancy.simulate.motion_history`).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..errors import DataFileError
+from ..io.tables import read_measurements
+
+__all__ = ["MeasuredData", "load_measured_data", "configuration_groups", "split_data"]
+
+#: Joints that differ by less than these are "the same configuration" [rad], [m].
+SAME_ROTATION = 1e-3
+SAME_TRANSLATION = 1e-5
+
+
+@dataclass(frozen=True, eq=False)
+class MeasuredData:
+    """Measured tip poses along a motion history, SI units.
+
+    Attributes
+    ----------
+    alpha, beta : ndarray, shape (K, n)
+        Base rotations [rad] and translations [m].
+    tip : ndarray, shape (K, 3)
+        Measured tip positions [m] (tracker frame if ``frame == "tracker"``).
+    tangent : ndarray or None, shape (K, 3)
+        Measured unit tip tangents.
+    eta : ndarray of int, shape (K, n - 1)
+        Direction of the last relative rotation of each pair (+1 CCW, -1 CW, 0 unknown), Eq. (38).
+    translation_last : ndarray of bool, shape (K,)
+        A translation came after the last rotation (twist released, Section V-B).
+    sequence : ndarray of int, shape (K,)
+        Continuous-motion id; rows of one sequence are in time order.
+    config_id : ndarray of int, shape (K,)
+        Configuration group (rows at the same joint values share it).
+    subset : ndarray of str or None, shape (K,)
+        ``"calibration"`` / ``"validation"`` when the file gives the split.
+    time : ndarray or None, shape (K,) [s]
+    file : str
+    frame : {"robot", "tracker"}
+        Frame of ``tip`` and ``tangent``.
+    """
+
+    alpha: np.ndarray
+    beta: np.ndarray
+    tip: np.ndarray
+    tangent: np.ndarray | None
+    eta: np.ndarray
+    translation_last: np.ndarray
+    sequence: np.ndarray
+    config_id: np.ndarray
+    subset: np.ndarray | None
+    time: np.ndarray | None
+    file: str
+    frame: str
+
+    @property
+    def n_samples(self) -> int:
+        return self.alpha.shape[0]
+
+    def take(self, rows) -> "MeasuredData":
+        """The rows ``rows`` (index array or boolean mask), in their original order."""
+        rows = np.flatnonzero(rows) if np.asarray(rows).dtype == bool else np.asarray(rows, dtype=int)
+        pick = (lambda a: None if a is None else a[rows])
+        return replace(self, alpha=self.alpha[rows], beta=self.beta[rows], tip=self.tip[rows],
+                       tangent=pick(self.tangent), eta=self.eta[rows],
+                       translation_last=self.translation_last[rows], sequence=self.sequence[rows],
+                       config_id=self.config_id[rows], subset=pick(self.subset), time=pick(self.time))
+
+
+def _is_whitespace_format(path: Path) -> bool:
+    return path.suffix.lower() != ".csv"
+
+
+def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = None) -> MeasuredData:
+    """Load measured data and complete its motion history.
+
+    Parameters
+    ----------
+    path : str or path-like
+        CSV in the project schema, or Ha's whitespace trajectory format (not ``.csv``).
+    robot : Robot
+        Gives the number of tubes; joints are checked against its limits.
+    frame : {"robot", "tracker"}, optional
+        Frame of the measured poses. Default: ``"tracker"`` for Ha's format (its README: the
+        registration is not given), ``"robot"`` for CSV.
+
+    Returns
+    -------
+    MeasuredData
+
+    Raises
+    ------
+    DataFileError
+        Missing file or column, non-numeric or non-finite value (named by column and row),
+        values that look like millimetres or degrees, a tangent that is not a unit vector, fewer
+        than 2 samples, a bad ``subset`` value, or a configuration outside the robot's joint
+        limits (named by row).
+    """
+    from .simulate import motion_history
+
+    path = Path(path)
+    file = str(path)
+    n = robot.n_tubes
+    if not path.exists():
+        raise DataFileError(f"{file}: file does not exist")
+    if _is_whitespace_format(path):
+        from ..io.tables import load_ha_trajectory
+
+        table = load_ha_trajectory(path)
+        tmp = _frame_to_arrays(table, n, file)
+        default_frame = "tracker"
+    else:
+        meas = read_measurements(path, n)
+        tmp = dict(alpha=meas.alpha, beta=meas.beta, tip=meas.tip, tangent=meas.tangent, eta=meas.eta,
+                   time=meas.time, table=meas.frame)
+        default_frame = "robot"
+    frame = frame or default_frame
+    if frame not in ("robot", "tracker"):
+        raise ValueError(f"frame must be 'robot' or 'tracker', got {frame!r}")
+    table = tmp["table"]
+    k = tmp["alpha"].shape[0]
+    if k < 2:
+        raise DataFileError(f"{file}: {k} sample(s); the workflow needs many more")
+    sequence = (table["sequence"].to_numpy(float).astype(int) if "sequence" in table
+                else np.arange(k))
+    for r in range(k):
+        try:
+            robot.check_configuration(tmp["alpha"][r], tmp["beta"][r])
+        except Exception as exc:  # JointLimitError / PhysicalParameterError
+            raise DataFileError(f"{file}: row {r + 1}: {exc}") from None
+    hist = motion_history(tmp["alpha"], tmp["beta"], sequence)
+    eta = hist.eta.copy()
+    if tmp["eta"] is not None:
+        given = tmp["eta"] != 0
+        eta[given] = tmp["eta"][given]
+    if "config_id" in table:
+        config_id = pd.to_numeric(table["config_id"], errors="coerce").to_numpy(float)
+        bad = np.flatnonzero(~np.isfinite(config_id))
+        if bad.size:
+            raise DataFileError(f"{file}: column 'config_id', row {bad[0] + 1}: not an integer "
+                                f"({table['config_id'].iloc[bad[0]]!r})")
+        config_id = config_id.astype(int)
+    else:
+        config_id = configuration_groups(tmp["alpha"], tmp["beta"])
+    subset = None
+    if "subset" in table:
+        subset = table["subset"].astype(str).str.strip().to_numpy()
+        bad = np.flatnonzero(~np.isin(subset, ("calibration", "validation")))
+        if bad.size:
+            raise DataFileError(f"{file}: column 'subset', row {bad[0] + 1}: {subset[bad[0]]!r} is "
+                                f"neither 'calibration' nor 'validation'")
+    return MeasuredData(alpha=tmp["alpha"], beta=tmp["beta"], tip=tmp["tip"], tangent=tmp["tangent"],
+                        eta=eta.astype(int), translation_last=np.asarray(hist.translation_last, bool),
+                        sequence=sequence, config_id=config_id, subset=subset, time=tmp["time"],
+                        file=file, frame=frame)
+
+
+def _frame_to_arrays(table: pd.DataFrame, n: int, file: str) -> dict:
+    alpha = table[[f"alpha_{i}" for i in range(1, n + 1)]].to_numpy(float)
+    beta = table[[f"beta_{i}" for i in range(1, n + 1)]].to_numpy(float)
+    if alpha.shape[1] != n:
+        raise DataFileError(f"{file}: data for {alpha.shape[1]} tubes, robot has {n}")
+    tip = table[["tip_x", "tip_y", "tip_z"]].to_numpy(float)
+    tangent = table[["tangent_x", "tangent_y", "tangent_z"]].to_numpy(float)
+    return dict(alpha=alpha, beta=beta, tip=tip, tangent=tangent, eta=None,
+                time=table["time"].to_numpy(float), table=table)
+
+
+def configuration_groups(alpha, beta, rotation_bin: float | None = None,
+                         translation_bin: float | None = None) -> np.ndarray:
+    """Group rows by configuration.
+
+    Parameters
+    ----------
+    alpha, beta : array-like, shape (K, n)
+        [rad], [m].
+    rotation_bin, translation_bin : float, optional
+        Bin widths [rad], [m]. Default: "the same configuration" (1e-3 rad, 1e-5 m). Coarser
+        bins group nearby configurations of a continuous trajectory. Rotations are binned on
+        the circle (wrapped to [-pi, pi)).
+
+    Returns
+    -------
+    ndarray of int, shape (K,)
+        Group ids 0..G-1 in order of first appearance.
+    """
+    alpha, beta = np.asarray(alpha, float), np.asarray(beta, float)
+    rb = SAME_ROTATION if rotation_bin is None else rotation_bin
+    tb = SAME_TRANSLATION if translation_bin is None else translation_bin
+    wrapped = (alpha + np.pi) % (2 * np.pi) - np.pi
+    ka = np.round(wrapped / rb).astype(np.int64)
+    # -pi and +pi are the same angle
+    ka[ka == np.round(np.pi / rb)] = np.round(-np.pi / rb)
+    kb = np.round(beta / tb).astype(np.int64)
+    keys = np.concatenate([ka, kb], axis=1)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(np.argsort(first))
+    return order[inverse.ravel()]
+
+
+def split_data(data: MeasuredData, calibration_fraction: float = 0.25, block_samples: int = 100,
+               seed: int = 0) -> tuple[np.ndarray, np.ndarray, str]:
+    """Split rows into calibration and validation, by configuration or by sequence, never by row.
+
+    - the file's ``subset`` column when present;
+    - else, whole *units*: rows linked by sharing a configuration group or a sequence are one
+      unit (for the paper's protocol a unit is one configuration with its approaches; for
+      several trajectories, one trajectory), a seeded choice of units for calibration;
+    - else (one continuous trajectory is one unit), contiguous blocks of ``block_samples``
+      rows, every k-th block for calibration, so both sets span the whole motion.
+
+    Returns
+    -------
+    calibration, validation : ndarray of bool, shape (K,)
+    how : str
+        One line saying how the split was made.
+
+    Raises
+    ------
+    DataFileError
+        Either set ends up empty.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if not 0.0 < calibration_fraction < 1.0:
+        raise ValueError(f"calibration_fraction must be in (0, 1), got {calibration_fraction!r}")
+    k = data.n_samples
+    rng = np.random.default_rng(seed)
+    _, g = np.unique(data.config_id, return_inverse=True)
+    _, q = np.unique(data.sequence, return_inverse=True)
+    n_g = g.max() + 1
+    graph = coo_matrix((np.ones(k), (g.ravel(), n_g + q.ravel())), shape=(n_g + q.max() + 1,) * 2)
+    _, labels = connected_components(graph, directed=False)
+    unit = labels[g.ravel()]
+    units = np.unique(unit)
+    if data.subset is not None:
+        cal = data.subset == "calibration"
+        how = "by the file's 'subset' column"
+    elif units.size > 1:
+        chosen = rng.choice(units, size=max(1, int(round(calibration_fraction * units.size))), replace=False)
+        cal = np.isin(unit, chosen)
+        how = (f"by configuration/sequence: {chosen.size} of {units.size} units (rows linked by a shared "
+               f"configuration or sequence) for calibration")
+    else:
+        block = np.arange(k) // block_samples
+        every = max(2, int(round(1.0 / calibration_fraction)))
+        cal = (block % every) == (every // 2)
+        how = (f"by time blocks of {block_samples} samples of the one continuous motion: every "
+               f"{every}th block for calibration ({int(cal.sum())} samples), the rest for validation")
+    val = ~cal
+    if not cal.any() or not val.any():
+        raise DataFileError(f"{data.file}: the split {how} leaves "
+                            f"{'no calibration' if not cal.any() else 'no validation'} samples")
+    return cal, val, how

@@ -1,0 +1,582 @@
+"""The discrepancy workflow: calibrate, diagnose residuals, try candidate effects, name the missing one.
+
+1. Calibrate the baseline (standard model; by default in-plane precurvatures and relative
+   bending stiffnesses, plus the registration when the data are in a tracker frame) by least
+   squares on Eq. (49) of Ha, Fagogenis & Dupont 2019, on a calibration split made of whole
+   configurations or sequences.
+2. Diagnose the held-out residuals with one signature test per candidate effect
+   (:mod:`ctrplan.discrepancy.signatures`).
+3. Try each candidate: switch it on, fit its parameters with the baseline's refitted (friction
+   coefficients by grid search, Section V-C; the clearance and friction candidates share tube
+   parameters refitted once with the clearance model, as in the paper's Table VII), and measure
+   the error on the held-out split.
+4. Name the missing effect: among candidates whose signature test is significant, whose held-out
+   improvement is significant (paired sign-flip test over held-out units) and whose BIC beats
+   the baseline's by :data:`BIC_MARGIN`, the one with the largest held-out improvement; none
+   when nothing beats the noise.
+5. Write the updated robot model file, load it back and check that it reproduces the errors.
+
+The result is a plain dictionary (JSON-ready) plus arrays for plots; :mod:`ctrplan.discrepancy.report`
+writes the report folder.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import CtrplanError, DataFileError
+from ..io.atomic import atomic_write_text
+from ..mechanics import ModelSettings
+from .calibrate import (ANGLE_UNIT, POSITION_UNIT, CalibrationResult, calibrate, eq49_residuals,
+                        grid_search_friction, information_criterion, pose_errors, predict)
+from .data import MeasuredData, configuration_groups, load_measured_data, split_data
+from .parameters import REGISTRATION, apply_parameters, registration_transform
+from .signatures import (EFFECT_LABELS, angle_features, friction_signature, overlap_features,
+                         registration_signature, regression_signature, twist_features)
+
+__all__ = ["DiscrepancyOptions", "run_discrepancy", "default_baseline_parameters", "effect_parameters",
+           "paired_improvement", "EFFECTS"]
+
+#: Candidate effects, in the order they are tried.
+EFFECTS = ("friction", "clearance", "offplane", "poisson", "registration")
+#: A candidate must lower the BIC by at least this much (Kass & Raftery: > 6 is strong evidence).
+BIC_MARGIN = 6.0
+#: Bins that group nearby configurations of a continuous trajectory for the friction test.
+TRAJECTORY_ROTATION_BIN = np.deg2rad(15.0)
+TRAJECTORY_TRANSLATION_BIN = 5e-3
+#: Held-out samples (whole units) re-evaluated with the written model file to check it.
+REPRODUCE_SAMPLES = 256
+
+
+@dataclass(frozen=True)
+class DiscrepancyOptions:
+    """Options of :func:`run_discrepancy`.
+
+    Attributes
+    ----------
+    fit : tuple of str or None
+        Baseline parameters (default :func:`default_baseline_parameters`).
+    effects : tuple of str
+        Candidate effects to test and try (subset of :data:`EFFECTS`).
+    frame : {"robot", "tracker"} or None
+        Frame of the measurements (default from the file type, see
+        :func:`ctrplan.discrepancy.data.load_measured_data`). "tracker" fits a registration.
+    calibration_fraction : float
+        Share of units (configurations / sequences / time blocks) used for calibration.
+    max_calibration_samples : int
+        Calibration samples used by the least-squares fits (whole units, evenly chosen).
+    significance : float
+        Level of the signature and held-out improvement tests.
+    n_permutations : int
+    friction_grid : tuple of float
+        Coarse grid of every friction coefficient.
+    friction_search_samples : int
+        Samples scoring the coarse friction grid.
+    max_evaluations : int
+        Model evaluations allowed per least-squares fit.
+    ds : float
+        Arc-length step [m].
+    n_jobs : int
+    seed : int
+    """
+
+    fit: tuple | None = None
+    effects: tuple = EFFECTS
+    frame: str | None = None
+    calibration_fraction: float = 0.25
+    max_calibration_samples: int = 300
+    significance: float = 0.01
+    n_permutations: int = 999
+    friction_grid: tuple = (0.0, 0.1, 0.2, 0.3, 0.4)
+    friction_search_samples: int = 96
+    max_evaluations: int = 60
+    ds: float = 3e-3
+    n_jobs: int = 1
+    seed: int = 0
+
+    def settings(self) -> ModelSettings:
+        # no multistart stability search in calibration: it does not change the solution found
+        return ModelSettings(ds=self.ds, multistart=0)
+
+
+def _curved_tubes(robot):
+    return [i for i, t in enumerate(robot.tubes) if any(not s.is_straight for s in t.sections)]
+
+
+def default_baseline_parameters(robot, register: bool) -> tuple:
+    """In-plane precurvature of every curved tube, bending stiffness of tubes 2..n relative to
+    tube 1 (Table VI / VII of Ha et al. 2019), and the registration when ``register``."""
+    names = [f"precurvature_y_{i + 1}" for i in _curved_tubes(robot)]
+    names += [f"k_xy_relative_{i + 1}" for i in range(1, robot.n_tubes)]
+    if register:
+        names += list(REGISTRATION)
+    return tuple(names)
+
+
+def effect_parameters(robot, effect: str) -> tuple:
+    """Parameters an effect adds: friction coefficients, none for clearance (nominal diameters,
+    as in the paper), off-plane precurvatures, Poisson ratios, or the registration."""
+    if effect == "friction":
+        return tuple(f"mu_{k + 1}" for k in range(robot.n_tubes - 1))
+    if effect == "clearance":
+        return ()
+    if effect == "offplane":
+        return tuple(f"precurvature_x_{i + 1}" for i in _curved_tubes(robot))
+    if effect == "poisson":
+        return tuple(f"poisson_ratio_{i + 1}" for i in range(robot.n_tubes))
+    if effect == "registration":
+        return REGISTRATION
+    raise ValueError(f"unknown effect {effect!r}; expected one of {EFFECTS}")
+
+
+_MODEL_OF = {"friction": "friction", "clearance": "clearance", "offplane": "standard",
+             "poisson": "standard", "registration": "standard"}
+
+
+def paired_improvement(err_base, err_cand, units, *, n_permutations: int = 9999, seed: int = 0) -> dict:
+    """Held-out improvement of a candidate over the baseline, tested over units.
+
+    Per unit (a configuration group or time block), the mean of ``err_base - err_cand``; the
+    statistic is their mean, the null flips the sign of every unit's difference (no systematic
+    improvement), one-sided.
+
+    Parameters
+    ----------
+    err_base, err_cand : ndarray, shape (K,)
+        Per-sample errors (e.g. Eq. (49) residuals or tip distances); NaN rows dropped.
+    units : ndarray of int, shape (K,)
+
+    Returns
+    -------
+    dict
+        ``mean_difference``, ``p_value``, ``n_units``.
+    """
+    ok = np.isfinite(err_base) & np.isfinite(err_cand)
+    _, u = np.unique(np.asarray(units)[ok], return_inverse=True)
+    u = u.ravel()
+    n_u = int(u.max()) + 1 if u.size else 0
+    if n_u < 2:
+        return {"mean_difference": float("nan"), "p_value": 1.0, "n_units": n_u}
+    d = np.bincount(u, (err_base - err_cand)[ok], n_u) / np.bincount(u, minlength=n_u)
+    obs = float(d.mean())
+    rng = np.random.default_rng(seed)
+    signs = rng.choice((-1.0, 1.0), size=(n_permutations, n_u))
+    null = (signs * d).mean(axis=1)
+    p = float((1 + np.count_nonzero(null >= obs)) / (1 + n_permutations))
+    return {"mean_difference": obs, "p_value": p, "n_units": n_u}
+
+
+def _error_summary(pos, ang, seconds, n) -> dict:
+    """Table VIII row: tip position error mean, std, max [mm]; tangent mean, max [deg]."""
+    pos_mm = pos[np.isfinite(pos)] * 1e3
+    ang_deg = np.rad2deg(ang[np.isfinite(ang)])
+    return {"position_mean_mm": float(pos_mm.mean()) if pos_mm.size else None,
+            "position_std_mm": float(pos_mm.std()) if pos_mm.size else None,
+            "position_max_mm": float(pos_mm.max()) if pos_mm.size else None,
+            "tangent_mean_deg": float(ang_deg.mean()) if ang_deg.size else None,
+            "tangent_max_deg": float(ang_deg.max()) if ang_deg.size else None,
+            "evaluation_ms_per_sample": 1e3 * seconds / max(n, 1),
+            "n_samples": int(n), "n_failed": int(np.count_nonzero(~np.isfinite(pos)))}
+
+
+def _most_strained_tube(robot) -> int:
+    strain = []
+    for t in robot.tubes:
+        kappa = max(np.hypot(*s.precurvature) for s in t.sections)
+        strain.append((t.r_out or 0.0) * kappa)
+    return int(np.argmax(strain)) if max(strain) > 0 else robot.n_tubes - 1
+
+
+def _twist(robot, alpha, beta, tube: int, settings) -> np.ndarray:
+    """Twist psi(end) - psi(base) of one tube in the standard model, shape (K,) [rad]."""
+    from ..mechanics import solve_standard
+
+    out = np.full(alpha.shape[0], np.nan)
+    for k in range(alpha.shape[0]):
+        try:
+            sol = solve_standard(robot, alpha[k], beta[k], settings)
+        except CtrplanError:
+            continue
+        psi = sol.psi[:, tube]
+        fin = np.flatnonzero(np.isfinite(psi))
+        if fin.size:
+            out[k] = psi[fin[-1]] - psi[fin[0]]
+    return out
+
+
+def _units(data: MeasuredData, block: int = 50) -> np.ndarray:
+    """Exchangeable units of held-out data: configuration groups when configurations repeat,
+    else time blocks of ``block`` samples within each sequence."""
+    if np.unique(data.config_id).size < data.n_samples:
+        return data.config_id
+    _, q = np.unique(data.sequence, return_inverse=True)
+    pos = np.zeros(data.n_samples, int)
+    for s in np.unique(q):
+        idx = np.flatnonzero(q == s)
+        pos[idx] = np.arange(idx.size) // block
+    return q.ravel() * 100000 + pos
+
+
+def _subsample(data: MeasuredData, rows: np.ndarray, limit: int, seed: int) -> np.ndarray:
+    """At most ``limit`` of ``rows``: whole configuration groups when they repeat, else evenly
+    spaced rows (keeping the time order)."""
+    if rows.sum() <= limit:
+        return rows
+    sub = data.take(rows)
+    idx = np.flatnonzero(rows)
+    if np.unique(sub.config_id).size < sub.n_samples:
+        groups = np.unique(sub.config_id)
+        per = sub.n_samples / groups.size
+        chosen = np.random.default_rng(seed).choice(groups, size=max(1, int(limit // per)), replace=False)
+        keep = idx[np.isin(sub.config_id, chosen)]
+    else:
+        keep = idx[np.linspace(0, idx.size - 1, limit).round().astype(int)]
+    out = np.zeros_like(rows)
+    out[keep] = True
+    return out
+
+
+class _Stages:
+    """Finished stages on disk (JSON), so an interrupted run resumes without redoing them."""
+
+    def __init__(self, folder: Path, key: str):
+        self.folder = folder / ".stages"
+        self.key = key
+
+    def path(self, name):
+        return self.folder / f"{self.key}-{name}.json"
+
+    def load(self, name):
+        p = self.path(name)
+        return json.loads(p.read_text()) if p.exists() else None
+
+    def save(self, name, value):
+        self.folder.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(self.path(name), json.dumps(value, default=_jsonable))
+
+
+def _jsonable(x):
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    raise TypeError(type(x))
+
+
+def _result_from(d: dict) -> CalibrationResult:
+    return CalibrationResult(d["model"], tuple(d["parameters"]), np.array(list(d["parameters"].values()), float),
+                             np.array(list(d["initial"].values()), float), dict(d["fixed"]), d["cost"],
+                             d["n_samples"], d["n_failed"], d["evaluations"], d["seconds"], d["message"])
+
+
+def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions = DiscrepancyOptions(),
+                    echo=print, progress: bool = True) -> dict:
+    """Run the whole workflow and return its results (see the module docstring).
+
+    Parameters
+    ----------
+    robot_path : path
+        Robot model file with the candidate effects switched off (or not: the baseline uses
+        the standard model, which ignores friction and clearance).
+    data_path : path
+        Measured data (:func:`ctrplan.discrepancy.data.load_measured_data`).
+    out_dir : path
+        Report folder; finished stages are kept in ``out_dir/.stages`` and reused by a rerun
+        with the same inputs and options.
+    options : DiscrepancyOptions
+    echo : callable
+        Receives one line per step.
+    progress : bool
+        Progress bars of model evaluations.
+
+    Returns
+    -------
+    dict
+        JSON-ready results; arrays for plots under the key ``"_arrays"``.
+
+    Raises
+    ------
+    DataFileError
+        Bad data (see :func:`load_measured_data`), or fewer calibration samples than parameters.
+    ModelFileError, PhysicalParameterError
+        Bad robot file.
+    """
+    from ..io.robot_file import load_robot, robot_to_toml
+
+    t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    robot = load_robot(robot_path)
+    data = load_measured_data(data_path, robot, frame=options.frame)
+    register = data.frame == "tracker"
+    settings = options.settings()
+    base_names = tuple(options.fit) if options.fit else default_baseline_parameters(robot, register)
+    effects = [e for e in options.effects if not (e == "registration" and register)]
+    for e in effects:
+        clash = set(effect_parameters(robot, e)) & set(base_names)
+        if clash:
+            raise CtrplanError(f"baseline parameters {sorted(clash)} belong to the candidate effect "
+                               f"{e!r}; a parameter of a tested effect cannot be fitted in the baseline "
+                               f"(calibration would absorb the effect)")
+    has_clearance = robot.n_tubes > 1 and _has_clearance(robot)
+    effects = [e for e in effects if has_clearance or e not in ("friction", "clearance")]
+    key = hashlib.sha256(Path(robot_path).read_bytes() + Path(data_path).read_bytes()
+                         + json.dumps(asdict(options), sort_keys=True, default=str).encode()).hexdigest()[:12]
+    stages = _Stages(out_dir, key)
+
+    cal_rows, val_rows, how = split_data(data, options.calibration_fraction, seed=options.seed)
+    fit_rows = _subsample(data, cal_rows, options.max_calibration_samples, options.seed)
+    cal, fit_data, val = data.take(cal_rows), data.take(fit_rows), data.take(val_rows)
+    n_fit = fit_data.n_samples
+    if n_fit <= len(base_names) + max((len(effect_parameters(robot, e)) for e in effects), default=0):
+        raise DataFileError(f"{data.file}: {n_fit} calibration samples are not more than the "
+                            f"{len(base_names)} baseline parameters plus the largest effect's; "
+                            f"give more samples")
+    echo(f"data: {data.n_samples} samples ({data.frame} frame) from {data.file}; split {how}; "
+         f"fitting on {n_fit} calibration samples, validating on {val.n_samples}")
+
+    # 1. baseline ------------------------------------------------------------------------
+    done = stages.load("baseline")
+    if done is None:
+        echo(f"calibrating the baseline (standard model) on {', '.join(base_names)} ...")
+        base = calibrate(robot, fit_data, "standard", base_names, settings=settings, n_jobs=options.n_jobs,
+                         register=register, max_evaluations=options.max_evaluations)
+        stages.save("baseline", base.as_dict())
+    else:
+        base = _result_from(done)
+        echo("baseline calibration: reused from an earlier run")
+    echo(f"  baseline: cost {base.cost:.4g} on {base.n_samples} samples, {base.evaluations} model "
+         f"evaluations, {base.seconds:.1f} s ({base.message})")
+    base_all = dict(zip(*base.all_parameters()))
+
+    def held_out(name, model, params: dict):
+        cached = stages.load(f"validation-{name}")
+        if cached is not None:
+            return {k: np.array(v, float) if isinstance(v, list) else v for k, v in cached.items()}
+        echo(f"  evaluating {name} ({model} model) on {val.n_samples} held-out samples ...")
+        pred = predict(robot, tuple(params), tuple(params.values()), val, model, settings,
+                       n_jobs=options.n_jobs, progress=progress)
+        pos, ang, vec = pose_errors(pred, val)
+        R, _ = registration_transform(tuple(params), tuple(params.values()))
+        res = {"position": pos, "angle": ang, "residual_base": vec @ R, "tip_base": pred.tip_base,
+               "seconds": pred.seconds}
+        stages.save(f"validation-{name}", res)
+        return res
+
+    base_val = held_out("baseline", "standard", base_all)
+
+    # 2. signature tests on held-out residuals --------------------------------------------
+    echo("testing residual signatures ...")
+    E = base_val["residual_base"]
+    repeated = np.unique(val.config_id).size < val.n_samples
+    groups = val.config_id if repeated else configuration_groups(
+        val.alpha, val.beta, TRAJECTORY_ROTATION_BIN, TRAJECTORY_TRANSLATION_BIN)
+    base_robot = apply_parameters(robot, tuple(base_all), tuple(base_all.values()))
+    tests = {}
+    perm = dict(n_permutations=options.n_permutations, seed=options.seed)
+    if "friction" in effects:
+        tests["friction"] = friction_signature(E, val.eta, groups, **perm)
+    if "clearance" in effects:
+        tests["clearance"] = regression_signature(
+            "clearance", E, overlap_features(robot, val.beta), val.config_id, sequence=val.sequence,
+            description="curved-curved overlap and transmission sections in curved sections, per pair", **perm)
+    if "offplane" in effects:
+        tests["offplane"] = regression_signature(
+            "offplane", E, angle_features(val.alpha), val.config_id, sequence=val.sequence,
+            description="cos/sin of 1x and 2x the absolute angle of every rotating tube", **perm)
+    if "poisson" in effects:
+        tube = _most_strained_tube(robot)
+        twist = _twist(base_robot, val.alpha, val.beta, tube, settings)
+        tests["poisson"] = regression_signature(
+            "poisson", E, twist_features(twist, base_val["tip_base"]), val.config_id, sequence=val.sequence,
+            description=f"twist of tube {tube + 1} (most strained) and its square, times 1, cos, sin of "
+                        f"the tip azimuth", **perm)
+    if "registration" in effects:
+        tests["registration"] = registration_signature(E, base_val["tip_base"], val.config_id, **perm)
+    for e, t in tests.items():
+        echo(f"  {EFFECT_LABELS[e]:>26s}: effect {t.effect_size_m * 1e3:.3f} mm, p = {t.p_value:.4f}")
+
+    # 3. try each candidate ---------------------------------------------------------------
+    units = _units(val)
+    base_r = eq49_residuals(base_val["position"], base_val["angle"])
+    base_bic = information_criterion(base.cost, base.n_samples, len(base.names))
+    candidates = {}
+    contact_all = None
+    if "friction" in effects or "clearance" in effects:
+        # The clearance and friction models share the tube parameters (Section V-C): refit the
+        # baseline parameters with the clearance model once, then try both effects from there.
+        done = stages.load("contact-baseline")
+        if done is None:
+            echo(f"recalibrating the baseline parameters with the clearance model (shared by the clearance "
+                 f"and friction candidates) ...")
+            contact = calibrate(robot, fit_data, "clearance", base.names, fixed=base.fixed, initial=base.values,
+                                settings=settings, n_jobs=options.n_jobs,
+                                max_evaluations=options.max_evaluations // 2)
+            stages.save("contact-baseline", contact.as_dict())
+        else:
+            contact = _result_from(done)
+        echo(f"  clearance-model parameters: cost {contact.cost:.4g}, {contact.evaluations} evaluations, "
+             f"{contact.seconds:.1f} s")
+        contact_all = dict(zip(*contact.all_parameters()))
+    for e in effects:
+        model = _MODEL_OF[e]
+        extra = effect_parameters(robot, e)
+        done = stages.load(f"fit-{e}")
+        if done is not None:
+            fit = _result_from(done)
+            echo(f"candidate {EFFECT_LABELS[e]}: fit reused from an earlier run")
+        else:
+            echo(f"candidate {EFFECT_LABELS[e]}: fitting {', '.join(extra) or 'no parameters'} "
+                 f"({model} model) ...")
+            if e == "friction":
+                fit = grid_search_friction(robot, fit_data, contact_all, settings=settings, n_jobs=options.n_jobs,
+                                           coarse=options.friction_grid,
+                                           search_samples=options.friction_search_samples, seed=options.seed,
+                                           progress=_grid_progress(echo))
+            elif e == "clearance":
+                fit = calibrate(robot, fit_data, "clearance", (), fixed=contact_all, settings=settings,
+                                n_jobs=options.n_jobs)
+            else:
+                names = tuple(base.names) + extra
+                start = apply_parameters(robot, tuple(base_all), tuple(base_all.values()))
+                from .parameters import read_parameters
+
+                init = np.concatenate([base.values, read_parameters(start, extra)])
+                fit = calibrate(start, fit_data, "standard", names, initial=init, settings=settings,
+                                n_jobs=options.n_jobs, max_evaluations=options.max_evaluations)
+            stages.save(f"fit-{e}", fit.as_dict())
+        params = dict(zip(*fit.all_parameters()))
+        val_e = held_out(e, model, params)
+        r = eq49_residuals(val_e["position"], val_e["angle"])
+        k_total = len(set(base_names) | set(extra))
+        bic = information_criterion(fit.cost, fit.n_samples, k_total)
+        test = paired_improvement(base_r, r, units, seed=options.seed)
+        pos_test = paired_improvement(base_val["position"], val_e["position"], units, seed=options.seed)
+        candidates[e] = {
+            "label": EFFECT_LABELS[e], "model": model, "fit": fit.as_dict(),
+            "parameters": {n: float(params[n]) for n in extra},
+            "n_parameters": k_total, "bic": bic, "delta_bic": bic - base_bic,
+            "held_out": _error_summary(val_e["position"], val_e["angle"], val_e["seconds"], val.n_samples),
+            "improvement_eq49": test, "improvement_position": pos_test,
+            "_val": val_e, "_params": params}
+        ho = candidates[e]["held_out"]
+        echo(f"  {EFFECT_LABELS[e]}: {', '.join(f'{n} = {params[n]:.4g}' for n in extra) or 'nominal'}; "
+             f"held-out mean {ho['position_mean_mm']:.3f} mm, max {ho['position_max_mm']:.3f} mm; "
+             f"dBIC {bic - base_bic:.1f}; improvement p = {test['p_value']:.4f}")
+
+    # 4. name the missing effect ------------------------------------------------------------
+    base_summary = _error_summary(base_val["position"], base_val["angle"], base_val["seconds"], val.n_samples)
+    eligible = []
+    for e, c in candidates.items():
+        sig = tests.get(e)
+        c["signature_significant"] = bool(sig is not None and sig.p_value < options.significance)
+        c["improvement_significant"] = bool(c["improvement_eq49"]["p_value"] < options.significance
+                                            and c["improvement_eq49"]["mean_difference"] > 0)
+        c["bic_better"] = bool(c["delta_bic"] < -BIC_MARGIN)
+        c["eligible"] = c["signature_significant"] and c["improvement_significant"] and c["bic_better"]
+        if c["eligible"]:
+            eligible.append(e)
+    named = max(eligible, key=lambda e: candidates[e]["improvement_eq49"]["mean_difference"]) if eligible else None
+    if named:
+        echo(f"named effect: {EFFECT_LABELS[named]}")
+    else:
+        echo("no effect named: no candidate has a significant signature, a significant held-out "
+             "improvement and a better BIC together (the residuals are consistent with noise and the "
+             "baseline's parameters)")
+
+    # 5. write the updated model and check it reproduces ------------------------------------
+    final_params = candidates[named]["_params"] if named else base_all
+    final_model = _MODEL_OF[named] if named else "standard"
+    reg_names = [n for n in final_params if n in REGISTRATION]
+    registration = None
+    if reg_names:
+        vals = [final_params.get(n, 0.0) for n in REGISTRATION]
+        registration = {"rotation_vector_rad": vals[:3], "translation_m": vals[3:]}
+    updated = apply_parameters(robot, tuple(final_params), tuple(final_params.values()))
+    updated = updated.replace(name=f"{robot.name}-{named or 'recalibrated'}",
+                              source=f"{robot.source}; recalibrated by ctrplan discrepancy on {Path(data_path).name}")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    model_path = out_dir / f"{updated.name}.toml"
+    header = (f"Written by `ctrplan discrepancy` from {Path(robot_path).name} and {Path(data_path).name}.\n"
+              f"Named effect: {EFFECT_LABELS[named] if named else 'none'}; evaluate with the "
+              f"{final_model} model.\nCalibrated parameters: "
+              + ", ".join(f"{n} = {v:.6g}" for n, v in final_params.items() if n not in REGISTRATION))
+    atomic_write_text(model_path, robot_to_toml(updated, header=header, model=final_model,
+                                                registration=registration))
+    final_val = candidates[named]["_val"] if named else base_val
+    after = _error_summary(final_val["position"], final_val["angle"], final_val["seconds"], val.n_samples)
+    check_rows = _subsample(val, np.ones(val.n_samples, bool), REPRODUCE_SAMPLES, options.seed)
+    check = reproduce_errors(model_path, val.take(check_rows), settings, n_jobs=options.n_jobs)
+    reproduced = bool(np.allclose(check["position"], final_val["position"][check_rows], atol=1e-9,
+                                  equal_nan=True))
+    echo(f"wrote {model_path}; reloaded, it reproduces the held-out errors of {int(check_rows.sum())} "
+         f"samples: {reproduced} "
+         f"(mean {np.nanmean(check['position']) * 1e3:.3f} mm)")
+
+    results = {
+        "robot_file": str(robot_path), "data_file": str(data_path), "frame": data.frame,
+        "n_samples": data.n_samples, "split": how, "n_calibration": cal.n_samples, "n_fit": n_fit,
+        "n_validation": val.n_samples, "baseline_parameters": list(base_names),
+        "baseline": {"fit": base.as_dict(), "bic": base_bic, "held_out": base_summary},
+        "signature_tests": {e: t.as_dict() for e, t in tests.items()},
+        "candidates": {e: {k: v for k, v in c.items() if not k.startswith("_")} for e, c in candidates.items()},
+        "named_effect": named, "named_label": EFFECT_LABELS[named] if named else None,
+        "after": after, "updated_model_file": str(model_path), "updated_model": final_model,
+        "reproduced": reproduced, "reproduced_samples": int(check_rows.sum()),
+        "reproduced_position_mean_mm": float(np.nanmean(check["position"]) * 1e3),
+        "significance": options.significance, "bic_margin": BIC_MARGIN, "options": asdict(options),
+        "seconds": time.perf_counter() - t_start,
+        "_arrays": {"val_eta": val.eta, "val_tip_base": base_val["tip_base"],
+                    "before_position": base_val["position"], "before_angle": base_val["angle"],
+                    "before_residual": base_val["residual_base"],
+                    "after_position": final_val["position"], "after_angle": final_val["angle"],
+                    "after_residual": final_val["residual_base"],
+                    "reduction": (1.0 - after["position_mean_mm"] / base_summary["position_mean_mm"])
+                    if base_summary["position_mean_mm"] else None},
+    }
+    return results
+
+
+def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: int = 1) -> dict:
+    """Load an updated model file and evaluate its held-out errors with the model it names.
+
+    Returns
+    -------
+    dict
+        ``position`` (K,) [m], ``angle`` (K,) [rad].
+    """
+    from ..io.robot_file import load_robot
+
+    robot = load_robot(model_path)
+    model = robot.metadata.get("model") or "standard"
+    reg = robot.metadata.get("tracker_registration")
+    names, values = (), ()
+    if reg:
+        names, values = REGISTRATION, tuple(reg["rotation_vector_rad"]) + tuple(reg["translation_m"])
+    pred = predict(robot, names, values, data, model, settings, n_jobs=n_jobs)
+    pos, ang, _ = pose_errors(pred, data)
+    return {"position": pos, "angle": ang}
+
+
+def _has_clearance(robot) -> bool:
+    try:
+        c = robot.clearances
+    except Exception:
+        return False
+    return c is not None and np.all(np.isfinite(c))
+
+
+def _grid_progress(echo):
+    state = {"last": -1}
+
+    def report(done, total):
+        pct = int(100 * done / total)
+        if pct // 10 != state["last"]:
+            state["last"] = pct // 10
+            echo(f"    friction grid search: {done}/{total} points")
+    return report
