@@ -21,22 +21,24 @@ from numba import njit
 
 from ..constants import DISTINCT_EQUILIBRIUM_TWIST
 from ..errors import ConvergenceError, ElasticInstabilityError
-from ._lie import exp_so3, left_jacobian_so3, rot_z
+from ._contact_kernels import chain_kinematics
+from ._lie import rot_z
 from .grid import build_grid
 from .results import Diagnostics, ModelSettings, StandardSolution
 
 __all__ = ["solve_standard"]
 
+_ZERO1 = np.zeros(1)
 
-@njit(cache=True)
-def _rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, dpsi, dsig, dSp, dSs):
-    """Torsion ODE and its variational equations on one interval (in-place outputs)."""
+
+@njit(cache=True, error_model="numpy")
+def _rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, dpsi, dsig, dSp, dSs, ax, ay, ducx, ducy):
+    """Torsion ODE and its variational equations on one interval (in-place outputs; ``ax``,
+    ``ay`` (n,) and ``ducx``, ``ducy`` (m,) are work arrays)."""
     n = psi.shape[0]
     ksum = 0.0
     ucx = 0.0
     ucy = 0.0
-    ax = np.empty(n)
-    ay = np.empty(n)
     for i in range(n):
         c = np.cos(psi[i])
         s = np.sin(psi[i])
@@ -51,8 +53,9 @@ def _rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, dpsi, dsig, dSp, dSs):
         ucy /= ksum
     m = Sp.shape[1]
     # d u_c / d psi_j = k_j rot90(a_j) / ksum, rot90(a) = (-a_y, a_x)
-    ducx = np.zeros(m)
-    ducy = np.zeros(m)
+    for q in range(m):
+        ducx[q] = 0.0
+        ducy[q] = 0.0
     for j in range(n):
         if present[j]:
             w = kxy[j] / ksum
@@ -76,9 +79,20 @@ def _rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, dpsi, dsig, dSp, dSs):
                 dSs[i, q] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
+def _stages(psi, sig, Sp, Ss, kp, ks, Kp, Ks, f, tp, ts, TP, TS):
+    """RK4 stage inputs: (tp, ts, TP, TS) = (psi, sig, Sp, Ss) + f (kp, ks, Kp, Ks)."""
+    for i in range(psi.shape[0]):
+        tp[i] = psi[i] + f * kp[i]
+        ts[i] = sig[i] + f * ks[i]
+        for q in range(Sp.shape[1]):
+            TP[i, q] = Sp[i, q] + f * Kp[i, q]
+            TS[i, q] = Ss[i, q] + f * Ks[i, q]
+
+
+@njit(cache=True, error_model="numpy")
 def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
-    """Classical RK4 over the grid intervals, one step per interval.
+    """Classical RK4 over the grid intervals, one step per interval (allocation-free inner loop).
 
     Returns final psi, sigma, sensitivities d(psi, sigma)/d sigma0, and, when ``record``,
     psi, sigma and sigma' at every node.
@@ -99,28 +113,33 @@ def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
     k3p = np.empty(n); k3s = np.empty(n); k4p = np.empty(n); k4s = np.empty(n)
     K1p = np.empty((n, m)); K1s = np.empty((n, m)); K2p = np.empty((n, m)); K2s = np.empty((n, m))
     K3p = np.empty((n, m)); K3s = np.empty((n, m)); K4p = np.empty((n, m)); K4s = np.empty((n, m))
+    tp = np.empty(n); ts = np.empty(n); TP = np.empty((n, m)); TS = np.empty((n, m))
+    ax = np.empty(n); ay = np.empty(n); dx = np.empty(m); dy = np.empty(m)
     for j in range(G - 1):
         h = s[j + 1] - s[j]
         pr = present[j]
         u = uh[j]
-        _rhs(psi, sig, Sp, Ss, pr, u, kxy, ratio, k1p, k1s, K1p, K1s)
+        _rhs(psi, sig, Sp, Ss, pr, u, kxy, ratio, k1p, k1s, K1p, K1s, ax, ay, dx, dy)
         if record:
             rec_psi[j] = psi
             rec_sig[j] = sig
             rec_dsig[j] = k1s
-        _rhs(psi + 0.5 * h * k1p, sig + 0.5 * h * k1s, Sp + 0.5 * h * K1p, Ss + 0.5 * h * K1s,
-             pr, u, kxy, ratio, k2p, k2s, K2p, K2s)
-        _rhs(psi + 0.5 * h * k2p, sig + 0.5 * h * k2s, Sp + 0.5 * h * K2p, Ss + 0.5 * h * K2s,
-             pr, u, kxy, ratio, k3p, k3s, K3p, K3s)
-        _rhs(psi + h * k3p, sig + h * k3s, Sp + h * K3p, Ss + h * K3s,
-             pr, u, kxy, ratio, k4p, k4s, K4p, K4s)
-        psi = psi + h / 6.0 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p)
-        sig = sig + h / 6.0 * (k1s + 2.0 * k2s + 2.0 * k3s + k4s)
-        Sp = Sp + h / 6.0 * (K1p + 2.0 * K2p + 2.0 * K3p + K4p)
-        Ss = Ss + h / 6.0 * (K1s + 2.0 * K2s + 2.0 * K3s + K4s)
+        _stages(psi, sig, Sp, Ss, k1p, k1s, K1p, K1s, 0.5 * h, tp, ts, TP, TS)
+        _rhs(tp, ts, TP, TS, pr, u, kxy, ratio, k2p, k2s, K2p, K2s, ax, ay, dx, dy)
+        _stages(psi, sig, Sp, Ss, k2p, k2s, K2p, K2s, 0.5 * h, tp, ts, TP, TS)
+        _rhs(tp, ts, TP, TS, pr, u, kxy, ratio, k3p, k3s, K3p, K3s, ax, ay, dx, dy)
+        _stages(psi, sig, Sp, Ss, k3p, k3s, K3p, K3s, h, tp, ts, TP, TS)
+        _rhs(tp, ts, TP, TS, pr, u, kxy, ratio, k4p, k4s, K4p, K4s, ax, ay, dx, dy)
+        f = h / 6.0
+        for i in range(n):
+            psi[i] = psi[i] + f * (k1p[i] + 2.0 * k2p[i] + 2.0 * k3p[i] + k4p[i])
+            sig[i] = sig[i] + f * (k1s[i] + 2.0 * k2s[i] + 2.0 * k3s[i] + k4s[i])
+            for q in range(m):
+                Sp[i, q] = Sp[i, q] + f * (K1p[i, q] + 2.0 * K2p[i, q] + 2.0 * K3p[i, q] + K4p[i, q])
+                Ss[i, q] = Ss[i, q] + f * (K1s[i, q] + 2.0 * K2s[i, q] + 2.0 * K3s[i, q] + K4s[i, q])
         if record and j == G - 2:
             # derivative at the last node, evaluated with the last interval's data
-            _rhs(psi, sig, Sp, Ss, pr, u, kxy, ratio, k1p, k1s, K1p, K1s)
+            _rhs(psi, sig, Sp, Ss, pr, u, kxy, ratio, k1p, k1s, K1p, K1s, ax, ay, dx, dy)
             rec_psi[G - 1] = psi
             rec_sig[G - 1] = sig
             rec_dsig[G - 1] = k1s
@@ -197,17 +216,12 @@ def _assemble(problem, sig0, diag) -> StandardSolution:
     k = problem.kxy[None, :] * g.present
     ksum = np.maximum(k.sum(axis=1), 1e-300)
     ub = np.stack([(k * ax).sum(axis=1) / ksum, (k * ay).sum(axis=1) / ksum], axis=1)
-    phi = np.zeros((h.size, 3))
-    phi[:, :2] = ub * h[:, None]
-    E = exp_so3(phi)
-    Vz = left_jacobian_so3(phi)[:, :, 2] * h[:, None]
+    # shared centerline: exponential-coordinates steps from R = I, p = (0, 0, s_0) (Eq. (57))
+    ucurv = np.zeros((h.size, 3))
+    ucurv[:, :2] = ub
     R = np.empty((s.size, 3, 3))
     p = np.empty((s.size, 3))
-    R[0] = np.eye(3)
-    p[0] = (0.0, 0.0, s[0])
-    for j in range(h.size):
-        p[j + 1] = p[j] + R[j] @ Vz[j]
-        R[j + 1] = R[j] @ E[j]
+    chain_kinematics(ucurv, h, _ZERO1, np.array([s[0]]), np.array([0, s.size], dtype=np.int64), R, p)
     # bending at nodes (for reporting): from node angles
     cN, sN = np.cos(psi), np.sin(psi)
     presN = np.vstack([g.present, g.present[-1:]])
