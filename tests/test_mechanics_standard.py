@@ -137,3 +137,30 @@ def test_tube_curvatures_and_frames_are_consistent():
     breaks = np.concatenate([beta[i] + t.section_breaks() for i, t in enumerate(robot.tubes)])
     interior = np.min(np.abs(sol.s[:, None] - breaks[None, :]), axis=1) > 2e-3
     assert np.max(np.abs(moment[interior])) < 1e-9
+
+
+def test_batch_equals_single_solves():
+    """solve_standard_batch reproduces solve_standard (check_stability=False) configuration by
+    configuration, flags impossible configurations instead of raising, and checks shapes."""
+    from ctrplan.mechanics import solve_standard_batch
+
+    robot = table2_robot()
+    rng = np.random.default_rng(7)
+    qs = [[rng.uniform(-np.pi, np.pi), rng.uniform(-np.pi, np.pi), rng.uniform(-0.104, -0.034)]
+          for _ in range(6)]
+    configs = [robot.configuration(q) for q in qs]
+    alpha = np.array([a for a, _ in configs])
+    beta = np.array([b for _, b in configs])
+    beta[-1, 2] = 0.01  # inner base in front of the outer bases: impossible
+    settings = ModelSettings(ds=3e-3)
+    res = solve_standard_batch(robot, alpha, beta, settings)
+    assert not res.valid[-1] and np.all(np.isnan(res.tip_position[-1]))
+    for k in range(5):
+        st = solve_standard(robot, alpha[k], beta[k], settings, check_stability=False)
+        np.testing.assert_allclose(res.tip_position[k], st.tip_position, atol=1e-10)
+        np.testing.assert_allclose(res.tip_tangent[k], st.tip_tangent, atol=1e-10)
+        np.testing.assert_allclose(res.base_torsion[k], st.base_torsion, atol=1e-8)
+        assert res.converged[k] == st.diagnostics.converged
+        assert res.unstable[k] == st.diagnostics.unstable
+    with pytest.raises(ValueError, match="shape"):
+        solve_standard_batch(robot, alpha[:, :2], beta, settings)

@@ -4,6 +4,7 @@
 - :func:`solve_clearance`: clearance model (Sections II-B to II-E, Appendices A and B).
 - :func:`solve_friction`: one maximal torsional friction solution (Section III).
 - :func:`evaluate_bound`: the per-configuration friction bound over all 2^(n-1) directions.
+- :func:`solve_standard_batch`: the standard model at many configurations in one compiled call.
 
 All from Ha, Fagogenis & Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906.
 """
@@ -13,10 +14,11 @@ from .contact import solve_clearance, solve_contact, solve_friction
 from .discrete import TubeChain, chain_jacobians, forward_kinematics
 from .grid import ArcLengthGrid, build_grid
 from .results import BoundResult, ContactSolution, Diagnostics, ModelSettings, StandardSolution
+from ._standard_batch import StandardBatch, solve_standard_batch
 from .standard import solve_standard
 
 __all__ = [
-    "solve_standard", "solve_clearance", "solve_friction", "solve_contact", "evaluate_bound",
+    "solve_standard", "solve_standard_batch", "StandardBatch", "solve_clearance", "solve_friction", "solve_contact", "evaluate_bound",
     "all_eta", "ModelSettings", "StandardSolution", "ContactSolution", "BoundResult", "Diagnostics",
     "TubeChain", "forward_kinematics", "chain_jacobians", "ArcLengthGrid", "build_grid",
 ]

@@ -1,0 +1,267 @@
+"""Standard model for many configurations in one compiled call (:func:`solve_standard_batch`).
+
+Per configuration, the same steps as :func:`ctrplan.mechanics.solve_standard` with
+``check_stability=False``: the common arc-length grid of Section II-C of Ha, Fagogenis & Dupont
+2019 (``grid.build_grid``), damped Newton shooting on the base torsions with the exact
+variational Jacobian (``standard._Problem.newton``), and the shared centerline from midpoint
+curvatures (``standard._assemble``), all in numba with no Python work per configuration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..constants import GRID_MERGE_TOL
+from ._contact_kernels import chain_kinematics
+from .results import ModelSettings
+from .standard import _integrate
+
+__all__ = ["StandardBatch", "solve_standard_batch"]
+
+
+@dataclass
+class StandardBatch:
+    """Tips of the standard model at K configurations.
+
+    Attributes
+    ----------
+    tip_position : ndarray, shape (K, 3)
+        [m]; NaN where the configuration is impossible.
+    tip_tangent : ndarray, shape (K, 3)
+        Unit tangent at the tip.
+    base_torsion : ndarray, shape (K, n)
+        Base torsions u_(i,z)(beta_i) [1/m] (``initial_guess`` of :func:`solve_standard`).
+    converged : ndarray of bool, shape (K,)
+        Newton shooting reached ``shooting_tol``.
+    unstable : ndarray of bool, shape (K,)
+        Shooting-Jacobian determinant not positive (the determinant test of
+        :func:`solve_standard`; the multistart search is not run in batch mode).
+    valid : ndarray of bool, shape (K,)
+        Configuration passed ``Robot.check_configuration``.
+    iterations : ndarray of int, shape (K,)
+        Newton iterations.
+    """
+
+    tip_position: np.ndarray
+    tip_tangent: np.ndarray
+    base_torsion: np.ndarray
+    converged: np.ndarray
+    unstable: np.ndarray
+    valid: np.ndarray
+    iterations: np.ndarray
+
+
+@njit(cache=True)
+def _grid(beta, lengths, brk, nbrk, curv, ds, tol):
+    """Common grid (same construction as ``grid.build_grid``): nodes s (G,), first/last (n,),
+    present (G - 1, n), precurvature (G - 1, n, 2)."""
+    n = beta.shape[0]
+    total = 0
+    for i in range(n):
+        total += nbrk[i]
+    allb = np.empty(total)
+    q = 0
+    for i in range(n):
+        for j in range(nbrk[i]):
+            allb[q] = np.round((beta[i] + brk[i, j]) / tol) * tol
+            q += 1
+    br = np.unique(allb)
+    count = 1
+    for a in range(br.shape[0] - 1):
+        m = max(1, int(np.ceil((br[a + 1] - br[a]) / ds - 1e-9)))
+        count += m
+    s = np.empty(count)
+    s[0] = br[0]
+    q = 1
+    for a in range(br.shape[0] - 1):
+        lo = br[a]
+        hi = br[a + 1]
+        m = max(1, int(np.ceil((hi - lo) / ds - 1e-9)))
+        for k in range(1, m + 1):
+            s[q] = lo + (hi - lo) * k / m
+            q += 1
+    G = s.shape[0]
+    first = np.empty(n, dtype=np.int64)
+    last = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        first[i] = np.argmin(np.abs(s - beta[i]))
+        last[i] = np.argmin(np.abs(s - (beta[i] + lengths[i])))
+    present = np.zeros((G - 1, n), dtype=np.bool_)
+    uhat = np.zeros((G - 1, n, 2))
+    for i in range(n):
+        b = brk[i, :nbrk[i]]
+        nsec = nbrk[i] - 1
+        for j in range(first[i], last[i]):
+            present[j, i] = True
+            local = 0.5 * (s[j] + s[j + 1]) - beta[i]
+            idx = np.searchsorted(b, local, side="right") - 1
+            idx = min(max(idx, 0), nsec - 1)
+            uhat[j, i, 0] = curv[i, idx, 0]
+            uhat[j, i, 1] = curv[i, idx, 1]
+    return s, first, last, present, uhat
+
+
+@njit(cache=True)
+def _newton(s, present, uhat, kxy, ratio, alpha, sig0, lengths, tol, maxit):
+    """Damped Newton shooting (``standard._Problem.newton``): returns (sig0, ok, iterations, detJ)."""
+    n = sig0.shape[0]
+    sig0 = sig0.copy()
+    for it in range(1, maxit + 1):
+        _, sig, _, Ss, _, _, _ = _integrate(s, present, uhat, kxy, ratio, alpha.copy(), sig0, False, True)
+        res = np.max(np.abs(sig))
+        J = Ss[:, :n].copy()
+        detJ = np.linalg.det(J)
+        if not np.all(np.isfinite(sig)):
+            return sig0, False, it, detJ
+        if res < tol:
+            return sig0, True, it, detJ
+        step = np.linalg.lstsq(J, sig)[0] if not abs(detJ) > 0.0 else np.linalg.solve(J, sig)
+        scale = 1.0
+        for i in range(n):
+            if abs(step[i]) > 0.0:
+                scale = min(scale, (np.pi / lengths[i]) / abs(step[i]))
+        t = scale
+        accepted = False
+        trial = sig0 - t * step
+        for _ in range(20):
+            trial = sig0 - t * step
+            _, sig_t, _, _, _, _, _ = _integrate(s, present, uhat, kxy, ratio, alpha.copy(), trial, False, False)
+            if np.all(np.isfinite(sig_t)) and np.max(np.abs(sig_t)) < (1.0 - 1e-4 * t) * res:
+                accepted = True
+                break
+            t *= 0.5
+        sig0 = trial if accepted else sig0 - scale * step
+    _, sig, _, Ss, _, _, _ = _integrate(s, present, uhat, kxy, ratio, alpha.copy(), sig0, False, True)
+    return sig0, np.max(np.abs(sig)) < tol, maxit, np.linalg.det(Ss)
+
+
+@njit(cache=True)
+def _tip(s, present, uhat, kxy, ratio, alpha, sig0):
+    """Tip position and tangent from midpoint curvatures (``standard._assemble``)."""
+    _, _, _, _, psi, sig, _ = _integrate(s, present, uhat, kxy, ratio, alpha.copy(), sig0, True, False)
+    G = s.shape[0]
+    n = alpha.shape[0]
+    u = np.zeros((G - 1, 3))
+    h = np.empty(G - 1)
+    for j in range(G - 1):
+        hj = s[j + 1] - s[j]
+        h[j] = hj
+        ks = 0.0
+        ux = 0.0
+        uy = 0.0
+        for i in range(n):
+            pm = 0.5 * (psi[j, i] + psi[j + 1, i]) + hj * (sig[j, i] - sig[j + 1, i]) / 8.0
+            c = np.cos(pm)
+            sn = np.sin(pm)
+            if present[j, i]:
+                ks += kxy[i]
+                ux += kxy[i] * (c * uhat[j, i, 0] - sn * uhat[j, i, 1])
+                uy += kxy[i] * (sn * uhat[j, i, 0] + c * uhat[j, i, 1])
+        ks = max(ks, 1e-300)
+        u[j, 0] = ux / ks
+        u[j, 1] = uy / ks
+    R = np.empty((G, 3, 3))
+    p = np.empty((G, 3))
+    node_off = np.array([0, G], dtype=np.int64)
+    chain_kinematics(u, h, np.zeros(1), np.array([s[0]]), node_off, R, p)
+    return p[G - 1].copy(), R[G - 1, :, 2].copy()
+
+
+@njit(cache=True)
+def _batch(alpha, beta, valid, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
+           grid_tol, tips, tans, sig_out, conv, unst, iters):
+    K, n = alpha.shape
+    for k in range(K):
+        if not valid[k]:
+            continue
+        s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, grid_tol)
+        a = alpha[k].copy()
+        sig0, ok, it, detJ = _newton(s, present, uhat, kxy, ratio, a, sig_init[k], lengths, tol, maxit)
+        if not ok:
+            sig0, ok, it2, detJ = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths, tol, maxit)
+            it += it2
+        iters[k] = it
+        conv[k] = ok
+        unst[k] = ok and not detJ > 0.0
+        sig_out[k] = sig0
+        p, t = _tip(s, present, uhat, kxy, ratio, a, sig0)
+        tips[k] = p
+        tans[k] = t
+
+
+def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = None, *,
+                         initial_guess=None) -> StandardBatch:
+    """Solve the standard zero-clearance model at many configurations in one compiled call.
+
+    Parameters
+    ----------
+    robot : Robot
+    alpha : array-like, shape (K, n)
+        Base rotations [rad].
+    beta : array-like, shape (K, n)
+        Base translations [m].
+    settings : ModelSettings, optional
+        Uses ``ds``, ``shooting_tol`` and ``max_shooting_iterations`` (no multistart search).
+    initial_guess : array-like, shape (K, n), optional
+        Base torsions [1/m] to start each Newton solve from (default: no twist); as in
+        :func:`solve_standard`, a failed start is retried from zero twist.
+
+    Returns
+    -------
+    StandardBatch
+        Tip positions and tangents, base torsions and per-configuration flags. Impossible
+        configurations are flagged ``valid = False`` (NaN tips) instead of raising.
+
+    Raises
+    ------
+    ValueError
+        If ``alpha`` and ``beta`` are not both of shape (K, n).
+
+    Notes
+    -----
+    Section II-A of Ha, Fagogenis & Dupont 2019 (refs [10], [11]); the same discretization,
+    tolerances and Newton iteration as :func:`solve_standard` with ``check_stability=False``,
+    so tips agree with it to the shooting tolerance. The stability flag is the
+    Jacobian-determinant test only.
+    """
+    settings = settings or ModelSettings()
+    n = robot.n_tubes
+    alpha = np.ascontiguousarray(alpha, dtype=float)
+    beta = np.ascontiguousarray(beta, dtype=float)
+    if alpha.ndim != 2 or alpha.shape[1] != n or beta.shape != alpha.shape:
+        raise ValueError(f"alpha and beta must both have shape (K, {n}), got {alpha.shape} and {beta.shape}")
+    K = alpha.shape[0]
+    sig_init = (np.zeros((K, n)) if initial_guess is None
+                else np.ascontiguousarray(np.broadcast_to(initial_guess, (K, n)), dtype=float))
+    valid = np.ones(K, dtype=bool)
+    for k in range(K):
+        try:
+            robot.check_configuration(alpha[k], beta[k])
+        except ValueError:
+            valid[k] = False
+    nb = max(len(t.sections) + 1 for t in robot.tubes)
+    brk = np.zeros((n, nb))
+    curv = np.zeros((n, nb - 1, 2))
+    nbrk = np.zeros(n, dtype=np.int64)
+    for i, t in enumerate(robot.tubes):
+        b = t.section_breaks()
+        brk[i, :b.size] = b
+        nbrk[i] = b.size
+        curv[i, :len(t.sections)] = [sec.precurvature for sec in t.sections]
+    lengths = np.array([t.length for t in robot.tubes])
+    kxy = np.array([t.k_xy for t in robot.tubes])
+    ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
+    tips = np.full((K, 3), np.nan)
+    tans = np.full((K, 3), np.nan)
+    sig_out = np.full((K, n), np.nan)
+    conv = np.zeros(K, dtype=bool)
+    unst = np.zeros(K, dtype=bool)
+    iters = np.zeros(K, dtype=np.int64)
+    _batch(alpha, beta, valid, sig_init, lengths, brk, nbrk, curv, kxy, ratio, float(settings.ds),
+           float(settings.shooting_tol), int(settings.max_shooting_iterations), GRID_MERGE_TOL,
+           tips, tans, sig_out, conv, unst, iters)
+    return StandardBatch(tip_position=tips, tip_tangent=tans, base_torsion=sig_out, converged=conv,
+                         unstable=unst, valid=valid, iterations=iters)
