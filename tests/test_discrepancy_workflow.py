@@ -1,0 +1,256 @@
+"""The discrepancy workflow: bad data, parameters, splits, signature tests, registration recovery,
+the updated model file, and (slow) naming of hidden effects on synthetic data and real data."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.spatial.transform import Rotation
+
+from ctrplan.discrepancy import Effects, Noise, synthesize, write_synth
+from ctrplan.discrepancy.data import MeasuredData, load_measured_data, split_data
+from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, read_parameters
+from ctrplan.discrepancy.report import write_report
+from ctrplan.discrepancy.signatures import friction_signature, regression_signature, registration_signature
+from ctrplan.discrepancy.workflow import DiscrepancyOptions, reproduce_errors, run_discrepancy
+from ctrplan.errors import CtrplanError, DataFileError
+from ctrplan.io.robot_file import load_robot, robot_to_toml
+from ctrplan.mechanics import ModelSettings
+
+ROOT = Path(__file__).resolve().parents[1]
+TABLE7 = ROOT / "model" / "ha2019-table7-calibrated.toml"
+HA_DATA = ROOT.parent / "shared" / "data" / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt"
+COARSE = ModelSettings(ds=6e-3)
+
+
+def _write_model(robot, path, header):
+    path.write_text(robot_to_toml(robot, header=header))
+    return path
+
+
+def _no_effects_model(tmp_path, offplane_zero=False):
+    """Table VII with friction switched off (and optionally its off-plane precurvature)."""
+    robot = load_robot(TABLE7).replace(friction_coefficients=(0.0, 0.0))
+    if offplane_zero:
+        robot = apply_parameters(robot, ("precurvature_x_1", "precurvature_x_2", "precurvature_x_3"), (0, 0, 0))
+    return robot, _write_model(robot, tmp_path / "model.toml", "Table VII, effects off")
+
+
+def _synth(robot, effects, path, grid, seed=0, settings=COARSE, noise=Noise()):
+    res = synthesize(robot, effects, protocol="paper", grid=grid, noise=noise, seed=seed,
+                     settings=settings, n_jobs=2)
+    write_synth(path, res)
+    return res
+
+
+# --------------------------------------------------------------------------- bad data
+def _good_frame(k=12):
+    rng = np.random.default_rng(0)
+    d = {"alpha_1": np.zeros(k), "alpha_2": rng.uniform(-3, 3, k), "alpha_3": rng.uniform(-3, 3, k),
+         "beta_1": np.zeros(k), "beta_2": np.full(k, -0.017), "beta_3": rng.uniform(-0.1, -0.04, k),
+         "tip_x": rng.normal(0.05, 0.01, k), "tip_y": rng.normal(0, 0.01, k), "tip_z": np.full(k, 0.15)}
+    return pd.DataFrame(d)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda f: f.drop(columns=["tip_y"]), r"missing column 'tip_y'"),
+    (lambda f: f.assign(tip_z=[0.15] * 5 + [float("nan")] + [0.15] * 6), r"column 'tip_z', row 6"),
+    (lambda f: f.assign(tip_z=f["tip_z"] * 1e3), r"column 'tip_z', row 1 .*millimetres"),
+    (lambda f: f.assign(beta_3=f["beta_3"] * 1e3), r"column 'beta_3', row 1 .*millimetres"),
+])
+def test_bad_data_names_the_column_and_row(tmp_path, edit, match):
+    robot = load_robot(TABLE7)
+    path = tmp_path / "bad.csv"
+    edit(_good_frame()).to_csv(path, index=False)
+    with pytest.raises(DataFileError, match=match):
+        load_measured_data(path, robot)
+
+
+def test_fewer_samples_than_parameters_is_refused_before_any_work(tmp_path):
+    robot, model = _no_effects_model(tmp_path)
+    path = tmp_path / "few.csv"
+    _good_frame(6).to_csv(path, index=False)
+    with pytest.raises(DataFileError, match=r"calibration samples are not more than the 5 baseline parameters"):
+        run_discrepancy(model, path, tmp_path / "out", DiscrepancyOptions(effects=("offplane",)), echo=lambda s: None)
+
+
+def test_joint_outside_limits_names_the_row(tmp_path):
+    robot = load_robot(TABLE7)
+    f = _good_frame()
+    f.loc[3, "beta_3"] = -0.2
+    path = tmp_path / "limits.csv"
+    f.to_csv(path, index=False)
+    with pytest.raises(DataFileError, match=r"limits.csv: row 4"):
+        load_measured_data(path, robot)
+
+
+# --------------------------------------------------------------------------- parameters and split
+def test_parameters_round_trip_and_refuse_what_does_not_exist():
+    robot = load_robot(TABLE7)
+    names = ("precurvature_y_3", "precurvature_x_2", "k_xy_relative_3", "poisson_ratio_1", "mu_2")
+    values = np.array([15.0, 0.5, 0.25, 0.2, 0.3])
+    moved = apply_parameters(robot, names, values)
+    np.testing.assert_allclose(read_parameters(moved, names), values, rtol=1e-12)
+    # tube 3's straight transmission section stays straight; other tubes untouched
+    assert moved.tubes[2].sections[0].is_straight and moved.tubes[0] == robot.tubes[0].__class__(
+        **{**robot.tubes[0].__dict__, "poisson_ratio": 0.2})
+    for bad, match in (("precurvature_y_4", "has 3 tubes"), ("k_xy_relative_1", "stiffness reference"),
+                       ("mu_3", "has 2 pairs"), ("twist_1", "unknown calibration parameter")):
+        with pytest.raises(ParameterError, match=match):
+            apply_parameters(robot, (bad,), (1.0,))
+    with pytest.raises(ParameterError, match="outside"):
+        apply_parameters(robot, ("poisson_ratio_2",), (0.7,))
+
+
+def _toy_data(config_id, sequence):
+    k = len(config_id)
+    z = np.zeros((k, 3))
+    return MeasuredData(alpha=z, beta=z, tip=z, tangent=None, eta=np.zeros((k, 2), int),
+                        translation_last=np.zeros(k, bool), sequence=np.asarray(sequence),
+                        config_id=np.asarray(config_id), subset=None, time=None, file="toy", frame="robot")
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_split_never_separates_a_configuration_or_a_sequence(seed):
+    rng = np.random.default_rng(seed)
+    unit = rng.integers(0, 40, 200)           # rows of a unit share configurations and sequences
+    config = unit * 10 + rng.integers(0, 3, 200)
+    seq = unit * 10 + rng.integers(0, 3, 200)
+    cal, val, how = split_data(_toy_data(config, seq), 0.3, seed=seed)
+    assert cal.any() and val.any() and not (cal & val).any() and (cal | val).all()
+    for ids in (config, seq):
+        for u in np.unique(ids):
+            assert cal[ids == u].all() or val[ids == u].all(), how
+    # one continuous motion: contiguous time blocks
+    cal, val, how = split_data(_toy_data(np.arange(500), np.zeros(500, int)), 0.25, block_samples=50)
+    assert "time blocks" in how and cal.sum() in (100, 150)
+    assert np.all(np.diff(np.flatnonzero(cal))[np.diff(np.flatnonzero(cal)) > 1] > 50)
+
+
+# --------------------------------------------------------------------------- signature tests
+def test_signature_tests_find_planted_patterns_and_not_noise():
+    rng = np.random.default_rng(3)
+    g = np.repeat(np.arange(200), 4)
+    eta = np.tile([[1, 1], [1, -1], [-1, 1], [-1, -1]], (200, 1))
+    noise = rng.normal(0, 0.8e-3, (800, 3))
+    direction = rng.normal(size=(200, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    planted = noise + 1e-3 * eta[:, :1] * direction[g]
+    null = friction_signature(noise, eta, g, n_permutations=199)
+    hit = friction_signature(planted, eta, g, n_permutations=199)
+    assert null.p_value > 0.01 and hit.p_value < 0.01
+    # +-1 mm on pair 1 only: half-difference 1 mm, RMS over the two pairs 1 mm / sqrt(2)
+    assert hit.effect_size_m == pytest.approx(1e-3 / np.sqrt(2), rel=0.15)
+    assert null.effect_size_m < 0.15e-3
+    feats = rng.normal(size=(800, 2))
+    feats = np.repeat(feats[::4], 4, axis=0)                        # configuration-level features
+    assert regression_signature("x", noise, feats, g, n_permutations=199).p_value > 0.01
+    assert regression_signature("x", noise + 1e-3 * feats[:, :1], feats, g, n_permutations=199).p_value < 0.01
+    tip = rng.normal(size=(800, 3)) * 0.05
+    assert registration_signature(noise, tip, g, n_permutations=199).p_value > 0.01
+    rigid = noise + np.array([1e-3, 0, 0]) + np.cross([0, 0.01, 0], tip)
+    assert registration_signature(rigid, tip, g, n_permutations=199).p_value < 0.01
+
+
+# --------------------------------------------------------------------------- registration, model file
+def test_hidden_registration_is_recovered_and_the_updated_model_reproduces_the_errors(tmp_path):
+    robot, model = _no_effects_model(tmp_path)
+    rv, t = np.array([0.05, -0.1, 0.3]), np.array([0.012, -0.004, 0.02])
+    data = tmp_path / "reg.csv"
+    _synth(robot, Effects(registration=tuple(rv) + tuple(t)), data, grid=3)
+    out = tmp_path / "out"
+    opts = DiscrepancyOptions(effects=("offplane",), frame="tracker", ds=6e-3, n_permutations=99,
+                              calibration_fraction=0.5, n_jobs=1)
+    res = run_discrepancy(model, data, out, opts, echo=lambda s: None, progress=False)
+    fit = res["baseline"]["fit"]["parameters"]
+    rv_fit = np.array([fit[f"registration_r{a}"] for a in "xyz"])
+    t_fit = np.array([fit[f"registration_t{a}"] for a in "xyz"])
+    angle = (Rotation.from_rotvec(rv_fit) * Rotation.from_rotvec(rv).inv()).magnitude()
+    n_fit = res["n_fit"]
+    # within the noise: 1.4 mm rms over n samples, 0.5 deg tangent noise
+    assert np.linalg.norm(t_fit - t) < 5 * 1.4e-3 / np.sqrt(n_fit) + 0.3e-3
+    assert np.rad2deg(angle) < 0.5
+    assert res["baseline"]["held_out"]["position_mean_mm"] < 2.0          # noise floor ~1.3 mm
+    # the written model loads back, names its model and registration, and reproduces the errors
+    assert res["reproduced"]
+    written = load_robot(res["updated_model_file"])
+    assert written.metadata["tracker_registration"] is not None
+    data_obj = load_measured_data(data, robot, frame="tracker")
+    cal, val, _ = split_data(data_obj, 0.5, seed=0)
+    again = reproduce_errors(res["updated_model_file"], data_obj.take(val), ModelSettings(ds=6e-3, multistart=0))
+    assert np.nanmean(again["position"]) * 1e3 == pytest.approx(res["after"]["position_mean_mm"], abs=1e-9)
+    paths = write_report(res, out)
+    assert Path(paths["markdown"]).read_text().count("|") > 20
+    assert json.loads(Path(paths["json"]).read_text())["reproduced"] is True
+    assert all((out / p).stat().st_size > 1000 for p in paths["plots"])
+
+
+def test_an_interrupted_run_resumes_from_finished_stages(tmp_path):
+    robot, model = _no_effects_model(tmp_path)
+    data = tmp_path / "d.csv"
+    _synth(robot, Effects(), data, grid=3)
+    opts = DiscrepancyOptions(effects=("offplane",), ds=6e-3, n_permutations=99, calibration_fraction=0.5)
+    lines = []
+    first = run_discrepancy(model, data, tmp_path / "out", opts, echo=lines.append, progress=False)
+    lines.clear()
+    second = run_discrepancy(model, data, tmp_path / "out", opts, echo=lines.append, progress=False)
+    assert any("reused from an earlier run" in s for s in lines)
+    assert second["after"] == first["after"]
+
+
+# --------------------------------------------------------------------------- hidden effects (slow)
+@pytest.mark.slow
+def test_hidden_friction_is_named_and_the_gap_shrinks_by_40_percent(tmp_path):
+    robot, model = _no_effects_model(tmp_path)
+    data = tmp_path / "friction.csv"
+    _synth(load_robot(TABLE7), Effects(friction_coefficients=(0.22, 0.12)), data, grid=5,
+           settings=ModelSettings())
+    res = run_discrepancy(model, data, tmp_path / "out", DiscrepancyOptions(n_jobs=2, n_permutations=199),
+                          echo=print, progress=False)
+    assert res["named_effect"] == "friction"
+    before, after = res["baseline"]["held_out"], res["after"]
+    assert after["position_mean_mm"] <= 0.6 * before["position_mean_mm"]
+    assert after["position_max_mm"] <= 0.6 * before["position_max_mm"]
+    assert res["reproduced"]
+
+
+@pytest.mark.slow
+def test_hidden_offplane_precurvature_is_named_not_friction(tmp_path):
+    robot, model = _no_effects_model(tmp_path, offplane_zero=True)
+    data = tmp_path / "offplane.csv"
+    _synth(robot, Effects(offplane_precurvature=(0.0, 0.5, 2.5)), data, grid=5)
+    opts = DiscrepancyOptions(n_jobs=2, n_permutations=199, ds=6e-3, friction_grid=(0.0, 0.15, 0.3),
+                              friction_search_samples=48)
+    res = run_discrepancy(model, data, tmp_path / "out", opts, echo=print, progress=False)
+    assert res["named_effect"] == "offplane"
+    assert not res["candidates"]["friction"]["eligible"]
+    assert res["signature_tests"]["offplane"]["p_value"] < 0.01
+
+
+@pytest.mark.slow
+def test_noise_only_names_no_effect(tmp_path):
+    robot, model = _no_effects_model(tmp_path)
+    data = tmp_path / "noise.csv"
+    _synth(robot, Effects(), data, grid=5, seed=4)
+    opts = DiscrepancyOptions(n_jobs=2, n_permutations=199, ds=6e-3, friction_grid=(0.0, 0.15, 0.3),
+                              friction_search_samples=48)
+    res = run_discrepancy(model, data, tmp_path / "out", opts, echo=print, progress=False)
+    assert res["named_effect"] is None
+    assert res["baseline"]["held_out"]["position_mean_mm"] < 1.6
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not HA_DATA.exists(), reason=f"measured data not present at {HA_DATA} (not redistributable; "
+                                                  f"get it from github.com/hjhdog1/ConcentricTubes)")
+def test_real_trajectory_runs_end_to_end(tmp_path):
+    res = run_discrepancy(ROOT / "model" / "ha2019-table2-nominal.toml", HA_DATA, tmp_path / "out",
+                          DiscrepancyOptions(n_jobs=2, n_permutations=199), echo=print, progress=False)
+    before, after = res["baseline"]["held_out"], res["after"]
+    assert res["frame"] == "tracker" and res["n_samples"] == 1307
+    assert before["n_failed"] < 0.05 * before["n_samples"]
+    assert after["position_mean_mm"] <= before["position_mean_mm"] + 1e-9
+    assert res["reproduced"]
