@@ -1,0 +1,155 @@
+"""Speed of the mechanics, side by side in one run (issue 4).
+
+1. Median and 90th-percentile time per configuration over the 4x4x4 grid of Section IV-D
+   (Table II robot, one thread) of: the standard model with and without the multistart
+   stability search, the clearance model, one friction solution and the full bound
+   (``evaluate_bound``), next to the paper's Table VIII MATLAB times, and the ratio to the frozen
+   slow reference implementation in tests/reference (on every ``--ref-every``-th configuration).
+2. Batch throughput of the standard model (``solve_standard_batch``) [configurations/s].
+3. Discretization convergence: tip-position error [mm] against a fine step for the standard,
+   clearance and friction models at a few grid configurations.
+
+Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py [--ref-every 4] [--conv-configs 2]
+The machine load (``os.getloadavg``) is printed: timings on a shared machine are noisy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from ctrplan.io.robot_file import load_robot  # noqa: E402
+from ctrplan.mechanics import (ModelSettings, evaluate_bound, solve_clearance, solve_friction,  # noqa: E402
+                               solve_standard, solve_standard_batch)
+from paper_section_4d import PAPER_TIMES_S, grid_4x4x4  # noqa: E402
+from reference import bound_reference, contact_reference, standard_reference  # noqa: E402
+
+
+def _t(fn, *a, **k):
+    t0 = time.perf_counter()
+    out = fn(*a, **k)
+    return out, time.perf_counter() - t0
+
+
+def timing_table(robot, settings, ref_every):
+    _, Q = grid_4x4x4(robot)
+    no_ms = settings.replace(multistart=0)
+    names = ["standard (det + multistart)", "standard (det only)", "clearance",
+             "one friction solution", "full bound (clearance + 4 friction)"]
+    fast = {k: [] for k in names}
+    ref = {k: [] for k in names}
+    a0, b0 = robot.configuration(Q[0])
+    evaluate_bound(robot, a0, b0, settings)                   # load compiled kernels
+    bound_reference.evaluate_bound(robot, a0, b0, settings)
+    for idx, q in enumerate(Q):
+        a, b = robot.configuration(q)
+        do_ref = idx % ref_every == 0
+        impls = [("fast", fast, solve_standard, solve_clearance, solve_friction, evaluate_bound)]
+        if do_ref:
+            impls.append(("ref", ref, standard_reference.solve_standard,
+                          lambda *x, **k: contact_reference.solve_contact(*x, **k),
+                          lambda r, a_, b_, eta, s, **k: contact_reference.solve_contact(r, a_, b_, s, eta=eta, **k),
+                          bound_reference.evaluate_bound))
+        for _, rows, std_f, cl_f, fr_f, bd_f in impls:
+            st, t = _t(std_f, robot, a, b, settings)
+            rows[names[0]].append(t)
+            _, t = _t(std_f, robot, a, b, no_ms)
+            rows[names[1]].append(t)
+            if not st.diagnostics.ok:
+                continue
+            cl, t = _t(cl_f, robot, a, b, settings, standard=st)
+            rows[names[2]].append(t)
+            _, t = _t(fr_f, robot, a, b, (1, -1), settings, standard=st, warm_start=cl)
+            rows[names[3]].append(t)
+            _, t = _t(bd_f, robot, a, b, settings)
+            rows[names[4]].append(t)
+    paper = {names[0]: PAPER_TIMES_S["standard"], names[2]: PAPER_TIMES_S["clearance"],
+             names[4]: PAPER_TIMES_S["friction"]}
+    print(f"1. Time per configuration: {robot.name}, 4x4x4 grid of Section IV-D, ds = {settings.ds * 1e3:.1f} mm, "
+          f"1 BLAS thread; reference on every {ref_every}th configuration")
+    print(f"{'model':<38} {'n':>3} {'median [ms]':>12} {'p90 [ms]':>9} {'paper T.VIII [ms]':>18} "
+          f"{'vs paper':>9} {'ref median [ms]':>16} {'speed-up vs ref':>16}")
+    for k in names:
+        ts = np.asarray(fast[k]) * 1e3
+        rs = np.asarray(ref[k]) * 1e3
+        p = paper.get(k)
+        print(f"{k:<38} {ts.size:>3} {np.median(ts):>12.2f} {np.percentile(ts, 90):>9.2f} "
+              f"{(f'{p * 1e3:.0f}' if p else '-'):>18} {(f'{p * 1e3 / np.median(ts):.0f}x' if p else '-'):>9} "
+              f"{np.median(rs):>16.2f} {np.median(rs) / np.median(ts):>15.1f}x")
+    print("(paper: MATLAB on an i5-3470; its friction time is clearance + all friction solutions, "
+          "Section V-C)")
+
+
+def batch_throughput(robot, settings, repeats=5):
+    _, Q = grid_4x4x4(robot)
+    rng = np.random.default_rng(0)
+    qs = np.column_stack([rng.uniform(j.lower, j.upper, 2000) for j in robot.joints])
+    cfg = [robot.configuration(q) for q in qs]
+    A = np.array([a for a, _ in cfg])
+    B = np.array([b for _, b in cfg])
+    solve_standard_batch(robot, A[:2], B[:2], settings)
+    rates = []
+    for _ in range(repeats):
+        _, t = _t(solve_standard_batch, robot, A, B, settings)
+        rates.append(A.shape[0] / t)
+    print(f"\n2. Standard model, batch mode (solve_standard_batch, {A.shape[0]} random configurations, "
+          f"no multistart): median {np.median(rates):.0f} configurations/s (best {max(rates):.0f})")
+
+
+def convergence_table(robot, n_configs, steps_mm=(12.0, 6.0, 3.0, 1.5), ref_mm=0.75):
+    _, Q = grid_4x4x4(robot)
+    picks = [Q[i] for i in np.linspace(5, len(Q) - 6, n_configs).astype(int)]
+    print(f"\n3. Discretization convergence: largest tip-position error [mm] over {n_configs} grid "
+          f"configurations against ds = {ref_mm} mm")
+    print(f"{'ds [mm]':>8} {'standard':>10} {'clearance':>10} {'friction (1,-1)':>16}")
+    refs = []
+    for q in picks:
+        a, b = robot.configuration(q)
+        s = ModelSettings(ds=ref_mm * 1e-3)
+        st = solve_standard(robot, a, b, s, check_stability=False)
+        cl = solve_clearance(robot, a, b, s, standard=st)
+        fr = solve_friction(robot, a, b, (1, -1), s, standard=st, warm_start=cl)
+        refs.append((st.tip_position, cl.tip_position, fr.tip_position))
+    for ds in steps_mm:
+        errs = np.zeros(3)
+        for q, r in zip(picks, refs):
+            a, b = robot.configuration(q)
+            s = ModelSettings(ds=ds * 1e-3)
+            st = solve_standard(robot, a, b, s, check_stability=False)
+            cl = solve_clearance(robot, a, b, s, standard=st)
+            fr = solve_friction(robot, a, b, (1, -1), s, standard=st, warm_start=cl)
+            for j, tip in enumerate((st.tip_position, cl.tip_position, fr.tip_position)):
+                errs[j] = max(errs[j], np.linalg.norm(tip - r[j]) * 1e3)
+        print(f"{ds:>8.2f} {errs[0]:>10.4f} {errs[1]:>10.4f} {errs[2]:>16.4f}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ds", type=float, default=3e-3)
+    ap.add_argument("--ref-every", type=int, default=4, help="run the slow reference on every k-th configuration")
+    ap.add_argument("--conv-configs", type=int, default=2)
+    ap.add_argument("--skip-convergence", action="store_true")
+    args = ap.parse_args(argv)
+    robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")
+    settings = ModelSettings(ds=args.ds)
+    print(f"load average (1, 5, 15 min) at start: {os.getloadavg()}, cores: {os.cpu_count()}")
+    timing_table(robot, settings, args.ref_every)
+    batch_throughput(robot, settings)
+    if not args.skip_convergence:
+        convergence_table(robot, args.conv_configs)
+    print(f"\nload average at end: {os.getloadavg()}")
+
+
+if __name__ == "__main__":
+    main()
