@@ -26,7 +26,7 @@ from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings, evaluate_bound
 from ctrplan.pipeline import compute_bound_map
 from ctrplan.planning import BoundField
-from ctrplan.planning.bound_store import BoundMapStore, compute_bound_map_store
+from ctrplan.planning.bound_store import BoundMapStore, compute_bound_map_store, start_local_cluster
 
 REPO = Path(__file__).resolve().parents[1]
 SETTINGS = ModelSettings(ds=1e-2)
@@ -57,9 +57,9 @@ def serial(robot_file):
 
 @pytest.fixture(scope="module")
 def client():
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    with start_local_cluster(2) as cluster:
         with Client(cluster) as c:
             yield c
 

@@ -169,3 +169,30 @@ def test_cli_boundmap(tmp_path):
                       (["--out", str(tmp_path / "m.h5")], "--out")):
         res = runner.invoke(cli.main, ["boundmap", "--robot", str(robot_file), "--jobs", "1"] + bad)
         assert res.exit_code == 2 and hint in res.output
+
+
+def test_six_joint_model_joint_box_is_feasible():
+    """Every point of the six-joint robot's joint box is a possible configuration with each inner
+    tube protruding from its outer neighbour (constraints are linear in beta: corners suffice)."""
+    import itertools
+
+    robot = load_robot(REPO / "model" / "ha2019-table2-six-joint.toml")
+    assert robot.joint_names == ["alpha_1", "alpha_2", "alpha_3", "beta_1", "beta_2", "beta_3"]
+    assert "Table II" in robot.source and not robot.links
+    for corner in itertools.product(*[(j.lower, j.upper) for j in robot.joints]):
+        alpha, beta = robot.configuration(corner)
+        robot.check_configuration(alpha, beta)
+        ends = robot.tube_ends(beta)
+        assert ends[1] >= ends[0] - 1e-12 and ends[2] > ends[1] + 9e-3
+
+
+def test_six_joint_bound_depends_on_relative_rotations_only():
+    """alpha_1 turns the robot rigidly: the bound is unchanged when all tubes turn together."""
+    from ctrplan.mechanics import evaluate_bound
+
+    robot = load_robot(REPO / "model" / "ha2019-table2-six-joint.toml")
+    settings = ModelSettings(ds=6e-3)
+    q = np.array([0.0, 1.0, 2.0, -0.005, -0.015, -0.07])
+    b = [evaluate_bound(robot, *robot.configuration(q + [turn, turn, turn, 0, 0, 0]), settings).position
+         for turn in (0.0, 0.7)]
+    assert b[0] > 1e-3 and b[1] == pytest.approx(b[0], abs=1e-9)

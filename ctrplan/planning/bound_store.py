@@ -54,7 +54,7 @@ from .bound_field import (DEFAULT_CHUNK_SIZE, QUANTITIES, UNITS, BoundField, Bou
 
 __all__ = ["STORE_FORMAT", "STORE_VERSION", "BoundMapMismatchError", "IncompleteBoundMapError", "BoundMapStore",
            "BoundMapRun", "MapIdentity", "map_identity", "chunk_shape_for", "compute_bound_map_store",
-           "is_store_path"]
+           "is_store_path", "start_local_cluster"]
 
 # Written to the group's attributes; a store of another format or version is refused.
 STORE_FORMAT = "ctrplan-boundmap"
@@ -558,13 +558,26 @@ class _Progress:
             self._bar.close()
 
 
+def start_local_cluster(n_workers: int):
+    """A ``distributed.LocalCluster`` of ``n_workers`` single-threaded worker processes.
+
+    No dashboard; the scheduler's HTTP endpoint listens on a free localhost port (not 8787, which
+    another cluster on the machine may hold). Workers inherit this process's environment (set
+    ``OPENBLAS_NUM_THREADS=1`` before, as the CLI does). Close it (or use it as a context
+    manager) when done.
+    """
+    from distributed import LocalCluster
+
+    return LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True, dashboard_address=None,
+                        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+
+
 def _open_client(scheduler, n_jobs):
     """(client, cluster or None, close_client, description) for the dask executors."""
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     if scheduler is None:
-        cluster = LocalCluster(n_workers=int(n_jobs), threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+        cluster = start_local_cluster(n_jobs)
         return Client(cluster), cluster, True, f"local cluster ({int(n_jobs)} workers)"
     if isinstance(scheduler, str):
         return Client(scheduler), None, True, f"dask scheduler {scheduler}"
