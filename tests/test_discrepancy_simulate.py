@@ -182,7 +182,11 @@ def test_friction_history_from_sequence(robot, path):
         simulate(robot, alpha, beta, model="friction", settings=SETTINGS)
 
 
-def test_failing_sample_is_flagged_not_fatal_and_parallel_equals_serial(robot, path):
+def test_failing_sample_is_flagged_not_fatal_and_parallel_equals_serial(robot, path, monkeypatch):
+    import importlib
+
+    simulate_module = importlib.import_module("ctrplan.discrepancy.simulate")  # not the function
+    monkeypatch.setattr(simulate_module, "_MIN_PARALLEL_SECONDS", 0.0)  # use workers even for 6 rows
     alpha, beta = path
     alpha, beta = alpha.copy(), beta.copy()
     beta[2, 2] = 0.01                       # tube 3's base in front of tube 2's: impossible

@@ -35,6 +35,12 @@ MODELS = ("standard", "clearance", "friction")
 # Rows per parallel task when rows are independent: enough to amortize the inter-process
 # transfer (a contact solve takes ~0.1 s, a task ~1 s), few enough to balance 2-8 workers.
 _ROWS_PER_TASK = 16
+# Rough serial cost of one sample [s] (Table VII robot, ds 3 mm, one core): a standard solve
+# from a good guess, and a contact solve. Work estimated below _MIN_PARALLEL_SECONDS runs in
+# this process: starting or feeding loky workers costs about a second.
+_STANDARD_COST_S = 0.003
+_CONTACT_COST_S = 0.1
+_MIN_PARALLEL_SECONDS = 2.0
 
 
 # --------------------------------------------------------------------------- history
@@ -376,7 +382,9 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None,
         every row is independent (solved from zero twist).
     settings : ModelSettings, optional
     n_jobs : int
-        Worker processes (joblib/loky, one BLAS thread each); 1 solves in this process.
+        Worker processes (joblib/loky, one BLAS thread each); 1 solves in this process, as
+        does any call whose estimated serial work is below about 2 s (e.g. fewer than about 700
+        standard-model samples or 20 contact samples).
     progress : bool
         tqdm progress bar.
     check_stability : bool
@@ -432,6 +440,8 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None,
         raise ValueError(f"alpha has {n} columns but robot {robot.name!r} has {robot.n_tubes} tubes")
     groups = _sequence_groups(sequence, K)
     contact = model != "standard"
+    if K * (_CONTACT_COST_S if contact else _STANDARD_COST_S) < _MIN_PARALLEL_SECONDS:
+        n_jobs = 1   # not worth the worker overhead
     eta_used = np.zeros((K, n - 1), dtype=int)
     mu_used = np.zeros((K, n - 1))
     n_released = 0
