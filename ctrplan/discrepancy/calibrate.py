@@ -340,7 +340,9 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
                                  int((r0 == FAILED_RESIDUAL).sum()), obj.evaluations,
                                  time.perf_counter() - t0, "nothing to fit: evaluated only")
     scale = np.array([p.scale for p in specs])
-    max_nfev = max(2, max_evaluations // (len(names) + 1))
+    # registration columns of the finite-difference Jacobian re-use the cached mechanics
+    n_mech = sum(1 for p in specs if p.mechanical)
+    max_nfev = max(2, max_evaluations // (n_mech + 1))
     sol = least_squares(obj.residuals, x0, bounds=(lower, upper), x_scale=scale, diff_step=DIFF_STEP,
                         method="trf", max_nfev=max_nfev, xtol=1e-6, ftol=1e-6)
     r = obj.residuals(sol.x)
