@@ -170,3 +170,19 @@ def test_cli_killed_run_resumes(tmp_path):
     runs = run.store.chunk_run()
     assert np.all(runs[done_before] == 1) and np.all(np.delete(runs, done_before) == 2)
     assert run.field.valid.all()
+
+
+def test_cli_with_scheduler_address(robot_file, serial, client, tmp_path):
+    """`ctrplan boundmap --scheduler ADDRESS` connects to a running cluster (the test's)."""
+    from click.testing import CliRunner
+
+    from ctrplan import cli
+
+    address = client.scheduler.address
+    out = tmp_path / "pair.zarr"
+    res = CliRunner().invoke(cli.main, ["boundmap", "--robot", str(robot_file), "--resolution", "8,3", "--ds", "0.01",
+                                        "--chunk-size", str(CHUNK), "--scheduler", address, "--out", str(out),
+                                        "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert f"dask scheduler {address}: 8 chunks computed, 0 reused of 8" in res.output
+    np.testing.assert_array_equal(BoundField.load(out, key=serial.field.key).values, serial.field.values)

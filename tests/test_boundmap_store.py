@@ -196,3 +196,14 @@ def test_six_joint_bound_depends_on_relative_rotations_only():
     b = [evaluate_bound(robot, *robot.configuration(q + [turn, turn, turn, 0, 0, 0]), settings).position
          for turn in (0.0, 0.7)]
     assert b[0] > 1e-3 and b[1] == pytest.approx(b[0], abs=1e-9)
+
+
+def test_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
+    from ctrplan.planning import bound_store
+
+    monkeypatch.setattr(bound_store, "SCHEDULER_TIMEOUT_S", 1.0)
+    robot_file = pair_file(tmp_path)
+    res = CliRunner().invoke(cli.main, ["boundmap", "--robot", str(robot_file), "--resolution", "4,3",
+                                        "--scheduler", "tcp://127.0.0.1:9", "--out", str(tmp_path / "m.zarr")])
+    assert isinstance(res.exception, bound_store.SchedulerUnreachableError)
+    assert "tcp://127.0.0.1:9" in str(res.exception)

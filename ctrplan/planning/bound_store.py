@@ -52,7 +52,8 @@ from .bound_field import (DEFAULT_CHUNK_SIZE, QUANTITIES, UNITS, BoundField, Bou
                           _canonical_robot, _evaluate_node, _resolution, _settings_dict, evaluator_name, field_key,
                           grid_axes)
 
-__all__ = ["STORE_FORMAT", "STORE_VERSION", "BoundMapMismatchError", "IncompleteBoundMapError", "BoundMapStore",
+__all__ = ["STORE_FORMAT", "STORE_VERSION", "BoundMapMismatchError", "IncompleteBoundMapError",
+           "SchedulerUnreachableError", "BoundMapStore",
            "BoundMapRun", "MapIdentity", "map_identity", "chunk_shape_for", "compute_bound_map_store",
            "is_store_path", "start_local_cluster"]
 
@@ -61,6 +62,9 @@ STORE_FORMAT = "ctrplan-boundmap"
 STORE_VERSION = 1
 # Suffix that marks a path as a zarr store (a directory) rather than an .npz file.
 STORE_SUFFIX = ".zarr"
+
+# How long to try to reach a Dask scheduler given by its address [s].
+SCHEDULER_TIMEOUT_S = 30.0
 
 # Set in each process that evaluates chunks: the first chunk of a process carries the imports
 # and numba warm-up, which a benchmark must not count as steady-state cost.
@@ -86,6 +90,10 @@ class BoundMapMismatchError(BoundFieldKeyError):
             f"{self.store}: key '{self.key}' is {stored!r} in the store but {requested!r} for this run; "
             "the store holds a bound map of another robot file, model settings, resolution or evaluator "
             "and maps are never mixed: use another output path or delete the store")
+
+
+class SchedulerUnreachableError(CtrplanError, RuntimeError):
+    """No Dask scheduler answers at the given address."""
 
 
 class IncompleteBoundMapError(CtrplanError, ValueError):
@@ -580,7 +588,13 @@ def _open_client(scheduler, n_jobs):
         cluster = start_local_cluster(n_jobs)
         return Client(cluster), cluster, True, f"local cluster ({int(n_jobs)} workers)"
     if isinstance(scheduler, str):
-        return Client(scheduler), None, True, f"dask scheduler {scheduler}"
+        try:
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise SchedulerUnreachableError(
+                f"dask scheduler {scheduler!r}: cannot connect within {SCHEDULER_TIMEOUT_S:g} s ({exc}); start it "
+                "with `dask scheduler` and workers with `dask worker ADDRESS --nthreads 1`") from None
+        return client, None, True, f"dask scheduler {scheduler}"
     return scheduler, None, False, f"dask client of {scheduler.scheduler.address}"
 
 
@@ -630,6 +644,8 @@ def compute_bound_map_store(robot, evaluator, resolution, settings=None, store=N
     ------
     BoundMapMismatchError
         ``store`` holds a map of another robot file, settings, resolution or evaluator.
+    SchedulerUnreachableError
+        No scheduler answers at the address ``scheduler`` within :data:`SCHEDULER_TIMEOUT_S`.
     ValueError
         Bad resolution or chunk size.
     """
