@@ -73,7 +73,7 @@ def main(argv=None) -> int:
     head = ("scenario", "map", "map [s]", "IK [s]", "planner [s]", "exact [s]", "rest [s]", "total [s]", "wall [s]")
     print(f"{head[0]:<18} {head[1]:<8} " + " ".join(f"{h:>11}" for h in head[2:]))
     for name, source, *vals in rows:
-        print(f"{name:<18} {source:<8} " + " ".join(f"{v:>11.2f}" for v in vals))
+        print(f"{name:<18} {source:<8} " + " ".join(f"{v:>11.3f}" for v in vals))
     return 0
 
 

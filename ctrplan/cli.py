@@ -147,6 +147,7 @@ def boundmap(robot_path, resolution, ds, out_path, store_path, jobs, scheduler, 
             raise click.BadParameter(
                 f"{resolution!r}: needs 1 or {len(robot.joints)} integers >= 2 "
                 f"({', '.join(robot.joint_names)} of {robot_path})", param_hint="--resolution")
+        res = res * len(robot.joints) if len(res) == 1 else res
     else:
         res = default_resolution(robot)
     if out_path and Path(out_path).suffix not in (".zarr", ".npz"):

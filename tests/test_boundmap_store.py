@@ -165,6 +165,11 @@ def test_cli_boundmap(tmp_path):
     # another resolution into the same store: a clear error (exit 2 through ctrplan's entry point)
     res = runner.invoke(cli.main, args[:4] + ["4,4"] + args[5:])
     assert isinstance(res.exception, BoundMapMismatchError) and "'resolution'" in str(res.exception)
+    # one number: the same resolution for every joint
+    res = runner.invoke(cli.main, args[:4] + ["3"] + args[5:-3] + ["--out", str(tmp_path / "r3.zarr"),
+                                                                   "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert BoundMapStore.open(tmp_path / "r3.zarr").resolution == (3, 3)
     for bad, hint in ((["--resolution", "4,x"], "--resolution"), (["--resolution", "4,3,2"], "--resolution"),
                       (["--out", str(tmp_path / "m.h5")], "--out")):
         res = runner.invoke(cli.main, ["boundmap", "--robot", str(robot_file), "--jobs", "1"] + bad)
