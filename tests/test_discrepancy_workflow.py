@@ -17,7 +17,7 @@ from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, rea
 from ctrplan.discrepancy.report import write_report
 from ctrplan.discrepancy.signatures import friction_signature, regression_signature, registration_signature
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, reproduce_errors, run_discrepancy
-from ctrplan.errors import CtrplanError, DataFileError
+from ctrplan.errors import DataFileError
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from ctrplan.mechanics import ModelSettings
 

@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import atomic_path, atomic_write_text
-from .signatures import EFFECT_LABELS
 
 __all__ = ["write_report"]
 

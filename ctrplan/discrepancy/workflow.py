@@ -25,7 +25,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import CtrplanError, DataFileError
 from ..io.atomic import atomic_write_text
 from ..mechanics import ModelSettings
-from .calibrate import (ANGLE_UNIT, POSITION_UNIT, CalibrationResult, calibrate, eq49_residuals,
+from .calibrate import (CalibrationResult, calibrate, eq49_residuals,
                         grid_search_friction, information_criterion, pose_errors, predict)
 from .data import MeasuredData, configuration_groups, load_measured_data, split_data
 from .parameters import REGISTRATION, apply_parameters, registration_transform
@@ -412,8 +412,8 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         # baseline parameters with the clearance model once, then try both effects from there.
         done = stages.load("contact-baseline")
         if done is None:
-            echo(f"recalibrating the baseline parameters with the clearance model (shared by the clearance "
-                 f"and friction candidates) ...")
+            echo("recalibrating the baseline parameters with the clearance model (shared by the clearance "
+                 "and friction candidates) ...")
             contact = calibrate(robot, fit_data, "clearance", base.names, fixed=base.fixed, initial=base.values,
                                 settings=settings, n_jobs=options.n_jobs,
                                 max_evaluations=options.max_evaluations // 2)
