@@ -34,16 +34,13 @@ def pair_file(tmp_path: Path, mu: float = 0.2) -> Path:
     return path
 
 
-@pytest.mark.parametrize("res, size", [((16, 16, 6), 64), ((4, 4, 4, 2, 2, 2), 8), ((5, 7), 3), ((3,), 100),
-                                       ((16, 16, 16, 6, 6, 6), 64)])
-def test_chunk_shape(res, size):
+@pytest.mark.parametrize("res, size, want", [((16, 16, 6), 64, (1, 8, 6)), ((4, 4, 4, 2, 2, 2), 8, (1, 1, 1, 2, 2, 2)),
+                                             ((5, 7), 3, (1, 3)), ((3,), 100, (3,)), ((8, 3), 4, (1, 3)),
+                                             ((16, 16, 16, 6, 6, 6), 64, (1, 1, 1, 1, 6, 6))])
+def test_chunk_shape(res, size, want):
     c = chunk_shape_for(res, size)
-    assert len(c) == len(res) and all(1 <= cj <= nj for cj, nj in zip(c, res))
-    assert int(np.prod(c)) <= size
-    # equal pieces: the chunks of one axis differ by at most one node
-    for cj, nj in zip(c, res):
-        pieces = -(-nj // cj)
-        assert nj - (pieces - 1) * cj >= cj - pieces
+    assert c == want
+    assert int(np.prod(c)) <= size and all(1 <= cj <= nj for cj, nj in zip(c, res))
     with pytest.raises(ValueError, match="chunk_size"):
         chunk_shape_for(res, 0)
 

@@ -188,8 +188,8 @@ def map_identity(robot, settings, resolution, evaluator, robot_file_text: str | 
 def chunk_shape_for(resolution, chunk_size: int) -> tuple[int, ...]:
     """Chunk shape of about ``chunk_size`` nodes, filling the last joints first.
 
-    Each axis is split into equal pieces (``ceil(n / pieces)`` nodes), so the chunks of one
-    axis differ by at most one node.
+    Each axis is split into the fewest pieces that respect the budget, with ``ceil(n / pieces)``
+    nodes per chunk (zarr chunks are regular; the last chunk of an axis may be shorter).
 
     Parameters
     ----------
