@@ -63,6 +63,14 @@ def evaluate_bound(robot, alpha, beta, settings: ModelSettings | None = None, *,
     Section III (Eqs. (37)-(47)) and Section V-B of Ha, Fagogenis & Dupont 2019. Pairs with
     mu = 0 give the same solution for both directions; it is computed once.
     """
+    return _evaluate_bound(robot, alpha, beta, settings, standard, initial_guess,
+                           solve_standard=solve_standard, solve_contact=solve_contact)
+
+
+def _evaluate_bound(robot, alpha, beta, settings, standard, initial_guess, *, solve_standard,
+                    solve_contact) -> BoundResult:
+    """:func:`evaluate_bound` with the two solvers passed in (the tests hold the fast solvers to
+    the frozen reference ones through the same bound logic)."""
     settings = settings or ModelSettings()
     st = standard if standard is not None else solve_standard(
         robot, alpha, beta, settings, initial_guess=initial_guess)

