@@ -24,6 +24,7 @@ from scipy.spatial.transform import Rotation
 from ..errors import CtrplanError
 from ..mechanics import ModelSettings
 from .data import MeasuredData
+from .effects import transform_poses
 from .parameters import REGISTRATION, apply_parameters, parameter, registration_transform
 
 __all__ = ["Prediction", "CalibrationResult", "predict", "pose_errors", "eq49_residuals", "calibrate",
@@ -155,10 +156,8 @@ def predict(robot, names, values, data: MeasuredData, model: str, settings: Mode
     sim = simulate(robot_p, data.alpha, data.beta, model=model, eta=data.eta,
                    translation_last=data.translation_last, sequence=data.sequence, settings=settings,
                    n_jobs=n_jobs, progress=progress)
-    R, t = registration_transform(names, values)
     tip_base = np.asarray(sim.tip, float)
-    tip = tip_base @ R.T + t
-    tangent = np.asarray(sim.tangent, float) @ R.T
+    tip, tangent = transform_poses(tip_base, sim.tangent, *registration_transform(names, values))
     return Prediction(tip=tip, tangent=tangent, tip_base=tip_base, ok=np.asarray(sim.ok, bool),
                       message=list(sim.message), seconds=time.perf_counter() - t0)
 
@@ -260,8 +259,8 @@ class _Objective:
             if len(self._cache) > 64:
                 self._cache.clear()
             self._cache[key] = base
-        R, t = registration_transform(self.all_names, v)
-        return Prediction(tip=base.tip_base @ R.T + t, tangent=base.tangent @ R.T, tip_base=base.tip_base,
+        tip, tangent = transform_poses(base.tip_base, base.tangent, *registration_transform(self.all_names, v))
+        return Prediction(tip=tip, tangent=tangent, tip_base=base.tip_base,
                           ok=base.ok, message=base.message, seconds=base.seconds)
 
     def residuals(self, x):
@@ -314,12 +313,8 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     if k <= len(names):
         raise CtrplanError(f"{data.file}: {k} calibration samples for {len(names)} parameters "
                            f"({', '.join(names)}); a calibration needs more samples than parameters")
-    reg = None
-    fixed_reg = {nm: v for nm, v in fixed.items() if nm in REGISTRATION}
-    if fixed_reg:
-        R0, t0r = registration_transform(tuple(fixed_reg), tuple(fixed_reg.values()))
-        reg = (Rotation.from_matrix(R0).as_rotvec(), t0r)
-    x0 = read_parameters(robot, names, reg) if initial is None else np.asarray(initial, float).copy()
+    # fitted registration parameters start at zero (then Kabsch when ``register``)
+    x0 = read_parameters(robot, names) if initial is None else np.asarray(initial, float).copy()
     obj = _Objective(robot, data, model, names, fixed, settings, n_jobs)
     if register and initial is None and any(nm in REGISTRATION for nm in names):
         pred = obj.prediction(x0)

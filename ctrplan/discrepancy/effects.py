@@ -22,7 +22,8 @@ from scipy.spatial.transform import Rotation
 from ..errors import ModelFileError, PhysicalParameterError
 from ..robot import Robot
 
-__all__ = ["Effects", "apply_effects", "apply_registration", "registration_matrix"]
+__all__ = ["Effects", "apply_effects", "apply_registration", "registration_matrix", "rigid_transform",
+           "transform_poses"]
 
 # Field name -> (expected length as a function of the tube count n, unit, meaning).
 _FIELDS = {
@@ -219,13 +220,28 @@ def apply_effects(robot: Robot, effects: Effects) -> Robot:
     return robot.replace(**changes) if changes else robot
 
 
+def rigid_transform(registration) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation R, shape (3, 3), and translation t, shape (3,) [m], of a registration given as
+    ``(rx, ry, rz, tx, ty, tz)`` (rotation vector [rad], translation [m]); identity for None."""
+    if registration is None:
+        return np.eye(3), np.zeros(3)
+    reg = np.asarray(registration, dtype=float)
+    return Rotation.from_rotvec(reg[:3]).as_matrix(), reg[3:].copy()
+
+
 def registration_matrix(effects: Effects) -> tuple[np.ndarray, np.ndarray]:
     """Rotation R, shape (3, 3), and translation t, shape (3,) [m], of the registration
     (identity and zero when unset)."""
-    if effects.registration is None:
-        return np.eye(3), np.zeros(3)
-    reg = np.asarray(effects.registration)
-    return Rotation.from_rotvec(reg[:3]).as_matrix(), reg[3:].copy()
+    return rigid_transform(effects.registration)
+
+
+def transform_poses(tip, tangent, R, t) -> tuple[np.ndarray, np.ndarray | None]:
+    """``p' = R p + t`` and ``t' = R t`` for tip positions (K, 3) or (3,) [m] and unit tangents
+    of the same shape (or None); R (3, 3), t (3,) [m]."""
+    tip = np.asarray(tip, dtype=float) @ R.T + t
+    if tangent is not None:
+        tangent = np.asarray(tangent, dtype=float) @ R.T
+    return tip, tangent
 
 
 def apply_registration(tip, tangent, effects: Effects) -> tuple[np.ndarray, np.ndarray]:
@@ -246,8 +262,4 @@ def apply_registration(tip, tangent, effects: Effects) -> tuple[np.ndarray, np.n
     tip : ndarray, same shape as the input [m]
     tangent : ndarray or None, same shape as the input
     """
-    R, t = registration_matrix(effects)
-    tip = np.asarray(tip, dtype=float) @ R.T + t
-    if tangent is not None:
-        tangent = np.asarray(tangent, dtype=float) @ R.T
-    return tip, tangent
+    return transform_poses(tip, tangent, *registration_matrix(effects))

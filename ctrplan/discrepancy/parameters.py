@@ -29,10 +29,9 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
-
 from ..errors import CtrplanError
 from ..robot import Robot, Section
+from .effects import rigid_transform
 
 __all__ = ["Parameter", "parameter", "read_parameters", "apply_parameters", "registration_transform",
            "REGISTRATION", "ParameterError"]
@@ -214,9 +213,8 @@ def apply_parameters(robot: Robot, names, values) -> Robot:
 def registration_transform(names, values):
     """Registration ``(R (3, 3), t (3,) [m])`` from the registration entries of ``names``/``values``
     (missing entries are zero): ``p_tracker = R p_base + t``."""
-    rv, t = np.zeros(3), np.zeros(3)
+    reg = np.zeros(6)
     for name, v in zip(names, values):
         if name in REGISTRATION:
-            k = REGISTRATION.index(name)
-            (rv if k < 3 else t)[k % 3] = v
-    return Rotation.from_rotvec(rv).as_matrix(), t
+            reg[REGISTRATION.index(name)] = v
+    return rigid_transform(reg)
