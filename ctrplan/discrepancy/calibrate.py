@@ -394,32 +394,31 @@ def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: Mo
     grid = list(itertools.product(coarse, repeat=m))
     step = float(np.min(np.diff(coarse))) if coarse.size > 1 else 0.05
     total = len(grid) + refinements * (3 ** m)
-    done = 0
-    scores = {}
-    for mu in grid:
-        r = obj_sub.residuals(np.array(mu))
-        scores[mu] = float(r @ r)
-        done += 1
-        if progress:
-            progress(done, total)
-    best = min(scores, key=scores.get)
-    trail = [f"coarse grid on {sub.n_samples} samples: best mu {best} cost {scores[best]:.4g}"]
-    best_all, best_cost = np.array(best), None
+    done = [0]
+
+    def scan(obj, points):
+        """Cost of every grid point (each distinct point solved once); the best point."""
+        costs = {}
+        for mu in points:
+            mu = tuple(round(float(v), 6) for v in mu)
+            if mu not in costs:
+                r = obj.residuals(np.array(mu))
+                costs[mu] = float(r @ r)
+            done[0] += 1
+            if progress:
+                progress(done[0], total)
+        best = min(costs, key=costs.get)
+        return best, costs[best]
+
+    best, cost = scan(obj_sub, grid)
+    trail = [f"coarse grid on {sub.n_samples} samples: best mu {best} cost {cost:.4g}"]
+    best_all = np.array(best)
     for _ in range(refinements):
         step /= 2.0
-        cand = {}
-        for d in itertools.product((-1, 0, 1), repeat=m):
-            mu = tuple(np.round(np.maximum(best_all + step * np.array(d), 0.0), 6))
-            if mu not in cand:
-                r = obj_all.residuals(np.array(mu))
-                cand[mu] = float(r @ r)
-            done += 1
-            if progress:
-                progress(done, total)
-        mu_best = min(cand, key=cand.get)
-        best_all, best_cost = np.array(mu_best), cand[mu_best]
-        trail.append(f"refined (step {step:.4g}) on {data.n_samples} samples: best mu {mu_best} "
-                     f"cost {best_cost:.4g}")
+        best, cost = scan(obj_all, (np.maximum(best_all + step * np.array(d), 0.0)
+                                    for d in itertools.product((-1, 0, 1), repeat=m)))
+        best_all = np.array(best)
+        trail.append(f"refined (step {step:.4g}) on {data.n_samples} samples: best mu {best} cost {cost:.4g}")
     r = obj_all.residuals(best_all)
     return CalibrationResult("friction", names, best_all, np.zeros(m), dict(fixed), float(r @ r),
                              data.n_samples, int((r == FAILED_RESIDUAL).sum()),
