@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path, atomic_write_text
+from ..io.atomic import atomic_write_text
 
 __all__ = ["write_report"]
 
@@ -34,15 +34,13 @@ def _tangential(residual, tip):
 
 
 def _plots(results: dict, out: Path) -> list[str]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..plots import _figure, _save
 
     a = results["_arrays"]
     files = []
     # error histograms before / after
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig = _figure((10, 3.8))
+    axes = fig.subplots(1, 2)
     before, after = a["before_position"] * 1e3, a["after_position"] * 1e3
     top = np.nanmax(np.concatenate([before, after]))
     bins = np.linspace(0, top if np.isfinite(top) and top > 0 else 1.0, 40)
@@ -61,16 +59,13 @@ def _plots(results: dict, out: Path) -> list[str]:
         axes[1].legend(fontsize=8)
     axes[1].set_xlabel("held-out tip tangent error [deg]")
     fig.suptitle("Error histograms before and after adding the named effect")
-    fig.tight_layout()
-    with atomic_path(out / "error_histograms.png") as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
-    plt.close(fig)
-    files.append("error_histograms.png")
+    files.append(_save(fig, out / "error_histograms.png").name)
 
     # residuals by approach direction
     eta = np.asarray(a["val_eta"], int)
     combos = sorted({tuple(e) for e in eta}, reverse=True)
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
+    fig = _figure((10, 3.8))
+    axes = fig.subplots(1, 2, sharey=True)
     for ax, key, title in ((axes[0], "before_residual", "baseline"), (axes[1], "after_residual", "after")):
         tang = _tangential(a[key], a["val_tip_base"]) * 1e3
         data = [tang[np.all(eta == np.array(c), axis=1) & np.isfinite(tang)] for c in combos]
@@ -82,11 +77,7 @@ def _plots(results: dict, out: Path) -> list[str]:
         ax.set_title(title)
     axes[0].set_ylabel("residual about the base axis [mm]")
     fig.suptitle("Held-out residual (tangential component) by approach direction")
-    fig.tight_layout()
-    with atomic_path(out / "residuals_by_direction.png") as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
-    plt.close(fig)
-    files.append("residuals_by_direction.png")
+    files.append(_save(fig, out / "residuals_by_direction.png").name)
     return files
 
 
