@@ -158,20 +158,20 @@ def friction_signature(residual, eta, groups, *, n_permutations: int = 999, seed
         perm = np.empty_like(order)
         perm[order] = np.lexsort((rng.random(g.size), g))   # a random order within every group
         null[b] = stat(eta[perm])[0]
-    size = 0.5 * np.sqrt(max(t_obs - _noise_part(residual, eta, g, n_g, null), 0.0) / wsum) if wsum > 0 else 0.0
+    size = 0.5 * np.sqrt(max(t_obs - _noise_part(residual, eta, g, null), 0.0) / wsum) if wsum > 0 else 0.0
     return SignatureTest("friction", t_obs, float(size), _p_value(t_obs, null), n_permutations, n_g,
                          "T = sum over configuration groups and pairs of w |mean residual(eta=+1) - "
                          "mean residual(eta=-1)|^2 [m^2]; effect size = RMS half difference between "
                          "approach directions, less what noise alone gives (noise from the within-group fit)")
 
 
-def _noise_part(residual, eta, g, n_g, null) -> float:
+def _noise_part(residual, eta, g, null) -> float:
     """Expected T from noise alone: each term w |d|^2 has expectation 3 sigma^2, with sigma^2
     (per component) from the within-group fit ``e = mean_g + sum_k eta_k b_gk``; the mean of
     the permutation null where that fit leaves no degrees of freedom."""
     rss, dof, terms = 0.0, 0, 0
-    for grp in range(n_g):
-        rows = np.flatnonzero(g == grp)
+    order = np.argsort(g, kind="stable")
+    for rows in np.split(order, np.flatnonzero(np.diff(g[order])) + 1):
         cols = [k for k in range(eta.shape[1]) if np.unique(eta[rows, k]).size > 1]
         X = np.column_stack([np.ones(rows.size)] + [eta[rows, k] for k in cols])
         rank = np.linalg.matrix_rank(X)
