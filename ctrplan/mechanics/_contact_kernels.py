@@ -62,6 +62,21 @@ def _coefficients(t):
     return s1, a, b, da, db
 
 
+@njit(cache=True, inline="always")
+def _skew_form(d0, c1, c2, x, y, z, M):
+    """``M = d0 I + c1 [phi]x + c2 phi phi^T`` with ``phi = (x, y, z)``, written in place (the
+    form of exp(phi) and of the left Jacobian V(phi) of SO(3))."""
+    M[0, 0] = d0 + c2 * x * x
+    M[1, 1] = d0 + c2 * y * y
+    M[2, 2] = d0 + c2 * z * z
+    M[0, 1] = -c1 * z + c2 * x * y
+    M[1, 0] = c1 * z + c2 * x * y
+    M[0, 2] = c1 * y + c2 * x * z
+    M[2, 0] = -c1 * y + c2 * x * z
+    M[1, 2] = -c1 * x + c2 * y * z
+    M[2, 1] = c1 * x + c2 * y * z
+
+
 @njit(cache=True)
 def chain_kinematics(u, h, alpha, beta, node_off, R, p):
     """Forward kinematics of all tubes (Eqs. (3), (57)), in place.
@@ -111,16 +126,7 @@ def chain_kinematics(u, h, alpha, beta, node_off, R, p):
             s1, ca_, cb, _, _ = _coefficients(th)
             th2 = th * th
             # exp([phi]x) = (1 - a th^2) I + s1 [phi]x + a phi phi^T
-            d0 = 1.0 - ca_ * th2
-            E[0, 0] = d0 + ca_ * x * x
-            E[1, 1] = d0 + ca_ * y * y
-            E[2, 2] = d0 + ca_ * z * z
-            E[0, 1] = -s1 * z + ca_ * x * y
-            E[1, 0] = s1 * z + ca_ * x * y
-            E[0, 2] = s1 * y + ca_ * x * z
-            E[2, 0] = -s1 * y + ca_ * x * z
-            E[1, 2] = -s1 * x + ca_ * y * z
-            E[2, 1] = s1 * x + ca_ * y * z
+            _skew_form(1.0 - ca_ * th2, s1, ca_, x, y, z, E)
             # V e_z h = ((1 - b th^2) e_z + a phi x e_z + b phi phi_z) h
             vz[0] = (ca_ * y + cb * x * z) * hk
             vz[1] = (-ca_ * x + cb * y * z) * hk
@@ -213,16 +219,7 @@ def linearize(u, uhat, kinv, h, node_off, R, p, Omega, base, H1, H2, F3, Jpv):
             th2 = x * x + y * y + z * z
             _, a_, b_, da, db = _coefficients(np.sqrt(th2))
             # V = (1 - b th^2) I + a [phi]x + b phi phi^T
-            d0 = 1.0 - b_ * th2
-            V[0, 0] = d0 + b_ * x * x
-            V[1, 1] = d0 + b_ * y * y
-            V[2, 2] = d0 + b_ * z * z
-            V[0, 1] = -a_ * z + b_ * x * y
-            V[1, 0] = a_ * z + b_ * x * y
-            V[0, 2] = a_ * y + b_ * x * z
-            V[2, 0] = -a_ * y + b_ * x * z
-            V[1, 2] = -a_ * x + b_ * y * z
-            V[2, 1] = a_ * x + b_ * y * z
+            _skew_form(1.0 - b_ * th2, a_, b_, x, y, z, V)
             # d(V e_z)/dphi = a (-[e_z]x) + da (phi x e_z) phi^T
             #                 + b (phi_z I + phi e_z^T - 2 e_z phi^T) + db (phi phi_z - th^2 e_z) phi^T
             px = (y, -x, 0.0)
