@@ -226,8 +226,23 @@ def kabsch_registration(model_tip, measured_tip) -> tuple[np.ndarray, np.ndarray
 
 
 def information_criterion(cost: float, n_samples: int, n_params: int) -> float:
-    """Bayesian information criterion of a least-squares fit with Gaussian residuals:
-    ``N ln(RSS / N) + k ln N``."""
+    """Bayesian information criterion of a least-squares fit with Gaussian residuals,
+    ``N ln(RSS / N) + k ln N`` (Schwarz 1978).
+
+    Parameters
+    ----------
+    cost : float
+        Residual sum of squares RSS [(mm + deg)^2 for Eq. (49) residuals].
+    n_samples : int
+        N, residuals in the fit.
+    n_params : int
+        k, fitted parameters.
+
+    Returns
+    -------
+    float
+        Lower is better; only differences between fits of the same data mean anything.
+    """
     return float(n_samples * np.log(max(cost, 1e-300) / n_samples) + n_params * np.log(n_samples))
 
 

@@ -129,6 +129,11 @@ def read_parameters(robot: Robot, names, registration=None) -> np.ndarray:
     """Current values of the named parameters, shape (m,), in their units.
 
     ``registration`` is ``(rotation_vector (3,) [rad], translation (3,) [m])`` or None (zero).
+
+    Raises
+    ------
+    ParameterError
+        As :func:`parameter`.
     """
     out = []
     for name in names:

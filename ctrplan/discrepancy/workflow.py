@@ -110,8 +110,15 @@ def _curved_tubes(robot):
 
 
 def default_baseline_parameters(robot, register: bool) -> tuple:
-    """In-plane precurvature of every curved tube, bending stiffness of tubes 2..n relative to
-    tube 1 (Table VI / VII of Ha et al. 2019), and the registration when ``register``."""
+    """Default baseline parameters: in-plane precurvature of every curved tube [1/m], bending
+    stiffness of tubes 2..n relative to tube 1 [-] (the calibrated parameters of Tables VI and
+    VII of Ha et al. 2019), and the six registration parameters [rad, m] when ``register``.
+
+    Returns
+    -------
+    tuple of str
+        Names in :mod:`ctrplan.discrepancy.parameters`.
+    """
     names = [f"precurvature_y_{i + 1}" for i in _curved_tubes(robot)]
     names += [f"k_xy_relative_{i + 1}" for i in range(1, robot.n_tubes)]
     if register:
@@ -120,8 +127,19 @@ def default_baseline_parameters(robot, register: bool) -> tuple:
 
 
 def effect_parameters(robot, effect: str) -> tuple:
-    """Parameters an effect adds: friction coefficients, none for clearance (nominal diameters,
-    as in the paper), off-plane precurvatures, Poisson ratios, or the registration."""
+    """Parameters an effect adds: friction coefficients mu_k [-] (Section III), none for
+    clearance (nominal diameters, as in Section V-C), off-plane precurvatures [1/m], Poisson
+    ratios [-], or the registration [rad, m].
+
+    Returns
+    -------
+    tuple of str
+
+    Raises
+    ------
+    ValueError
+        ``effect`` not in :data:`EFFECTS`.
+    """
     if effect == "friction":
         return tuple(f"mu_{k + 1}" for k in range(robot.n_tubes - 1))
     if effect == "clearance":
@@ -545,10 +563,25 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
 def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: int = 1) -> dict:
     """Load an updated model file and evaluate its held-out errors with the model it names.
 
+    Parameters
+    ----------
+    model_path : path
+        Robot model file written by :func:`run_discrepancy` (its ``model`` key names the
+        mechanics model; ``[tracker_registration]`` maps to the data's frame).
+    data : MeasuredData
+    settings : ModelSettings, optional
+    n_jobs : int
+
     Returns
     -------
     dict
-        ``position`` (K,) [m], ``angle`` (K,) [rad].
+        ``position`` (K,) [m], ``angle`` (K,) [rad]: tip position and tangent errors (Eq. (49)
+        terms), NaN where the model failed.
+
+    Raises
+    ------
+    ModelFileError, PhysicalParameterError
+        The file does not load.
     """
     from ..io.robot_file import load_robot
 
