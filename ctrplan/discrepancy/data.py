@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import DataFileError
+from ..errors import CtrplanError, DataFileError
 from ..io.tables import read_measurements
 
 __all__ = ["MeasuredData", "load_measured_data", "configuration_groups", "split_data"]
@@ -147,7 +147,7 @@ def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = No
     for r in range(k):
         try:
             robot.check_configuration(tmp["alpha"][r], tmp["beta"][r])
-        except Exception as exc:  # JointLimitError / PhysicalParameterError
+        except CtrplanError as exc:  # JointLimitError / PhysicalParameterError
             raise DataFileError(f"{file}: row {r + 1}: {exc}") from None
     hist = motion_history(tmp["alpha"], tmp["beta"], sequence)
     eta = hist.eta.copy()

@@ -30,13 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CtrplanError, DataFileError
+from ..errors import CtrplanError, DataFileError, PhysicalParameterError
 from ..io.atomic import atomic_write_text
 from ..mechanics import ModelSettings
 from .calibrate import (CalibrationResult, calibrate, eq49_residuals,
                         grid_search_friction, information_criterion, pose_errors, predict)
 from .data import MeasuredData, configuration_groups, load_measured_data, split_data
-from .parameters import REGISTRATION, apply_parameters, registration_transform
+from .parameters import REGISTRATION, apply_parameters, read_parameters, registration_transform
 from .signatures import (EFFECT_LABELS, angle_features, friction_signature, overlap_features,
                          registration_signature, regression_signature, twist_features)
 
@@ -462,8 +462,6 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
             else:
                 names = tuple(base.names) + extra
                 start = apply_parameters(robot, tuple(base_all), tuple(base_all.values()))
-                from .parameters import read_parameters
-
                 init = np.concatenate([base.values, read_parameters(start, extra)])
                 fit = calibrate(start, fit_data, "standard", names, initial=init, settings=settings,
                                 n_jobs=options.n_jobs, max_evaluations=options.max_evaluations)
@@ -599,7 +597,7 @@ def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: i
 def _has_clearance(robot) -> bool:
     try:
         c = robot.clearances
-    except Exception:
+    except PhysicalParameterError:   # a diameter is missing
         return False
     return c is not None and np.all(np.isfinite(c))
 
