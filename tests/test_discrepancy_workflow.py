@@ -16,7 +16,8 @@ from ctrplan.discrepancy.data import MeasuredData, load_measured_data, split_dat
 from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, read_parameters
 from ctrplan.discrepancy.report import write_report
 from ctrplan.discrepancy.signatures import friction_signature, regression_signature, registration_signature
-from ctrplan.discrepancy.workflow import DiscrepancyOptions, reproduce_errors, run_discrepancy
+from ctrplan.discrepancy.workflow import (DiscrepancyOptions, _configurations_repeat, _units, reproduce_errors,
+                                         run_discrepancy)
 from ctrplan.errors import DataFileError
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from ctrplan.mechanics import ModelSettings
@@ -130,6 +131,18 @@ def test_split_never_separates_a_configuration_or_a_sequence(seed):
     assert "time blocks" in how and cal.sum() in (100, 150)
     assert np.all(np.diff(np.flatnonzero(cal))[np.diff(np.flatnonzero(cal)) > 1] > 50)
 
+
+
+def test_a_trajectory_that_passes_home_twice_is_not_a_repeated_protocol():
+    """The friction test groups rows by exact configuration only for a protocol that revisits
+    them (the paper's grid from four directions); a trajectory that returns home once must get
+    binned groups and time-block units, or its friction test has almost no informative group."""
+    grid = np.repeat(np.arange(64), 4)                 # 64 configurations x 4 directions
+    assert _configurations_repeat(grid)
+    path = np.concatenate([[0], np.arange(1, 999), [0], [0]])   # starts and ends at home
+    assert not _configurations_repeat(path)
+    units = _units(_toy_data(path, np.zeros(path.size, int)), block=50)
+    assert np.unique(units).size == 21              # time blocks, not ~1000 single-row units
 
 # --------------------------------------------------------------------------- signature tests
 def test_signature_tests_find_planted_patterns_and_not_noise():

@@ -228,10 +228,18 @@ def _twist(robot, alpha, beta, tube: int, settings) -> np.ndarray:
     return out
 
 
+def _configurations_repeat(config_id) -> bool:
+    """True for a protocol that revisits configurations (the paper's grid approached from several
+    directions): at least half the rows share their configuration with another row. A continuous
+    trajectory that merely passes a configuration twice (its home, a pause) is not one."""
+    _, inverse, counts = np.unique(config_id, return_inverse=True, return_counts=True)
+    return bool(np.mean(counts[inverse.ravel()] > 1) >= 0.5) if len(config_id) else False
+
+
 def _units(data: MeasuredData, block: int = 50) -> np.ndarray:
     """Exchangeable units of held-out data: configuration groups when configurations repeat,
     else time blocks of ``block`` samples within each sequence."""
-    if np.unique(data.config_id).size < data.n_samples:
+    if _configurations_repeat(data.config_id):
         return data.config_id
     _, q = np.unique(data.sequence, return_inverse=True)
     pos = np.zeros(data.n_samples, int)
@@ -248,7 +256,7 @@ def _subsample(data: MeasuredData, rows: np.ndarray, limit: int, seed: int) -> n
         return rows
     sub = data.take(rows)
     idx = np.flatnonzero(rows)
-    if np.unique(sub.config_id).size < sub.n_samples:
+    if _configurations_repeat(sub.config_id):
         groups = np.unique(sub.config_id)
         per = sub.n_samples / groups.size
         chosen = np.random.default_rng(seed).choice(groups, size=max(1, int(limit // per)), replace=False)
@@ -391,8 +399,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     # 2. signature tests on held-out residuals --------------------------------------------
     echo("testing residual signatures ...")
     E = base_val["residual_base"]
-    repeated = np.unique(val.config_id).size < val.n_samples
-    groups = val.config_id if repeated else configuration_groups(
+    groups = val.config_id if _configurations_repeat(val.config_id) else configuration_groups(
         val.alpha, val.beta, TRAJECTORY_ROTATION_BIN, TRAJECTORY_TRANSLATION_BIN)
     base_robot = apply_parameters(robot, tuple(base_all), tuple(base_all.values()))
     tests = {}
