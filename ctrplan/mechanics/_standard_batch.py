@@ -17,7 +17,7 @@ from numba import njit
 from ..constants import GRID_MERGE_TOL
 from ._contact_kernels import chain_kinematics
 from .results import ModelSettings
-from .standard import _integrate
+from .standard import _newton
 
 __all__ = ["StandardBatch", "solve_standard_batch"]
 
@@ -105,45 +105,11 @@ def _grid(beta, lengths, brk, nbrk, curv, ds, tol):
 
 
 @njit(cache=True)
-def _newton(s, present, uhat, kxy, ratio, alpha, sig0, lengths, tol, maxit):
-    """Damped Newton shooting (``standard._Problem.newton``): returns (sig0, ok, iterations, detJ)."""
-    n = sig0.shape[0]
-    sig0 = sig0.copy()
-    for it in range(1, maxit + 1):
-        _, sig, _, Ss, _, _, _ = _integrate(s, present, uhat, kxy, ratio, alpha.copy(), sig0, False, True)
-        res = np.max(np.abs(sig))
-        J = Ss[:, :n].copy()
-        detJ = np.linalg.det(J)
-        if not np.all(np.isfinite(sig)):
-            return sig0, False, it, detJ
-        if res < tol:
-            return sig0, True, it, detJ
-        step = np.linalg.lstsq(J, sig)[0] if not abs(detJ) > 0.0 else np.linalg.solve(J, sig)
-        scale = 1.0
-        for i in range(n):
-            if abs(step[i]) > 0.0:
-                scale = min(scale, (np.pi / lengths[i]) / abs(step[i]))
-        t = scale
-        accepted = False
-        trial = sig0 - t * step
-        for _ in range(20):
-            trial = sig0 - t * step
-            _, sig_t, _, _, _, _, _ = _integrate(s, present, uhat, kxy, ratio, alpha.copy(), trial, False, False)
-            if np.all(np.isfinite(sig_t)) and np.max(np.abs(sig_t)) < (1.0 - 1e-4 * t) * res:
-                accepted = True
-                break
-            t *= 0.5
-        sig0 = trial if accepted else sig0 - scale * step
-    _, sig, _, Ss, _, _, _ = _integrate(s, present, uhat, kxy, ratio, alpha.copy(), sig0, False, True)
-    return sig0, np.max(np.abs(sig)) < tol, maxit, np.linalg.det(Ss)
-
-
-@njit(cache=True)
-def _tip(s, present, uhat, kxy, ratio, alpha, sig0):
-    """Tip position and tangent from midpoint curvatures (``standard._assemble``)."""
-    _, _, _, _, psi, sig, _ = _integrate(s, present, uhat, kxy, ratio, alpha.copy(), sig0, True, False)
+def _tip(s, present, uhat, kxy, psi, sig):
+    """Tip position and tangent from midpoint curvatures (``standard._assemble``), given the node
+    angles ``psi`` and torsions ``sig`` (G, n) of the solution."""
     G = s.shape[0]
-    n = alpha.shape[0]
+    n = psi.shape[1]
     u = np.zeros((G - 1, 3))
     h = np.empty(G - 1)
     for j in range(G - 1):
@@ -179,15 +145,17 @@ def _batch(alpha, beta, valid, sig_init, lengths, brk, nbrk, curv, kxy, ratio, d
             continue
         s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, grid_tol)
         a = alpha[k].copy()
-        sig0, ok, it, detJ = _newton(s, present, uhat, kxy, ratio, a, sig_init[k], lengths, tol, maxit)
+        sig0, _, it, ok, detJ, psi, sig, _ = _newton(s, present, uhat, kxy, ratio, a, sig_init[k], lengths,
+                                                     tol, maxit)
         if not ok:
-            sig0, ok, it2, detJ = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths, tol, maxit)
+            sig0, _, it2, ok, detJ, psi, sig, _ = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths,
+                                                          tol, maxit)
             it += it2
         iters[k] = it
         conv[k] = ok
         unst[k] = ok and not detJ > 0.0
         sig_out[k] = sig0
-        p, t = _tip(s, present, uhat, kxy, ratio, a, sig0)
+        p, t = _tip(s, present, uhat, kxy, psi, sig)
         tips[k] = p
         tans[k] = t
 

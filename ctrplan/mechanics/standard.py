@@ -157,6 +157,7 @@ class _Problem:
         self.kxy = np.array([t.k_xy for t in robot.tubes])
         self.ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
         self.lengths = np.array([t.length for t in robot.tubes])
+        self.recorded = None
 
     def shoot(self, sig0, record=False, with_sens=True):
         g = self.grid
@@ -164,48 +165,82 @@ class _Problem:
                           self.alpha.copy(), np.asarray(sig0, dtype=float).copy(), record, with_sens)
 
     def newton(self, sig0, settings):
-        """Newton shooting on the base torsions; returns (sig0, residual norm, iterations, ok, detJ)."""
-        sig0 = np.asarray(sig0, dtype=float).copy()
-        n = sig0.size
-        res_norm = np.inf
-        detJ = np.nan
-        for it in range(1, settings.max_shooting_iterations + 1):
-            _, sig, _, Ss, _, _, _ = self.shoot(sig0)
-            r = sig  # torsion at each tube's free end must vanish
-            res_norm = float(np.max(np.abs(r)))
-            J = Ss[:, :n]
-            detJ = float(np.linalg.det(J))
-            if not np.all(np.isfinite(r)):
-                return sig0, np.inf, it, False, detJ
-            if res_norm < settings.shooting_tol:
-                return sig0, res_norm, it, True, detJ
-            try:
-                step = np.linalg.solve(J, r)
-            except np.linalg.LinAlgError:
-                step = np.linalg.lstsq(J, r, rcond=None)[0]
-            # damped step: never change a base torsion by more than pi over the tube length
-            lim = np.pi / self.lengths
-            scale = min(1.0, float(np.min(lim / np.maximum(np.abs(step), 1e-300))))
-            t = scale
+        """Newton shooting on the base torsions; returns (sig0, residual norm, iterations, ok, detJ).
+
+        The node values of the last evaluation are kept in ``self.recorded`` for ``_assemble``."""
+        g = self.grid
+        sig0, res, it, ok, detJ, rp, rs, rd = _newton(
+            g.s, g.present, g.precurvature, self.kxy, self.ratio, self.alpha, np.asarray(sig0, dtype=float),
+            self.lengths, float(settings.shooting_tol), int(settings.max_shooting_iterations))
+        self.recorded = (sig0, rp, rs, rd)
+        return sig0, res, it, ok, detJ
+
+
+@njit(cache=True, error_model="numpy")
+def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
+    """Damped Newton shooting on the base torsions, compiled.
+
+    Each iteration solves J step = r with the variational Jacobian J = d sigma(L) / d sigma0,
+    limits every base-torsion change to pi over the tube length, and backtracks until the
+    residual max|sigma(L)| decreases (Armijo factor 1e-4, 20 halvings at most). The full step is
+    evaluated with sensitivities and node records, so an accepted full step is the next
+    iteration's evaluation (one integration per iteration instead of two).
+
+    Returns (sig0, residual, iterations, ok, detJ, psi, sigma, sigma') with the node values of
+    the evaluation at the returned sig0.
+    """
+    n = sig0.shape[0]
+    x = sig0.copy()
+    _, r, _, Ss, rp, rs, rd = _integrate(s, present, uh, kxy, ratio, alpha.copy(), x, True, True)
+    res = np.max(np.abs(r))
+    detJ = np.nan
+    for it in range(1, maxit + 1):
+        J = Ss[:, :n].copy()
+        detJ = np.linalg.det(J)
+        if not np.all(np.isfinite(r)):
+            return x, np.inf, it, False, detJ, rp, rs, rd
+        if res < tol:
+            return x, res, it, True, detJ, rp, rs, rd
+        if abs(detJ) > 0.0:
+            step = np.linalg.solve(J, r)
+        else:
+            step = np.linalg.lstsq(J, r)[0]
+        # damped step: never change a base torsion by more than pi over the tube length
+        scale = 1.0
+        for i in range(n):
+            if abs(step[i]) > 0.0:
+                scale = min(scale, (np.pi / lengths[i]) / abs(step[i]))
+        t = scale
+        trial = x - t * step
+        _, r_t, _, S_t, rp_t, rs_t, rd_t = _integrate(s, present, uh, kxy, ratio, alpha.copy(), trial, True, True)
+        if np.all(np.isfinite(r_t)) and np.max(np.abs(r_t)) < (1.0 - 1e-4 * t) * res:
+            x, r, Ss, rp, rs, rd = trial, r_t, S_t, rp_t, rs_t, rd_t
+        else:
             accepted = False
-            for _ in range(20):
-                trial = sig0 - t * step
-                _, sig_t, _, _, _, _, _ = self.shoot(trial, with_sens=False)
-                if np.all(np.isfinite(sig_t)) and np.max(np.abs(sig_t)) < (1.0 - 1e-4 * t) * res_norm:
+            for _ in range(19):
+                t *= 0.5
+                trial = x - t * step
+                _, r_t, _, _, _, _, _ = _integrate(s, present, uh, kxy, ratio, alpha.copy(), trial, False, False)
+                if np.all(np.isfinite(r_t)) and np.max(np.abs(r_t)) < (1.0 - 1e-4 * t) * res:
                     accepted = True
                     break
-                t *= 0.5
-            sig0 = trial if accepted else sig0 - scale * step
-        _, sig, _, Ss, _, _, _ = self.shoot(sig0)
-        res_norm = float(np.max(np.abs(sig)))
-        return sig0, res_norm, settings.max_shooting_iterations, res_norm < settings.shooting_tol, float(np.linalg.det(Ss))
+            x = trial if accepted else x - scale * step
+            _, r, _, Ss, rp, rs, rd = _integrate(s, present, uh, kxy, ratio, alpha.copy(), x, True, True)
+        res = np.max(np.abs(r))
+    detJ = np.linalg.det(Ss[:, :n].copy())
+    ok = np.all(np.isfinite(r)) and res < tol
+    return x, res if np.isfinite(res) else np.inf, maxit, ok, detJ, rp, rs, rd
 
 
 def _assemble(problem, sig0, diag) -> StandardSolution:
     g = problem.grid
     s = g.s
     h = np.diff(s)
-    _, _, _, _, psi, sig, dsig = problem.shoot(sig0, record=True, with_sens=False)
+    rec = getattr(problem, "recorded", None)
+    if rec is not None and np.array_equal(rec[0], sig0):
+        _, psi, sig, dsig = rec
+    else:
+        _, _, _, _, psi, sig, dsig = problem.shoot(sig0, record=True, with_sens=False)
     # Hermite midpoints (4th-order psi, 3rd-order sigma) for the per-interval curvature
     psi_mid = 0.5 * (psi[:-1] + psi[1:]) + h[:, None] * (sig[:-1] - sig[1:]) / 8.0
     sig_mid = 1.5 * (psi[1:] - psi[:-1]) / h[:, None] - 0.25 * (sig[:-1] + sig[1:])
@@ -314,6 +349,7 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
     if not ok and initial_guess is not None:
         sig0, res, iters2, ok, detJ = problem.newton(np.zeros(n), settings)
         iters += iters2
+    solved = problem.recorded    # node values at sig0, reused by _assemble
     unstable = bool(ok and not detJ > 0.0)
     n_eq = 0  # not checked
     msg = "converged" if ok else f"shooting did not converge (tip torsion residual {res:.3g} 1/m)"
@@ -342,4 +378,5 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
     if raise_on_failure and unstable:
         raise ElasticInstabilityError(f"standard model at alpha={np.round(alpha, 4)} rad, "
                                       f"beta={np.round(np.asarray(beta) * 1e3, 3)} mm: {msg}")
+    problem.recorded = solved
     return _assemble(problem, sig0, diag)
