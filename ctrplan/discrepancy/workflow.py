@@ -79,7 +79,10 @@ class DiscrepancyOptions:
     friction_search_samples : int
         Samples scoring the coarse friction grid.
     max_evaluations : int
-        Model evaluations allowed per least-squares fit.
+        Model evaluations allowed per least-squares fit with the standard model (Jacobian
+        columns included; about 6 per step for 5 parameters).
+    max_contact_evaluations : int
+        The same for the clearance-model refit (about 30 times dearer per evaluation).
     ds : float
         Arc-length step [m].
     n_jobs : int
@@ -95,7 +98,8 @@ class DiscrepancyOptions:
     n_permutations: int = 999
     friction_grid: tuple = (0.0, 0.1, 0.2, 0.3, 0.4)
     friction_search_samples: int = 96
-    max_evaluations: int = 60
+    max_evaluations: int = 400
+    max_contact_evaluations: int = 40
     ds: float = 3e-3
     n_jobs: int = 1
     seed: int = 0
@@ -351,8 +355,11 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                                f"(calibration would absorb the effect)")
     has_clearance = robot.n_tubes > 1 and _has_clearance(robot)
     effects = [e for e in effects if has_clearance or e not in ("friction", "clearance")]
+    # the stages depend on the inputs and on the options that change a fit, not on the number of
+    # workers or the tests' permutations and level (the tests are not stored)
+    keyed = {k: v for k, v in asdict(options).items() if k not in ("n_jobs", "n_permutations", "significance")}
     key = hashlib.sha256(Path(robot_path).read_bytes() + Path(data_path).read_bytes()
-                         + json.dumps(asdict(options), sort_keys=True, default=str).encode()).hexdigest()[:12]
+                         + json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:12]
     stages = _Stages(out_dir, key)
 
     cal_rows, val_rows, how = split_data(data, options.calibration_fraction, seed=options.seed)
@@ -441,7 +448,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                  "and friction candidates) ...")
             contact = calibrate(robot, fit_data, "clearance", base.names, fixed=base.fixed, initial=base.values,
                                 settings=settings, n_jobs=options.n_jobs,
-                                max_evaluations=options.max_evaluations // 2)
+                                max_evaluations=options.max_contact_evaluations)
             stages.save("contact-baseline", contact.as_dict())
         else:
             contact = _result_from(done)
