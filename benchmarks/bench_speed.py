@@ -5,7 +5,8 @@
    stability search, the clearance model, one friction solution and the full bound
    (``evaluate_bound``), next to the paper's Table VIII MATLAB times, and the ratio to the frozen
    slow reference implementation in tests/reference (on every ``--ref-every``-th configuration).
-2. Batch throughput of the standard model (``solve_standard_batch``) [configurations/s].
+2. Batch throughput of the standard model (``solve_standard_batch``) [configurations/s], on one
+   thread and on all cores.
 3. Discretization convergence: tip-position error [mm] against a fine step for the standard,
    clearance and friction models at a few grid configurations.
 
@@ -98,13 +99,17 @@ def batch_throughput(robot, settings, repeats=5):
     cfg = [robot.configuration(q) for q in qs]
     A = np.array([a for a, _ in cfg])
     B = np.array([b for _, b in cfg])
-    solve_standard_batch(robot, A[:2], B[:2], settings)
-    rates = []
-    for _ in range(repeats):
-        _, t = _t(solve_standard_batch, robot, A, B, settings)
-        rates.append(A.shape[0] / t)
     print(f"\n2. Standard model, batch mode (solve_standard_batch, {A.shape[0]} random configurations, "
-          f"no multistart): median {np.median(rates):.0f} configurations/s (best {max(rates):.0f})")
+          f"no multistart)")
+    for threads in (1, os.cpu_count() or 1):
+        solve_standard_batch(robot, A[:2], B[:2], settings, n_threads=threads)
+        rates = []
+        for _ in range(repeats):
+            _, t = _t(solve_standard_batch, robot, A, B, settings, n_threads=threads)
+            rates.append(A.shape[0] / t)
+        print(f"   {threads} thread(s): median {np.median(rates):.0f} configurations/s (best {max(rates):.0f})")
+        if threads == 1 and (os.cpu_count() or 1) == 1:
+            break
 
 
 def convergence_table(robot, n_configs, steps_mm=(12.0, 6.0, 3.0, 1.5), ref_mm=0.75):

@@ -162,5 +162,11 @@ def test_batch_equals_single_solves():
         np.testing.assert_allclose(res.base_torsion[k], st.base_torsion, atol=1e-8)
         assert res.converged[k] == st.diagnostics.converged
         assert res.unstable[k] == st.diagnostics.unstable
+    # threads share the configurations without changing any result
+    par = solve_standard_batch(robot, alpha, beta, settings, n_threads=2)
+    np.testing.assert_array_equal(par.tip_position, res.tip_position)
+    np.testing.assert_array_equal(par.iterations, res.iterations)
     with pytest.raises(ValueError, match="shape"):
         solve_standard_batch(robot, alpha[:, :2], beta, settings)
+    with pytest.raises(ValueError, match="n_threads"):
+        solve_standard_batch(robot, alpha, beta, settings, n_threads=0)

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import config, get_num_threads, njit, prange, set_num_threads
 
 from ..constants import GRID_MERGE_TOL
 from ._contact_kernels import chain_kinematics
@@ -137,31 +137,47 @@ def _tip(s, present, uhat, kxy, psi, sig):
 
 
 @njit(cache=True)
+def _solve_one(k, alpha, beta, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
+               tips, tans, sig_out, conv, unst, iters):
+    """Configuration ``k`` of the batch: grid, Newton shooting (retried from zero twist), tip."""
+    n = alpha.shape[1]
+    s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, grid_tol)
+    a = alpha[k].copy()
+    sig0, _, it, ok, detJ, psi, sig, _ = _newton(s, present, uhat, kxy, ratio, a, sig_init[k], lengths,
+                                                 tol, maxit)
+    if not ok:
+        sig0, _, it2, ok, detJ, psi, sig, _ = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths,
+                                                      tol, maxit)
+        it += it2
+    iters[k] = it
+    conv[k] = ok
+    unst[k] = ok and not detJ > 0.0
+    sig_out[k] = sig0
+    p, t = _tip(s, present, uhat, kxy, psi, sig)
+    tips[k] = p
+    tans[k] = t
+
+
+@njit(cache=True)
 def _batch(alpha, beta, valid, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
            grid_tol, tips, tans, sig_out, conv, unst, iters):
-    K, n = alpha.shape
-    for k in range(K):
-        if not valid[k]:
-            continue
-        s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, grid_tol)
-        a = alpha[k].copy()
-        sig0, _, it, ok, detJ, psi, sig, _ = _newton(s, present, uhat, kxy, ratio, a, sig_init[k], lengths,
-                                                     tol, maxit)
-        if not ok:
-            sig0, _, it2, ok, detJ, psi, sig, _ = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths,
-                                                          tol, maxit)
-            it += it2
-        iters[k] = it
-        conv[k] = ok
-        unst[k] = ok and not detJ > 0.0
-        sig_out[k] = sig0
-        p, t = _tip(s, present, uhat, kxy, psi, sig)
-        tips[k] = p
-        tans[k] = t
+    for k in range(alpha.shape[0]):
+        if valid[k]:
+            _solve_one(k, alpha, beta, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
+                       tips, tans, sig_out, conv, unst, iters)
+
+
+@njit(cache=True, parallel=True)
+def _batch_parallel(alpha, beta, valid, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
+                    grid_tol, tips, tans, sig_out, conv, unst, iters):
+    for k in prange(alpha.shape[0]):
+        if valid[k]:
+            _solve_one(k, alpha, beta, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
+                       tips, tans, sig_out, conv, unst, iters)
 
 
 def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = None, *,
-                         initial_guess=None) -> StandardBatch:
+                         initial_guess=None, n_threads: int = 1) -> StandardBatch:
     """Solve the standard zero-clearance model at many configurations in one compiled call.
 
     Parameters
@@ -176,6 +192,9 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     initial_guess : array-like, shape (K, n), optional
         Base torsions [1/m] to start each Newton solve from (default: no twist); as in
         :func:`solve_standard`, a failed start is retried from zero twist.
+    n_threads : int
+        Threads sharing the configurations (numba ``prange``, at most ``NUMBA_NUM_THREADS``); 1 (default) runs serially, as
+        fits a call from inside a worker process. Results do not depend on it.
 
     Returns
     -------
@@ -186,7 +205,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     Raises
     ------
     ValueError
-        If ``alpha`` and ``beta`` are not both of shape (K, n).
+        If ``alpha`` and ``beta`` are not both of shape (K, n), or ``n_threads`` < 1.
 
     Notes
     -----
@@ -201,6 +220,8 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     beta = np.ascontiguousarray(beta, dtype=float)
     if alpha.ndim != 2 or alpha.shape[1] != n or beta.shape != alpha.shape:
         raise ValueError(f"alpha and beta must both have shape (K, {n}), got {alpha.shape} and {beta.shape}")
+    if int(n_threads) < 1:
+        raise ValueError(f"n_threads must be at least 1, got {n_threads!r}")
     K = alpha.shape[0]
     sig_init = (np.zeros((K, n)) if initial_guess is None
                 else np.ascontiguousarray(np.broadcast_to(initial_guess, (K, n)), dtype=float))
@@ -228,8 +249,17 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     conv = np.zeros(K, dtype=bool)
     unst = np.zeros(K, dtype=bool)
     iters = np.zeros(K, dtype=np.int64)
-    _batch(alpha, beta, valid, sig_init, lengths, brk, nbrk, curv, kxy, ratio, float(settings.ds),
-           float(settings.shooting_tol), int(settings.max_shooting_iterations), GRID_MERGE_TOL,
-           tips, tans, sig_out, conv, unst, iters)
+    args = (alpha, beta, valid, sig_init, lengths, brk, nbrk, curv, kxy, ratio, float(settings.ds),
+            float(settings.shooting_tol), int(settings.max_shooting_iterations), GRID_MERGE_TOL,
+            tips, tans, sig_out, conv, unst, iters)
+    if int(n_threads) == 1:
+        _batch(*args)
+    else:
+        before = get_num_threads()
+        set_num_threads(min(int(n_threads), config.NUMBA_NUM_THREADS))
+        try:
+            _batch_parallel(*args)
+        finally:
+            set_num_threads(before)
     return StandardBatch(tip_position=tips, tip_tangent=tans, base_torsion=sig_out, converged=conv,
                          unstable=unst, valid=valid, iterations=iters)
