@@ -51,6 +51,9 @@ class Anderson:
             self.g_hist.pop(0)
         if len(self.f_hist) < 2:
             return g
+        if not (np.all(np.isfinite(f)) and np.all(np.isfinite(g))):
+            self.f_hist, self.g_hist = [], []      # restart the history; plain fixed-point step
+            return g
         dF = np.column_stack([self.f_hist[j + 1] - self.f_hist[j] for j in range(len(self.f_hist) - 1)])
         dG = np.column_stack([self.g_hist[j + 1] - self.g_hist[j] for j in range(len(self.g_hist) - 1)])
         gamma = np.linalg.lstsq(dF, f, rcond=None)[0]

@@ -716,6 +716,9 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
             _lu_solve(J, pJ, rhs)
             stepR = rhs
         else:
+            if not np.all(np.isfinite(Jc)):
+                # a non-finite Newton matrix (LAPACK would print an error): no step possible
+                return lam, d, False, it, _max_scaled(phi, c, kappa)
             rr = np.empty(nR)
             for ii in range(nR):
                 rr[ii] = -phi[Rs[ii]]

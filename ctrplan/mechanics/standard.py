@@ -196,9 +196,9 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
     detJ = np.nan
     for it in range(1, maxit + 1):
         J = Ss[:, :n].copy()
+        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
+            return x, np.inf, it, False, np.nan, rp, rs, rd
         detJ = np.linalg.det(J)
-        if not np.all(np.isfinite(r)):
-            return x, np.inf, it, False, detJ, rp, rs, rd
         if res < tol:
             return x, res, it, True, detJ, rp, rs, rd
         if abs(detJ) > 0.0:
@@ -227,7 +227,7 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
             x = trial if accepted else x - scale * step
             _, r, _, Ss, rp, rs, rd = _integrate(s, present, uh, kxy, ratio, alpha.copy(), x, True, True)
         res = np.max(np.abs(r))
-    detJ = np.linalg.det(Ss[:, :n].copy())
+    detJ = np.linalg.det(Ss[:, :n].copy()) if np.all(np.isfinite(Ss)) else np.nan
     ok = np.all(np.isfinite(r)) and res < tol
     return x, res if np.isfinite(res) else np.inf, maxit, ok, detJ, rp, rs, rd
 
