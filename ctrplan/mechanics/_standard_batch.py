@@ -17,6 +17,7 @@ from numba import config, get_num_threads, njit, prange, set_num_threads
 from ..constants import GRID_MERGE_TOL
 from ._contact_kernels import chain_kinematics
 from .results import ModelSettings
+from .grid import _grid, packed_sections
 from .standard import _newton
 
 __all__ = ["StandardBatch", "solve_standard_batch"]
@@ -52,56 +53,6 @@ class StandardBatch:
     unstable: np.ndarray
     valid: np.ndarray
     iterations: np.ndarray
-
-
-@njit(cache=True)
-def _grid(beta, lengths, brk, nbrk, curv, ds, tol):
-    """Common grid (same construction as ``grid.build_grid``): nodes s (G,), first/last (n,),
-    present (G - 1, n), precurvature (G - 1, n, 2)."""
-    n = beta.shape[0]
-    total = 0
-    for i in range(n):
-        total += nbrk[i]
-    allb = np.empty(total)
-    q = 0
-    for i in range(n):
-        for j in range(nbrk[i]):
-            allb[q] = np.round((beta[i] + brk[i, j]) / tol) * tol
-            q += 1
-    br = np.unique(allb)
-    count = 1
-    for a in range(br.shape[0] - 1):
-        m = max(1, int(np.ceil((br[a + 1] - br[a]) / ds - 1e-9)))
-        count += m
-    s = np.empty(count)
-    s[0] = br[0]
-    q = 1
-    for a in range(br.shape[0] - 1):
-        lo = br[a]
-        hi = br[a + 1]
-        m = max(1, int(np.ceil((hi - lo) / ds - 1e-9)))
-        for k in range(1, m + 1):
-            s[q] = lo + (hi - lo) * k / m
-            q += 1
-    G = s.shape[0]
-    first = np.empty(n, dtype=np.int64)
-    last = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        first[i] = np.argmin(np.abs(s - beta[i]))
-        last[i] = np.argmin(np.abs(s - (beta[i] + lengths[i])))
-    present = np.zeros((G - 1, n), dtype=np.bool_)
-    uhat = np.zeros((G - 1, n, 2))
-    for i in range(n):
-        b = brk[i, :nbrk[i]]
-        nsec = nbrk[i] - 1
-        for j in range(first[i], last[i]):
-            present[j, i] = True
-            local = 0.5 * (s[j] + s[j + 1]) - beta[i]
-            idx = np.searchsorted(b, local, side="right") - 1
-            idx = min(max(idx, 0), nsec - 1)
-            uhat[j, i, 0] = curv[i, idx, 0]
-            uhat[j, i, 1] = curv[i, idx, 1]
-    return s, first, last, present, uhat
 
 
 @njit(cache=True)
@@ -231,15 +182,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
             robot.check_configuration(alpha[k], beta[k])
         except ValueError:
             valid[k] = False
-    nb = max(len(t.sections) + 1 for t in robot.tubes)
-    brk = np.zeros((n, nb))
-    curv = np.zeros((n, nb - 1, 2))
-    nbrk = np.zeros(n, dtype=np.int64)
-    for i, t in enumerate(robot.tubes):
-        b = t.section_breaks()
-        brk[i, :b.size] = b
-        nbrk[i] = b.size
-        curv[i, :len(t.sections)] = [sec.precurvature for sec in t.sections]
+    brk, nbrk, curv = packed_sections(robot)
     lengths = np.array([t.length for t in robot.tubes])
     kxy = np.array([t.k_xy for t in robot.tubes])
     ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])

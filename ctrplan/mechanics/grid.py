@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..constants import GRID_MERGE_TOL
 
@@ -67,28 +68,76 @@ def build_grid(robot, beta, ds: float) -> ArcLengthGrid:
     """
     if not ds > 0:
         raise ValueError(f"arc-length step ds must be > 0 m, got {ds!r}")
-    beta = np.asarray(beta, dtype=float)
-    breaks = []
-    for i, t in enumerate(robot.tubes):
-        breaks.extend(beta[i] + t.section_breaks())
-    breaks = np.unique(np.round(np.asarray(breaks) / GRID_MERGE_TOL) * GRID_MERGE_TOL)
-    nodes = [breaks[0]]
-    for a, b in zip(breaks[:-1], breaks[1:]):
-        m = max(1, int(np.ceil((b - a) / ds - 1e-9)))
-        nodes.extend(a + (b - a) * np.arange(1, m + 1) / m)
-    s = np.asarray(nodes)
-    n = robot.n_tubes
-    ends = robot.tube_ends(beta)
-    first = np.array([int(np.argmin(np.abs(s - beta[i]))) for i in range(n)])
-    last = np.array([int(np.argmin(np.abs(s - ends[i]))) for i in range(n)])
-    mid = 0.5 * (s[:-1] + s[1:])
-    present = np.zeros((s.size - 1, n), dtype=bool)
-    uhat = np.zeros((s.size - 1, n, 2))
-    for i, t in enumerate(robot.tubes):
-        present[first[i]:last[i], i] = True
-        local = mid - beta[i]
-        br = t.section_breaks()
-        idx = np.clip(np.searchsorted(br, local, side="right") - 1, 0, len(t.sections) - 1)
-        curv = np.array([sec.precurvature for sec in t.sections], dtype=float)
-        uhat[:, i, :] = np.where(present[:, i, None], curv[idx], 0.0)
+    beta = np.ascontiguousarray(beta, dtype=float)
+    brk, nbrk, curv = packed_sections(robot)
+    lengths = np.array([t.length for t in robot.tubes])
+    s, first, last, present, uhat = _grid(beta, lengths, brk, nbrk, curv, float(ds), GRID_MERGE_TOL)
     return ArcLengthGrid(s=s, first=first, last=last, present=present, precurvature=uhat)
+
+
+def packed_sections(robot):
+    """Section breaks and precurvatures of every tube as padded arrays for the compiled grid:
+    ``brk`` (n, B) [m] (tube-local, from 0 to the length), ``nbrk`` (n,) breaks per tube,
+    ``curv`` (n, B - 1, 2) [1/m]."""
+    n = robot.n_tubes
+    nb = max(len(t.sections) + 1 for t in robot.tubes)
+    brk = np.zeros((n, nb))
+    curv = np.zeros((n, nb - 1, 2))
+    nbrk = np.zeros(n, dtype=np.int64)
+    for i, t in enumerate(robot.tubes):
+        b = t.section_breaks()
+        brk[i, :b.size] = b
+        nbrk[i] = b.size
+        curv[i, :len(t.sections)] = [sec.precurvature for sec in t.sections]
+    return brk, nbrk, curv
+
+
+@njit(cache=True)
+def _grid(beta, lengths, brk, nbrk, curv, ds, tol):
+    """Compiled body of :func:`build_grid`: the tube bases, section breaks and ends (merged within
+    ``tol``) split into equal steps of at most ``ds``. Returns nodes s (G,), first/last (n,),
+    present (G - 1, n), precurvature (G - 1, n, 2)."""
+    n = beta.shape[0]
+    total = 0
+    for i in range(n):
+        total += nbrk[i]
+    allb = np.empty(total)
+    q = 0
+    for i in range(n):
+        for j in range(nbrk[i]):
+            allb[q] = np.round((beta[i] + brk[i, j]) / tol) * tol
+            q += 1
+    br = np.unique(allb)
+    count = 1
+    for a in range(br.shape[0] - 1):
+        m = max(1, int(np.ceil((br[a + 1] - br[a]) / ds - 1e-9)))
+        count += m
+    s = np.empty(count)
+    s[0] = br[0]
+    q = 1
+    for a in range(br.shape[0] - 1):
+        lo = br[a]
+        hi = br[a + 1]
+        m = max(1, int(np.ceil((hi - lo) / ds - 1e-9)))
+        for k in range(1, m + 1):
+            s[q] = lo + (hi - lo) * k / m
+            q += 1
+    G = s.shape[0]
+    first = np.empty(n, dtype=np.int64)
+    last = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        first[i] = np.argmin(np.abs(s - beta[i]))
+        last[i] = np.argmin(np.abs(s - (beta[i] + lengths[i])))
+    present = np.zeros((G - 1, n), dtype=np.bool_)
+    uhat = np.zeros((G - 1, n, 2))
+    for i in range(n):
+        b = brk[i, :nbrk[i]]
+        nsec = nbrk[i] - 1
+        for j in range(first[i], last[i]):
+            present[j, i] = True
+            local = 0.5 * (s[j] + s[j + 1]) - beta[i]
+            idx = np.searchsorted(b, local, side="right") - 1
+            idx = min(max(idx, 0), nsec - 1)
+            uhat[j, i, 0] = curv[i, idx, 0]
+            uhat[j, i, 1] = curv[i, idx, 1]
+    return s, first, last, present, uhat

@@ -31,7 +31,7 @@ __all__ = ["solve_standard"]
 _ZERO1 = np.zeros(1)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, dpsi, dsig, dSp, dSs, ax, ay, ducx, ducy):
     """Torsion ODE and its variational equations on one interval (in-place outputs; ``ax``,
     ``ay`` (n,) and ``ducx``, ``ducy`` (m,) are work arrays)."""
@@ -79,7 +79,7 @@ def _rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, dpsi, dsig, dSp, dSs, ax, ay
                 dSs[i, q] = 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _stages(psi, sig, Sp, Ss, kp, ks, Kp, Ks, f, tp, ts, TP, TS):
     """RK4 stage inputs: (tp, ts, TP, TS) = (psi, sig, Sp, Ss) + f (kp, ks, Kp, Ks)."""
     for i in range(psi.shape[0]):
