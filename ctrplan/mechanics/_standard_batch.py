@@ -15,10 +15,9 @@ import numpy as np
 from numba import config, get_num_threads, njit, prange, set_num_threads
 
 from ..constants import GRID_MERGE_TOL
-from ._contact_kernels import chain_kinematics
-from .results import ModelSettings
 from .grid import _grid, packed_sections
-from .standard import _newton
+from .results import ModelSettings
+from .standard import _centerline, _newton
 
 __all__ = ["StandardBatch", "solve_standard_batch"]
 
@@ -56,38 +55,6 @@ class StandardBatch:
 
 
 @njit(cache=True)
-def _tip(s, present, uhat, kxy, psi, sig):
-    """Tip position and tangent from midpoint curvatures (``standard._assemble``), given the node
-    angles ``psi`` and torsions ``sig`` (G, n) of the solution."""
-    G = s.shape[0]
-    n = psi.shape[1]
-    u = np.zeros((G - 1, 3))
-    h = np.empty(G - 1)
-    for j in range(G - 1):
-        hj = s[j + 1] - s[j]
-        h[j] = hj
-        ks = 0.0
-        ux = 0.0
-        uy = 0.0
-        for i in range(n):
-            pm = 0.5 * (psi[j, i] + psi[j + 1, i]) + hj * (sig[j, i] - sig[j + 1, i]) / 8.0
-            c = np.cos(pm)
-            sn = np.sin(pm)
-            if present[j, i]:
-                ks += kxy[i]
-                ux += kxy[i] * (c * uhat[j, i, 0] - sn * uhat[j, i, 1])
-                uy += kxy[i] * (sn * uhat[j, i, 0] + c * uhat[j, i, 1])
-        ks = max(ks, 1e-300)
-        u[j, 0] = ux / ks
-        u[j, 1] = uy / ks
-    R = np.empty((G, 3, 3))
-    p = np.empty((G, 3))
-    node_off = np.array([0, G], dtype=np.int64)
-    chain_kinematics(u, h, np.zeros(1), np.array([s[0]]), node_off, R, p)
-    return p[G - 1].copy(), R[G - 1, :, 2].copy()
-
-
-@njit(cache=True)
 def _solve_one(k, alpha, beta, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
                tips, tans, sig_out, conv, unst, iters):
     """Configuration ``k`` of the batch: grid, Newton shooting (retried from zero twist), tip."""
@@ -104,9 +71,9 @@ def _solve_one(k, alpha, beta, sig_init, lengths, brk, nbrk, curv, kxy, ratio, d
     conv[k] = ok
     unst[k] = ok and not detJ > 0.0
     sig_out[k] = sig0
-    p, t = _tip(s, present, uhat, kxy, psi, sig)
-    tips[k] = p
-    tans[k] = t
+    _, _, _, R, p, _ = _centerline(s, present, uhat, kxy, psi, sig)
+    tips[k] = p[-1]
+    tans[k] = R[-1, :, 2]
 
 
 @njit(cache=True)

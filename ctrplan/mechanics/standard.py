@@ -28,8 +28,6 @@ from .results import Diagnostics, ModelSettings, StandardSolution
 
 __all__ = ["solve_standard"]
 
-_ZERO1 = np.zeros(1)
-
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, dpsi, dsig, dSp, dSs, ax, ay, ducx, ducy):
@@ -232,39 +230,76 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
     return x, res if np.isfinite(res) else np.inf, maxit, ok, detJ, rp, rs, rd
 
 
+@njit(cache=True, error_model="numpy")
+def _centerline(s, present, uh, kxy, psi, sig):
+    """Shared centerline of the standard model from the node angles and torsions (G, n).
+
+    Per interval: Hermite midpoint angle (4th order) and torsion (3rd order), the bending
+    curvature u_xy = sum_i k_i R_z(psi_i) uhat_i / sum_i k_i of the tubes present, then
+    exponential-coordinates steps from R = I, p = (0, 0, s_0) (Eq. (57) of Ha et al. 2019).
+    Returns psi_mid, sig_mid (G - 1, n), u_xy (G - 1, 2), R (G, 3, 3), p (G, 3), and the
+    bending at the nodes (G, 2) (last interval's tubes at the last node).
+    """
+    G = s.shape[0]
+    n = psi.shape[1]
+    psi_mid = np.empty((G - 1, n))
+    sig_mid = np.empty((G - 1, n))
+    ub = np.empty((G - 1, 2))
+    ucurv = np.zeros((G - 1, 3))
+    h = np.empty(G - 1)
+    bend = np.empty((G, 2))
+    for j in range(G - 1):
+        hj = s[j + 1] - s[j]
+        h[j] = hj
+        ks = 0.0
+        ux = 0.0
+        uy = 0.0
+        for i in range(n):
+            pm = 0.5 * (psi[j, i] + psi[j + 1, i]) + hj * (sig[j, i] - sig[j + 1, i]) / 8.0
+            psi_mid[j, i] = pm
+            sig_mid[j, i] = 1.5 * (psi[j + 1, i] - psi[j, i]) / hj - 0.25 * (sig[j, i] + sig[j + 1, i])
+            if present[j, i]:
+                c = np.cos(pm)
+                sn = np.sin(pm)
+                ks += kxy[i]
+                ux += kxy[i] * (c * uh[j, i, 0] - sn * uh[j, i, 1])
+                uy += kxy[i] * (sn * uh[j, i, 0] + c * uh[j, i, 1])
+        ks = max(ks, 1e-300)
+        ub[j, 0] = ux / ks
+        ub[j, 1] = uy / ks
+        ucurv[j, 0] = ub[j, 0]
+        ucurv[j, 1] = ub[j, 1]
+    for q in range(G):
+        j = min(q, G - 2)
+        ks = 0.0
+        bx = 0.0
+        by = 0.0
+        for i in range(n):
+            if present[j, i]:
+                c = np.cos(psi[q, i])
+                sn = np.sin(psi[q, i])
+                ks += kxy[i]
+                bx += kxy[i] * (c * uh[j, i, 0] - sn * uh[j, i, 1])
+                by += kxy[i] * (sn * uh[j, i, 0] + c * uh[j, i, 1])
+        ks = max(ks, 1e-300)
+        bend[q, 0] = bx / ks
+        bend[q, 1] = by / ks
+    R = np.empty((G, 3, 3))
+    p = np.empty((G, 3))
+    node_off = np.array([0, G], dtype=np.int64)
+    chain_kinematics(ucurv, h, np.zeros(1), np.array([s[0]]), node_off, R, p)
+    return psi_mid, sig_mid, ub, R, p, bend
+
+
 def _assemble(problem, sig0, diag) -> StandardSolution:
     g = problem.grid
     s = g.s
-    h = np.diff(s)
     rec = getattr(problem, "recorded", None)
     if rec is not None and np.array_equal(rec[0], sig0):
         _, psi, sig, dsig = rec
     else:
         _, _, _, _, psi, sig, dsig = problem.shoot(sig0, record=True, with_sens=False)
-    # Hermite midpoints (4th-order psi, 3rd-order sigma) for the per-interval curvature
-    psi_mid = 0.5 * (psi[:-1] + psi[1:]) + h[:, None] * (sig[:-1] - sig[1:]) / 8.0
-    sig_mid = 1.5 * (psi[1:] - psi[:-1]) / h[:, None] - 0.25 * (sig[:-1] + sig[1:])
-    c, sn = np.cos(psi_mid), np.sin(psi_mid)
-    uh = g.precurvature
-    ax = c * uh[..., 0] - sn * uh[..., 1]
-    ay = sn * uh[..., 0] + c * uh[..., 1]
-    k = problem.kxy[None, :] * g.present
-    ksum = np.maximum(k.sum(axis=1), 1e-300)
-    ub = np.stack([(k * ax).sum(axis=1) / ksum, (k * ay).sum(axis=1) / ksum], axis=1)
-    # shared centerline: exponential-coordinates steps from R = I, p = (0, 0, s_0) (Eq. (57))
-    ucurv = np.zeros((h.size, 3))
-    ucurv[:, :2] = ub
-    R = np.empty((s.size, 3, 3))
-    p = np.empty((s.size, 3))
-    chain_kinematics(ucurv, h, _ZERO1, np.array([s[0]]), np.array([0, s.size], dtype=np.int64), R, p)
-    # bending at nodes (for reporting): from node angles
-    cN, sN = np.cos(psi), np.sin(psi)
-    presN = np.vstack([g.present, g.present[-1:]])
-    uhN = np.vstack([uh, uh[-1:]])
-    kN = problem.kxy[None, :] * presN
-    kNs = np.maximum(kN.sum(axis=1), 1e-300)
-    bend = np.stack([(kN * (cN * uhN[..., 0] - sN * uhN[..., 1])).sum(axis=1) / kNs,
-                     (kN * (sN * uhN[..., 0] + cN * uhN[..., 1])).sum(axis=1) / kNs], axis=1)
+    psi_mid, sig_mid, ub, R, p, bend = _centerline(s, g.present, g.precurvature, problem.kxy, psi, sig)
     n = problem.robot.n_tubes
     psi_rep = psi.copy()
     sig_rep = sig.copy()
