@@ -270,11 +270,21 @@ def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, contact, settings, c
                     counts["n_reused"] += 1
                 else:
                     friction = bool(np.any(mu[k] > 0.0))
+                    warm = prev_cont
+                    if friction and warm is None:
+                        # a friction solve started from the standard model's linearization can
+                        # wander for its whole iteration budget; started from the clearance
+                        # solution at the same configuration it converges in a few steps (as in
+                        # evaluate_bound)
+                        warm = solve_contact(robot, a, b, settings, standard=std)
+                        counts["n_contact"] += 1
+                        if not warm.diagnostics.converged:
+                            warm = None
                     sol = solve_contact(robot, a, b, settings, eta=eta[k] if friction else None,
                                         mu=mu[k] if friction else None, standard=std,
-                                        warm_start=prev_cont)
+                                        warm_start=warm)
                     counts["n_contact"] += 1
-                    counts["n_warm"] += prev_cont is not None
+                    counts["n_warm"] += warm is not None
                     prev_cont, prev_key = sol, key
             elif reused:
                 counts["n_reused"] += 1
@@ -420,7 +430,9 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None,
     parallel chunks, each standard solve restarted from the first stage's base torsions (it
     converges in one Newton step to the same branch). A contact solve is warm-started only from
     a solution at the same configuration (same grid): the previous sample's when it did not
-    move, e.g. the clearance solution for a friction solve or another friction direction.
+    move, e.g. another friction direction. The first friction solve at a configuration is
+    warm-started from a clearance solve there: a cold friction solve can fail after its whole
+    iteration budget where the warm one converges in a few steps.
 
     Friction model per sample: ``mu_i = robot.friction_coefficients[i]`` if ``eta_i != 0`` and
     not ``translation_last``, else 0 (translation-last releases the twist, Section V-B; a pair
