@@ -11,3 +11,8 @@ DISTINCT_EQUILIBRIUM_TWIST = 1e-5
 
 # Grid points closer than this are merged when building the arc-length grid [m].
 GRID_MERGE_TOL = 1e-9
+
+# The contact models' outer loop gives up after this many consecutive re-linearizations whose
+# complementarity solve failed: such a solve does not recover, and each failed step costs up to
+# the whole Newton budget (seconds).
+MAX_FAILED_INNER_STEPS = 10

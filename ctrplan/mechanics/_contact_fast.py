@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..constants import MAX_FAILED_INNER_STEPS
 from . import _contact_kernels as ck
 
 __all__ = ["FlatProblem", "Anderson", "run_outer_loop"]
@@ -206,6 +207,9 @@ class FlatProblem:
 def run_outer_loop(prob, u, lam, settings):
     """Outer re-linearization loop (Section II-E, alpha = 1, Anderson-accelerated).
 
+    Stops unconverged after ``MAX_FAILED_INNER_STEPS`` consecutive failed complementarity
+    solves (``constants``), which do not recover.
+
     Parameters
     ----------
     prob : FlatProblem
@@ -225,6 +229,7 @@ def run_outer_loop(prob, u, lam, settings):
     inner_ok = True
     change = np.inf
     outer = 0
+    failed_in_a_row = 0
     anderson = Anderson(settings.anderson_depth)
     for outer in range(1, settings.max_outer_iterations + 1):
         if prob.M == 0:
@@ -232,6 +237,9 @@ def run_outer_loop(prob, u, lam, settings):
             break
         lam, g, inner_ok, its = prob.outer_step(u, R, p, lam, settings)
         inner_total += its
+        failed_in_a_row = 0 if inner_ok else failed_in_a_row + 1
+        if failed_in_a_row >= MAX_FAILED_INNER_STEPS:
+            break
         Rg, pg = prob.kinematics(g)
         change = float(np.max(np.abs(pg - p)))
         if change < settings.outer_tol and inner_ok:
