@@ -12,6 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from ctrplan.discrepancy import Effects, Noise, synthesize, write_synth
+from ctrplan.discrepancy.calibrate import grid_search_friction
 from ctrplan.discrepancy.data import MeasuredData, load_measured_data, split_data
 from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, read_parameters
 from ctrplan.discrepancy.report import write_report
@@ -267,3 +268,16 @@ def test_real_trajectory_runs_end_to_end(tmp_path):
     assert before["n_failed"] < 0.05 * before["n_samples"]
     assert after["position_mean_mm"] <= before["position_mean_mm"] + 1e-9
     assert res["reproduced"]
+
+
+def test_friction_grid_search_extends_past_the_coarse_grid_edge(tmp_path):
+    """Hidden mu = 0.55 on the Table I tube pair, noise-free, coarse grid 0..0.2: a best point on
+    the grid's upper edge is not a minimum, so the grid grows until it brackets the minimum, and
+    the refinements land on the hidden value."""
+    pair = load_robot(ROOT / "model" / "ha2019-table1-tube-pair.toml")
+    data = tmp_path / "pair.csv"
+    _synth(pair, Effects(friction_coefficients=(0.55,)), data, grid=3, noise=Noise(position_rms=0.0, angle_rms=0.0))
+    off = pair.replace(friction_coefficients=(0.0,))
+    fit = grid_search_friction(off, load_measured_data(data, off), {}, settings=COARSE, coarse=(0.0, 0.1, 0.2))
+    assert fit.values == pytest.approx([0.55], abs=1e-9)
+    assert "coarse grid 0..0.7" in fit.message

@@ -39,6 +39,9 @@ ANGLE_UNIT = np.pi / 180.0
 FAILED_RESIDUAL = 50.0
 #: Relative finite-difference step of the least-squares Jacobian (solver tolerances are ~1e-9).
 DIFF_STEP = 1e-4
+#: Largest friction coefficient the grid search extends its coarse grid to (NiTi on NiTi is
+#: far below; the paper's calibrated values are 0.22 and 0.12, Table VII).
+MU_GRID_LIMIT = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -368,8 +371,10 @@ def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: Mo
     second pass using a 2-D grid search to avoid local minima"), other parameters ``fixed``.
 
     The coarse grid (``coarse`` per pair) is scored on at most ``search_samples`` calibration
-    samples made of whole configuration groups; then ``refinements`` rounds of a 3^(n-1) grid
-    with half the previous step around the best point are scored on the whole calibration set.
+    samples made of whole configuration groups; while its best point lies on the grid's upper
+    edge, the grid grows by one step (up to mu = ``MU_GRID_LIMIT``). Then ``refinements`` rounds
+    of a 3^(n-1) grid with half the previous step around the best point are scored on the whole
+    calibration set.
 
     Parameters
     ----------
@@ -411,9 +416,9 @@ def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: Mo
     total = len(grid) + refinements * (3 ** m)
     done = [0]
 
-    def scan(obj, points):
-        """Cost of every grid point (each distinct point solved once); the best point."""
-        costs = {}
+    def scan(obj, points, costs):
+        """Cost of every grid point (each distinct point solved once, ``costs`` kept across
+        calls); the best point scored so far."""
         for mu in points:
             mu = tuple(round(float(v), 6) for v in mu)
             if mu not in costs:
@@ -425,13 +430,21 @@ def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: Mo
         best = min(costs, key=costs.get)
         return best, costs[best]
 
-    best, cost = scan(obj_sub, grid)
-    trail = [f"coarse grid on {sub.n_samples} samples: best mu {best} cost {cost:.4g}"]
+    coarse_costs: dict = {}
+    best, cost = scan(obj_sub, grid, coarse_costs)
+    # a best point on the grid's upper edge is no minimum: extend the grid there by whole steps
+    axis = list(coarse)
+    while coarse.size > 1 and max(best) >= axis[-1] - 1e-9 and axis[-1] + step <= MU_GRID_LIMIT + 1e-9:
+        axis.append(round(axis[-1] + step, 6))
+        new = [q for q in itertools.product(axis, repeat=m) if max(q) >= axis[-1] - 1e-9]
+        total += len(new)
+        best, cost = scan(obj_sub, new, coarse_costs)
+    trail = [f"coarse grid {axis[0]:g}..{axis[-1]:g} on {sub.n_samples} samples: best mu {best} cost {cost:.4g}"]
     best_all = np.array(best)
     for _ in range(refinements):
         step /= 2.0
         best, cost = scan(obj_all, (np.maximum(best_all + step * np.array(d), 0.0)
-                                    for d in itertools.product((-1, 0, 1), repeat=m)))
+                                    for d in itertools.product((-1, 0, 1), repeat=m)), {})
         best_all = np.array(best)
         trail.append(f"refined (step {step:.4g}) on {data.n_samples} samples: best mu {best} cost {cost:.4g}")
     r = obj_all.residuals(best_all)
