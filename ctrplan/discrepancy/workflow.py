@@ -50,7 +50,8 @@ BIC_MARGIN = 6.0
 #: Bins that group nearby configurations of a continuous trajectory for the friction test.
 TRAJECTORY_ROTATION_BIN = np.deg2rad(15.0)
 TRAJECTORY_TRANSLATION_BIN = 5e-3
-#: Held-out samples (whole units) re-evaluated with the written model file to check it.
+#: Held-out samples (whole configuration groups) re-evaluated with the written model file to
+#: check it; a continuous trajectory is re-evaluated whole.
 REPRODUCE_SAMPLES = 256
 
 
@@ -540,7 +541,10 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                                                 registration=registration))
     final_val = candidates[named]["_val"] if named else base_val
     after = _error_summary(final_val["position"], final_val["angle"], final_val["seconds"], val.n_samples)
-    check_rows = _subsample(val, np.ones(val.n_samples, bool), REPRODUCE_SAMPLES, options.seed)
+    # whole configuration groups of a revisiting protocol; a trajectory is re-run whole, since a
+    # subsample would break its branch following (each sample starts from the previous one)
+    check_rows = (_subsample(val, np.ones(val.n_samples, bool), REPRODUCE_SAMPLES, options.seed)
+                  if _configurations_repeat(val.config_id) else np.ones(val.n_samples, bool))
     check = reproduce_errors(model_path, val.take(check_rows), settings, n_jobs=options.n_jobs)
     reproduced = bool(np.allclose(check["position"], final_val["position"][check_rows], atol=1e-9,
                                   equal_nan=True))
