@@ -17,8 +17,8 @@ from ctrplan.discrepancy.data import MeasuredData, load_measured_data, split_dat
 from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, read_parameters
 from ctrplan.discrepancy.report import write_report
 from ctrplan.discrepancy.signatures import friction_signature, regression_signature, registration_signature
-from ctrplan.discrepancy.workflow import (DiscrepancyOptions, _configurations_repeat, _units, reproduce_errors,
-                                         run_discrepancy)
+from ctrplan.discrepancy.workflow import (DiscrepancyOptions, _cautions, _configurations_repeat, _units,
+                                         reproduce_errors, run_discrepancy)
 from ctrplan.errors import DataFileError
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from ctrplan.mechanics import ModelSettings
@@ -281,3 +281,14 @@ def test_friction_grid_search_extends_past_the_coarse_grid_edge(tmp_path):
     fit = grid_search_friction(off, load_measured_data(data, off), {}, settings=COARSE, coarse=(0.0, 0.1, 0.2))
     assert fit.values == pytest.approx([0.55], abs=1e-9)
     assert "coarse grid 0..0.7" in fit.message
+
+
+def test_cautions_flag_an_implausible_friction_coefficient_and_a_worse_maximum():
+    before = {"position_mean_mm": 5.2, "position_max_mm": 16.8}
+    worse_max = {"position_mean_mm": 4.3, "position_max_mm": 23.2}
+    cand = {"parameters": {"mu_1": 0.975, "mu_2": 0.05}}
+    notes = _cautions("friction", cand, before, worse_max)
+    assert len(notes) == 2 and "mu_1 = 0.975" in notes[0] and "16.80 to 23.20 mm" in notes[1]
+    assert _cautions("friction", {"parameters": {"mu_1": 0.22, "mu_2": 0.12}}, before,
+                     {"position_mean_mm": 2.0, "position_max_mm": 8.0}) == []
+    assert _cautions(None, None, before, before) == []

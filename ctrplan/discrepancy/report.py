@@ -114,6 +114,8 @@ def write_report(results: dict, out_dir) -> dict:
         lines += ["**No effect named.** No candidate had a significant residual signature, a significant "
                   "held-out improvement and a better BIC together: the residuals of the calibrated baseline "
                   "are consistent with noise.", ""]
+    if results.get("cautions"):
+        lines += ["Cautions:", ""] + [f"- {c}." for c in results["cautions"]] + [""]
     lines += [f"- data: {results['n_samples']} samples in the {results['frame']} frame; split {results['split']};",
               f"- calibration fit on {results['n_fit']} samples, errors on {results['n_validation']} held-out samples;",
               f"- baseline parameters: {', '.join(results['baseline_parameters'])};",

@@ -47,6 +47,9 @@ __all__ = ["DiscrepancyOptions", "run_discrepancy", "default_baseline_parameters
 EFFECTS = ("friction", "clearance", "offplane", "poisson", "registration")
 #: A candidate must lower the BIC by at least this much (Kass & Raftery: > 6 is strong evidence).
 BIC_MARGIN = 6.0
+#: A fitted friction coefficient above this is flagged as implausible for NiTi on NiTi (the
+#: paper's calibrated values are 0.22 and 0.12, Table VII of Ha et al. 2019).
+PLAUSIBLE_MU = 0.5
 #: Bins that group nearby configurations of a continuous trajectory for the friction test.
 TRAJECTORY_ROTATION_BIN = np.deg2rad(15.0)
 TRAJECTORY_TRANSLATION_BIN = 5e-3
@@ -552,6 +555,10 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
          f"samples: {reproduced} "
          f"(mean {np.nanmean(check['position']) * 1e3:.3f} mm)")
 
+    cautions = _cautions(named, candidates.get(named), base_summary, after)
+    for line in cautions:
+        echo(f"caution: {line}")
+
     results = {
         "robot_file": str(robot_path), "data_file": str(data_path), "frame": data.frame,
         "n_samples": data.n_samples, "split": how, "n_calibration": cal.n_samples, "n_fit": n_fit,
@@ -563,6 +570,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         "after": after, "updated_model_file": str(model_path), "updated_model": final_model,
         "reproduced": reproduced, "reproduced_samples": int(check_rows.sum()),
         "reproduced_position_mean_mm": float(np.nanmean(check["position"]) * 1e3),
+        "cautions": cautions,
         "significance": options.significance, "bic_margin": BIC_MARGIN, "options": asdict(options),
         "seconds": time.perf_counter() - t_start,
         "_arrays": {"val_eta": val.eta, "val_tip_base": base_val["tip_base"],
@@ -610,6 +618,26 @@ def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: i
     pred = predict(robot, names, values, data, model, settings, n_jobs=n_jobs)
     pos, ang, _ = pose_errors(pred, data)
     return {"position": pos, "angle": ang}
+
+
+def _cautions(named, candidate, before: dict, after: dict) -> list[str]:
+    """What a reader of the named effect must not overlook: a fitted value outside what the
+    physics allows, or an addition that lowers the mean error but raises the maximum."""
+    out = []
+    if named is None:
+        return out
+    for name, value in candidate["parameters"].items():
+        if name.startswith("mu_") and value > PLAUSIBLE_MU:
+            out.append(f"{name} = {value:.3g} is larger than plausible Coulomb friction between NiTi tubes "
+                       f"(> {PLAUSIBLE_MU}; Table VII of Ha et al. 2019 has 0.22 and 0.12): the "
+                       f"direction-dependent error is real, but it may come from another hysteretic effect "
+                       f"(e.g. backlash or lag in that tube's rotation drive) that the friction model "
+                       f"imitates; read the coefficient as a size, not as a material property")
+    if after["position_max_mm"] > before["position_max_mm"]:
+        out.append(f"the held-out maximum tip error rises from {before['position_max_mm']:.2f} to "
+                   f"{after['position_max_mm']:.2f} mm while the mean falls: the added effect makes some "
+                   f"samples worse")
+    return out
 
 
 def _has_clearance(robot) -> bool:
