@@ -108,8 +108,11 @@ def write_report(results: dict, out_dir) -> dict:
     if named:
         red = 1.0 - after["position_mean_mm"] / base["position_mean_mm"]
         redmax = 1.0 - after["position_max_mm"] / base["position_max_mm"]
-        lines += [f"**Named missing effect: {results['named_label']}.** Adding it lowers the held-out mean "
-                  f"tip position error by {100 * red:.0f}% and the maximum by {100 * redmax:.0f}%.", ""]
+        change = (f"lowers the maximum by {100 * redmax:.0f}%" if redmax >= 0
+                  else f"raises the maximum by {-100 * redmax:.0f}%")
+        lines += [f"**Named missing effect: {results['named_label']}.** Adding it "
+                  f"{'lowers' if red >= 0 else 'raises'} the held-out mean tip position error by "
+                  f"{100 * abs(red):.0f}% and {change}.", ""]
     else:
         lines += ["**No effect named.** No candidate had a significant residual signature, a significant "
                   "held-out improvement and a better BIC together: the residuals of the calibrated baseline "
