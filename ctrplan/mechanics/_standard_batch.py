@@ -3,8 +3,8 @@
 Per configuration, the same steps as :func:`ctrplan.mechanics.solve_standard` with
 ``check_stability=False``: the common arc-length grid of Section II-C of Ha, Fagogenis & Dupont
 2019 (``grid.build_grid``), damped Newton shooting on the base torsions with the exact
-variational Jacobian (``standard._Problem.newton``), and the shared centerline from midpoint
-curvatures (``standard._assemble``), all in numba with no Python work per configuration.
+variational Jacobian (``standard._newton``), and the shared centerline from midpoint
+curvatures (``standard._centerline``), all in numba with no Python work per configuration.
 """
 
 from __future__ import annotations
@@ -61,10 +61,10 @@ def _solve_one(k, alpha, beta, sig_init, lengths, brk, nbrk, curv, kxy, ratio, d
     n = alpha.shape[1]
     s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, grid_tol)
     a = alpha[k].copy()
-    sig0, _, it, ok, detJ, psi, sig, _ = _newton(s, present, uhat, kxy, ratio, a, sig_init[k], lengths,
+    sig0, _, it, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, sig_init[k], lengths,
                                                  tol, maxit)
     if not ok:
-        sig0, _, it2, ok, detJ, psi, sig, _ = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths,
+        sig0, _, it2, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths,
                                                       tol, maxit)
         it += it2
     iters[k] = it

@@ -155,23 +155,15 @@ class _Problem:
         self.kxy = np.array([t.k_xy for t in robot.tubes])
         self.ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
         self.lengths = np.array([t.length for t in robot.tubes])
-        self.recorded = None
-
-    def shoot(self, sig0, record=False, with_sens=True):
-        g = self.grid
-        return _integrate(g.s, g.present, g.precurvature, self.kxy, self.ratio,
-                          self.alpha.copy(), np.asarray(sig0, dtype=float).copy(), record, with_sens)
 
     def newton(self, sig0, settings):
-        """Newton shooting on the base torsions; returns (sig0, residual norm, iterations, ok, detJ).
-
-        The node values of the last evaluation are kept in ``self.recorded`` for ``_assemble``."""
+        """Newton shooting on the base torsions; returns (sig0, residual norm, iterations, ok, detJ,
+        (psi, sigma)) with the node angles and torsions (G, n) of the evaluation at sig0."""
         g = self.grid
-        sig0, res, it, ok, detJ, rp, rs, rd = _newton(
+        sig0, res, it, ok, detJ, psi, sig = _newton(
             g.s, g.present, g.precurvature, self.kxy, self.ratio, self.alpha, np.asarray(sig0, dtype=float),
             self.lengths, float(settings.shooting_tol), int(settings.max_shooting_iterations))
-        self.recorded = (sig0, rp, rs, rd)
-        return sig0, res, it, ok, detJ
+        return sig0, res, it, ok, detJ, (psi, sig)
 
 
 @njit(cache=True, error_model="numpy")
@@ -184,21 +176,21 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
     evaluated with sensitivities and node records, so an accepted full step is the next
     iteration's evaluation (one integration per iteration instead of two).
 
-    Returns (sig0, residual, iterations, ok, detJ, psi, sigma, sigma') with the node values of
-    the evaluation at the returned sig0.
+    Returns (sig0, residual, iterations, ok, detJ, psi, sigma) with the node angles and torsions
+    (G, n) of the evaluation at the returned sig0.
     """
     n = sig0.shape[0]
     x = sig0.copy()
-    _, r, _, Ss, rp, rs, rd = _integrate(s, present, uh, kxy, ratio, alpha.copy(), x, True, True)
+    _, r, _, Ss, rp, rs, _ = _integrate(s, present, uh, kxy, ratio, alpha, x, True, True)
     res = np.max(np.abs(r))
     detJ = np.nan
     for it in range(1, maxit + 1):
         J = Ss[:, :n].copy()
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
-            return x, np.inf, it, False, np.nan, rp, rs, rd
+            return x, np.inf, it, False, np.nan, rp, rs
         detJ = np.linalg.det(J)
         if res < tol:
-            return x, res, it, True, detJ, rp, rs, rd
+            return x, res, it, True, detJ, rp, rs
         if abs(detJ) > 0.0:
             step = np.linalg.solve(J, r)
         else:
@@ -210,24 +202,42 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
                 scale = min(scale, (np.pi / lengths[i]) / abs(step[i]))
         t = scale
         trial = x - t * step
-        _, r_t, _, S_t, rp_t, rs_t, rd_t = _integrate(s, present, uh, kxy, ratio, alpha.copy(), trial, True, True)
+        _, r_t, _, S_t, rp_t, rs_t, _ = _integrate(s, present, uh, kxy, ratio, alpha, trial, True, True)
         if np.all(np.isfinite(r_t)) and np.max(np.abs(r_t)) < (1.0 - 1e-4 * t) * res:
-            x, r, Ss, rp, rs, rd = trial, r_t, S_t, rp_t, rs_t, rd_t
+            x, r, Ss, rp, rs = trial, r_t, S_t, rp_t, rs_t
         else:
             accepted = False
             for _ in range(19):
                 t *= 0.5
                 trial = x - t * step
-                _, r_t, _, _, _, _, _ = _integrate(s, present, uh, kxy, ratio, alpha.copy(), trial, False, False)
+                _, r_t, _, _, _, _, _ = _integrate(s, present, uh, kxy, ratio, alpha, trial, False, False)
                 if np.all(np.isfinite(r_t)) and np.max(np.abs(r_t)) < (1.0 - 1e-4 * t) * res:
                     accepted = True
                     break
             x = trial if accepted else x - scale * step
-            _, r, _, Ss, rp, rs, rd = _integrate(s, present, uh, kxy, ratio, alpha.copy(), x, True, True)
+            _, r, _, Ss, rp, rs, _ = _integrate(s, present, uh, kxy, ratio, alpha, x, True, True)
         res = np.max(np.abs(r))
     detJ = np.linalg.det(Ss[:, :n].copy()) if np.all(np.isfinite(Ss)) else np.nan
     ok = np.all(np.isfinite(r)) and res < tol
-    return x, res if np.isfinite(res) else np.inf, maxit, ok, detJ, rp, rs, rd
+    return x, res if np.isfinite(res) else np.inf, maxit, ok, detJ, rp, rs
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _mean_bending(angle, present, uh, kxy):
+    """Shared bending curvature (u_x, u_y) [1/m] = sum_i k_i R_z(angle_i) uhat_i / sum_i k_i over
+    the tubes present (angle (n,) [rad], present (n,), uh (n, 2) [1/m], kxy (n,))."""
+    ks = 0.0
+    bx = 0.0
+    by = 0.0
+    for i in range(angle.shape[0]):
+        if present[i]:
+            c = np.cos(angle[i])
+            sn = np.sin(angle[i])
+            ks += kxy[i]
+            bx += kxy[i] * (c * uh[i, 0] - sn * uh[i, 1])
+            by += kxy[i] * (sn * uh[i, 0] + c * uh[i, 1])
+    ks = max(ks, 1e-300)
+    return bx / ks, by / ks
 
 
 @njit(cache=True, error_model="numpy")
@@ -251,39 +261,15 @@ def _centerline(s, present, uh, kxy, psi, sig):
     for j in range(G - 1):
         hj = s[j + 1] - s[j]
         h[j] = hj
-        ks = 0.0
-        ux = 0.0
-        uy = 0.0
         for i in range(n):
-            pm = 0.5 * (psi[j, i] + psi[j + 1, i]) + hj * (sig[j, i] - sig[j + 1, i]) / 8.0
-            psi_mid[j, i] = pm
+            psi_mid[j, i] = 0.5 * (psi[j, i] + psi[j + 1, i]) + hj * (sig[j, i] - sig[j + 1, i]) / 8.0
             sig_mid[j, i] = 1.5 * (psi[j + 1, i] - psi[j, i]) / hj - 0.25 * (sig[j, i] + sig[j + 1, i])
-            if present[j, i]:
-                c = np.cos(pm)
-                sn = np.sin(pm)
-                ks += kxy[i]
-                ux += kxy[i] * (c * uh[j, i, 0] - sn * uh[j, i, 1])
-                uy += kxy[i] * (sn * uh[j, i, 0] + c * uh[j, i, 1])
-        ks = max(ks, 1e-300)
-        ub[j, 0] = ux / ks
-        ub[j, 1] = uy / ks
+        ub[j, 0], ub[j, 1] = _mean_bending(psi_mid[j], present[j], uh[j], kxy)
         ucurv[j, 0] = ub[j, 0]
         ucurv[j, 1] = ub[j, 1]
     for q in range(G):
         j = min(q, G - 2)
-        ks = 0.0
-        bx = 0.0
-        by = 0.0
-        for i in range(n):
-            if present[j, i]:
-                c = np.cos(psi[q, i])
-                sn = np.sin(psi[q, i])
-                ks += kxy[i]
-                bx += kxy[i] * (c * uh[j, i, 0] - sn * uh[j, i, 1])
-                by += kxy[i] * (sn * uh[j, i, 0] + c * uh[j, i, 1])
-        ks = max(ks, 1e-300)
-        bend[q, 0] = bx / ks
-        bend[q, 1] = by / ks
+        bend[q, 0], bend[q, 1] = _mean_bending(psi[q], present[j], uh[j], kxy)
     R = np.empty((G, 3, 3))
     p = np.empty((G, 3))
     node_off = np.array([0, G], dtype=np.int64)
@@ -291,14 +277,10 @@ def _centerline(s, present, uh, kxy, psi, sig):
     return psi_mid, sig_mid, ub, R, p, bend
 
 
-def _assemble(problem, sig0, diag) -> StandardSolution:
+def _assemble(problem, sig0, psi, sig, diag) -> StandardSolution:
+    """The solution from the node angles and torsions (G, n) of the converged shooting."""
     g = problem.grid
     s = g.s
-    rec = getattr(problem, "recorded", None)
-    if rec is not None and np.array_equal(rec[0], sig0):
-        _, psi, sig, dsig = rec
-    else:
-        _, _, _, _, psi, sig, dsig = problem.shoot(sig0, record=True, with_sens=False)
     psi_mid, sig_mid, ub, R, p, bend = _centerline(s, g.present, g.precurvature, problem.kxy, psi, sig)
     n = problem.robot.n_tubes
     psi_rep = psi.copy()
@@ -380,11 +362,10 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
     problem = _Problem(robot, alpha, beta, settings)
     n = robot.n_tubes
     sig0 = np.zeros(n) if initial_guess is None else np.asarray(initial_guess, dtype=float)
-    sig0, res, iters, ok, detJ = problem.newton(sig0, settings)
+    sig0, res, iters, ok, detJ, nodes = problem.newton(sig0, settings)
     if not ok and initial_guess is not None:
-        sig0, res, iters2, ok, detJ = problem.newton(np.zeros(n), settings)
+        sig0, res, iters2, ok, detJ, nodes = problem.newton(np.zeros(n), settings)
         iters += iters2
-    solved = problem.recorded    # node values at sig0, reused by _assemble
     unstable = bool(ok and not detJ > 0.0)
     n_eq = 0  # not checked
     msg = "converged" if ok else f"shooting did not converge (tip torsion residual {res:.3g} 1/m)"
@@ -393,7 +374,7 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
         # solutions of the BVP with the same base torsions are the same solution
         found = [sig0]
         for guess in _multistart_guesses(problem, sig0, settings.multistart):
-            g_sig, g_res, g_it, g_ok, g_det = problem.newton(guess, settings)
+            g_sig, _, g_it, g_ok, g_det, _ = problem.newton(guess, settings)
             iters += g_it
             if not g_ok or not g_det > 0.0:
                 continue
@@ -413,5 +394,4 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
     if raise_on_failure and unstable:
         raise ElasticInstabilityError(f"standard model at alpha={np.round(alpha, 4)} rad, "
                                       f"beta={np.round(np.asarray(beta) * 1e3, 3)} mm: {msg}")
-    problem.recorded = solved
-    return _assemble(problem, sig0, diag)
+    return _assemble(problem, sig0, *nodes, diag)
