@@ -216,6 +216,13 @@ class Simulation:
 
 
 # --------------------------------------------------------------------------- kernel
+def _no_results(m, n):
+    """Per-row outputs before solving: tips, tangents (m, 3) and base torsions (m, n) NaN, ok
+    False, empty messages, and zero work counters."""
+    return (np.full((m, 3), np.nan), np.full((m, 3), np.nan), np.zeros(m, dtype=bool), [""] * m,
+            np.full((m, n), np.nan), dict(n_standard=0, n_contact=0, n_warm=0, n_reused=0))
+
+
 def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, contact, settings, check_stability):
     """Solve rows in order (one task; pure, runs in a worker).
 
@@ -224,12 +231,7 @@ def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, contact, settings, c
     {-1, +1} and mu (m, n - 1) (all mu 0: clearance model); contact: solve the contact model.
     """
     m, n = alpha.shape
-    tip = np.full((m, 3), np.nan)
-    tan = np.full((m, 3), np.nan)
-    ok = np.zeros(m, dtype=bool)
-    msg = [""] * m
-    torsion = np.full((m, n), np.nan)
-    counts = dict(n_standard=0, n_contact=0, n_warm=0, n_reused=0)
+    tip, tan, ok, msg, torsion, counts = _no_results(m, n)
     prev_std = prev_cont = prev_key = None
     prev_start = None
     for k in range(m):
@@ -330,13 +332,7 @@ def _chunks(order, alpha, beta, size):
 def _run(tasks, alpha, beta, guess, follow, eta, mu, contact, robot, settings, check_stability,
          n_jobs, progress, desc, K):
     """Run tasks (each an index array in processing order) and scatter results to rows."""
-    n = alpha.shape[1]
-    tip = np.full((K, 3), np.nan)
-    tan = np.full((K, 3), np.nan)
-    ok = np.zeros(K, dtype=bool)
-    msg = [""] * K
-    torsion = np.full((K, n), np.nan)
-    counts = dict(n_standard=0, n_contact=0, n_warm=0, n_reused=0)
+    tip, tan, ok, msg, torsion, counts = _no_results(K, alpha.shape[1])
 
     def args(idx):
         return (robot, alpha[idx], beta[idx], guess[idx], follow[idx], eta[idx], mu[idx], contact,
