@@ -45,15 +45,15 @@ class Anderson:
             self.f_hist, self.g_hist = [], []
         self.last = residual_size
         f = g - u
+        if not (np.all(np.isfinite(f)) and np.all(np.isfinite(g))):
+            self.f_hist, self.g_hist = [], []      # restart the history; plain fixed-point step
+            return g
         self.f_hist.append(f)
         self.g_hist.append(g)
         if len(self.f_hist) > self.depth + 1:
             self.f_hist.pop(0)
             self.g_hist.pop(0)
         if len(self.f_hist) < 2:
-            return g
-        if not (np.all(np.isfinite(f)) and np.all(np.isfinite(g))):
-            self.f_hist, self.g_hist = [], []      # restart the history; plain fixed-point step
             return g
         dF = np.column_stack([self.f_hist[j + 1] - self.f_hist[j] for j in range(len(self.f_hist) - 1)])
         dG = np.column_stack([self.g_hist[j + 1] - self.g_hist[j] for j in range(len(self.g_hist) - 1)])
