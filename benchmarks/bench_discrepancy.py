@@ -52,7 +52,8 @@ def main(argv=None):
         n_rows = len(res.frame)
     else:
         data = Path(args.data)
-        n_rows = sum(1 for _ in data.open()) - 1
+        with data.open() as fh:
+            n_rows = sum(1 for _ in fh) - 1
     t_synth = time.perf_counter() - t0
     model = out / "table7-without-friction.toml"
     model.write_text(robot_to_toml(robot.replace(friction_coefficients=(0.0, 0.0)),

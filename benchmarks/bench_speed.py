@@ -93,7 +93,6 @@ def timing_table(robot, settings, ref_every):
 
 
 def batch_throughput(robot, settings, repeats=5):
-    _, Q = grid_4x4x4(robot)
     rng = np.random.default_rng(0)
     qs = np.column_stack([rng.uniform(j.lower, j.upper, 2000) for j in robot.joints])
     cfg = [robot.configuration(q) for q in qs]
