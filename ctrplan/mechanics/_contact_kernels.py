@@ -38,6 +38,8 @@ from numba import njit
 from ..constants import SMALL_ANGLE
 
 _SMALL = SMALL_ANGLE  # module-level constant, frozen into the compiled code
+_SEPARATION_ROUNDS = 3
+_NONMONOTONE = 5
 
 
 @njit(cache=True, inline="always")
@@ -641,6 +643,8 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
     fill_columns(act, W, Z, have, pair, jo, ji, B, R, p, H1, H2, F3, tq_out, tq_in, friction)
     fok, LU, piv = _displacements(lam, act, dfree, Mblk, W, Z, friction, d)
     merit = _fb_residual(lam, d, c, kappa, phi, da, db)
+    hist = np.zeros(_NONMONOTONE)
+    hist[0] = merit
     for it in range(1, maxit + 1):
         err = _max_scaled(phi, c, kappa)
         if err < tol:
@@ -659,47 +663,62 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
                 pos[k] = i
                 i += 1
         fill_columns(Rs, W, Z, have, pair, jo, ji, B, R, p, H1, H2, F3, tq_out, tq_in, friction)
-        # C[:, l] = Z[:, l] - W[:, l-block] M_l d_l, rows of R (2 nR) and columns of R
-        C = np.empty((2 * nR, nR))
+        # Only the projection d_k . (dd_k / dlambda) enters the Newton matrix, so the derivative
+        # D = C - W_(:, a) L_a S^-1 C_a (C[:, l] = Z[:, l] - W[:, l-block] M_l d_l) is formed
+        # projected on d_k for the rows of R, and in full only for the active rows (C_a).
+        n_act = act.shape[0]
+        E = np.empty((nR, 2))
         for jj in range(nR):
             l = Rs[jj]
-            e0 = Mblk[l, 0, 0] * d[l, 0] + Mblk[l, 0, 1] * d[l, 1]
-            e1 = Mblk[l, 1, 0] * d[l, 0] + Mblk[l, 1, 1] * d[l, 1]
-            for ii in range(nR):
-                k = Rs[ii]
-                for q in range(2):
-                    v = -(W[2 * k + q, 2 * l] * e0 + W[2 * k + q, 2 * l + 1] * e1)
-                    if friction:
-                        v += Z[2 * k + q, l]
-                    C[2 * ii + q, jj] = v
-        # D_R = C_R - W_(R, a) L_a S^-1 C_a
-        n_act = act.shape[0]
+            E[jj, 0] = Mblk[l, 0, 0] * d[l, 0] + Mblk[l, 0, 1] * d[l, 1]
+            E[jj, 1] = Mblk[l, 1, 0] * d[l, 0] + Mblk[l, 1, 1] * d[l, 1]
+        Dp = np.empty((nR, nR))
+        for ii in range(nR):
+            k = Rs[ii]
+            r0 = 2 * k
+            r1 = 2 * k + 1
+            dk0 = d[k, 0]
+            dk1 = d[k, 1]
+            for jj in range(nR):
+                l = Rs[jj]
+                v0 = -(W[r0, 2 * l] * E[jj, 0] + W[r0, 2 * l + 1] * E[jj, 1])
+                v1 = -(W[r1, 2 * l] * E[jj, 0] + W[r1, 2 * l + 1] * E[jj, 1])
+                if friction:
+                    v0 += Z[r0, l]
+                    v1 += Z[r1, l]
+                Dp[ii, jj] = dk0 * v0 + dk1 * v1
         if n_act > 0:
             Ca = np.empty((2 * n_act, nR))
             for i in range(n_act):
-                ii = pos[act[i]]
-                for jj in range(nR):
-                    Ca[2 * i, jj] = C[2 * ii, jj]
-                    Ca[2 * i + 1, jj] = C[2 * ii + 1, jj]
-            _lu_solve_matrix(LU, piv, Ca)
-            # Y = L_a Ca (block rows)
-            for i in range(n_act):
-                l = act[i]
-                lj = lam[l]
-                for jj in range(nR):
-                    y0 = lj * (Mblk[l, 0, 0] * Ca[2 * i, jj] + Mblk[l, 0, 1] * Ca[2 * i + 1, jj])
-                    y1 = lj * (Mblk[l, 1, 0] * Ca[2 * i, jj] + Mblk[l, 1, 1] * Ca[2 * i + 1, jj])
-                    Ca[2 * i, jj] = y0
-                    Ca[2 * i + 1, jj] = y1
-            for ii in range(nR):
-                k = Rs[ii]
+                k = act[i]
                 for q in range(2):
                     row = 2 * k + q
-                    for i in range(n_act):
-                        w0 = W[row, 2 * act[i]]
-                        w1 = W[row, 2 * act[i] + 1]
+                    for jj in range(nR):
+                        l = Rs[jj]
+                        v = -(W[row, 2 * l] * E[jj, 0] + W[row, 2 * l + 1] * E[jj, 1])
+                        if friction:
+                            v += Z[row, l]
+                        Ca[2 * i + q, jj] = v
+            _lu_solve_matrix(LU, piv, Ca)
+            # Pw[ii, :] = d_k^T W_(k, a) L_a (L_a = blockdiag(lambda_l M_l))
+            Pw = np.empty((nR, 2 * n_act))
+            for ii in range(nR):
+                k = Rs[ii]
+                dk0 = d[k, 0]
+                dk1 = d[k, 1]
+                for i in range(n_act):
+                    l = act[i]
+                    lj = lam[l]
+                    w0 = dk0 * W[2 * k, 2 * l] + dk1 * W[2 * k + 1, 2 * l]
+                    w1 = dk0 * W[2 * k, 2 * l + 1] + dk1 * W[2 * k + 1, 2 * l + 1]
+                    Pw[ii, 2 * i] = lj * (w0 * Mblk[l, 0, 0] + w1 * Mblk[l, 1, 0])
+                    Pw[ii, 2 * i + 1] = lj * (w0 * Mblk[l, 0, 1] + w1 * Mblk[l, 1, 1])
+            for ii in range(nR):
+                for m in range(2 * n_act):
+                    w = Pw[ii, m]
+                    if w != 0.0:
                         for jj in range(nR):
-                            C[2 * ii + q, jj] -= w0 * Ca[2 * i, jj] + w1 * Ca[2 * i + 1, jj]
+                            Dp[ii, jj] -= w * Ca[m, jj]
         # J_RR = diag(da c) + db kappa dgap,  dgap[k, l] = -d_k . D[k, l] / c_k
         J = np.empty((nR, nR))
         rhs = np.empty(nR)
@@ -707,7 +726,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
             k = Rs[ii]
             f = -db[k] * kappa / c[k]
             for jj in range(nR):
-                J[ii, jj] = f * (d[k, 0] * C[2 * ii, jj] + d[k, 1] * C[2 * ii + 1, jj])
+                J[ii, jj] = f * Dp[ii, jj]
             J[ii, ii] += da[k] * c[k]
             rhs[ii] = -phi[k]
         Jc = J.copy()
@@ -723,9 +742,58 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
             for ii in range(nR):
                 rr[ii] = -phi[Rs[ii]]
             stepR = np.linalg.lstsq(Jc, rr)[0]
-        t = 1.0
+        # A full step that drives multipliers negative is projected, and the projected point is
+        # usually not a descent point: the line search would then crawl towards the separation
+        # with many short steps. Instead re-solve the Newton system with those contacts held at
+        # lambda = 0 (their rows replaced by d lambda_k = -lambda_k), up to SEPARATION_ROUNDS
+        # times, and try the full step of that direction first. It is accepted only on the same
+        # sufficient decrease of the merit; otherwise the usual backtracking on the Newton step.
+        ref_merit = merit
+        for q in range(_NONMONOTONE):
+            if hist[q] > ref_merit:
+                ref_merit = hist[q]
         accepted = False
+        held = np.zeros(nR, dtype=np.bool_)
+        direction = stepR.copy()
+        for _round in range(_SEPARATION_ROUNDS):
+            grew = False
+            for ii in range(nR):
+                if not held[ii] and lam[Rs[ii]] + direction[ii] < 0.0:
+                    held[ii] = True
+                    grew = True
+            if not grew:
+                break
+            J2 = Jc.copy()
+            rhs2 = np.empty(nR)
+            for ii in range(nR):
+                k = Rs[ii]
+                if held[ii]:
+                    for jj in range(nR):
+                        J2[ii, jj] = 0.0
+                    J2[ii, ii] = 1.0
+                    rhs2[ii] = -lam[k]
+                else:
+                    rhs2[ii] = -phi[k]
+            if not _lu_factor(J2, pJ):
+                break
+            _lu_solve(J2, pJ, rhs2)
+            direction = rhs2
+            for k in range(M):
+                lam_t[k] = lam[k]
+            for ii in range(nR):
+                k = Rs[ii]
+                lam_t[k] = max(lam[k] + direction[ii], 0.0)
+            act_n = _active_of(lam_t)
+            fill_columns(act_n, W, Z, have, pair, jo, ji, B, R, p, H1, H2, F3, tq_out, tq_in, friction)
+            fok_t, LU_t, piv_t = _displacements(lam_t, act_n, dfree, Mblk, W, Z, friction, d_t)
+            m_t = _fb_residual(lam_t, d_t, c, kappa, phi_t, da_t, db_t)
+            if fok_t and m_t <= (1.0 - 1e-4) * ref_merit:
+                accepted = True
+                break
+        t = 1.0
         for _ in range(40):
+            if accepted:
+                break
             for k in range(M):
                 lam_t[k] = lam[k]
             for ii in range(nR):
@@ -735,7 +803,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
             fill_columns(act_n, W, Z, have, pair, jo, ji, B, R, p, H1, H2, F3, tq_out, tq_in, friction)
             fok_t, LU_t, piv_t = _displacements(lam_t, act_n, dfree, Mblk, W, Z, friction, d_t)
             m_t = _fb_residual(lam_t, d_t, c, kappa, phi_t, da_t, db_t)
-            if fok_t and m_t <= (1.0 - 1e-4 * t) * merit:
+            if fok_t and m_t <= (1.0 - 1e-4 * t) * ref_merit:
                 accepted = True
                 break
             t *= 0.5
@@ -747,6 +815,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
         da[:] = da_t
         db[:] = db_t
         merit = m_t
+        hist[it % _NONMONOTONE] = merit
         act = act_n
         LU = LU_t
         piv = piv_t
