@@ -385,6 +385,40 @@ class Robot:
         beta = np.asarray(beta, dtype=float)
         return np.array([alpha[j.tube] if j.kind == ROTATION else beta[j.tube] for j in self.joints])
 
+    def configurations_possible(self, alpha, beta) -> np.ndarray:
+        """Which of many configurations pass :meth:`check_configuration`, without raising.
+
+        Parameters
+        ----------
+        alpha, beta : array-like, shape (K, n)
+            Base rotations [rad] and translations [m].
+
+        Returns
+        -------
+        ndarray of bool, shape (K,)
+            True where the configuration is finite, each inner tube's base lies behind (or at)
+            its outer tube's base, and no tube is curved proximal to the most distal base (the
+            same tests and tolerances as :meth:`check_configuration`).
+
+        Raises
+        ------
+        ValueError
+            If ``alpha`` and ``beta`` are not both of shape (K, n).
+        """
+        alpha = np.asarray(alpha, dtype=float)
+        beta = np.asarray(beta, dtype=float)
+        n = self.n_tubes
+        if alpha.ndim != 2 or alpha.shape[1] != n or beta.shape != alpha.shape:
+            raise ValueError(f"robot {self.name!r}: alpha and beta need shape (K, {n}), "
+                             f"got {alpha.shape} and {beta.shape}")
+        ok = np.all(np.isfinite(alpha), axis=1) & np.all(np.isfinite(beta), axis=1)
+        if n > 1:
+            ok &= np.all(beta[:, 1:] <= beta[:, :-1] + 1e-12, axis=1)
+        starts = np.array([t.curved_start() for t in self.tubes])
+        with np.errstate(invalid="ignore"):
+            ok &= np.all(beta + starts[None, :] >= np.max(beta, axis=1, keepdims=True) - 1e-9, axis=1)
+        return ok
+
     def check_configuration(self, alpha, beta) -> None:
         """Raise if a full configuration is kinematically impossible.
 

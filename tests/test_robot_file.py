@@ -63,6 +63,30 @@ def test_shipped_model_loads_and_home_is_feasible(path):
     assert np.all(robot.clearances > 0)
 
 
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_configurations_possible_agrees_with_check_configuration(path):
+    """Seeded property: the vectorized test used by the batch solver accepts exactly the
+    configurations that check_configuration accepts (random bases, some sorted, one NaN)."""
+    robot = load_robot(path)
+    n = robot.n_tubes
+    rng = np.random.default_rng(11)
+    length = max(t.length for t in robot.tubes)
+    alpha = rng.uniform(-np.pi, np.pi, (2000, n))
+    beta = -rng.uniform(0.0, 0.6 * length, (2000, n))
+    beta[::5] = np.sort(beta[::5], axis=1)[:, ::-1]
+    alpha[3, 0] = np.nan
+    expected = []
+    for a, b in zip(alpha, beta):
+        try:
+            robot.check_configuration(a, b)
+            expected.append(True)
+        except ValueError:
+            expected.append(False)
+    got = robot.configurations_possible(alpha, beta)
+    assert 0 < got.sum() < got.size
+    np.testing.assert_array_equal(got, expected)
+
+
 def test_table2_values():
     robot = load_robot(TABLE2)
     # Clearances (ID_i - OD_(i+1)) / 2 of Table II [m].

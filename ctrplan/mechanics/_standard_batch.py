@@ -40,7 +40,7 @@ class StandardBatch:
         Shooting-Jacobian determinant not positive (the determinant test of
         :func:`solve_standard`; the multistart search is not run in batch mode).
     valid : ndarray of bool, shape (K,)
-        Configuration passed ``Robot.check_configuration``.
+        Configuration passed ``Robot.check_configuration`` (``Robot.configurations_possible``).
     iterations : ndarray of int, shape (K,)
         Newton iterations.
     """
@@ -143,12 +143,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     K = alpha.shape[0]
     sig_init = (np.zeros((K, n)) if initial_guess is None
                 else np.ascontiguousarray(np.broadcast_to(initial_guess, (K, n)), dtype=float))
-    valid = np.ones(K, dtype=bool)
-    for k in range(K):
-        try:
-            robot.check_configuration(alpha[k], beta[k])
-        except ValueError:
-            valid[k] = False
+    valid = robot.configurations_possible(alpha, beta)
     brk, nbrk, curv = packed_sections(robot)
     lengths = np.array([t.length for t in robot.tubes])
     kxy = np.array([t.k_xy for t in robot.tubes])
