@@ -16,3 +16,11 @@ GRID_MERGE_TOL = 1e-9
 # complementarity solve failed: such a solve does not recover, and each failed step costs up to
 # the whole Newton budget (seconds).
 MAX_FAILED_INNER_STEPS = 10
+
+# The standard model's Newton shooting from no twist is first run on a grid this many times
+# coarser (same breakpoints) and the fine grid's Newton starts from its base torsions: the
+# RK4 solutions differ by little at that step, so the fine Newton needs about two sweeps.
+PREDICTOR_STEP_FACTOR = 4.0
+
+# Shooting tolerance of that coarse predictor [1/m] (it only has to land near the fine solution).
+PREDICTOR_TOL = 1e-6

@@ -3,7 +3,7 @@
 Per configuration, the same steps as :func:`ctrplan.mechanics.solve_standard` with
 ``check_stability=False``: the common arc-length grid of Section II-C of Ha, Fagogenis & Dupont
 2019 (``grid.build_grid``), damped Newton shooting on the base torsions with the exact
-variational Jacobian (``standard._newton``), and the shared centerline from midpoint
+variational Jacobian (``standard._shoot``: coarse-grid predictor, then ``standard._newton``), and the shared centerline from midpoint
 curvatures (``standard._centerline``), all in numba with no Python work per configuration.
 """
 
@@ -14,12 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import config, get_num_threads, njit, prange, set_num_threads
 
-from ..constants import GRID_MERGE_TOL
+from ..constants import GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR
 from .grid import _grid, packed_sections
 from .results import ModelSettings
-from .standard import _centerline, _newton
+from .standard import _centerline, _newton, _shoot
 
 __all__ = ["StandardBatch", "solve_standard_batch"]
+
+_PREDICTOR_STEP_FACTOR = PREDICTOR_STEP_FACTOR  # frozen into the compiled code
 
 
 @dataclass
@@ -55,15 +57,16 @@ class StandardBatch:
 
 
 @njit(cache=True)
-def _solve_one(k, alpha, beta, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
+def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
                tips, tans, sig_out, conv, unst, iters):
     """Configuration ``k`` of the batch: grid, Newton shooting (retried from zero twist), tip."""
     n = alpha.shape[1]
     s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, grid_tol)
+    cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds, grid_tol)
     a = alpha[k].copy()
-    sig0, _, it, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, sig_init[k], lengths,
-                                                 tol, maxit)
-    if not ok:
+    sig0, _, it, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, sig_init[k],
+                                             lengths, tol, maxit, predict)
+    if not ok and not predict:   # a given initial guess failed: retry from no twist
         sig0, _, it2, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths,
                                                       tol, maxit)
         it += it2
@@ -77,20 +80,20 @@ def _solve_one(k, alpha, beta, sig_init, lengths, brk, nbrk, curv, kxy, ratio, d
 
 
 @njit(cache=True)
-def _batch(alpha, beta, valid, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
+def _batch(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
            grid_tol, tips, tans, sig_out, conv, unst, iters):
     for k in range(alpha.shape[0]):
         if valid[k]:
-            _solve_one(k, alpha, beta, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
+            _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
                        tips, tans, sig_out, conv, unst, iters)
 
 
 @njit(cache=True, parallel=True)
-def _batch_parallel(alpha, beta, valid, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
+def _batch_parallel(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
                     grid_tol, tips, tans, sig_out, conv, unst, iters):
     for k in prange(alpha.shape[0]):
         if valid[k]:
-            _solve_one(k, alpha, beta, sig_init, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
+            _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
                        tips, tans, sig_out, conv, unst, iters)
 
 
@@ -108,8 +111,9 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     settings : ModelSettings, optional
         Uses ``ds``, ``shooting_tol`` and ``max_shooting_iterations`` (no multistart search).
     initial_guess : array-like, shape (K, n), optional
-        Base torsions [1/m] to start each Newton solve from (default: no twist); as in
-        :func:`solve_standard`, a failed start is retried from zero twist.
+        Base torsions [1/m] to start each Newton solve from (default: no twist, through the
+        coarse-grid predictor of :func:`solve_standard`); as in :func:`solve_standard`, a
+        failed start is retried from zero twist.
     n_threads : int
         Threads sharing the configurations (numba ``prange``, at most ``NUMBA_NUM_THREADS``); 1 (default) runs serially, as
         fits a call from inside a worker process. Results do not depend on it.
@@ -154,7 +158,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     conv = np.zeros(K, dtype=bool)
     unst = np.zeros(K, dtype=bool)
     iters = np.zeros(K, dtype=np.int64)
-    args = (alpha, beta, valid, sig_init, lengths, brk, nbrk, curv, kxy, ratio, float(settings.ds),
+    args = (alpha, beta, valid, sig_init, initial_guess is None, lengths, brk, nbrk, curv, kxy, ratio, float(settings.ds),
             float(settings.shooting_tol), int(settings.max_shooting_iterations), GRID_MERGE_TOL,
             tips, tans, sig_out, conv, unst, iters)
     if int(n_threads) == 1:

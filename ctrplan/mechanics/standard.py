@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..constants import DISTINCT_EQUILIBRIUM_TWIST
+from ..constants import DISTINCT_EQUILIBRIUM_TWIST, PREDICTOR_STEP_FACTOR, PREDICTOR_TOL
 from ..errors import ConvergenceError, ElasticInstabilityError
 from ._contact_kernels import chain_kinematics
 from ._lie import rot_z
@@ -27,6 +27,8 @@ from .grid import build_grid
 from .results import Diagnostics, ModelSettings, StandardSolution
 
 __all__ = ["solve_standard"]
+
+_PREDICTOR_TOL = PREDICTOR_TOL  # module-level constant, frozen into the compiled code
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -216,17 +218,21 @@ class _Problem:
         self.alpha = np.asarray(alpha, dtype=float)
         self.beta = np.asarray(beta, dtype=float)
         self.grid = build_grid(robot, self.beta, settings.ds)
+        self.coarse = build_grid(robot, self.beta, PREDICTOR_STEP_FACTOR * settings.ds)
         self.kxy = np.array([t.k_xy for t in robot.tubes])
         self.ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
         self.lengths = np.array([t.length for t in robot.tubes])
 
-    def newton(self, sig0, settings):
-        """Newton shooting on the base torsions; returns (sig0, residual norm, iterations, ok, detJ,
-        (psi, sigma)) with the node angles and torsions (G, n) of the evaluation at sig0."""
+    def newton(self, sig0, settings, predict=False):
+        """Newton shooting on the base torsions (``predict``: from the coarse-grid solution, see
+        :func:`_shoot`); returns (sig0, residual norm, iterations, ok, detJ, (psi, sigma)) with
+        the node angles and torsions (G, n) of the evaluation at sig0."""
         g = self.grid
-        sig0, res, it, ok, detJ, psi, sig = _newton(
-            g.s, g.present, g.precurvature, self.kxy, self.ratio, self.alpha, np.asarray(sig0, dtype=float),
-            self.lengths, float(settings.shooting_tol), int(settings.max_shooting_iterations))
+        c = self.coarse
+        sig0, res, it, ok, detJ, psi, sig = _shoot(
+            g.s, g.present, g.precurvature, c.s, c.present, c.precurvature, self.kxy, self.ratio,
+            self.alpha, np.asarray(sig0, dtype=float), self.lengths, float(settings.shooting_tol),
+            int(settings.max_shooting_iterations), bool(predict))
         return sig0, res, it, ok, detJ, (psi, sig)
 
 
@@ -284,6 +290,27 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
     detJ = np.linalg.det(Ss[:, :n].copy()) if np.all(np.isfinite(Ss)) else np.nan
     ok = np.all(np.isfinite(r)) and res < tol
     return x, res if np.isfinite(res) else np.inf, maxit, ok, detJ, rp, rs
+
+
+@njit(cache=True, error_model="numpy")
+def _shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, sig0, lengths, tol, maxit, predict):
+    """Newton shooting on the grid ``s`` started from ``sig0``; with ``predict``, started instead
+    from the solution on the coarser grid ``cs`` (``cpresent``, ``cuh``; same breakpoints,
+    ``PREDICTOR_STEP_FACTOR`` times the step) found from ``sig0`` to ``PREDICTOR_TOL``. Falls
+    back to ``sig0`` if either of those fails. Returns what :func:`_newton` returns, with the
+    Newton iterations of all stages in ``iterations``."""
+    total = 0
+    if predict:
+        c0, _, cit, cok, _, _, _ = _newton(cs, cpresent, cuh, kxy, ratio, alpha, sig0, lengths,
+                                           max(tol, _PREDICTOR_TOL), maxit)
+        total += cit
+        if cok:
+            x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, c0, lengths, tol, maxit)
+            total += it
+            if ok:
+                return x, res, total, ok, detJ, psi, sig
+    x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit)
+    return x, res, total + it, ok, detJ, psi, sig
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -394,7 +421,9 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
         Uses ``ds``, ``shooting_tol``, ``max_shooting_iterations`` and ``multistart``.
     initial_guess : array-like, shape (n,), optional
         Base torsions [1/m] to start Newton from, e.g. ``previous.base_torsion`` to follow the
-        branch the robot is on along a path. Default: no twist.
+        branch the robot is on along a path. Default: no twist, solved first on a grid
+        ``PREDICTOR_STEP_FACTOR`` (4) times coarser, whose base torsions start the Newton
+        shooting on the ``ds`` grid (``constants``; it falls back to no twist if that fails).
     check_stability : bool
         Run the multistart search for other equilibria (skipped when ``settings.multistart``
         is 0). The Jacobian-determinant test always runs.
@@ -426,7 +455,7 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
     problem = _Problem(robot, alpha, beta, settings)
     n = robot.n_tubes
     sig0 = np.zeros(n) if initial_guess is None else np.asarray(initial_guess, dtype=float)
-    sig0, res, iters, ok, detJ, nodes = problem.newton(sig0, settings)
+    sig0, res, iters, ok, detJ, nodes = problem.newton(sig0, settings, predict=initial_guess is None)
     if not ok and initial_guess is not None:
         sig0, res, iters2, ok, detJ, nodes = problem.newton(np.zeros(n), settings)
         iters += iters2
