@@ -154,11 +154,12 @@ def test_compliance_kernels_equal_dense_products(eta):
                  prob._H1, prob._H2, prob._F3, prob._Jpv)
     ck.contact_frames(R, p, prob.jo, prob.ji, prob._Jpv, prob._B, prob._dfree, prob._diagW,
                       prob._H1, prob._H2, prob.pair)
+    ck.contact_projections(prob._B, p, prob.jo, prob.ji, prob._H1, prob._H2, prob._Pc)
     M = prob.M
     W = np.zeros((2 * M, 2 * M))
     Z = np.zeros((2 * M, M))
     ck.fill_columns(np.arange(M), W, Z, np.zeros(M, dtype=bool), prob.pair, prob.jo, prob.ji, prob._B,
-                    R, p, prob._H1, prob._H2, prob._F3, prob.tq_out, prob.tq_in, prob.friction)
+                    prob._Pc, R, p, prob._H1, prob._H2, prob._F3, prob.tq_out, prob.tq_in, prob.friction)
     scale = np.abs(W_ref).max()
     assert np.abs(W - W_ref).max() < 1e-10 * scale
     np.testing.assert_allclose(prob._diagW[:, [0, 1], [0, 1]].ravel(), np.diag(W_ref), rtol=1e-10)

@@ -165,6 +165,7 @@ class FlatProblem:
         self._B = np.empty((self.M, 3, 2))
         self._dfree = np.empty((self.M, 2))
         self._diagW = np.empty((self.M, 2, 2))
+        self._Pc = np.empty((self.M, 2, 3, 2, 3))
 
     def kinematics(self, u):
         """Frames (N, 3, 3) and centerline points (N, 3) [m] of all tubes for curvatures u (S, 3)."""
@@ -187,6 +188,7 @@ class FlatProblem:
                      self._H1, self._H2, self._F3, self._Jpv)
         ck.contact_frames(R, p, self.jo, self.ji, self._Jpv, self._B, self._dfree, self._diagW,
                           self._H1, self._H2, self.pair)
+        ck.contact_projections(self._B, p, self.jo, self.ji, self._H1, self._H2, self._Pc)
         M = self.M
         kappa = 1.0 / max(float(np.mean(self._diagW[:, [0, 1], [0, 1]])), 1e-300)
         W = np.empty((2 * M, 2 * M))
@@ -195,7 +197,7 @@ class FlatProblem:
         lam, d, ok, its, _ = ck.complementarity(
             np.asarray(lam, dtype=float), self._dfree, self.c, self.Mblk, kappa,
             settings.complementarity_tol, settings.max_newton_iterations, W, Z, have,
-            self.pair, self.jo, self.ji, self._B, R, p, self._H1, self._H2, self._F3,
+            self.pair, self.jo, self.ji, self._B, self._Pc, R, p, self._H1, self._H2, self._F3,
             self.tq_out, self.tq_in, self.friction)
         g = np.empty_like(u)
         ck.generalized_curvature(lam, d, self.Mblk, self._B, self.pair, self.jo, self.ji, R, p,
