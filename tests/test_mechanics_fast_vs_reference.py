@@ -174,3 +174,47 @@ def test_compliance_kernels_equal_dense_products(eta):
     phi = -lam[:, None] * np.einsum("kab,kb->ka", ref.Mblk, d)
     g_ref = ref.uhat_flat + ref.kinv * (A.T @ phi.ravel() + zt.T @ lam)
     np.testing.assert_allclose(g.ravel(), g_ref, rtol=1e-9, atol=1e-9 * np.abs(g_ref).max())
+
+
+@pytest.mark.parametrize("eta", [None, (1, -1), (-1, 1)])
+@pytest.mark.parametrize("q", [[2.0, -1.0, -0.07], [0.3, 2.5, -0.09], [-2.8, 0.7, -0.05]])
+def test_constraint_generation_equals_the_full_complementarity_solve(eta, q):
+    """The working-set solve (solve_contacts: constraint generation around the FB Newton method)
+    reaches the solution of the Newton method over all contacts, at the first linearization
+    (standard solution, lambda = 0, where the force-free shape violates most contacts): same
+    displacements to 1e-3 of the clearance, same contact forces to 1 % of the largest, and
+    no contact outside its final working set violated."""
+    from ctrplan.mechanics import _contact_kernels as ck
+    from ctrplan.mechanics._contact_fast import FlatProblem
+
+    robot = table2_robot()
+    alpha, beta = robot.configuration(q)
+    st = solve_standard(robot, alpha, beta, SETTINGS, check_stability=False)
+    mu = robot.friction_coefficients if eta else np.zeros(2)
+    prob = FlatProblem(robot, st, eta, mu)
+    u = prob.u0.copy()
+    R, p = prob.kinematics(u)
+    ck.linearize(u, prob.uhat, prob.kinv, prob.h, prob.node_off, R, p, prob._Omega, prob._base,
+                 prob._H1, prob._H2, prob._F3, prob._Jpv)
+    ck.contact_frames(R, p, prob.jo, prob.ji, prob._Jpv, prob._B, prob._dfree, prob._diagW,
+                      prob._H1, prob._H2, prob.pair)
+    ck.contact_projections(prob._B, p, prob.jo, prob.ji, prob._H1, prob._H2, prob._Pc)
+    M = prob.M
+    kappa = 1.0 / float(np.mean(prob._diagW[:, [0, 1], [0, 1]]))
+    tol = SETTINGS.complementarity_tol
+    assert np.sum(np.sum(prob._dfree ** 2, axis=1) > prob.c ** 2) > M // 4   # a hard start
+
+    def run(solver, *extra):
+        W = np.empty((2 * M, 2 * M))
+        Z = np.empty((2 * M, M)) if prob.friction else np.empty((1, 1))
+        return solver(np.zeros(M), prob._dfree, prob.c, prob.Mblk, kappa, tol, 200, W, Z,
+                      np.zeros(M, dtype=np.bool_), prob.pair, prob.jo, prob.ji, prob._B, prob._Pc, R, p,
+                      prob._H1, prob._H2, prob._F3, prob.tq_out, prob.tq_in, prob.friction, *extra)
+
+    lam_g, d_g, ok_g, _, err_g = run(ck.solve_contacts)
+    lam_f, d_f, ok_f, _, err_f = run(ck.complementarity, np.ones(M, dtype=np.bool_))
+    assert ok_g and ok_f and err_g < tol and err_f < tol
+    assert np.max(np.abs(d_g - d_f)) < 1e-3 * prob.c.min()
+    forces_g, forces_f = prob.c * lam_g, prob.c * lam_f
+    assert np.max(np.abs(forces_g - forces_f)) <= 0.01 * forces_f.max()
+    assert np.all(np.sum(d_g ** 2, axis=1) <= prob.c ** 2 * (1 + tol))

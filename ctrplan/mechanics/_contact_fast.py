@@ -194,7 +194,7 @@ class FlatProblem:
         W = np.empty((2 * M, 2 * M))
         Z = np.empty((2 * M, M)) if self.friction else np.empty((1, 1))
         have = np.zeros(M, dtype=np.bool_)
-        lam, d, ok, its, _ = ck.complementarity(
+        lam, d, ok, its, _ = ck.solve_contacts(
             np.asarray(lam, dtype=float), self._dfree, self.c, self.Mblk, kappa,
             settings.complementarity_tol, settings.max_newton_iterations, W, Z, have,
             self.pair, self.jo, self.ji, self._B, self._Pc, R, p, self._H1, self._H2, self._F3,

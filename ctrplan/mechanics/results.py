@@ -40,7 +40,8 @@ class ModelSettings:
     complementarity_tol : float
         Tolerance of the contact complementarity solve, relative to the clearance [-].
     max_newton_iterations : int
-        Semismooth-Newton iterations of one contact solve.
+        Semismooth-Newton iterations of one contact solve on one working set (the solve grows
+        its working set of contacts in rounds; each round has this budget).
     """
 
     ds: float = 3e-3
