@@ -197,7 +197,9 @@ def test_six_joint_bound_depends_on_relative_rotations_only():
     q = np.array([0.0, 1.0, 2.0, -0.005, -0.015, -0.07])
     b = [evaluate_bound(robot, *robot.configuration(q + [turn, turn, turn, 0, 0, 0]), settings).position
          for turn in (0.0, 0.7)]
-    assert b[0] > 1e-3 and b[1] == pytest.approx(b[0], abs=1e-9)
+    # equal to well below the solver's own tolerance (outer loop: 1 um centerline change); the
+    # iteration path itself need not be rotation-invariant to rounding (working-set choices)
+    assert b[0] > 1e-3 and b[1] == pytest.approx(b[0], abs=0.1 * settings.outer_tol)
 
 
 def test_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
