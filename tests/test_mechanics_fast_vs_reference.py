@@ -123,6 +123,18 @@ def test_bound_matches_reference_many(q):
     test_bound_matches_reference(q)
 
 
+def _linearize_kernels(prob, u, R, p):
+    """Run the per-linearization kernels of the compiled contact solver on ``prob`` at the
+    curvatures u (S, 3) with frames R and points p (what ``FlatProblem.outer_step`` does first)."""
+    from ctrplan.mechanics import _contact_kernels as ck
+
+    ck.linearize(u, prob.uhat, prob.kinv, prob.h, prob.node_off, R, p, prob._Omega, prob._base,
+                 prob._H1, prob._H2, prob._F3, prob._Jpv)
+    ck.contact_frames(R, p, prob.jo, prob.ji, prob._Jpv, prob._B, prob._dfree, prob._diagW,
+                      prob._H1, prob._H2, prob.pair)
+    ck.contact_projections(prob._B, p, prob.jo, prob.ji, prob._H1, prob._H2, prob._Pc)
+
+
 @pytest.mark.parametrize("eta", [None, (1, -1)])
 def test_compliance_kernels_equal_dense_products(eta):
     """Prefix-sum compliance W = A K^-1 A^T, torque columns Z = A K^-1 zt^T, force-free
@@ -150,11 +162,7 @@ def test_compliance_kernels_equal_dense_products(eta):
     u = u_flat.reshape(-1, 3)
     R, p = prob.kinematics(u)
     np.testing.assert_allclose(p, np.concatenate([x for _, x in fk]), atol=1e-14)
-    ck.linearize(u, prob.uhat, prob.kinv, prob.h, prob.node_off, R, p, prob._Omega, prob._base,
-                 prob._H1, prob._H2, prob._F3, prob._Jpv)
-    ck.contact_frames(R, p, prob.jo, prob.ji, prob._Jpv, prob._B, prob._dfree, prob._diagW,
-                      prob._H1, prob._H2, prob.pair)
-    ck.contact_projections(prob._B, p, prob.jo, prob.ji, prob._H1, prob._H2, prob._Pc)
+    _linearize_kernels(prob, u, R, p)
     M = prob.M
     W = np.zeros((2 * M, 2 * M))
     Z = np.zeros((2 * M, M))
@@ -194,11 +202,7 @@ def test_constraint_generation_equals_the_full_complementarity_solve(eta, q):
     prob = FlatProblem(robot, st, eta, mu)
     u = prob.u0.copy()
     R, p = prob.kinematics(u)
-    ck.linearize(u, prob.uhat, prob.kinv, prob.h, prob.node_off, R, p, prob._Omega, prob._base,
-                 prob._H1, prob._H2, prob._F3, prob._Jpv)
-    ck.contact_frames(R, p, prob.jo, prob.ji, prob._Jpv, prob._B, prob._dfree, prob._diagW,
-                      prob._H1, prob._H2, prob.pair)
-    ck.contact_projections(prob._B, p, prob.jo, prob.ji, prob._H1, prob._H2, prob._Pc)
+    _linearize_kernels(prob, u, R, p)
     M = prob.M
     kappa = 1.0 / float(np.mean(prob._diagW[:, [0, 1], [0, 1]]))
     tol = SETTINGS.complementarity_tol

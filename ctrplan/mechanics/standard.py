@@ -122,6 +122,23 @@ def _combine2(x, k1, k2, k3, k4, f):
             x[i, q] = x[i, q] + f * (k1[i, q] + 2.0 * k2[i, q] + 2.0 * k3[i, q] + k4[i, q])
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _stages(psi, sig, Sp, Ss, kp, ks, Kp, Ks, f, tp, ts, TP, TS):
+    """RK4 stage inputs of the state and its sensitivities: (tp, ts, TP, TS) = (psi, sig, Sp,
+    Ss) + f (kp, ks, Kp, Ks)."""
+    _stage(psi, kp, f, tp)
+    _stage(sig, ks, f, ts)
+    _stage2(Sp, Kp, f, TP)
+    _stage2(Ss, Ks, f, TS)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _both_rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, ax, ay, dpsi, dsig, dSp, dSs):
+    """Torsion ODE and its variational equations at one stage (in place)."""
+    ucx, ucy, ks = _torsion_rhs(psi, sig, present, uh, kxy, ratio, ax, ay, dpsi, dsig)
+    _sensitivity_rhs(Sp, Ss, present, kxy, ratio, ax, ay, ucx, ucy, ks, dSp, dSs)
+
+
 @njit(cache=True, error_model="numpy")
 def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
     """Classical RK4 over the grid intervals, one step per interval (allocation-free inner loop).
@@ -164,24 +181,12 @@ def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
                 rec_dsig[j, i] = k1s[i]
         if with_sens:
             _sensitivity_rhs(Sp, Ss, pr, kxy, ratio, ax, ay, ucx, ucy, ks, K1p, K1s)
-            _stage(psi, k1p, 0.5 * h, tp)
-            _stage(sig, k1s, 0.5 * h, ts)
-            _stage2(Sp, K1p, 0.5 * h, TP)
-            _stage2(Ss, K1s, 0.5 * h, TS)
-            ucx, ucy, ks = _torsion_rhs(tp, ts, pr, u, kxy, ratio, ax, ay, k2p, k2s)
-            _sensitivity_rhs(TP, TS, pr, kxy, ratio, ax, ay, ucx, ucy, ks, K2p, K2s)
-            _stage(psi, k2p, 0.5 * h, tp)
-            _stage(sig, k2s, 0.5 * h, ts)
-            _stage2(Sp, K2p, 0.5 * h, TP)
-            _stage2(Ss, K2s, 0.5 * h, TS)
-            ucx, ucy, ks = _torsion_rhs(tp, ts, pr, u, kxy, ratio, ax, ay, k3p, k3s)
-            _sensitivity_rhs(TP, TS, pr, kxy, ratio, ax, ay, ucx, ucy, ks, K3p, K3s)
-            _stage(psi, k3p, h, tp)
-            _stage(sig, k3s, h, ts)
-            _stage2(Sp, K3p, h, TP)
-            _stage2(Ss, K3s, h, TS)
-            ucx, ucy, ks = _torsion_rhs(tp, ts, pr, u, kxy, ratio, ax, ay, k4p, k4s)
-            _sensitivity_rhs(TP, TS, pr, kxy, ratio, ax, ay, ucx, ucy, ks, K4p, K4s)
+            _stages(psi, sig, Sp, Ss, k1p, k1s, K1p, K1s, 0.5 * h, tp, ts, TP, TS)
+            _both_rhs(tp, ts, TP, TS, pr, u, kxy, ratio, ax, ay, k2p, k2s, K2p, K2s)
+            _stages(psi, sig, Sp, Ss, k2p, k2s, K2p, K2s, 0.5 * h, tp, ts, TP, TS)
+            _both_rhs(tp, ts, TP, TS, pr, u, kxy, ratio, ax, ay, k3p, k3s, K3p, K3s)
+            _stages(psi, sig, Sp, Ss, k3p, k3s, K3p, K3s, h, tp, ts, TP, TS)
+            _both_rhs(tp, ts, TP, TS, pr, u, kxy, ratio, ax, ay, k4p, k4s, K4p, K4s)
             f = h / 6.0
             _combine(psi, k1p, k2p, k3p, k4p, f)
             _combine(sig, k1s, k2s, k3s, k4s, f)
