@@ -3,8 +3,9 @@
 Per configuration, the same steps as :func:`ctrplan.mechanics.solve_standard` with
 ``check_stability=False``: the common arc-length grid of Section II-C of Ha, Fagogenis & Dupont
 2019 (``grid.build_grid``), damped Newton shooting on the base torsions with the exact
-variational Jacobian (``standard._shoot``: coarse-grid predictor, then ``standard._newton``), and the shared centerline from midpoint
-curvatures (``standard._centerline``), all in numba with no Python work per configuration.
+variational Jacobian (``standard._shoot``: coarse-grid predictor, then ``standard._newton``),
+and the shared centerline from midpoint curvatures (``standard._centerline``), all in numba
+with no Python work per configuration.
 """
 
 from __future__ import annotations
@@ -84,8 +85,8 @@ def _batch(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, curv, kxy,
            grid_tol, tips, tans, sig_out, conv, unst, iters):
     for k in range(alpha.shape[0]):
         if valid[k]:
-            _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
-                       tips, tans, sig_out, conv, unst, iters)
+            _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
+                       grid_tol, tips, tans, sig_out, conv, unst, iters)
 
 
 @njit(cache=True, parallel=True)
@@ -93,8 +94,8 @@ def _batch_parallel(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, c
                     grid_tol, tips, tans, sig_out, conv, unst, iters):
     for k in prange(alpha.shape[0]):
         if valid[k]:
-            _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
-                       tips, tans, sig_out, conv, unst, iters)
+            _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
+                       grid_tol, tips, tans, sig_out, conv, unst, iters)
 
 
 def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = None, *,
@@ -158,9 +159,9 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     conv = np.zeros(K, dtype=bool)
     unst = np.zeros(K, dtype=bool)
     iters = np.zeros(K, dtype=np.int64)
-    args = (alpha, beta, valid, sig_init, initial_guess is None, lengths, brk, nbrk, curv, kxy, ratio, float(settings.ds),
-            float(settings.shooting_tol), int(settings.max_shooting_iterations), GRID_MERGE_TOL,
-            tips, tans, sig_out, conv, unst, iters)
+    args = (alpha, beta, valid, sig_init, initial_guess is None, lengths, brk, nbrk, curv, kxy, ratio,
+            float(settings.ds), float(settings.shooting_tol), int(settings.max_shooting_iterations),
+            GRID_MERGE_TOL, tips, tans, sig_out, conv, unst, iters)
     if int(n_threads) == 1:
         _batch(*args)
     else:
