@@ -27,6 +27,12 @@ __all__ = ["Section", "Tube", "Joint", "TranslationLink", "Robot"]
 ROTATION = "rotation"
 TRANSLATION = "translation"
 
+# Tolerances of the configuration tests (check_configuration, configurations_possible) [m]: an
+# inner base may lie this far in front of its outer base, a curved section start this far behind
+# the most distal base (rounding of joint values read from files).
+_BASE_ORDER_TOL = 1e-12
+_CURVED_START_TOL = 1e-9
+
 
 @dataclass(frozen=True)
 class Section:
@@ -388,6 +394,9 @@ class Robot:
     def configurations_possible(self, alpha, beta) -> np.ndarray:
         """Which of many configurations pass :meth:`check_configuration`, without raising.
 
+        The same tests with the same tolerances, vectorized over configurations (the scalar
+        check stays a loop: numpy on one row costs twice as much, and it runs on every solve).
+
         Parameters
         ----------
         alpha, beta : array-like, shape (K, n)
@@ -413,10 +422,10 @@ class Robot:
                              f"got {alpha.shape} and {beta.shape}")
         ok = np.all(np.isfinite(alpha), axis=1) & np.all(np.isfinite(beta), axis=1)
         if n > 1:
-            ok &= np.all(beta[:, 1:] <= beta[:, :-1] + 1e-12, axis=1)
+            ok &= np.all(beta[:, 1:] <= beta[:, :-1] + _BASE_ORDER_TOL, axis=1)
         starts = np.array([t.curved_start() for t in self.tubes])
         with np.errstate(invalid="ignore"):
-            ok &= np.all(beta + starts[None, :] >= np.max(beta, axis=1, keepdims=True) - 1e-9, axis=1)
+            ok &= np.all(beta + starts[None, :] >= np.max(beta, axis=1, keepdims=True) - _CURVED_START_TOL, axis=1)
         return ok
 
     def check_configuration(self, alpha, beta) -> None:
@@ -444,13 +453,13 @@ class Robot:
         if not (np.all(np.isfinite(alpha)) and np.all(np.isfinite(beta))):
             raise JointLimitError(f"configuration is not finite: alpha={alpha}, beta={beta}")
         for i in range(n - 1):
-            if beta[i + 1] > beta[i] + 1e-12:
+            if beta[i + 1] > beta[i] + _BASE_ORDER_TOL:
                 raise JointLimitError(
                     f"base of {self.tubes[i + 1].name} (beta_{i + 2} = {beta[i + 1] * 1e3:.3f} mm) lies in "
                     f"front of the base of {self.tubes[i].name} (beta_{i + 1} = {beta[i] * 1e3:.3f} mm)")
         s_clamp = float(np.max(beta))
         for i, t in enumerate(self.tubes):
-            if beta[i] + t.curved_start() < s_clamp - 1e-9:
+            if beta[i] + t.curved_start() < s_clamp - _CURVED_START_TOL:
                 raise JointLimitError(
                     f"{t.name}: curved section starts at s = {(beta[i] + t.curved_start()) * 1e3:.3f} mm, "
                     f"behind the most distal tube base at {s_clamp * 1e3:.3f} mm")
