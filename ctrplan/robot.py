@@ -29,7 +29,7 @@ TRANSLATION = "translation"
 
 # Tolerances of the configuration tests (check_configuration, configurations_possible) [m]: an
 # inner base may lie this far in front of its outer base, a curved section start this far behind
-# the most distal base (rounding of joint values read from files).
+# the most distal base (slack for floating-point rounding).
 _BASE_ORDER_TOL = 1e-12
 _CURVED_START_TOL = 1e-9
 

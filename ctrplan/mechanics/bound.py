@@ -100,8 +100,8 @@ def _evaluate_bound(robot, alpha, beta, settings, standard, initial_guess, *, so
             if all(k == 0 for k in key):
                 cache[key] = cl
             else:
-                mirror = cache.get(tuple(-k for k in key))
-                start = cl if mirror is None or mirror is cl else _mirrored_start(cl, mirror)
+                mirror = cache.get(tuple(-k for k in key))   # never the all-zero key here
+                start = cl if mirror is None else _mirrored_start(cl, mirror)
                 cache[key] = solve_contact(robot, alpha, beta, settings, eta=eta, standard=st,
                                            warm_start=start)
         friction[eta] = cache[key]

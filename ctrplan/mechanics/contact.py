@@ -70,6 +70,8 @@ def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, 
         Standard-model solution at the same configuration (first linearization point).
     warm_start : ContactSolution, optional
         Start from this solution's curvatures and multipliers (same configuration and grid).
+        Any object with ``curvatures`` (list of n arrays (S_i, 3) [1/m]) and ``multipliers``
+        ((M,) or None) will do, e.g. the mirrored start of ``evaluate_bound``.
     raise_on_failure : bool
         Raise ConvergenceError instead of flagging ``diagnostics.converged = False``.
 
