@@ -623,6 +623,34 @@ def _fb_residual(lam, d, c, kappa, phi, da, db, work):
     return merit
 
 
+@njit(cache=True, inline="always")
+def _c_entry(W, Z, row, l, e0, e1, friction):
+    """Entry (row, l) of C = Z - W_(:, l-block) M_l d_l with (e0, e1) = M_l d_l: the change of
+    displacement component ``row`` per unit lambda_l at fixed other multipliers [m/N]."""
+    v = -(W[row, 2 * l] * e0 + W[row, 2 * l + 1] * e1)
+    if friction:
+        v += Z[row, l]
+    return v
+
+
+@njit(cache=True)
+def _trial(lam, Rs, step, t, lam_t, dfree, c, Mblk, kappa, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2,
+           F3, tq_out, tq_in, friction, work, d_t, phi_t, da_t, db_t):
+    """Line-search trial point: lam_t = max(lam + t step, 0) on the rows ``Rs`` (lam elsewhere),
+    its displacements ``d_t`` and FB residual (``phi_t``, ``da_t``, ``db_t``) in place. Returns
+    (displacements ok, LU factors, pivots, active set, merit)."""
+    for k in range(lam.shape[0]):
+        lam_t[k] = lam[k]
+    for ii in range(Rs.shape[0]):
+        k = Rs[ii]
+        lam_t[k] = max(lam[k] + t * step[ii], 0.0)
+    act_n = _active_of(lam_t)
+    fill_columns(act_n, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
+    fok_t, LU_t, piv_t = _displacements(lam_t, act_n, dfree, Mblk, W, Z, friction, d_t)
+    m_t = _fb_residual(lam_t, d_t, c, kappa, phi_t, da_t, db_t, work)
+    return fok_t, LU_t, piv_t, act_n, m_t
+
+
 @njit(cache=True)
 def _max_scaled(phi, c, kappa):
     err = 0.0
@@ -782,12 +810,8 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
             dk1 = d[k, 1]
             for jj in range(nR):
                 l = Rs[jj]
-                v0 = -(W[r0, 2 * l] * E[jj, 0] + W[r0, 2 * l + 1] * E[jj, 1])
-                v1 = -(W[r1, 2 * l] * E[jj, 0] + W[r1, 2 * l + 1] * E[jj, 1])
-                if friction:
-                    v0 += Z[r0, l]
-                    v1 += Z[r1, l]
-                Dp[ii, jj] = dk0 * v0 + dk1 * v1
+                Dp[ii, jj] = (dk0 * _c_entry(W, Z, r0, l, E[jj, 0], E[jj, 1], friction)
+                              + dk1 * _c_entry(W, Z, r1, l, E[jj, 0], E[jj, 1], friction))
         if n_act > 0:
             Ca = np.empty((2 * n_act, nR))
             for i in range(n_act):
@@ -795,11 +819,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
                 for q in range(2):
                     row = 2 * k + q
                     for jj in range(nR):
-                        l = Rs[jj]
-                        v = -(W[row, 2 * l] * E[jj, 0] + W[row, 2 * l + 1] * E[jj, 1])
-                        if friction:
-                            v += Z[row, l]
-                        Ca[2 * i + q, jj] = v
+                        Ca[2 * i + q, jj] = _c_entry(W, Z, row, Rs[jj], E[jj, 0], E[jj, 1], friction)
             _lu_solve_matrix(LU, piv, Ca)
             # Pw[ii, :] = d_k^T W_(k, a) L_a (L_a = blockdiag(lambda_l M_l))
             Pw = np.empty((nR, 2 * n_act))
@@ -846,7 +866,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
         # A full step that drives multipliers negative is projected, and the projected point is
         # usually not a descent point: the line search would then crawl towards the separation
         # with many short steps. Instead re-solve the Newton system with those contacts held at
-        # lambda = 0 (their rows replaced by d lambda_k = -lambda_k), up to SEPARATION_ROUNDS
+        # lambda = 0 (their rows replaced by d lambda_k = -lambda_k), up to _SEPARATION_ROUNDS
         # times, and try the full step of that direction first. It is accepted only on the same
         # sufficient decrease of the merit; otherwise the usual backtracking on the Newton step.
         ref_merit = merit
@@ -879,31 +899,17 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
                 break
             _lu_solve(J2, pJ, rhs2)
             direction = rhs2
-            for k in range(M):
-                lam_t[k] = lam[k]
-            for ii in range(nR):
-                k = Rs[ii]
-                lam_t[k] = max(lam[k] + direction[ii], 0.0)
-            act_n = _active_of(lam_t)
-            fill_columns(act_n, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
-            fok_t, LU_t, piv_t = _displacements(lam_t, act_n, dfree, Mblk, W, Z, friction, d_t)
-            m_t = _fb_residual(lam_t, d_t, c, kappa, phi_t, da_t, db_t, work)
+            fok_t, LU_t, piv_t, act_n, m_t = _trial(
+                lam, Rs, direction, 1.0, lam_t, dfree, c, Mblk, kappa, W, Z, have, pair, jo, ji, B, Pc, R, p,
+                H1, H2, F3, tq_out, tq_in, friction, work, d_t, phi_t, da_t, db_t)
             if fok_t and m_t <= (1.0 - 1e-4) * ref_merit:
                 accepted = True
                 break
         t = 1.0
-        for _ in range(40):
-            if accepted:
-                break
-            for k in range(M):
-                lam_t[k] = lam[k]
-            for ii in range(nR):
-                k = Rs[ii]
-                lam_t[k] = max(lam[k] + t * stepR[ii], 0.0)
-            act_n = _active_of(lam_t)
-            fill_columns(act_n, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
-            fok_t, LU_t, piv_t = _displacements(lam_t, act_n, dfree, Mblk, W, Z, friction, d_t)
-            m_t = _fb_residual(lam_t, d_t, c, kappa, phi_t, da_t, db_t, work)
+        for _ in range(0 if accepted else 40):
+            fok_t, LU_t, piv_t, act_n, m_t = _trial(
+                lam, Rs, stepR, t, lam_t, dfree, c, Mblk, kappa, W, Z, have, pair, jo, ji, B, Pc, R, p,
+                H1, H2, F3, tq_out, tq_in, friction, work, d_t, phi_t, da_t, db_t)
             if fok_t and m_t <= (1.0 - 1e-4 * t) * ref_merit:
                 accepted = True
                 break
