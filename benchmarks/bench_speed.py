@@ -7,10 +7,11 @@
    slow reference implementation in tests/reference (on every ``--ref-every``-th configuration).
 2. Batch throughput of the standard model (``solve_standard_batch``) [configurations/s], on one
    thread and on all cores.
-3. Discretization convergence: tip-position error [mm] against a fine step for the standard,
-   clearance and friction models at a few grid configurations.
+3. Discretization convergence: tip-position error [mm] against a step four times finer for the
+   standard, clearance and friction models at a few grid configurations, on the default graded
+   grid and on the paper's uniform grid.
 
-Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py [--ref-every 4] [--conv-configs 2]
+Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py [--ref-every 4] [--conv-configs 8]
 The machine load (``os.getloadavg``) is printed: timings on a shared machine are noisy.
 """
 
@@ -112,37 +113,40 @@ def batch_throughput(robot, settings, repeats=5):
 
 
 def convergence_table(robot, n_configs, steps_mm=(12.0, 6.0, 3.0, 1.5), ref_mm=0.75):
+    """Largest tip error against ``ref_mm`` over ``n_configs`` grid configurations, for the default
+    graded grid and for the uniform grid of the paper (``refine_ratio = 1``), side by side."""
     _, Q = grid_4x4x4(robot)
-    picks = [Q[i] for i in np.linspace(5, len(Q) - 6, n_configs).astype(int)]
+    picks = [Q[i] for i in np.linspace(3, len(Q) - 4, n_configs).astype(int)]
+    grids = (("graded (default)", {}), ("uniform (paper)", {"refine_ratio": 1.0}))
     print(f"\n3. Discretization convergence: largest tip-position error [mm] over {n_configs} grid "
-          f"configurations against ds = {ref_mm} mm")
-    print(f"{'ds [mm]':>8} {'standard':>10} {'clearance':>10} {'friction (1,-1)':>16}")
-    refs = []
-    for q in picks:
+          f"configurations against ds = {ref_mm} mm on the same kind of grid; G = mean grid nodes")
+    print(f"{'grid':>17} {'ds [mm]':>8} {'G':>5} {'standard':>10} {'clearance':>10} {'friction (1,-1)':>16}")
+
+    def tips(q, s):
         a, b = robot.configuration(q)
-        s = ModelSettings(ds=ref_mm * 1e-3)
         st = solve_standard(robot, a, b, s, check_stability=False)
         cl = solve_clearance(robot, a, b, s, standard=st)
         fr = solve_friction(robot, a, b, (1, -1), s, standard=st, warm_start=cl)
-        refs.append((st.tip_position, cl.tip_position, fr.tip_position))
-    for ds in steps_mm:
-        errs = np.zeros(3)
-        for q, r in zip(picks, refs):
-            a, b = robot.configuration(q)
-            s = ModelSettings(ds=ds * 1e-3)
-            st = solve_standard(robot, a, b, s, check_stability=False)
-            cl = solve_clearance(robot, a, b, s, standard=st)
-            fr = solve_friction(robot, a, b, (1, -1), s, standard=st, warm_start=cl)
-            for j, tip in enumerate((st.tip_position, cl.tip_position, fr.tip_position)):
-                errs[j] = max(errs[j], np.linalg.norm(tip - r[j]) * 1e3)
-        print(f"{ds:>8.2f} {errs[0]:>10.4f} {errs[1]:>10.4f} {errs[2]:>16.4f}")
+        return (st.tip_position, cl.tip_position, fr.tip_position), st.s.size
+
+    for name, extra in grids:
+        refs = [tips(q, ModelSettings(ds=ref_mm * 1e-3, **extra))[0] for q in picks]
+        for ds in steps_mm:
+            errs = np.zeros(3)
+            nodes = []
+            for q, r in zip(picks, refs):
+                t, G = tips(q, ModelSettings(ds=ds * 1e-3, **extra))
+                nodes.append(G)
+                for j in range(3):
+                    errs[j] = max(errs[j], np.linalg.norm(t[j] - r[j]) * 1e3)
+            print(f"{name:>17} {ds:>8.2f} {np.mean(nodes):>5.0f} {errs[0]:>10.4f} {errs[1]:>10.4f} {errs[2]:>16.4f}")
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ds", type=float, default=3e-3)
     ap.add_argument("--ref-every", type=int, default=4, help="run the slow reference on every k-th configuration")
-    ap.add_argument("--conv-configs", type=int, default=2)
+    ap.add_argument("--conv-configs", type=int, default=8)
     ap.add_argument("--skip-convergence", action="store_true")
     args = ap.parse_args(argv)
     robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")

@@ -58,12 +58,13 @@ class StandardBatch:
 
 
 @njit(cache=True)
-def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, grid_tol,
+def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, gspec,
                tips, tans, sig_out, conv, unst, iters):
     """Configuration ``k`` of the batch: grid, Newton shooting (retried from zero twist), tip."""
     n = alpha.shape[1]
-    s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, grid_tol)
-    cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds, grid_tol)
+    s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, gspec[0], gspec[1], gspec[2])
+    cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds, gspec[0], gspec[1],
+                                     gspec[2])
     a = alpha[k].copy()
     sig0, _, it, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, sig_init[k],
                                              lengths, tol, maxit, predict)
@@ -82,20 +83,20 @@ def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy,
 
 @njit(cache=True)
 def _batch(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-           grid_tol, tips, tans, sig_out, conv, unst, iters):
+           gspec, tips, tans, sig_out, conv, unst, iters):
     for k in range(alpha.shape[0]):
         if valid[k]:
             _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-                       grid_tol, tips, tans, sig_out, conv, unst, iters)
+                       gspec, tips, tans, sig_out, conv, unst, iters)
 
 
 @njit(cache=True, parallel=True)
 def _batch_parallel(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-                    grid_tol, tips, tans, sig_out, conv, unst, iters):
+                    gspec, tips, tans, sig_out, conv, unst, iters):
     for k in prange(alpha.shape[0]):
         if valid[k]:
             _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-                       grid_tol, tips, tans, sig_out, conv, unst, iters)
+                       gspec, tips, tans, sig_out, conv, unst, iters)
 
 
 def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = None, *,
@@ -110,7 +111,8 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     beta : array-like, shape (K, n)
         Base translations [m].
     settings : ModelSettings, optional
-        Uses ``ds``, ``shooting_tol`` and ``max_shooting_iterations`` (no multistart search).
+        Uses ``ds``, ``refine_ratio``, ``refine_length``, ``shooting_tol`` and ``max_shooting_iterations``
+        (no multistart search).
     initial_guess : array-like, shape (K, n), optional
         Base torsions [1/m] to start each Newton solve from (default: no twist, through the
         coarse-grid predictor of :func:`solve_standard`); as in :func:`solve_standard`, a
@@ -161,7 +163,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     iters = np.zeros(K, dtype=np.int64)
     args = (alpha, beta, valid, sig_init, initial_guess is None, lengths, brk, nbrk, curv, kxy, ratio,
             float(settings.ds), float(settings.shooting_tol), int(settings.max_shooting_iterations),
-            GRID_MERGE_TOL, tips, tans, sig_out, conv, unst, iters)
+            np.array([GRID_MERGE_TOL, settings.refine_ratio, settings.refine_length]), tips, tans, sig_out, conv, unst, iters)
     if int(n_threads) == 1:
         _batch(*args)
     else:

@@ -46,8 +46,17 @@ class ArcLengthGrid:
         return np.diff(self.s)
 
 
-def build_grid(robot, beta, ds: float) -> ArcLengthGrid:
+def build_grid(robot, beta, ds: float, refine_ratio: float = 1.0, refine_length: float = 0.0) -> ArcLengthGrid:
     """Build the common arc-length grid.
+
+    Between consecutive breakpoints (tube bases, section boundaries, tube ends) the step is at
+    most ``ds``. Where at least two tubes overlap (where contacts can be), the step is graded
+    towards the breakpoints bordering such a stretch: at distance x from the nearest one it is
+    at most ``ds * min(1, refine_ratio + (1 - refine_ratio) * x / refine_length)``. Point
+    contacts (the couples at tube ends and precurvature jumps) sit within a few millimetres of
+    these breakpoints, and resolving them is what the contact models' accuracy hinges on
+    (docs/mechanics.md, Sec. 1). The step profile scales with ``ds``: halving ``ds`` halves
+    every step.
 
     Parameters
     ----------
@@ -56,6 +65,11 @@ def build_grid(robot, beta, ds: float) -> ArcLengthGrid:
         Base translations [m].
     ds : float
         Largest step [m], > 0.
+    refine_ratio : float
+        Step at a breakpoint of the overlap as a fraction of ``ds``, in (0, 1]; 1 (default)
+        gives the uniform grid of Section II-C of Ha et al. 2019.
+    refine_length : float
+        Distance from such a breakpoint over which the step grows back to ``ds`` [m], >= 0.
 
     Returns
     -------
@@ -64,14 +78,19 @@ def build_grid(robot, beta, ds: float) -> ArcLengthGrid:
     Raises
     ------
     ValueError
-        If ``ds`` is not positive.
+        If ``ds`` is not positive, ``refine_ratio`` not in (0, 1] or ``refine_length`` negative.
     """
     if not ds > 0:
         raise ValueError(f"arc-length step ds must be > 0 m, got {ds!r}")
+    if not 0.0 < refine_ratio <= 1.0:
+        raise ValueError(f"refine_ratio must be in (0, 1], got {refine_ratio!r}")
+    if not refine_length >= 0.0:
+        raise ValueError(f"refine_length must be >= 0 m, got {refine_length!r}")
     beta = np.ascontiguousarray(beta, dtype=float)
     brk, nbrk, curv = packed_sections(robot)
     lengths = np.array([t.length for t in robot.tubes])
-    s, first, last, present, uhat = _grid(beta, lengths, brk, nbrk, curv, float(ds), GRID_MERGE_TOL)
+    s, first, last, present, uhat = _grid(beta, lengths, brk, nbrk, curv, float(ds), GRID_MERGE_TOL,
+                                          float(refine_ratio), float(refine_length))
     return ArcLengthGrid(s=s, first=first, last=last, present=present, precurvature=uhat)
 
 
@@ -92,11 +111,58 @@ def packed_sections(robot):
     return brk, nbrk, curv
 
 
+# Samples per smallest step when integrating the graded step profile (node placement only).
+_PROFILE_SAMPLES = 8
+
+
 @njit(cache=True)
-def _grid(beta, lengths, brk, nbrk, curv, ds, tol):
+def _interval_nodes(lo, hi, ds, graded, refined, ratio, length, out, q):
+    """Write the nodes of (lo, hi] into ``out`` from index ``q``; returns the next index.
+    Uniform: the fewest equal steps not longer than ``ds``. Graded: nodes at equal increments
+    of the integral of 1 / h(s), h(s) = ds * min(1, ratio + (1 - ratio) * x(s) / length) with
+    x the distance to the nearest breakpoint in ``refined`` (trapezoid rule on a fine sampling),
+    again the fewest increments of at most one."""
+    if not graded or ratio >= 1.0 or length <= 0.0:
+        m = max(1, int(np.ceil((hi - lo) / ds - 1e-9)))
+        for k in range(1, m + 1):
+            out[q] = lo + (hi - lo) * k / m
+            q += 1
+        return q
+    ns = max(2, int(np.ceil((hi - lo) / (ratio * ds) * _PROFILE_SAMPLES)) + 1)
+    x = np.empty(ns)
+    cum = np.empty(ns)
+    prev = 0.0
+    for a in range(ns):
+        x[a] = lo + (hi - lo) * a / (ns - 1)
+        dist = np.inf
+        for b in range(refined.shape[0]):
+            dd = abs(x[a] - refined[b])
+            if dd < dist:
+                dist = dd
+        h = ds * min(1.0, ratio + (1.0 - ratio) * dist / length)
+        inv = 1.0 / h
+        cum[a] = 0.0 if a == 0 else cum[a - 1] + 0.5 * (inv + prev) * (x[a] - x[a - 1])
+        prev = inv
+    total = cum[ns - 1]
+    m = max(1, int(np.ceil(total - 1e-9)))
+    a = 0
+    for k in range(1, m):
+        target = total * k / m
+        while cum[a + 1] < target:
+            a += 1
+        w = (target - cum[a]) / (cum[a + 1] - cum[a])
+        out[q] = x[a] + w * (x[a + 1] - x[a])
+        q += 1
+    out[q] = hi
+    return q + 1
+
+
+@njit(cache=True)
+def _grid(beta, lengths, brk, nbrk, curv, ds, tol, ratio, length):
     """Compiled body of :func:`build_grid`: the tube bases, section breaks and ends (merged within
-    ``tol``) split into equal steps of at most ``ds``. Returns nodes s (G,), first/last (n,),
-    present (G - 1, n), precurvature (G - 1, n, 2)."""
+    ``tol``) split into steps of at most ``ds``, graded towards the breakpoints that border an
+    overlap of two or more tubes (``ratio`` < 1 and ``length`` > 0). Returns nodes s (G,),
+    first/last (n,), present (G - 1, n), precurvature (G - 1, n, 2)."""
     n = beta.shape[0]
     total = 0
     for i in range(n):
@@ -108,20 +174,35 @@ def _grid(beta, lengths, brk, nbrk, curv, ds, tol):
             allb[q] = np.round((beta[i] + brk[i, j]) / tol) * tol
             q += 1
     br = np.unique(allb)
-    count = 1
-    for a in range(br.shape[0] - 1):
-        m = max(1, int(np.ceil((br[a + 1] - br[a]) / ds - 1e-9)))
-        count += m
-    s = np.empty(count)
-    s[0] = br[0]
+    nb = br.shape[0]
+    # tubes overlapping on each breakpoint interval, and the breakpoints bordering an overlap
+    multi = np.zeros(max(nb - 1, 0), dtype=np.bool_)
+    for a in range(nb - 1):
+        mid = 0.5 * (br[a] + br[a + 1])
+        count = 0
+        for i in range(n):
+            if beta[i] < mid < beta[i] + lengths[i]:
+                count += 1
+        multi[a] = count >= 2
+    refined_mask = np.zeros(nb, dtype=np.bool_)
+    for a in range(nb - 1):
+        if multi[a]:
+            refined_mask[a] = True
+            refined_mask[a + 1] = True
+    refined = br[refined_mask]
+    graded = ratio < 1.0 and length > 0.0
+    cap = 1
+    for a in range(nb - 1):
+        if graded and multi[a]:
+            cap += int(np.ceil((br[a + 1] - br[a]) / (ratio * ds))) + 2
+        else:
+            cap += int(np.ceil((br[a + 1] - br[a]) / ds)) + 2
+    buf = np.empty(cap)
+    buf[0] = br[0]
     q = 1
-    for a in range(br.shape[0] - 1):
-        lo = br[a]
-        hi = br[a + 1]
-        m = max(1, int(np.ceil((hi - lo) / ds - 1e-9)))
-        for k in range(1, m + 1):
-            s[q] = lo + (hi - lo) * k / m
-            q += 1
+    for a in range(nb - 1):
+        q = _interval_nodes(br[a], br[a + 1], ds, graded and multi[a], refined, ratio, length, buf, q)
+    s = buf[:q].copy()
     G = s.shape[0]
     first = np.empty(n, dtype=np.int64)
     last = np.empty(n, dtype=np.int64)

