@@ -81,6 +81,13 @@ def test_bad_grid_settings_are_rejected(bad):
         build_grid(robot, beta, DS, **args)
 
 
+@pytest.mark.parametrize("bad", [dict(refine_ratio=0.0), dict(refine_ratio=2.0), dict(refine_length=-0.01)])
+def test_model_settings_reject_bad_grid_settings(bad):
+    """The batch passes the grid settings straight to compiled code, so ModelSettings checks them."""
+    with pytest.raises(ValueError, match="ModelSettings.refine_"):
+        ModelSettings(**bad)
+
+
 def test_graded_grid_meets_the_accuracy_target_where_the_uniform_grid_fails():
     """Issue 4's accuracy target, at the hardest configuration of the Sec. IV-D grid found
     (alpha_2 = 0, alpha_3 = -180 deg, beta_3 = -80.7 mm, where friction moves the tip by 23 mm):

@@ -64,6 +64,13 @@ class ModelSettings:
     complementarity_tol: float = 1e-6
     max_newton_iterations: int = 100
 
+    def __post_init__(self):
+        # the grid settings reach compiled code (the batch) without build_grid's checks
+        if not 0.0 < self.refine_ratio <= 1.0:
+            raise ValueError(f"ModelSettings.refine_ratio must be in (0, 1], got {self.refine_ratio!r}")
+        if not self.refine_length >= 0.0:
+            raise ValueError(f"ModelSettings.refine_length must be >= 0 m, got {self.refine_length!r}")
+
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
 
