@@ -111,47 +111,49 @@ def packed_sections(robot):
     return brk, nbrk, curv
 
 
-# Samples per smallest step when integrating the graded step profile (node placement only).
-_PROFILE_SAMPLES = 8
+@njit(cache=True, inline="always")
+def _steps_from_end(x, ds, ratio, length):
+    """Number of steps F(x) = integral_0^x dt / h(t) covered within distance x of a refined
+    breakpoint, h(t) = ds * min(1, ratio + (1 - ratio) t / length) (closed form)."""
+    k = (1.0 - ratio) / length
+    if x <= length:
+        return np.log1p(k * x / ratio) / (ds * k)
+    return np.log1p(k * length / ratio) / (ds * k) + (x - length) / ds
+
+
+@njit(cache=True, inline="always")
+def _distance_for_steps(y, ds, ratio, length):
+    """Inverse of :func:`_steps_from_end`: the distance covered by y steps."""
+    k = (1.0 - ratio) / length
+    y_len = np.log1p(k * length / ratio) / (ds * k)
+    if y <= y_len:
+        return ratio / k * np.expm1(y * ds * k)
+    return length + (y - y_len) * ds
 
 
 @njit(cache=True)
-def _interval_nodes(lo, hi, ds, graded, refined, ratio, length, out, q):
+def _interval_nodes(lo, hi, ds, graded, ratio, length, out, q):
     """Write the nodes of (lo, hi] into ``out`` from index ``q``; returns the next index.
-    Uniform: the fewest equal steps not longer than ``ds``. Graded: nodes at equal increments
-    of the integral of 1 / h(s), h(s) = ds * min(1, ratio + (1 - ratio) * x(s) / length) with
-    x the distance to the nearest breakpoint in ``refined`` (trapezoid rule on a fine sampling),
-    again the fewest increments of at most one."""
-    if not graded or ratio >= 1.0 or length <= 0.0:
+    Uniform: the fewest equal steps not longer than ``ds``. Graded: the fewest nodes at equal
+    increments, of at most one, of the integral of 1 / h(s),
+    h(s) = ds * min(1, ratio + (1 - ratio) * x(s) / length) with x = min(s - lo, hi - s) (both
+    ends of an overlap interval are refined breakpoints and no other one is nearer); the
+    integral and its inverse are closed forms, symmetric about the interval's middle."""
+    if not graded:
         m = max(1, int(np.ceil((hi - lo) / ds - 1e-9)))
         for k in range(1, m + 1):
             out[q] = lo + (hi - lo) * k / m
             q += 1
         return q
-    ns = max(2, int(np.ceil((hi - lo) / (ratio * ds) * _PROFILE_SAMPLES)) + 1)
-    x = np.empty(ns)
-    cum = np.empty(ns)
-    prev = 0.0
-    for a in range(ns):
-        x[a] = lo + (hi - lo) * a / (ns - 1)
-        dist = np.inf
-        for b in range(refined.shape[0]):
-            dd = abs(x[a] - refined[b])
-            if dd < dist:
-                dist = dd
-        h = ds * min(1.0, ratio + (1.0 - ratio) * dist / length)
-        inv = 1.0 / h
-        cum[a] = 0.0 if a == 0 else cum[a - 1] + 0.5 * (inv + prev) * (x[a] - x[a - 1])
-        prev = inv
-    total = cum[ns - 1]
+    half = _steps_from_end(0.5 * (hi - lo), ds, ratio, length)
+    total = 2.0 * half
     m = max(1, int(np.ceil(total - 1e-9)))
-    a = 0
     for k in range(1, m):
-        target = total * k / m
-        while cum[a + 1] < target:
-            a += 1
-        w = (target - cum[a]) / (cum[a + 1] - cum[a])
-        out[q] = x[a] + w * (x[a + 1] - x[a])
+        y = total * k / m
+        if y <= half:
+            out[q] = lo + _distance_for_steps(y, ds, ratio, length)
+        else:
+            out[q] = hi - _distance_for_steps(total - y, ds, ratio, length)
         q += 1
     out[q] = hi
     return q + 1
@@ -175,7 +177,7 @@ def _grid(beta, lengths, brk, nbrk, curv, ds, tol, ratio, length):
             q += 1
     br = np.unique(allb)
     nb = br.shape[0]
-    # tubes overlapping on each breakpoint interval, and the breakpoints bordering an overlap
+    # breakpoint intervals where two or more tubes overlap (graded towards both their ends)
     multi = np.zeros(max(nb - 1, 0), dtype=np.bool_)
     for a in range(nb - 1):
         mid = 0.5 * (br[a] + br[a + 1])
@@ -184,12 +186,6 @@ def _grid(beta, lengths, brk, nbrk, curv, ds, tol, ratio, length):
             if beta[i] < mid < beta[i] + lengths[i]:
                 count += 1
         multi[a] = count >= 2
-    refined_mask = np.zeros(nb, dtype=np.bool_)
-    for a in range(nb - 1):
-        if multi[a]:
-            refined_mask[a] = True
-            refined_mask[a + 1] = True
-    refined = br[refined_mask]
     graded = ratio < 1.0 and length > 0.0
     cap = 1
     for a in range(nb - 1):
@@ -201,7 +197,7 @@ def _grid(beta, lengths, brk, nbrk, curv, ds, tol, ratio, length):
     buf[0] = br[0]
     q = 1
     for a in range(nb - 1):
-        q = _interval_nodes(br[a], br[a + 1], ds, graded and multi[a], refined, ratio, length, buf, q)
+        q = _interval_nodes(br[a], br[a + 1], ds, graded and multi[a], ratio, length, buf, q)
     s = buf[:q].copy()
     G = s.shape[0]
     first = np.empty(n, dtype=np.int64)
