@@ -63,8 +63,11 @@ def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy,
     """Configuration ``k`` of the batch: grid, Newton shooting (retried from zero twist), tip."""
     n = alpha.shape[1]
     s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, gspec[0], gspec[1], gspec[2])
-    cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds, gspec[0], gspec[1],
-                                     gspec[2])
+    if predict:
+        cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds, gspec[0],
+                                         gspec[1], gspec[2])
+    else:   # not read by _shoot without the predictor
+        cs, cpresent, cuhat = s, present, uhat
     a = alpha[k].copy()
     sig0, _, it, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, sig_init[k],
                                              lengths, tol, maxit, predict)

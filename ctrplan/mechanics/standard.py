@@ -225,8 +225,8 @@ class _Problem:
         self.alpha = np.asarray(alpha, dtype=float)
         self.beta = np.asarray(beta, dtype=float)
         self.grid = build_grid(robot, self.beta, settings.ds, settings.refine_ratio, settings.refine_length)
-        self.coarse = build_grid(robot, self.beta, PREDICTOR_STEP_FACTOR * settings.ds, settings.refine_ratio,
-                                 settings.refine_length)
+        self.settings = settings
+        self._coarse = None
         self.kxy = np.array([t.k_xy for t in robot.tubes])
         self.ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
         self.lengths = np.array([t.length for t in robot.tubes])
@@ -236,12 +236,20 @@ class _Problem:
         :func:`_shoot`); returns (sig0, residual norm, iterations, ok, detJ, (psi, sigma)) with
         the node angles and torsions (G, n) of the evaluation at sig0."""
         g = self.grid
-        c = self.coarse
+        c = self._coarse_grid() if predict else g   # the coarse grid is read only when predicting
         sig0, res, it, ok, detJ, psi, sig = _shoot(
             g.s, g.present, g.precurvature, c.s, c.present, c.precurvature, self.kxy, self.ratio,
             self.alpha, np.asarray(sig0, dtype=float), self.lengths, float(settings.shooting_tol),
             int(settings.max_shooting_iterations), bool(predict))
         return sig0, res, it, ok, detJ, (psi, sig)
+
+    def _coarse_grid(self):
+        """The predictor's grid (``PREDICTOR_STEP_FACTOR`` times the step), built on first use."""
+        if self._coarse is None:
+            st = self.settings
+            self._coarse = build_grid(self.robot, self.beta, PREDICTOR_STEP_FACTOR * st.ds, st.refine_ratio,
+                                      st.refine_length)
+        return self._coarse
 
 
 @njit(cache=True, error_model="numpy")
