@@ -597,6 +597,13 @@ def _displacements(lam, act, dfree, Mblk, W, Z, friction, d):
     return True, S, piv
 
 
+@njit(cache=True, inline="always")
+def _offset_norm(d, c, k):
+    """|d_k| [m], floored at 1e-6 c_k so that the gap c_k / |d_k| - 1 stays finite for
+    concentric tubes."""
+    return max(np.sqrt(d[k, 0] * d[k, 0] + d[k, 1] * d[k, 1]), 1e-6 * c[k])
+
+
 @njit(cache=True)
 def _fb_residual(lam, d, c, kappa, phi, da, db, work):
     """Fischer-Burmeister residual FB(c lam, kappa c (c / |d| - 1)) and its partial
@@ -616,8 +623,7 @@ def _fb_residual(lam, d, c, kappa, phi, da, db, work):
             db[k] = 0.0
             continue
         a = c[k] * lam[k]
-        nd = np.sqrt(d[k, 0] * d[k, 0] + d[k, 1] * d[k, 1])
-        b = kappa * c[k] * (c[k] / max(nd, 1e-6 * c[k]) - 1.0)
+        b = kappa * c[k] * (c[k] / _offset_norm(d, c, k) - 1.0)
         r = np.sqrt(a * a + b * b)
         phi[k] = a + b - r
         if r < 1e-300:
@@ -670,8 +676,9 @@ def _max_scaled(phi, c, kappa):
 
 @njit(cache=True)
 def _violation(d, c, k):
-    """Scaled FB residual |Phi_k| / (kappa c_k) of contact k at lambda = 0:
-    max(0, |d_k|^2 - c_k^2) / c_k^2."""
+    """Constraint violation of contact k, max(0, |d_k|^2 - c_k^2) / c_k^2: to first order the
+    scaled FB residual |Phi_k| / (kappa c_k) = 2 (1 - c_k / |d_k|) of the contact at
+    lambda = 0, which the Newton method's stopping test bounds inside the working set."""
     g = (d[k, 0] * d[k, 0] + d[k, 1] * d[k, 1] - c[k] * c[k]) / (c[k] * c[k])
     return g if g > 0.0 else 0.0
 
@@ -791,12 +798,10 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
             if db[k] != 0.0 or lam[k] > 0.0 or phi[k] != 0.0:
                 nR += 1
         Rs = np.empty(nR, dtype=np.int64)
-        pos = np.full(M, -1, dtype=np.int64)
         i = 0
         for k in range(M):
             if db[k] != 0.0 or lam[k] > 0.0 or phi[k] != 0.0:
                 Rs[i] = k
-                pos[k] = i
                 i += 1
         fill_columns(Rs, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
         # Only the projection d_k . (dd_k / dlambda) enters the Newton matrix, so the derivative
@@ -853,7 +858,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
         rhs = np.empty(nR)
         for ii in range(nR):
             k = Rs[ii]
-            nd = max(np.sqrt(d[k, 0] * d[k, 0] + d[k, 1] * d[k, 1]), 1e-6 * c[k])
+            nd = _offset_norm(d, c, k)
             f = -db[k] * kappa * c[k] * c[k] / (nd * nd * nd)
             for jj in range(nR):
                 J[ii, jj] = f * Dp[ii, jj]
