@@ -50,6 +50,11 @@ class ModelSettings:
     max_newton_iterations : int
         Semismooth-Newton iterations of one contact solve on one working set (the solve grows
         its working set of contacts in rounds; each round has this budget).
+
+    Raises
+    ------
+    ValueError
+        If ``refine_ratio`` is not in (0, 1] or ``refine_length`` is negative.
     """
 
     ds: float = 3e-3
