@@ -164,10 +164,11 @@ def test_compliance_kernels_equal_dense_products(eta):
     np.testing.assert_allclose(p, np.concatenate([x for _, x in fk]), atol=1e-14)
     _linearize_kernels(prob, u, R, p)
     M = prob.M
-    W = np.zeros((2 * M, 2 * M))
-    Z = np.zeros((2 * M, M))
-    ck.fill_columns(np.arange(M), W, Z, np.zeros(M, dtype=bool), prob.pair, prob.jo, prob.ji, prob._B,
+    Wt = np.zeros((2 * M, 2 * M))
+    Zt = np.zeros((M, 2 * M))
+    ck.fill_columns(np.arange(M), Wt, Zt, np.zeros(M, dtype=bool), prob.pair, prob.jo, prob.ji, prob._B,
                     prob._Pc, R, p, prob._H1, prob._H2, prob._F3, prob.tq_out, prob.tq_in, prob.friction)
+    W, Z = Wt.T, Zt.T   # stored transposed
     scale = np.abs(W_ref).max()
     assert np.abs(W - W_ref).max() < 1e-10 * scale
     np.testing.assert_allclose(prob._diagW[:, [0, 1], [0, 1]].ravel(), np.diag(W_ref), rtol=1e-10)
@@ -210,7 +211,7 @@ def test_constraint_generation_equals_the_full_complementarity_solve(eta, q):
 
     def run(solver, *extra):
         W = np.empty((2 * M, 2 * M))
-        Z = np.empty((2 * M, M)) if prob.friction else np.empty((1, 1))
+        Z = np.empty((M, 2 * M)) if prob.friction else np.empty((1, 1))
         return solver(np.zeros(M), prob._dfree, prob.c, prob.Mblk, kappa, tol, 200, W, Z,
                       np.zeros(M, dtype=np.bool_), prob.pair, prob.jo, prob.ji, prob._B, prob._Pc, R, p,
                       prob._H1, prob._H2, prob._F3, prob.tq_out, prob.tq_in, prob.friction, *extra)

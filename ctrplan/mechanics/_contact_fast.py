@@ -191,12 +191,12 @@ class FlatProblem:
         ck.contact_projections(self._B, p, self.jo, self.ji, self._H1, self._H2, self._Pc)
         M = self.M
         kappa = 1.0 / max(float(np.mean(self._diagW[:, [0, 1], [0, 1]])), 1e-300)
-        W = np.empty((2 * M, 2 * M))
-        Z = np.empty((2 * M, M)) if self.friction else np.empty((1, 1))
+        Wt = np.empty((2 * M, 2 * M))   # W and Z stored transposed (ck.fill_columns)
+        Zt = np.empty((M, 2 * M)) if self.friction else np.empty((1, 1))
         have = np.zeros(M, dtype=np.bool_)
         lam, d, ok, its, _ = ck.solve_contacts(
             np.asarray(lam, dtype=float), self._dfree, self.c, self.Mblk, kappa,
-            settings.complementarity_tol, settings.max_newton_iterations, W, Z, have,
+            settings.complementarity_tol, settings.max_newton_iterations, Wt, Zt, have,
             self.pair, self.jo, self.ji, self._B, self._Pc, R, p, self._H1, self._H2, self._F3,
             self.tq_out, self.tq_in, self.friction)
         g = np.empty_like(u)

@@ -24,6 +24,11 @@ and the block W_ce = A_c K^-1 A_e^T of the contact compliance of Appendix A (Eqs
 A_c = B_c^T S_c J_p, is a sum over the (at most two) tubes that contacts c and e share. A
 block costs O(1) instead of O(number of unknowns); blocks are computed column by column only
 for the contacts the semismooth Newton method actually touches (active or violated ones).
+The columns are stored as rows (arrays ``Wt`` = W^T and ``Zt`` = Z^T, C order), so that
+computing a column and reading it back are both contiguous.
+
+**Dense solves by LAPACK.** The active block of Appendix A and the Newton matrix are factored
+by LAPACK's ``dgetrf`` (``_lapack``), 2.1-2.5x faster than a compiled triple loop at these sizes.
 
 **Generalized forces by suffix sums.** A^T phi + zt^T lambda of Eqs. (34)-(36), (41) is, for
 segment k, base_k^T F_k + Omega_k^T (sum p_j x f_j + sum tau_j t_j) over the contacts distal to k:
@@ -36,6 +41,7 @@ import numpy as np
 from numba import njit
 
 from ..constants import SMALL_ANGLE
+from ._lapack import PIVOT_DTYPE, lu_factor, lu_solve, lu_solve_matrix
 
 _SMALL = SMALL_ANGLE  # module-level constant, frozen into the compiled code
 _SEPARATION_ROUNDS = 3
@@ -359,9 +365,11 @@ def contact_projections(B, p, jo, ji, H1, H2, Pc):
 
 
 @njit(cache=True)
-def fill_columns(cols, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction):
+def fill_columns(cols, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction):
     """Compute the block columns ``e in cols`` of W (2M, 2M) [m/N] and the columns of Z (2M, M)
-    [m/N] (torque terms, friction only) that are not computed yet (``have[e]`` False).
+    [m/N] (torque terms, friction only) that are not computed yet (``have[e]`` False), stored
+    transposed: column 2e + q of W is row 2e + q of ``Wt`` (2M, 2M), column e of Z is row e of
+    ``Zt`` (M, 2M).
 
     Z column e is A K^-1 zt_e^T: the displacements caused by the friction torques of contact e
     (Eq. (41)) per unit multiplier. ``Pc`` from :func:`contact_projections`.
@@ -378,10 +386,10 @@ def fill_columns(cols, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out
             continue
         have[e] = True
         for r in range(2 * M):
-            W[r, 2 * e] = 0.0
-            W[r, 2 * e + 1] = 0.0
+            Wt[2 * e, r] = 0.0
+            Wt[2 * e + 1, r] = 0.0
             if friction:
-                Z[r, e] = 0.0
+                Zt[e, r] = 0.0
         for side in range(2):
             te = pair[e] + side
             je = jo[e] if side == 0 else ji[e]
@@ -432,11 +440,11 @@ def fill_columns(cols, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out
                             v = 0.0
                             for a in range(3):
                                 v += Pc[c, sd, 0, q1, a] * B[e, a, q2] + Pc[c, sd, 1, q1, a] * PB[a, q2]
-                            W[2 * c + q1, 2 * e + q2] += f * v
+                            Wt[2 * e + q2, 2 * c + q1] += f * v
                     if with_torque:
                         # B_c^T H2_jc t_e
                         for q1 in range(2):
-                            Z[2 * c + q1, e] += sc * tau * (Pc[c, sd, 1, q1, 0] * R[je, 0, 2]
+                            Zt[e, 2 * c + q1] += sc * tau * (Pc[c, sd, 1, q1, 0] * R[je, 0, 2]
                                                             + Pc[c, sd, 1, q1, 1] * R[je, 1, 2]
                                                             + Pc[c, sd, 1, q1, 2] * R[je, 2, 2])
                 else:
@@ -446,96 +454,14 @@ def fill_columns(cols, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out
                             v = 0.0
                             for a in range(3):
                                 v += B[c, a, q1] * U[a, q2] - Pc[c, sd, 2, q1, a] * Vv[a, q2]
-                            W[2 * c + q1, 2 * e + q2] += f * v
+                            Wt[2 * e + q2, 2 * c + q1] += f * v
                     if with_torque:
                         # B_c^T ((H2_je - [p_c - p_e]x F3_je) t_e) = B_c^T g1 - Pc2 w
                         for q1 in range(2):
                             v = 0.0
                             for a in range(3):
                                 v += B[c, a, q1] * g1[a] - Pc[c, sd, 2, q1, a] * w[a]
-                            Z[2 * c + q1, e] += sc * tau * v
-
-
-@njit(cache=True)
-def _lu_factor(A, piv):
-    """In-place LU with partial pivoting; returns False on an exactly singular or non-finite
-    pivot."""
-    n = A.shape[0]
-    for k in range(n):
-        m = k
-        big = abs(A[k, k])
-        for i in range(k + 1, n):
-            v = abs(A[i, k])
-            if v > big:
-                big = v
-                m = i
-        piv[k] = m
-        if not (big > 0.0) or not np.isfinite(big):
-            return False
-        if m != k:
-            for j in range(n):
-                tmp = A[k, j]
-                A[k, j] = A[m, j]
-                A[m, j] = tmp
-        inv = 1.0 / A[k, k]
-        for i in range(k + 1, n):
-            A[i, k] *= inv
-            f = A[i, k]
-            if f != 0.0:
-                for j in range(k + 1, n):
-                    A[i, j] -= f * A[k, j]
-    return True
-
-
-@njit(cache=True)
-def _lu_solve(LU, piv, b):
-    """Solve LU x = b in place for one right-hand side, shape (n,)."""
-    n = LU.shape[0]
-    for k in range(n):
-        m = piv[k]
-        if m != k:
-            tmp = b[k]
-            b[k] = b[m]
-            b[m] = tmp
-    for i in range(n):
-        s = b[i]
-        for j in range(i):
-            s -= LU[i, j] * b[j]
-        b[i] = s
-    for i in range(n - 1, -1, -1):
-        s = b[i]
-        for j in range(i + 1, n):
-            s -= LU[i, j] * b[j]
-        b[i] = s / LU[i, i]
-
-
-@njit(cache=True)
-def _lu_solve_matrix(LU, piv, Bm):
-    """Solve LU X = Bm in place for a matrix right-hand side, shape (n, k)."""
-    n = LU.shape[0]
-    k = Bm.shape[1]
-    for r in range(n):
-        m = piv[r]
-        if m != r:
-            for c in range(k):
-                tmp = Bm[r, c]
-                Bm[r, c] = Bm[m, c]
-                Bm[m, c] = tmp
-    for i in range(n):
-        for j in range(i):
-            f = LU[i, j]
-            if f != 0.0:
-                for c in range(k):
-                    Bm[i, c] -= f * Bm[j, c]
-    for i in range(n - 1, -1, -1):
-        for j in range(i + 1, n):
-            f = LU[i, j]
-            if f != 0.0:
-                for c in range(k):
-                    Bm[i, c] -= f * Bm[j, c]
-        inv = 1.0 / LU[i, i]
-        for c in range(k):
-            Bm[i, c] *= inv
+                            Zt[e, 2 * c + q1] += sc * tau * v
 
 
 @njit(cache=True)
@@ -545,55 +471,59 @@ def _active_of(lam):
 
 
 @njit(cache=True)
-def _displacements(lam, act, dfree, Mblk, W, Z, friction, d):
-    """d (M, 2) for multipliers lam that are non-zero only on ``act``:
-    (I + W Lambda M) d = dfree + Z lam reduced to those contacts (Appendix A, Eqs. (50)-(56)
-    on the active set). Returns (ok, LU, piv) with the LU factors of S = I + W_aa L_a."""
-    M = lam.shape[0]
+def _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, rows):
+    """d (M, 2) on the contacts ``rows`` for multipliers lam that are non-zero only on ``act``
+    (a subset of ``rows``): (I + W Lambda M) d = dfree + Z lam reduced to those contacts
+    (Appendix A, Eqs. (50)-(56) on the active set). Rows of d outside ``rows`` are left alone.
+    Returns (ok, LU, piv) with the LU factors of S = I + W_aa L_a."""
     n_act = act.shape[0]
-    # r = dfree + Z lam
-    for k in range(M):
+    nr = rows.shape[0]
+    for idx in range(nr):
+        k = rows[idx]
         d[k, 0] = dfree[k, 0]
         d[k, 1] = dfree[k, 1]
     if friction:
         for i in range(n_act):
             l = act[i]
-            for r in range(M):
-                d[r, 0] += Z[2 * r, l] * lam[l]
-                d[r, 1] += Z[2 * r + 1, l] * lam[l]
+            for idx in range(nr):
+                r = rows[idx]
+                d[r, 0] += Zt[l, 2 * r] * lam[l]
+                d[r, 1] += Zt[l, 2 * r + 1] * lam[l]
     m2 = 2 * n_act
     S = np.empty((m2, m2))
-    piv = np.empty(m2, dtype=np.int64)
+    piv = np.empty(m2, dtype=PIVOT_DTYPE)
     if n_act == 0:
         return True, S, piv
     # S = I + W_aa L_a, L_a = blockdiag(lam_l M_l)
-    for i in range(n_act):
-        ci = act[i]
-        for j in range(n_act):
-            cj = act[j]
-            lj = lam[cj]
+    for j in range(n_act):
+        cj = act[j]
+        lj = lam[cj]
+        for i in range(n_act):
+            ci = act[i]
             for q1 in range(2):
                 for q2 in range(2):
-                    S[2 * i + q1, 2 * j + q2] = lj * (W[2 * ci + q1, 2 * cj] * Mblk[cj, 0, q2]
-                                                      + W[2 * ci + q1, 2 * cj + 1] * Mblk[cj, 1, q2])
+                    S[2 * i + q1, 2 * j + q2] = lj * (Wt[2 * cj, 2 * ci + q1] * Mblk[cj, 0, q2]
+                                                      + Wt[2 * cj + 1, 2 * ci + q1] * Mblk[cj, 1, q2])
+    for i in range(n_act):
         S[2 * i, 2 * i] += 1.0
         S[2 * i + 1, 2 * i + 1] += 1.0
     da = np.empty(m2)
     for i in range(n_act):
         da[2 * i] = d[act[i], 0]
         da[2 * i + 1] = d[act[i], 1]
-    if not _lu_factor(S, piv):
+    if not lu_factor(S, piv):
         return False, S, piv
-    _lu_solve(S, piv, da)
+    lu_solve(S, piv, da)
     # d = r - W[:, a] (L_a d_a)
     for j in range(n_act):
         cj = act[j]
         lj = lam[cj]
         y0 = lj * (Mblk[cj, 0, 0] * da[2 * j] + Mblk[cj, 0, 1] * da[2 * j + 1])
         y1 = lj * (Mblk[cj, 1, 0] * da[2 * j] + Mblk[cj, 1, 1] * da[2 * j + 1])
-        for r in range(M):
-            d[r, 0] -= W[2 * r, 2 * cj] * y0 + W[2 * r, 2 * cj + 1] * y1
-            d[r, 1] -= W[2 * r + 1, 2 * cj] * y0 + W[2 * r + 1, 2 * cj + 1] * y1
+        for idx in range(nr):
+            r = rows[idx]
+            d[r, 0] -= Wt[2 * cj, 2 * r] * y0 + Wt[2 * cj + 1, 2 * r] * y1
+            d[r, 1] -= Wt[2 * cj, 2 * r + 1] * y0 + Wt[2 * cj + 1, 2 * r + 1] * y1
     return True, S, piv
 
 
@@ -637,18 +567,18 @@ def _fb_residual(lam, d, c, kappa, phi, da, db, work):
 
 
 @njit(cache=True, inline="always")
-def _c_entry(W, Z, row, l, e0, e1, friction):
+def _c_entry(Wt, Zt, row, l, e0, e1, friction):
     """Entry (row, l) of C = Z - W_(:, l-block) M_l d_l with (e0, e1) = M_l d_l: the change of
     displacement component ``row`` per unit lambda_l at fixed other multipliers [m/N]."""
-    v = -(W[row, 2 * l] * e0 + W[row, 2 * l + 1] * e1)
+    v = -(Wt[2 * l, row] * e0 + Wt[2 * l + 1, row] * e1)
     if friction:
-        v += Z[row, l]
+        v += Zt[l, row]
     return v
 
 
 @njit(cache=True)
-def _trial(lam, Rs, step, t, lam_t, dfree, c, Mblk, kappa, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2,
-           F3, tq_out, tq_in, friction, work, d_t, phi_t, da_t, db_t):
+def _trial(lam, Rs, step, t, lam_t, dfree, c, Mblk, kappa, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2,
+           F3, tq_out, tq_in, friction, work, rows, d_t, phi_t, da_t, db_t):
     """Line-search trial point: lam_t = max(lam + t step, 0) on the rows ``Rs`` (lam elsewhere),
     its displacements ``d_t`` and FB residual (``phi_t``, ``da_t``, ``db_t``) in place. Returns
     (displacements ok, LU factors, pivots, active set, merit)."""
@@ -658,8 +588,8 @@ def _trial(lam, Rs, step, t, lam_t, dfree, c, Mblk, kappa, W, Z, have, pair, jo,
         k = Rs[ii]
         lam_t[k] = max(lam[k] + t * step[ii], 0.0)
     act_n = _active_of(lam_t)
-    fill_columns(act_n, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
-    fok_t, LU_t, piv_t = _displacements(lam_t, act_n, dfree, Mblk, W, Z, friction, d_t)
+    fill_columns(act_n, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
+    fok_t, LU_t, piv_t = _displacements(lam_t, act_n, dfree, Mblk, Wt, Zt, friction, d_t, rows)
     m_t = _fb_residual(lam_t, d_t, c, kappa, phi_t, da_t, db_t, work)
     return fok_t, LU_t, piv_t, act_n, m_t
 
@@ -711,7 +641,7 @@ def _grow_working_set(d, c, pair, tol, work):
 
 
 @njit(cache=True)
-def solve_contacts(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
+def solve_contacts(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
                    pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction):
     """Contact multipliers of one linearization by constraint generation around
     :func:`complementarity`: solve on a working set (the contacts with lambda > 0 and the local
@@ -730,15 +660,15 @@ def solve_contacts(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
     work = lam > 0.0
     d = np.empty((M, 2))
     act = _active_of(lam)
-    fill_columns(act, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
-    fok, _, _ = _displacements(lam, act, dfree, Mblk, W, Z, friction, d)
+    fill_columns(act, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
+    fok, _, _ = _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, np.arange(M))
     if fok:
         _grow_working_set(d, c, pair, tol, work)
     else:
         work[:] = True
     total = 0
     for _ in range(M + 1):
-        lam, d, ok, its, err = complementarity(lam, dfree, c, Mblk, kappa, tol, maxit, W, Z,
+        lam, d, ok, its, err = complementarity(lam, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt,
                                                have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in,
                                                friction, work)
         total += its
@@ -751,7 +681,7 @@ def solve_contacts(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
 
 
 @njit(cache=True)
-def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
+def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
                     pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction, work):
     """Semismooth Fischer-Burmeister Newton on the contact complementarity conditions of one
     linearization (same iteration as the reference ``_Complementarity.solve``), over the
@@ -783,14 +713,16 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
     db_t = np.empty(M)
     lam_t = np.empty(M)
     act = _active_of(lam)
-    fill_columns(act, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
-    fok, LU, piv = _displacements(lam, act, dfree, Mblk, W, Z, friction, d)
+    fill_columns(act, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
+    rows = np.nonzero(work)[0]
+    fok, LU, piv = _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, rows)
     merit = _fb_residual(lam, d, c, kappa, phi, da, db, work)
     hist = np.zeros(_NONMONOTONE)
     hist[0] = merit
     for it in range(1, maxit + 1):
         err = _max_scaled(phi, c, kappa)
         if err < tol:
+            _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, np.arange(M))
             return lam, d, True, it - 1, err
         # reduced set: rows with db != 0, lam > 0 or phi != 0
         nR = 0
@@ -803,55 +735,73 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
             if db[k] != 0.0 or lam[k] > 0.0 or phi[k] != 0.0:
                 Rs[i] = k
                 i += 1
-        fill_columns(Rs, W, Z, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
+        fill_columns(Rs, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
         # Only the projection d_k . (dd_k / dlambda) enters the Newton matrix, so the derivative
         # D = C - W_(:, a) L_a S^-1 C_a (C[:, l] = Z[:, l] - W[:, l-block] M_l d_l) is formed
         # projected on d_k for the rows of R, and in full only for the active rows (C_a).
-        n_act = act.shape[0]
         E = np.empty((nR, 2))
         for jj in range(nR):
             l = Rs[jj]
             E[jj, 0] = Mblk[l, 0, 0] * d[l, 0] + Mblk[l, 0, 1] * d[l, 1]
             E[jj, 1] = Mblk[l, 1, 0] * d[l, 0] + Mblk[l, 1, 1] * d[l, 1]
+        # Active rows: D_a = C_a - W_aa L_a S^-1 C_a = S^-1 C_a (S = I + W_aa L_a). Other rows:
+        # d_k^T D_k = d_k^T C_k - (d_k^T W_(k, a) L_a) S^-1 C_a, the last factor a BLAS product.
+        n_act = act.shape[0]
+        slot = np.full(nR, -1, dtype=np.int64)
+        if n_act > 0:
+            ia = 0
+            for ii in range(nR):
+                if ia < n_act and Rs[ii] == act[ia]:
+                    slot[ii] = ia
+                    ia += 1
         Dp = np.empty((nR, nR))
-        for ii in range(nR):
-            k = Rs[ii]
-            r0 = 2 * k
-            r1 = 2 * k + 1
-            dk0 = d[k, 0]
-            dk1 = d[k, 1]
+        if n_act > 0:
+            CaT = np.empty((nR, 2 * n_act))
             for jj in range(nR):
                 l = Rs[jj]
-                Dp[ii, jj] = (dk0 * _c_entry(W, Z, r0, l, E[jj, 0], E[jj, 1], friction)
-                              + dk1 * _c_entry(W, Z, r1, l, E[jj, 0], E[jj, 1], friction))
-        if n_act > 0:
-            Ca = np.empty((2 * n_act, nR))
-            for i in range(n_act):
-                k = act[i]
-                for q in range(2):
-                    row = 2 * k + q
-                    for jj in range(nR):
-                        Ca[2 * i + q, jj] = _c_entry(W, Z, row, Rs[jj], E[jj, 0], E[jj, 1], friction)
-            _lu_solve_matrix(LU, piv, Ca)
-            # Pw[ii, :] = d_k^T W_(k, a) L_a (L_a = blockdiag(lambda_l M_l))
-            Pw = np.empty((nR, 2 * n_act))
-            for ii in range(nR):
-                k = Rs[ii]
-                dk0 = d[k, 0]
-                dk1 = d[k, 1]
                 for i in range(n_act):
-                    l = act[i]
-                    lj = lam[l]
-                    w0 = dk0 * W[2 * k, 2 * l] + dk1 * W[2 * k + 1, 2 * l]
-                    w1 = dk0 * W[2 * k, 2 * l + 1] + dk1 * W[2 * k + 1, 2 * l + 1]
-                    Pw[ii, 2 * i] = lj * (w0 * Mblk[l, 0, 0] + w1 * Mblk[l, 1, 0])
-                    Pw[ii, 2 * i + 1] = lj * (w0 * Mblk[l, 0, 1] + w1 * Mblk[l, 1, 1])
-            for ii in range(nR):
-                for m in range(2 * n_act):
-                    w = Pw[ii, m]
-                    if w != 0.0:
-                        for jj in range(nR):
-                            Dp[ii, jj] -= w * Ca[m, jj]
+                    k = act[i]
+                    for q in range(2):
+                        CaT[jj, 2 * i + q] = _c_entry(Wt, Zt, 2 * k + q, l, E[jj, 0], E[jj, 1], friction)
+            lu_solve_matrix(LU, piv, CaT)
+        n_free = nR - n_act
+        free = np.empty(n_free, dtype=np.int64)
+        m = 0
+        for ii in range(nR):
+            k = Rs[ii]
+            ia = slot[ii]
+            if ia >= 0:
+                for jj in range(nR):
+                    Dp[ii, jj] = d[k, 0] * CaT[jj, 2 * ia] + d[k, 1] * CaT[jj, 2 * ia + 1]
+            else:
+                free[m] = ii
+                m += 1
+        for jj in range(nR):
+            l = Rs[jj]
+            for f in range(n_free):
+                ii = free[f]
+                k = Rs[ii]
+                Dp[ii, jj] = (d[k, 0] * _c_entry(Wt, Zt, 2 * k, l, E[jj, 0], E[jj, 1], friction)
+                              + d[k, 1] * _c_entry(Wt, Zt, 2 * k + 1, l, E[jj, 0], E[jj, 1], friction))
+        if n_act > 0 and n_free > 0:
+            # Pw[f, :] = d_k^T W_(k, a) L_a (L_a = blockdiag(lambda_l M_l)) for the free rows
+            Pw = np.empty((n_free, 2 * n_act))
+            for i in range(n_act):
+                l = act[i]
+                lj = lam[l]
+                for f in range(n_free):
+                    k = Rs[free[f]]
+                    dk0 = d[k, 0]
+                    dk1 = d[k, 1]
+                    w0 = dk0 * Wt[2 * l, 2 * k] + dk1 * Wt[2 * l, 2 * k + 1]
+                    w1 = dk0 * Wt[2 * l + 1, 2 * k] + dk1 * Wt[2 * l + 1, 2 * k + 1]
+                    Pw[f, 2 * i] = lj * (w0 * Mblk[l, 0, 0] + w1 * Mblk[l, 1, 0])
+                    Pw[f, 2 * i + 1] = lj * (w0 * Mblk[l, 0, 1] + w1 * Mblk[l, 1, 1])
+            G = Pw @ CaT.T
+            for f in range(n_free):
+                ii = free[f]
+                for jj in range(nR):
+                    Dp[ii, jj] -= G[f, jj]
         # J_RR = diag(da c) + db kappa c dgap,
         # dgap[k, l] = d(c_k / |d_k|) / d lambda_l = -c_k d_k . D[k, l] / |d_k|^3
         J = np.empty((nR, nR))
@@ -865,13 +815,14 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
             J[ii, ii] += da[k] * c[k]
             rhs[ii] = -phi[k]
         Jc = J.copy()
-        pJ = np.empty(nR, dtype=np.int64)
-        if _lu_factor(J, pJ):
-            _lu_solve(J, pJ, rhs)
+        pJ = np.empty(nR, dtype=PIVOT_DTYPE)
+        if lu_factor(J, pJ):
+            lu_solve(J, pJ, rhs)
             stepR = rhs
         else:
             if not np.all(np.isfinite(Jc)):
                 # a non-finite Newton matrix (LAPACK would print an error): no step possible
+                _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, np.arange(M))
                 return lam, d, False, it, _max_scaled(phi, c, kappa)
             rr = np.empty(nR)
             for ii in range(nR):
@@ -909,26 +860,27 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
                     rhs2[ii] = -lam[k]
                 else:
                     rhs2[ii] = -phi[k]
-            if not _lu_factor(J2, pJ):
+            if not lu_factor(J2, pJ):
                 break
-            _lu_solve(J2, pJ, rhs2)
+            lu_solve(J2, pJ, rhs2)
             direction = rhs2
             fok_t, LU_t, piv_t, act_n, m_t = _trial(
-                lam, Rs, direction, 1.0, lam_t, dfree, c, Mblk, kappa, W, Z, have, pair, jo, ji, B, Pc, R, p,
-                H1, H2, F3, tq_out, tq_in, friction, work, d_t, phi_t, da_t, db_t)
+                lam, Rs, direction, 1.0, lam_t, dfree, c, Mblk, kappa, Wt, Zt, have, pair, jo, ji, B, Pc, R, p,
+                H1, H2, F3, tq_out, tq_in, friction, work, rows, d_t, phi_t, da_t, db_t)
             if fok_t and m_t <= (1.0 - 1e-4) * ref_merit:
                 accepted = True
                 break
         t = 1.0
         for _ in range(0 if accepted else 40):
             fok_t, LU_t, piv_t, act_n, m_t = _trial(
-                lam, Rs, stepR, t, lam_t, dfree, c, Mblk, kappa, W, Z, have, pair, jo, ji, B, Pc, R, p,
-                H1, H2, F3, tq_out, tq_in, friction, work, d_t, phi_t, da_t, db_t)
+                lam, Rs, stepR, t, lam_t, dfree, c, Mblk, kappa, Wt, Zt, have, pair, jo, ji, B, Pc, R, p,
+                H1, H2, F3, tq_out, tq_in, friction, work, rows, d_t, phi_t, da_t, db_t)
             if fok_t and m_t <= (1.0 - 1e-4 * t) * ref_merit:
                 accepted = True
                 break
             t *= 0.5
         if not accepted:
+            _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, np.arange(M))
             return lam, d, False, it, _max_scaled(phi, c, kappa)
         lam[:] = lam_t
         d[:, :] = d_t
@@ -941,6 +893,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, W, Z, have,
         LU = LU_t
         piv = piv_t
     err = _max_scaled(phi, c, kappa)
+    _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, np.arange(M))
     return lam, d, err < tol, maxit, err
 
 
