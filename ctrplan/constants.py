@@ -22,5 +22,6 @@ MAX_FAILED_INNER_STEPS = 10
 # RK4 solutions differ by little at that step, so the fine Newton needs about two sweeps.
 PREDICTOR_STEP_FACTOR = 4.0
 
-# Shooting tolerance of that coarse predictor [1/m] (it only has to land near the fine solution).
-PREDICTOR_TOL = 1e-6
+# Shooting tolerance of that coarse predictor [1/m] (it only has to land near the fine solution;
+# looser than 1e-4 costs the fine Newton more sweeps than it saves, docs/mechanics.md Sec. 10).
+PREDICTOR_TOL = 1e-4
