@@ -21,6 +21,7 @@ import argparse
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -44,6 +45,31 @@ def _t(fn, *a, **k):
     return out, time.perf_counter() - t0
 
 
+def _guarded(fn):
+    """The frozen reference diverges at some configurations of the graded grid (overflow, then
+    numpy.linalg.LinAlgError in its Anderson step): such a call returns None (counted as not
+    converged) instead of ending the benchmark, and its floating-point warnings are silenced."""
+    def call(*a, **k):
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            try:
+                return fn(*a, **k)
+            except (np.linalg.LinAlgError, FloatingPointError, ValueError):
+                return None
+    return call
+
+
+def _converged(result):
+    return result is not None and bool(result.diagnostics.converged)
+
+
+def _keep(rows, failed, name, t, converged):
+    if converged:
+        rows[name].append(t)
+    else:
+        failed[name] += 1
+
+
 def timing_table(robot, settings, ref_every):
     _, Q = grid_4x4x4(robot)
     no_ms = settings.replace(multistart=0)
@@ -51,44 +77,57 @@ def timing_table(robot, settings, ref_every):
              "one friction solution", "full bound (clearance + 4 friction)"]
     fast = {k: [] for k in names}
     ref = {k: [] for k in names}
+    failed = {"fast": {k: 0 for k in names}, "ref": {k: 0 for k in names}}
     a0, b0 = robot.configuration(Q[0])
     evaluate_bound(robot, a0, b0, settings)                   # load compiled kernels
-    bound_reference.evaluate_bound(robot, a0, b0, settings)
+    ref_std = _guarded(standard_reference.solve_standard)
+    ref_contact = _guarded(contact_reference.solve_contact)
+    ref_bound = _guarded(bound_reference.evaluate_bound)
+    ref_std(robot, a0, b0, settings)
     for idx, q in enumerate(Q):
         a, b = robot.configuration(q)
         do_ref = idx % ref_every == 0
         impls = [("fast", fast, solve_standard, solve_clearance, solve_friction, evaluate_bound)]
         if do_ref:
-            impls.append(("ref", ref, standard_reference.solve_standard,
-                          lambda *x, **k: contact_reference.solve_contact(*x, **k),
-                          lambda r, a_, b_, eta, s, **k: contact_reference.solve_contact(r, a_, b_, s, eta=eta, **k),
-                          bound_reference.evaluate_bound))
-        for _, rows, std_f, cl_f, fr_f, bd_f in impls:
+            impls.append(("ref", ref, ref_std, ref_contact,
+                          lambda r, a_, b_, eta, s, **k: ref_contact(r, a_, b_, s, eta=eta, **k),
+                          ref_bound))
+        for kind, rows, std_f, cl_f, fr_f, bd_f in impls:
             st, t = _t(std_f, robot, a, b, settings)
             rows[names[0]].append(t)
             _, t = _t(std_f, robot, a, b, no_ms)
             rows[names[1]].append(t)
-            if not st.diagnostics.ok:
+            if st is None or not st.diagnostics.ok:
                 continue
+            # a time counts only if that solve converged (the frozen reference does not at some
+            # configurations of the graded grid; it then runs to its iteration limits)
             cl, t = _t(cl_f, robot, a, b, settings, standard=st)
-            rows[names[2]].append(t)
-            _, t = _t(fr_f, robot, a, b, (1, -1), settings, standard=st, warm_start=cl)
-            rows[names[3]].append(t)
-            _, t = _t(bd_f, robot, a, b, settings)
-            rows[names[4]].append(t)
+            if cl is None:   # the bound's clearance solve is the same one
+                for k in names[2:]:
+                    failed[kind][k] += 1
+                continue
+            _keep(rows, failed[kind], names[2], t, _converged(cl))
+            fr, t = _t(fr_f, robot, a, b, (1, -1), settings, standard=st, warm_start=cl)
+            _keep(rows, failed[kind], names[3], t, _converged(fr))
+            bd, t = _t(bd_f, robot, a, b, settings)
+            _keep(rows, failed[kind], names[4], t, _converged(bd))
     paper = {names[0]: PAPER_TIMES_S["standard"], names[2]: PAPER_TIMES_S["clearance"],
              names[4]: PAPER_TIMES_S["friction"]}
     print(f"1. Time per configuration: {robot.name}, 4x4x4 grid of Section IV-D, ds = {settings.ds * 1e3:.1f} mm, "
           f"1 BLAS thread; reference on every {ref_every}th configuration")
     print(f"{'model':<38} {'n':>3} {'median [ms]':>12} {'p90 [ms]':>9} {'paper T.VIII [ms]':>18} "
-          f"{'vs paper':>9} {'ref median [ms]':>16} {'speed-up vs ref':>16}")
+          f"{'vs paper':>9} {'n ref':>5} {'ref median [ms]':>16} {'speed-up vs ref':>16}")
     for k in names:
         ts = np.asarray(fast[k]) * 1e3
         rs = np.asarray(ref[k]) * 1e3
         p = paper.get(k)
         print(f"{k:<38} {ts.size:>3} {np.median(ts):>12.2f} {np.percentile(ts, 90):>9.2f} "
               f"{(f'{p * 1e3:.0f}' if p else '-'):>18} {(f'{p * 1e3 / np.median(ts):.0f}x' if p else '-'):>9} "
-              f"{np.median(rs):>16.2f} {np.median(rs) / np.median(ts):>15.1f}x")
+              f"{rs.size:>5} {np.median(rs):>16.2f} {np.median(rs) / np.median(ts):>15.1f}x")
+    for kind in ("fast", "ref"):
+        bad = {k: v for k, v in failed[kind].items() if v}
+        if bad:
+            print(f"   not converged, left out of the {kind} times: " + ", ".join(f"{k}: {v}" for k, v in bad.items()))
     print("(paper: MATLAB on an i5-3470; its friction time is clearance + all friction solutions, "
           "Section V-C)")
 

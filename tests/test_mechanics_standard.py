@@ -170,3 +170,31 @@ def test_batch_equals_single_solves():
         solve_standard_batch(robot, alpha[:, :2], beta, settings)
     with pytest.raises(ValueError, match="n_threads"):
         solve_standard_batch(robot, alpha, beta, settings, n_threads=0)
+
+
+def test_shooting_restarts_where_newton_stalls():
+    """At these two joint values (seeded random draws of the batch benchmark) damped Newton from
+    no twist stalls at a local minimum of the shooting residual with a singular Jacobian (tip
+    torsion residual 0.40 and 0.52 1/m before the restarts of ``standard._shoot``). With the
+    restarts both the single solve and the batch converge, to a stable equilibrium that the
+    multistart search finds unique, whose tip is within 0.001 mm of the paper's uniform grid
+    (which converged there without restarts)."""
+    from ctrplan.mechanics import solve_standard_batch
+
+    robot = table2_robot()
+    qs = [[float.fromhex("0x1.f0b0b0a31a498p-2"), float.fromhex("-0x1.86e79d438254fp+1"),
+           float.fromhex("-0x1.a48954f9c7525p-4")],
+          [float.fromhex("0x1.141e5ba43a010p-2"), float.fromhex("-0x1.68e6226b7078fp+1"),
+           float.fromhex("-0x1.a2a94e8be40f9p-4")]]
+    configs = [robot.configuration(q) for q in qs]
+    settings = ModelSettings(ds=3e-3)
+    batch = solve_standard_batch(robot, np.array([a for a, _ in configs]), np.array([b for _, b in configs]),
+                                 settings)
+    assert np.all(batch.converged) and not np.any(batch.unstable)
+    for k, (a, b) in enumerate(configs):
+        st = solve_standard(robot, a, b, settings)
+        assert st.diagnostics.converged and not st.diagnostics.unstable
+        assert st.diagnostics.n_equilibria == 1
+        uniform = solve_standard(robot, a, b, settings.replace(refine_ratio=1.0), check_stability=False)
+        assert np.linalg.norm(st.tip_position - uniform.tip_position) < 1e-6
+        np.testing.assert_allclose(batch.tip_position[k], st.tip_position, atol=1e-10)

@@ -29,6 +29,10 @@ from .results import Diagnostics, ModelSettings, StandardSolution
 __all__ = ["solve_standard"]
 
 _PREDICTOR_TOL = PREDICTOR_TOL  # module-level constant, frozen into the compiled code
+# Newton shooting gives up a start when its residual has not fallen below _STALL_FACTOR times
+# its best for _STALL_ITERATIONS iterations
+_STALL_FACTOR = 0.9
+_STALL_ITERATIONS = 20
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -143,12 +147,12 @@ def _both_rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, ax, ay, dpsi, dsig, dSp
 def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
     """Classical RK4 over the grid intervals, one step per interval (allocation-free inner loop).
 
-    The torsion ODE and its variational equations are separate inline kernels, and the sweep
-    without sensitivities runs its own loop. The earlier form (one right-hand side for both,
-    with shared work arrays and sensitivity loops that were empty without sensitivities) took
-    80-85 us per sweep with sensitivities on the Table II robot at ds = 3 mm; this one takes
-    32-42 us, with bitwise-identical results (which change of the rewrite matters was not
-    isolated).
+    The torsion ODE and its variational equations are separate inline kernels. The earlier
+    form (one right-hand side for both, with shared work arrays) took 80-85 us per sweep with
+    sensitivities on the Table II robot at ds = 3 mm (uniform grid); this one takes 32-42 us,
+    with bitwise-identical results. Without sensitivities (m = 0) the same loop runs with empty
+    sensitivity loops: 30 us against 51 us with them on the graded grid (a separate loop for it
+    took 71 us).
 
     Returns final psi, sigma, sensitivities d(psi, sigma)/d sigma0 (n, n; (n, 0) without), and,
     when ``record``, psi, sigma and sigma' at every node.
@@ -181,32 +185,20 @@ def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
                 rec_psi[j, i] = psi[i]
                 rec_sig[j, i] = sig[i]
                 rec_dsig[j, i] = k1s[i]
-        if with_sens:
-            _sensitivity_rhs(Sp, Ss, pr, kxy, ratio, ax, ay, ucx, ucy, ks, K1p, K1s)
-            _stages(psi, sig, Sp, Ss, k1p, k1s, K1p, K1s, 0.5 * h, tp, ts, TP, TS)
-            _both_rhs(tp, ts, TP, TS, pr, u, kxy, ratio, ax, ay, k2p, k2s, K2p, K2s)
-            _stages(psi, sig, Sp, Ss, k2p, k2s, K2p, K2s, 0.5 * h, tp, ts, TP, TS)
-            _both_rhs(tp, ts, TP, TS, pr, u, kxy, ratio, ax, ay, k3p, k3s, K3p, K3s)
-            _stages(psi, sig, Sp, Ss, k3p, k3s, K3p, K3s, h, tp, ts, TP, TS)
-            _both_rhs(tp, ts, TP, TS, pr, u, kxy, ratio, ax, ay, k4p, k4s, K4p, K4s)
-            f = h / 6.0
-            _combine(psi, k1p, k2p, k3p, k4p, f)
-            _combine(sig, k1s, k2s, k3s, k4s, f)
-            _combine2(Sp, K1p, K2p, K3p, K4p, f)
-            _combine2(Ss, K1s, K2s, K3s, K4s, f)
-        else:
-            _stage(psi, k1p, 0.5 * h, tp)
-            _stage(sig, k1s, 0.5 * h, ts)
-            _torsion_rhs(tp, ts, pr, u, kxy, ratio, ax, ay, k2p, k2s)
-            _stage(psi, k2p, 0.5 * h, tp)
-            _stage(sig, k2s, 0.5 * h, ts)
-            _torsion_rhs(tp, ts, pr, u, kxy, ratio, ax, ay, k3p, k3s)
-            _stage(psi, k3p, h, tp)
-            _stage(sig, k3s, h, ts)
-            _torsion_rhs(tp, ts, pr, u, kxy, ratio, ax, ay, k4p, k4s)
-            f = h / 6.0
-            _combine(psi, k1p, k2p, k3p, k4p, f)
-            _combine(sig, k1s, k2s, k3s, k4s, f)
+        # one loop for both sweeps: without sensitivities (m = 0) their loops are empty. A
+        # separate loop for the sweep without them took 71 us instead of 30 (ds = 3 mm, graded)
+        _sensitivity_rhs(Sp, Ss, pr, kxy, ratio, ax, ay, ucx, ucy, ks, K1p, K1s)
+        _stages(psi, sig, Sp, Ss, k1p, k1s, K1p, K1s, 0.5 * h, tp, ts, TP, TS)
+        _both_rhs(tp, ts, TP, TS, pr, u, kxy, ratio, ax, ay, k2p, k2s, K2p, K2s)
+        _stages(psi, sig, Sp, Ss, k2p, k2s, K2p, K2s, 0.5 * h, tp, ts, TP, TS)
+        _both_rhs(tp, ts, TP, TS, pr, u, kxy, ratio, ax, ay, k3p, k3s, K3p, K3s)
+        _stages(psi, sig, Sp, Ss, k3p, k3s, K3p, K3s, h, tp, ts, TP, TS)
+        _both_rhs(tp, ts, TP, TS, pr, u, kxy, ratio, ax, ay, k4p, k4s, K4p, K4s)
+        f = h / 6.0
+        _combine(psi, k1p, k2p, k3p, k4p, f)
+        _combine(sig, k1s, k2s, k3s, k4s, f)
+        _combine2(Sp, K1p, K2p, K3p, K4p, f)
+        _combine2(Ss, K1s, K2s, K3s, K4s, f)
         if record and j == G - 2:
             # derivative at the last node, evaluated with the last interval's data
             _torsion_rhs(psi, sig, pr, u, kxy, ratio, ax, ay, k1p, k1s)
@@ -262,6 +254,9 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
     evaluated with sensitivities and node records, so an accepted full step is the next
     iteration's evaluation (one integration per iteration instead of two).
 
+    Stops unconverged when the residual has not fallen below ``_STALL_FACTOR`` (0.9) times its
+    best for ``_STALL_ITERATIONS`` (20) iterations.
+
     Returns (sig0, residual, iterations, ok, detJ, psi, sigma) with the node angles and torsions
     (G, n) of the evaluation at the returned sig0.
     """
@@ -270,6 +265,8 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
     _, r, _, Ss, rp, rs, _ = _integrate(s, present, uh, kxy, ratio, alpha, x, True, True)
     res = np.max(np.abs(r))
     detJ = np.nan
+    best = res
+    best_it = 0
     for it in range(1, maxit + 1):
         J = Ss[:, :n].copy()
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
@@ -277,6 +274,13 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
         detJ = np.linalg.det(J)
         if res < tol:
             return x, res, it, True, detJ, rp, rs
+        if res < _STALL_FACTOR * best:
+            best = res
+            best_it = it
+        elif it - best_it > _STALL_ITERATIONS:
+            # stalled (typically at a local minimum of the residual where J is singular):
+            # give up this start, :func:`_shoot` tries others
+            return x, res, it, False, detJ, rp, rs
         if abs(detJ) > 0.0:
             step = np.linalg.solve(J, r)
         else:
@@ -313,20 +317,36 @@ def _shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, sig0, lengths, 
     """Newton shooting on the grid ``s`` started from ``sig0``; with ``predict``, started instead
     from the solution on the coarser grid ``cs`` (``cpresent``, ``cuh``; same breakpoints,
     ``PREDICTOR_STEP_FACTOR`` times the step) found from ``sig0`` to ``PREDICTOR_TOL``. Falls
-    back to ``sig0`` if either of those fails. Returns what :func:`_newton` returns, with the
-    Newton iterations of all stages in ``iterations``."""
+    back to ``sig0`` if either of those fails. With ``predict``, if that fails too, the same two
+    stages restart from ``sig0`` plus pi / L_i of twist on each inner tube i, then minus (the
+    multistart guesses of :func:`solve_standard`), until one converges: damped Newton can stall
+    at a local minimum of the residual where the shooting Jacobian is singular (seen at
+    alpha_3 - alpha_2 near 200 deg with the innermost tube retracted). Returns what
+    :func:`_newton` returns for the last start, with the Newton iterations of all stages and
+    starts in ``iterations``."""
     total = 0
-    if predict:
-        c0, _, cit, cok, _, _, _ = _newton(cs, cpresent, cuh, kxy, ratio, alpha, sig0, lengths,
-                                           max(tol, _PREDICTOR_TOL), maxit)
-        total += cit
-        if cok:
-            x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, c0, lengths, tol, maxit)
-            total += it
-            if ok:
-                return x, res, total, ok, detJ, psi, sig
-    x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit)
-    return x, res, total + it, ok, detJ, psi, sig
+    n = sig0.shape[0]
+    # starts: sig0, then (predict only) sig0 with +pi, then -pi, of extra twist on each inner tube
+    n_starts = 1 + (2 * (n - 1) if predict else 0)
+    for start in range(n_starts):
+        g = sig0.copy()
+        if start > 0:
+            i = 1 + (start - 1) % (n - 1)
+            g[i] += (1.0 if start <= n - 1 else -1.0) * np.pi / lengths[i]
+        if predict:
+            c0, _, cit, cok, _, _, _ = _newton(cs, cpresent, cuh, kxy, ratio, alpha, g, lengths,
+                                               max(tol, _PREDICTOR_TOL), maxit)
+            total += cit
+            if cok:
+                x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, c0, lengths, tol, maxit)
+                total += it
+                if ok:
+                    return x, res, total, ok, detJ, psi, sig
+        x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, g, lengths, tol, maxit)
+        total += it
+        if ok:
+            break
+    return x, res, total, ok, detJ, psi, sig
 
 
 @njit(cache=True, error_model="numpy", inline="always")
