@@ -73,7 +73,7 @@ def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy,
                                              lengths, tol, maxit, predict)
     if not ok and not predict:   # a given initial guess failed: retry from no twist
         sig0, _, it2, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths,
-                                                      tol, maxit)
+                                                      tol, maxit, np.empty((n, n)))
         it += it2
     iters[k] = it
     conv[k] = ok

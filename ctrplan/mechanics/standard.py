@@ -245,7 +245,7 @@ class _Problem:
 
 
 @njit(cache=True, error_model="numpy")
-def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
+def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit, J_out):
     """Damped Newton shooting on the base torsions, compiled.
 
     Each iteration solves J step = r with the variational Jacobian J = d sigma(L) / d sigma0,
@@ -258,7 +258,8 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
     best for ``_STALL_ITERATIONS`` (20) iterations.
 
     Returns (sig0, residual, iterations, ok, detJ, psi, sigma) with the node angles and torsions
-    (G, n) of the evaluation at the returned sig0.
+    (G, n) of the evaluation at the returned sig0; on convergence the shooting Jacobian there is
+    copied into ``J_out`` (n, n).
     """
     n = sig0.shape[0]
     x = sig0.copy()
@@ -273,6 +274,7 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
             return x, np.inf, it, False, np.nan, rp, rs
         detJ = np.linalg.det(J)
         if res < tol:
+            J_out[:, :] = J
             return x, res, it, True, detJ, rp, rs
         if res < _STALL_FACTOR * best:
             best = res
@@ -309,14 +311,38 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit):
         res = np.max(np.abs(r))
     detJ = np.linalg.det(Ss[:, :n].copy()) if np.all(np.isfinite(Ss)) else np.nan
     ok = np.all(np.isfinite(r)) and res < tol
+    if ok:
+        J_out[:, :] = Ss[:, :n]
     return x, res if np.isfinite(res) else np.inf, maxit, ok, detJ, rp, rs
+
+
+@njit(cache=True, error_model="numpy")
+def _chord_step(s, present, uh, kxy, ratio, alpha, x, J, lengths):
+    """One chord step x - J^-1 r(x) on the grid ``s`` with a given Jacobian ``J`` (the coarse
+    predictor's at x), damped like a Newton step of :func:`_newton`; the sweep at x runs without
+    sensitivities. From the predictor's solution this reaches the fine grid's shooting
+    tolerance as often as the exact Newton step does (measured: 299 of 300 random
+    configurations below 1e-9 1/m with either Jacobian; residual median 1e-14 after the step,
+    4e-7 before), for a sweep of 30 instead of 51 us. Returns x unchanged if r or J is not
+    usable."""
+    n = x.shape[0]
+    _, r, _, _, _, _, _ = _integrate(s, present, uh, kxy, ratio, alpha, x, False, False)
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))) or not abs(np.linalg.det(J)) > 0.0:
+        return x.copy()
+    step = np.linalg.solve(J, r)
+    scale = 1.0
+    for i in range(n):
+        if abs(step[i]) > 0.0:
+            scale = min(scale, (np.pi / lengths[i]) / abs(step[i]))
+    return x - scale * step
 
 
 @njit(cache=True, error_model="numpy")
 def _shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, sig0, lengths, tol, maxit, predict):
     """Newton shooting on the grid ``s`` started from ``sig0``; with ``predict``, started instead
     from the solution on the coarser grid ``cs`` (``cpresent``, ``cuh``; same breakpoints,
-    ``PREDICTOR_STEP_FACTOR`` times the step) found from ``sig0`` to ``PREDICTOR_TOL``. Falls
+    ``PREDICTOR_STEP_FACTOR`` times the step) found from ``sig0`` to ``PREDICTOR_TOL``, after
+    one chord step on the fine grid with the predictor's Jacobian (:func:`_chord_step`). Falls
     back to ``sig0`` if either of those fails. With ``predict``, if that fails too, the same two
     stages restart from ``sig0`` plus pi / L_i of twist on each inner tube i, then minus (the
     multistart guesses of :func:`solve_standard`), until one converges: damped Newton can stall
@@ -326,6 +352,7 @@ def _shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, sig0, lengths, 
     starts in ``iterations``."""
     total = 0
     n = sig0.shape[0]
+    Jc = np.empty((n, n))
     # starts: sig0, then (predict only) sig0 with +pi, then -pi, of extra twist on each inner tube
     n_starts = 1 + (2 * (n - 1) if predict else 0)
     for start in range(n_starts):
@@ -335,14 +362,17 @@ def _shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, sig0, lengths, 
             g[i] += (1.0 if start <= n - 1 else -1.0) * np.pi / lengths[i]
         if predict:
             c0, _, cit, cok, _, _, _ = _newton(cs, cpresent, cuh, kxy, ratio, alpha, g, lengths,
-                                               max(tol, _PREDICTOR_TOL), maxit)
+                                               max(tol, _PREDICTOR_TOL), maxit, Jc)
             total += cit
             if cok:
-                x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, c0, lengths, tol, maxit)
+                x1 = _chord_step(s, present, uh, kxy, ratio, alpha, c0, Jc, lengths)
+                total += 1
+                x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, x1, lengths, tol, maxit,
+                                                         Jc)
                 total += it
                 if ok:
                     return x, res, total, ok, detJ, psi, sig
-        x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, g, lengths, tol, maxit)
+        x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, g, lengths, tol, maxit, Jc)
         total += it
         if ok:
             break
