@@ -140,14 +140,15 @@ def batch_throughput(robot, settings, repeats=5):
     B = np.array([b for _, b in cfg])
     print(f"\n2. Standard model, batch mode (solve_standard_batch, {A.shape[0]} random configurations, "
           f"no multistart)")
-    for threads in (1, os.cpu_count() or 1):
+    cores = len(os.sched_getaffinity(0))   # the cores this process may run on (taskset)
+    for threads in (1, cores):
         solve_standard_batch(robot, A[:2], B[:2], settings, n_threads=threads)
         rates = []
         for _ in range(repeats):
             _, t = _t(solve_standard_batch, robot, A, B, settings, n_threads=threads)
             rates.append(A.shape[0] / t)
         print(f"   {threads} thread(s): median {np.median(rates):.0f} configurations/s (best {max(rates):.0f})")
-        if threads == 1 and (os.cpu_count() or 1) == 1:
+        if cores == 1:
             break
 
 
