@@ -690,7 +690,9 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
     The Newton system is reduced exactly to the contacts whose row is not trivial (active,
     violated, or with a non-zero residual): a contact with lambda = 0 and a positive gap has
     phi = 0 and d phi / d b = 0, so its step is zero. Only the W and Z columns of those contacts
-    are ever computed (:func:`fill_columns`).
+    are ever computed (:func:`fill_columns`). Inside the iteration the displacements d are
+    updated only on the working set (the merit and the Newton matrix read no other rows); the
+    returned d is complete.
 
     Returns
     -------
@@ -755,8 +757,8 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
                     slot[ii] = ia
                     ia += 1
         Dp = np.empty((nR, nR))
+        CaT = np.empty((nR, 2 * n_act))   # (S^-1 C_a)^T
         if n_act > 0:
-            CaT = np.empty((nR, 2 * n_act))
             for jj in range(nR):
                 l = Rs[jj]
                 for i in range(n_act):

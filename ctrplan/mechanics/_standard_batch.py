@@ -118,8 +118,8 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
         (no multistart search).
     initial_guess : array-like, shape (K, n), optional
         Base torsions [1/m] to start each Newton solve from (default: no twist, through the
-        coarse-grid predictor of :func:`solve_standard`); as in :func:`solve_standard`, a
-        failed start is retried from zero twist.
+        coarse-grid predictor and, where Newton stalls, the restarts of :func:`solve_standard`);
+        as in :func:`solve_standard`, a failed given start is retried from zero twist.
     n_threads : int
         Threads sharing the configurations (numba ``prange``, at most ``NUMBA_NUM_THREADS``); 1 (default) runs serially, as
         fits a call from inside a worker process. Results do not depend on it.

@@ -490,7 +490,8 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
         Base torsions [1/m] to start Newton from, e.g. ``previous.base_torsion`` to follow the
         branch the robot is on along a path. Default: no twist, solved first on a grid
         ``PREDICTOR_STEP_FACTOR`` (4) times coarser, whose base torsions start the Newton
-        shooting on the ``ds`` grid (``constants``; it falls back to no twist if that fails).
+        shooting on the ``ds`` grid (``constants``; it falls back to no twist if that fails,
+        then restarts from plus and minus pi / L_i of twist on each inner tube i).
     check_stability : bool
         Run the multistart search for other equilibria (skipped when ``settings.multistart``
         is 0). The Jacobian-determinant test always runs.
