@@ -4,7 +4,7 @@ The contact solver factors one dense system per line-search trial (the active bl
 Appendix A, size 2 x active contacts, 40-110) and one Newton matrix per iteration. A plain
 compiled LU runs at about 4 GFlop/s there; LAPACK's blocked one (OpenBLAS, shipped with scipy)
 is 2.1-2.5x faster at those sizes (measured 10.3 vs 23.2 us at n = 52, 19.5 vs 46.4 us at
-n = 70, one core).
+n = 70, one core, against the better of two compiled variants; docs/mechanics.md Sec. 10).
 
 The routines are scipy's own (``scipy.linalg.cython_lapack``), bound by name into LLVM's symbol
 table, so the kernels that call them stay cacheable (``cache=True``): a cached kernel refers to
