@@ -244,6 +244,17 @@ class _Problem:
         return self._coarse
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _damping(step, lengths):
+    """Largest factor <= 1 by which a base-torsion step (n,) [1/m] can be taken without
+    changing any base torsion by more than pi over its tube length ``lengths`` (n,) [m]."""
+    scale = 1.0
+    for i in range(step.shape[0]):
+        if abs(step[i]) > 0.0:
+            scale = min(scale, (np.pi / lengths[i]) / abs(step[i]))
+    return scale
+
+
 @njit(cache=True, error_model="numpy")
 def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit, J_out):
     """Damped Newton shooting on the base torsions, compiled.
@@ -287,11 +298,7 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit, J_out)
             step = np.linalg.solve(J, r)
         else:
             step = np.linalg.lstsq(J, r)[0]
-        # damped step: never change a base torsion by more than pi over the tube length
-        scale = 1.0
-        for i in range(n):
-            if abs(step[i]) > 0.0:
-                scale = min(scale, (np.pi / lengths[i]) / abs(step[i]))
+        scale = _damping(step, lengths)
         t = scale
         trial = x - t * step
         _, r_t, _, S_t, rp_t, rs_t, _ = _integrate(s, present, uh, kxy, ratio, alpha, trial, True, True)
@@ -325,16 +332,11 @@ def _chord_step(s, present, uh, kxy, ratio, alpha, x, J, lengths):
     configurations below 1e-9 1/m with either Jacobian; residual median 1e-14 after the step,
     4e-7 before), for a sweep of 30 instead of 51 us. Returns x unchanged if r or J is not
     usable."""
-    n = x.shape[0]
     _, r, _, _, _, _, _ = _integrate(s, present, uh, kxy, ratio, alpha, x, False, False)
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))) or not abs(np.linalg.det(J)) > 0.0:
         return x.copy()
     step = np.linalg.solve(J, r)
-    scale = 1.0
-    for i in range(n):
-        if abs(step[i]) > 0.0:
-            scale = min(scale, (np.pi / lengths[i]) / abs(step[i]))
-    return x - scale * step
+    return x - _damping(step, lengths) * step
 
 
 @njit(cache=True, error_model="numpy")
