@@ -174,8 +174,10 @@ def test_batch_equals_single_solves():
 
 def test_shooting_restarts_where_newton_stalls():
     """At these two joint values (seeded random draws of the batch benchmark) damped Newton from
-    no twist stalls at a local minimum of the shooting residual with a singular Jacobian (tip
-    torsion residual 0.40 and 0.52 1/m before the restarts of ``standard._shoot``). With the
+    no twist stalls at a local minimum of the shooting residual with a singular Jacobian (the
+    first on both grids; the second on the coarse grid, and on the fine grid it escapes only
+    after 81 iterations, beyond the budget of 50), so neither converged before the restarts of
+    ``standard._shoot`` (tip torsion residual 0.40 and 0.52 1/m). With the
     restarts both the single solve and the batch converge, to a stable equilibrium that the
     multistart search finds unique, whose tip is within 0.001 mm of the paper's uniform grid
     (which converged there without restarts)."""
