@@ -470,25 +470,53 @@ def _active_of(lam):
     return np.nonzero(lam > 0.0)[0]
 
 
-@njit(cache=True)
-def _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, rows):
-    """d (M, 2) on the contacts ``rows`` for multipliers lam that are non-zero only on ``act``
-    (a subset of ``rows``): (I + W Lambda M) d = dfree + Z lam reduced to those contacts
-    (Appendix A, Eqs. (50)-(56) on the active set). Rows of d outside ``rows`` are left alone.
-    Returns (ok, LU, piv) with the LU factors of S = I + W_aa L_a."""
-    n_act = act.shape[0]
+@njit(cache=True, inline="always")
+def _free_displacements(lam, act, dfree, Zt, friction, d, rows):
+    """d = dfree + Z lam on the contacts ``rows`` (lam non-zero only on ``act``)."""
     nr = rows.shape[0]
     for idx in range(nr):
         k = rows[idx]
         d[k, 0] = dfree[k, 0]
         d[k, 1] = dfree[k, 1]
     if friction:
-        for i in range(n_act):
+        for i in range(act.shape[0]):
             l = act[i]
             for idx in range(nr):
                 r = rows[idx]
                 d[r, 0] += Zt[l, 2 * r] * lam[l]
                 d[r, 1] += Zt[l, 2 * r + 1] * lam[l]
+
+
+@njit(cache=True, inline="always")
+def _active_correction(lam, act, Mblk, Wt, d, rows, LU, piv):
+    """d -= W_(:, a) L_a d_a on the contacts ``rows``, with d_a = S^-1 r_a from the LU factors of
+    S = I + W_aa L_a and r = d as :func:`_free_displacements` left it."""
+    n_act = act.shape[0]
+    da = np.empty(2 * n_act)
+    for i in range(n_act):
+        da[2 * i] = d[act[i], 0]
+        da[2 * i + 1] = d[act[i], 1]
+    lu_solve(LU, piv, da)
+    for j in range(n_act):
+        cj = act[j]
+        lj = lam[cj]
+        y0 = lj * (Mblk[cj, 0, 0] * da[2 * j] + Mblk[cj, 0, 1] * da[2 * j + 1])
+        y1 = lj * (Mblk[cj, 1, 0] * da[2 * j] + Mblk[cj, 1, 1] * da[2 * j + 1])
+        for idx in range(rows.shape[0]):
+            r = rows[idx]
+            d[r, 0] -= Wt[2 * cj, 2 * r] * y0 + Wt[2 * cj + 1, 2 * r] * y1
+            d[r, 1] -= Wt[2 * cj, 2 * r + 1] * y0 + Wt[2 * cj + 1, 2 * r + 1] * y1
+
+
+@njit(cache=True)
+def _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, rows):
+    """d (M, 2) on the contacts ``rows`` for multipliers lam that are non-zero only on ``act``
+    (a subset of ``rows``): (I + W Lambda M) d = dfree + Z lam reduced to those contacts
+    (Appendix A, Eqs. (50)-(56) on the active set). Rows of d outside ``rows`` are left alone.
+    Returns (ok, LU, piv) with the LU factors of S = I + W_aa L_a (if not ok, S is singular or
+    not finite and d holds dfree + Z lam)."""
+    _free_displacements(lam, act, dfree, Zt, friction, d, rows)
+    n_act = act.shape[0]
     m2 = 2 * n_act
     S = np.empty((m2, m2))
     piv = np.empty(m2, dtype=PIVOT_DTYPE)
@@ -507,24 +535,20 @@ def _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, rows):
     for i in range(n_act):
         S[2 * i, 2 * i] += 1.0
         S[2 * i + 1, 2 * i + 1] += 1.0
-    da = np.empty(m2)
-    for i in range(n_act):
-        da[2 * i] = d[act[i], 0]
-        da[2 * i + 1] = d[act[i], 1]
     if not lu_factor(S, piv):
         return False, S, piv
-    lu_solve(S, piv, da)
-    # d = r - W[:, a] (L_a d_a)
-    for j in range(n_act):
-        cj = act[j]
-        lj = lam[cj]
-        y0 = lj * (Mblk[cj, 0, 0] * da[2 * j] + Mblk[cj, 0, 1] * da[2 * j + 1])
-        y1 = lj * (Mblk[cj, 1, 0] * da[2 * j] + Mblk[cj, 1, 1] * da[2 * j + 1])
-        for idx in range(nr):
-            r = rows[idx]
-            d[r, 0] -= Wt[2 * cj, 2 * r] * y0 + Wt[2 * cj + 1, 2 * r] * y1
-            d[r, 1] -= Wt[2 * cj, 2 * r + 1] * y0 + Wt[2 * cj + 1, 2 * r + 1] * y1
+    _active_correction(lam, act, Mblk, Wt, d, rows, S, piv)
     return True, S, piv
+
+
+@njit(cache=True)
+def _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok):
+    """d on every contact with the LU factors the Newton loop already has for ``act``
+    (``lu_ok`` False: they failed, d = dfree + Z lam as :func:`_displacements` leaves it)."""
+    rows = np.arange(d.shape[0])
+    _free_displacements(lam, act, dfree, Zt, friction, d, rows)
+    if lu_ok and act.shape[0] > 0:
+        _active_correction(lam, act, Mblk, Wt, d, rows, LU, piv)
 
 
 @njit(cache=True, inline="always")
@@ -717,14 +741,14 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
     act = _active_of(lam)
     fill_columns(act, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
     rows = np.nonzero(work)[0]
-    fok, LU, piv = _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, rows)
+    lu_ok, LU, piv = _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, rows)
     merit = _fb_residual(lam, d, c, kappa, phi, da, db, work)
     hist = np.zeros(_NONMONOTONE)
     hist[0] = merit
     for it in range(1, maxit + 1):
         err = _max_scaled(phi, c, kappa)
         if err < tol:
-            _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, np.arange(M))
+            _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
             return lam, d, True, it - 1, err
         # reduced set: rows with db != 0, lam > 0 or phi != 0
         nR = 0
@@ -824,7 +848,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
         else:
             if not np.all(np.isfinite(Jc)):
                 # a non-finite Newton matrix (LAPACK would print an error): no step possible
-                _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, np.arange(M))
+                _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
                 return lam, d, False, it, _max_scaled(phi, c, kappa)
             rr = np.empty(nR)
             for ii in range(nR):
@@ -882,7 +906,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
                 break
             t *= 0.5
         if not accepted:
-            _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, np.arange(M))
+            _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
             return lam, d, False, it, _max_scaled(phi, c, kappa)
         lam[:] = lam_t
         d[:, :] = d_t
@@ -894,8 +918,9 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
         act = act_n
         LU = LU_t
         piv = piv_t
+        lu_ok = True   # an accepted trial's factorization succeeded
     err = _max_scaled(phi, c, kappa)
-    _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, np.arange(M))
+    _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
     return lam, d, err < tol, maxit, err
 
 
