@@ -1,0 +1,225 @@
+"""Standard-model robot bodies for many configurations in one compiled call.
+
+:func:`solve_standard_bodies` runs, per configuration, exactly the steps of
+:func:`~ctrplan.mechanics.solve_standard_batch` with ``initial_guess=None`` (the common
+arc-length grid of Section II-C of Ha, Fagogenis & Dupont 2019 built by ``grid._grid``, Newton
+shooting on the base torsions through the coarse-grid predictor and its restarts,
+``standard._shoot``, and the shared centerline of Eq. (57), ``standard._centerline``) and keeps
+what collision checking needs: the body of
+:meth:`~ctrplan.mechanics.results.StandardSolution.body`, i.e. the centerline points at or
+distal to the most distal tube base, each with the outer radius of the outermost tube present.
+The kernels of ``_standard_batch`` are reused unchanged; only the body extraction is new.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..constants import GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR
+from .grid import _grid, packed_sections
+from .results import ModelSettings
+from .standard import _centerline, _shoot
+
+__all__ = ["StandardBodies", "solve_standard_bodies"]
+
+_PREDICTOR_STEP_FACTOR = PREDICTOR_STEP_FACTOR  # frozen into the compiled code
+# Slack of the body tests of StandardSolution.body [m]: a node belongs to the body when
+# s >= max(beta) - _BODY_TOL, and tube i is present at s when
+# beta_i - _BODY_TOL <= s <= beta_i + L_i + _BODY_TOL (the same literal 1e-12 as there).
+_BODY_TOL = 1e-12
+
+
+@dataclass
+class StandardBodies:
+    """Robot bodies of the standard model at K configurations, as padded arrays.
+
+    Body k is ``points[k, :counts[k]]`` with radii ``radii[k, :counts[k]]``, equal to
+    ``solve_standard(robot, alpha[k], beta[k], settings.replace(multistart=0)).body(robot)``.
+
+    Attributes
+    ----------
+    points : ndarray, shape (K, P, 3)
+        Centerline points of each body [m], from the most distal tube base to the tip; NaN
+        beyond ``counts[k]``. P is the largest count of the batch (0 when no configuration is
+        possible).
+    radii : ndarray, shape (K, P)
+        Outer radius of the outermost tube present at each point [m] (0 where no tube is, as
+        in ``StandardSolution.body``); NaN beyond ``counts[k]``.
+    counts : ndarray of int, shape (K,)
+        Points of each body; 0 for impossible configurations.
+    tip_position : ndarray, shape (K, 3)
+        [m]; NaN where the configuration is impossible.
+    converged : ndarray of bool, shape (K,)
+        Newton shooting reached ``shooting_tol`` (``diagnostics.converged``).
+    unstable : ndarray of bool, shape (K,)
+        Converged with a shooting-Jacobian determinant that is not positive
+        (``diagnostics.unstable`` with ``multistart=0``).
+    valid : ndarray of bool, shape (K,)
+        The configuration passed ``Robot.check_configuration``
+        (``Robot.configurations_possible``); the others are not solved.
+    iterations : ndarray of int, shape (K,)
+        Newton iterations of all shooting stages (``diagnostics.iterations``).
+    """
+
+    points: np.ndarray
+    radii: np.ndarray
+    counts: np.ndarray
+    tip_position: np.ndarray
+    converged: np.ndarray
+    unstable: np.ndarray
+    valid: np.ndarray
+    iterations: np.ndarray
+
+    @property
+    def ok(self) -> np.ndarray:
+        """``valid & converged & ~unstable``, shape (K,): ``diagnostics.ok`` of a possible
+        configuration."""
+        return self.valid & self.converged & ~self.unstable
+
+    def body(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Body of configuration ``k``: points (counts[k], 3) [m] and radii (counts[k],) [m]."""
+        c = int(self.counts[k])
+        return self.points[k, :c], self.radii[k, :c]
+
+
+@njit(cache=True)
+def _body_counts(alpha, beta, valid, lengths, brk, nbrk, curv, ds, gspec, counts):
+    """Body points of each possible configuration (grid nodes with s >= max(beta) - tol), to
+    size the padded outputs; writes ``counts`` (K,) and returns their maximum."""
+    largest = 0
+    for k in range(alpha.shape[0]):
+        if not valid[k]:
+            continue
+        s, _, _, _, _ = _grid(beta[k], lengths, brk, nbrk, curv, ds, gspec[0], gspec[1], gspec[2])
+        front = np.max(beta[k]) - _BODY_TOL
+        c = 0
+        for q in range(s.shape[0]):
+            if s[q] >= front:
+                c += 1
+        counts[k] = c
+        largest = max(largest, c)
+    return largest
+
+
+@njit(cache=True)
+def _bodies(alpha, beta, valid, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, gspec, r_out,
+            points, radii, tips, conv, unst, iters):
+    """Per possible configuration k: the grid, Newton shooting from no twist through the coarse
+    predictor (``_shoot`` with ``predict``, as ``_standard_batch._solve_one`` with no initial
+    guess), the centerline, and the body of ``StandardSolution.body`` written into ``points[k]``
+    (P, 3) and ``radii[k]`` (P,)."""
+    n = alpha.shape[1]
+    for k in range(alpha.shape[0]):
+        if not valid[k]:
+            continue
+        b = beta[k]
+        s, first, last, present, uhat = _grid(b, lengths, brk, nbrk, curv, ds, gspec[0], gspec[1], gspec[2])
+        cs, _, _, cpresent, cuhat = _grid(b, lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds, gspec[0],
+                                          gspec[1], gspec[2])
+        a = alpha[k].copy()
+        _, _, it, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, np.zeros(n),
+                                              lengths, tol, maxit, True)
+        iters[k] = it
+        conv[k] = ok
+        unst[k] = ok and not detJ > 0.0
+        _, _, _, _, p, _ = _centerline(s, present, uhat, kxy, psi, sig)
+        tips[k] = p[-1]
+        front = np.max(b) - _BODY_TOL
+        c = 0
+        for q in range(s.shape[0]):
+            sq = s[q]
+            if sq < front:
+                continue
+            points[k, c] = p[q]
+            r = 0.0
+            for i in range(n):   # outermost tube present: the smallest index (tube 1 is outermost)
+                if b[i] - _BODY_TOL <= sq <= b[i] + lengths[i] + _BODY_TOL:
+                    r = r_out[i]
+                    break
+            radii[k, c] = r
+            c += 1
+
+
+def solve_standard_bodies(robot, alpha, beta, settings: ModelSettings | None = None) -> StandardBodies:
+    """Solve the standard model at many configurations and return each robot body.
+
+    Parameters
+    ----------
+    robot : Robot
+    alpha : array-like, shape (K, n)
+        Base rotations [rad] (the paper's theta_b).
+    beta : array-like, shape (K, n)
+        Base translations [m] (the paper's l_b).
+    settings : ModelSettings, optional
+        Uses ``ds``, ``refine_ratio``, ``refine_length`` (the grid), ``shooting_tol`` and
+        ``max_shooting_iterations``; ``multistart`` is ignored (no multistart search is run).
+
+    Returns
+    -------
+    StandardBodies
+        Bodies as padded arrays, with the convergence and determinant-stability flags.
+        Configurations that fail ``Robot.configurations_possible`` are flagged
+        ``valid = False`` (no body, ``counts = 0``) instead of raising.
+
+    Raises
+    ------
+    ValueError
+        If ``alpha`` and ``beta`` are not both of shape (K, n).
+
+    Notes
+    -----
+    Section II-A of Ha, Fagogenis & Dupont 2019 (doi:10.1109/TRO.2018.2878906) and its refs
+    [10], [11]; the same grid, predictor, Newton iteration, tolerances and flags as
+    :func:`~ctrplan.mechanics.solve_standard_batch` with ``initial_guess=None``, hence as
+    :func:`~ctrplan.mechanics.solve_standard` with ``multistart=0``. The body is that of
+    :meth:`~ctrplan.mechanics.results.StandardSolution.body` (the part outside the drive, from
+    the most distal base to the tip, with the outer radius ``Robot.outer_radius`` of the
+    outermost tube present at each node, tolerances 1e-12 m), also for configurations that
+    did not converge (the last Newton iterate), as ``body`` gives it for them.
+    """
+    settings = settings or ModelSettings()
+    n = robot.n_tubes
+    alpha = np.ascontiguousarray(alpha, dtype=float)
+    beta = np.ascontiguousarray(beta, dtype=float)
+    if alpha.ndim != 2 or alpha.shape[1] != n or beta.shape != alpha.shape:
+        raise ValueError(f"alpha and beta must both have shape (K, {n}), got {alpha.shape} and {beta.shape}")
+    return _solve_packed(_pack(robot), alpha, beta, robot.configurations_possible(alpha, beta), settings)
+
+
+def _pack(robot) -> tuple:
+    """The robot's arrays for the kernels: tube lengths (n,) [m], section breaks (n, B) [m],
+    breaks per tube (n,), precurvatures (n, B - 1, 2) [1/m], k_xy (n,) [N m^2], k_xy / k_z (n,)
+    and outer radii for collision (n,) [m] (``Robot.outer_radius``)."""
+    n = robot.n_tubes
+    brk, nbrk, curv = packed_sections(robot)
+    lengths = np.array([t.length for t in robot.tubes])
+    kxy = np.array([t.k_xy for t in robot.tubes])
+    ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
+    r_out = np.array([robot.outer_radius(i) for i in range(n)])
+    return lengths, brk, nbrk, curv, kxy, ratio, r_out
+
+
+def _solve_packed(packed, alpha, beta, valid, settings) -> StandardBodies:
+    """:func:`solve_standard_bodies` on a robot packed by :func:`_pack`, for contiguous
+    ``alpha``, ``beta`` (K, n) whose possible configurations are flagged in ``valid`` (K,) (for
+    callers that pack the robot once and have checked the configurations already)."""
+    lengths, brk, nbrk, curv, kxy, ratio, r_out = packed
+    K = alpha.shape[0]
+    gspec = np.array([GRID_MERGE_TOL, settings.refine_ratio, settings.refine_length])
+    ds = float(settings.ds)
+    counts = np.zeros(K, dtype=np.int64)
+    P = int(_body_counts(alpha, beta, valid, lengths, brk, nbrk, curv, ds, gspec, counts)) if K else 0
+    points = np.full((K, P, 3), np.nan)
+    radii = np.full((K, P), np.nan)
+    tips = np.full((K, 3), np.nan)
+    conv = np.zeros(K, dtype=bool)
+    unst = np.zeros(K, dtype=bool)
+    iters = np.zeros(K, dtype=np.int64)
+    if K:
+        _bodies(alpha, beta, valid, lengths, brk, nbrk, curv, kxy, ratio, ds, float(settings.shooting_tol),
+                int(settings.max_shooting_iterations), gspec, r_out, points, radii, tips, conv, unst, iters)
+    return StandardBodies(points=points, radii=radii, counts=counts, tip_position=tips, converged=conv,
+                          unstable=unst, valid=valid, iterations=iters)
