@@ -9,6 +9,7 @@ import pytest
 from ctrplan.errors import JointLimitError
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings, solve_standard, solve_standard_batch
+from ctrplan.mechanics import _standard_bodies
 from ctrplan.mechanics._standard_bodies import solve_standard_bodies
 
 REPO = Path(__file__).resolve().parent.parent
@@ -59,9 +60,15 @@ def _compare_with_reference(robot, alpha, beta):
     return int(bodies.valid.sum()), int(bodies.converged.sum()), int(bodies.unstable.sum())
 
 
-def test_table7_bodies_equal_the_reference():
+def _capacity_must_hold(*args):
+    raise AssertionError("the body capacity bound did not hold")
+
+
+def test_table7_bodies_equal_the_reference(monkeypatch):
     """250 random joint vectors of the Table VII robot plus 3 impossible configurations
-    (inner base in front of its outer base; curved section inside the drive)."""
+    (inner base in front of its outer base; curved section inside the drive); the capacity
+    bound holds (no exact-sizing pass)."""
+    monkeypatch.setattr(_standard_bodies, "_body_counts", _capacity_must_hold)
     robot = load_robot(REPO / "model" / "ha2019-table7-calibrated.toml")
     alpha, beta = _configurations(robot, _random_q(robot, np.random.default_rng(7), 250))
     bad_beta = np.array([[0.0, 0.005, -0.03], [-0.02, -0.017, -0.034], [0.0, -0.017, 0.001]])
@@ -71,10 +78,11 @@ def test_table7_bodies_equal_the_reference():
     assert valid == 250 and converged == 250
 
 
-def test_six_joint_bodies_and_flags_equal_the_reference():
+def test_six_joint_bodies_and_flags_equal_the_reference(monkeypatch):
     """150 random joint vectors of the six-joint robot, plus 100 with tube 3 turned about pi
     against tube 2 (where the determinant test flags unstable equilibria), chosen so that the
-    unstable ones are all included."""
+    unstable ones are all included; the capacity bound holds."""
+    monkeypatch.setattr(_standard_bodies, "_body_counts", _capacity_must_hold)
     robot = load_robot(REPO / "model" / "ha2019-table2-six-joint.toml")
     rng = np.random.default_rng(11)
     Q = _random_q(robot, rng, 150)
@@ -100,3 +108,21 @@ def test_shapes_are_checked_and_empty_batches_work():
         solve_standard_bodies(robot, np.zeros((2, 3)), np.zeros((2, 2)))
     empty = solve_standard_bodies(robot, np.zeros((0, 3)), np.zeros((0, 3)))
     assert empty.points.shape == (0, 0, 3) and empty.counts.shape == (0,)
+
+
+def test_bodies_larger_than_the_first_allocation_are_sized_exactly(monkeypatch):
+    """If the allocated capacity is too small, the kernel stops writing and the bodies are
+    recomputed in exactly sized arrays: the same result as with the normal capacity."""
+    robot = load_robot(REPO / "model" / "ha2019-table7-calibrated.toml")
+    Q = _random_q(robot, np.random.default_rng(23), 20)
+    alpha, beta = _configurations(robot, Q)
+    alpha[3], beta[3] = 0.0, [0.0, 0.01, 0.0]           # impossible: no body
+    normal = solve_standard_bodies(robot, alpha, beta, SETTINGS)
+    assert normal.counts.max() > 3
+    monkeypatch.setattr(_standard_bodies, "_body_capacity", lambda *args: 3)
+    small = solve_standard_bodies(robot, alpha, beta, SETTINGS)
+    np.testing.assert_array_equal(small.counts, normal.counts)
+    np.testing.assert_array_equal(small.points, normal.points)
+    np.testing.assert_array_equal(small.radii, normal.radii)
+    np.testing.assert_array_equal(small.converged, normal.converged)
+    assert small.counts[3] == 0 and not small.valid[3]
