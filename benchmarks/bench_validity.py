@@ -1,0 +1,213 @@
+"""Per-state cost of the pipeline's ValidityChecker against the batched checker, side by side.
+
+On ``scenarios/obstacles.toml`` (its robot, obstacles, model settings with ``multistart=0`` and
+the shipped bound map, loaded as ``ctrplan/pipeline.py`` loads it), in one process:
+
+1. states: the same seeded random states (default 600) go, one at a time, through the old
+   :class:`ctrplan.planning.ValidityChecker` and the new
+   :class:`ctrplan.planning.validity.BatchValidityChecker` (``__call__``), alternating which
+   goes first; per-state wall times of both (mean, median, 90th percentile, max, and the
+   ratios), how many states reached the model, the collision test, and the fcl narrow phase
+   (states whose capsules survived the broad phase), the old checker's time split into
+   ``solve_standard`` and the capsule-manager collision query (first 100 states), and the new
+   checker's cost per state when all states come in one ``check`` call;
+2. motions: the same seeded random straight motions (default 200, at most 40 mm long in the
+   weighted metric, about RRT*'s default range on this space) checked by the new
+   ``check_motion`` and by the old checker at the same states in the same order with the same
+   early exit (what OMPL's DiscreteMotionValidator does with it), each with fresh caches; cost
+   per motion and per evaluated state, and the ratios.
+
+Decisions of both checkers are compared and mismatches counted. The machine is shared: the
+load average (``os.getloadavg()``) is printed before and after, and the ratios matter more than
+the absolute times. The first calls (numba cache loading) are run before timing.
+
+Usage::
+
+    python benchmarks/bench_validity.py                   # 600 states, 200 motions
+    python benchmarks/bench_validity.py --states 200 --motions 50 --seed 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIO = REPO / "scenarios" / "obstacles.toml"
+# Longest benchmark motion [m of the weighted joint metric]: about RRT*'s default range
+# (0.2 x the space's maximum extent, 0.196 m for the Table VII joints).
+MAX_MOTION_LENGTH = 0.04
+
+
+def _load_field(sc, settings):
+    """The scenario's bound map, loaded as ctrplan/pipeline.py loads it (shipped, cached, else
+    computed). The map API is moving from ctrplan.pipeline to ctrplan.boundmap; both are tried."""
+    try:
+        from ctrplan.boundmap import load_or_compute_bound_map
+        from ctrplan.pipeline import map_spec
+
+        spec = map_spec(sc)
+    except ImportError:
+        from ctrplan.pipeline import default_resolution, load_or_compute_bound_map
+
+        spec = tuple(sc.bound_field.resolution) if sc.bound_field.resolution else default_resolution(sc.robot)
+    return load_or_compute_bound_map(sc.robot_file, sc.robot, spec, settings, n_jobs=1, echo=print)
+
+
+def _stats(label, t_old, t_new, unit="ms"):
+    """Print mean, median, p90, max of two arrays of times [s] and their ratios."""
+    f = 1e3
+    rows = []
+    for name, t in (("old ValidityChecker", t_old), ("new BatchValidityChecker", t_new)):
+        rows.append(f"  {name:26s} mean {t.mean() * f:8.3f}  median {np.median(t) * f:8.3f}  "
+                    f"p90 {np.percentile(t, 90) * f:8.3f}  max {t.max() * f:8.3f}  [{unit}]")
+    print(label)
+    print("\n".join(rows))
+    print(f"  ratio old/new              mean {t_old.mean() / t_new.mean():8.1f}  median "
+          f"{np.median(t_old) / np.median(t_new):8.1f}  p90 {np.percentile(t_old, 90) / np.percentile(t_new, 90):8.1f}"
+          f"  max {t_old.max() / t_new.max():8.1f}  [-]")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--states", type=int, default=600, help="random states (default 600)")
+    ap.add_argument("--motions", type=int, default=200, help="random motions (default 200)")
+    ap.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    args = ap.parse_args(argv)
+
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
+    from ctrplan.io.scenario import load_scenario
+    from ctrplan.mechanics import ModelSettings, solve_standard
+    from ctrplan.pipeline import COLLISION_SEGMENT
+    from ctrplan.planning import CollisionChecker, JointStateSpace, ValidityChecker
+    from ctrplan.planning.planners import DEFAULT_VALIDITY_RESOLUTION
+    from ctrplan.planning.validity import BatchValidityChecker
+
+    print(f"load average before (1, 5, 15 min): {os.getloadavg()}")
+    sc = load_scenario(SCENARIO)
+    robot = sc.robot
+    settings = ModelSettings(ds=sc.bound_field.ds) if sc.bound_field.ds else ModelSettings()
+    field, source, seconds = _load_field(sc, settings)
+    print(f"bound map: {source} in {seconds:.2f} s")
+    check_settings = settings.replace(multistart=0)   # as the pipeline builds its checker
+    js = JointStateSpace(robot)
+    obstacles = [o.as_dict() for o in sc.obstacles]
+
+    def checkers():
+        collision = CollisionChecker(obstacles, segment_length=COLLISION_SEGMENT)
+        old = ValidityChecker(robot, collision=collision, field=field, settings=check_settings)
+        new = BatchValidityChecker(robot, collision=collision, field=field, settings=check_settings,
+                                   joint_space=js, resolution=DEFAULT_VALIDITY_RESOLUTION)
+        return old, new, collision
+
+    rng = np.random.default_rng(args.seed)
+    lo, hi = robot.joint_lower, robot.joint_upper
+    warm = lo + (hi - lo) * rng.random((4, lo.size))
+    old, new, _ = checkers()
+    for q in warm:                       # numba cache loading, imports, first fcl objects
+        old(q), new(q)
+    new.check(warm + 1e-3)
+
+    # ------------------------------------------------------------------ states
+    Q = lo + (hi - lo) * rng.random((args.states, lo.size))
+    old, new, collision = checkers()
+    t_old = np.empty(len(Q))
+    t_new = np.empty(len(Q))
+    v_old = np.empty(len(Q), dtype=bool)
+    v_new = np.empty(len(Q), dtype=bool)
+    clock = time.perf_counter
+    for i, q in enumerate(Q):
+        first_old = i % 2 == 0
+        for which in ((0, 1) if first_old else (1, 0)):
+            t0 = clock()
+            if which == 0:
+                v_old[i] = old(q)
+                t_old[i] = clock() - t0
+            else:
+                v_new[i] = new(q)
+                t_new[i] = clock() - t0
+    print(f"\n{len(Q)} random states of {SCENARIO.name} (one call per state, the same states, side by side):")
+    _stats("per-state wall time", t_old, t_new)
+    print(f"  valid: old {v_old.sum()}, new {v_new.sum()}, mismatches {np.sum(v_old != v_new)}")
+    print(f"  new checker: {new.n_model} states reached the standard model, {new.n_collision_checked} the "
+          f"collision test, {collision.n_batch_narrow_bodies} the fcl narrow phase "
+          f"({collision.n_batch_narrow_calls} fcl.collide calls); time in the model "
+          f"{new.seconds_model / len(Q) * 1e3:.3f} ms/state, in collision "
+          f"{new.seconds_collision / len(Q) * 1e3:.3f} ms/state")
+    n_split = min(100, len(Q))
+    t_solve, t_body = np.empty(n_split), np.empty(n_split)
+    for i, q in enumerate(Q[:n_split]):     # where the old checker's time goes
+        alpha, beta = robot.configuration(q)
+        t0 = clock()
+        sol = solve_standard(robot, alpha, beta, check_settings)
+        t_solve[i] = clock() - t0
+        t0 = clock()
+        collision.check_body(*sol.body(robot))
+        t_body[i] = clock() - t0
+    print(f"  old checker, first {n_split} states: solve_standard {t_solve.mean() * 1e3:.3f} ms/state, body + "
+          f"capsule manager + fcl {t_body.mean() * 1e3:.3f} ms/state (means)")
+    _, fresh, _ = checkers()
+    t0 = clock()
+    v_all = fresh.check(Q)
+    t_all = clock() - t0
+    print(f"  new checker, all {len(Q)} states in one check() call: {t_all / len(Q) * 1e3:.3f} ms/state "
+          f"(ratio to the old mean {t_old.mean() / (t_all / len(Q)):.1f}); mismatches {np.sum(v_all != v_old)}")
+
+    # ------------------------------------------------------------------ motions
+    q0 = lo + (hi - lo) * rng.random((args.motions, lo.size))
+    q1 = lo + (hi - lo) * rng.random((args.motions, lo.size))
+    lengths = MAX_MOTION_LENGTH * rng.random(args.motions)
+    d = js.difference(q0, q1)
+    scale = np.minimum(1.0, lengths / js.distance(q0, q1))
+    q1 = q0 + d * scale[:, None]
+    old, new, collision = checkers()
+    tm_old = np.empty(args.motions)
+    tm_new = np.empty(args.motions)
+    n_old = np.zeros(args.motions, dtype=np.int64)
+    n_new = np.zeros(args.motions, dtype=np.int64)
+    r_old = np.empty(args.motions, dtype=bool)
+    r_new = np.empty(args.motions, dtype=bool)
+    n_states = np.empty(args.motions, dtype=np.int64)
+    for i in range(args.motions):
+        states = new.motion_states(q0[i], q1[i])
+        n_states[i] = len(states)
+        for which in ((0, 1) if i % 2 == 0 else (1, 0)):
+            if which == 0:
+                before = old.n_evaluations
+                t0 = clock()
+                ok = True
+                for q in states:          # OMPL's DiscreteMotionValidator with the old checker
+                    if not old(q):
+                        ok = False
+                        break
+                tm_old[i] = clock() - t0
+                r_old[i], n_old[i] = ok, old.n_evaluations - before
+            else:
+                before = new.n_evaluations
+                t0 = clock()
+                r_new[i] = new.check_motion(q0[i], q1[i])
+                tm_new[i] = clock() - t0
+                n_new[i] = new.n_evaluations - before
+    print(f"\n{args.motions} random straight motions (<= {MAX_MOTION_LENGTH * 1e3:.0f} mm in the weighted metric, "
+          f"{n_states.mean():.1f} states on average at {DEFAULT_VALIDITY_RESOLUTION * 1e3:.0f} mm resolution):")
+    _stats("per-motion wall time", tm_old, tm_new)
+    print(f"  per evaluated state: old {tm_old.sum() / max(n_old.sum(), 1) * 1e3:.3f} ms ({n_old.sum()} states), "
+          f"new {tm_new.sum() / max(n_new.sum(), 1) * 1e3:.3f} ms ({n_new.sum()} states, batches up to "
+          f"{new.batch_size}); total time ratio old/new {tm_old.sum() / tm_new.sum():.1f}")
+    print(f"  valid motions: old {r_old.sum()}, new {r_new.sum()}, mismatches {np.sum(r_old != r_new)}; "
+          f"states reaching the fcl narrow phase (new) {collision.n_batch_narrow_bodies}")
+    print(f"\nload average after (1, 5, 15 min): {os.getloadavg()}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
