@@ -186,6 +186,25 @@ def test_stability_rule_equals_validity_checker(check_stability):
 
 
 # ---------------------------------------------------------------------------- motions
+def test_check_motion_equals_a_validity_checker_reference(scenario):
+    """Motions of the obstacles scenario: the compiled checker and the reference mode driven by
+    the pipeline's ValidityChecker give the same answers and evaluate the same states."""
+    robot, obstacles, settings = scenario
+    collision = CollisionChecker(obstacles, segment_length=SEGMENT)
+    js = JointStateSpace(robot)
+    compiled = BatchValidityChecker(robot, collision=collision, settings=settings, joint_space=js)
+    reference = BatchValidityChecker(robot, joint_space=js,
+                                     reference=ValidityChecker(robot, collision=collision, settings=settings))
+    rng = np.random.default_rng(29)
+    q0, q1 = _random_q(robot, rng, 16), _random_q(robot, rng, 16)
+    q1 = q0 + js.difference(q0, q1) * np.minimum(1.0, 0.03 / js.distance(q0, q1))[:, None]
+    answers = [compiled.check_motion(a, b) for a, b in zip(q0, q1)]
+    assert answers == [reference.check_motion(a, b) for a, b in zip(q0, q1)]
+    assert 0 < sum(answers) < len(answers)
+    assert compiled.n_evaluations == reference.n_evaluations
+    assert reference.seconds_reference > 0.0 and reference.seconds_model == 0.0
+
+
 def _analytic_validity(q):
     """Joint-space obstacles for the fake robot: two discs in the (alpha_2, alpha_3) plane
     (periodic distance) and a slab of beta_3."""

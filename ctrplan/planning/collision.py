@@ -38,6 +38,10 @@ DEFAULT_SEGMENT_LENGTH = 2e-3
 # negligible against the 2-5 mm capsules, so the culling loses nothing measurable.
 AABB_MARGIN = 1e-5
 
+# A capsule axis within this of +-z (cosine distance) gets the identity or the half-turn about
+# x as its pose in _capsule_poses: the literal of _z_to, so both paths build the same poses.
+_AXIS_PARALLEL_TOL = 1e-12
+
 
 def rotation_from_rpy(rpy) -> np.ndarray:
     """Rotation matrix from roll, pitch, yaw (fixed x, then y, then z axes: ``Rz @ Ry @ Rx``).
@@ -356,9 +360,9 @@ def _capsule_poses(cap_a, cap_b, ncap, length, rot, center):
             u0 = d0 / L
             u1 = d1 / L
             c = d2 / L
-            if c > 1.0 - 1e-12:
+            if c > 1.0 - _AXIS_PARALLEL_TOL:
                 continue
-            if c < -1.0 + 1e-12:
+            if c < -1.0 + _AXIS_PARALLEL_TOL:
                 rot[k, j, 1, 1] = -1.0
                 rot[k, j, 2, 2] = -1.0
                 continue

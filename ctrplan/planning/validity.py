@@ -91,7 +91,9 @@ class BatchValidityChecker:
     Accepts exactly the states that ``ValidityChecker(robot, collision, field,
     settings=settings.replace(multistart=0), check_stability=check_stability)`` accepts (the
     pipeline's checker): the multistart search for other equilibria is never run (the bound
-    map flags multi-equilibrium regions), the determinant test is.
+    map flags multi-equilibrium regions), the determinant test is. One difference in use: a
+    joint vector of the wrong length raises ``ValueError`` here (``ValidityChecker`` calls it
+    invalid).
 
     Parameters
     ----------
@@ -191,6 +193,11 @@ class BatchValidityChecker:
         ----------
         q : array-like, shape (n_joints,)
             [rad or m].
+
+        Raises
+        ------
+        ValueError
+            If ``q`` does not hold ``n_joints`` values.
         """
         return bool(self.check(np.asarray(q, dtype=float).reshape(1, -1))[0])
 
