@@ -22,8 +22,8 @@ chunks, times the target chunk's node count. Timings on a shared 2-core machine 
 
 Usage::
 
-    python benchmarks/bench_boundmap.py                       # six-joint robot, 4x4x4x2x2x2, 2 workers
-    python benchmarks/bench_boundmap.py --store out/boundmaps/six-joint-4x4x4x2x2x2.zarr   # reuse a run
+    python benchmarks/bench_boundmap.py                       # six-joint robot, 4-D map 4x4x2x3, 2 workers
+    python benchmarks/bench_boundmap.py --store out/boundmaps/six-joint-4x4x2x3.zarr   # reuse a run
     python benchmarks/bench_boundmap.py --robot model/ha2019-table2-nominal.toml --resolution 4,4,3 \\
         --target-resolution 24,24,8
 """
@@ -59,13 +59,16 @@ def schedule(times, n_workers, warmup_s, overhead_s=0.0) -> float:
 
 def measure_write_seconds(store, n=20) -> float:
     """Mean time [s] for the client to write one chunk like the store's into a scratch store."""
-    from ctrplan.planning.bound_store import BoundMapStore, MapIdentity
+    from ctrplan.boundmap import BoundMapStore, MapIdentity
 
     with tempfile.TemporaryDirectory(prefix="ctrplan-bench-") as tmp:
         ident = MapIdentity(key="0" * 64, robot_sha256="0" * 64, robot_hash_of="robot file",
-                            resolution=store.resolution, settings={}, evaluator="bench",
-                            joint_names=tuple(store.attrs["joint_names"]))
-        scratch = BoundMapStore.create_or_resume(Path(tmp) / "w.zarr", ident, store.axes, store.periodic, store.chunks)
+                            spec={"resolution": list(store.resolution), "placement": "uniform"}, settings={},
+                            evaluator="bench", mechanics_version="bench",
+                            joint_names=tuple(store.attrs["joint_names"]),
+                            coordinate_names=tuple(store.coordinates.names))
+        scratch = BoundMapStore.create_or_resume(Path(tmp) / "w.zarr", ident, store.axes, store.periodic, store.chunks,
+                                                 store.coordinates)
         m = int(np.prod(store.chunks))
         vals, valid = np.random.default_rng(0).random((m, 4)), np.ones(m, dtype=bool)
         n = min(n, scratch.n_chunks)
@@ -80,7 +83,7 @@ def measure_cluster_startup(n_workers) -> float:
     """Wall time [s] to start and stop a LocalCluster of ``n_workers`` processes."""
     from distributed import Client
 
-    from ctrplan.planning.bound_store import start_local_cluster
+    from ctrplan.boundmap import start_local_cluster
 
     t0 = time.perf_counter()
     with start_local_cluster(n_workers) as lc:
@@ -93,14 +96,16 @@ def measure_cluster_startup(n_workers) -> float:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--robot", default=str(REPO / "model" / "ha2019-table2-six-joint.toml"))
-    ap.add_argument("--resolution", default="4,4,4,2,2,2")
+    ap.add_argument("--resolution", default="4,4,2,3",
+                    help="nodes per map coordinate (six-joint robot: alpha_2-alpha_1, alpha_3-alpha_1, "
+                         "beta_2-beta_1, beta_3-beta_1)")
     ap.add_argument("--ds", type=float, default=3e-3, help="arc-length step [m]")
     ap.add_argument("--chunk-size", type=int, default=8, help="nodes per chunk of a new store")
     ap.add_argument("--jobs", type=int, default=2, help="local workers for computing")
     ap.add_argument("--scheduler", default=None, help="dask scheduler address instead of local workers")
     ap.add_argument("--store", default=None, help="zarr store (default out/bench/<robot>-<res>.zarr)")
-    ap.add_argument("--target-resolution", default="16,16,16,6,6,6",
-                    help="larger map to project (same joints)")
+    ap.add_argument("--target-resolution", default="16,16,5,14",
+                    help="larger map to project (same map coordinates)")
     ap.add_argument("--target-chunk-size", type=int, default=64)
     ap.add_argument("--workers", default=",".join(map(str, WORKERS)))
     ap.add_argument("--cost", choices=("cpu", "wall"), default="cpu",
@@ -109,9 +114,8 @@ def main(argv=None) -> int:
                     help="scheduler cost per chunk [ms] added in the projection")
     args = ap.parse_args(argv)
 
+    from ctrplan.boundmap import chunk_shape_for, compute_bound_map
     from ctrplan.mechanics import ModelSettings
-    from ctrplan.pipeline import compute_bound_map
-    from ctrplan.planning.bound_store import chunk_shape_for
 
     res = tuple(int(x) for x in args.resolution.split(","))
     target = tuple(int(x) for x in args.target_resolution.split(","))

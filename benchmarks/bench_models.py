@@ -89,13 +89,12 @@ def profile_bound(robot, settings):
 
 
 def map_error(n_random, seed=0):
-    from ctrplan.pipeline import load_or_compute_bound_map, default_resolution
-    from ctrplan.planning import interpolation_error
+    from ctrplan.boundmap import MapSpec, interpolation_error, load_or_compute_bound_map
 
     robot_path = ROOT / "model" / "ha2019-table7-calibrated.toml"
     robot = load_robot(robot_path)
     settings = ModelSettings(ds=3e-3)
-    res = default_resolution(robot)
+    res = MapSpec((16, 16, 14), "adaptive")     # the shipped map of scenarios/*.toml
     field, source, secs = load_or_compute_bound_map(robot_path, robot, res, settings)
     t0 = time.perf_counter()
     err = interpolation_error(field, robot, evaluate_bound, n=n_random, seed=seed, settings=settings)

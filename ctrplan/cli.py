@@ -108,14 +108,20 @@ def plan(scenario_path, out_dir, jobs, iterations, no_blind):
 @main.command()
 @click.option("--robot", "robot_path", required=True, type=click.Path(exists=True, dir_okay=False))
 @click.option("--resolution", default=None,
-              help="Grid nodes per joint, comma-separated in robot joint order (e.g. 16,16,6; "
-                   "default 16 per rotation, 6 per translation).")
+              help="Grid nodes per map coordinate, comma-separated in the order the command prints (base "
+                   "rotations, then translations, of tubes 2..n relative to tube 1; e.g. 16,16,14). One "
+                   "number applies to all. Default 16 per rotation, 6 per translation.")
+@click.option("--placement", type=click.Choice(["uniform", "adaptive"]), default="uniform", show_default=True,
+              help="Nodes of bounded coordinates: uniform, or placed where pilot lines of the exact bound "
+                   "show it bends (docs/boundmaps.md).")
 @click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")
 @click.option("--out", "out_path", type=click.Path(), default=None,
-              help="The map: a chunked zarr store DIR.zarr (default: boundmaps/<robot>-<key>.zarr next to "
-                   "the robot file) or FILE.npz (exported when its store is complete).")
+              help="The map: a chunked zarr store DIR.zarr or FILE.npz (exported when its store is complete). "
+                   "Default: boundmaps/<robot>-<key>.<format> next to the robot file.")
+@click.option("--format", "fmt", type=click.Choice(["zarr", "npz"]), default="zarr", show_default=True,
+              help="Suffix of the default --out; an .npz map is computed through a store in .cache/boundmaps/.")
 @click.option("--store", "--cache-dir", "store_path", type=click.Path(file_okay=False), default=None,
-              help="Chunk store of an .npz output (default: <out>.zarr).")
+              help="Chunk store of an .npz output (default: .cache/boundmaps/<robot>-<key>.zarr).")
 @click.option("--jobs", type=int, default=None,
               help="Local worker processes (default: all cores; 1 computes in this process).")
 @click.option("--scheduler", default=None,
@@ -123,47 +129,66 @@ def plan(scenario_path, out_dir, jobs, iterations, no_blind):
                    "need ctrplan installed. Default: the local cores.")
 @click.option("--chunk-size", type=click.IntRange(min=1), default=None,
               help="Grid nodes per chunk of a new store (default 64).")
-@click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
-def boundmap(robot_path, resolution, ds, out_path, store_path, jobs, scheduler, chunk_size, no_progress):
+@click.option("--no-progress", is_flag=True, help="Hide the progress bars.")
+def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, jobs, scheduler, chunk_size,
+             no_progress):
     """Compute the friction-bound map of a robot over its joint space.
 
-    Chunks are written to a zarr store as they finish; rerunning the same command after an
-    interruption computes only the missing chunks. The store records the robot file's sha256,
-    the model settings and the resolution, and refuses to resume a map made for others.
+    The map's coordinates are the base rotations and translations of tubes 2..n relative to
+    tube 1 that the robot's joints change (the bound depends on nothing else), so a robot whose
+    three tubes each rotate and translate has a 4-D map. Chunks are written to a zarr store as
+    they finish; rerunning the same command after an interruption computes only the missing
+    chunks. The store records the robot file's sha256, the model settings, the grid spec and the
+    mechanics version, and refuses to resume a map made for others.
     """
     import numpy as np
 
+    from .boundmap import MapSpec, default_spec, map_coordinates, map_identity, map_paths
+    from .boundmap.files import compute_bound_map
     from .io.robot_file import load_robot
-    from .pipeline import compute_bound_map, default_resolution
+    from .mechanics import evaluate_bound
 
     robot = load_robot(robot_path)
+    coords = map_coordinates(robot)
     if resolution:
         try:
             res = tuple(int(x) for x in resolution.split(","))
         except ValueError:
             raise click.BadParameter(f"{resolution!r} is not a comma-separated list of integers",
                                      param_hint="--resolution") from None
-        if len(res) not in (1, len(robot.joints)) or min(res) < 2:
+        if len(res) not in (1, coords.dim) or min(res) < 2:
             raise click.BadParameter(
-                f"{resolution!r}: needs 1 or {len(robot.joints)} integers >= 2 "
-                f"({', '.join(robot.joint_names)} of {robot_path})", param_hint="--resolution")
-        res = res * len(robot.joints) if len(res) == 1 else res
+                f"{resolution!r}: needs 1 or {coords.dim} integers >= 2, one per map coordinate "
+                f"({', '.join(coords.names)}) of {robot_path}", param_hint="--resolution")
+        spec = MapSpec(res * coords.dim if len(res) == 1 else res, placement)
     else:
-        res = default_resolution(robot)
+        spec = MapSpec(default_spec(robot).resolution, placement)
     if out_path and Path(out_path).suffix not in (".zarr", ".npz"):
         raise click.BadParameter(f"{out_path!r} must end in .zarr (chunked store) or .npz", param_hint="--out")
-    if store_path and not (out_path and Path(out_path).suffix == ".npz"):
-        raise click.BadParameter(f"{store_path!r}: a separate store needs an .npz --out (a .zarr --out is the "
+    settings = _settings(ds)
+    ident = map_identity(robot, settings, spec, evaluate_bound, Path(robot_path).read_text())
+    shipped, cache = map_paths(robot_path, ident.key)
+    out = Path(out_path) if out_path else shipped.with_suffix("." + fmt)
+    if store_path and out.suffix != ".npz":
+        raise click.BadParameter(f"{store_path!r}: a separate store needs an .npz output (a .zarr output is the "
                                  "store)", param_hint="--store")
+    if out.suffix == ".npz" and not store_path:
+        store_path = cache.with_suffix(".zarr") if not out_path else out.with_suffix(".zarr")
+    click.echo(f"map coordinates: {', '.join(f'{n} ({r} nodes)' for n, r in zip(coords.names, spec.resolution))}; "
+               f"placement {spec.placement}; key {ident.key[:12]}; mechanics {ident.mechanics_version}")
     n_jobs = 1 if scheduler else (jobs or os.cpu_count() or 1)
-    run, path = compute_bound_map(robot_path, res, _settings(ds), out_path=out_path, store_path=store_path,
-                                  n_jobs=n_jobs, scheduler=scheduler, chunk_size=chunk_size,
-                                  progress=not no_progress)
+    run, path = compute_bound_map(robot_path, spec, settings, out_path=out, store_path=store_path, n_jobs=n_jobs,
+                                  scheduler=scheduler, chunk_size=chunk_size, progress=not no_progress)
     field = run.field
     secs = np.asarray(run.chunk_seconds)
     timing = (f"; chunk time mean {secs.mean():.2f} s, max {secs.max():.2f} s" if secs.size else "")
+    pilots = (f"; {run.pilot_evaluations} pilot evaluations in {run.pilot_seconds:.1f} s"
+              if run.pilot_evaluations else "")
     click.echo(f"{run.executor}: {run.n_computed} chunks computed, {run.n_reused} reused of {run.n_chunks} "
-               f"in {run.wall_seconds:.1f} s{timing}")
+               f"in {run.wall_seconds:.1f} s{timing}{pilots}")
+    for name, axis in zip(coords.names, field.axes):
+        unit, f = ("deg", np.degrees(1.0)) if "alpha" in name else ("mm", 1e3)
+        click.echo(f"  {name} nodes [{unit}]: {np.array2string(axis * f, precision=1, max_line_width=200)}")
     v = field.values[..., 0][field.valid] * 1e3
     stats = (f"bound median {float(np.median(v)):.2f} mm, max {v.max():.2f} mm" if v.size else "no valid node")
     click.echo(f"wrote {path}: {int(field.valid.sum())} of {field.valid.size} nodes valid; {stats}")

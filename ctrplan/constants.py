@@ -25,3 +25,9 @@ PREDICTOR_STEP_FACTOR = 4.0
 # Shooting tolerance of that coarse predictor [1/m] (it only has to land near the fine solution;
 # looser than 1e-4 costs the fine Newton more sweeps than it saves, docs/mechanics.md Sec. 10).
 PREDICTOR_TOL = 1e-4
+
+# Version of the mechanics' results. A bound map records it in its key, so a map computed by
+# other mechanics is recognised as stale instead of silently used. Bump it with every change
+# that moves a tip, a bound or a stability flag by more than the solvers' tolerances (shooting
+# 1e-9 1/m, contact outer loop 1e-6 m), and recompute the shipped maps (docs/boundmaps.md).
+MECHANICS_VERSION = "2026.11.22"

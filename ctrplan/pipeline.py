@@ -22,21 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .boundmap import MapSpec, default_spec, load_or_compute_bound_map
 from .errors import JointLimitError, UnreachableGoalError
-from .io.robot_file import load_robot
 from .io.scenario import load_scenario
 from .mechanics import ModelSettings, evaluate_bound
-from .planning import (BoundCostObjective, BoundField, CollisionChecker, JointStateSpace,
-                       ValidityChecker, bounds_given_last_motion, field_key, order_path, plan,
-                       resolve_goal)
-from .planning.bound_field import BoundFieldKeyError
+from .planning import (BoundCostObjective, CollisionChecker, JointStateSpace, ValidityChecker,
+                       bounds_given_last_motion, order_path, plan, resolve_goal)
 
-__all__ = ["run_plan", "compute_bound_map", "load_or_compute_bound_map", "default_resolution"]
+__all__ = ["run_plan", "map_spec"]
 
-# Default grid nodes per joint: periodic rotations, translations (median interpolation error
-# below 0.5 mm on the Table VII robot; see docs/planning.md for the measurement).
-DEFAULT_ROTATION_NODES = 16
-DEFAULT_TRANSLATION_NODES = 6
 # Spacing of interpolated-bound samples along an ordered path for the bound plot and the
 # max-bound comparison [m of the weighted joint metric].
 PATH_SAMPLE_SPACING = 2e-3
@@ -44,153 +38,13 @@ PATH_SAMPLE_SPACING = 2e-3
 COLLISION_SEGMENT = 5e-3
 
 
-def default_resolution(robot) -> tuple[int, ...]:
-    """Default bound-map nodes per joint (rotations 16, translations 6)."""
-    return tuple(DEFAULT_ROTATION_NODES if j.kind == "rotation" else DEFAULT_TRANSLATION_NODES
-                 for j in robot.joints)
-
-
-def _map_paths(robot_path: Path, key: str):
-    """(shipped map without suffix, cache map without suffix) of a robot file and map key."""
-    shipped = robot_path.parent / "boundmaps" / f"{robot_path.stem}-{key[:12]}"
-    cache = Path(".cache") / "boundmaps" / f"{robot_path.stem}-{key[:12]}"
-    return shipped, cache
-
-
-def compute_bound_map(robot_path, resolution, settings: ModelSettings, *, out_path=None, store_path=None,
-                      n_jobs: int = 1, scheduler=None, chunk_size: int | None = None, progress: bool = True,
-                      max_chunks: int | None = None, on_chunk=None):
-    """Compute (or resume) the bound map of a robot file into a zarr store.
-
-    Parameters
-    ----------
-    robot_path : path
-        Robot model file; its sha256 is recorded in the map and is part of the map's key.
-    resolution : sequence of int, shape (n_joints,)
-        Grid nodes per joint.
-    settings : ModelSettings
-    out_path : path, optional
-        The map: a zarr store ``*.zarr`` (default ``<robot dir>/boundmaps/<robot>-<key12>.zarr``),
-        or an ``.npz`` file, written once the store ``store_path`` is complete.
-    store_path : path, optional
-        Chunk store of an ``.npz`` output (default: ``out_path`` with suffix ``.zarr``); must
-        be None or equal to ``out_path`` for a ``.zarr`` output.
-    n_jobs : int
-        Local worker processes (1: this process) when no ``scheduler`` is given.
-    scheduler : str or distributed.Client, optional
-        Dask scheduler address, e.g. ``"tcp://host:8786"``.
-    chunk_size : int, optional
-        Nodes per chunk of a new store (default
-        :data:`~ctrplan.planning.bound_field.DEFAULT_CHUNK_SIZE`).
-    progress : bool
-        Progress bar.
-    max_chunks, on_chunk
-        See :func:`ctrplan.planning.bound_store.compute_bound_map_store`.
-
-    Returns
-    -------
-    run : BoundMapRun
-        ``run.field`` is the map (None if ``max_chunks`` stopped the run), ``run.store`` the
-        store, ``run.n_reused`` / ``run.n_computed`` the chunks found / computed.
-    path : Path
-        The map written (the store, or the ``.npz``).
-
-    Raises
-    ------
-    ModelFileError
-        Malformed robot file.
-    BoundMapMismatchError
-        The store holds a map of another robot file, settings or resolution.
-    ValueError
-        ``store_path`` given with a ``.zarr`` output, or an output suffix other than ``.zarr``
-        or ``.npz``.
-    """
-    from .planning.bound_field import DEFAULT_CHUNK_SIZE
-    from .planning.bound_store import STORE_SUFFIX, compute_bound_map_store
-
-    robot_path = Path(robot_path)
-    robot = load_robot(robot_path)
-    text = robot_path.read_text()
-    key = field_key(robot, settings, resolution, evaluate_bound, text)
-    shipped, _ = _map_paths(robot_path, key)
-    out = Path(out_path) if out_path else shipped.with_suffix(STORE_SUFFIX)
-    if out.suffix == STORE_SUFFIX:
-        if store_path is not None and Path(store_path) != out:
-            raise ValueError(f"--store {store_path} cannot differ from a .zarr output {out} (the store is the map)")
-        store = out
-    elif out.suffix == ".npz":
-        store = Path(store_path) if store_path else out.with_suffix(STORE_SUFFIX)
-    else:
-        raise ValueError(f"bound map output {out} must end in {STORE_SUFFIX} (chunked store) or .npz")
-    store.parent.mkdir(parents=True, exist_ok=True)
-    run = compute_bound_map_store(
-        robot, evaluate_bound, resolution, settings, store, n_jobs, scheduler=scheduler,
-        chunk_size=chunk_size or DEFAULT_CHUNK_SIZE, progress=progress, robot_file_text=text,
-        metadata={"robot_file": robot_path.name}, max_chunks=max_chunks, on_chunk=on_chunk)
-    if run.field is not None and out.suffix == ".npz":
-        run.field.save(out)
-    return run, out
-
-
-def load_or_compute_bound_map(robot_path, robot, resolution, settings, n_jobs=1, echo=print, *, scheduler=None):
-    """Shipped or cached map with the right key, else compute it (resumable zarr store).
-
-    Looks for ``<robot dir>/boundmaps/<robot>-<key12>.npz`` or ``.zarr`` (shipped), then
-    ``.cache/boundmaps/<robot>-<key12>.zarr`` or ``.npz`` (computed earlier); a cached store that
-    is incomplete is resumed.
-
-    Parameters
-    ----------
-    robot_path : path
-        Robot model file (its content is part of the key).
-    robot : Robot
-        The robot loaded from ``robot_path``.
-    resolution : sequence of int, shape (n_joints,)
-        Grid nodes per joint.
-    settings : ModelSettings
-    n_jobs : int
-        Local worker processes when computing.
-    echo : callable
-        Progress messages.
-    scheduler : str or distributed.Client, optional, keyword-only
-        Dask scheduler address for computing.
-
-    Returns
-    -------
-    field : BoundField
-    source : str
-        ``"shipped"``, ``"cache"`` or ``"computed"``.
-    seconds : float
-        Wall time spent loading or computing [s].
-
-    Raises
-    ------
-    BoundMapMismatchError
-        The cache store holds a map computed with another key.
-    """
-    from .planning.bound_store import IncompleteBoundMapError, compute_bound_map_store
-
-    t0 = time.perf_counter()
-    robot_path = Path(robot_path)
-    text = robot_path.read_text()
-    key = field_key(robot, settings, resolution, evaluate_bound, text)
-    shipped, cache = _map_paths(robot_path, key)
-    for path, source in ((shipped.with_suffix(".npz"), "shipped"), (shipped.with_suffix(".zarr"), "shipped"),
-                         (cache.with_suffix(".zarr"), "cache"), (cache.with_suffix(".npz"), "cache")):
-        if path.exists():
-            try:
-                return BoundField.load(path, key=key), source, time.perf_counter() - t0
-            except IncompleteBoundMapError:
-                continue
-            except BoundFieldKeyError as exc:
-                echo(f"ignoring {path}: {exc}")
-    store = cache.with_suffix(".zarr")
-    echo(f"computing the bound map of {robot_path.name} at resolution {resolution} "
-         f"(store {store}; interrupt and rerun to resume)")
-    store.parent.mkdir(parents=True, exist_ok=True)
-    run = compute_bound_map_store(robot, evaluate_bound, resolution, settings, store, n_jobs, scheduler=scheduler,
-                                  robot_file_text=text, metadata={"robot_file": robot_path.name})
-    return run.field, "computed", time.perf_counter() - t0
+def map_spec(scenario) -> MapSpec:
+    """The bound-map spec of a scenario: its ``[bound_field]`` resolution and placement, else
+    :func:`ctrplan.boundmap.default_spec` of its robot."""
+    bf = scenario.bound_field
+    if bf.resolution is None:
+        return MapSpec(default_spec(scenario.robot).resolution, bf.placement)
+    return MapSpec(tuple(bf.resolution), bf.placement)
 
 
 def _dense_path(ordered_q, motions, joint_space, spacing):
@@ -277,11 +131,11 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
     sc = load_scenario(scenario_path)
     robot = sc.robot
     settings = ModelSettings(ds=sc.bound_field.ds) if sc.bound_field.ds else ModelSettings()
-    resolution = tuple(sc.bound_field.resolution) if sc.bound_field.resolution else default_resolution(robot)
+    spec = map_spec(sc)
     out = Path(out_dir) if out_dir else (sc.output_dir or Path("out") / sc.name)
     echo(f"scenario {sc.name}: robot {robot.name} ({', '.join(robot.joint_names)})")
 
-    field, map_source, map_time = load_or_compute_bound_map(sc.robot_file, robot, resolution, settings,
+    field, map_source, map_time = load_or_compute_bound_map(sc.robot_file, robot, spec, settings,
                                                              n_jobs=n_jobs, echo=echo)
     echo(f"bound map: {map_source} in {map_time:.1f} s")
     # 5 mm capsules: chord error 0.06 mm on the tightest precurvature radius (55 mm)
@@ -357,8 +211,9 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
         "joints": robot.joint_names,
         "goals": [{"q": g.q.tolist(), "tip_error_mm": g.tip_error * 1e3, "field_bound_mm": g.bound * 1e3,
                    "n_candidates": int(len(g.candidates))} for g in goals],
-        "bound_map": {"source": map_source, "time_s": map_time, "resolution": list(resolution),
-                      "key": field.key, "ds_m": settings.ds},
+        "bound_map": {"source": map_source, "time_s": map_time, "coordinates": field.coordinate_names,
+                      "resolution": list(field.shape), "placement": spec.placement, "key": field.key,
+                      "mechanics_version": field.metadata.get("mechanics_version"), "ds_m": settings.ds},
         "bound_aware": route_summary(aware),
         "duration_s": float(traj.duration) if traj is not None else None,
         "model_evaluations": {

@@ -22,11 +22,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ctrplan.boundmap import (BoundMapStore, compute_bound_map, compute_bound_map_store, load_bound_map,
+                              start_local_cluster)
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings, evaluate_bound
-from ctrplan.pipeline import compute_bound_map
-from ctrplan.planning import BoundField
-from ctrplan.planning.bound_store import BoundMapStore, compute_bound_map_store, start_local_cluster
 
 REPO = Path(__file__).resolve().parents[1]
 SETTINGS = ModelSettings(ds=1e-2)
@@ -88,7 +87,7 @@ def test_cluster_map_equals_serial_map(robot_file, serial, client, tmp_path):
     np.testing.assert_array_equal(run.field.values, serial.field.values)
     np.testing.assert_array_equal(run.field.valid, serial.field.valid)
     assert run.field.key == serial.field.key
-    loaded = BoundField.load(store, key=serial.field.key)
+    loaded = load_bound_map(store, key=serial.field.key)
     np.testing.assert_array_equal(loaded.values, serial.field.values)
     assert loaded.metadata["robot_hash_of"] == "robot file"
 
@@ -111,7 +110,7 @@ def test_interrupted_cluster_run_resumes_only_missing_chunks(robot_file, serial,
     first = np.flatnonzero(st.done())
     assert first.size == k
     with pytest.raises(Exception, match="incomplete"):
-        BoundField.load(store)
+        load_bound_map(store)
     seen = []
     run = _run(robot_file, store, client, on_chunk=lambda n, c: seen.append(c))
     assert run.n_reused == k and run.n_computed == 8 - k
@@ -185,4 +184,4 @@ def test_cli_with_scheduler_address(robot_file, serial, client, tmp_path):
                                         "--no-progress"])
     assert res.exit_code == 0, res.output
     assert f"dask scheduler {address}: 8 chunks computed, 0 reused of 8" in res.output
-    np.testing.assert_array_equal(BoundField.load(out, key=serial.field.key).values, serial.field.values)
+    np.testing.assert_array_equal(load_bound_map(out, key=serial.field.key).values, serial.field.values)

@@ -4,7 +4,6 @@ reads, and the ``ctrplan boundmap`` command. Serial and fast (fake bound or a co
 from __future__ import annotations
 
 import hashlib
-import time
 from pathlib import Path
 
 import numpy as np
@@ -13,12 +12,11 @@ from click.testing import CliRunner
 from test_planning_helpers import fake_bound, fake_robot
 
 from ctrplan import cli
+from ctrplan.boundmap import (BoundMapMismatchError, BoundMapStore, IncompleteBoundMapError, MapSpec,
+                              chunk_shape_for, compute_bound_map, compute_bound_map_store, compute_field, field_key,
+                              load_bound_map, load_or_compute_bound_map)
 from ctrplan.io.robot_file import load_robot
-from ctrplan.mechanics import ModelSettings, evaluate_bound
-from ctrplan.pipeline import compute_bound_map, load_or_compute_bound_map
-from ctrplan.planning import BoundField, field_key
-from ctrplan.planning.bound_store import (BoundMapMismatchError, BoundMapStore, IncompleteBoundMapError,
-                                          chunk_shape_for, compute_bound_map_store)
+from ctrplan.mechanics import MECHANICS_VERSION, ModelSettings, evaluate_bound
 
 REPO = Path(__file__).resolve().parents[1]
 SETTINGS = ModelSettings(ds=2e-2)
@@ -58,7 +56,7 @@ def test_fake_map_chunks_cover_the_grid_once(tmp_path):
         np.testing.assert_array_equal(st.chunk_nodes(c), run.field.nodes().reshape(5, 7, 3, 3)[st.chunk_slices(c)]
                                       .reshape(-1, 3))
     assert np.all(covered == 1)
-    ref = BoundField.compute(robot, fake_bound, (5, 7, 3), progress=False)
+    ref = compute_field(robot, fake_bound, (5, 7, 3), progress=False)
     np.testing.assert_array_equal(run.field.values, ref.values)
     assert np.all(np.isfinite(st.chunk_seconds())) and st.chunk_cold().sum() <= 1
 
@@ -69,7 +67,9 @@ def test_store_records_robot_file_hash_and_settings(tmp_path):
     attrs = BoundMapStore.open(path).attrs
     assert attrs["robot_sha256"] == hashlib.sha256(robot_file.read_bytes()).hexdigest()
     assert attrs["robot_hash_of"] == "robot file"
-    assert attrs["settings"] == SETTINGS.as_dict() and attrs["resolution"] == [4, 3]
+    assert attrs["settings"] == SETTINGS.as_dict() and attrs["spec"] == {"resolution": [4, 3], "placement": "uniform"}
+    assert attrs["coordinate_names"] == ["alpha_2-alpha_1", "beta_2-beta_1"]
+    assert attrs["mechanics_version"] == MECHANICS_VERSION
     assert attrs["evaluator"].endswith("evaluate_bound")
     assert attrs["key"] == run.field.key == field_key(load_robot(robot_file), SETTINGS, (4, 3), evaluate_bound,
                                                        robot_file.read_text())
@@ -82,7 +82,8 @@ def test_resuming_into_another_map_is_refused(tmp_path):
     compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=store, progress=False, max_chunks=1)
     old_sha = hashlib.sha256(robot_file.read_bytes()).hexdigest()
     cases = [
-        (dict(resolution=(4, 4)), "resolution", [4, 3], [4, 4]),
+        (dict(resolution=(4, 4)), "spec", {"resolution": [4, 3], "placement": "uniform"},
+         {"resolution": [4, 4], "placement": "uniform"}),
         (dict(settings=ModelSettings(ds=1e-2)), "settings.ds", 0.02, 0.01),
     ]
     for change, key, stored, requested in cases:
@@ -110,9 +111,9 @@ def test_incomplete_store_is_not_a_map(tmp_path):
                                   max_chunks=2)
     assert run.field is None and run.n_computed == 2
     with pytest.raises(IncompleteBoundMapError, match=r"m\.zarr.*2 of 4 chunks not computed"):
-        BoundField.load(store)
+        load_bound_map(store)
     with pytest.raises(FileNotFoundError):
-        BoundField.load(tmp_path / "missing.zarr")
+        load_bound_map(tmp_path / "missing.zarr")
 
 
 def test_npz_output_and_planner_lookup(tmp_path, monkeypatch):
@@ -121,8 +122,8 @@ def test_npz_output_and_planner_lookup(tmp_path, monkeypatch):
     robot = load_robot(robot_file)
     run, path = compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=tmp_path / "m.npz", progress=False)
     assert path == tmp_path / "m.npz" and (tmp_path / "m.zarr").is_dir()
-    np.testing.assert_array_equal(BoundField.load(path, key=run.field.key).values,
-                                  BoundField.load(tmp_path / "m.zarr", key=run.field.key).values)
+    np.testing.assert_array_equal(load_bound_map(path, key=run.field.key).values,
+                                  load_bound_map(tmp_path / "m.zarr", key=run.field.key).values)
     # planner lookup: an interrupted cache store is resumed, then found
     monkeypatch.chdir(tmp_path)
     key = run.field.key
@@ -130,7 +131,7 @@ def test_npz_output_and_planner_lookup(tmp_path, monkeypatch):
     compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=cache, progress=False, max_chunks=1, chunk_size=3)
     msgs = []
     field, source, _ = load_or_compute_bound_map(robot_file, robot, (4, 3), SETTINGS, echo=msgs.append)
-    assert source == "computed" and "store .cache" in msgs[0]
+    assert source == "computed" and ".cache/boundmaps" in msgs[-1]
     st = BoundMapStore.open(cache)  # resumed with its own chunks (4 of 3 nodes), not restarted
     assert st.n_chunks == 4 and list(st.chunk_run()) == [1, 2, 2, 2]
     np.testing.assert_array_equal(field.values, run.field.values)
@@ -138,14 +139,16 @@ def test_npz_output_and_planner_lookup(tmp_path, monkeypatch):
     assert source == "cache"
 
 
-def test_shipped_npz_map_is_found_without_computing():
-    """The main job's map (scenarios/obstacles.toml: Table VII robot, 16x16x6, ds 3 mm) is shipped."""
-    robot_file = REPO / "model" / "ha2019-table7-calibrated.toml"
-    t0 = time.perf_counter()
-    field, source, _ = load_or_compute_bound_map(robot_file, load_robot(robot_file), (16, 16, 6),
-                                                 ModelSettings(ds=3e-3), echo=pytest.fail)
-    assert source == "shipped" and field.shape == (16, 16, 6)
-    assert time.perf_counter() - t0 < 10.0
+@pytest.mark.parametrize("scenario", sorted((REPO / "scenarios").glob("*.toml")), ids=lambda p: p.stem)
+def test_shipped_scenarios_find_their_map_without_computing(scenario):
+    """Every shipped scenario's bound map is shipped: the main job computes no map."""
+    from ctrplan.io.scenario import load_scenario
+    from ctrplan.pipeline import map_spec
+
+    sc = load_scenario(scenario)
+    settings = ModelSettings(ds=sc.bound_field.ds) if sc.bound_field.ds else ModelSettings()
+    field, source, _ = load_or_compute_bound_map(sc.robot_file, sc.robot, map_spec(sc), settings, echo=pytest.fail)
+    assert source == "shipped" and field.shape == tuple(sc.bound_field.resolution)
 
 
 def test_cli_boundmap(tmp_path):
@@ -161,8 +164,8 @@ def test_cli_boundmap(tmp_path):
     assert "0 chunks computed, 4 reused of 4" in res.output
     # another resolution into the same store: a clear error (exit 2 through ctrplan's entry point)
     res = runner.invoke(cli.main, args[:4] + ["4,4"] + args[5:])
-    assert isinstance(res.exception, BoundMapMismatchError) and "'resolution'" in str(res.exception)
-    # one number: the same resolution for every joint
+    assert isinstance(res.exception, BoundMapMismatchError) and "'spec'" in str(res.exception)
+    # one number: the same resolution for every map coordinate
     res = runner.invoke(cli.main, args[:4] + ["3"] + args[5:-3] + ["--out", str(tmp_path / "r3.zarr"),
                                                                    "--no-progress"])
     assert res.exit_code == 0, res.output
@@ -188,22 +191,8 @@ def test_six_joint_model_joint_box_is_feasible():
         assert ends[1] >= ends[0] - 1e-12 and ends[2] > ends[1] + 9e-3
 
 
-def test_six_joint_bound_depends_on_relative_rotations_only():
-    """alpha_1 turns the robot rigidly: the bound is unchanged when all tubes turn together."""
-    from ctrplan.mechanics import evaluate_bound
-
-    robot = load_robot(REPO / "model" / "ha2019-table2-six-joint.toml")
-    settings = ModelSettings(ds=6e-3)
-    q = np.array([0.0, 1.0, 2.0, -0.005, -0.015, -0.07])
-    b = [evaluate_bound(robot, *robot.configuration(q + [turn, turn, turn, 0, 0, 0]), settings).position
-         for turn in (0.0, 0.7)]
-    # equal to well below the solver's own tolerance (outer loop: 1 um centerline change); the
-    # iteration path itself need not be rotation-invariant to rounding (working-set choices)
-    assert b[0] > 1e-3 and b[1] == pytest.approx(b[0], abs=0.1 * settings.outer_tol)
-
-
 def test_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
-    from ctrplan.planning import bound_store
+    from ctrplan.boundmap import compute as bound_store
 
     monkeypatch.setattr(bound_store, "SCHEDULER_TIMEOUT_S", 1.0)
     robot_file = pair_file(tmp_path)
@@ -211,3 +200,46 @@ def test_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
                                         "--scheduler", "tcp://127.0.0.1:9", "--out", str(tmp_path / "m.zarr")])
     assert isinstance(res.exception, bound_store.SchedulerUnreachableError)
     assert "tcp://127.0.0.1:9" in str(res.exception)
+
+
+def test_maps_of_other_mechanics_are_stale_and_named(tmp_path, monkeypatch):
+    """The key holds the mechanics version: a map computed by other mechanics is not used, and
+    the planner's lookup says which map it skipped and why."""
+    from ctrplan import constants
+
+    robot = fake_robot()
+    key_now = field_key(robot, None, (4, 4, 3), fake_bound)
+    assert field_key(robot, None, (4, 4, 3), fake_bound, mechanics_version="1999.01.01") != key_now
+    # a map computed by "older" mechanics, shipped next to a robot file
+    robot_file = pair_file(tmp_path)
+    monkeypatch.setattr(constants, "MECHANICS_VERSION", "1999.01.01")
+    old_run, old_path = compute_bound_map(robot_file, (4, 3), SETTINGS, fake_pair_bound, progress=False,
+                                          out_path=tmp_path / "boundmaps" / "placeholder.npz")
+    old_path.rename(tmp_path / "boundmaps" / f"pair-{old_run.field.key[:12]}.npz")
+    store = tmp_path / "boundmaps" / "placeholder.zarr"
+    monkeypatch.undo()
+    # resuming the old store with today's mechanics is refused, naming the version
+    with pytest.raises(BoundMapMismatchError) as err:
+        compute_bound_map(robot_file, (4, 3), SETTINGS, fake_pair_bound, out_path=store, progress=False)
+    assert (err.value.key, err.value.stored, err.value.requested) == ("mechanics_version", "1999.01.01",
+                                                                       MECHANICS_VERSION)
+    # the lookup skips the old shipped map, says why, and computes a new one
+    monkeypatch.chdir(tmp_path)
+    msgs = []
+    field, source, _ = load_or_compute_bound_map(robot_file, load_robot(robot_file), (4, 3), SETTINGS,
+                                                 echo=msgs.append, evaluator=fake_pair_bound)
+    assert source == "computed" and field.key != old_run.field.key
+    assert any("mechanics_version" in m and "1999.01.01" in m and f"pair-{old_run.field.key[:12]}" in m
+               for m in msgs), msgs
+
+
+def fake_pair_bound(robot, alpha, beta, settings=None):
+    """Fast stand-in for evaluate_bound on the tube pair: smooth in the relative coordinates."""
+    from types import SimpleNamespace
+
+    p = 1e-3 * (2.0 + np.cos(alpha[1] - alpha[0])) * (1.0 + 10.0 * (beta[1] - beta[0]))
+    return SimpleNamespace(position=p, angle=p, translation_last_position=0.5 * p, translation_last_angle=0.5 * p,
+                           diagnostics=SimpleNamespace(converged=True, unstable=False))
+
+
+fake_pair_bound.name = "fake-pair-bound"

@@ -25,7 +25,7 @@ from ctrplan import cli, pipeline
 from ctrplan.errors import UnreachableGoalError
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings, solve_standard
-from ctrplan.planning import BoundField, grid_axes
+from ctrplan.boundmap import BoundField, map_coordinates, uniform_axis
 
 REPO = Path(__file__).resolve().parents[1]
 TABLE7 = REPO / "model" / "ha2019-table7-calibrated.toml"
@@ -74,13 +74,15 @@ def synthetic_map(monkeypatch):
     the calls: no map is computed or read."""
     calls = []
 
-    def fake(robot_path, robot, resolution, settings, n_jobs=1, echo=print):
-        calls.append(resolution)
-        axes = grid_axes(robot, resolution)
+    def fake(robot_path, robot, spec, settings, n_jobs=1, echo=print):
+        calls.append(spec.resolution)
+        coords = map_coordinates(robot)
+        axes = [uniform_axis(lo, hi, n, per) for lo, hi, n, per in zip(coords.lower, coords.upper, spec.resolution,
+                                                                         coords.periodic)]
         shape = tuple(len(a) for a in axes)
         values = np.broadcast_to(np.array([1e-3, 0.1, 5e-4, 0.05]), shape + (4,)).copy()
-        field = BoundField(axes, [j.periodic for j in robot.joints], values, np.ones(shape, bool),
-                           key="synthetic")
+        field = BoundField(axes, coords.periodic, values, np.ones(shape, bool), key="synthetic",
+                           coordinates=coords)
         return field, "synthetic", 0.0
 
     monkeypatch.setattr(pipeline, "load_or_compute_bound_map", fake)

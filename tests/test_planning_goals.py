@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from ctrplan.errors import UnreachableGoalError
-from ctrplan.planning import BoundField, TaskSpaceGoal, resolve_goal
+from ctrplan.boundmap import compute_field
+from ctrplan.planning import TaskSpaceGoal, resolve_goal
 from test_planning_helpers import fake_robot, fake_solve_standard, fake_tip
 
 
@@ -18,7 +19,7 @@ def test_ik_finds_both_elbows_and_picks_lowest_bound():
         return SimpleNamespace(position=p, angle=p, translation_last_position=p, translation_last_angle=p,
                                diagnostics=SimpleNamespace(converged=True, unstable=False))
 
-    field = BoundField.compute(robot, bound, (24, 8, 3), progress=False)
+    field = compute_field(robot, bound, (24, 8, 3), progress=False)
     sol = resolve_goal(TaskSpaceGoal(tuple(target), 1e-4), robot, lambda q: True, field=field,
                        solve_standard=fake_solve_standard, seed=0)
     assert sol.tip_error < 1e-4

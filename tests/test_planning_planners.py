@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from ctrplan.errors import UnreachableGoalError
-from ctrplan.planning import (PLANNERS, BoundCostObjective, BoundField, JointStateSpace, ValidityChecker,
+from ctrplan.boundmap import compute_field
+from ctrplan.planning import (PLANNERS, BoundCostObjective, JointStateSpace, ValidityChecker,
                               order_path, plan)
 from test_planning_helpers import fake_bound, fake_robot, fake_solve_standard
 
@@ -13,7 +14,7 @@ GOAL = np.array([1.2, 0.0, -0.07])
 @pytest.fixture(scope="module")
 def setup():
     robot = fake_robot()
-    field = BoundField.compute(robot, fake_bound, (16, 16, 3), progress=False)
+    field = compute_field(robot, fake_bound, (16, 16, 3), progress=False)
     return robot, field
 
 

@@ -161,6 +161,7 @@ def test_joint_array_helpers(tmp_path):
     ('file = "meshes/tri.stl"', 'file = "meshes/missing.stl"', "obstacles[4].file"),
     ("scale = 0.001\n", "", "obstacles[4].scale"),
     ("resolution = [9, 9, 5]", "resolution = [9, 9]", "bound_field.resolution"),
+    ("ds_m = 0.002", 'placement = "smart"\nds_m = 0.002', "bound_field.placement"),
     ("max_jerk = {alpha_2 = 50.0, ", "max_jerk = {", "drive.max_jerk.alpha_2"),
     ("max_velocity = {alpha_2 = 1.0,", "max_velocity = {alpha_2 = 0.0,", "drive.max_velocity.alpha_2"),
     ('dir = "out"', "dir = 3", "output.dir"),

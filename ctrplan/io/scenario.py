@@ -99,6 +99,7 @@ class _PlannerDoc(_Strict):
 
 class _BoundFieldDoc(_Strict):
     resolution: list[Annotated[int, Field(ge=2)]] | None = None
+    placement: Literal["uniform", "adaptive"] = "uniform"
     ds_m: Positive | None = None
 
 
@@ -278,17 +279,22 @@ class PlannerSettings:
 
 @dataclass(frozen=True)
 class BoundFieldSettings:
-    """Sampling of the friction-bound field over joint space.
+    """The bound map the planner uses (``ctrplan.boundmap``).
 
     Attributes
     ----------
-    resolution : tuple of int or None, shape (n_joints,)
-        Grid points per joint, in robot joint order; None for the default.
+    resolution : tuple of int or None, shape (d,)
+        Grid nodes per map coordinate (base rotations, then translations, of tubes 2..n
+        relative to tube 1 that the joints change; ``ctrplan.boundmap.map_coordinates``); None
+        for the default.
+    placement : {"uniform", "adaptive"}
+        Node placement along bounded coordinates (``ctrplan.boundmap.MapSpec``).
     ds : float or None
         Arc-length step of the mechanics [m]; None for the default.
     """
 
     resolution: tuple[int, ...] | None = None
+    placement: str = "uniform"
     ds: float | None = None
 
 
@@ -461,7 +467,6 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
     if not robot_file.is_file():
         raise ModelFileError(file, "robot", f"robot file {doc.robot!r} not found (looked for {robot_file})")
     robot = load_robot(robot_file)
-    n_joints = len(robot.joints)
 
     start = _joint_values(robot, doc.start.q, file, "start.q")
 
@@ -496,11 +501,16 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
                               seed=p.seed, bound_weight=p.bound_weight, range=p.range)
 
     bf = doc.bound_field
-    if bf.resolution is not None and len(bf.resolution) != n_joints:
-        raise ModelFileError(file, "bound_field.resolution",
-                             f"needs one value per joint ({', '.join(robot.joint_names)}), got {bf.resolution!r}")
+    if bf.resolution is not None:
+        from ..boundmap.coordinates import map_coordinates
+
+        names = map_coordinates(robot).names
+        if len(bf.resolution) != len(names):
+            raise ModelFileError(file, "bound_field.resolution",
+                                 f"needs one value per map coordinate ({', '.join(names)}: the base rotations and "
+                                 f"translations relative to tube 1 that the joints change), got {bf.resolution!r}")
     bound_field = BoundFieldSettings(resolution=None if bf.resolution is None else tuple(bf.resolution),
-                                     ds=bf.ds_m)
+                                     placement=bf.placement, ds=bf.ds_m)
 
     drive = None
     if doc.drive is not None:

@@ -6,9 +6,12 @@
 - :func:`evaluate_bound`: the per-configuration friction bound over all 2^(n-1) directions.
 - :func:`solve_standard_batch`: the standard model at many configurations in one compiled call.
 
+:data:`MECHANICS_VERSION` names the version of their results (bound maps record it).
+
 All from Ha, Fagogenis & Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906.
 """
 
+from ..constants import MECHANICS_VERSION
 from .bound import all_eta, evaluate_bound
 from .contact import solve_clearance, solve_contact, solve_friction
 from .discrete import TubeChain, chain_jacobians, forward_kinematics
@@ -18,7 +21,7 @@ from ._standard_batch import StandardBatch, solve_standard_batch
 from .standard import solve_standard
 
 __all__ = [
-    "solve_standard", "solve_standard_batch", "StandardBatch", "solve_clearance", "solve_friction", "solve_contact", "evaluate_bound",
+    "MECHANICS_VERSION", "solve_standard", "solve_standard_batch", "StandardBatch", "solve_clearance", "solve_friction", "solve_contact", "evaluate_bound",
     "all_eta", "ModelSettings", "StandardSolution", "ContactSolution", "BoundResult", "Diagnostics",
     "TubeChain", "forward_kinematics", "chain_jacobians", "ArcLengthGrid", "build_grid",
 ]

@@ -6,16 +6,16 @@ Building blocks (each usable on its own in an OMPL setup, see ``docs/planning.md
   translations) with numpy conversions; :func:`unwrap_path`.
 - :class:`CollisionChecker`: robot body (capsule chain) versus spheres, capsules, boxes, meshes
   with python-fcl.
-- :class:`BoundField`: precomputed, resumable grid of the friction bound of Ha, Fagogenis &
-  Dupont 2019 (doi:10.1109/TRO.2018.2878906), interpolated multilinearly.
+- :class:`BoundField` (from :mod:`ctrplan.boundmap`): the friction bound of Ha, Fagogenis &
+  Dupont 2019 (doi:10.1109/TRO.2018.2878906) precomputed on a grid and interpolated.
 - :class:`BoundCostObjective`: ``ob.OptimizationObjective`` = length + weight x integral of bound.
 - :func:`plan` with :data:`PLANNERS`, :class:`ValidityChecker`, :class:`PlanResult`.
 - :func:`order_path` (rotate, then translate) and :func:`bounds_given_last_motion`.
 - :func:`resolve_goal` for joint or tip-position goals.
 """
 
-from .bound_field import (QUANTITIES, BoundField, BoundFieldKeyError, InterpolationError, field_key,
-                          grid_axes, interpolation_error)
+from ..boundmap import (QUANTITIES, BoundField, BoundFieldKeyError, InterpolationError, field_key,
+                        interpolation_error)
 from .collision import (BoxObstacle, CapsuleObstacle, CollisionChecker, CollisionReport, MeshObstacle,
                         SphereObstacle, obstacle_from_dict)
 from .goals import GoalSolution, JointGoal, TaskSpaceGoal, resolve_goal
@@ -28,8 +28,7 @@ __all__ = [
     "JointStateSpace", "DEFAULT_METERS_PER_RADIAN", "unwrap_path", "wrap_angle",
     "CollisionChecker", "CollisionReport", "SphereObstacle", "CapsuleObstacle", "BoxObstacle",
     "MeshObstacle", "obstacle_from_dict",
-    "BoundField", "BoundFieldKeyError", "InterpolationError", "QUANTITIES", "field_key", "grid_axes",
-    "interpolation_error",
+    "BoundField", "BoundFieldKeyError", "InterpolationError", "QUANTITIES", "field_key", "interpolation_error",
     "BoundCostObjective", "DEFAULT_BOUND_WEIGHT",
     "PLANNERS", "PlanResult", "ValidityChecker", "plan",
     "OrderedPath", "OrderedWaypoint", "LastMotionBounds", "order_path", "bounds_given_last_motion",

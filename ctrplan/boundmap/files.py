@@ -1,0 +1,214 @@
+"""Bound maps of robot files on disk: where they live, finding a shipped or cached one, computing
+one (``ctrplan boundmap``, and ``ctrplan plan`` when no map matches).
+
+A map of robot file ``model/<robot>.toml`` with key ``<key>`` is looked for as
+
+- ``model/boundmaps/<robot>-<key[:12]>.npz`` or ``.zarr`` (shipped with the repository), then
+- ``.cache/boundmaps/<robot>-<key[:12]>.zarr`` or ``.npz`` (computed earlier on this machine).
+
+The key (:func:`~ctrplan.boundmap.identity.field_key`) covers the robot file's text, the model
+settings, the grid spec, the evaluator and the mechanics version, so an edited robot file, other
+settings or newer mechanics never pick up an old map; a map of the same robot that no longer
+matches is named with the attribute that differs.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .axes import MapSpec
+from .compute import DEFAULT_CHUNK_SIZE, compute_bound_map_store
+from .coordinates import map_coordinates
+from .identity import BoundFieldKeyError, BoundMapMismatchError, map_identity
+from .store import STORE_SUFFIX, IncompleteBoundMapError, load_bound_map
+
+__all__ = ["DEFAULT_ROTATION_NODES", "DEFAULT_TRANSLATION_NODES", "default_spec", "map_paths",
+           "compute_bound_map", "load_or_compute_bound_map", "CACHE_DIR"]
+
+# Default grid nodes per periodic rotation and per translation coordinate (uniform): the
+# original default of ctrplan (median interpolation error 0.08 mm on the Table VII robot, but
+# 1.3 mm at the 95th percentile; shipped maps use adaptive placement, docs/boundmaps.md).
+DEFAULT_ROTATION_NODES = 16
+DEFAULT_TRANSLATION_NODES = 6
+
+# Maps computed by `ctrplan plan` for robots without a shipped map (relative to the working
+# directory).
+CACHE_DIR = Path(".cache") / "boundmaps"
+
+
+def default_spec(robot) -> MapSpec:
+    """Uniform grid, 16 nodes per rotation coordinate and 6 per translation coordinate."""
+    coords = map_coordinates(robot)
+    return MapSpec(tuple(DEFAULT_ROTATION_NODES if k == "rotation" else DEFAULT_TRANSLATION_NODES
+                         for k in coords.kinds))
+
+
+def map_paths(robot_path, key: str) -> tuple[Path, Path]:
+    """(shipped map, cached map), both without suffix, of a robot file and a map key."""
+    robot_path = Path(robot_path)
+    shipped = robot_path.parent / "boundmaps" / f"{robot_path.stem}-{key[:12]}"
+    cache = CACHE_DIR / f"{robot_path.stem}-{key[:12]}"
+    return shipped, cache
+
+
+def compute_bound_map(robot_path, spec, settings, evaluator=None, *, out_path=None, store_path=None,
+                      n_jobs: int = 1, scheduler=None, chunk_size: int | None = None, progress: bool = True,
+                      max_chunks: int | None = None, on_chunk=None):
+    """Compute (or resume) the bound map of a robot file into a zarr store.
+
+    Parameters
+    ----------
+    robot_path : path
+        Robot model file; its sha256 is recorded in the map and is part of the map's key.
+    spec : MapSpec or sequence of int
+        Grid spec, or nodes per map coordinate (uniform).
+    settings : ModelSettings
+    evaluator : callable, optional
+        Default :func:`ctrplan.mechanics.evaluate_bound`.
+    out_path : path, optional, keyword-only
+        The map: a zarr store ``*.zarr`` (default ``<robot dir>/boundmaps/<robot>-<key12>.zarr``)
+        or an ``.npz`` file, written once the store ``store_path`` is complete.
+    store_path : path, optional, keyword-only
+        Chunk store of an ``.npz`` output (default: ``out_path`` with suffix ``.zarr``); must be
+        None or equal to ``out_path`` for a ``.zarr`` output.
+    n_jobs, scheduler, chunk_size, progress, max_chunks, on_chunk
+        See :func:`~ctrplan.boundmap.compute.compute_bound_map_store`.
+
+    Returns
+    -------
+    run : BoundMapRun
+    path : Path
+        The map written (the store, or the ``.npz``).
+
+    Raises
+    ------
+    ModelFileError
+        Malformed robot file.
+    BoundMapMismatchError
+        The store holds another map.
+    ValueError
+        A spec that does not fit the robot, ``store_path`` given with a ``.zarr`` output, or an
+        output suffix other than ``.zarr`` or ``.npz``.
+    """
+    from ..io.robot_file import load_robot
+
+    if evaluator is None:
+        from ..mechanics import evaluate_bound as evaluator
+    robot_path = Path(robot_path)
+    robot = load_robot(robot_path)
+    text = robot_path.read_text()
+    ident = map_identity(robot, settings, spec, evaluator, text)
+    shipped, _ = map_paths(robot_path, ident.key)
+    out = Path(out_path) if out_path else shipped.with_suffix(STORE_SUFFIX)
+    if out.suffix == STORE_SUFFIX:
+        if store_path is not None and Path(store_path) != out:
+            raise ValueError(f"--store {store_path} cannot differ from a .zarr output {out} (the store is the map)")
+        store = out
+    elif out.suffix == ".npz":
+        store = Path(store_path) if store_path else out.with_suffix(STORE_SUFFIX)
+    else:
+        raise ValueError(f"bound map output {out} must end in {STORE_SUFFIX} (chunked store) or .npz")
+    store.parent.mkdir(parents=True, exist_ok=True)
+    run = compute_bound_map_store(
+        robot, evaluator, spec, settings, store, n_jobs, scheduler=scheduler,
+        chunk_size=chunk_size or DEFAULT_CHUNK_SIZE, progress=progress, robot_file_text=text,
+        metadata={"robot_file": robot_path.name}, max_chunks=max_chunks, on_chunk=on_chunk)
+    if run.field is not None and out.suffix == ".npz":
+        run.field.save(out)
+    return run, out
+
+
+def _identity_of(path) -> dict:
+    """Identity attributes of a map file or store (empty if unreadable)."""
+    try:
+        if Path(path).suffix == ".npz":
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z["metadata"])) if "metadata" in z else {}
+                meta["key"] = str(z["key"])
+                return meta
+        from .store import BoundMapStore
+
+        return dict(BoundMapStore.open(path).attrs)
+    except Exception:  # noqa: BLE001 - any unreadable map is just not explained
+        return {}
+
+
+def _stale_maps(robot_path, ident) -> list[str]:
+    """Why other maps of the same robot file do not match this run (one line each)."""
+    robot_path = Path(robot_path)
+    lines = []
+    for folder in (robot_path.parent / "boundmaps", CACHE_DIR):
+        for path in sorted(folder.glob(f"{robot_path.stem}-*")):
+            if path.suffix not in (".npz", STORE_SUFFIX) or path.name.endswith(f"{ident.key[:12]}{path.suffix}"):
+                continue
+            stored = _identity_of(path)
+            try:
+                ident.check(stored, str(path))
+            except BoundMapMismatchError as exc:
+                lines.append(f"{path} is not used: '{exc.key}' is {exc.stored!r} there, {exc.requested!r} now")
+    return lines
+
+
+def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1, echo=print, *,
+                              scheduler=None, evaluator=None):
+    """Shipped or cached map with the right key, else compute it (resumable zarr store).
+
+    Parameters
+    ----------
+    robot_path : path
+        Robot model file (its content is part of the key).
+    robot : Robot
+        The robot loaded from ``robot_path``.
+    spec : MapSpec or sequence of int
+    settings : ModelSettings
+    n_jobs : int
+        Local worker processes when computing.
+    echo : callable
+        Progress messages (also names maps of this robot that are stale and why).
+    scheduler : str or distributed.Client, optional, keyword-only
+        Dask scheduler address for computing.
+    evaluator : callable, optional, keyword-only
+        Default :func:`ctrplan.mechanics.evaluate_bound`.
+
+    Returns
+    -------
+    field : BoundField
+    source : str
+        ``"shipped"``, ``"cache"`` or ``"computed"``.
+    seconds : float
+        Wall time spent loading or computing [s].
+
+    Raises
+    ------
+    BoundMapMismatchError
+        The cache store holds a map computed for another identity under the same key prefix.
+    """
+    if evaluator is None:
+        from ..mechanics import evaluate_bound as evaluator
+    t0 = time.perf_counter()
+    robot_path = Path(robot_path)
+    text = robot_path.read_text()
+    ident = map_identity(robot, settings, spec, evaluator, text)
+    shipped, cache = map_paths(robot_path, ident.key)
+    for path, source in ((shipped.with_suffix(".npz"), "shipped"), (shipped.with_suffix(STORE_SUFFIX), "shipped"),
+                         (cache.with_suffix(STORE_SUFFIX), "cache"), (cache.with_suffix(".npz"), "cache")):
+        if path.exists():
+            try:
+                return load_bound_map(path, key=ident.key), source, time.perf_counter() - t0
+            except IncompleteBoundMapError:
+                continue
+            except BoundFieldKeyError as exc:
+                echo(f"ignoring {path}: {exc}")
+    for line in _stale_maps(robot_path, ident):
+        echo(line)
+    store = cache.with_suffix(STORE_SUFFIX)
+    echo(f"computing the bound map of {robot_path.name} ({', '.join(map_coordinates(robot).names)}; "
+         f"{ident.spec}) into {store}; interrupt and rerun to resume")
+    store.parent.mkdir(parents=True, exist_ok=True)
+    run = compute_bound_map_store(robot, evaluator, spec, settings, store, n_jobs, scheduler=scheduler,
+                                  robot_file_text=text, metadata={"robot_file": robot_path.name})
+    return run.field, "computed", time.perf_counter() - t0
