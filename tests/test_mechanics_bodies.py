@@ -8,9 +8,8 @@ import pytest
 
 from ctrplan.errors import JointLimitError
 from ctrplan.io.robot_file import load_robot
-from ctrplan.mechanics import ModelSettings, solve_standard, solve_standard_batch
+from ctrplan.mechanics import ModelSettings, solve_standard, solve_standard_batch, solve_standard_bodies
 from ctrplan.mechanics import _standard_bodies
-from ctrplan.mechanics._standard_bodies import solve_standard_bodies
 
 REPO = Path(__file__).resolve().parent.parent
 SETTINGS = ModelSettings(multistart=0)

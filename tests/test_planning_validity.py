@@ -11,8 +11,7 @@ from ompl import base as ob, geometric as og, util as ou
 
 from ctrplan.io.robot_file import load_robot
 from ctrplan.io.scenario import load_scenario
-from ctrplan.mechanics import ModelSettings
-from ctrplan.mechanics._standard_bodies import solve_standard_bodies
+from ctrplan.mechanics import ModelSettings, solve_standard_bodies
 from ctrplan.planning import BoundCostObjective, CollisionChecker, JointStateSpace, ValidityChecker
 from ctrplan.planning.validity import BatchValidityChecker, bisection_order, use_motion_validator
 from test_planning_helpers import fake_robot

@@ -18,10 +18,12 @@ from .discrete import TubeChain, chain_jacobians, forward_kinematics
 from .grid import ArcLengthGrid, build_grid
 from .results import BoundResult, ContactSolution, Diagnostics, ModelSettings, StandardSolution
 from ._standard_batch import StandardBatch, solve_standard_batch
+from ._standard_bodies import StandardBodies, solve_standard_bodies
 from .standard import solve_standard
 
 __all__ = [
     "MECHANICS_VERSION", "solve_standard", "solve_standard_batch", "StandardBatch", "solve_clearance", "solve_friction", "solve_contact", "evaluate_bound",
     "all_eta", "ModelSettings", "StandardSolution", "ContactSolution", "BoundResult", "Diagnostics",
     "TubeChain", "forward_kinematics", "chain_jacobians", "ArcLengthGrid", "build_grid",
+    "StandardBodies", "solve_standard_bodies",
 ]
