@@ -48,17 +48,11 @@ MAX_MOTION_LENGTH = 0.04
 
 def _load_field(sc, settings):
     """The scenario's bound map, loaded as ctrplan/pipeline.py loads it (shipped, cached, else
-    computed). The map API is moving from ctrplan.pipeline to ctrplan.boundmap; both are tried."""
-    try:
-        from ctrplan.boundmap import load_or_compute_bound_map
-        from ctrplan.pipeline import map_spec
+    computed)."""
+    from ctrplan.boundmap import load_or_compute_bound_map
+    from ctrplan.pipeline import map_spec
 
-        spec = map_spec(sc)
-    except ImportError:
-        from ctrplan.pipeline import default_resolution, load_or_compute_bound_map
-
-        spec = tuple(sc.bound_field.resolution) if sc.bound_field.resolution else default_resolution(sc.robot)
-    return load_or_compute_bound_map(sc.robot_file, sc.robot, spec, settings, n_jobs=1, echo=print)
+    return load_or_compute_bound_map(sc.robot_file, sc.robot, map_spec(sc), settings, n_jobs=1, echo=print)
 
 
 def _stats(label, t_old, t_new, unit="ms"):
