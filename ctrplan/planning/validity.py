@@ -244,7 +244,6 @@ class BatchValidityChecker:
 
     def _evaluate(self, Q) -> np.ndarray:
         """Validity of distinct uncached states Q (m, n_joints), cheapest test first."""
-        m = Q.shape[0]
         if self.reference is not None:
             t0 = time.perf_counter()
             v = np.array([bool(self.reference(q)) for q in Q], dtype=bool)
