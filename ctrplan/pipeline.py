@@ -26,16 +26,14 @@ from .boundmap import MapSpec, default_spec, load_or_compute_bound_map
 from .errors import JointLimitError, UnreachableGoalError
 from .io.scenario import load_scenario
 from .mechanics import ModelSettings, evaluate_bound
-from .planning import (BoundCostObjective, CollisionChecker, JointStateSpace, ValidityChecker,
-                       bounds_given_last_motion, order_path, plan, resolve_goal)
+from .planning import BoundCostObjective, JointStateSpace, bounds_given_last_motion, resolve_goal
+from .planning.route import plan_route, route_checks
 
 __all__ = ["run_plan", "map_spec"]
 
 # Spacing of interpolated-bound samples along an ordered path for the bound plot and the
 # max-bound comparison [m of the weighted joint metric].
 PATH_SAMPLE_SPACING = 2e-3
-# Length of the capsules that sweep the robot body for collision checking [m].
-COLLISION_SEGMENT = 5e-3
 
 
 def map_spec(scenario) -> MapSpec:
@@ -63,22 +61,6 @@ def _dense_path(ordered_q, motions, joint_space, spacing):
     return np.array(pts), np.array(s), seg_motion
 
 
-def _plan_route(robot, start, goals_q, validity, field, weight, sc, iterations, joint_space):
-    legs, q_prev, waypoints = [], start, [start]
-    for gi, q_goal in enumerate(goals_q):
-        res = plan(robot, q_prev, q_goal, validity, BoundCostObjective.factory(field, bound_weight=weight),
-                   planner=sc.planner.name, iterations=iterations, time_limit=sc.planner.time_limit,
-                   seed=sc.planner.seed + gi, joint_space=joint_space, range_=sc.planner.range)
-        legs.append(res)
-        wp = np.array(res.waypoints)
-        # continue from where the previous leg ended (unwrapped angles stay continuous)
-        offset = waypoints[-1] - wp[0]
-        waypoints.extend(list(wp[1:] + offset))
-        q_prev = waypoints[-1]
-    ordered = order_path(np.array(waypoints), robot, validity, joint_space=joint_space)
-    return legs, ordered
-
-
 def _route_report(ordered, robot, field, settings, joint_space):
     """Interpolated bounds sampled along an ordered path, and the exact bound at its waypoints."""
     qd, sd, md = _dense_path(ordered.q, ordered.motions, joint_space, PATH_SAMPLE_SPACING)
@@ -87,8 +69,12 @@ def _route_report(ordered, robot, field, settings, joint_space):
     # along a rotation phase the friction bound applies; along (and after) a translation, the
     # translation-last bound (Section V-B)
     given_last = np.where(np.array(md) == "translation", tlast, friction)
+    # the map's value of the quantity the exact report gives at each waypoint
+    motions = np.array(ordered.motions)
+    planned = np.where(motions == "translation", field(ordered.q, "translation_last_position"),
+                       field(ordered.q, "position"))
     return {"dense_q": qd, "dense_s": sd, "dense_motion": md, "dense_friction": friction,
-            "dense_translation_last": tlast, "dense_given_last": given_last,
+            "dense_translation_last": tlast, "dense_given_last": given_last, "planned": planned,
             "exact": bounds_given_last_motion(ordered, robot, evaluate_bound, settings)}
 
 
@@ -138,11 +124,10 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
     field, map_source, map_time = load_or_compute_bound_map(sc.robot_file, robot, spec, settings,
                                                              n_jobs=n_jobs, echo=echo)
     echo(f"bound map: {map_source} in {map_time:.1f} s")
-    # 5 mm capsules: chord error 0.06 mm on the tightest precurvature radius (55 mm)
-    collision = CollisionChecker([o.as_dict() for o in sc.obstacles], segment_length=COLLISION_SEGMENT)
     check_settings = settings.replace(multistart=0)  # the map flags multi-equilibrium regions
-    validity = ValidityChecker(robot, collision=collision, field=field, settings=check_settings)
     joint_space = JointStateSpace(robot)
+    obstacles = [o.as_dict() for o in sc.obstacles]
+    validity = route_checks(robot, obstacles, field, check_settings, joint_space=joint_space).search
     if not validity(sc.start):
         raise UnreachableGoalError(f"{sc.file}: start configuration {sc.joint_dict(sc.start)} is invalid "
                                    "(collision, elastic instability or outside the bound map's valid region)")
@@ -157,16 +142,23 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
     routes = {}
     modes = [("bound_aware", sc.planner.bound_weight)] + ([("bound_blind", 0.0)] if compare_blind else [])
     for mode, weight in modes:
+        checks = route_checks(robot, obstacles, field, check_settings, joint_space=joint_space)
         t0 = time.perf_counter()
-        legs, ordered = _plan_route(robot, sc.start, [g.q for g in goals], validity, field, weight, sc, iters,
-                                    joint_space)
+        route = plan_route(robot, sc.start, [g.q for g in goals], checks,
+                           BoundCostObjective.factory(field, bound_weight=weight), planner=sc.planner.name,
+                           iterations=iters, seed=sc.planner.seed, time_limit=sc.planner.time_limit,
+                           range_=sc.planner.range, joint_space=joint_space)
+        legs, ordered = route.legs, route.ordered
         plan_time = time.perf_counter() - t0
         t0 = time.perf_counter()
         rep = _route_report(ordered, robot, field, settings, joint_space)
         exact_time = time.perf_counter() - t0
-        routes[mode] = dict(legs=legs, ordered=ordered, report=rep, plan_time=plan_time, exact_time=exact_time)
+        routes[mode] = dict(legs=legs, ordered=ordered, report=rep, plan_time=plan_time, exact_time=exact_time,
+                            checks=checks.counters(), max_body_step_mm=checks.final.max_body_step * 1e3)
         lm = rep["exact"]
-        echo(f"{mode}: {len(ordered)} ordered waypoints, planning {plan_time:.1f} s; exact bound at waypoints: "
+        echo(f"{mode}: {len(ordered)} ordered waypoints, planning {plan_time:.1f} s "
+             f"({checks.search.n_evaluations} states checked, final check {checks.final.n_states} states, "
+             f"{ordered.n_subdivisions} bisections, {ordered.n_repairs} repairs); exact bound at waypoints: "
              f"max {np.nanmax(lm.position) * 1e3:.2f} mm, final {lm.position[-1] * 1e3:.2f} mm")
 
     aware = routes["bound_aware"]
@@ -179,12 +171,13 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
                               + "; ".join(str(v) for v in violations[:5]))
 
     lm = aware["report"]["exact"]
+    planned = aware["report"]["planned"]
     rows = []
     for k, w in enumerate(ordered.waypoints):
         res = lm.results[k]
         tip = res.standard.tip_position if res is not None else np.full(3, np.nan)
         rows.append({"motion": w.motion, "q": w.q, "tip": tip, "bound_position_m": float(lm.position[k]),
-                     "bound_angle_rad": float(lm.angle[k]),
+                     "planned_bound_m": float(planned[k]), "bound_angle_rad": float(lm.angle[k]),
                      "bound_kind": "translation_last" if w.motion == "translation" else "friction"})
 
     def route_summary(r):
@@ -200,7 +193,13 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
             "max_interpolated_friction_bound_along_path_mm": float(np.nanmax(rep["dense_friction"]) * 1e3),
             "max_interpolated_bound_given_last_motion_mm": float(np.nanmax(rep["dense_given_last"]) * 1e3),
             "mean_interpolated_friction_bound_along_path_mm": float(np.nanmean(rep["dense_friction"]) * 1e3),
+            "max_planned_bound_at_waypoints_mm": float(np.nanmax(rep["planned"]) * 1e3),
+            "max_planned_minus_exact_bound_mm": float(np.nanmax(np.abs(rep["planned"] - lmr.position)) * 1e3),
             "planning_time_s": r["plan_time"], "exact_model_time_s": r["exact_time"],
+            "checks": r["checks"],
+            "final_check": {"phases_checked": r["ordered"].n_phase_checks, "bisections": r["ordered"].n_subdivisions,
+                            "repairs": r["ordered"].n_repairs, "failures": list(r["ordered"].failures),
+                            "max_body_step_mm": r["max_body_step_mm"]},
             "planner": [{"planner": leg.planner, "iterations": leg.iterations, "n_vertices": leg.n_vertices,
                          "solve_time_s": leg.solve_time, "simplify_time_s": leg.simplify_time,
                          "seed": leg.seed, "status": leg.status, "cost": leg.cost} for leg in r["legs"]],
@@ -217,7 +216,11 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
         "bound_aware": route_summary(aware),
         "duration_s": float(traj.duration) if traj is not None else None,
         "model_evaluations": {
-            "validity_calls": validity.n_calls, "standard_model_solves": validity.n_evaluations,
+            "validity_calls": int(sum(r["checks"]["validity_calls"] for r in routes.values()) + validity.n_calls),
+            "standard_model_solves": int(sum(r["checks"]["standard_model_solves"] for r in routes.values())
+                                         + validity.n_model),
+            "collision_time_s": float(sum(r["checks"]["search_collision_time_s"] for r in routes.values())
+                                      + validity.seconds_collision),
             "ik_model_evaluations": int(sum(g.n_model_evaluations for g in goals)),
             "exact_bound_evaluations": int(sum(len(r["ordered"]) for r in routes.values())),
         },

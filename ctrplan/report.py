@@ -10,8 +10,9 @@ Column schema (SI units, full float precision):
 ``path.csv``
     ``waypoint`` (0-based index), ``motion`` (``start``, ``rotation``, ``translation``), one column
     per joint (``alpha_i`` [rad], ``beta_i`` [m]), ``tip_x``, ``tip_y``, ``tip_z`` [m],
-    ``bound_position_m`` [m], ``bound_angle_rad`` [rad], ``bound_kind`` (``friction`` or
-    ``translation_last``).
+    ``bound_position_m`` [m] (the exact bound given the last motion), ``planned_bound_m`` [m] (the same
+    quantity as the planner's bound map gave it; empty when no map was used), ``bound_angle_rad``
+    [rad], ``bound_kind`` (``friction`` or ``translation_last``).
 ``trajectory.csv``
     ``t`` [s], then per joint ``<name>`` [rad or m], ``<name>_vel`` [per s], ``<name>_acc``
     [per s^2].
@@ -43,7 +44,7 @@ SUMMARY_FILE = "summary.json"
 BOUND_KINDS = ("friction", "translation_last")
 _MOTIONS = (START, "rotation", "translation")
 _TIP_COLUMNS = ("tip_x", "tip_y", "tip_z")
-_BOUND_COLUMNS = ("bound_position_m", "bound_angle_rad", "bound_kind")
+_BOUND_COLUMNS = ("bound_position_m", "planned_bound_m", "bound_angle_rad", "bound_kind")
 
 # Unit suffixes of summary keys -> (unit shown, factor from the key's unit to the shown unit).
 # Longest suffix first; lengths in m are shown in mm and angles in rad in degrees.
@@ -80,8 +81,9 @@ def write_plan_outputs(out_dir, ordered_path_rows: Sequence[Mapping[str, Any]],
         (array-like, shape (n_joints,), [rad or m], in the order of ``joint_names``) or one key per
         joint name; the tip position, either ``tip`` (shape (3,) [m]) or ``tip_x``, ``tip_y``,
         ``tip_z`` [m]; ``bound_position_m`` [m]; ``bound_angle_rad`` [rad]; ``bound_kind``
-        (``"friction"`` or ``"translation_last"``). An optional ``waypoint`` index defaults to the
-        row number. Other keys are ignored.
+        (``"friction"`` or ``"translation_last"``). Optional: ``planned_bound_m`` [m] (the bound
+        map's value of the same quantity; NaN, written empty, when missing) and a ``waypoint``
+        index (default: the row number). Other keys are ignored.
     trajectory : Trajectory or None
         Written to ``trajectory.csv`` (skipped when None).
     summary : mapping
@@ -186,8 +188,9 @@ def _path_csv(rows: Sequence[Mapping[str, Any]], names: list[str]) -> str:
         kind = _require(row, "bound_kind", r)
         if kind not in BOUND_KINDS:
             raise ValueError(f"path row {r}: bound_kind must be one of {BOUND_KINDS}, got {kind!r}")
+        planned = float(row.get("planned_bound_m", float("nan")))
         writer.writerow([int(row.get("waypoint", r)), motion, *map(_num, q), *map(_num, tip),
-                         _num(_require(row, "bound_position_m", r)),
+                         _num(_require(row, "bound_position_m", r)), _num(planned) if math.isfinite(planned) else "",
                          _num(_require(row, "bound_angle_rad", r)), kind])
     return buf.getvalue()
 

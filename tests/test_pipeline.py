@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import csv
 import json
-import re
 import sys
 from pathlib import Path
 
@@ -30,7 +29,6 @@ from ctrplan.boundmap import BoundField, map_coordinates, uniform_axis
 REPO = Path(__file__).resolve().parents[1]
 TABLE7 = REPO / "model" / "ha2019-table7-calibrated.toml"
 SCENARIOS = REPO / "scenarios"
-BOUNDMAPS = REPO / "model" / "boundmaps"
 
 DRIVE = """
 [drive]
@@ -133,7 +131,7 @@ radius_m = 0.004
     def no_plan(*args, **kwargs):
         raise UnreachableGoalError("planner stopped by the test")
 
-    monkeypatch.setattr(pipeline, "plan", no_plan)
+    monkeypatch.setattr(pipeline, "plan_route", no_plan)
     code, _, err = _run_entry(monkeypatch, capsys, ["plan", str(_scenario(tmp_path, q, "", name="free")),
                                                     "--out", str(out), "--jobs", "1"])
     assert code == 2 and "planner stopped by the test" in err, err
@@ -147,7 +145,7 @@ def test_no_path_within_budget_fails_without_outputs(tmp_path, monkeypatch, caps
         calls.append(kwargs.get("iterations"))
         raise UnreachableGoalError(f"RRTstar found no exact path in {kwargs.get('iterations')} iterations")
 
-    monkeypatch.setattr(pipeline, "plan", no_plan)
+    monkeypatch.setattr(pipeline, "plan_route", no_plan)
     sc = _scenario(tmp_path, "{alpha_2 = 2.0, alpha_3 = 2.0, beta_3 = -0.06}")
     out = tmp_path / "out"
     code, _, err = _run_entry(monkeypatch, capsys, ["plan", str(sc), "--out", str(out), "--jobs", "1",
@@ -159,26 +157,11 @@ def test_no_path_within_budget_fails_without_outputs(tmp_path, monkeypatch, caps
 
 
 # --------------------------------------------------------------------------- full run (slow)
-def _shipped_map(prefer=None):
-    """(resolution, ds) of a shipped bound map of the Table VII robot (the one with resolution
-    ``prefer`` if shipped), or None."""
-    found = []
-    for path in sorted(BOUNDMAPS.glob(f"{TABLE7.stem}-*.npz")):
-        meta = BoundField.load(path).metadata
-        found.append((tuple(int(r) for r in meta["resolution"]), float(meta["settings"]["ds"])))
-    for res, ds in found:
-        if prefer is not None and res == tuple(prefer):
-            return res, ds
-    return found[0] if found else None
-
-
-def _shipped_scenario_with_map(tmp_path, name, resolution, ds):
-    """A copy of a shipped scenario whose [bound_field] matches the shipped map, paths absolute."""
+def _shipped_scenario(tmp_path, name):
+    """A copy of a shipped scenario with absolute paths (its map is the shipped one)."""
     text = (SCENARIOS / f"{name}.toml").read_text()
     text = text.replace('robot = "../model/', f'robot = "{(REPO / "model").as_posix()}/')
     text = text.replace('file = "meshes/', f'file = "{(SCENARIOS / "meshes").as_posix()}/')
-    text = re.sub(r"resolution = \[[^\]]*\]", f"resolution = {list(resolution)}", text)
-    text = re.sub(r"ds_m = [0-9.eE+-]+", f"ds_m = {ds!r}", text)
     path = tmp_path / f"{name}.toml"
     path.write_text(text)
     return path
@@ -197,15 +180,10 @@ def test_shipped_scenario_bound_aware_beats_bound_blind(tmp_path, monkeypatch):
 
     Measured (2026-11-21): exact bound at the ordered waypoints, max 3.17 mm (bound-aware) versus
     4.92 mm (bound-blind); interpolated along the path 3.24 versus 4.96 mm; mean friction bound
-    along the path 2.93 versus 3.70 mm. About 4 minutes on 2 cores.
+    along the path 2.93 versus 3.70 mm.
     """
-    from ctrplan.io.scenario import load_scenario
-
-    shipped = _shipped_map(load_scenario(SCENARIOS / "obstacles.toml").bound_field.resolution)
-    if shipped is None:
-        pytest.skip(f"no shipped bound map of {TABLE7.name} in {BOUNDMAPS}")
     monkeypatch.chdir(tmp_path)  # a computed map would be cached under ./.cache
-    sc = _shipped_scenario_with_map(tmp_path, "obstacles", *shipped)
+    sc = _shipped_scenario(tmp_path, "obstacles")
     out = tmp_path / "out"
     summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, compare_blind=True, echo=lambda *a: None)
     assert summary["bound_map"]["source"] == "shipped"
@@ -245,6 +223,12 @@ def _check_outputs(out: Path, robot, scenario_path: Path):
         assert changed.any(), f"waypoint {k} repeats waypoint {k - 1}"
         assert np.all(kinds[changed] == motions[k]), (k, motions[k], q[k - 1], q[k])
     np.testing.assert_allclose(q[0], sc.start, atol=1e-12)
+    # the bound the planner used next to the exact one, the same quantity (given the last motion)
+    exact = np.array([float(r["bound_position_m"]) for r in rows])
+    planned = np.array([float(r["planned_bound_m"]) for r in rows])
+    assert np.all(np.isfinite(exact)) and np.all(np.isfinite(planned))
+    assert [r["bound_kind"] for r in rows] == ["translation_last" if m == "translation" else "friction"
+                                              for m in motions]
     # the goals change both joint groups, so both phases occur (the checks above are not vacuous)
     assert {"rotation", "translation"} <= set(motions[1:])
     # every rotation phase of a planner segment comes before its translation: the last phase

@@ -84,3 +84,59 @@ def multilinear(u, axes, start, size, periodic, strides, values, valid, columns,
             for c in range(nc):
                 out[p, c] += w * values[flat, columns[c]]
         ok[p] = good
+
+
+@njit(cache=True)
+def point_value(u, axes, start, size, periodic, strides, values, valid, column, eps):
+    """Multilinear value of one column at one point ``u`` (d,); returns (value, ok) as
+    :func:`multilinear` computes them (ok False where an invalid node carries weight)."""
+    d = u.shape[0]
+    value = 0.0
+    good = True
+    lo = np.empty(d, dtype=np.int64)
+    hi = np.empty(d, dtype=np.int64)
+    t = np.empty(d)
+    for k in range(d):
+        a0 = start[k]
+        n = size[k]
+        x = u[k]
+        if periodic[k]:
+            h = 2.0 * np.pi / n
+            y = (x - axes[a0]) / h
+            y = y - n * np.floor(y / n)
+            i = int(np.floor(y))
+            if i >= n:
+                i = n - 1
+            lo[k] = i
+            hi[k] = (i + 1) % n
+            t[k] = y - i
+        else:
+            first = axes[a0]
+            last = axes[a0 + n - 1]
+            if x <= first:
+                lo[k], hi[k], t[k] = 0, 1, 0.0
+            elif x >= last:
+                lo[k], hi[k], t[k] = n - 2, n - 1, 1.0
+            else:
+                i = np.searchsorted(axes[a0:a0 + n], x, side="right") - 1
+                if i > n - 2:
+                    i = n - 2
+                lo[k] = i
+                hi[k] = i + 1
+                t[k] = (x - axes[a0 + i]) / (axes[a0 + i + 1] - axes[a0 + i])
+    for corner in range(1 << d):
+        w = 1.0
+        flat = 0
+        for k in range(d):
+            if (corner >> k) & 1:
+                w *= t[k]
+                flat += hi[k] * strides[k]
+            else:
+                w *= 1.0 - t[k]
+                flat += lo[k] * strides[k]
+        if w <= eps:
+            continue
+        if not valid[flat]:
+            good = False
+        value += w * values[flat, column]
+    return value, good

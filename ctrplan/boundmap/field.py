@@ -168,6 +168,22 @@ class BoundField:
         out[~ok] = np.nan
         return out, ok
 
+    def kernel_arrays(self, quantity: str = "position") -> tuple:
+        """Arrays of the compiled interpolation of one quantity, for compiled callers:
+        ``(matrix (d, n_joints), offset (d,), axes, start, size, periodic, strides, values, valid,
+        column, eps)`` with the joint-to-map coordinates first (identity without ``coordinates``);
+        the rest are the arguments of ``ctrplan.boundmap._interp.point_value`` after ``u``."""
+        if quantity not in QUANTITIES:
+            raise ValueError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")
+        d = len(self.axes)
+        if self.coordinates is None:
+            matrix, offset = np.eye(d), np.zeros(d)
+        else:
+            matrix, offset = self.coordinates.matrix, self.coordinates.offset
+        return (np.ascontiguousarray(matrix, dtype=float), np.ascontiguousarray(offset, dtype=float),
+                self._axes_flat, self._start, self._size, self.periodic, self._strides, self._flat_values,
+                self._flat_valid, int(QUANTITIES.index(quantity)), _WEIGHT_EPS)
+
     def __call__(self, q, quantity: str = "position"):
         """Interpolated bound at joint vectors.
 

@@ -12,6 +12,9 @@ Building blocks (each usable on its own in an OMPL setup, see ``docs/planning.md
 - :func:`plan` with :data:`PLANNERS`, :class:`ValidityChecker`, :class:`PlanResult`.
 - :func:`order_path` (rotate, then translate) and :func:`bounds_given_last_motion`.
 - :func:`resolve_goal` for joint or tip-position goals.
+- :class:`~ctrplan.planning.validity.BatchValidityChecker` (states and motions in compiled
+  batches, an OMPL motion validator), :class:`~ctrplan.planning.verify.MotionVerifier` (the
+  final check of ordered phases) and :func:`plan_route` (plan, order, check, repair).
 """
 
 from ..boundmap import (QUANTITIES, BoundField, BoundFieldKeyError, InterpolationError, field_key,
@@ -22,7 +25,10 @@ from .goals import GoalSolution, JointGoal, TaskSpaceGoal, resolve_goal
 from .objective import DEFAULT_BOUND_WEIGHT, BoundCostObjective
 from .ordering import LastMotionBounds, OrderedPath, OrderedWaypoint, bounds_given_last_motion, order_path
 from .planners import PLANNERS, PlanResult, ValidityChecker, plan
+from .route import Route, RouteChecks, plan_route, route_checks
 from .space import DEFAULT_METERS_PER_RADIAN, JointStateSpace, unwrap_path, wrap_angle
+from .validity import BatchMotionValidator, BatchValidityChecker, use_motion_validator
+from .verify import MotionCheck, MotionVerifier
 
 __all__ = [
     "JointStateSpace", "DEFAULT_METERS_PER_RADIAN", "unwrap_path", "wrap_angle",
@@ -33,4 +39,6 @@ __all__ = [
     "PLANNERS", "PlanResult", "ValidityChecker", "plan",
     "OrderedPath", "OrderedWaypoint", "LastMotionBounds", "order_path", "bounds_given_last_motion",
     "JointGoal", "TaskSpaceGoal", "GoalSolution", "resolve_goal",
+    "BatchValidityChecker", "BatchMotionValidator", "use_motion_validator", "MotionVerifier", "MotionCheck",
+    "Route", "RouteChecks", "plan_route", "route_checks",
 ]

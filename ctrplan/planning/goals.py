@@ -3,9 +3,12 @@
 Inverse kinematics minimizes ``|p_tip(q) - p_target|^2`` with ``scipy.optimize.least_squares``
 (trust-region reflective, translation limits as bounds, periodic rotations unbounded) on the
 standard model's tip position, started from every node of a coarse grid of the joint space
-(plus a seeded jitter). All converged solutions within tolerance that pass the validity
-function are kept; the one with the smallest friction bound (from a
-:class:`~ctrplan.planning.BoundField`, or the smallest tip error without one) is chosen.
+(plus a seeded jitter) or, when that grid would exceed ``max_starts`` (six joints: 3^6 = 729
+starts), from ``max_starts`` seeded Latin-hypercube points of the joint box. All converged
+solutions within tolerance that pass the validity function are kept; the one with the smallest
+friction bound (from a :class:`~ctrplan.boundmap.BoundField`, or the smallest tip error without
+one) is chosen. A redundant robot (more than three joints) has a manifold of solutions, and
+more starts find lower bounds on it.
 """
 
 from __future__ import annotations
@@ -18,10 +21,14 @@ from scipy.optimize import least_squares
 from ..errors import CtrplanError, UnreachableGoalError
 from .space import wrap_angle
 
-__all__ = ["JointGoal", "TaskSpaceGoal", "GoalSolution", "resolve_goal", "DEFAULT_IK_STARTS_PER_JOINT"]
+__all__ = ["JointGoal", "TaskSpaceGoal", "GoalSolution", "resolve_goal", "DEFAULT_IK_STARTS_PER_JOINT",
+           "DEFAULT_IK_MAX_STARTS"]
 
 # Coarse start grid: nodes per joint (3 joints -> 27 starts, ~1-3 s with a ~1 ms model).
 DEFAULT_IK_STARTS_PER_JOINT = 3
+# Largest number of starts; a bigger grid is replaced by this many Latin-hypercube points
+# (six joints: 64 starts of ~0.1 s each instead of 729).
+DEFAULT_IK_MAX_STARTS = 64
 
 # Residual returned where the model fails, so least_squares steers away [m].
 _FAILED_RESIDUAL = 1.0
@@ -73,6 +80,17 @@ class GoalSolution:
     n_model_evaluations: int = 0
 
 
+def _starts(robot, n_per_joint, max_starts, rng):
+    """The start grid, or ``max_starts`` seeded Latin-hypercube points when the grid is larger."""
+    n = len(robot.joints)
+    if n_per_joint ** n <= max_starts:
+        return _start_grid(robot, n_per_joint, rng)
+    from scipy.stats import qmc
+
+    u = qmc.LatinHypercube(d=n, seed=rng).random(int(max_starts))
+    return robot.joint_lower + u * (robot.joint_upper - robot.joint_lower)
+
+
 def _start_grid(robot, n_per_joint, rng):
     axes = []
     for j in robot.joints:
@@ -90,7 +108,7 @@ def _start_grid(robot, n_per_joint, rng):
 
 def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None, settings=None, *,
                  starts_per_joint: int = DEFAULT_IK_STARTS_PER_JOINT, seed: int = 0,
-                 max_nfev: int = 60) -> GoalSolution:
+                 max_nfev: int = 60, max_starts: int = DEFAULT_IK_MAX_STARTS) -> GoalSolution:
     """Turn a goal into one joint vector.
 
     Parameters
@@ -110,6 +128,9 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
     settings : ModelSettings, optional
     starts_per_joint : int, keyword-only
         Multi-start grid nodes per joint.
+    max_starts : int, keyword-only
+        Largest number of starts: a bigger grid is replaced by this many seeded Latin-hypercube
+        points of the joint box.
     seed : int, keyword-only
         Seed of the start jitter.
     max_nfev : int, keyword-only
@@ -172,7 +193,8 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
     rng = np.random.default_rng(seed)
     best_err, best_q = np.inf, None
     sols, errs = [], []
-    for q0 in _start_grid(robot, int(starts_per_joint), rng):
+    starts = _starts(robot, int(starts_per_joint), int(max_starts), rng)
+    for q0 in starts:
         res = least_squares(residual, q0, bounds=(lo, hi), method="trf", max_nfev=max_nfev,
                             x_scale=np.where([j.kind == "rotation" for j in robot.joints], 1.0, 0.01))
         q = np.where(periodic, wrap_angle(res.x), res.x)
@@ -193,7 +215,7 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
         raise UnreachableGoalError(
             f"no valid inverse-kinematics solution within {tol * 1e3:.3g} mm of the tip target "
             f"({', '.join(f'{v * 1e3:.2f}' for v in target)}) mm; best distance reached "
-            f"{best_err * 1e3:.3g} mm{where} from {int(starts_per_joint) ** len(robot.joints)} starts")
+            f"{best_err * 1e3:.3g} mm{where} from {len(starts)} starts")
     cand = np.array(sols)
     errs = np.array(errs)
     if field is not None:

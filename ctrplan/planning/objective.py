@@ -14,12 +14,18 @@ the plain weighted path length (the bound-blind baseline with identical metric).
 Following the project's OMPL notes this subclasses ``ob.OptimizationObjective`` directly (a
 Python ``StateCostIntegralObjective`` subclass is ignored by the planners) and caches b(q) per
 state and the cost per motion, since RRT* re-evaluates the same few hundred states ~10^5 times.
+With a :class:`~ctrplan.boundmap.BoundField` as the bound, a motion's cost (metric, samples,
+interpolation, trapezoid rule) is one compiled call (:func:`_segment_cost`), ~50 times less
+than the same steps in numpy; any other bound callable goes through numpy.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from ompl import base as ob
+
+from ..boundmap._interp import point_value
 
 __all__ = ["BoundCostObjective", "DEFAULT_BOUND_WEIGHT", "DEFAULT_SAMPLE_SPACING"]
 
@@ -34,6 +40,47 @@ DEFAULT_SAMPLE_SPACING = 2e-3
 # Cost of the bound where the field is invalid [m] (finite so that OMPL's cost arithmetic stays
 # well defined; such states are also rejected by the validity checker).
 DEFAULT_INVALID_PENALTY = 1.0
+
+
+@njit(cache=True)
+def _segment_cost(q0, q1, periodic, weights, is_rotation, spacing, weight, penalty, matrix, offset, axes, start, size,
+                  periodic_u, strides, values, valid, column, eps):
+    """Compiled :meth:`BoundCostObjective.segment_cost` with a bound map: weighted length L of
+    the straight motion (short way round periodic joints), then L + w * trapezoid integral of the
+    map's bound at m + 1 equally spaced samples, m = ceil(L / spacing); invalid or non-finite
+    values count as ``penalty``. Returns (cost, number of bound samples)."""
+    n = q0.shape[0]
+    dq = np.empty(n)
+    rot = 0.0
+    tr = 0.0
+    for j in range(n):
+        x = q1[j] - q0[j]
+        if periodic[j]:
+            x = (x + np.pi) % (2.0 * np.pi) - np.pi
+        dq[j] = x
+        if is_rotation[j]:
+            rot += abs(x) * weights[j]
+        else:
+            tr += x * x
+    length = rot + np.sqrt(tr)
+    if weight == 0.0 or length == 0.0:
+        return length, 0
+    m = max(1, int(np.ceil(length / spacing)))
+    d = matrix.shape[0]
+    u = np.empty(d)
+    acc = 0.0
+    for k in range(m + 1):
+        t = k / m
+        for i in range(d):
+            x = offset[i]
+            for j in range(n):
+                x += matrix[i, j] * (q0[j] + t * dq[j])
+            u[i] = x
+        b, ok = point_value(u, axes, start, size, periodic_u, strides, values, valid, column, eps)
+        if not ok or not np.isfinite(b):
+            b = penalty
+        acc += 0.5 * b if (k == 0 or k == m) else b
+    return length + weight * length * acc / m, m + 1
 
 
 class BoundCostObjective(ob.OptimizationObjective):
@@ -88,6 +135,12 @@ class BoundCostObjective(ob.OptimizationObjective):
         self._motion_cache: dict[tuple[bytes, bytes], float] = {}
         self.n_bound_evaluations = 0
         self.n_motion_calls = 0
+        self._kernel = None
+        if self.bound_weight > 0.0 and hasattr(bound, "kernel_arrays"):
+            js = joint_space
+            self._kernel = (np.ascontiguousarray(js.periodic), np.ascontiguousarray(js.weights, dtype=float),
+                            np.ascontiguousarray(js.is_rotation), self.sample_spacing, self.bound_weight,
+                            self.invalid_penalty) + tuple(bound.kernel_arrays("position"))
 
     @classmethod
     def factory(cls, bound=None, **kwargs):
@@ -130,6 +183,10 @@ class BoundCostObjective(ob.OptimizationObjective):
         """Motion cost of the straight segment ``q0 -> q1`` (shapes (n_joints,)) [m]."""
         q0 = np.asarray(q0, dtype=float)
         q1 = np.asarray(q1, dtype=float)
+        if self._kernel is not None:
+            cost, m = _segment_cost(q0, q1, *self._kernel)
+            self.n_bound_evaluations += m
+            return float(cost)
         length = float(self.joint_space.distance(q0, q1))
         if self.bound_weight == 0.0 or length == 0.0:
             return length

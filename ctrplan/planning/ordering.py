@@ -8,9 +8,15 @@ straight segment ``q_a -> q_b`` of a planned path into
 1. a rotation phase: rotation joints move from ``q_a`` to ``q_b``, translations held at ``q_a``;
 2. a translation phase: translation joints move, rotations held at ``q_b``.
 
-Both phases are checked for validity at a given resolution. If a phase is invalid, the segment
-is bisected and each half ordered again (the L-shaped detour shrinks toward the validated
-straight segment), up to ``max_subdivisions`` times. Phases with no change are dropped.
+Both phases are checked, by a validity function sampled at a given resolution or by a motion
+check such as :class:`~ctrplan.planning.verify.MotionVerifier` (the final check of the
+pipeline). If a phase is invalid and the straight segment itself is valid, the segment is
+bisected and each half ordered again (the L-shaped detour shrinks toward the straight
+segment), up to ``max_subdivisions`` times. If the straight segment is invalid too (a search
+that checked it coarsely or lazily was wrong about it), a ``repair`` function, when given,
+re-plans from one end to the other and the new sub-path is ordered in turn (at most
+``max_repairs`` nested repairs); otherwise, or if that fails, the ordering raises
+:class:`~ctrplan.errors.UnreachableGoalError`. Phases with no change are dropped.
 """
 
 from __future__ import annotations
@@ -62,10 +68,19 @@ class OrderedPath:
     waypoints : list of OrderedWaypoint
     n_subdivisions : int
         Bisections needed to make all phases valid.
+    n_repairs : int
+        Segments re-planned because the straight segment itself failed the check.
+    n_phase_checks : int
+        Phases (and straight segments) checked.
+    failures : list of str
+        What failed, for each bisection or repair.
     """
 
     waypoints: list
     n_subdivisions: int = 0
+    n_repairs: int = 0
+    n_phase_checks: int = 0
+    failures: list = field(default_factory=list)
 
     @property
     def q(self) -> np.ndarray:
@@ -105,6 +120,10 @@ class LastMotionBounds:
     results: list = field(default_factory=list, repr=False)
 
 
+# Nested repairs (a repaired sub-path whose own segment fails again) before giving up.
+DEFAULT_MAX_REPAIRS = 2
+
+
 def _phase_valid(js, validity_fn, q0, q1, resolution) -> bool:
     length = float(js.distance(q0, q1))
     m = max(1, int(np.ceil(length / resolution)))
@@ -114,9 +133,14 @@ def _phase_valid(js, validity_fn, q0, q1, resolution) -> bool:
     return True
 
 
-def order_path(waypoints, robot, validity_fn, *, joint_space: JointStateSpace | None = None,
+def _fmt(q) -> str:
+    return "[" + ", ".join(f"{v:.4g}" for v in np.asarray(q, dtype=float)) + "]"
+
+
+def order_path(waypoints, robot, validity_fn=None, *, joint_space: JointStateSpace | None = None,
                resolution: float = DEFAULT_ORDERING_RESOLUTION,
-               max_subdivisions: int = DEFAULT_MAX_SUBDIVISIONS) -> OrderedPath:
+               max_subdivisions: int = DEFAULT_MAX_SUBDIVISIONS, motion_check=None, repair=None,
+               max_repairs: int = DEFAULT_MAX_REPAIRS) -> OrderedPath:
     """Split each segment into a rotation phase followed by a translation phase.
 
     Parameters
@@ -124,14 +148,24 @@ def order_path(waypoints, robot, validity_fn, *, joint_space: JointStateSpace | 
     waypoints : array-like, shape (K, n_joints)
         Planned path [rad or m] (periodic angles may be wrapped; they are unwrapped first).
     robot : Robot
-    validity_fn : callable
-        ``validity_fn(q (n_joints,)) -> bool``.
+    validity_fn : callable, optional
+        ``validity_fn(q (n_joints,)) -> bool``, sampled every ``resolution`` along a phase;
+        required without ``motion_check``.
     joint_space : JointStateSpace, optional
         Metric for the sampling resolution (default ``JointStateSpace(robot)``).
     resolution : float, keyword-only
         Largest spacing of validity samples along a phase [m of the weighted metric].
     max_subdivisions : int, keyword-only
         Bisections allowed per planned segment when a phase is invalid.
+    motion_check : callable, optional, keyword-only
+        ``motion_check(q0, q1)`` -> bool, or an object with ``valid`` and ``reason`` (e.g.
+        :meth:`MotionVerifier.check`); replaces the sampled ``validity_fn``.
+    repair : callable, optional, keyword-only
+        ``repair(q_a, q_b) -> ndarray (K, n_joints)``: a new path from ``q_a`` to ``q_b``
+        (first and last rows those states), called when the straight segment between them
+        fails; may raise :class:`UnreachableGoalError`.
+    max_repairs : int, keyword-only
+        Nested repairs allowed.
 
     Returns
     -------
@@ -142,18 +176,31 @@ def order_path(waypoints, robot, validity_fn, *, joint_space: JointStateSpace | 
     Raises
     ------
     UnreachableGoalError
-        A segment cannot be ordered validly within ``max_subdivisions`` bisections.
+        A segment cannot be ordered validly within ``max_subdivisions`` bisections and
+        ``max_repairs`` repairs (the message names the segment and what failed).
     ValueError
-        Bad waypoint shape.
+        Bad waypoint shape, or neither ``validity_fn`` nor ``motion_check``.
     """
+    if validity_fn is None and motion_check is None:
+        raise ValueError("order_path needs a validity_fn or a motion_check")
     js = joint_space if joint_space is not None else JointStateSpace(robot)
     w = unwrap_path(np.atleast_2d(np.asarray(waypoints, dtype=float)), robot)
     rot = js.is_rotation
     out = [OrderedWaypoint("start", w[0].copy())]
-    n_sub = 0
+    result = OrderedPath(out)
 
-    def emit(a, b, depth):
-        nonlocal n_sub
+    def check(p, q):
+        """(valid, reason) of the motion p -> q."""
+        result.n_phase_checks += 1
+        if motion_check is not None:
+            r = motion_check(p, q)
+            if isinstance(r, (bool, np.bool_)):
+                return bool(r), "invalid"
+            return bool(r.valid), str(getattr(r, "reason", ""))
+        ok = _phase_valid(js, validity_fn, p, q, resolution)
+        return ok, "" if ok else f"an invalid state (checked every {resolution * 1e3:.3g} mm)"
+
+    def emit(a, b, depth, n_rep):
         d = b - a
         mid = a + np.where(rot, d, 0.0)
         phases = []
@@ -161,21 +208,43 @@ def order_path(waypoints, robot, validity_fn, *, joint_space: JointStateSpace | 
             phases.append(("rotation", a, mid))
         if np.any(np.abs(d[~rot]) > NO_MOTION_TOL):
             phases.append(("translation", mid, b))
-        if all(_phase_valid(js, validity_fn, p, q, resolution) for _, p, q in phases):
+        reason = ""
+        for kind, p, q in phases:
+            ok, reason = check(p, q)
+            if not ok:
+                reason = f"{kind} phase {_fmt(p)} -> {_fmt(q)}: {reason}"
+                break
+        else:
             out.extend(OrderedWaypoint(kind, q.copy()) for kind, _, q in phases)
             return
-        if depth >= max_subdivisions:
+        straight_ok, straight_reason = (True, "") if len(phases) == 1 and depth == 0 else check(a, b)
+        if len(phases) == 1:   # a pure rotation or translation is its own straight segment
+            straight_ok, straight_reason = False, reason
+        if straight_ok and depth < max_subdivisions:
+            result.n_subdivisions += 1
+            result.failures.append(f"bisected: {reason}")
+            c = a + 0.5 * d
+            emit(a, c, depth + 1, n_rep)
+            emit(c, b, depth + 1, n_rep)
+            return
+        why = straight_reason if not straight_ok else reason
+        if repair is None or n_rep >= max_repairs:
             raise UnreachableGoalError(
-                f"cannot order the segment from {a} to {b} into valid rotation and translation phases "
-                f"after {max_subdivisions} bisections (resolution {resolution * 1e3:.3g} mm)")
-        n_sub += 1
-        c = a + 0.5 * d
-        emit(a, c, depth + 1)
-        emit(c, b, depth + 1)
+                f"cannot order the segment {_fmt(a)} -> {_fmt(b)} into valid rotation and translation phases "
+                f"({result.n_subdivisions} bisections, {n_rep} repairs): {why}")
+        result.n_repairs += 1
+        result.failures.append(f"repaired: {why}")
+        sub = unwrap_path(np.atleast_2d(np.asarray(repair(a, b), dtype=float)), robot)
+        sub = sub - sub[0] + a                       # continuous angles from a
+        if not np.allclose(js.difference(sub[-1], b), 0.0, atol=1e-9):
+            raise UnreachableGoalError(f"the repair of {_fmt(a)} -> {_fmt(b)} ended at {_fmt(sub[-1])}")
+        sub[-1] = b
+        for p, q in zip(sub[:-1], sub[1:]):
+            emit(p, q, 0, n_rep + 1)
 
     for a, b in zip(w[:-1], w[1:]):
-        emit(a, b, 0)
-    return OrderedPath(out, n_sub)
+        emit(a, b, 0, 0)
+    return result
 
 
 def bounds_given_last_motion(ordered: OrderedPath, robot, evaluator, settings=None) -> LastMotionBounds:

@@ -200,7 +200,10 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
         Joint vectors in robot joint order [rad or m].
     validity_fn : callable
         ``validity_fn(q (n_joints,)) -> bool`` (e.g. a :class:`ValidityChecker`); wrapped so OMPL
-        receives a real ``bool``. Checked along motions every ``validity_resolution``.
+        receives a real ``bool``. Checked along motions every ``validity_resolution``. A
+        :class:`~ctrplan.planning.validity.BatchValidityChecker` also checks OMPL's motions,
+        all states of a motion in a few compiled calls
+        (:func:`~ctrplan.planning.validity.use_motion_validator`), at its own ``resolution``.
     objective : callable or ob.OptimizationObjective
         ``objective(si, joint_space) -> ob.OptimizationObjective`` (e.g.
         ``BoundCostObjective.factory(field)``), or an objective already built on
@@ -217,7 +220,8 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
     joint_space : JointStateSpace, optional
         Default ``JointStateSpace(robot)``.
     validity_resolution : float, keyword-only
-        Spacing of validity checks along motions [m of the weighted metric].
+        Spacing of validity checks along motions [m of the weighted metric] (a
+        ``BatchValidityChecker`` uses its own ``resolution``).
     range_ : float, optional
         Planner's maximum motion length [m of the metric] (RRT* family only).
     goal_bias : float, optional
@@ -272,9 +276,14 @@ def _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, t
                 "stability, collision or bound field validity)")
 
     si = objective.getSpaceInformation() if prebuilt else ob.SpaceInformation(js.space)
-    si.setStateValidityChecker(lambda s: bool(validity_fn(js.to_numpy(s))))
-    extent = js.space.getMaximumExtent()
-    si.setStateValidityCheckingResolution(min(1.0, float(validity_resolution) / extent))
+    if hasattr(validity_fn, "check_motion") and hasattr(validity_fn, "motion_states"):
+        from .validity import use_motion_validator  # noqa: PLC0415 (imports this module)
+
+        use_motion_validator(si, js, validity_fn)
+    else:
+        si.setStateValidityChecker(lambda s: bool(validity_fn(js.to_numpy(s))))
+        extent = js.space.getMaximumExtent()
+        si.setStateValidityCheckingResolution(min(1.0, float(validity_resolution) / extent))
     si.setup()
     obj = objective if prebuilt else objective(si, js)
 
@@ -330,7 +339,8 @@ def _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, t
                       iterations=int(pl.numIterations()), n_vertices=n_vertices, solve_time=solve_time,
                       simplify_time=simplify_time, seed=int(seed), status=str(status),
                       extra={"n_validity_calls": getattr(validity_fn, "n_calls", None),
-                             "n_validity_evaluations": getattr(validity_fn, "n_evaluations", None)})
+                             "n_validity_evaluations": getattr(validity_fn, "n_evaluations", None),
+                             "n_motions": getattr(validity_fn, "n_motions", None)})
 
 
 def _fmt_q(robot, q) -> str:

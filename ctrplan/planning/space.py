@@ -264,6 +264,36 @@ class JointStateSpace:
         tr = np.sqrt(np.sum(np.where(self.is_rotation, 0.0, d) ** 2, axis=-1))
         return rot + tr
 
+    def segment_count(self, q0, q1, resolution: float) -> int:
+        """OMPL's ``validSegmentCount`` of the motion ``q0 -> q1`` at a validity-checking
+        resolution: the largest over the subspaces (SO2 per periodic rotation, a real line per
+        bounded rotation, one real vector of the translations) of
+        ceil(subspace distance / (subspace extent * fraction)), with
+        fraction = min(1, resolution / maximum extent of the compound space). The states
+        ``q0 + (k / count) (q1 - q0)`` are those OMPL's discrete motion validator checks; they
+        are at most ``resolution`` apart in the weighted metric, and on the paper's robot much
+        closer (0.032 rad of rotation or 0.7 mm of translation at 2 mm).
+
+        Parameters
+        ----------
+        q0, q1 : array-like, shape (n_joints,)
+            [rad or m].
+        resolution : float
+            [m of the weighted metric], > 0.
+
+        Returns
+        -------
+        int
+        """
+        fraction = min(1.0, float(resolution) / self.space.getMaximumExtent())
+        d = self.difference(q0, q1)
+        count = 0
+        for k, (kind, idx) in enumerate(self._layout):
+            seg = self.space.getSubspace(k).getMaximumExtent() * fraction
+            dist = abs(d[idx[0]]) if kind == "so2" else float(np.sqrt(np.sum(d[idx] ** 2)))
+            count = max(count, int(np.ceil(dist / seg)))
+        return count
+
     def interpolate(self, q0, q1, t) -> np.ndarray:
         """Points on the straight joint-space segment from ``q0`` to ``q1`` (as OMPL does).
 

@@ -163,15 +163,10 @@ class BatchValidityChecker:
         self.joint_space = joint_space if joint_space is not None else JointStateSpace(robot)
         self.resolution = float(resolution)
         self.batch_size = int(batch_size)
-        js = self.joint_space
         self._n_joints = len(robot.joints)
         self._periodic = np.array([j.periodic for j in robot.joints], dtype=bool)
         self._lower = np.array([j.lower for j in robot.joints], dtype=float) - _LIMIT_TOL
         self._upper = np.array([j.upper for j in robot.joints], dtype=float) + _LIMIT_TOL
-        # OMPL's segment count: per subspace ceil(distance / (extent * fraction)), the largest
-        fraction = min(1.0, self.resolution / js.space.getMaximumExtent())
-        self._segment_lengths = np.array([js.space.getSubspace(k).getMaximumExtent() * fraction
-                                          for k in range(len(js._layout))])
         self._motion_validators = []   # keeps installed OMPL validators alive
         self._packed = None            # robot arrays of the compiled solve, built on first use
         self._cache: dict[bytes, bool] = {}
@@ -344,12 +339,9 @@ class BatchValidityChecker:
 
     # ------------------------------------------------------------------ motions
     def segment_count(self, q0, q1) -> int:
-        """OMPL's ``validSegmentCount`` of the motion q0 -> q1 on :attr:`joint_space` at
-        :attr:`resolution`: the largest over the subspaces (SO2 per periodic rotation, a real
-        line per bounded rotation, one real vector of the translations) of
-        ceil(subspace distance / (subspace extent * fraction)), with
-        fraction = min(1, resolution / maximum extent of the compound space). Consecutive checked
-        states are then at most ``resolution`` apart in the weighted metric [m].
+        """OMPL's ``validSegmentCount`` of the motion q0 -> q1 at :attr:`resolution`
+        (:meth:`JointStateSpace.segment_count`): consecutive checked states are at most
+        ``resolution`` apart in the weighted metric [m].
 
         Parameters
         ----------
@@ -360,12 +352,7 @@ class BatchValidityChecker:
         -------
         int
         """
-        d = self.joint_space.difference(q0, q1)
-        count = 0
-        for (kind, idx), seg in zip(self.joint_space._layout, self._segment_lengths):
-            dist = abs(d[idx[0]]) if kind == "so2" else float(np.sqrt(np.sum(d[idx] ** 2)))
-            count = max(count, int(np.ceil(dist / seg)))
-        return count
+        return self.joint_space.segment_count(q0, q1, self.resolution)
 
     def motion_states(self, q0, q1, n_segments: int | None = None) -> np.ndarray:
         """The states :meth:`check_motion` checks, in its order.

@@ -1,0 +1,216 @@
+"""A route through several goals: batched search, rotate-then-translate ordering, final check.
+
+:func:`plan_route` is what ``ctrplan plan`` runs for each of its plans (bound-aware and
+bound-blind):
+
+1. every leg (start -> goal 1 -> goal 2 ...) is planned by OMPL (:func:`~ctrplan.planning.plan`)
+   with the **search checker** (:class:`~ctrplan.planning.validity.BatchValidityChecker`):
+   all states of a motion in a few compiled calls, at the search's resolution, on the standard
+   model's uniform arc-length grid, with bodies inflated as in the final check;
+2. the whole route is split into rotation and translation phases
+   (:func:`~ctrplan.planning.order_path`, Section V-B of Ha, Fagogenis & Dupont 2019), and every
+   phase passes the **final check** (:class:`~ctrplan.planning.verify.MotionVerifier`: exact
+   standard model, exact obstacles, states no sparser than OMPL's at 2 mm, refined until no body
+   point moves more than 0.5 mm between them, bodies inflated by half that);
+3. a phase that fails is bisected when its straight segment passes; a straight segment that
+   fails (the search missed something between its states, e.g. a thin wall) is **repaired**: the
+   segment is planned again with motions checked ``repair_factor`` times more finely, and the new
+   sub-path is ordered and checked in turn. If that fails too, :class:`UnreachableGoalError`.
+
+No path leaves :func:`plan_route` that has not passed the final check.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field as dc_field
+
+import numpy as np
+
+from .collision import CollisionChecker
+from .ordering import OrderedPath, order_path
+from .planners import DEFAULT_ITERATIONS, PlanResult, plan
+from .validity import BatchValidityChecker
+from .verify import DEFAULT_MAX_BODY_STEP, DEFAULT_VERIFY_RESOLUTION, MotionVerifier
+
+__all__ = ["RouteChecks", "Route", "route_checks", "plan_route", "DEFAULT_SEARCH_RESOLUTION",
+           "DEFAULT_SEARCH_REFINE_RATIO", "DEFAULT_REPAIR_FACTOR", "DEFAULT_REPAIR_ITERATIONS",
+           "DEFAULT_COLLISION_SEGMENT"]
+
+# Validity-checking resolution of the search [m of the weighted joint metric] (OMPL's rule,
+# JointStateSpace.segment_count). See docs/planning.md for how it was chosen.
+DEFAULT_SEARCH_RESOLUTION = 2e-3
+# The search solves the standard model on the paper's uniform arc-length grid (Section II-C;
+# refine_ratio 1): half the nodes of the graded grid, tips within 0.4 um of it and the same
+# convergence and stability flags on 400 random Table VII configurations. The final check uses
+# the model settings as given (graded grid).
+DEFAULT_SEARCH_REFINE_RATIO = 1.0
+# A segment that fails the final check is planned again with motions checked this many times
+# more finely, for this many planner iterations.
+DEFAULT_REPAIR_FACTOR = 4
+DEFAULT_REPAIR_ITERATIONS = 300
+# Length of the capsules that sweep the robot body for collision checking [m]: chord error
+# 0.06 mm on the tightest precurvature radius of the shipped robots (55 mm).
+DEFAULT_COLLISION_SEGMENT = 5e-3
+
+
+@dataclass
+class RouteChecks:
+    """The three checkers of :func:`plan_route` (built by :func:`route_checks`).
+
+    Attributes
+    ----------
+    search : BatchValidityChecker
+        States and motions during planning.
+    repair_search : BatchValidityChecker
+        The same, ``repair_factor`` times finer, for re-planning a failed segment.
+    final : MotionVerifier
+        Every ordered phase.
+    """
+
+    search: BatchValidityChecker
+    repair_search: BatchValidityChecker
+    final: MotionVerifier
+
+    def counters(self) -> dict:
+        """Work of the three checkers (states, motions, model and collision seconds)."""
+        c = self.search.counters()
+        r = self.repair_search.counters()
+        return {"validity_calls": c["n_calls"] + r["n_calls"],
+                "standard_model_solves": c["n_model"] + r["n_model"] + self.final.n_states,
+                "search_states_evaluated": c["n_evaluations"] + r["n_evaluations"],
+                "search_motions_checked": c["n_motions"] + r["n_motions"],
+                "search_standard_model_time_s": c["seconds_model"] + r["seconds_model"],
+                "search_collision_time_s": c["seconds_collision"] + r["seconds_collision"],
+                "final_check_motions": self.final.n_motions, "final_check_states": self.final.n_states,
+                "final_check_time_s": self.final.seconds}
+
+
+def route_checks(robot, obstacles=(), field=None, settings=None, *, joint_space=None,
+                 search_resolution: float = DEFAULT_SEARCH_RESOLUTION,
+                 search_refine_ratio: float = DEFAULT_SEARCH_REFINE_RATIO,
+                 final_resolution: float = DEFAULT_VERIFY_RESOLUTION, max_body_step: float = DEFAULT_MAX_BODY_STEP,
+                 repair_factor: int = DEFAULT_REPAIR_FACTOR,
+                 segment_length: float = DEFAULT_COLLISION_SEGMENT) -> RouteChecks:
+    """The search, repair and final checkers of a planning problem.
+
+    Parameters
+    ----------
+    robot : Robot
+    obstacles : sequence of obstacle dicts or dataclasses
+        As for :class:`~ctrplan.planning.CollisionChecker`.
+    field : BoundField, optional
+        Its validity flags reject states near unstable or failed map nodes.
+    settings : ModelSettings, optional
+        Standard-model settings of the final check (``multistart`` is not run: the map flags
+        multi-equilibrium regions).
+    joint_space : JointStateSpace, optional, keyword-only
+    search_resolution : float, keyword-only
+        OMPL validity-checking resolution of the search [m of the weighted metric].
+    search_refine_ratio : float, keyword-only
+        ``ModelSettings.refine_ratio`` of the search's standard model.
+    final_resolution, max_body_step : float, keyword-only
+        See :class:`~ctrplan.planning.verify.MotionVerifier` [m].
+    repair_factor : int, keyword-only
+        The repair search checks motions this many times more finely than the search.
+    segment_length : float, keyword-only
+        Capsule length of the collision bodies [m].
+
+    Returns
+    -------
+    RouteChecks
+    """
+    from ..mechanics import ModelSettings
+    from .space import JointStateSpace
+
+    settings = (settings or ModelSettings()).replace(multistart=0)
+    js = joint_space if joint_space is not None else JointStateSpace(robot)
+    obstacles = list(obstacles)
+    # the search avoids what the final check inflates
+    collision = CollisionChecker(obstacles, segment_length=segment_length, padding=0.5 * max_body_step) \
+        if obstacles else None
+    search_settings = settings.replace(refine_ratio=search_refine_ratio)
+    search = BatchValidityChecker(robot, collision, field, search_settings, joint_space=js,
+                                  resolution=search_resolution)
+    repair = BatchValidityChecker(robot, collision, field, search_settings, joint_space=js,
+                                  resolution=search_resolution / int(repair_factor))
+    final = MotionVerifier(robot, obstacles, field, settings, joint_space=js, resolution=final_resolution,
+                           max_body_step=max_body_step, segment_length=segment_length)
+    return RouteChecks(search, repair, final)
+
+
+@dataclass
+class Route:
+    """Outcome of :func:`plan_route`.
+
+    Attributes
+    ----------
+    legs : list of PlanResult
+        One per goal, as planned (before ordering).
+    ordered : OrderedPath
+        The whole route in rotation and translation phases, every phase checked.
+    repairs : list of PlanResult
+        The re-planned segments.
+    """
+
+    legs: list
+    ordered: OrderedPath
+    repairs: list = dc_field(default_factory=list)
+
+
+def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, planner: str = "RRTstar",
+               iterations: int = DEFAULT_ITERATIONS, seed: int = 1, time_limit: float | None = None,
+               range_: float | None = None, joint_space=None,
+               repair_iterations: int = DEFAULT_REPAIR_ITERATIONS) -> Route:
+    """Plan start -> goals, order into rotate-then-translate phases and check every phase.
+
+    Parameters
+    ----------
+    robot : Robot
+    start_q : array-like, shape (n_joints,)
+        [rad or m].
+    goals_q : sequence of array-like, shape (n_joints,)
+        Visited in order [rad or m].
+    checks : RouteChecks
+    objective : callable
+        ``objective(si, joint_space) -> ob.OptimizationObjective``, e.g.
+        ``BoundCostObjective.factory(field, bound_weight=w)``.
+    planner, iterations, seed, time_limit, range_
+        As :func:`~ctrplan.planning.plan`; leg k uses ``seed + k``.
+    joint_space : JointStateSpace, optional, keyword-only
+    repair_iterations : int, keyword-only
+        Planner iterations of a repair.
+
+    Returns
+    -------
+    Route
+
+    Raises
+    ------
+    UnreachableGoalError
+        A leg has no path within the budget, or a segment fails the final check and cannot be
+        bisected or repaired (the message names the segment and what failed).
+    """
+    js = joint_space if joint_space is not None else checks.search.joint_space
+    legs: list[PlanResult] = []
+    q_prev = np.asarray(start_q, dtype=float)
+    waypoints = [q_prev]
+    for gi, q_goal in enumerate(goals_q):
+        res = plan(robot, q_prev, q_goal, checks.search, objective, planner=planner, iterations=iterations,
+                   time_limit=time_limit, seed=seed + gi, joint_space=js, range_=range_)
+        legs.append(res)
+        wp = np.array(res.waypoints)
+        offset = waypoints[-1] - wp[0]   # continue from where the previous leg ended (unwrapped angles)
+        waypoints.extend(list(wp[1:] + offset))
+        q_prev = waypoints[-1]
+    repairs: list[PlanResult] = []
+
+    def repair(a, b):
+        res = plan(robot, a, b, checks.repair_search, objective, planner=planner, iterations=repair_iterations,
+                   seed=seed + 1000 + len(repairs), joint_space=js, range_=range_)
+        repairs.append(res)
+        return res.waypoints
+
+    ordered = order_path(np.array(waypoints), robot, motion_check=checks.final.check, repair=repair,
+                         joint_space=js)
+    return Route(legs, ordered, repairs)
+
