@@ -20,7 +20,7 @@ from numba import njit
 
 from ..constants import GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR
 from .grid import _grid, packed_sections
-from .results import ModelSettings
+from .results import BODY_TOL, ModelSettings
 from .standard import _centerline, _shoot
 
 __all__ = ["StandardBodies", "solve_standard_bodies"]
@@ -28,8 +28,8 @@ __all__ = ["StandardBodies", "solve_standard_bodies"]
 _PREDICTOR_STEP_FACTOR = PREDICTOR_STEP_FACTOR  # frozen into the compiled code
 # Slack of the body tests of StandardSolution.body [m]: a node belongs to the body when
 # s >= max(beta) - _BODY_TOL, and tube i is present at s when
-# beta_i - _BODY_TOL <= s <= beta_i + L_i + _BODY_TOL (the same literal 1e-12 as there).
-_BODY_TOL = 1e-12
+# beta_i - _BODY_TOL <= s <= beta_i + L_i + _BODY_TOL (results.BODY_TOL, frozen into the kernels).
+_BODY_TOL = BODY_TOL
 
 
 @dataclass
@@ -184,7 +184,7 @@ def solve_standard_bodies(robot, alpha, beta, settings: ModelSettings | None = N
     :func:`~ctrplan.mechanics.solve_standard` with ``multistart=0``. The body is that of
     :meth:`~ctrplan.mechanics.results.StandardSolution.body` (the part outside the drive, from
     the most distal base to the tip, with the outer radius ``Robot.outer_radius`` of the
-    outermost tube present at each node, tolerances 1e-12 m), also for configurations that
+    outermost tube present at each node, tolerances ``results.BODY_TOL``), also for configurations that
     did not converge (the last Newton iterate), as ``body`` gives it for them.
     """
     settings = settings or ModelSettings()

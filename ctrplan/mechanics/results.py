@@ -7,6 +7,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..constants import GRID_MERGE_TOL
+
+# Slack of the body's tests [m]: the grid rounds breakpoints (tube bases and ends) to multiples
+# of GRID_MERGE_TOL, so the node at the most distal base can sit up to half of it behind the
+# base; a smaller slack (1e-12 before) dropped that node for some translations and the exposed
+# body jumped by one grid step (0.77 mm on the six-joint robot).
+BODY_TOL = 2.0 * GRID_MERGE_TOL
+
 __all__ = ["ModelSettings", "Diagnostics", "StandardSolution", "ContactSolution", "BoundResult"]
 
 
@@ -200,11 +208,12 @@ class StandardSolution:
         """
         s_front = float(np.max(self.beta))
         ends = robot.tube_ends(self.beta)
-        keep = self.s >= s_front - 1e-12
+        tol = BODY_TOL
+        keep = self.s >= s_front - tol
         pts = self.centerline[keep]
         radii = np.empty(pts.shape[0])
         for k, sk in enumerate(self.s[keep]):
-            present = [i for i in range(robot.n_tubes) if self.beta[i] - 1e-12 <= sk <= ends[i] + 1e-12]
+            present = [i for i in range(robot.n_tubes) if self.beta[i] - tol <= sk <= ends[i] + tol]
             radii[k] = robot.outer_radius(min(present)) if present else 0.0
         return pts, radii
 
