@@ -38,7 +38,7 @@ __all__ = ["RouteChecks", "Route", "route_checks", "plan_route", "DEFAULT_SEARCH
 
 # Validity-checking resolution of the search [m of the weighted joint metric] (OMPL's rule,
 # JointStateSpace.segment_count). See docs/planning.md for how it was chosen.
-DEFAULT_SEARCH_RESOLUTION = 2e-3
+DEFAULT_SEARCH_RESOLUTION = 4e-3
 # The search solves the standard model on the paper's uniform arc-length grid (Section II-C;
 # refine_ratio 1): half the nodes of the graded grid, tips within 0.4 um of it and the same
 # convergence and stability flags on 400 random Table VII configurations. The final check uses

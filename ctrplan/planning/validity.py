@@ -36,10 +36,12 @@ from .space import JointStateSpace, wrap_angle
 __all__ = ["BatchValidityChecker", "BatchMotionValidator", "use_motion_validator", "bisection_order",
            "DEFAULT_MOTION_BATCH"]
 
-# Largest number of motion states evaluated in one compiled call by check_motion [-]. Batches
-# grow 1, 1, 2, 4, ... (one bisection level each) up to this size: a motion that fails at its
-# end or midpoint costs one state, a valid one pays the Python overhead of a call (~0.1 ms) once
-# per 8 states, against ~0.3 ms of standard model per state.
+# Motion states evaluated per compiled call by check_motion after the end state [-]: a motion
+# costs one call for its end state (the state most often invalid: the planner's new sample),
+# then its other states in calls of this many. Only 2.6 % of the 1721 motions of 600 RRT*
+# iterations on the obstacles scenario were invalid, so a large batch wastes few states, while
+# each call costs ~0.3 ms of Python and numpy overhead (the 1, 1, 2, 4, 8 growth used before
+# took 9.1 s against 6.3 s for this, same plan).
 DEFAULT_MOTION_BATCH = 8
 
 # Slack of the joint-limit test of Robot.configuration [m or rad] (the same literal there).
@@ -386,8 +388,8 @@ class BatchValidityChecker:
 
         Checks the states of :meth:`motion_states` (spacing at most :attr:`resolution` in the
         weighted metric, OMPL's segment count and order: end state, midpoint, quarter points,
-        ...) in batches of 1, 1, 2, 4, ... states up to :attr:`batch_size`, and stops after the
-        first batch holding an invalid state.
+        ...): the end state alone, then the others in batches of :attr:`batch_size`, stopping
+        after the first batch holding an invalid state.
 
         Parameters
         ----------
@@ -402,15 +404,11 @@ class BatchValidityChecker:
         """
         self.n_motions += 1
         states = self.motion_states(q0, q1, n_segments)
-        start, size = 0, 1
-        while start < states.shape[0]:
-            stop = min(start + size, states.shape[0])
+        starts = [0] + list(range(1, states.shape[0], self.batch_size))
+        for start, stop in zip(starts, starts[1:] + [states.shape[0]]):
             if not np.all(self.check(states[start:stop])):
                 self.n_invalid_motions += 1
                 return False
-            start = stop
-            if stop > 1:
-                size = min(2 * size, self.batch_size)
         return True
 
     def counters(self) -> dict:
