@@ -10,11 +10,11 @@ A map is a tensor grid over the map coordinates (:mod:`ctrplan.boundmap.coordina
 
 Why adaptive placement. Along the translations the bound is smooth over most of the range but
 changes within millimetres where the precurved section of an inner tube passes the end of an
-outer tube (the contact set changes there): on the six-joint robot of Table II it falls from
-20 mm to 2.4 mm over the last 10 mm of ``beta_3 - beta_1``, and on the calibrated robot of
-Table VII it peaks at 9.7 mm 10 mm before the end of the ``beta_3`` range and halves over the
-next 5 mm (measured along lines of the exact model; ``docs/boundmaps.md``). Uniform nodes every
-14 mm missed the peak by 2.2 mm. Adaptive placement evaluates the exact bound along a few
+outer tube (the contact set changes there): along a line of the six-joint robot of Table II it
+falls from 20 mm to 2.4 mm over the last 10 mm of ``beta_3``, and along one of the calibrated
+robot of Table VII it peaks at 9.7 mm 10 mm before the end of the ``beta_3`` range and falls to
+3.3 mm at that end (exact model; ``docs/boundmaps.md``). The former uniform map, with nodes every
+14 mm there, was off by up to 2.2 mm. Adaptive placement evaluates the exact bound along a few
 **pilot lines** parallel to the coordinate (the other coordinates at random joint
 configurations, seeded), at a fine step, and inserts nodes greedily where linear interpolation
 through the nodes so far misses the pilot values most (:func:`place_nodes`). The nodes are a
