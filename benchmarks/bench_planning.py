@@ -133,8 +133,10 @@ def main(argv=None) -> int:
                     a["final_check"]["repairs"])
             print(f"{name:<14}" + "".join(f"{v:>13.0f}" if isinstance(v, int) else f"{v:>13.2f}" for v in vals))
         if len(runs) > 1:
-            print(f"{'':<14}wall: {stats([r[0] for r in runs])}; bound-aware planner: "
-                  f"{stats([r[1]['bound_aware']['planning_time_s'] for r in runs])}")
+            print(f"{'':<14}wall: {stats([r[0] for r in runs])}")
+            print(f"{'':<14}bound-aware planner: {stats([r[1]['bound_aware']['planning_time_s'] for r in runs])}")
+            same = all(r[2] == runs[0][2] for r in runs[1:])
+            print(f"{'':<14}same path.csv in all {len(runs)} runs (same seed): {'yes' if same else 'NO'}")
         if "bound_blind" in runs[0][1]:
             b = runs[0][1]["bound_blind"]
             print(f"{'':<14}bound-blind: max bound {b['max_bound_at_waypoints_mm']:.2f} mm, path "

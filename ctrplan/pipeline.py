@@ -78,6 +78,52 @@ def _route_report(ordered, robot, field, settings, joint_space):
             "exact": bounds_given_last_motion(ordered, robot, evaluate_bound, settings)}
 
 
+def _plan_mode(job: dict) -> dict:
+    """One plan of a scenario (bound-aware or bound-blind): search, ordering, final check and the
+    report. Takes and returns only picklable data, so that it can run in another process."""
+    robot, field = job["robot"], job["field"]
+    joint_space = JointStateSpace(robot)
+    checks = route_checks(robot, job["obstacles"], field, job["check_settings"], joint_space=joint_space)
+    p = job["planner"]
+    t0 = time.perf_counter()
+    route = plan_route(robot, job["start"], job["goals"], checks,
+                       BoundCostObjective.factory(field, bound_weight=job["weight"]), planner=p.name,
+                       iterations=job["iterations"], seed=p.seed, time_limit=p.time_limit, range_=p.range,
+                       joint_space=joint_space)
+    plan_time = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rep = _route_report(route.ordered, robot, field, job["settings"], joint_space)
+    exact_time = time.perf_counter() - t0
+    return dict(legs=route.legs, ordered=route.ordered, report=rep, plan_time=plan_time, exact_time=exact_time,
+                checks=checks.counters(), max_body_step_mm=checks.final.max_body_step * 1e3,
+                states_checked=checks.search.n_evaluations, final_states=checks.final.n_states)
+
+
+def _plan_modes(jobs: dict, n_jobs: int) -> dict:
+    """Run the plans of ``jobs`` ({mode: job}); with ``n_jobs`` >= 2 and more than one plan, the
+    bound-blind plan runs in a forked process while this one plans bound-aware (the plans are
+    independent and seeded, so the result is the same as in series; a failed child process is
+    replaced by the same plan here)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    modes = list(jobs)
+    parallel = n_jobs >= 2 and len(modes) > 1 and "fork" in multiprocessing.get_all_start_methods()
+    if not parallel:
+        return {m: _plan_mode(jobs[m]) for m in modes}
+    out = {}
+    with ProcessPoolExecutor(max_workers=len(modes) - 1, mp_context=multiprocessing.get_context("fork")) as ex:
+        futures = {m: ex.submit(_plan_mode, jobs[m]) for m in modes[1:]}
+        out[modes[0]] = _plan_mode(jobs[modes[0]])
+        for m, fut in futures.items():
+            try:
+                out[m] = fut.result()
+            except BrokenProcessPool:
+                out[m] = _plan_mode(jobs[m])
+    return {m: out[m] for m in modes}
+
+
 def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | None = None,
              compare_blind: bool = True, echo=print) -> dict:
     """Plan, order, time-parameterize and report one scenario (``ctrplan plan``).
@@ -89,7 +135,8 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
     out_dir : path, optional
         Output folder (default: the scenario's ``[output] dir``, else ``out/<scenario name>``).
     n_jobs : int
-        Worker processes if the bound map must be computed.
+        Worker processes: for a bound map that must be computed, and, with 2 or more, the
+        bound-blind plan runs beside the bound-aware one (same results as in series).
     iterations : int, optional
         Overrides the scenario's planner iterations.
     compare_blind : bool
@@ -139,25 +186,18 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
         echo(f"goal {k + 1}: q = {np.round(g.q, 4).tolist()}, tip error {g.tip_error * 1e3:.3f} mm, "
              f"field bound {g.bound * 1e3:.2f} mm ({len(g.candidates)} candidates)")
     iters = iterations or sc.planner.iterations
-    routes = {}
     modes = [("bound_aware", sc.planner.bound_weight)] + ([("bound_blind", 0.0)] if compare_blind else [])
-    for mode, weight in modes:
-        checks = route_checks(robot, obstacles, field, check_settings, joint_space=joint_space)
-        t0 = time.perf_counter()
-        route = plan_route(robot, sc.start, [g.q for g in goals], checks,
-                           BoundCostObjective.factory(field, bound_weight=weight), planner=sc.planner.name,
-                           iterations=iters, seed=sc.planner.seed, time_limit=sc.planner.time_limit,
-                           range_=sc.planner.range, joint_space=joint_space)
-        legs, ordered = route.legs, route.ordered
-        plan_time = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        rep = _route_report(ordered, robot, field, settings, joint_space)
-        exact_time = time.perf_counter() - t0
-        routes[mode] = dict(legs=legs, ordered=ordered, report=rep, plan_time=plan_time, exact_time=exact_time,
-                            checks=checks.counters(), max_body_step_mm=checks.final.max_body_step * 1e3)
-        lm = rep["exact"]
-        echo(f"{mode}: {len(ordered)} ordered waypoints, planning {plan_time:.1f} s "
-             f"({checks.search.n_evaluations} states checked, final check {checks.final.n_states} states, "
+    jobs = {mode: dict(robot=robot, field=field, obstacles=obstacles, check_settings=check_settings, settings=settings,
+                       start=sc.start, goals=[g.q for g in goals], weight=weight, planner=sc.planner, iterations=iters)
+            for mode, weight in modes}
+    t0 = time.perf_counter()
+    routes = _plan_modes(jobs, n_jobs)
+    plans_time = time.perf_counter() - t0
+    for mode, r in routes.items():
+        lm = r["report"]["exact"]
+        ordered = r["ordered"]
+        echo(f"{mode}: {len(ordered)} ordered waypoints, planning {r['plan_time']:.1f} s "
+             f"({r['states_checked']} states checked, final check {r['final_states']} states, "
              f"{ordered.n_subdivisions} bisections, {ordered.n_repairs} repairs); exact bound at waypoints: "
              f"max {np.nanmax(lm.position) * 1e3:.2f} mm, final {lm.position[-1] * 1e3:.2f} mm")
 
@@ -224,8 +264,8 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
             "ik_model_evaluations": int(sum(g.n_model_evaluations for g in goals)),
             "exact_bound_evaluations": int(sum(len(r["ordered"]) for r in routes.values())),
         },
-        "times_s": {"bound_map": map_time, "inverse_kinematics": ik_time,
-                    "total": None},
+        "times_s": {"bound_map": map_time, "inverse_kinematics": ik_time, "plans_wall": plans_time,
+                    "plans_in_parallel": bool(n_jobs >= 2 and len(routes) > 1), "total": None},
         "bound_weight_per_metre": sc.planner.bound_weight,
     }
     if "bound_blind" in routes:

@@ -293,3 +293,18 @@ def test_short_plan_outputs_are_ordered_at_rest_and_complete(tmp_path, monkeypat
     # bound of each waypoint is the one of its motion
     planned = [float(r["planned_bound_m"]) for r in rows]
     np.testing.assert_allclose(planned, [5e-4 if r["motion"] == "translation" else 1e-3 for r in rows], rtol=1e-12)
+
+
+def test_plans_in_parallel_equal_plans_in_series(tmp_path, monkeypatch, synthetic_map):
+    """With --jobs 2 the bound-blind plan runs in a forked process beside the bound-aware one: the
+    outputs equal those of the serial run (seeded planners, iteration-count termination)."""
+    monkeypatch.chdir(tmp_path)
+    sc = _scenario(tmp_path, "{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}")
+    runs = {}
+    for jobs in (1, 2):
+        out = tmp_path / f"out{jobs}"
+        s = pipeline.run_plan(sc, out_dir=out, n_jobs=jobs, iterations=30, compare_blind=True, echo=lambda *a: None)
+        assert s["times_s"]["plans_in_parallel"] == (jobs == 2)
+        runs[jobs] = ((out / "path.csv").read_text(), s["bound_blind"]["joint_path_length_m"],
+                      s["bound_blind"]["max_bound_at_waypoints_mm"], s["bound_aware"]["cost"])
+    assert runs[1] == runs[2]
