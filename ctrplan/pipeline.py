@@ -27,7 +27,7 @@ from .errors import JointLimitError, UnreachableGoalError
 from .io.scenario import load_scenario
 from .mechanics import ModelSettings, evaluate_bound
 from .planning import BoundCostObjective, JointStateSpace, bounds_given_last_motion, resolve_goal
-from .planning.route import plan_route, route_checks
+from .planning.route import DEFAULT_REWIRE_FACTOR, plan_route, route_checks
 
 __all__ = ["run_plan", "map_spec"]
 
@@ -89,7 +89,8 @@ def _plan_mode(job: dict) -> dict:
     route = plan_route(robot, job["start"], job["goals"], checks,
                        BoundCostObjective.factory(field, bound_weight=job["weight"]), planner=p.name,
                        iterations=job["iterations"], seed=p.seed, time_limit=p.time_limit, range_=p.range,
-                       joint_space=joint_space)
+                       joint_space=joint_space,
+                       rewire_factor=p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR)
     plan_time = time.perf_counter() - t0
     t0 = time.perf_counter()
     rep = _route_report(route.ordered, robot, field, job["settings"], joint_space)

@@ -95,6 +95,7 @@ class _PlannerDoc(_Strict):
     seed: int = 1
     bound_weight: Annotated[float, Field(ge=0.0)] = DEFAULT_BOUND_WEIGHT
     range: Positive | None = None
+    rewire_factor: Positive | None = None
 
 
 class _BoundFieldDoc(_Strict):
@@ -266,7 +267,11 @@ class PlannerSettings:
         ``path length + w * integral(bound)`` [1/m] (default 1000 /m, as
         :data:`ctrplan.planning.objective.DEFAULT_BOUND_WEIGHT`).
     range : float or None
-        Planner step range in joint space (OMPL ``range``); None for the planner's default.
+        Planner step range in joint space (OMPL ``range``) [m of the weighted joint metric]; None
+        for the planner's default.
+    rewire_factor : float or None
+        RRT* family: OMPL's rewire factor on the k-nearest neighbour count; None for ctrplan's
+        default (``ctrplan.planning.route.DEFAULT_REWIRE_FACTOR``).
     """
 
     name: str = "RRTstar"
@@ -275,6 +280,7 @@ class PlannerSettings:
     seed: int = 1
     bound_weight: float = DEFAULT_BOUND_WEIGHT
     range: float | None = None
+    rewire_factor: float | None = None
 
 
 @dataclass(frozen=True)
@@ -498,7 +504,8 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
 
     p = doc.planner
     planner = PlannerSettings(name=p.name, iterations=p.iterations, time_limit=p.time_limit_s,
-                              seed=p.seed, bound_weight=p.bound_weight, range=p.range)
+                              seed=p.seed, bound_weight=p.bound_weight, range=p.range,
+                              rewire_factor=p.rewire_factor)
 
     bf = doc.bound_field
     if bf.resolution is not None:

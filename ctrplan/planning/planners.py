@@ -189,7 +189,7 @@ def _path_to_numpy(joint_space, path) -> np.ndarray:
 def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar",
          iterations: int = DEFAULT_ITERATIONS, time_limit: float | None = None, seed: int = 1, *,
          joint_space: JointStateSpace | None = None, validity_resolution: float = DEFAULT_VALIDITY_RESOLUTION,
-         range_: float | None = None, goal_bias: float | None = None,
+         range_: float | None = None, goal_bias: float | None = None, rewire_factor: float | None = None,
          shortcut_rounds: int = DEFAULT_SHORTCUT_ROUNDS, quiet: bool = True) -> PlanResult:
     """Plan a valid, low-cost joint-space path from ``start_q`` to ``goal_q``.
 
@@ -226,6 +226,11 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
         Planner's maximum motion length [m of the metric] (RRT* family only).
     goal_bias : float, optional
         Goal sampling probability (RRT* family only).
+    rewire_factor : float, optional
+        RRT* family: OMPL's ``setRewireFactor``, the factor on the k-nearest neighbour count
+        ``k = factor * 2^(d+1) e (1 + 1/d) log(n)`` (d the state dimension) whose motions a new
+        state is connected and rewired through (OMPL's default 1.1: on three joints every node of
+        a 1000-node tree is a neighbour; each costs a motion-cost evaluation).
     shortcut_rounds : int, keyword-only
         Rounds of cost-aware ``partialShortcutPath``; 0 disables.
     quiet : bool, keyword-only
@@ -253,13 +258,13 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
         ou.setLogLevel(ou.LOG_WARN)
     try:
         return _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, time_limit, seed,
-                     joint_space, validity_resolution, range_, goal_bias, shortcut_rounds)
+                     joint_space, validity_resolution, range_, goal_bias, shortcut_rounds, rewire_factor)
     finally:
         ou.setLogLevel(level)
 
 
 def _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, time_limit, seed,
-          joint_space, validity_resolution, range_, goal_bias, shortcut_rounds):
+          joint_space, validity_resolution, range_, goal_bias, shortcut_rounds, rewire_factor=None):
     _set_seed(seed)
     prebuilt = isinstance(objective, ob.OptimizationObjective)
     if prebuilt and joint_space is None:
@@ -297,6 +302,8 @@ def _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, t
         pl.setRange(float(range_))
     if goal_bias is not None and hasattr(pl, "setGoalBias"):
         pl.setGoalBias(float(goal_bias))
+    if rewire_factor is not None and hasattr(pl, "setRewireFactor"):
+        pl.setRewireFactor(float(rewire_factor))
     pl.setProblemDefinition(pdef)
     pl.setup()
 
