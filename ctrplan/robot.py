@@ -343,13 +343,16 @@ class Robot:
     def joint_upper(self) -> np.ndarray:
         return np.array([j.upper for j in self.joints], dtype=float)
 
-    def configuration(self, q) -> tuple[np.ndarray, np.ndarray]:
+    def configuration(self, q, *, check_limits: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Full base rotations and translations from the joint vector.
 
         Parameters
         ----------
         q : array-like, shape (n_joints,)
             Joint values in the order of ``self.joints`` [rad or m].
+        check_limits : bool, keyword-only
+            Raise for values outside the joint limits (False: place any finite values, e.g. to
+            read off the affine joint-to-configuration map).
 
         Returns
         -------
@@ -373,7 +376,7 @@ class Robot:
         for j, v in zip(self.joints, q):
             if not np.isfinite(v):
                 raise JointLimitError(f"joint {j.name} = {v!r} is not finite")
-            if not j.periodic and not (j.lower - 1e-12 <= v <= j.upper + 1e-12):
+            if check_limits and not j.periodic and not (j.lower - 1e-12 <= v <= j.upper + 1e-12):
                 unit = "rad" if j.kind == ROTATION else "m"
                 raise JointLimitError(
                     f"joint {j.name} = {v:.6g} {unit} is outside its limits [{j.lower:.6g}, {j.upper:.6g}] {unit}")

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..robot import ROTATION
 
 __all__ = ["MapCoordinates", "map_coordinates", "ROTATION_COORDINATE", "TRANSLATION_COORDINATE"]
 
@@ -46,37 +45,24 @@ _ZERO_COEFFICIENT = 1e-12
 def _affine_configuration(robot):
     """alpha = Ka q + ka, beta = Kb q + kb: the affine map of :meth:`Robot.configuration`,
     read off the robot by evaluating it column by column (so links and home values are
-    handled exactly as the robot handles them). Returns (Ka (n, m), ka (n,), Kb, kb)."""
+    handled exactly as the robot handles them; limits are not checked: q0 + e_j may leave
+    them). Returns (Ka (n, m), ka (n,), Kb, kb)."""
     m = len(robot.joints)
     n = robot.n_tubes
     # a joint vector inside the limits (mid-range); columns by unit steps of one joint
     q0 = 0.5 * (robot.joint_lower + robot.joint_upper)
-    a0, b0 = _configuration_unchecked(robot, q0)
+    a0, b0 = robot.configuration(q0, check_limits=False)
     Ka = np.zeros((n, m))
     Kb = np.zeros((n, m))
     for j in range(m):
         q = q0.copy()
         q[j] += 1.0
-        a, b = _configuration_unchecked(robot, q)
+        a, b = robot.configuration(q, check_limits=False)
         Ka[:, j] = a - a0
         Kb[:, j] = b - b0
     Ka[np.abs(Ka) < _ZERO_COEFFICIENT] = 0.0
     Kb[np.abs(Kb) < _ZERO_COEFFICIENT] = 0.0
     return Ka, a0 - Ka @ q0, Kb, b0 - Kb @ q0
-
-
-def _configuration_unchecked(robot, q):
-    """:meth:`Robot.configuration` without the limit checks (same placement rules)."""
-    alpha = np.array(robot.home_alpha, dtype=float)
-    beta = np.array(robot.home_beta, dtype=float)
-    for j, v in zip(robot.joints, q):
-        if j.kind == ROTATION:
-            alpha[j.tube] = v
-        else:
-            beta[j.tube] = v
-    for link in robot.links:
-        beta[link.follower] = beta[link.leader] + link.offset
-    return alpha, beta
 
 
 @dataclass(frozen=True)

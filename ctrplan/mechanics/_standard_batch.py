@@ -102,6 +102,22 @@ def _batch_parallel(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, c
                        gspec, tips, tans, sig_out, conv, unst, iters)
 
 
+def configuration_arrays(robot, alpha, beta):
+    """``alpha``, ``beta`` as contiguous float arrays, checked to be both of shape (K, n).
+
+    Raises
+    ------
+    ValueError
+        Naming both shapes.
+    """
+    n = robot.n_tubes
+    alpha = np.ascontiguousarray(alpha, dtype=float)
+    beta = np.ascontiguousarray(beta, dtype=float)
+    if alpha.ndim != 2 or alpha.shape[1] != n or beta.shape != alpha.shape:
+        raise ValueError(f"alpha and beta must both have shape (K, {n}), got {alpha.shape} and {beta.shape}")
+    return alpha, beta
+
+
 def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = None, *,
                          initial_guess=None, n_threads: int = 1) -> StandardBatch:
     """Solve the standard zero-clearance model at many configurations in one compiled call.
@@ -144,10 +160,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     """
     settings = settings or ModelSettings()
     n = robot.n_tubes
-    alpha = np.ascontiguousarray(alpha, dtype=float)
-    beta = np.ascontiguousarray(beta, dtype=float)
-    if alpha.ndim != 2 or alpha.shape[1] != n or beta.shape != alpha.shape:
-        raise ValueError(f"alpha and beta must both have shape (K, {n}), got {alpha.shape} and {beta.shape}")
+    alpha, beta = configuration_arrays(robot, alpha, beta)
     if int(n_threads) < 1:
         raise ValueError(f"n_threads must be at least 1, got {n_threads!r}")
     K = alpha.shape[0]

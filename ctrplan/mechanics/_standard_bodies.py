@@ -21,6 +21,7 @@ from numba import njit
 from ..constants import GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR
 from .grid import _grid, packed_sections
 from .results import BODY_TOL, ModelSettings
+from ._standard_batch import configuration_arrays
 from .standard import _centerline, _shoot
 
 __all__ = ["StandardBodies", "solve_standard_bodies"]
@@ -188,11 +189,7 @@ def solve_standard_bodies(robot, alpha, beta, settings: ModelSettings | None = N
     did not converge (the last Newton iterate), as ``body`` gives it for them.
     """
     settings = settings or ModelSettings()
-    n = robot.n_tubes
-    alpha = np.ascontiguousarray(alpha, dtype=float)
-    beta = np.ascontiguousarray(beta, dtype=float)
-    if alpha.ndim != 2 or alpha.shape[1] != n or beta.shape != alpha.shape:
-        raise ValueError(f"alpha and beta must both have shape (K, {n}), got {alpha.shape} and {beta.shape}")
+    alpha, beta = configuration_arrays(robot, alpha, beta)
     return _solve_packed(_pack(robot), alpha, beta, robot.configurations_possible(alpha, beta), settings)
 
 

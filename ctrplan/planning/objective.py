@@ -28,6 +28,8 @@ import numpy as np
 from numba import njit
 from ompl import base as ob
 
+from ..boundmap._interp import corner_sum, locate
+
 
 __all__ = ["BoundCostObjective", "DEFAULT_BOUND_WEIGHT", "DEFAULT_SAMPLE_SPACING"]
 
@@ -50,9 +52,9 @@ def _segment_cost(q0, q1, periodic, weights, is_rotation, spacing, weight, penal
     """Compiled :meth:`BoundCostObjective.segment_cost` with a bound map: weighted length L of
     the straight motion (short way round periodic joints), then L + w * trapezoid integral of the
     map's bound at m + 1 equally spaced samples, m = ceil(L / spacing); invalid or non-finite
-    values count as ``penalty``. The interpolation is that of
-    :func:`ctrplan.boundmap._interp.point_value`, written out here with the work arrays
-    allocated once per motion. Returns (cost, number of bound samples)."""
+    values count as ``penalty``. The interpolation is that of the map
+    (:mod:`ctrplan.boundmap._interp`), with the work arrays allocated once per motion. Returns
+    (cost, number of bound samples)."""
     n = q0.shape[0]
     dq = np.empty(n)
     rot = 0.0
@@ -85,52 +87,14 @@ def _segment_cost(q0, q1, periodic, weights, is_rotation, spacing, weight, penal
     lo = np.empty(d, dtype=np.int64)
     hi = np.empty(d, dtype=np.int64)
     tt = np.empty(d)
+    u = np.empty(d)
     acc = 0.0
     for k in range(m + 1):
         t = k / m
         for i in range(d):
-            x = u0[i] + t * du[i]
-            a0 = start[i]
-            nn = size[i]
-            if periodic_u[i]:
-                h = 2.0 * np.pi / nn
-                y = (x - axes[a0]) / h
-                y = y - nn * np.floor(y / nn)
-                c = int(np.floor(y))
-                if c >= nn:
-                    c = nn - 1
-                lo[i] = c
-                hi[i] = (c + 1) % nn
-                tt[i] = y - c
-            elif x <= axes[a0]:
-                lo[i], hi[i], tt[i] = 0, 1, 0.0
-            elif x >= axes[a0 + nn - 1]:
-                lo[i], hi[i], tt[i] = nn - 2, nn - 1, 1.0
-            else:
-                c = 0
-                while c < nn - 2 and axes[a0 + c + 1] <= x:   # axes are short (< 100 nodes)
-                    c += 1
-                lo[i] = c
-                hi[i] = c + 1
-                tt[i] = (x - axes[a0 + c]) / (axes[a0 + c + 1] - axes[a0 + c])
-        b = 0.0
-        ok = True
-        for corner in range(1 << d):
-            w = 1.0
-            flat = 0
-            for i in range(d):
-                if (corner >> i) & 1:
-                    w *= tt[i]
-                    flat += hi[i] * strides[i]
-                else:
-                    w *= 1.0 - tt[i]
-                    flat += lo[i] * strides[i]
-            if w <= eps:
-                continue
-            if not valid[flat]:
-                ok = False
-                break
-            b += w * values[flat, column]
+            u[i] = u0[i] + t * du[i]
+        locate(u, axes, start, size, periodic_u, lo, hi, tt)
+        b, ok = corner_sum(lo, hi, tt, strides, values, valid, column, eps)
         if not ok or not np.isfinite(b):
             b = penalty
         acc += 0.5 * b if (k == 0 or k == m) else b
