@@ -217,9 +217,10 @@ def order_path(waypoints, robot, validity_fn=None, *, joint_space: JointStateSpa
         else:
             out.extend(OrderedWaypoint(kind, q.copy()) for kind, _, q in phases)
             return
-        straight_ok, straight_reason = (True, "") if len(phases) == 1 and depth == 0 else check(a, b)
         if len(phases) == 1:   # a pure rotation or translation is its own straight segment
             straight_ok, straight_reason = False, reason
+        else:
+            straight_ok, straight_reason = check(a, b)
         if straight_ok and depth < max_subdivisions:
             result.n_subdivisions += 1
             result.failures.append(f"bisected: {reason}")
