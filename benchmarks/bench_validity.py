@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     threadpool_limits(1)
     from ctrplan.io.scenario import load_scenario
     from ctrplan.mechanics import ModelSettings, solve_standard
-    from ctrplan.pipeline import COLLISION_SEGMENT
+    from ctrplan.planning.route import DEFAULT_COLLISION_SEGMENT as COLLISION_SEGMENT
     from ctrplan.planning import CollisionChecker, JointStateSpace, ValidityChecker
     from ctrplan.planning.planners import DEFAULT_VALIDITY_RESOLUTION
     from ctrplan.planning.validity import BatchValidityChecker
