@@ -96,15 +96,14 @@ def _plan_mode(job: dict) -> dict:
     rep = _route_report(route.ordered, robot, field, job["settings"], joint_space)
     exact_time = time.perf_counter() - t0
     return dict(legs=route.legs, ordered=route.ordered, report=rep, plan_time=plan_time, exact_time=exact_time,
-                checks=checks.counters(), max_body_step_mm=checks.final.max_body_step * 1e3,
-                states_checked=checks.search.n_evaluations, final_states=checks.final.n_states)
+                checks=checks.counters(), max_body_step_mm=checks.final.max_body_step * 1e3)
 
 
-def _plan_modes(jobs: dict, n_jobs: int) -> dict:
+def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:
     """Run the plans of ``jobs`` ({mode: job}); with ``n_jobs`` >= 2 and more than one plan, the
     bound-blind plan runs in a forked process while this one plans bound-aware (the plans are
     independent and seeded, so the result is the same as in series; a failed child process is
-    replaced by the same plan here)."""
+    replaced by the same plan here). Returns ({mode: result}, whether they ran in parallel)."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
@@ -112,7 +111,7 @@ def _plan_modes(jobs: dict, n_jobs: int) -> dict:
     modes = list(jobs)
     parallel = n_jobs >= 2 and len(modes) > 1 and "fork" in multiprocessing.get_all_start_methods()
     if not parallel:
-        return {m: _plan_mode(jobs[m]) for m in modes}
+        return {m: _plan_mode(jobs[m]) for m in modes}, False
     out = {}
     with ProcessPoolExecutor(max_workers=len(modes) - 1, mp_context=multiprocessing.get_context("fork")) as ex:
         futures = {m: ex.submit(_plan_mode, jobs[m]) for m in modes[1:]}
@@ -122,7 +121,7 @@ def _plan_modes(jobs: dict, n_jobs: int) -> dict:
                 out[m] = fut.result()
             except BrokenProcessPool:
                 out[m] = _plan_mode(jobs[m])
-    return {m: out[m] for m in modes}
+    return {m: out[m] for m in modes}, True
 
 
 def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | None = None,
@@ -192,13 +191,14 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
                        start=sc.start, goals=[g.q for g in goals], weight=weight, planner=sc.planner, iterations=iters)
             for mode, weight in modes}
     t0 = time.perf_counter()
-    routes = _plan_modes(jobs, n_jobs)
+    routes, in_parallel = _plan_modes(jobs, n_jobs)
     plans_time = time.perf_counter() - t0
     for mode, r in routes.items():
         lm = r["report"]["exact"]
         ordered = r["ordered"]
         echo(f"{mode}: {len(ordered)} ordered waypoints, planning {r['plan_time']:.1f} s "
-             f"({r['states_checked']} states checked, final check {r['final_states']} states, "
+             f"({r['checks']['search_states_evaluated']} states checked, final check "
+             f"{r['checks']['final_check_states']} states, "
              f"{ordered.n_subdivisions} bisections, {ordered.n_repairs} repairs); exact bound at waypoints: "
              f"max {np.nanmax(lm.position) * 1e3:.2f} mm, final {lm.position[-1] * 1e3:.2f} mm")
 
@@ -266,7 +266,7 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
             "exact_bound_evaluations": int(sum(len(r["ordered"]) for r in routes.values())),
         },
         "times_s": {"bound_map": map_time, "inverse_kinematics": ik_time, "plans_wall": plans_time,
-                    "plans_in_parallel": bool(n_jobs >= 2 and len(routes) > 1), "total": None},
+                    "plans_in_parallel": in_parallel, "total": None},
         "bound_weight_per_metre": sc.planner.bound_weight,
     }
     if "bound_blind" in routes:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["locate", "corner_sum", "point_value", "multilinear"]
+__all__ = ["locate", "corner_sum", "multilinear"]
 
 
 @njit(cache=True, inline="always")
@@ -74,17 +74,6 @@ def corner_sum(lo, hi, t, strides, values, valid, column, eps):
             return value, False
         value += w * values[flat, column]
     return value, True
-
-
-@njit(cache=True)
-def point_value(u, axes, start, size, periodic, strides, values, valid, column, eps):
-    """Multilinear value of one column at one point ``u`` (d,): (value, ok)."""
-    d = u.shape[0]
-    lo = np.empty(d, dtype=np.int64)
-    hi = np.empty(d, dtype=np.int64)
-    t = np.empty(d)
-    locate(u, axes, start, size, periodic, lo, hi, t)
-    return corner_sum(lo, hi, t, strides, values, valid, column, eps)
 
 
 @njit(cache=True)

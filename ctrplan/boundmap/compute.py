@@ -26,7 +26,7 @@ from ..errors import CtrplanError
 from .axes import pilot_design, place_nodes, uniform_axis
 from .coordinates import map_coordinates
 from .field import QUANTITIES, BoundField
-from .identity import map_identity
+from .identity import as_spec, map_identity
 from .store import BoundMapStore, chunk_shape_for
 
 __all__ = ["DEFAULT_CHUNK_SIZE", "SCHEDULER_TIMEOUT_S", "SchedulerUnreachableError", "BoundMapRun",
@@ -326,8 +326,6 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
     """
     t_start = time.perf_counter()
     ident = map_identity(robot, settings, spec, evaluator, robot_file_text)
-    from .identity import as_spec
-
     spec = as_spec(robot, spec)
     coords = map_coordinates(robot)
     chunk_shape_for(spec.resolution, chunk_size)     # checks chunk_size before any work
@@ -335,9 +333,8 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
     pilot_evals, pilot_secs = 0, 0.0
     run = 0
     with _Executor(scheduler, n_jobs) as ex:
-        if BoundMapStore.exists_for(store, ident):
-            st = BoundMapStore.create_or_resume(store, ident, None, None, None, coords)
-        else:
+        st = BoundMapStore.resume(store, ident)
+        if st is None:
             t0 = time.perf_counter()
             axes, pilots = _axes_and_pilots(robot, coords, spec, ex, evaluator, settings, progress)
             pilot_secs = time.perf_counter() - t0

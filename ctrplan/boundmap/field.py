@@ -172,7 +172,8 @@ class BoundField:
         """Arrays of the compiled interpolation of one quantity, for compiled callers:
         ``(matrix (d, n_joints), offset (d,), axes, start, size, periodic, strides, values, valid,
         column, eps)`` with the joint-to-map coordinates first (identity without ``coordinates``);
-        the rest are the arguments of ``ctrplan.boundmap._interp.point_value`` after ``u``."""
+        the rest are what ``ctrplan.boundmap._interp.locate`` and ``corner_sum`` take besides
+        the point and its cell."""
         if quantity not in QUANTITIES:
             raise ValueError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")
         d = len(self.axes)

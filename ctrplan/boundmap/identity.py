@@ -179,8 +179,9 @@ class MapIdentity:
     coordinate_names: tuple
     robot_name: str = ""
 
-    # attributes compared when a map is resumed or loaded (settings are compared one by one)
-    COMPARED = ("spec", "robot_sha256", "robot_hash_of", "evaluator", "mechanics_version", "joint_names",
+    # attributes compared when a map is resumed or loaded, in this order (settings are compared one
+    # by one after them): a map of other mechanics is named as such first
+    COMPARED = ("mechanics_version", "spec", "robot_sha256", "robot_hash_of", "evaluator", "joint_names",
                 "coordinate_names")
 
     def as_attrs(self) -> dict:
@@ -201,7 +202,7 @@ class MapIdentity:
             Naming the first attribute that differs and both values.
         """
         want = self.as_attrs()
-        for name in ("mechanics_version",) + tuple(n for n in self.COMPARED if n != "mechanics_version"):
+        for name in self.COMPARED:
             if stored.get(name) != want[name]:
                 raise BoundMapMismatchError(where, name, stored.get(name), want[name])
         s_stored, s_want = stored.get("settings", {}) or {}, want["settings"]

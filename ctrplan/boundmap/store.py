@@ -162,13 +162,24 @@ class BoundMapStore:
         return cls(zarr.open_group(str(path), mode="r"), str(path))
 
     @classmethod
-    def exists_for(cls, path, identity: MapIdentity) -> bool:
-        """True if a store made for ``identity`` exists at ``path`` (raises if one for another
-        map does: :class:`BoundMapMismatchError`)."""
+    def resume(cls, path, identity: MapIdentity) -> "BoundMapStore | None":
+        """The store at ``path`` opened for writing if it was made for ``identity``; None if there
+        is none (or ``path`` is None).
+
+        Raises
+        ------
+        BoundMapMismatchError
+            The store there was made for another map.
+        IncompleteBoundMapError
+            ``path`` holds a zarr group that is not a ctrplan bound map.
+        """
+        import zarr
+
         if path is None or not Path(path).exists():
-            return False
-        cls.open(path).check(identity)
-        return True
+            return None
+        store = cls(zarr.open_group(str(path), mode="r+"), str(path))
+        store.check(identity)
+        return store
 
     def check(self, identity: MapIdentity) -> None:
         """Raise :class:`BoundMapMismatchError` unless this store was made for ``identity``."""
@@ -208,14 +219,13 @@ class BoundMapStore:
         """
         import zarr
 
+        existing = cls.resume(path, identity)
+        if existing is not None:
+            return existing
         if path is None:
             group, where = zarr.open_group(zarr.storage.MemoryStore(), mode="w"), "<memory>"
         else:
             where = str(path)
-            if Path(path).exists():
-                store = cls(zarr.open_group(where, mode="r+"), where)
-                store.check(identity)
-                return store
             group = zarr.open_group(where, mode="w-")
         res = tuple(len(a) for a in axes)
         chunks = tuple(int(c) for c in chunks)
