@@ -40,8 +40,9 @@ __all__ = ["BatchValidityChecker", "BatchMotionValidator", "use_motion_validator
 # costs one call for its end state (the state most often invalid: the planner's new sample),
 # then its other states in calls of this many. Only 2.6 % of the 1721 motions of 600 RRT*
 # iterations on the obstacles scenario were invalid, so a large batch wastes few states, while
-# each call costs ~0.3 ms of Python and numpy overhead (the 1, 1, 2, 4, 8 growth used before
-# took 9.1 s against 6.3 s for this, same plan).
+# each call costs ~0.3 ms of Python and numpy overhead (in one run, the 1, 1, 2, 4, 8 growth used
+# before took 9.1 s against 6.3 s for this at 4 mm and 6.6 against 6.4 s at 6 mm, same plan;
+# such runs drift by up to 2x on the shared machine).
 DEFAULT_MOTION_BATCH = 8
 
 # Slack of the joint-limit test of Robot.configuration [m or rad] (the same literal there).
