@@ -37,8 +37,20 @@ PATH_SAMPLE_SPACING = 2e-3
 
 
 def map_spec(scenario) -> MapSpec:
-    """The bound-map spec of a scenario: its ``[bound_field]`` resolution and placement, else
-    :func:`ctrplan.boundmap.default_spec` of its robot."""
+    """The bound-map spec of a scenario.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Loaded scenario (``ctrplan.io.scenario.load_scenario``).
+
+    Returns
+    -------
+    MapSpec
+        Its ``[bound_field]`` resolution (one entry per map coordinate, checked when the scenario
+        was loaded) and placement, else :func:`ctrplan.boundmap.default_spec` of its robot with
+        that placement.
+    """
     bf = scenario.bound_field
     if bf.resolution is None:
         return MapSpec(default_spec(scenario.robot).resolution, bf.placement)

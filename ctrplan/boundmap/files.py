@@ -41,14 +41,43 @@ CACHE_DIR = Path(".cache") / "boundmaps"
 
 
 def default_spec(robot) -> MapSpec:
-    """Uniform grid, 16 nodes per rotation coordinate and 6 per translation coordinate."""
+    """Uniform grid, 16 nodes per rotation coordinate and 6 per translation coordinate.
+
+    Parameters
+    ----------
+    robot : Robot
+
+    Returns
+    -------
+    MapSpec
+        Resolution of shape (d,), one entry per map coordinate (:func:`map_coordinates`).
+
+    Raises
+    ------
+    ValueError
+        The robot has no joints.
+    """
     coords = map_coordinates(robot)
     return MapSpec(tuple(DEFAULT_ROTATION_NODES if k == "rotation" else DEFAULT_TRANSLATION_NODES
                          for k in coords.kinds))
 
 
 def map_paths(robot_path, key: str) -> tuple[Path, Path]:
-    """(shipped map, cached map), both without suffix, of a robot file and a map key."""
+    """Where the map of a robot file with key ``key`` is shipped and cached.
+
+    Parameters
+    ----------
+    robot_path : path
+        Robot model file.
+    key : str
+        :func:`~ctrplan.boundmap.identity.field_key` (its first 12 hex digits name the files).
+
+    Returns
+    -------
+    shipped, cached : Path
+        ``<robot dir>/boundmaps/<robot>-<key12>`` and ``.cache/boundmaps/<robot>-<key12>``,
+        without suffix (``.npz`` or ``.zarr`` is added by the caller).
+    """
     robot_path = Path(robot_path)
     shipped = robot_path.parent / "boundmaps" / f"{robot_path.stem}-{key[:12]}"
     cache = CACHE_DIR / f"{robot_path.stem}-{key[:12]}"
