@@ -4,6 +4,7 @@
 - :func:`solve_clearance`: clearance model (Sections II-B to II-E, Appendices A and B).
 - :func:`solve_friction`: one maximal torsional friction solution (Section III).
 - :func:`evaluate_bound`: the per-configuration friction bound over all 2^(n-1) directions.
+- :func:`predict_tip`: the tip and shape after a given motion history (Section V-B).
 - :func:`solve_standard_batch`: the standard model at many configurations in one compiled call.
 
 :data:`MECHANICS_VERSION` names the version of their results (bound maps record it).
@@ -16,6 +17,7 @@ from .bound import all_eta, evaluate_bound
 from .contact import solve_clearance, solve_contact, solve_friction
 from .discrete import TubeChain, chain_jacobians, forward_kinematics
 from .grid import ArcLengthGrid, build_grid
+from .prediction import PAIR_CASES, Prediction, pair_cases, predict_tip
 from .results import BoundResult, ContactSolution, Diagnostics, ModelSettings, StandardSolution
 from ._standard_batch import StandardBatch, solve_standard_batch
 from ._standard_bodies import StandardBodies, solve_standard_bodies
@@ -26,4 +28,5 @@ __all__ = [
     "all_eta", "ModelSettings", "StandardSolution", "ContactSolution", "BoundResult", "Diagnostics",
     "TubeChain", "forward_kinematics", "chain_jacobians", "ArcLengthGrid", "build_grid",
     "StandardBodies", "solve_standard_bodies",
+    "predict_tip", "Prediction", "pair_cases", "PAIR_CASES",
 ]
