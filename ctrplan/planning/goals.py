@@ -9,6 +9,11 @@ solutions within tolerance that pass the validity function are kept; the one wit
 friction bound (from a :class:`~ctrplan.boundmap.BoundField`, or the smallest tip error without
 one) is chosen. A redundant robot (more than three joints) has a manifold of solutions, and
 more starts find lower bounds on it.
+
+:func:`compensate_goal` then moves such a solution so that the tip *predicted* for the motion
+history that reaches it (:func:`ctrplan.mechanics.predict_tip`: clearance model after a final
+translation, friction model after a final rotation, Section V-B of Ha, Fagogenis & Dupont 2019)
+is on the target, instead of the standard model's tip.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from ..errors import CtrplanError, UnreachableGoalError
 from .space import wrap_angle
 
 __all__ = ["JointGoal", "TaskSpaceGoal", "GoalSolution", "resolve_goal", "DEFAULT_IK_STARTS_PER_JOINT",
-           "DEFAULT_IK_MAX_STARTS"]
+           "DEFAULT_IK_MAX_STARTS", "CompensatedGoal", "compensate_goal"]
 
 # Coarse start grid: nodes per joint (3 joints -> 27 starts, ~1-3 s with a ~1 ms model).
 DEFAULT_IK_STARTS_PER_JOINT = 3
@@ -226,3 +231,240 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
         order = np.argsort(errs)
     i = int(order[0])
     return GoalSolution(cand[i], float(errs[i]), float(bounds[i]), cand, errs, bounds, n_eval)
+
+
+# ----------------------------------------------------------------------------- compensation
+# Compensated IK: stop when the predicted tip is this close to the target [m] (well below any
+# goal tolerance, above the contact solver's tip accuracy, ~1 um for outer_tol 1e-7 m).
+COMPENSATION_TIP_TOL = 1e-5
+# Gauss-Newton iterations before giving up.
+COMPENSATION_MAX_ITERATIONS = 15
+# Finite-difference steps of the standard-model Jacobian [rad] and [m].
+_FD_STEP_ROTATION = 1e-5
+_FD_STEP_TRANSLATION = 1e-6
+# Scale of a translation against a rotation in the minimum-norm step of a redundant robot [m/rad]
+# (the same 0.01 as the x_scale of resolve_goal's least squares).
+_TRANSLATION_SCALE = 0.01
+# Step halvings of the backtracking line search.
+_MAX_HALVINGS = 5
+
+
+@dataclass(frozen=True, eq=False)
+class CompensatedGoal:
+    """A task-space goal aimed with the predicted tip instead of the standard model's.
+
+    Attributes
+    ----------
+    q : ndarray, shape (n_joints,)
+        The goal to plan to [rad or m]: ``q_compensated`` when ``accepted``, else ``q_standard``.
+    q_compensated : ndarray, shape (n_joints,)
+        Where the compensation ended (periodic angles in [-pi, pi)).
+    q_standard : ndarray, shape (n_joints,)
+        The standard-model IK solution it started from.
+    target : ndarray, shape (3,)
+        Target tip position [m].
+    eta : ndarray of int, shape (n - 1,)
+        Friction direction per pair of the assumed final approach (Eq. (39)).
+    translation_last : ndarray of bool, shape (n - 1,)
+        Per pair: a translation follows the pair's last rotation in the assumed approach.
+    predicted_tip_standard : ndarray, shape (3,)
+        Predicted tip at ``q_standard`` with that history [m].
+    predicted_miss_standard : float
+        Its distance from the target [m]: the miss of standard-model IK.
+    predicted_tip : ndarray, shape (3,)
+        Predicted tip at ``q_compensated`` [m].
+    predicted_miss : float
+        Its distance from the target [m]: the compensated miss.
+    standard_tip_error : float
+        Distance of the standard model's tip at ``q_compensated`` from the target [m] (about
+        the predicted offset: the standard model now misses by design).
+    model : str
+        ``"clearance"`` or ``"friction"``: the model of the prediction.
+    converged : bool
+        ``predicted_miss`` reached the iteration's tolerance.
+    accepted : bool
+        The compensated ``q`` is used: it converged to within the goal tolerance and passed the
+        validity function.
+    iterations : int
+        Gauss-Newton iterations.
+    n_predictions : int
+        Contact-model solves (predictions).
+    message : str
+        What happened, for the report.
+    """
+
+    q: np.ndarray
+    q_compensated: np.ndarray
+    q_standard: np.ndarray
+    target: np.ndarray
+    eta: np.ndarray
+    translation_last: np.ndarray
+    predicted_tip_standard: np.ndarray
+    predicted_miss_standard: float
+    predicted_tip: np.ndarray
+    predicted_miss: float
+    standard_tip_error: float
+    model: str
+    converged: bool
+    accepted: bool
+    iterations: int
+    n_predictions: int
+    message: str
+
+
+def compensate_goal(target, robot, q_standard, eta, translation_last, settings=None, *, tolerance: float,
+                    validity_fn=None, predict=None, tip_tol: float = COMPENSATION_TIP_TOL,
+                    max_iterations: int = COMPENSATION_MAX_ITERATIONS) -> CompensatedGoal:
+    """Joint vector whose predicted tip is on the target, for a fixed final-approach history.
+
+    Gauss-Newton on the residual ``r(q) = p_pred(q; eta, translation_last) - target`` with the
+    standard model's tip Jacobian (finite differences, cheap) in place of the prediction's:
+    ``q <- q - D (J_std D)^+ r(q)`` with ``D = diag(1, 0.01 m/rad)`` (minimum-norm step of a
+    redundant robot), a backtracking line search on ``|r|``, translations kept in their limits.
+    The prediction differs from the standard tip by a slowly varying offset (the friction and
+    clearance deviation, a few mm), so each iteration contracts the miss by roughly the relative
+    difference of the two Jacobians; one contact solve per iteration (warm-started from the
+    previous one).
+
+    Parameters
+    ----------
+    target : array-like, shape (3,)
+        Target tip position [m].
+    robot : Robot
+    q_standard : array-like, shape (n_joints,)
+        Standard-model IK solution to start from (:func:`resolve_goal`) [rad or m].
+    eta : array-like of int, shape (n - 1,)
+        Friction directions of the final approach (+1, -1, 0 none; Eq. (39)), e.g. from
+        :func:`ctrplan.planning.history.approach_history`.
+    translation_last : bool or array-like of bool, shape (n - 1,)
+        Per pair: a translation follows the pair's last rotation (Section V-B).
+    settings : ModelSettings, optional
+    tolerance : float, keyword-only
+        Goal tolerance [m], > 0: the compensated solution is accepted only within it.
+    validity_fn : callable, optional, keyword-only
+        ``validity_fn(q) -> bool`` (limits, stability, collisions); an invalid compensated
+        configuration is not accepted.
+    predict : callable, optional, keyword-only
+        ``predict(robot, alpha, beta, eta, translation_last, settings, warm_start=...) ->
+        Prediction``; default :func:`ctrplan.mechanics.predict_tip`.
+    tip_tol : float, keyword-only
+        Stop when the predicted miss is below this [m] (default 10 um).
+    max_iterations : int, keyword-only
+
+    Returns
+    -------
+    CompensatedGoal
+        With the predicted miss of ``q_standard`` and of ``q_compensated``. When the iteration
+        does not reach ``tolerance`` or the result is invalid, ``accepted`` is False, ``q`` is
+        ``q_standard`` and ``message`` says why.
+
+    Raises
+    ------
+    ValueError
+        ``target`` not 3 finite numbers, ``tolerance`` <= 0, bad ``eta`` / ``translation_last``
+        (see :func:`ctrplan.mechanics.predict_tip`), ``q_standard`` of the wrong length.
+    CtrplanError
+        The prediction fails at ``q_standard`` itself (e.g. ``ConvergenceError`` of the standard
+        model, ``PhysicalParameterError`` without clearances).
+
+    Notes
+    -----
+    Prediction: Section V-B with Sections II (clearance model) and III (friction model, Eqs.
+    (37)-(47)) of Ha, Fagogenis & Dupont, IEEE T-RO 35(2):353-370, 2019,
+    doi:10.1109/TRO.2018.2878906. The history is held fixed while q moves: a small change of the
+    goal does not change the direction of the final rotations.
+    """
+    from ..mechanics import ModelSettings, predict_tip, solve_standard  # noqa: PLC0415
+
+    settings = settings or ModelSettings()
+    predict = predict or predict_tip
+    target = np.asarray(target, dtype=float).reshape(-1)
+    if target.shape != (3,) or not np.all(np.isfinite(target)):
+        raise ValueError(f"target must be 3 finite numbers [m], got {target!r}")
+    if not np.isfinite(tolerance) or tolerance <= 0.0:
+        raise ValueError(f"tolerance must be > 0 m, got {tolerance!r}")
+    q0 = np.asarray(q_standard, dtype=float).reshape(-1)
+    nj = len(robot.joints)
+    if q0.shape != (nj,):
+        raise ValueError(f"q_standard needs {nj} values ({', '.join(robot.joint_names)}), got {q0.shape}")
+    periodic = np.array([j.periodic for j in robot.joints])
+    rot = np.array([j.kind == "rotation" for j in robot.joints])
+    lo = np.where(periodic, -np.inf, robot.joint_lower)
+    hi = np.where(periodic, np.inf, robot.joint_upper)
+    scale = np.where(rot, 1.0, _TRANSLATION_SCALE)
+    fd = np.where(rot, _FD_STEP_ROTATION, _FD_STEP_TRANSLATION)
+    n_pred = 0
+    last = {"sol": None}
+
+    def prediction(q):
+        nonlocal n_pred
+        alpha, beta = robot.configuration(q)
+        n_pred += 1
+        p = predict(robot, alpha, beta, eta, translation_last, settings, warm_start=last["sol"])
+        last["sol"] = p.solution
+        return p
+
+    def std_tip(q):
+        alpha, beta = robot.configuration(q)
+        sol = solve_standard(robot, alpha, beta, settings, check_stability=False)
+        if not sol.diagnostics.converged:
+            raise ValueError("standard model did not converge")
+        return np.asarray(sol.tip_position, dtype=float)
+
+    def jacobian(q, p0):
+        J = np.empty((3, nj))
+        for j in range(nj):
+            h = fd[j] if q[j] + fd[j] <= hi[j] else -fd[j]
+            dq = np.zeros(nj)
+            dq[j] = h
+            J[:, j] = (std_tip(q + dq) - p0) / h
+        return J
+
+    first = prediction(q0)
+    tip0 = first.tip_position.copy()
+    miss0 = float(np.linalg.norm(tip0 - target))
+    q, p, miss = q0.copy(), first, miss0
+    it, message = 0, ""
+    try:
+        while miss > tip_tol and it < max_iterations:
+            it += 1
+            J = jacobian(q, p.standard.tip_position)
+            r = p.tip_position - target
+            step = -scale * (np.linalg.pinv(J * scale[None, :]) @ r)
+            t, improved = 1.0, False
+            for _ in range(_MAX_HALVINGS + 1):
+                q_new = np.clip(q + t * step, lo, hi)
+                try:
+                    p_new = prediction(q_new)
+                    miss_new = float(np.linalg.norm(p_new.tip_position - target))
+                except (CtrplanError, ValueError, np.linalg.LinAlgError, FloatingPointError):
+                    miss_new = np.inf
+                if miss_new < miss:
+                    q, p, miss, improved = q_new, p_new, miss_new, True
+                    break
+                t *= 0.5
+            if not improved:
+                message = f"no descent after {it} iterations"
+                break
+    except (CtrplanError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
+        message = f"stopped after {it} iterations: {type(exc).__name__}: {exc}"
+    q = np.where(periodic, wrap_angle(q), q)
+    converged = miss <= tip_tol
+    std_err = float(np.linalg.norm(p.standard.tip_position - target))
+    accepted = miss <= tolerance and bool(p.ok)
+    if not p.ok:
+        message = message or f"the prediction at the compensated goal did not converge: {p.solution.diagnostics.message}"
+    if accepted and validity_fn is not None and not bool(validity_fn(q)):
+        accepted, message = False, "the compensated configuration is invalid (limits, stability, map or collision)"
+    if not accepted and not message:
+        message = f"predicted miss {miss * 1e3:.3g} mm is outside the tolerance {tolerance * 1e3:.3g} mm"
+    if accepted:
+        message = (f"converged in {it} iterations" if converged else
+                   f"within tolerance after {it} iterations ({message or 'iteration limit'})")
+    return CompensatedGoal(
+        q=q if accepted else q0.copy(), q_compensated=q, q_standard=q0.copy(), target=target,
+        eta=np.asarray(eta, dtype=int).reshape(-1).copy(),
+        translation_last=np.broadcast_to(np.asarray(translation_last, dtype=bool), first.eta.shape).copy(),
+        predicted_tip_standard=tip0, predicted_miss_standard=miss0, predicted_tip=p.tip_position.copy(),
+        predicted_miss=miss, standard_tip_error=std_err, model=p.model, converged=converged, accepted=accepted,
+        iterations=it, n_predictions=n_pred, message=message)
