@@ -84,13 +84,49 @@ def test_distal_contact_forces_form_the_straightening_couple():
     assert cl.contact_force[np.argmax(cl.contact_s)] > 10.0
 
 
-def test_friction_with_zero_mu_equals_clearance_model():
+def test_friction_model_is_continuous_in_mu_at_zero():
+    """At mu = 1e-3 each of the four friction solutions of the Table II robot lies within a
+    small, first-order distance of the clearance solution, and is not the clearance solution.
+
+    The friction terms (Eqs. (38)-(41)) are linear in mu, so the tip moves by mu D + O(mu^2):
+    doubling mu to 2e-3 must double the distance (to 1 %; the O(mu) relative correction is
+    about 1e-3 here, and the outer loop is run to 1e-9 m so that its stopping test does not
+    blur the ratio). The distance itself must be clearly above the solver's tolerance (the
+    solutions differ) and below 0.1 mm (a friction effect of 1/200 of the bound's, which is
+    about 9 mm at mu = 0.2 here). Catches: a friction term that does not vanish with mu (a jump
+    at mu -> 0), friction ignored for small mu, or a friction path that returns the clearance
+    solution unchanged (the old test's mu = 0 solve was that solve by construction)."""
     robot = table2_robot()
     alpha, beta = robot.configuration([2.0, 1.0, -0.06])
-    cl = solve_clearance(robot, alpha, beta, FAST)
+    settings = FAST.replace(outer_tol=1e-9)
+    cl = solve_clearance(robot, alpha, beta, settings)
     for eta in all_eta(3):
-        fr = solve_friction(robot, alpha, beta, eta, FAST, mu=[0.0, 0.0])
-        np.testing.assert_allclose(fr.tip_position, cl.tip_position, atol=2e-6)
+        dist = []
+        for mu in (1e-3, 2e-3):
+            fr = solve_friction(robot, alpha, beta, eta, settings, mu=[mu, mu], warm_start=cl)
+            assert fr.diagnostics.converged, fr.diagnostics.message
+            dist.append(np.linalg.norm(fr.tip_position - cl.tip_position))
+        assert 100 * settings.outer_tol < dist[0] < 0.1e-3, (eta, dist)
+        assert dist[1] / dist[0] == pytest.approx(2.0, rel=0.01), (eta, dist)
+
+
+def test_twist_between_friction_directions_grows_monotonically_with_mu():
+    """Table I pair at 1.0, 2.0 and 2.8 rad: the relative tip twist of the eta = -1 solution minus
+    that of eta = +1 is zero without friction and grows strictly with mu over 0.05, 0.1, 0.2,
+    0.4 (friction torques and forces scale with mu, Eqs. (38), (41)). Catches a friction term
+    with the wrong sign or one that saturates or ignores mu."""
+    for theta in (1.0, 2.0, 2.8):
+        spread = []
+        for mu in (0.0, 0.05, 0.1, 0.2, 0.4):
+            robot = table1_pair(clearance=0.05e-3, mu=mu)
+            alpha, beta = robot.configuration([theta])
+            cl = solve_clearance(robot, alpha, beta, FAST)
+            ccw = solve_friction(robot, alpha, beta, [1], FAST, warm_start=cl)
+            cw = solve_friction(robot, alpha, beta, [-1], FAST, warm_start=cl)
+            assert ccw.diagnostics.converged and cw.diagnostics.converged
+            spread.append(_tip_twist(cw) - _tip_twist(ccw))
+        assert abs(spread[0]) < 1e-12, spread
+        assert all(a < b for a, b in zip(spread, spread[1:])), (theta, spread)
 
 
 def _tip_twist(sol):
