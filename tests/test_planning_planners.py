@@ -84,18 +84,26 @@ def test_ordered_segments_rotate_before_translating(setup):
     assert ordered.motions[0] == "start"
     for k in range(1, len(q)):
         dq = q[k] - q[k - 1]
-        if ordered.motions[k] == "rotation":
-            assert np.all(dq[~js.is_rotation] == 0.0)
-            assert k + 1 == len(q) or ordered.motions[k + 1] in ("translation", "rotation")
-        else:
-            assert np.all(dq[js.is_rotation] == 0.0)
+        assert ordered.motions[k] in ("rotation", "translation")
+        moved = js.is_rotation if ordered.motions[k] == "rotation" else ~js.is_rotation
+        assert np.all(dq[~moved] == 0.0), (k, ordered.motions[k], dq)   # only its own joints move
+        assert np.any(dq[moved] != 0.0), (k, ordered.motions[k], dq)    # and something moves
     # every planned waypoint appears, and each segment is rotation then translation
     plan_pts = [tuple(p) for p in r.waypoints]
     idx = [i for i, p in enumerate(map(tuple, q)) if p in plan_pts]
     assert len(idx) == len(r.waypoints)
+    # the goal changes every joint, so both phases occur somewhere (the checks below are not vacuous)
+    assert {"rotation", "translation"} <= set(ordered.motions[1:])
+    rot = js.is_rotation
     for a, b in zip(idx[:-1], idx[1:]):
         seg = ordered.motions[a + 1:b + 1]
         assert seg in (["rotation", "translation"], ["rotation"], ["translation"])
+        if seg == ["rotation", "translation"]:
+            # the corner of the L: rotations already at the segment's end, translations still at
+            # its start (a translate-then-rotate order, or a corner off the segment, fails here)
+            corner = q[a + 1]
+            np.testing.assert_array_equal(corner[rot], q[b][rot])
+            np.testing.assert_array_equal(corner[~rot], q[a][~rot])
     np.testing.assert_allclose(js.difference(q[-1], goal), 0.0, atol=1e-9)
 
 
@@ -120,11 +128,18 @@ def test_objective_in_a_plain_ompl_setup(setup):
     planner.solve(ob.PlannerTerminationCondition(lambda: planner.numIterations() >= 100))
     assert pdef.hasExactSolution()
     path = pdef.getSolutionPath()
-    before = path.cost(objective).value()
     og.PathSimplifier(si, pdef.getGoal(), objective).partialShortcutPath(path)
     after = path.cost(objective).value()
-    assert after <= before + 1e-12
     w = np.array([js.to_numpy(path.getState(i)) for i in range(path.getStateCount())])
+    # the shortcut path still joins start and goal through valid motions
+    np.testing.assert_allclose(js.difference(w[0], START), 0.0, atol=1e-12)
+    np.testing.assert_allclose(js.difference(w[-1], GOAL), 0.0, atol=1e-12)
+    assert all(si.checkMotion(path.getState(i), path.getState(i + 1)) for i in range(len(w) - 1))
+    # a lower bound the cost must respect: every path is at least as long as the straight
+    # start-goal distance, and the fake bound (a bump on a 0.5 mm floor, interpolated between
+    # nodes >= 0.5 mm) adds at least w * 0.5 mm per unit length
+    floor = 0.5e-3
+    assert after >= (1.0 + 1000.0 * floor) * js.distance(START, GOAL) * (1 - 1e-12)
     # OMPL's path cost equals the numpy cost of the same waypoints
     assert objective.path_cost(w) == pytest.approx(after, rel=1e-9)
     # and a pre-built objective can be handed to plan()
@@ -154,3 +169,56 @@ def test_compiled_motion_cost_equals_the_numpy_one(setup):
         b = np.array([slow.segment_cost(x, y) for x, y in zip(q0, q1)])
         np.testing.assert_allclose(a, b, rtol=1e-12)
         assert fast.n_bound_evaluations == slow.n_bound_evaluations
+
+
+def _linear_bound(robot, alpha, beta, settings=None):
+    """Bound linear in the relative translation l_3 - l_1 only: 1 mm at -104 mm rising by
+    0.05 m/m (4.5 mm at -34 mm); the multilinear map reproduces it exactly."""
+    from types import SimpleNamespace
+
+    p = LINEAR_B0 + LINEAR_SLOPE * (beta[2] - beta[0] + 0.104)
+    return SimpleNamespace(position=p, angle=p, translation_last_position=p, translation_last_angle=p,
+                           diagnostics=SimpleNamespace(converged=True, unstable=False))
+
+
+_linear_bound.name = "linear-bound"
+LINEAR_B0 = 1e-3        # [m]
+LINEAR_SLOPE = 0.05     # [m of bound per m of translation]
+
+
+def test_motion_cost_equals_a_hand_computation_on_a_linear_bound():
+    """c = L + w * integral of b over the motion (objective.py; Sec. III bound). With a bound
+    linear in beta_3 (exact in the map and under the trapezoid rule) the integral is
+    L * (b(q0) + b(q1)) / 2 by hand, and L = sum_rot m_per_rad |d alpha| (short way round) +
+    |d beta|. Checked for the compiled path (BoundField) and the numpy path (a plain callable).
+    Catches: a wrong metric weight, the long way round +-pi, a missing factor L or w in the
+    integral, the bound sampled at the wrong place."""
+    from ompl import base as ob
+
+    robot = fake_robot()
+    field = compute_field(robot, _linear_bound, (8, 8, 3), progress=False)
+    m_per_rad, w = 0.05, 500.0
+    js = JointStateSpace(robot, meters_per_radian=m_per_rad)
+    si = ob.SpaceInformation(js.space)
+    si.setStateValidityChecker(lambda s: True)
+    si.setup()
+
+    def b(beta3):
+        return LINEAR_B0 + LINEAR_SLOPE * (beta3 + 0.104)
+
+    cases = [
+        # pure translation -90 -> -50 mm: L = 0.04 m
+        (([0.3, -0.2, -0.09], [0.3, -0.2, -0.05]), 0.04 * (1 + w * 0.5 * (b(-0.09) + b(-0.05)))),
+        # rotation 3.0 -> -3.0 rad goes the short way, 2 pi - 6 rad; bound constant
+        (([3.0, -0.2, -0.07], [-3.0, -0.2, -0.07]), m_per_rad * (2 * np.pi - 6.0) * (1 + w * b(-0.07))),
+        # both groups: L = 0.05 (1.0 + 0.5) + 0.06 m, bound linear along the motion
+        (([0.1, 0.4, -0.10], [1.1, -0.1, -0.04]), (m_per_rad * 1.5 + 0.06) * (1 + w * 0.5 * (b(-0.10) + b(-0.04)))),
+    ]
+    direct = lambda q: b(np.atleast_2d(q)[:, 2])  # noqa: E731
+    for bound in (field, direct):
+        objective = BoundCostObjective(si, js, bound, bound_weight=w, sample_spacing=1e-3)
+        for (q0, q1), expected in cases:
+            assert objective.segment_cost(q0, q1) == pytest.approx(expected, rel=1e-12), (bound, q0, q1)
+        path = np.array([c[0][0] for c in cases[:1]] + [[0.3, -0.2, -0.05], [1.0, -0.2, -0.05]])
+        leg2 = m_per_rad * 0.7 * (1 + w * b(-0.05))
+        assert objective.path_cost(path) == pytest.approx(cases[0][1] + leg2, rel=1e-12)
