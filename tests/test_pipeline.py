@@ -266,10 +266,23 @@ def _check_outputs(out: Path, robot, scenario_path: Path):
         assert abs(traj[n][-1] - q[-1, i]) < 1e-9
     assert np.all(np.diff(traj["t"]) > 0)
 
-    for png in ("robot_shapes.png", "bound_along_path.png", "joint_trajectories.png"):
+    # figures: PNGs whose pixel size is the figure's (one bound panel per plan, one row of panels
+    # per joint; figure sizes [in] of ctrplan.plots at its DPI) and that show something (dark
+    # pixels of lines and text: none in a blank figure, most of it in a filled one)
+    import matplotlib.image as mpimg
+
+    from ctrplan import plots
+
+    n_plans = 2 if "bound_blind" in json.loads((out / "summary.json").read_text()) else 1
+    inches = {"robot_shapes.png": (7.5, 6.5), "bound_along_path.png": (5.5 * n_plans, 4.0),
+              "joint_trajectories.png": (12.0, 2.2 * len(names) + 0.8)}
+    for png, (w_in, h_in) in inches.items():
         p = out / png
-        assert p.exists() and p.stat().st_size > 1000, png
-        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", png
+        img = mpimg.imread(p)
+        assert img.shape[:2] == (round(h_in * plots.DPI), round(w_in * plots.DPI)), (png, img.shape)
+        ink = np.mean(np.any(img[..., :3] < 0.5, axis=-1))
+        assert 0.002 < ink < 0.5, (png, ink)
     return rows
 
 

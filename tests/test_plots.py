@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import ctrplan.io.atomic as atomic
+import ctrplan.plots as plots
 from ctrplan.plots import plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes, plot_xy
 from ctrplan.report import format_summary, path_columns, write_plan_outputs
 from ctrplan.trajectory import time_parameterize
@@ -39,8 +40,29 @@ def _shapes():
     return [np.column_stack([0.02 * k * s**2, np.zeros_like(s), s]) for k in range(4)]
 
 
+@pytest.fixture
+def figures(monkeypatch):
+    """The matplotlib Figures the plot functions write, in order (``plots._save`` still writes)."""
+    captured = []
+    save = plots._save
+
+    def spy(fig, path):
+        captured.append(fig)
+        return save(fig, path)
+
+    monkeypatch.setattr(plots, "_save", spy)
+    return captured
+
+
+def _lines_with_label(ax, label):
+    return [ln for ln in ax.get_lines() if ln.get_label() == label]
+
+
 # ---------------------------------------------------------------------------------- plots
-def test_robot_shapes_with_every_obstacle_type(tmp_path):
+def test_robot_shapes_with_every_obstacle_type(tmp_path, figures):
+    """The PNG is written, and the figure shows one 3-D axes in mm with one centerline per
+    waypoint, equal to the input in mm (catches a dropped shape, a wrong unit or axis swap),
+    the friction tips as one marker set, and every obstacle drawn."""
     obstacles = [
         {"type": "sphere", "center_m": [0.02, 0.0, 0.08], "radius_m": 0.005},
         {"type": "capsule", "a_m": [-0.02, 0.0, 0.05], "b_m": [-0.02, 0.01, 0.09], "radius_m": 0.003},
@@ -53,6 +75,22 @@ def test_robot_shapes_with_every_obstacle_type(tmp_path):
     out = plot_robot_shapes(tmp_path / "shapes.png", _shapes(), obstacles, tips, "test")
     assert out == tmp_path / "shapes.png" and _is_png(out)
     assert _no_temp_files(tmp_path)
+    (fig,) = figures
+    (ax,) = fig.axes
+    assert ax.name == "3d" and ax.get_title() == "test"
+    assert (ax.get_xlabel(), ax.get_ylabel(), ax.get_zlabel()) == ("x [mm]", "y [mm]", "z [mm]")
+    lines = ax.get_lines()
+    assert len(lines) == len(_shapes())
+    for line, shape in zip(lines, _shapes()):
+        np.testing.assert_allclose(np.column_stack(line.get_data_3d()), shape * 1e3, rtol=1e-12)
+    # first and last waypoint labelled; friction tips: one scatter with the two non-empty tips
+    assert [ln.get_label() for ln in lines][::3] == ["waypoint 0", "waypoint 3"]
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert texts == ["waypoint 0", "waypoint 3", "friction-model tips"]
+    scatters = [c for c in ax.collections if c.get_label() == "friction-model tips"]
+    assert len(scatters) == 1 and len(scatters[0].get_offsets()) == 2
+    # sphere and capsule are surfaces, box and mesh polygon sets: four obstacle collections
+    assert len(ax.collections) == 1 + len(obstacles)
 
 
 def test_robot_shapes_accepts_obstacle_dataclasses(tmp_path):
@@ -78,7 +116,11 @@ def test_unknown_obstacle_raises_and_writes_nothing(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_bound_along_two_plans_and_one_plan(tmp_path):
+def test_bound_along_two_plans_and_one_plan(tmp_path, figures):
+    """One panel per plan; each shows its bound as given (mm), the translation-last bound only
+    where there is one, the limit line, the plan's maximum in the title and a y label with its
+    unit. Catches plans drawn into one panel or swapped, a unit conversion applied twice, a
+    missing limit."""
     s = [np.linspace(0, 1, 4), np.linspace(0, 1, 3)]
     bound = [np.array([0.5, 1.0, 0.8, 0.6]), np.array([0.5, 2.5, 1.1])]
     tl = [np.array([np.nan, np.nan, 0.4, np.nan]), np.full(3, np.nan)]
@@ -86,14 +128,55 @@ def test_bound_along_two_plans_and_one_plan(tmp_path):
     assert _is_png(plot_bound_along_path(tmp_path / "b2.png", s, bound, tl, motions, threshold_mm=1.5))
     assert _is_png(plot_bound_along_path(tmp_path / "b1.png", s[0], bound[0], tl[0], MOTIONS,
                                          labels=("plan",)))
+    two, one = figures
+    assert len(two.axes) == 2 and len(one.axes) == 1
+    assert two.axes[0].get_ylabel() == "tip error bound [mm]"
+    for j, ax in enumerate(two.axes):
+        (line,) = _lines_with_label(ax, "friction bound")
+        np.testing.assert_array_equal(line.get_xdata(), s[j])
+        np.testing.assert_array_equal(line.get_ydata(), bound[j])
+        (limit,) = _lines_with_label(ax, "limit 1.5 mm")
+        assert list(limit.get_ydata()) == [1.5, 1.5]
+        assert ax.get_xlabel() == "path parameter s [-]"
+    assert two.axes[0].get_title() == "bound-aware plan (max 1 mm)"
+    assert two.axes[1].get_title() == "bound-blind plan (max 2.5 mm)"
+    (tl_line,) = _lines_with_label(two.axes[0], "translation-last bound")
+    np.testing.assert_array_equal(tl_line.get_ydata(), tl[0])
+    assert _lines_with_label(two.axes[1], "translation-last bound") == []   # all NaN: not drawn
+    # one shaded span per motion phase (3 phases in plan 0, 2 in plan 1)
+    assert [len(ax.patches) for ax in two.axes] == [3, 2]
+    assert one.axes[0].get_title() == "plan (max 1 mm)"
     with pytest.raises(ValueError, match="plan 1"):
         plot_bound_along_path(tmp_path / "bad.png", s, [bound[0], bound[0]], tl, motions)
 
 
-def test_joint_trajectories_and_xy(tmp_path, traj):
+def test_joint_trajectories_and_xy(tmp_path, traj, figures):
+    """Joint plot: a 3 x 3 grid (joints x position / velocity / acceleration) whose curves are
+    the trajectory in deg or mm (per s, per s^2) against t, with the unit in each y label.
+    Generic plot: one axes, one curve equal to its input, the given labels. Catches a missing
+    joint or derivative, a swapped column, a rotation shown in rad or a translation in m."""
     assert _is_png(plot_joint_trajectories(tmp_path / "joints.png", traj))
     assert _is_png(plot_xy(tmp_path / "xy.png", traj.t, traj.position[:, 2] * 1e3,
                            xlabel="time t [s]", ylabel="beta_3 [mm]"))
+    joints, xy = figures
+    assert len(joints.axes) == 9
+    grid = np.array(joints.axes).reshape(3, 3)
+    units = {"rotation": ("deg", np.degrees(1.0)), "translation": ("mm", 1e3)}
+    for i, (name, kind) in enumerate(zip(NAMES, KINDS)):
+        unit, scale = units[kind]
+        for col, (values, suffix) in enumerate(((traj.position, ""), (traj.velocity, "/s"),
+                                                (traj.acceleration, "/s^2"))):
+            ax = grid[i, col]
+            assert ax.get_ylabel() == f"{name} [{unit}{suffix}]"
+            (line,) = ax.get_lines()
+            np.testing.assert_array_equal(line.get_xdata(), traj.t)
+            np.testing.assert_allclose(line.get_ydata(), values[:, i] * scale, rtol=1e-12)
+    assert [ax.get_xlabel() for ax in grid[-1]] == ["time t [s]"] * 3
+    (ax,) = xy.axes
+    (line,) = ax.get_lines()
+    np.testing.assert_array_equal(line.get_xdata(), traj.t)
+    np.testing.assert_array_equal(line.get_ydata(), traj.position[:, 2] * 1e3)
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("time t [s]", "beta_3 [mm]")
     with pytest.raises(ValueError, match="3 joint names"):
         plot_joint_trajectories(tmp_path / "j.png", traj, joint_names=["a"])
 
