@@ -5,12 +5,17 @@
 1. load the scenario and its robot; load the robot's bound map (shipped in
    ``<robot dir>/boundmaps/`` as ``.npz`` or ``.zarr``, or cached) or compute it into a zarr store
    (local cores or a Dask cluster, resumable);
-2. resolve each goal (task-space goals by inverse kinematics preferring the smallest bound);
+2. resolve each goal (task-space goals by inverse kinematics preferring the smallest bound), then
+   aim task-space goals with the tip *predicted* after the final approach (``[planner]
+   final_motion``: translation-last, the default, or rotation-last; Section V-B of Ha et al.
+   2019) instead of the standard model's tip (:func:`ctrplan.planning.goals.compensate_goal`);
 3. plan every leg twice with the same planner and seed: bound-aware (length + weight x integral
    of the bound) and bound-blind (length only);
 4. order every segment into rotations then translations (Section V-B of Ha et al. 2019) and check
-   both phases;
-5. re-run the exact model at the final waypoints and report the bound given the last motion;
+   both phases; the phases reaching each goal are swapped if the final motion asks for it;
+5. re-run the exact model at the final waypoints and report the bound given the last motion, and
+   the tip predicted for the history the ordered plan creates (one contact solve at most per
+   waypoint, usually none: the bound's own solutions are reused);
 6. time-parameterize with ruckig (rest-to-rest, stop between phases), check the samples;
 7. write path.csv, trajectory.csv, figures and summary.json atomically.
 """
@@ -24,9 +29,12 @@ import numpy as np
 
 from .boundmap import MapSpec, default_spec, load_or_compute_bound_map
 from .errors import JointLimitError, UnreachableGoalError
-from .io.scenario import load_scenario
-from .mechanics import ModelSettings, evaluate_bound
+from .errors import CtrplanError
+from .io.scenario import TaskGoal, load_scenario
+from .mechanics import ModelSettings, evaluate_bound, pair_cases, predict_tip
 from .planning import BoundCostObjective, JointStateSpace, bounds_given_last_motion, resolve_goal
+from .planning.goals import compensate_goal
+from .planning.history import approach_history, end_with, goal_indices, path_history
 from .planning.route import DEFAULT_REWIRE_FACTOR, plan_route, route_checks
 
 __all__ = ["run_plan", "map_spec"]
@@ -90,6 +98,50 @@ def _route_report(ordered, robot, field, settings, joint_space):
             "exact": bounds_given_last_motion(ordered, robot, evaluate_bound, settings)}
 
 
+def _eta_text(eta) -> str:
+    """Per-pair directions as text, e.g. ``+1;-1`` (0: no friction on that pair)."""
+    return ";".join(f"{int(e):+d}" if e else "0" for e in eta)
+
+
+def _predictions(ordered, robot, settings, exact) -> dict:
+    """Tip predicted at every ordered waypoint for the history the ordered path creates.
+
+    The history (:func:`ctrplan.planning.history.path_history`) gives per pair eta and whether
+    a translation followed the last rotation; :func:`ctrplan.mechanics.predict_tip` reuses the
+    exact bound's clearance or friction solution at the waypoint when it is the one needed, and
+    solves only partial histories. Waypoints where the bound failed, or the prediction raises,
+    get NaN."""
+    t0 = time.perf_counter()
+    hist = path_history(robot, ordered.q)
+    K, m = len(ordered), robot.n_tubes - 1
+    tips = np.full((K, 3), np.nan)
+    offsets = np.full(K, np.nan)
+    eta_used = np.zeros((K, m), dtype=int)
+    cases, models, messages = [""] * K, [""] * K, [""] * K
+    ok = np.zeros(K, dtype=bool)
+    n_solved = 0
+    for k in range(K):
+        res = exact.results[k]
+        eta, tl = hist.at(k)
+        try:
+            if res is None:
+                raise CtrplanError("the exact bound failed here")
+            alpha, beta = robot.configuration(ordered.q[k], check_limits=False)
+            p = predict_tip(robot, alpha, beta, eta, tl, settings, bound=res)
+        except (CtrplanError, np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+            messages[k] = f"{type(exc).__name__}: {exc}"
+            eta_used[k], _, c = pair_cases(robot, eta, tl)
+            cases[k] = ";".join(c)
+            continue
+        n_solved += not p.reused
+        tips[k], offsets[k], eta_used[k] = p.tip_position, p.offset, p.eta
+        cases[k], models[k], ok[k] = ";".join(p.cases), p.model, p.ok
+        messages[k] = p.solution.diagnostics.message
+    return {"tip": tips, "offset": offsets, "eta": hist.eta, "translation_last": hist.translation_last,
+            "eta_used": eta_used, "cases": cases, "model": models, "ok": ok, "message": messages,
+            "n_solved": n_solved, "time_s": time.perf_counter() - t0}
+
+
 def _plan_mode(job: dict) -> dict:
     """One plan of a scenario (bound-aware or bound-blind): search, ordering, final check and the
     report. Takes and returns only picklable data, so that it can run in another process."""
@@ -103,12 +155,22 @@ def _plan_mode(job: dict) -> dict:
                        iterations=job["iterations"], seed=p.seed, time_limit=p.time_limit, range_=p.range,
                        joint_space=joint_space,
                        rewire_factor=p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR)
+    ordered = route.ordered
+    # the motion reaching each goal ends as the scenario asks (swap its last two phases if needed
+    # and if the swapped phases pass the final check)
+    idx = goal_indices(ordered, job["goals"], robot)
+    final_status = []
+    for gi in idx:
+        ordered, status = end_with(ordered, gi, job["final_motion"], checks.final.check)
+        final_status.append(status)
     plan_time = time.perf_counter() - t0
     t0 = time.perf_counter()
-    rep = _route_report(route.ordered, robot, field, job["settings"], joint_space)
+    rep = _route_report(ordered, robot, field, job["settings"], joint_space)
     exact_time = time.perf_counter() - t0
-    return dict(legs=route.legs, ordered=route.ordered, report=rep, plan_time=plan_time, exact_time=exact_time,
-                checks=checks.counters(), max_body_step_mm=checks.final.max_body_step * 1e3)
+    pred = _predictions(ordered, robot, job["settings"], rep["exact"])
+    return dict(legs=route.legs, ordered=ordered, report=rep, plan_time=plan_time, exact_time=exact_time,
+                checks=checks.counters(), max_body_step_mm=checks.final.max_body_step * 1e3,
+                prediction=pred, goal_indices=idx, final_motion_status=final_status)
 
 
 def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:
@@ -134,6 +196,36 @@ def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:
             except BrokenProcessPool:
                 out[m] = _plan_mode(jobs[m])
     return {m: out[m] for m in modes}, True
+
+
+def _goal_prediction(goal_docs, compensations, plan, robot) -> dict:
+    """Per goal: the predicted miss of standard-model IK next to the compensated one (task-space
+    goals, with the assumed approach), and the tip predicted at the goal's waypoint of the plan
+    (with the history the ordered plan creates there)."""
+    pred = plan["prediction"]
+    out = {}
+    for k, (doc, c, gi) in enumerate(zip(goal_docs, compensations, plan["goal_indices"])):
+        planned_eta, _, planned_cases = pair_cases(robot, *(pred["eta"][gi], pred["translation_last"][gi]))
+        entry = {"waypoint": int(gi), "final_motion_status": plan["final_motion_status"][k],
+                 "planned_eta": _eta_text(planned_eta), "planned_cases": ";".join(planned_cases),
+                 "predicted_offset_at_goal_mm": float(pred["offset"][gi] * 1e3)}
+        if c is not None:
+            assumed_eta, _, assumed_cases = pair_cases(robot, c.eta, c.translation_last)
+            entry.update({
+                "assumed_eta": _eta_text(assumed_eta), "assumed_cases": ";".join(assumed_cases),
+                "planned_history_as_assumed": bool(np.array_equal(assumed_eta, planned_eta)
+                                                   and assumed_cases == planned_cases),
+                "prediction_model": c.model,
+                "predicted_miss_standard_ik_mm": c.predicted_miss_standard * 1e3,
+                "predicted_miss_compensated_mm": c.predicted_miss * 1e3,
+                "standard_tip_error_compensated_mm": c.standard_tip_error * 1e3,
+                "compensation_used": c.accepted, "compensation_iterations": c.iterations,
+                "compensation_message": c.message,
+                "predicted_miss_at_planned_goal_mm": float(np.linalg.norm(pred["tip"][gi] - c.target) * 1e3),
+                "tolerance_mm": float(doc.tolerance * 1e3),
+            })
+        out[f"goal_{k + 1}"] = entry
+    return out
 
 
 def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | None = None,
@@ -197,10 +289,31 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
     for k, g in enumerate(goals):
         echo(f"goal {k + 1}: q = {np.round(g.q, 4).tolist()}, tip error {g.tip_error * 1e3:.3f} mm, "
              f"field bound {g.bound * 1e3:.2f} mm ({len(g.candidates)} candidates)")
+    # compensated targeting: aim task-space goals with the tip predicted after the final approach,
+    # assumed to be one straight segment from the previous goal (or the start), ordered as
+    # [planner] final_motion asks (directions of the relative rotations the short way)
+    final_motion = sc.planner.final_motion
+    t0 = time.perf_counter()
+    compensations, goal_q, q_prev = [], [], np.asarray(sc.start, dtype=float)
+    for k, (doc, g) in enumerate(zip(sc.goals, goals)):
+        c = None
+        if isinstance(doc, TaskGoal):
+            eta, tl = approach_history(robot, q_prev, g.q, final_motion)
+            c = compensate_goal(doc.tip_position, robot, g.q, eta, tl, settings, tolerance=doc.tolerance,
+                                validity_fn=validity)
+            echo(f"goal {k + 1} ({final_motion}, {c.model} model, eta {_eta_text(c.eta)}): predicted miss of "
+                 f"standard-model IK {c.predicted_miss_standard * 1e3:.3f} mm, compensated "
+                 f"{c.predicted_miss * 1e3:.3f} mm ({'used' if c.accepted else 'not used: ' + c.message}); "
+                 f"q = {np.round(c.q, 4).tolist()}")
+        compensations.append(c)
+        goal_q.append(c.q if c is not None else g.q)
+        q_prev = goal_q[-1]
+    compensation_time = time.perf_counter() - t0
     iters = iterations or sc.planner.iterations
     modes = [("bound_aware", sc.planner.bound_weight)] + ([("bound_blind", 0.0)] if compare_blind else [])
     jobs = {mode: dict(robot=robot, field=field, obstacles=obstacles, check_settings=check_settings, settings=settings,
-                       start=sc.start, goals=[g.q for g in goals], weight=weight, planner=sc.planner, iterations=iters)
+                       start=sc.start, goals=goal_q, weight=weight, planner=sc.planner, iterations=iters,
+                       final_motion=final_motion)
             for mode, weight in modes}
     t0 = time.perf_counter()
     routes, in_parallel = _plan_modes(jobs, n_jobs)
@@ -225,19 +338,30 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
 
     lm = aware["report"]["exact"]
     planned = aware["report"]["planned"]
+    pred = aware["prediction"]
     rows = []
     for k, w in enumerate(ordered.waypoints):
         res = lm.results[k]
         tip = res.standard.tip_position if res is not None else np.full(3, np.nan)
         rows.append({"motion": w.motion, "q": w.q, "tip": tip, "bound_position_m": float(lm.position[k]),
                      "planned_bound_m": float(planned[k]), "bound_angle_rad": float(lm.angle[k]),
-                     "bound_kind": "translation_last" if w.motion == "translation" else "friction"})
+                     "bound_kind": "translation_last" if w.motion == "translation" else "friction",
+                     "predicted_tip": pred["tip"][k], "predicted_offset_m": float(pred["offset"][k]),
+                     "prediction_eta": _eta_text(pred["eta_used"][k]), "prediction_cases": pred["cases"][k]})
 
     def route_summary(r):
         lmr = r["report"]["exact"]
         rep = r["report"]
+        pr = r["prediction"]
         return {
             "cost": float(sum(leg.cost for leg in r["legs"])),
+            "max_predicted_offset_at_waypoints_mm": float(np.nanmax(pr["offset"]) * 1e3)
+            if np.any(np.isfinite(pr["offset"])) else None,
+            "final_predicted_offset_mm": float(pr["offset"][-1] * 1e3),
+            "predictions_failed": int(np.sum(~pr["ok"])),
+            "prediction_contact_solves": int(pr["n_solved"]), "prediction_time_s": pr["time_s"],
+            "final_motion": dict(zip((f"goal_{k + 1}" for k in range(len(r["goal_indices"]))),
+                                     r["final_motion_status"])),
             "joint_path_length_m": float(rep["dense_s"][-1]),
             "n_ordered_waypoints": len(r["ordered"]),
             "max_bound_at_waypoints_mm": float(np.nanmax(lmr.position) * 1e3),
@@ -262,7 +386,11 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
         "scenario": sc.name, "robot": robot.name, "robot_source": robot.source,
         "joints": robot.joint_names,
         "goals": [{"q": g.q.tolist(), "tip_error_mm": g.tip_error * 1e3, "field_bound_mm": g.bound * 1e3,
-                   "n_candidates": int(len(g.candidates))} for g in goals],
+                   "n_candidates": int(len(g.candidates)), "q_planned": np.asarray(qp).tolist(),
+                   "field_bound_planned_mm": float(field(np.asarray(qp))) * 1e3}
+                  for g, qp in zip(goals, goal_q)],
+        "final_motion": final_motion,
+        "goal_prediction": _goal_prediction(sc.goals, compensations, aware, robot),
         "bound_map": {"source": map_source, "time_s": map_time, "coordinates": field.coordinate_names,
                       "resolution": list(field.shape), "placement": spec.placement, "key": field.key,
                       "mechanics_version": field.metadata.get("mechanics_version"), "ds_m": settings.ds},
@@ -277,7 +405,8 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
             "ik_model_evaluations": int(sum(g.n_model_evaluations for g in goals)),
             "exact_bound_evaluations": int(sum(len(r["ordered"]) for r in routes.values())),
         },
-        "times_s": {"bound_map": map_time, "inverse_kinematics": ik_time, "plans_wall": plans_time,
+        "times_s": {"bound_map": map_time, "inverse_kinematics": ik_time, "compensation": compensation_time,
+                    "prediction_at_waypoints": aware["prediction"]["time_s"], "plans_wall": plans_time,
                     "plans_in_parallel": in_parallel, "total": None},
         "bound_weight_per_metre": sc.planner.bound_weight,
     }

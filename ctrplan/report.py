@@ -12,7 +12,14 @@ Column schema (SI units, full float precision):
     per joint (``alpha_i`` [rad], ``beta_i`` [m]), ``tip_x``, ``tip_y``, ``tip_z`` [m],
     ``bound_position_m`` [m] (the exact bound given the last motion), ``planned_bound_m`` [m] (the same
     quantity as the planner's bound map gave it; empty when no map was used), ``bound_angle_rad``
-    [rad], ``bound_kind`` (``friction`` or ``translation_last``).
+    [rad], ``bound_kind`` (``friction`` or ``translation_last``), ``predicted_tip_x``,
+    ``predicted_tip_y``, ``predicted_tip_z`` [m] (the tip predicted for the motion history the
+    ordered plan creates, :func:`ctrplan.mechanics.predict_tip`), ``predicted_offset_m`` [m] (its
+    distance from the standard-model tip), ``prediction_eta`` (friction direction applied per
+    pair, ``+1;-1``, 0 where the pair is frictionless in the prediction) and
+    ``prediction_cases`` (per pair: ``friction``, ``translation_last``, ``no_history`` or
+    ``frictionless``, joined by ``;``); the prediction columns are empty where no prediction was
+    given or it failed.
 ``trajectory.csv``
     ``t`` [s], then per joint ``<name>`` [rad or m], ``<name>_vel`` [per s], ``<name>_acc``
     [per s^2].
@@ -45,6 +52,8 @@ BOUND_KINDS = ("friction", "translation_last")
 _MOTIONS = (START, "rotation", "translation")
 _TIP_COLUMNS = ("tip_x", "tip_y", "tip_z")
 _BOUND_COLUMNS = ("bound_position_m", "planned_bound_m", "bound_angle_rad", "bound_kind")
+_PREDICTION_COLUMNS = ("predicted_tip_x", "predicted_tip_y", "predicted_tip_z", "predicted_offset_m",
+                       "prediction_eta", "prediction_cases")
 
 # Unit suffixes of summary keys -> (unit shown, factor from the key's unit to the shown unit).
 # Longest suffix first; lengths in m are shown in mm and angles in rad in degrees.
@@ -63,7 +72,7 @@ _SUMMARY_UNITS = (
 
 def path_columns(joint_names: Sequence[str]) -> list[str]:
     """Columns of ``path.csv`` for the given joints, in order."""
-    return ["waypoint", "motion", *joint_names, *_TIP_COLUMNS, *_BOUND_COLUMNS]
+    return ["waypoint", "motion", *joint_names, *_TIP_COLUMNS, *_BOUND_COLUMNS, *_PREDICTION_COLUMNS]
 
 
 def write_plan_outputs(out_dir, ordered_path_rows: Sequence[Mapping[str, Any]],
@@ -82,8 +91,10 @@ def write_plan_outputs(out_dir, ordered_path_rows: Sequence[Mapping[str, Any]],
         joint name; the tip position, either ``tip`` (shape (3,) [m]) or ``tip_x``, ``tip_y``,
         ``tip_z`` [m]; ``bound_position_m`` [m]; ``bound_angle_rad`` [rad]; ``bound_kind``
         (``"friction"`` or ``"translation_last"``). Optional: ``planned_bound_m`` [m] (the bound
-        map's value of the same quantity; NaN, written empty, when missing) and a ``waypoint``
-        index (default: the row number). Other keys are ignored.
+        map's value of the same quantity; NaN, written empty, when missing), ``predicted_tip``
+        (shape (3,) [m]), ``predicted_offset_m`` [m], ``prediction_eta`` and
+        ``prediction_cases`` (str) (empty when missing or NaN), and a ``waypoint`` index
+        (default: the row number). Other keys are ignored.
     trajectory : Trajectory or None
         Written to ``trajectory.csv`` (skipped when None).
     summary : mapping
@@ -189,9 +200,14 @@ def _path_csv(rows: Sequence[Mapping[str, Any]], names: list[str]) -> str:
         if kind not in BOUND_KINDS:
             raise ValueError(f"path row {r}: bound_kind must be one of {BOUND_KINDS}, got {kind!r}")
         planned = float(row.get("planned_bound_m", float("nan")))
+        ptip = np.asarray(row.get("predicted_tip", np.full(3, np.nan)), dtype=float).reshape(-1)
+        if ptip.size != 3:
+            raise ValueError(f"path row {r}: predicted_tip needs 3 values [m], got {ptip.size}")
+        offset = float(row.get("predicted_offset_m", float("nan")))
         writer.writerow([int(row.get("waypoint", r)), motion, *map(_num, q), *map(_num, tip),
-                         _num(_require(row, "bound_position_m", r)), _num(planned) if math.isfinite(planned) else "",
-                         _num(_require(row, "bound_angle_rad", r)), kind])
+                         _num(_require(row, "bound_position_m", r)), _opt(planned),
+                         _num(_require(row, "bound_angle_rad", r)), kind, *map(_opt, ptip), _opt(offset),
+                         str(row.get("prediction_eta", "")), str(row.get("prediction_cases", ""))])
     return buf.getvalue()
 
 
@@ -218,6 +234,11 @@ def _require(row: Mapping[str, Any], key: str, r: int):
 def _num(x) -> str:
     """Shortest text that reads back to the same float."""
     return repr(float(x))
+
+
+def _opt(x) -> str:
+    """:func:`_num`, or an empty cell for NaN / infinity."""
+    return _num(x) if math.isfinite(float(x)) else ""
 
 
 def _jsonable(value):

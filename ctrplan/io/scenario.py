@@ -96,6 +96,7 @@ class _PlannerDoc(_Strict):
     bound_weight: Annotated[float, Field(ge=0.0)] = DEFAULT_BOUND_WEIGHT
     range: Positive | None = None
     rewire_factor: Positive | None = None
+    final_motion: Literal["translation-last", "rotation-last"] = "translation-last"
 
 
 class _BoundFieldDoc(_Strict):
@@ -272,6 +273,12 @@ class PlannerSettings:
     rewire_factor : float or None
         RRT* family: OMPL's rewire factor on the k-nearest neighbour count; None for ctrplan's
         default (``ctrplan.planning.route.DEFAULT_REWIRE_FACTOR``).
+    final_motion : {"translation-last", "rotation-last"}
+        How the motion reaching each goal ends (default ``"translation-last"``): a final
+        translation releases the friction-induced twist (clearance model), a final rotation
+        leaves the friction solution of its direction (Section V-B of Ha et al. 2019). Task-space
+        goals are aimed for the tip predicted after that motion
+        (:func:`ctrplan.planning.goals.compensate_goal`).
     """
 
     name: str = "RRTstar"
@@ -281,6 +288,7 @@ class PlannerSettings:
     bound_weight: float = DEFAULT_BOUND_WEIGHT
     range: float | None = None
     rewire_factor: float | None = None
+    final_motion: str = "translation-last"
 
 
 @dataclass(frozen=True)
@@ -505,7 +513,7 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
     p = doc.planner
     planner = PlannerSettings(name=p.name, iterations=p.iterations, time_limit=p.time_limit_s,
                               seed=p.seed, bound_weight=p.bound_weight, range=p.range,
-                              rewire_factor=p.rewire_factor)
+                              rewire_factor=p.rewire_factor, final_motion=p.final_motion)
 
     bf = doc.bound_field
     if bf.resolution is not None:
