@@ -93,6 +93,8 @@ class CalibrationResult:
         Model evaluations over the calibration set.
     seconds : float
     message : str
+    converged : bool
+        The optimizer met its tolerance (False: it stopped at its evaluation budget).
     """
 
     model: str
@@ -106,6 +108,7 @@ class CalibrationResult:
     evaluations: int = 0
     seconds: float = 0.0
     message: str = ""
+    converged: bool = True
 
     def all_parameters(self) -> tuple[tuple, np.ndarray]:
         """Fixed and fitted parameters together: ``(names, values)``."""
@@ -119,7 +122,7 @@ class CalibrationResult:
                 "fixed": {k: float(v) for k, v in self.fixed.items()}, "cost": float(self.cost),
                 "n_samples": int(self.n_samples), "n_failed": int(self.n_failed),
                 "evaluations": int(self.evaluations), "seconds": float(self.seconds),
-                "message": self.message}
+                "message": self.message, "converged": bool(self.converged)}
 
 
 def predict(robot, names, values, data: MeasuredData, model: str, settings: ModelSettings | None = None,
@@ -156,13 +159,65 @@ def predict(robot, names, values, data: MeasuredData, model: str, settings: Mode
     t0 = time.perf_counter()
     names = tuple(names)
     robot_p = apply_parameters(robot, names, values)
-    sim = simulate(robot_p, data.alpha, data.beta, model=model, eta=data.eta,
-                   translation_last=data.translation_last, sequence=data.sequence, settings=settings,
-                   n_jobs=n_jobs, progress=progress)
+    alpha, beta, eta, tlast, mu = history_inputs(robot_p, names, values, data, model)
+    sim = simulate(robot_p, alpha, beta, model=model, eta=eta, translation_last=tlast, mu=mu,
+                   sequence=data.sequence, settings=settings, n_jobs=n_jobs, progress=progress)
     tip_base = np.asarray(sim.tip, float)
     tip, tangent = transform_poses(tip_base, sim.tangent, *registration_transform(names, values))
     return Prediction(tip=tip, tangent=tangent, tip_base=tip_base, ok=np.asarray(sim.ok, bool),
                       message=list(sim.message), seconds=time.perf_counter() - t0)
+
+
+def history_inputs(robot, names, values, data: MeasuredData, model: str):
+    """The motion history a model is evaluated along, after the named history effects.
+
+    Time offset first (joints interpolated at ``time - tau``), then the drive backlash (play
+    operator on the base angles), then, for the friction model with ``friction_angle``, the
+    developing friction state (:mod:`ctrplan.discrepancy.history`). Without history parameters
+    the data's own history is returned unchanged.
+
+    Returns
+    -------
+    alpha, beta : ndarray, shape (K, n)
+        [rad], [m].
+    eta : ndarray of int, shape (K, n - 1)
+    translation_last : ndarray of bool, shape (K,)
+    mu : ndarray, shape (K, n - 1), or None
+        Per-sample friction coefficients (gradual friction), else None (the robot's).
+
+    Raises
+    ------
+    ParameterError
+        A time offset on data without times.
+    """
+    from .history import apply_backlash, apply_time_offset, friction_state
+    from .parameters import ParameterError, history_parameters
+    from .simulate import motion_history
+
+    h = history_parameters(robot, names, values)
+    if not h:
+        return data.alpha, data.beta, data.eta, data.translation_last, None
+    alpha, beta = data.alpha, data.beta
+    if h.get("time_offset") is not None:
+        if data.time is None:
+            raise ParameterError(f"{data.file}: a time offset needs sample times (a 'time' column)")
+        alpha, beta = apply_time_offset(alpha, beta, data.time, h["time_offset"], data.sequence)
+    if "backlash" in h:
+        alpha = apply_backlash(alpha, h["backlash"], data.sequence)
+    eta, tlast = data.eta, data.translation_last
+    multi = np.unique(data.sequence).size < data.n_samples
+    if multi and (h.get("time_offset") or "backlash" in h):
+        hist = motion_history(alpha, beta, data.sequence)
+        # one-sample sequences keep the file's directions (e.g. the paper protocol's approach)
+        eta = np.where(hist.eta != 0, hist.eta, data.eta)
+        tlast = hist.translation_last
+    mu = None
+    if model == "friction" and h.get("friction_angle") is not None:
+        e = friction_state(alpha, beta, h["friction_angle"], data.sequence, eta=eta)
+        eta = np.sign(e).astype(int)
+        mu = np.abs(e) * np.asarray(robot.friction_coefficients, float)[None, :]
+        tlast = np.zeros(data.n_samples, dtype=bool)   # the state already released the twist
+    return alpha, beta, eta, tlast, mu
 
 
 def pose_errors(pred: Prediction, data: MeasuredData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -258,7 +313,8 @@ class _Objective:
         self.names = tuple(names)
         self.fixed = dict(fixed)
         self.all_names = tuple(self.fixed) + self.names
-        self.mech = [k for k, nm in enumerate(self.all_names) if parameter(robot, nm).mechanical]
+        # parameters that need a new model solve: mechanical and history ones (not registration)
+        self.mech = [k for k, nm in enumerate(self.all_names) if parameter(robot, nm).needs_solve]
         self._cache: dict = {}
         self.evaluations = 0
 
@@ -354,14 +410,16 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
                                  time.perf_counter() - t0, "nothing to fit: evaluated only")
     scale = np.array([p.scale for p in specs])
     # registration columns of the finite-difference Jacobian re-use the cached mechanics
-    n_mech = sum(1 for p in specs if p.mechanical)
+    n_mech = sum(1 for p in specs if p.needs_solve)
     max_nfev = max(2, max_evaluations // (n_mech + 1))
     sol = least_squares(obj.residuals, x0, bounds=(lower, upper), x_scale=scale, diff_step=DIFF_STEP,
                         method="trf", max_nfev=max_nfev, xtol=1e-6, ftol=1e-6)
     r = obj.residuals(sol.x)
-    msg = f"least squares: {sol.message} ({sol.nfev} steps)"
+    converged = bool(sol.status > 0)
+    msg = (f"least squares: {sol.message} ({sol.nfev} steps)"
+           + ("" if converged else f"; NOT converged: stopped at the budget of {max_evaluations} evaluations"))
     return CalibrationResult(model, names, sol.x, x0, fixed, float(r @ r), k, int((r == FAILED_RESIDUAL).sum()),
-                             obj.evaluations, time.perf_counter() - t0, msg)
+                             obj.evaluations, time.perf_counter() - t0, msg, converged)
 
 
 def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: ModelSettings | None = None,

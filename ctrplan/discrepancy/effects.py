@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 from ..errors import ModelFileError, PhysicalParameterError
 from ..robot import Robot
 
-__all__ = ["Effects", "apply_effects", "apply_registration", "registration_matrix", "rigid_transform",
+__all__ = ["Effects", "HISTORY_FIELDS", "apply_effects", "apply_registration", "registration_matrix", "rigid_transform",
            "transform_poses"]
 
 # Field name -> (expected length as a function of the tube count n, unit, meaning).
@@ -32,7 +32,12 @@ _FIELDS = {
     "offplane_precurvature": (lambda n: n, "1/m", "x precurvature added to curved sections"),
     "poisson_ratios": (lambda n: n, "-", "Poisson ratio of each tube"),
     "registration": (lambda n: 6, "rad, m", "rotation vector and translation, p_tracker = R p + t"),
+    "backlash": (lambda n: n, "rad", "dead band of each tube's rotation drive (history effect)"),
+    "time_offset": (lambda n: 1, "s", "lag of the tracker readings behind the joint readings (history effect)"),
+    "friction_angle": (lambda n: 1, "rad", "relative rotation over which friction develops after a reversal"),
 }
+#: Fields that change the motion history, not the robot (:mod:`ctrplan.discrepancy.history`).
+HISTORY_FIELDS = ("backlash", "time_offset", "friction_angle")
 
 
 def _as_tuple(name, value):
@@ -69,6 +74,15 @@ class Effects:
         ``(r_x, r_y, r_z, t_x, t_y, t_z)``: rotation vector [rad] and translation [m] of the
         rigid map from the robot base frame to the tracker frame, ``p_tracker = R p_robot + t``
         with ``R = exp([r]x)``.
+    backlash : tuple of float, shape (n,), optional
+        Dead band of each tube's rotation drive [rad], >= 0: after a reversal the base angle
+        lags the recorded one by up to half of it (:func:`~ctrplan.discrepancy.history.apply_backlash`).
+    time_offset : tuple of float, shape (1,), optional
+        Lag of the tracker readings behind the joint readings [s]
+        (:func:`~ctrplan.discrepancy.history.apply_time_offset`).
+    friction_angle : tuple of float, shape (1,), optional
+        Relative rotation over which friction develops after a reversal [rad], >= 0 (theta_c of
+        :func:`~ctrplan.discrepancy.history.friction_state`); needs friction coefficients.
 
     Raises
     ------
@@ -82,6 +96,9 @@ class Effects:
     offplane_precurvature: tuple[float, ...] | None = None
     poisson_ratios: tuple[float, ...] | None = None
     registration: tuple[float, ...] | None = None
+    backlash: tuple[float, ...] | None = None
+    time_offset: tuple[float, ...] | None = None
+    friction_angle: tuple[float, ...] | None = None
 
     def __post_init__(self):
         for name in _FIELDS:
@@ -95,6 +112,14 @@ class Effects:
         if self.poisson_ratios is not None and not all(-1.0 < v <= 0.5 for v in self.poisson_ratios):
             raise PhysicalParameterError(
                 f"effect 'poisson_ratios': must lie in (-1, 0.5], got {list(self.poisson_ratios)}")
+        for name in ("backlash", "friction_angle"):
+            v = getattr(self, name)
+            if v is not None and min(v) < 0.0:
+                raise PhysicalParameterError(f"effect {name!r}: must be >= 0 rad, got {list(v)}")
+        for name in ("time_offset", "friction_angle"):
+            v = getattr(self, name)
+            if v is not None and len(v) != 1:
+                raise PhysicalParameterError(f"effect {name!r}: needs 1 value, got {len(v)}: {list(v)}")
         if self.registration is not None and len(self.registration) != 6:
             raise PhysicalParameterError(
                 f"effect 'registration': needs 6 values (rotation vector [rad], translation [m]), "
@@ -110,6 +135,11 @@ class Effects:
     def clearance_on(self) -> bool:
         """True when clearances are set (the clearance model applies)."""
         return self.clearances is not None
+
+    @property
+    def history_on(self) -> bool:
+        """True when an effect on the motion history is set."""
+        return any(getattr(self, name) is not None for name in HISTORY_FIELDS)
 
     def active(self) -> list[str]:
         """Names of the fields that are set, in field order."""
@@ -178,7 +208,9 @@ class Effects:
 def apply_effects(robot: Robot, effects: Effects) -> Robot:
     """Robot with the mechanical effects applied (friction, clearance, precurvature, Poisson).
 
-    The registration is not a property of the robot; see :func:`apply_registration`.
+    The registration is not a property of the robot; see :func:`apply_registration`. Nor are
+    the history effects (backlash, time offset, friction angle): see
+    :mod:`ctrplan.discrepancy.history`.
 
     Parameters
     ----------

@@ -17,9 +17,20 @@ name                       unit      meaning
 ``mu_k``                   -         Coulomb friction coefficient of pair k (Section III)
 ``registration_r{x,y,z}``  rad       rotation vector of the tracker frame from the robot base
 ``registration_t{x,y,z}``  m         translation of the tracker frame: p_tracker = R p_base + t
+``backlash_i``             rad       dead band of tube i's rotation drive (:mod:`.history`)
+``time_offset``            s         lag of the tracker readings behind the joint readings
+``friction_angle``         rad       relative rotation over which friction develops after a
+                                     reversal (theta_c of :func:`.history.friction_state`)
 =========================  ========  ===========================================================
 
 Registration parameters change no mechanics; they map model outputs to the tracker frame.
+History parameters (backlash, time offset, friction angle) change no robot either; they change
+the motion history the model is evaluated along (:func:`history_parameters`).
+
+Every parameter has optimizer bounds (``lower``, ``upper``: what the code accepts) and, where
+physics says so, a *plausible* range (``plausible``: what a real robot of this kind can have,
+with the reason in ``plausible_note``). A fitted value outside the plausible range is reported
+as implausible by the discrepancy workflow.
 """
 
 from __future__ import annotations
@@ -34,12 +45,30 @@ from ..robot import Robot, Section
 from .effects import rigid_transform
 
 __all__ = ["Parameter", "parameter", "read_parameters", "apply_parameters", "registration_transform",
-           "REGISTRATION", "ParameterError"]
+           "history_parameters", "REGISTRATION", "HISTORY_KINDS", "PLAUSIBLE", "ParameterError"]
+
+#: Parameters of the motion history (not of the robot, not of the registration).
+HISTORY_KINDS = ("backlash", "time_offset", "friction_angle")
+
+# Plausible ranges: kind -> (lower, upper, reason), in the parameter's unit.
+PLAUSIBLE = {
+    "mu": (0.0, 0.5, "Coulomb friction of NiTi on NiTi (Ha et al. 2019 calibrated 0.22 and 0.12 on the "
+                     "three-tube robot, Table VII)"),
+    "backlash": (0.0, float(np.deg2rad(5.0)), "dead band of a geared rotation stage: up to a few degrees "
+                                              "(0-5 deg)"),
+    "time_offset": (-0.3, 0.3, "latency between joint encoders and an EM/optical tracker: tens to a few "
+                               "hundred ms (|tau| <= 0.3 s)"),
+    "friction_angle": (0.0, float(np.deg2rad(30.0)), "the paper assumes friction develops within its 90 deg "
+                                                     "approach rotations (Sec. V-B): 95 % after 3 theta_c <= "
+                                                     "90 deg"),
+    "poisson_ratio": (-0.99, 0.5, "the paper's calibrated (effective) values are negative for some tubes "
+                                  "(Tables V-VII)"),
+}
 
 REGISTRATION = ("registration_rx", "registration_ry", "registration_rz",
                 "registration_tx", "registration_ty", "registration_tz")
 
-_PATTERN = re.compile(r"^(precurvature_y|precurvature_x|k_xy_relative|poisson_ratio|mu)_([1-9][0-9]*)$")
+_PATTERN = re.compile(r"^(precurvature_y|precurvature_x|k_xy_relative|poisson_ratio|mu|backlash)_([1-9][0-9]*)$")
 
 
 class ParameterError(CtrplanError, ValueError):
@@ -63,6 +92,11 @@ class Parameter:
         Bounds for the optimizer, in ``unit``.
     scale : float
         Typical size of a change, in ``unit`` (scales the optimizer's steps).
+    plausible : tuple of float or None
+        ``(lower, upper)`` a real robot can have, in ``unit``; None: no physical limit beyond
+        the bounds.
+    plausible_note : str
+        Why (source or reasoning).
     """
 
     name: str
@@ -72,11 +106,27 @@ class Parameter:
     lower: float
     upper: float
     scale: float
+    plausible: tuple | None = None
+    plausible_note: str = ""
+
+    @property
+    def history(self) -> bool:
+        """True for a parameter of the motion history (backlash, time offset, friction angle)."""
+        return self.kind in HISTORY_KINDS
 
     @property
     def mechanical(self) -> bool:
-        """True when the parameter changes the mechanics (not a registration parameter)."""
+        """True when the parameter changes the robot (neither registration nor history)."""
+        return not self.kind.startswith("registration") and not self.history
+
+    @property
+    def needs_solve(self) -> bool:
+        """True when a change needs the model solved again (mechanical or history)."""
         return not self.kind.startswith("registration")
+
+    def is_plausible(self, value: float) -> bool:
+        """Whether ``value`` lies in the plausible range (True when there is none)."""
+        return self.plausible is None or (self.plausible[0] - 1e-12 <= value <= self.plausible[1] + 1e-12)
 
 
 def parameter(robot: Robot, name: str) -> Parameter:
@@ -88,6 +138,10 @@ def parameter(robot: Robot, name: str) -> Parameter:
         Unknown name, a tube or pair the robot does not have, a precurvature of a straight tube,
         or ``k_xy_relative_1`` (tube 1 is the stiffness reference).
     """
+    if name == "time_offset":
+        return Parameter(name, "time_offset", 0, "s", -2.0, 2.0, 0.02, *_plausible("time_offset"))
+    if name == "friction_angle":
+        return Parameter(name, "friction_angle", 0, "rad", 0.0, np.pi, 0.05, *_plausible("friction_angle"))
     if name in REGISTRATION:
         axis = REGISTRATION.index(name)
         if axis < 3:
@@ -97,7 +151,8 @@ def parameter(robot: Robot, name: str) -> Parameter:
     if m is None:
         raise ParameterError(
             f"unknown calibration parameter {name!r}; expected precurvature_y_i, precurvature_x_i, "
-            f"k_xy_relative_i, poisson_ratio_i, mu_k or registration_(rx|ry|rz|tx|ty|tz)")
+            f"k_xy_relative_i, poisson_ratio_i, mu_k, backlash_i, time_offset, friction_angle or "
+            f"registration_(rx|ry|rz|tx|ty|tz)")
     kind, idx = m.group(1), int(m.group(2)) - 1
     n = robot.n_tubes
     limit = n - 1 if kind == "mu" else n
@@ -114,8 +169,15 @@ def parameter(robot: Robot, name: str) -> Parameter:
                                  "reference (only ratios matter); fit k_xy_relative_2..n")
         return Parameter(name, kind, idx, "-", 1e-3, 1e3, 0.05)
     if kind == "poisson_ratio":
-        return Parameter(name, kind, idx, "-", -0.99, 0.5, 0.05)
-    return Parameter(name, kind, idx, "-", 0.0, 2.0, 0.05)
+        return Parameter(name, kind, idx, "-", -0.99, 0.5, 0.05, *_plausible(kind))
+    if kind == "backlash":
+        return Parameter(name, kind, idx, "rad", 0.0, float(np.deg2rad(30.0)), 0.005, *_plausible(kind))
+    return Parameter(name, kind, idx, "-", 0.0, 2.0, 0.05, *_plausible(kind))
+
+
+def _plausible(kind):
+    lo, hi, note = PLAUSIBLE[kind]
+    return (lo, hi), note
 
 
 def _first_curved(robot: Robot, i: int):
@@ -150,6 +212,8 @@ def read_parameters(robot: Robot, names, registration=None) -> np.ndarray:
             out.append(robot.tubes[p.index].k_xy / robot.tubes[0].k_xy)
         elif p.kind == "poisson_ratio":
             out.append(robot.tubes[p.index].poisson_ratio)
+        elif p.history:
+            out.append(0.0)   # history effects are off on a robot
         else:
             out.append(robot.friction_coefficients[p.index])
     return np.asarray(out, dtype=float)
@@ -186,7 +250,7 @@ def apply_parameters(robot: Robot, names, values) -> Robot:
             raise ParameterError(f"calibration parameter {name!r} = {v!r} {p.unit} is outside "
                                  f"[{p.lower}, {p.upper}]")
         if not p.mechanical:
-            continue
+            continue   # registration and history parameters: see registration_transform, history_parameters
         i = p.index
         if p.kind == "mu":
             mu[i] = float(v)
@@ -213,6 +277,35 @@ def apply_parameters(robot: Robot, names, values) -> Robot:
             tube = dataclasses.replace(tube, poisson_ratio=float(v))
         tubes[i] = tube
     return robot.replace(tubes=tuple(tubes), friction_coefficients=tuple(mu))
+
+
+def history_parameters(robot: Robot, names, values) -> dict:
+    """The history effects among ``names``/``values``.
+
+    Returns
+    -------
+    dict
+        ``backlash`` (n,) [rad] (zeros where not named), ``time_offset`` [s] and
+        ``friction_angle`` [rad] (None when not named); empty when no history parameter is named.
+
+    Raises
+    ------
+    ParameterError
+        As :func:`parameter`, or a value outside its bounds.
+    """
+    out: dict = {}
+    for name, v in zip(names, values):
+        p = parameter(robot, name)
+        if not p.history:
+            continue
+        if not (p.lower <= v <= p.upper) or not np.isfinite(v):
+            raise ParameterError(f"calibration parameter {name!r} = {v!r} {p.unit} is outside "
+                                 f"[{p.lower}, {p.upper}]")
+        if p.kind == "backlash":
+            out.setdefault("backlash", np.zeros(robot.n_tubes))[p.index] = float(v)
+        else:
+            out[p.kind] = float(v)
+    return out
 
 
 def registration_transform(names, values):

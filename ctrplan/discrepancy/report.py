@@ -114,9 +114,15 @@ def write_report(results: dict, out_dir) -> dict:
                   f"{'lowers' if red >= 0 else 'raises'} the held-out mean tip position error by "
                   f"{100 * abs(red):.0f}% and {change}.", ""]
     else:
-        lines += ["**No effect named.** No candidate had a significant residual signature, a significant "
-                  "held-out improvement and a better BIC together: the residuals of the calibrated baseline "
-                  "are consistent with noise.", ""]
+        lines += [_no_effect_paragraph(results), ""]
+    decision = results.get("decision") or {}
+    if named and decision.get("notes"):
+        lines += ["Decision:", ""] + [f"- {n}." for n in decision["notes"]] + [""]
+    noise = results.get("noise")
+    if noise:
+        ratio = "" if noise["ratio"] is None else f" = {noise['ratio']:.2f} x the noise"
+        lines += [f"Sensor noise: {noise['noise']['description']}; held-out baseline rms position error "
+                  f"{noise['rms_mm']:.3f} mm{ratio} (consistent with noise when <= {noise['threshold_ratio']}).", ""]
     if results.get("cautions"):
         lines += ["Cautions:", ""] + [f"- {c}." for c in results["cautions"]] + [""]
     lines += [f"- data: {results['n_samples']} samples in the {results['frame']} frame; split {results['split']};",
@@ -137,26 +143,82 @@ def write_report(results: dict, out_dir) -> dict:
     lines += ["", "## Signature tests (held-out residuals of the baseline)", "",
               "| effect | effect size [mm] | p-value | statistic | units | test |", "|---|---|---|---|---|---|"]
     for e, t in results["signature_tests"].items():
+        if not t.get("testable", True):
+            lines.append(f"| {t['label']} | - | - | - | - | {t['description']} |")
+            continue
         lines.append(f"| {t['label']} | {t['effect_size_mm']:.3f} | {t['p_value']:.4f} | {t['statistic']:.4g} | "
                      f"{t['n_units']} | {t['description']} |")
+    for e, why in (results.get("skipped_effects") or {}).items():
+        lines.append(f"| {e} | - | - | - | - | not tried, because {why} |")
     lines += ["", f"Significance level {results['significance']}; permutation p-values are bounded below by "
               f"1 / (permutations + 1).", "", "## Candidate effects", "",
               "| effect | fitted parameters | dBIC | held-out mean change [mm] | improvement p | signature | "
               "improvement | BIC | eligible |", "|---|---|---|---|---|---|---|---|---|"]
+    notes = []
     for e, c in results["candidates"].items():
-        params = ", ".join(f"{k} = {v:.4g}" for k, v in c["parameters"].items()) or "none (nominal)"
+        params = ", ".join(f"{k} = {v:.4g}" + (" (implausible)" if any(b["name"] == k for b in c.get("implausible", []))
+                                               else "") for k, v in c["parameters"].items()) or "none (nominal)"
+        if c.get("fit_note"):
+            notes.append(f"- {c['label']}: {c['fit_note']}.")
         dm = c["held_out"]["position_mean_mm"] - base["position_mean_mm"]
         yes = (lambda b: "yes" if b else "no")
         lines.append(f"| {c['label']} | {params} | {c['delta_bic']:.1f} | {dm:+.3f} | "
                      f"{c['improvement_eq49']['p_value']:.4f} | {yes(c['signature_significant'])} | "
                      f"{yes(c['improvement_significant'])} | {yes(c['bic_better'])} | {yes(c['eligible'])} |")
-    lines += ["", "Rule: an effect is named when its signature test is significant, its held-out improvement "
+    base_fit = results["baseline"]["fit"]
+    lines += ["", f"Baseline fit: {base_fit['message']}" + ("" if base_fit.get("converged", True) else
+                                                            " (**not converged**)") + "."]
+    if notes:
+        lines += ["", "Fits:", ""] + notes
+    lines += ["", "Rule: an effect is eligible when its signature test is significant, its held-out improvement "
               "(Eq. (49) residual, paired sign-flip test over held-out configurations or time blocks) is "
-              f"significant, and its BIC is lower than the baseline's by more than {results['bic_margin']}; "
-              "among those, the largest held-out improvement wins.", "", "## Plots", ""]
+              f"significant, and its BIC is lower than the baseline's by more than {results['bic_margin']}. "
+              "Among the eligible effects whose fitted values are plausible (all eligible ones if none is), the "
+              "largest held-out improvement is named; eligible effects whose held-out residual does not differ "
+              "significantly from the named one's are listed as equally good.", ""]
+    lines += _prediction_section(results)
+    lines += ["## Plots", ""]
     lines += [f"![{p}]({p})" for p in plots]
     atomic_write_text(out / "report.md", "\n".join(lines) + "\n")
     return {"markdown": str(out / "report.md"), "json": str(out / "results.json"), "plots": plots}
+
+
+def _no_effect_paragraph(results: dict) -> str:
+    case = (results.get("decision") or {}).get("no_effect_case")
+    noise = results.get("noise") or {}
+    head = ("**No effect named.** No candidate had a significant residual signature, a significant held-out "
+            "improvement and a better BIC together. ")
+    if case == "noise":
+        return head + (f"The held-out residual of the calibrated baseline (rms {noise['rms_mm']:.3f} mm) is "
+                       f"consistent with the sensor noise ({noise['noise']['description']}).")
+    if case == "unexplained":
+        return head + (f"The held-out residual of the calibrated baseline (rms {noise['rms_mm']:.3f} mm, "
+                       f"{noise['ratio']:.1f} times the sensor noise, {noise['noise']['description']}) is **not** "
+                       f"consistent with noise: the model misses something that none of the candidates explains.")
+    return head + ("Whether the residual is noise cannot be said: the sensor noise is unknown (give "
+                   "`--noise-position-mm`).")
+
+
+def _prediction_section(results: dict) -> list[str]:
+    """History-aware prediction and friction-envelope coverage (issue 13, Sec. 3)."""
+    pred = results.get("prediction")
+    if not pred:
+        return []
+    lines = ["## Prediction with the motion history (held-out data)", "",
+             pred["description"], "",
+             "| model | samples | mean [mm] | p95 [mm] | max [mm] |", "|---|---|---|---|---|"]
+    for row in pred["rows"]:
+        lines.append(f"| {row['label']} | {row['n']} | {_fmt(row['mean_mm'])} | {_fmt(row['p95_mm'])} | "
+                     f"{_fmt(row['max_mm'])} |")
+    env = pred.get("envelope")
+    if env:
+        lines += ["", f"Envelope coverage ({env['description']}): {env['inside']} of {env['n']} measured tips "
+                      f"({100 * env['fraction_inside']:.0f} %) lie inside the envelope of the bounding solutions "
+                      f"plus {env['margin_mm']:.2f} mm of sensor noise; the others lie outside by median "
+                      f"{_fmt(env['outside_median_mm'])} mm, p95 {_fmt(env['outside_p95_mm'])} mm, max "
+                      f"{_fmt(env['outside_max_mm'])} mm. Median envelope size (largest distance between two "
+                      f"bounding tips): {_fmt(env['size_median_mm'])} mm."]
+    return lines + [""]
 
 
 def _plain(x):

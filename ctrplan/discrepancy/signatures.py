@@ -38,6 +38,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 __all__ = ["SignatureTest", "friction_signature", "regression_signature", "registration_signature",
+           "vector_signature", "untestable",
            "overlap_features", "angle_features", "twist_features", "EFFECT_LABELS"]
 
 #: Human-readable effect names used in reports.
@@ -47,6 +48,9 @@ EFFECT_LABELS = {
     "offplane": "off-plane precurvature",
     "poisson": "stiffness ratio / Poisson ratio (torsional stiffness)",
     "registration": "registration",
+    "backlash": "drive backlash",
+    "time_offset": "time offset (tracker lag)",
+    "gradual_friction": "gradually developing friction",
 }
 
 
@@ -68,6 +72,9 @@ class SignatureTest:
     n_units : int
         Exchangeable units (groups, rows) the test used.
     description : str
+    testable : bool
+        False when the data cannot show the signature at all (``description`` says why); the
+        statistic, size and p-value are then placeholders (0, 0, 1) and mean nothing.
     """
 
     effect: str
@@ -77,6 +84,7 @@ class SignatureTest:
     n_permutations: int
     n_units: int
     description: str
+    testable: bool = True
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -130,7 +138,8 @@ def friction_signature(residual, eta, groups, *, n_permutations: int = 999, seed
     residual, eta, g = residual[rows], eta[rows], g[rows]
     if not rows.any():
         return SignatureTest("friction", 0.0, 0.0, 1.0, 0, 0,
-                             "no configuration group has both approach directions of any pair: untestable")
+                             "not testable, because no configuration group holds rows from both approach "
+                             "directions of any pair", testable=False)
     _, g = np.unique(g, return_inverse=True)
     g = g.ravel()
     n_g = int(g.max()) + 1
@@ -245,7 +254,8 @@ def regression_signature(effect: str, residual, features, groups, *, sequence=No
         mode = "rows permuted"
     m = E.shape[0]
     if m <= F.shape[1] + 2:
-        return SignatureTest(effect, 0.0, 0.0, 1.0, 0, m, f"too few units ({m}) for {F.shape[1]} features")
+        return SignatureTest(effect, 0.0, 0.0, 1.0, 0, m, f"not testable, because there are too few units "
+                             f"({m}) for {F.shape[1]} features", testable=False)
     r2, fit = _explained(E, F)
     null = np.empty(n_permutations)
     for b in range(n_permutations):
@@ -373,3 +383,94 @@ def twist_features(twist, model_tip) -> np.ndarray:
     phi = np.arctan2(model_tip[:, 1], model_tip[:, 0])
     base = [np.ones_like(phi), np.cos(phi), np.sin(phi)]
     return np.column_stack([t * b for t in (twist, twist ** 2) for b in base])
+
+
+# --------------------------------------------------------------------------- vector patterns
+def untestable(effect: str, reason: str) -> SignatureTest:
+    """A signature test that cannot run on the data: ``reason`` completes "not testable, because"."""
+    return SignatureTest(effect, 0.0, 0.0, 1.0, 0, 0, f"not testable, because {reason}", testable=False)
+
+
+def _project_out(C, Y):
+    """Y minus its least-squares fit on the columns of C (C (N, c), Y (N,) or (N, m))."""
+    if C is None or C.shape[1] == 0:
+        return Y
+    coef, *_ = np.linalg.lstsq(C, Y, rcond=None)
+    return Y - C @ coef
+
+
+def vector_signature(effect: str, residual, columns, groups, *, sequence=None, control=None,
+                     n_permutations: int = 999, seed: int = 0, description: str = "") -> SignatureTest:
+    """Does the residual point along effect-specific vectors? ``e_k ~ sum_j c_j X_kj`` (+ control).
+
+    For effects whose tip displacement is a known vector per sample times an unknown scalar: a
+    drive backlash moves the tip along ``-s_i d tip / d alpha_i`` (s_i the direction of the last
+    rotation of tube i), a tracker lag along ``-d tip / dt``. The statistic is the fraction of the
+    residual (after an intercept per component and the ``control`` columns are projected out)
+    explained by the columns. Null: along one continuous motion, the columns circularly shifted
+    by a random lag (at least 10 % of the samples; keeps the serial correlation of both series);
+    else the rows permuted.
+
+    Parameters
+    ----------
+    effect : str
+    residual : ndarray, shape (K, 3) [m]
+    columns : ndarray, shape (K, 3, m)
+        The effect's displacement per unit of each of its m parameters [m per unit].
+    groups : ndarray of int, shape (K,)
+        Configuration groups (only their count is reported).
+    sequence : ndarray of int, shape (K,), optional
+    control : ndarray, shape (K, 3, c), optional
+        Columns of a related effect whose part is removed first (the test then asks what the
+        effect explains beyond it).
+    n_permutations, seed : int
+    description : str
+
+    Returns
+    -------
+    SignatureTest
+        ``statistic`` = explained fraction; effect size = RMS of the explained displacement less
+        what chance explains [m]; not testable when the columns vanish.
+    """
+    E = np.asarray(residual, float)
+    X = np.asarray(columns, float).reshape(E.shape[0], 3, -1)
+    C = None if control is None else np.asarray(control, float).reshape(E.shape[0], 3, -1)
+    keep = np.all(np.isfinite(E), axis=1) & np.all(np.isfinite(X), axis=(1, 2))
+    if C is not None:
+        keep &= np.all(np.isfinite(C), axis=(1, 2))
+    E, X = E[keep], X[keep]
+    C = None if C is None else C[keep]
+    k, m = E.shape[0], X.shape[2]
+    if k < 3 * (m + 2) or not np.any(np.abs(X) > 0):
+        return untestable(effect, f"its displacement vectors vanish or too few samples remain ({k}) "
+                                  f"({description})")
+    intercept = np.tile(np.eye(3), (k, 1))
+    Cm = intercept if C is None else np.concatenate([intercept, C.reshape(3 * k, -1)], axis=1)
+    y = _project_out(Cm, E.reshape(-1))
+    tss = float(y @ y)
+    if tss <= 0:
+        return untestable(effect, "the residual is zero")
+
+    def stat(Xs):
+        A = _project_out(Cm, Xs.reshape(3 * k, m))
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        fit = A @ coef
+        return float(fit @ fit) / tss
+
+    seq = None if sequence is None else np.asarray(sequence)[keep]
+    shift = seq is not None and np.unique(seq).size == 1
+    r2 = stat(X)
+    rng = np.random.default_rng(seed)
+    null = np.empty(n_permutations)
+    for b in range(n_permutations):
+        if shift:
+            lag = rng.integers(max(1, k // 10), k - max(1, k // 10))
+            null[b] = stat(np.roll(X, lag, axis=0))
+        else:
+            null[b] = stat(X[rng.permutation(k)])
+    size = float(np.sqrt(max(r2 - float(null.mean()), 0.0) * tss / k))
+    mode = "columns circularly shifted along the trajectory" if shift else "rows permuted"
+    n_units = int(np.unique(np.asarray(groups)[keep]).size)
+    return SignatureTest(effect, r2, size, _p_value(r2, null), n_permutations, n_units,
+                         f"fraction of the residual along {m} displacement vector(s) ({description}); "
+                         f"null: {mode}")

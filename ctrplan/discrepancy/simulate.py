@@ -360,7 +360,7 @@ def _run(tasks, alpha, beta, guess, follow, eta, mu, contact, robot, settings, c
 
 
 def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None, sequence=None,
-             settings: ModelSettings | None = None, n_jobs: int = 1, progress: bool = False,
+             mu=None, settings: ModelSettings | None = None, n_jobs: int = 1, progress: bool = False,
              check_stability: bool = False, rotation_tol: float = 1e-3,
              translation_tol: float = 1e-4) -> Simulation:
     """Evaluate a model at every sample of a motion history, following the elastic branch.
@@ -381,6 +381,11 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None,
     translation_last : array-like of bool, shape (K,), optional
         Whether a translation followed the last rotation. Friction model only; default from
         :func:`motion_history` when ``sequence`` is given, else all False.
+    mu : array-like, shape (K, n - 1), optional
+        Friction coefficient of each pair per sample [-], >= 0, in place of
+        ``robot.friction_coefficients`` (friction model only; e.g. partly developed friction,
+        :func:`~ctrplan.discrepancy.history.friction_state`). The release rules below apply
+        to it as to the robot's.
     sequence : array-like of int, shape (K,), optional
         Motion id per row (rows of one id in time order). Rows of a sequence are solved in
         order, each standard solve starting from the previous sample's base torsions (branch
@@ -409,7 +414,7 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None,
     Raises
     ------
     ValueError
-        Unknown model, shapes that do not match, eta outside {-1, 0, 1}, friction model
+        Unknown model, shapes that do not match, eta outside {-1, 0, 1}, bad ``mu``, friction model
         without ``eta`` or ``sequence``, ``n_jobs`` < 1.
     PhysicalParameterError
         Contact models without clearances (diameters or override), friction without a
@@ -475,9 +480,14 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None,
         tl = np.asarray(translation_last, dtype=bool)
         if tl.shape != (K,):
             raise ValueError(f"translation_last must have shape ({K},), got {tl.shape}")
-        mu_robot = np.asarray(robot.friction_coefficients, dtype=float)
-        active = (eta != 0) & ~tl[:, None] & (mu_robot[None, :] > 0.0)
-        mu_used = np.where(active, mu_robot[None, :], 0.0)
+        if mu is None:
+            mu_rows = np.broadcast_to(np.asarray(robot.friction_coefficients, dtype=float)[None, :], (K, n - 1))
+        else:
+            mu_rows = np.asarray(mu, dtype=float)
+            if mu_rows.shape != (K, n - 1) or not np.all(np.isfinite(mu_rows)) or np.any(mu_rows < 0):
+                raise ValueError(f"mu must have shape ({K}, {n - 1}) with finite values >= 0")
+        active = (eta != 0) & ~tl[:, None] & (mu_rows > 0.0)
+        mu_used = np.where(active, mu_rows, 0.0)
         eta_used = np.where(active, eta, 0)
         n_released = int(np.sum(~np.any(active, axis=1)))
         if np.any(active):

@@ -13,7 +13,9 @@ and perturbed by sensor noise:
 
 Truth model: the friction model when a friction coefficient is positive (with the friction
 directions of the approach or of the motion history, :func:`~.simulate.simulate`); else the
-clearance model when clearances are set; else the standard model. Noise defaults to the
+clearance model when clearances are set; else the standard model. History effects (drive
+backlash, a tracker time lag, gradually developing friction; :mod:`.history`) change the
+motion the truth is evaluated along, not the recorded joints (trajectory protocol only). Noise defaults to the
 paper's EM sensor (Section V-C): 1.4 mm rms position, 0.5 deg rms orientation.
 
 The truth (effects, seed, counts) goes to a JSON sidecar for tests and reports; analysis code
@@ -34,7 +36,8 @@ import pandas as pd
 from ..errors import PhysicalParameterError
 from ..mechanics import ModelSettings
 from ..robot import ROTATION, TRANSLATION
-from .effects import Effects, apply_effects, apply_registration
+from .effects import HISTORY_FIELDS, Effects, apply_effects, apply_registration
+from .history import apply_backlash, apply_time_offset, friction_state
 from .simulate import motion_history, simulate
 
 __all__ = ["PROTOCOLS", "Noise", "SynthResult", "truth_model", "paper_protocol",
@@ -388,6 +391,14 @@ def synthesize(robot, effects: Effects = Effects(), *, protocol: str = "paper", 
     rng = np.random.default_rng(seed)
     truth_robot = apply_effects(robot, effects)
     model = truth_model(effects)
+    if effects.history_on and protocol != "trajectory":
+        raise PhysicalParameterError(
+            f"effects {', '.join(f for f in HISTORY_FIELDS if getattr(effects, f) is not None)} change the "
+            f"motion history and need the trajectory protocol (protocol {protocol!r} solves every target "
+            f"without its approach path)")
+    if effects.friction_angle is not None and not effects.friction_on:
+        raise PhysicalParameterError("effect 'friction_angle' (gradual friction) needs positive friction "
+                                     "coefficients")
     if model != "standard":
         try:
             truth_robot.clearances  # noqa: B018
@@ -421,10 +432,22 @@ def synthesize(robot, effects: Effects = Effects(), *, protocol: str = "paper", 
         seq = frame["sequence"].to_numpy(int)
         hist = motion_history(alpha, beta, seq)
         for i, c in enumerate(ecols):
-            frame[c] = hist.eta[:, i]
-        sim = simulate(truth_robot, alpha, beta, model=model, eta=hist.eta,
-                       translation_last=hist.translation_last, sequence=seq, settings=settings,
-                       n_jobs=n_jobs, progress=progress)
+            frame[c] = hist.eta[:, i]   # what the recorded joints say
+        # the truth moves along the history the tubes really saw
+        a_t, b_t = alpha, beta
+        if effects.time_offset is not None:
+            a_t, b_t = apply_time_offset(alpha, beta, frame["time"].to_numpy(float), effects.time_offset[0], seq)
+        if effects.backlash is not None:
+            a_t = apply_backlash(a_t, effects.backlash, seq)
+        hist_t = motion_history(a_t, b_t, seq) if (a_t is not alpha or b_t is not beta) else hist
+        eta_t, tl_t, mu_t = hist_t.eta, hist_t.translation_last, None
+        if effects.friction_angle is not None:
+            e = friction_state(a_t, b_t, effects.friction_angle[0], seq)
+            eta_t = np.sign(e).astype(int)
+            mu_t = np.abs(e) * np.asarray(truth_robot.friction_coefficients, float)[None, :]
+            tl_t = np.zeros(len(frame), dtype=bool)
+        sim = simulate(truth_robot, a_t, b_t, model=model, eta=eta_t, translation_last=tl_t, mu=mu_t,
+                       sequence=seq, settings=settings, n_jobs=n_jobs, progress=progress)
         extra = {"samples": int(samples), "rate_hz": TRAJECTORY_RATE_HZ,
                  "translation_last_samples": int(hist.translation_last.sum()),
                  "reversals": {j.name: _reversals(frame[j.name]) for j in robot.joints}}

@@ -36,15 +36,33 @@ from ..mechanics import ModelSettings
 from .calibrate import (CalibrationResult, calibrate, eq49_residuals,
                         grid_search_friction, information_criterion, pose_errors, predict)
 from .data import MeasuredData, configuration_groups, load_measured_data, split_data
-from .parameters import REGISTRATION, apply_parameters, read_parameters, registration_transform
+from .parameters import REGISTRATION, apply_parameters, parameter, read_parameters, registration_transform
+from .history import rotation_direction, rotation_since_reversal, tip_velocity
 from .signatures import (EFFECT_LABELS, angle_features, friction_signature, overlap_features,
-                         registration_signature, regression_signature, twist_features)
+                         registration_signature, regression_signature, twist_features, untestable,
+                         vector_signature)
 
 __all__ = ["DiscrepancyOptions", "run_discrepancy", "default_baseline_parameters", "effect_parameters",
            "paired_improvement", "EFFECTS"]
 
-#: Candidate effects, in the order they are tried.
-EFFECTS = ("friction", "clearance", "offplane", "poisson", "registration")
+#: Candidate effects, in the order they are tried (gradual friction after friction: it starts
+#: from the friction fit).
+EFFECTS = ("friction", "clearance", "offplane", "poisson", "registration", "backlash", "time_offset",
+           "gradual_friction")
+#: The held-out residual is "consistent with the sensor noise" when its rms position error is at
+#: most this multiple of the noise rms (a calibrated model adds a little parameter error).
+NOISE_RATIO = 1.25
+#: Rests (consecutive samples at identical joints) needed to estimate the noise from the data.
+MIN_REST_PAIRS = 10
+#: Trial values of the history candidates' 1-D start scans: backlash [rad] (all moving tubes
+#: alike), time offset [s], friction angle theta_c [rad] (0 = the abrupt friction model).
+BACKLASH_SCAN = tuple(np.deg2rad([0.0, 1.0, 2.0, 4.0, 8.0]))
+TIME_OFFSET_SCAN = (-0.4, -0.2, -0.1, 0.0, 0.1, 0.2, 0.4)
+FRICTION_ANGLE_SCAN = tuple(np.deg2rad([0.0, 5.0, 10.0, 20.0, 40.0]))
+#: Reference theta_c of the gradual-friction signature [rad].
+FRICTION_ANGLE_REFERENCE = float(np.deg2rad(15.0))
+#: Finite-difference step of d tip / d alpha_i in the backlash signature [rad].
+ALPHA_STEP = 1e-3
 #: A candidate must lower the BIC by at least this much (Kass & Raftery: > 6 is strong evidence).
 BIC_MARGIN = 6.0
 #: A fitted friction coefficient above this is flagged as implausible for NiTi on NiTi (the
@@ -91,6 +109,13 @@ class DiscrepancyOptions:
         Arc-length step [m].
     n_jobs : int
     seed : int
+    noise_position : float or None
+        rms tip position noise of the sensor [m] as the data's source states it (e.g. 0.2 mm
+        for Ha's trajectory); None: estimated from rests (consecutive samples at identical
+        joints) or repeated configurations, if the data has them.
+    envelope_samples : int
+        Held-out samples (evenly spaced) at which the friction envelope (all 2^(n-1) bounding
+        solutions) is evaluated for the coverage figures; 0 skips it.
     """
 
     fit: tuple | None = None
@@ -107,6 +132,8 @@ class DiscrepancyOptions:
     ds: float = 3e-3
     n_jobs: int = 1
     seed: int = 0
+    noise_position: float | None = None
+    envelope_samples: int = 0
 
     def settings(self) -> ModelSettings:
         # no multistart stability search in calibration: it does not change the solution found
@@ -134,10 +161,22 @@ def default_baseline_parameters(robot, register: bool) -> tuple:
     return tuple(names)
 
 
-def effect_parameters(robot, effect: str) -> tuple:
+def _rotating_tubes(robot, data=None):
+    """Tubes with a rotation joint (and, given data, whose recorded angle moves)."""
+    from ..robot import ROTATION
+
+    tubes = sorted({j.tube for j in robot.joints if j.kind == ROTATION})
+    if data is not None:
+        tubes = [i for i in tubes if np.ptp(data.alpha[:, i]) > 1e-6]
+    return tubes
+
+
+def effect_parameters(robot, effect: str, data=None) -> tuple:
     """Parameters an effect adds: friction coefficients mu_k [-] (Section III), none for
     clearance (nominal diameters, as in Section V-C), off-plane precurvatures [1/m], Poisson
-    ratios [-], or the registration [rad, m].
+    ratios [-], the registration [rad, m], the backlash of every rotating tube [rad] (those
+    whose angle moves in ``data`` when given), the time offset [s], or the friction angle
+    [rad] (gradual friction; its friction coefficients come from the friction fit).
 
     Returns
     -------
@@ -158,11 +197,18 @@ def effect_parameters(robot, effect: str) -> tuple:
         return tuple(f"poisson_ratio_{i + 1}" for i in range(robot.n_tubes))
     if effect == "registration":
         return REGISTRATION
+    if effect == "backlash":
+        return tuple(f"backlash_{i + 1}" for i in _rotating_tubes(robot, data))
+    if effect == "time_offset":
+        return ("time_offset",)
+    if effect == "gradual_friction":
+        return ("friction_angle",)
     raise ValueError(f"unknown effect {effect!r}; expected one of {EFFECTS}")
 
 
 _MODEL_OF = {"friction": "friction", "clearance": "clearance", "offplane": "standard",
-             "poisson": "standard", "registration": "standard"}
+             "poisson": "standard", "registration": "standard", "backlash": "standard",
+             "time_offset": "standard", "gradual_friction": "friction"}
 
 
 def paired_improvement(err_base, err_cand, units, *, n_permutations: int = 9999, seed: int = 0) -> dict:
@@ -306,7 +352,8 @@ def _jsonable(x):
 def _result_from(d: dict) -> CalibrationResult:
     return CalibrationResult(d["model"], tuple(d["parameters"]), np.array(list(d["parameters"].values()), float),
                              np.array(list(d["initial"].values()), float), dict(d["fixed"]), d["cost"],
-                             d["n_samples"], d["n_failed"], d["evaluations"], d["seconds"], d["message"])
+                             d["n_samples"], d["n_failed"], d["evaluations"], d["seconds"], d["message"],
+                             d.get("converged", True))
 
 
 def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions = DiscrepancyOptions(),
@@ -358,7 +405,15 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                                f"{e!r}; a parameter of a tested effect cannot be fitted in the baseline "
                                f"(calibration would absorb the effect)")
     has_clearance = robot.n_tubes > 1 and _has_clearance(robot)
-    effects = [e for e in effects if has_clearance or e not in ("friction", "clearance")]
+    effects = [e for e in effects if has_clearance or e not in ("friction", "clearance", "gradual_friction")]
+    if "gradual_friction" in effects and "friction" not in effects:
+        effects.remove("gradual_friction")   # it starts from the friction fit
+    skipped = {}
+    if "backlash" in effects and not effect_parameters(robot, "backlash", data):
+        skipped["backlash"] = "no rotation joint moves in the data"
+    if "time_offset" in effects and data.time is None:
+        skipped["time_offset"] = "the data has no 'time' column"
+    effects = [e for e in effects if e not in skipped]
     # the stages depend on the inputs and on the options that change a fit, not on the number of
     # workers or the tests' permutations and level (the tests are not stored)
     keyed = {k: v for k, v in asdict(options).items() if k not in ("n_jobs", "n_permutations", "significance")}
@@ -434,8 +489,57 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                         f"the tip azimuth", **perm)
     if "registration" in effects:
         tests["registration"] = registration_signature(E, base_val["tip_base"], val.config_id, **perm)
+    if {"backlash", "gradual_friction"} & set(effects):
+        jac = stages.load("alpha-jacobian")
+        if jac is None:
+            jac = _alpha_jacobian(base_robot, val, settings, options.n_jobs, _rotating_tubes(robot, data))
+            stages.save("alpha-jacobian", {str(i): v for i, v in jac.items()})
+        else:
+            jac = {int(i): np.array(v, float) for i, v in jac.items()}
+        single = np.unique(val.sequence).size == val.n_samples
+        if "backlash" in effects:
+            if single:
+                tests["backlash"] = untestable("backlash", "every sequence holds one sample: no drive has a "
+                                                           "recorded motion to lag behind")
+            else:
+                s_dir = rotation_direction(val.alpha, val.sequence)
+                X = np.stack([-s_dir[:, i, None] * jac[i] for i in sorted(jac)], axis=2)
+                tests["backlash"] = vector_signature(
+                    "backlash", E, X, groups, sequence=val.sequence,
+                    description="-s_i d tip/d alpha_i per rotating tube, s_i the direction of its last rotation",
+                    **perm)
+        if "gradual_friction" in effects:
+            pairs = [i - 1 for i in sorted(jac) if i >= 1]
+            if single or not pairs:
+                tests["gradual_friction"] = untestable(
+                    "gradual_friction", "every sequence holds one sample: no rotation since a reversal to "
+                                        "develop over" if single else "no pair's inner tube rotates")
+            else:
+                d = rotation_since_reversal(val.alpha, val.sequence)
+                eta = val.eta.astype(float)
+                full = np.stack([eta[:, k, None] * jac[k + 1] for k in pairs], axis=2)
+                ramp = np.stack([eta[:, k, None] * np.exp(-d[:, k, None] / FRICTION_ANGLE_REFERENCE) * jac[k + 1]
+                                 for k in pairs], axis=2)
+                tests["gradual_friction"] = vector_signature(
+                    "gradual_friction", E, ramp, groups, sequence=val.sequence, control=full,
+                    description=f"eta_k exp(-rotation since reversal / {np.rad2deg(FRICTION_ANGLE_REFERENCE):.0f} "
+                                f"deg) d tip/d alpha_(k+1), beyond eta_k d tip/d alpha_(k+1)", **perm)
+    if "time_offset" in effects:
+        v = tip_velocity(base_val["tip_base"], val.time, val.sequence)
+        tests["time_offset"] = vector_signature(
+            "time_offset", E, -v[:, :, None], groups, sequence=val.sequence,
+            description="-d tip/dt of the baseline model along the recorded motion", **perm)
     for e, t in tests.items():
-        echo(f"  {EFFECT_LABELS[e]:>26s}: effect {t.effect_size_m * 1e3:.3f} mm, p = {t.p_value:.4f}")
+        if t.testable:
+            echo(f"  {EFFECT_LABELS[e]:>30s}: effect {t.effect_size_m * 1e3:.3f} mm, p = {t.p_value:.4f}")
+        else:
+            echo(f"  {EFFECT_LABELS[e]:>30s}: {t.description}")
+
+    # noise: is the baseline's held-out residual more than the sensor noise? -----------------
+    noise = estimate_noise(data, options.noise_position)
+    noise_check = _noise_check(base_val["position"], noise)
+    echo(f"  sensor noise: {noise['description']}; held-out baseline rms {noise_check['rms_mm']:.3f} mm"
+         + (f" = {noise_check['ratio']:.2f} x noise" if noise_check["ratio"] is not None else ""))
 
     # 3. try each candidate ---------------------------------------------------------------
     units = _units(val)
@@ -461,7 +565,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         contact_all = dict(zip(*contact.all_parameters()))
     for e in effects:
         model = _MODEL_OF[e]
-        extra = effect_parameters(robot, e)
+        extra = effect_parameters(robot, e, data)
         done = stages.load(f"fit-{e}")
         if done is not None:
             fit = _result_from(done)
@@ -477,51 +581,69 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
             elif e == "clearance":
                 fit = calibrate(robot, fit_data, "clearance", (), fixed=contact_all, settings=settings,
                                 n_jobs=options.n_jobs)
+            elif e == "gradual_friction":
+                fit = _scan_fit(robot, fit_data, "friction", dict(candidates["friction"]["_params"]),
+                                "friction_angle", FRICTION_ANGLE_SCAN, settings, options.n_jobs)
             else:
+                # nested in the baseline: start at the baseline's values with the effect switched
+                # off (so the fit can only lower the calibration cost), the history effects from
+                # the best point of a 1-D scan
                 names = tuple(base.names) + extra
                 start = apply_parameters(robot, tuple(base_all), tuple(base_all.values()))
                 init = np.concatenate([base.values, read_parameters(start, extra)])
+                if e in ("backlash", "time_offset"):
+                    scan = BACKLASH_SCAN if e == "backlash" else TIME_OFFSET_SCAN
+                    best = _scan_fit(robot, fit_data, "standard", base_all, extra, scan, settings, options.n_jobs)
+                    init[len(base.names):] = best.values
                 fit = calibrate(start, fit_data, "standard", names, initial=init, settings=settings,
                                 n_jobs=options.n_jobs, max_evaluations=options.max_evaluations)
             stages.save(f"fit-{e}", fit.as_dict())
         params = dict(zip(*fit.all_parameters()))
         val_e = held_out(e, model, params)
         r = eq49_residuals(val_e["position"], val_e["angle"])
-        k_total = len(set(base_names) | set(extra))
+        extra_all = tuple(extra) + (effect_parameters(robot, "friction") if e == "gradual_friction" else ())
+        k_total = len(set(base_names) | set(extra_all))
         bic = information_criterion(fit.cost, fit.n_samples, k_total)
         test = paired_improvement(base_r, r, units, seed=options.seed)
         pos_test = paired_improvement(base_val["position"], val_e["position"], units, seed=options.seed)
+        shown = {n: float(params[n]) for n in extra_all}
+        held = _error_summary(val_e["position"], val_e["angle"], val_e["seconds"], val.n_samples)
         candidates[e] = {
             "label": EFFECT_LABELS[e], "model": model, "fit": fit.as_dict(),
-            "parameters": {n: float(params[n]) for n in extra},
+            "parameters": shown, "parameters_si": {n: parameter(robot, n).unit for n in shown},
+            "implausible": _implausible(robot, shown),
             "n_parameters": k_total, "bic": bic, "delta_bic": bic - base_bic,
-            "held_out": _error_summary(val_e["position"], val_e["angle"], val_e["seconds"], val.n_samples),
-            "improvement_eq49": test, "improvement_position": pos_test,
-            "_val": val_e, "_params": params}
-        ho = candidates[e]["held_out"]
-        echo(f"  {EFFECT_LABELS[e]}: {', '.join(f'{n} = {params[n]:.4g}' for n in extra) or 'nominal'}; "
-             f"held-out mean {ho['position_mean_mm']:.3f} mm, max {ho['position_max_mm']:.3f} mm; "
-             f"dBIC {bic - base_bic:.1f}; improvement p = {test['p_value']:.4f}")
+            "held_out": held, "improvement_eq49": test, "improvement_position": pos_test,
+            "fit_note": _fit_note(e, fit, base, held, base_val, val_e),
+            "_val": val_e, "_params": params, "_r": r}
+        echo(f"  {EFFECT_LABELS[e]}: {', '.join(f'{n} = {params[n]:.4g}' for n in extra_all) or 'nominal'}; "
+             f"held-out mean {held['position_mean_mm']:.3f} mm, max {held['position_max_mm']:.3f} mm; "
+             f"dBIC {bic - base_bic:.1f}; improvement p = {test['p_value']:.4f}"
+             + (f"; {candidates[e]['fit_note']}" if candidates[e]["fit_note"] else ""))
 
     # 4. name the missing effect ------------------------------------------------------------
     base_summary = _error_summary(base_val["position"], base_val["angle"], base_val["seconds"], val.n_samples)
     eligible = []
     for e, c in candidates.items():
         sig = tests.get(e)
-        c["signature_significant"] = bool(sig is not None and sig.p_value < options.significance)
+        c["signature_significant"] = bool(sig is not None and sig.testable and sig.p_value < options.significance)
         c["improvement_significant"] = bool(c["improvement_eq49"]["p_value"] < options.significance
                                             and c["improvement_eq49"]["mean_difference"] > 0)
         c["bic_better"] = bool(c["delta_bic"] < -BIC_MARGIN)
         c["eligible"] = c["signature_significant"] and c["improvement_significant"] and c["bic_better"]
+        c["plausible"] = not c["implausible"]
         if c["eligible"]:
             eligible.append(e)
-    named = max(eligible, key=lambda e: candidates[e]["improvement_eq49"]["mean_difference"]) if eligible else None
+    decision = _decide(candidates, eligible, units, options)
+    named = decision["named"]
     if named:
         echo(f"named effect: {EFFECT_LABELS[named]}")
+        for line in decision["notes"]:
+            echo(f"  {line}")
     else:
-        echo("no effect named: no candidate has a significant signature, a significant held-out "
-             "improvement and a better BIC together (the residuals are consistent with noise and the "
-             "baseline's parameters)")
+        decision["no_effect_case"] = ("noise" if noise_check["consistent"] else
+                                      "unexplained" if noise_check["consistent"] is False else "unknown")
+        echo("no effect named: " + _no_effect_sentence(decision, noise_check, candidates))
 
     # 5. write the updated model and check it reproduces ------------------------------------
     final_params = candidates[named]["_params"] if named else base_all
@@ -542,6 +664,15 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
               + ", ".join(f"{n} = {v:.6g}" for n, v in final_params.items() if n not in REGISTRATION))
     atomic_write_text(model_path, robot_to_toml(updated, header=header, model=final_model,
                                                 registration=registration))
+    hist_params = {n: float(v) for n, v in final_params.items() if parameter(robot, n).history}
+    side = history_sidecar(model_path)
+    if hist_params:
+        # the robot file has no place for effects of the motion history: they go beside it
+        atomic_write_text(side, json.dumps({"note": "history effects of the model file of the same name "
+                                                    "(ctrplan.discrepancy.parameters; SI units)",
+                                            "parameters": hist_params}, indent=2) + "\n")
+    elif side.exists():
+        side.unlink()
     final_val = candidates[named]["_val"] if named else base_val
     after = _error_summary(final_val["position"], final_val["angle"], final_val["seconds"], val.n_samples)
     # whole configuration groups of a revisiting protocol; a trajectory is re-run whole, since a
@@ -555,7 +686,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
          f"samples: {reproduced} "
          f"(mean {np.nanmean(check['position']) * 1e3:.3f} mm)")
 
-    cautions = _cautions(named, candidates.get(named), base_summary, after)
+    cautions = _cautions(named, candidates.get(named), base_summary, after, robot)
     for line in cautions:
         echo(f"caution: {line}")
 
@@ -565,6 +696,8 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         "n_validation": val.n_samples, "baseline_parameters": list(base_names),
         "baseline": {"fit": base.as_dict(), "bic": base_bic, "held_out": base_summary},
         "signature_tests": {e: t.as_dict() for e, t in tests.items()},
+        "skipped_effects": skipped,
+        "noise": noise_check, "decision": decision,
         "candidates": {e: {k: v for k, v in c.items() if not k.startswith("_")} for e, c in candidates.items()},
         "named_effect": named, "named_label": EFFECT_LABELS[named] if named else None,
         "after": after, "updated_model_file": str(model_path), "updated_model": final_model,
@@ -582,6 +715,212 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                     if base_summary["position_mean_mm"] else None},
     }
     return results
+
+
+# --------------------------------------------------------------------------- helpers of the steps
+def _alpha_jacobian(robot, data: MeasuredData, settings, n_jobs, tubes) -> dict:
+    """d tip / d alpha_i of the standard model along the data's motion, per rotating tube i:
+    ``{i: ndarray (K, 3) [m/rad]}`` by central differences of :data:`ALPHA_STEP`, branch
+    following (NaN where a solve failed)."""
+    from .simulate import simulate
+
+    out = {}
+    for i in tubes:
+        tips = []
+        for sign in (1.0, -1.0):
+            a = data.alpha.copy()
+            a[:, i] += sign * ALPHA_STEP
+            tips.append(simulate(robot, a, data.beta, model="standard", sequence=data.sequence,
+                                 settings=settings, n_jobs=n_jobs).tip)
+        out[i] = (tips[0] - tips[1]) / (2.0 * ALPHA_STEP)
+    return out
+
+
+def estimate_noise(data: MeasuredData, stated: float | None = None) -> dict:
+    """The sensor's rms tip position noise: as stated, else from the data.
+
+    From rests (consecutive samples of a sequence at identical joints: their tip difference is
+    noise alone; robust, from the median of |d|, Maxwell-distributed for Gaussian noise), else
+    from configurations measured more than once (spread about the configuration mean; an upper
+    bound, since it includes whatever else differs between the visits, e.g. the approach
+    direction).
+
+    Returns
+    -------
+    dict
+        ``position_rms_m`` (None when unknown), ``source`` ("stated", "rests",
+        "repeated configurations", None), ``n`` (pairs or rows used), ``upper_bound`` (bool),
+        ``description``.
+    """
+    if stated is not None:
+        return {"position_rms_m": float(stated), "source": "stated", "n": 0, "upper_bound": False,
+                "description": f"{stated * 1e3:.3f} mm rms as stated for the data"}
+    joints = np.concatenate([data.alpha, data.beta], axis=1)
+    same = (np.all(np.abs(np.diff(joints, axis=0)) <= 1e-12, axis=1)
+            & (np.diff(data.sequence) == 0))
+    d = np.linalg.norm(np.diff(data.tip, axis=0)[same], axis=1)
+    d = d[np.isfinite(d)]
+    if d.size >= MIN_REST_PAIRS:
+        # |d| of two samples with per-component sigma s: Maxwell with scale sqrt(2) s, median
+        # 1.5382 sqrt(2) s; position rms = sqrt(3) s
+        rms = float(np.median(d) / (1.5382 * np.sqrt(2.0)) * np.sqrt(3.0))
+        return {"position_rms_m": rms, "source": "rests", "n": int(d.size), "upper_bound": False,
+                "description": f"{rms * 1e3:.3f} mm rms from {d.size} pairs of consecutive samples at rest"}
+    _, g, counts = np.unique(data.config_id, return_inverse=True, return_counts=True)
+    g = g.ravel()
+    rep = counts[g] > 1
+    if rep.sum() >= 2 * MIN_REST_PAIRS:
+        n_g = int(g.max()) + 1
+        mean = np.stack([np.bincount(g, data.tip[:, j], n_g) for j in range(3)], axis=1) / counts[:, None]
+        dev = (data.tip - mean[g])[rep]
+        dof = int(rep.sum() - np.count_nonzero(counts > 1))
+        rms = float(np.sqrt(np.sum(dev * dev) / max(dof, 1)))
+        return {"position_rms_m": rms, "source": "repeated configurations", "n": int(rep.sum()),
+                "upper_bound": True,
+                "description": f"at most {rms * 1e3:.3f} mm rms: spread of {int(rep.sum())} rows at repeated "
+                               f"configurations (includes any direction-dependent effect)"}
+    return {"position_rms_m": None, "source": None, "n": 0, "upper_bound": False,
+            "description": "unknown: not stated (--noise-position-mm) and the data has neither rests nor "
+                           "repeated configurations"}
+
+
+def _noise_check(position, noise: dict) -> dict:
+    """Held-out rms position error against the noise rms (ratio <= :data:`NOISE_RATIO`:
+    consistent)."""
+    pos = position[np.isfinite(position)]
+    rms = float(np.sqrt(np.mean(pos * pos))) if pos.size else float("nan")
+    sigma = noise["position_rms_m"]
+    ratio = rms / sigma if sigma else None
+    return {"rms_mm": rms * 1e3, "noise_rms_mm": None if sigma is None else sigma * 1e3,
+            "ratio": ratio, "consistent": None if ratio is None else bool(ratio <= NOISE_RATIO),
+            "threshold_ratio": NOISE_RATIO, "noise": noise}
+
+
+def _scan_fit(robot, data: MeasuredData, model: str, fixed: dict, names, values, settings,
+              n_jobs) -> CalibrationResult:
+    """Best of a 1-D scan: every parameter in ``names`` set to each of ``values`` in turn, the
+    others ``fixed``; the cost (Eq. (49)) of each trial in the message."""
+    from .calibrate import FAILED_RESIDUAL, _Objective
+
+    t0 = time.perf_counter()
+    names = (names,) if isinstance(names, str) else tuple(names)
+    obj = _Objective(robot, data, model, names, fixed, settings, n_jobs)
+    costs = []
+    for v in values:
+        r = obj.residuals(np.full(len(names), v))
+        costs.append(float(r @ r))
+    b = int(np.argmin(costs))
+    x = np.full(len(names), values[b])
+    r = obj.residuals(x)
+    trail = ", ".join(f"{v:.4g}: {c:.4g}" for v, c in zip(values, costs))
+    return CalibrationResult(model, names, x, np.zeros(len(names)), dict(fixed), float(r @ r), data.n_samples,
+                             int((r == FAILED_RESIDUAL).sum()), obj.evaluations, time.perf_counter() - t0,
+                             f"scan of {', '.join(names)} (value: cost) {trail}; best {values[b]:.4g}", True)
+
+
+def _implausible(robot, params: dict) -> list:
+    """Fitted values outside their plausible range: ``[{name, value, plausible, unit, why}]``."""
+    out = []
+    for name, value in params.items():
+        p = parameter(robot, name)
+        if not p.is_plausible(value):
+            out.append({"name": name, "value": float(value), "plausible": list(p.plausible), "unit": p.unit,
+                        "why": p.plausible_note})
+    return out
+
+
+_NESTED = ("offplane", "poisson", "registration", "backlash", "time_offset")
+
+
+def _fit_note(effect, fit, base, held, base_val, val_e) -> str:
+    """What a candidate's fit says about itself: not converged, worse on the calibration data
+    than the baseline, or better there but worse held-out (overfitting)."""
+    notes = []
+    if not fit.converged:
+        notes.append("its fit did not converge (stopped at the evaluation budget)")
+    base_mean = float(np.nanmean(base_val["position"]))
+    cand_mean = float(np.nanmean(val_e["position"]))
+    if fit.cost > base.cost * (1 + 1e-9):
+        if effect in _NESTED:
+            notes.append(f"it fits the calibration data worse than the baseline (cost {fit.cost:.4g} against "
+                         f"{base.cost:.4g}) although it contains the baseline: the fit failed")
+        else:
+            notes.append(f"it fits the calibration data worse than the standard baseline (cost {fit.cost:.4g} "
+                         f"against {base.cost:.4g}): the {fit.model} model with the shared refitted tube "
+                         f"parameters does not reach the standard model's fit, which costs it in the BIC; "
+                         f"either the refit (see its convergence) or the model is at fault")
+    elif cand_mean > base_mean:
+        notes.append(f"it fits the calibration data better (cost {fit.cost:.4g} against {base.cost:.4g}) but the "
+                     f"held-out data worse (mean {cand_mean * 1e3:.3f} against {base_mean * 1e3:.3f} mm): its "
+                     f"extra parameters absorb a pattern of the calibration samples that does not hold on the "
+                     f"held-out ones (overfitting)")
+    return "; ".join(notes)
+
+
+def _decide(candidates: dict, eligible: list, units, options) -> dict:
+    """Name an effect among the eligible ones.
+
+    Plausible candidates first (an effect whose fitted values are implausible is not named
+    while a plausible one is eligible); among them the largest held-out improvement. Others
+    whose held-out residual does not differ significantly from the named one's (paired
+    sign-flip test, ``options.significance``) explain the data equally well and are listed.
+    """
+    plausible = [e for e in eligible if candidates[e]["plausible"]]
+    pool = plausible or eligible
+    out = {"named": None, "eligible": list(eligible), "equally_good": [], "passed_over_implausible": [],
+           "notes": []}
+    if not pool:
+        return out
+    ranked = sorted(pool, key=lambda e: -candidates[e]["improvement_eq49"]["mean_difference"])
+    named = ranked[0]
+    out["named"] = named
+    label = candidates[named]["label"]
+    for e in eligible:
+        if e not in pool:
+            bad = ", ".join(f"{b['name']} = {b['value']:.4g} {b['unit']} (plausible {b['plausible'][0]:.3g}.."
+                            f"{b['plausible'][1]:.3g})" for b in candidates[e]["implausible"])
+            out["passed_over_implausible"].append(e)
+            out["notes"].append(f"{candidates[e]['label']} also explains the held-out data but needs {bad}; it is "
+                                f"not named while the plausible {label} explains the data")
+    for e in ranked[1:]:
+        t = paired_improvement(candidates[e]["_r"], candidates[named]["_r"], units, seed=options.seed)
+        if not (t["p_value"] < options.significance):
+            out["equally_good"].append({"effect": e, "label": candidates[e]["label"],
+                                        "mean_difference": t["mean_difference"], "p_value": t["p_value"]})
+    if out["equally_good"]:
+        others = ", ".join(f"{d['label']} (held-out Eq. (49) difference {d['mean_difference']:.3f}, p = "
+                           f"{d['p_value']:.3f})" for d in out["equally_good"])
+        out["notes"].append(f"{label} and {others} explain the held-out data equally well within their "
+                            f"uncertainty: the data cannot tell them apart; {label} is listed first for its "
+                            f"larger mean improvement only")
+    if candidates[named]["implausible"]:
+        out["notes"].append(f"{label} is named although its fitted values are implausible: no plausible "
+                            f"candidate explains the data")
+    return out
+
+
+def _no_effect_sentence(decision: dict, check: dict, candidates: dict) -> str:
+    case = decision["no_effect_case"]
+    noise = check["noise"]
+    if case == "noise":
+        return (f"no candidate is eligible, and the held-out residual of the calibrated baseline (rms "
+                f"{check['rms_mm']:.3f} mm) is consistent with the sensor noise ({noise['description']}; "
+                f"ratio {check['ratio']:.2f} <= {NOISE_RATIO})")
+    if case == "unexplained":
+        best = min(candidates, key=lambda e: candidates[e]["held_out"]["position_mean_mm"], default=None)
+        tail = (f"; the best candidate, {candidates[best]['label']}, reaches a held-out mean of "
+                f"{candidates[best]['held_out']['position_mean_mm']:.3f} mm" if best else "")
+        return (f"the held-out residual of the calibrated baseline (rms {check['rms_mm']:.3f} mm) is "
+                f"{check['ratio']:.1f} times the sensor noise ({noise['description']}): NOT consistent with "
+                f"noise. The model misses something that no candidate explains{tail}")
+    return (f"no candidate is eligible; whether the held-out residual (rms {check['rms_mm']:.3f} mm) is noise "
+            f"cannot be said: the sensor noise is {noise['description']}")
+
+
+def history_sidecar(model_path) -> Path:
+    """Where the history effects of an updated model file go: ``<model>.history.json``."""
+    model_path = Path(model_path)
+    return model_path.with_name(model_path.stem + ".history.json")
 
 
 def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: int = 1) -> dict:
@@ -615,24 +954,35 @@ def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: i
     names, values = (), ()
     if reg:
         names, values = REGISTRATION, tuple(reg["rotation_vector_rad"]) + tuple(reg["translation_m"])
+    side = history_sidecar(model_path)
+    if side.exists():
+        hist = json.loads(side.read_text())["parameters"]
+        names, values = names + tuple(hist), values + tuple(hist.values())
     pred = predict(robot, names, values, data, model, settings, n_jobs=n_jobs)
     pos, ang, _ = pose_errors(pred, data)
     return {"position": pos, "angle": ang}
 
 
-def _cautions(named, candidate, before: dict, after: dict) -> list[str]:
+def _cautions(named, candidate, before: dict, after: dict, robot=None) -> list[str]:
     """What a reader of the named effect must not overlook: a fitted value outside what the
     physics allows, or an addition that lowers the mean error but raises the maximum."""
     out = []
     if named is None:
         return out
-    for name, value in candidate["parameters"].items():
-        if name.startswith("mu_") and value > PLAUSIBLE_MU:
-            out.append(f"{name} = {value:.3g} is larger than plausible Coulomb friction between NiTi tubes "
-                       f"(> {PLAUSIBLE_MU}; Table VII of Ha et al. 2019 has 0.22 and 0.12): the "
+    bad = candidate.get("implausible")
+    if bad is None:   # a candidate dict without the plausibility check (older results)
+        bad = [{"name": n, "value": v, "plausible": [0.0, PLAUSIBLE_MU], "unit": "-", "why": ""}
+               for n, v in candidate["parameters"].items() if n.startswith("mu_") and v > PLAUSIBLE_MU]
+    for b in bad:
+        if b["name"].startswith("mu_"):
+            out.append(f"{b['name']} = {b['value']:.3g} is larger than plausible Coulomb friction between NiTi "
+                       f"tubes (> {b['plausible'][1]:g}; Table VII of Ha et al. 2019 has 0.22 and 0.12): the "
                        f"direction-dependent error is real, but it may come from another hysteretic effect "
                        f"(e.g. backlash or lag in that tube's rotation drive) that the friction model "
                        f"imitates; read the coefficient as a size, not as a material property")
+        else:
+            out.append(f"{b['name']} = {b['value']:.4g} {b['unit']} is outside its plausible range "
+                       f"{b['plausible'][0]:.3g}..{b['plausible'][1]:.3g} {b['unit']} ({b['why']})")
     if after["position_max_mm"] > before["position_max_mm"]:
         out.append(f"the held-out maximum tip error rises from {before['position_max_mm']:.2f} to "
                    f"{after['position_max_mm']:.2f} mm while the mean falls: the added effect makes some "
