@@ -211,6 +211,14 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
 @click.option("--poisson", default=None, help="Poisson ratio per tube (default: the robot's).")
 @click.option("--registration", default=None,
               help="Robot-to-tracker transform 'rx,ry,rz,tx,ty,tz' (rotation vector [rad], translation [m]).")
+@click.option("--backlash-rad", "backlash", default=None,
+              help="Dead band of each tube's rotation drive [rad], e.g. 0,0.05,0.03 (trajectory protocol; "
+                   "default: off).")
+@click.option("--time-offset-s", "time_offset", default=None,
+              help="Lag of the tracker readings behind the joint readings [s] (trajectory protocol; default: off).")
+@click.option("--friction-angle-rad", "friction_angle", default=None,
+              help="Relative rotation over which friction develops after a reversal [rad] (needs --mu; "
+                   "trajectory protocol; default: off, friction switches at once).")
 @click.option("--noise-position-mm", "noise_mm", type=float, default=1.4, show_default=True,
               help="rms tip position noise [mm].")
 @click.option("--noise-angle-deg", "noise_deg", type=float, default=0.5, show_default=True,
@@ -220,7 +228,7 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
 @click.option("--jobs", type=int, default=None, help="Worker processes (default: all cores).")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane, poisson, registration,
-          noise_mm, noise_deg, seed, ds, jobs, no_progress):
+          backlash, time_offset, friction_angle, noise_mm, noise_deg, seed, ds, jobs, no_progress):
     """Generate measured-like data from a robot model with hidden effects and sensor noise."""
     import numpy as np
 
@@ -236,7 +244,10 @@ def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane
                                       ("--clearance-m", clearance, "clearances", n - 1),
                                       ("--offplane-per-m", offplane, "offplane_precurvature", n),
                                       ("--poisson", poisson, "poisson_ratios", n),
-                                      ("--registration", registration, "registration", 6)):
+                                      ("--registration", registration, "registration", 6),
+                                      ("--backlash-rad", backlash, "backlash", n),
+                                      ("--time-offset-s", time_offset, "time_offset", 1),
+                                      ("--friction-angle-rad", friction_angle, "friction_angle", 1)):
         if text is None:
             continue
         fields[name] = parse_values(option, text, count)
@@ -252,7 +263,17 @@ def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane
             raise PhysicalParameterError(f"option {option} {value!r}: must be >= {low}")
     if ds is not None and not (np.isfinite(ds) and ds > 0):
         raise PhysicalParameterError(f"option --ds {ds!r}: must be > 0 m")
-    effects = Effects(**fields)
+    try:
+        effects = Effects(**fields)
+        if effects.history_on and protocol != "trajectory":
+            raise PhysicalParameterError("needs --protocol trajectory (the paper protocol solves every target "
+                                         "without its approach path)")
+        if effects.friction_angle is not None and not effects.friction_on:
+            raise PhysicalParameterError("needs positive friction coefficients (--mu)")
+    except PhysicalParameterError as exc:
+        used = [o for o, v in (("--backlash-rad", backlash), ("--time-offset-s", time_offset),
+                               ("--friction-angle-rad", friction_angle)) if v is not None]
+        raise PhysicalParameterError(f"option {used[-1] if used else '--mu'}: {exc}") from None
     noise = Noise(position_rms=noise_mm * 1e-3, angle_rms=float(np.deg2rad(noise_deg)))
     result = synthesize(robot, effects, protocol=protocol, grid=grid, samples=samples, noise=noise,
                         seed=seed, settings=_settings(ds), n_jobs=jobs or os.cpu_count() or 1,
@@ -275,8 +296,15 @@ def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane
 @click.option("--fit", default=None,
               help="Baseline parameters, comma-separated (default: precurvature_y_i of curved tubes, "
                    "k_xy_relative_2..n, and the registration for tracker-frame data).")
-@click.option("--effects", default=",".join(("friction", "clearance", "offplane", "poisson", "registration")),
+@click.option("--effects", default=",".join(("friction", "clearance", "offplane", "poisson", "registration",
+                                              "backlash", "time_offset", "gradual_friction")),
               show_default=True, help="Candidate effects to test and try.")
+@click.option("--noise-position-mm", "noise_mm", type=float, default=None,
+              help="rms tip position noise of the sensor [mm] as the data's source states it (default: "
+                   "estimated from rests or repeated configurations in the data).")
+@click.option("--envelope-samples", type=int, default=0, show_default=True,
+              help="Held-out samples at which to evaluate the friction envelope (all bounding solutions) "
+                   "for the coverage figures; 0 skips it.")
 @click.option("--frame", type=click.Choice(["robot", "tracker"]), default=None,
               help="Frame of the measured poses (default: tracker for Ha's format, robot for CSV); "
                    "tracker fits a rigid registration.")
@@ -289,8 +317,9 @@ def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane
 @click.option("--jobs", type=int, default=None, help="Worker processes (default: all cores).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--no-progress", is_flag=True, help="Hide progress bars.")
-def discrepancy(robot_path, data_path, out_dir, fit, effects, frame, calibration_fraction,
-                max_calibration_samples, significance, permutations, ds, jobs, seed, no_progress):
+def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, envelope_samples, frame,
+                calibration_fraction, max_calibration_samples, significance, permutations, ds, jobs, seed,
+                no_progress):
     """Find where model and measurement disagree, name the missing effect, add it, show the gap shrink.
 
     Interrupted runs resume from <out>/.stages (finished calibrations and evaluations are kept).
@@ -308,11 +337,16 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, frame, calibration
         raise PhysicalParameterError(f"option --calibration-fraction {calibration_fraction!r}: must be in (0, 1)")
     if ds is not None and not ds > 0:
         raise PhysicalParameterError(f"option --ds {ds!r}: must be > 0 m")
+    if noise_mm is not None and not (noise_mm > 0 and noise_mm < float("inf")):
+        raise PhysicalParameterError(f"option --noise-position-mm {noise_mm!r}: must be > 0 mm")
+    if envelope_samples < 0:
+        raise PhysicalParameterError(f"option --envelope-samples {envelope_samples!r}: must be >= 0")
     opts = DiscrepancyOptions(
         fit=tuple(x.strip() for x in fit.split(",")) if fit else None, effects=chosen, frame=frame,
         calibration_fraction=calibration_fraction, max_calibration_samples=max_calibration_samples,
         significance=significance, n_permutations=permutations, ds=ds or 3e-3,
-        n_jobs=jobs or os.cpu_count() or 1, seed=seed)
+        n_jobs=jobs or os.cpu_count() or 1, seed=seed,
+        noise_position=None if noise_mm is None else noise_mm * 1e-3, envelope_samples=envelope_samples)
     results = run_discrepancy(robot_path, data_path, out_dir, opts, echo=click.echo, progress=not no_progress)
     paths = write_report(results, out_dir)
     click.echo(f"report: {paths['markdown']}")

@@ -416,7 +416,8 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     effects = [e for e in effects if e not in skipped]
     # the stages depend on the inputs and on the options that change a fit, not on the number of
     # workers or the tests' permutations and level (the tests are not stored)
-    keyed = {k: v for k, v in asdict(options).items() if k not in ("n_jobs", "n_permutations", "significance")}
+    keyed = {k: v for k, v in asdict(options).items()
+             if k not in ("n_jobs", "n_permutations", "significance", "noise_position", "envelope_samples")}
     key = hashlib.sha256(Path(robot_path).read_bytes() + Path(data_path).read_bytes()
                          + json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:12]
     stages = _Stages(out_dir, key)
@@ -645,6 +646,10 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                                       "unexplained" if noise_check["consistent"] is False else "unknown")
         echo("no effect named: " + _no_effect_sentence(decision, noise_check, candidates))
 
+    # prediction with the motion history and the friction envelope (issue 13, Sec. 3) --------
+    prediction = _prediction_figures(robot, val, base_val, candidates, named, noise, stages, settings, options,
+                                     echo)
+
     # 5. write the updated model and check it reproduces ------------------------------------
     final_params = candidates[named]["_params"] if named else base_all
     final_model = _MODEL_OF[named] if named else "standard"
@@ -696,7 +701,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         "n_validation": val.n_samples, "baseline_parameters": list(base_names),
         "baseline": {"fit": base.as_dict(), "bic": base_bic, "held_out": base_summary},
         "signature_tests": {e: t.as_dict() for e, t in tests.items()},
-        "skipped_effects": skipped,
+        "skipped_effects": skipped, "prediction": prediction,
         "noise": noise_check, "decision": decision,
         "candidates": {e: {k: v for k, v in c.items() if not k.startswith("_")} for e, c in candidates.items()},
         "named_effect": named, "named_label": EFFECT_LABELS[named] if named else None,
@@ -715,6 +720,107 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                     if base_summary["position_mean_mm"] else None},
     }
     return results
+
+
+#: Envelope margin: 95 % of 3-D Gaussian noise vectors are shorter than 2.80 sigma per component,
+#: i.e. 1.62 times their rms length.
+ENVELOPE_NOISE_FACTOR = 1.62
+
+
+def _stats_mm(pos) -> dict:
+    p = pos[np.isfinite(pos)] * 1e3
+    if not p.size:
+        return {"n": 0, "mean_mm": None, "p95_mm": None, "max_mm": None}
+    return {"n": int(p.size), "mean_mm": float(p.mean()), "p95_mm": float(np.percentile(p, 95)),
+            "max_mm": float(p.max())}
+
+
+def hull_distance(points, x) -> float:
+    """Distance from ``x`` (3,) to the convex hull of ``points`` (m, 3) [same unit]: the nearest
+    convex combination, by non-negative least squares with the weights' sum held at 1 by a
+    heavily weighted row."""
+    from scipy.optimize import nnls
+
+    P = np.asarray(points, float)
+    w_row = 1e3 * max(1.0, float(np.abs(P).max()))
+    A = np.vstack([P.T, np.full((1, P.shape[0]), w_row)])
+    b = np.concatenate([np.asarray(x, float), [w_row]])
+    w, _ = nnls(A, b)
+    return float(np.linalg.norm(P.T @ w - x))
+
+
+def _prediction_figures(robot, val: MeasuredData, base_val, candidates, named, noise, stages, settings, options,
+                        echo) -> dict | None:
+    """Held-out prediction error of the standard and the history-aware models (mean, p95, max)
+    and the coverage of the friction envelope; None without a friction candidate."""
+    from ..mechanics import all_eta
+    from .simulate import simulate
+
+    if "friction" not in candidates:
+        return None
+    fr = candidates["friction"]
+    rows = [{"label": "standard model, calibrated (no history)", **_stats_mm(base_val["position"])},
+            {"label": "history-aware: friction model along the recorded history, "
+                      + ", ".join(f"{k} = {v:.3g}" for k, v in fr["parameters"].items()),
+             **_stats_mm(fr["_val"]["position"])}]
+    if named and named != "friction":
+        rows.append({"label": f"named effect: {candidates[named]['label']}", **_stats_mm(candidates[named]["_val"]["position"])})
+    out = {"description": "Held-out tip position errors. Standard: the calibrated baseline, which ignores the "
+                          "motion history. History-aware: the friction model (Section III of Ha et al. 2019) with "
+                          "each sample's recorded history (eta of the last relative rotation of each pair; the "
+                          "clearance solution after a final translation), parameters calibrated on the "
+                          "calibration split only.", "rows": rows}
+    for r in rows:
+        echo(f"  prediction: {r['label']}: mean {r['mean_mm']:.3f}, p95 {r['p95_mm']:.3f}, max {r['max_mm']:.3f} mm")
+    k_env = min(int(options.envelope_samples), val.n_samples)
+    if k_env <= 0:
+        return out
+    sigma = noise.get("position_rms_m")
+    margin = ENVELOPE_NOISE_FACTOR * sigma if sigma else 0.0
+    rows_env = np.unique(np.linspace(0, val.n_samples - 1, k_env).round().astype(int))
+    sub = val.take(rows_env)
+    params = fr["_params"]
+    cached = stages.load(f"envelope-{rows_env.size}")
+    if cached is None:
+        echo(f"  friction envelope: {len(all_eta(robot.n_tubes))} bounding solutions at {rows_env.size} held-out "
+             f"samples ...")
+        robot_p = apply_parameters(robot, tuple(params), tuple(params.values()))
+        R, t = registration_transform(tuple(params), tuple(params.values()))
+        tips = []
+        for eta in all_eta(robot.n_tubes):
+            sim = simulate(robot_p, sub.alpha, sub.beta, model="friction",
+                           eta=np.tile(np.asarray(eta, int), (sub.n_samples, 1)),
+                           translation_last=np.zeros(sub.n_samples, bool), sequence=sub.sequence,
+                           settings=settings, n_jobs=options.n_jobs)
+            tips.append(sim.tip @ R.T + t)
+        cached = {"tips": np.stack(tips, axis=1)}
+        stages.save(f"envelope-{rows_env.size}", cached)
+    tips = np.asarray(cached["tips"], float)            # (k, 2^(n-1), 3) in the data's frame
+    dist = np.full(sub.n_samples, np.nan)
+    size = np.full(sub.n_samples, np.nan)
+    for k in range(sub.n_samples):
+        P = tips[k]
+        if np.all(np.isfinite(P)):
+            dist[k] = hull_distance(P, sub.tip[k])
+            size[k] = max(np.linalg.norm(P[a] - P[b]) for a in range(len(P)) for b in range(len(P)))
+    ok = np.isfinite(dist)
+    outside = dist[ok] - margin
+    far = outside[outside > 0]
+    env = {"n": int(ok.sum()), "inside": int(np.sum(outside <= 0)),
+           "fraction_inside": float(np.mean(outside <= 0)) if ok.any() else float("nan"),
+           "margin_mm": margin * 1e3,
+           "outside_median_mm": float(np.median(far) * 1e3) if far.size else None,
+           "outside_p95_mm": float(np.percentile(far, 95) * 1e3) if far.size else None,
+           "outside_max_mm": float(far.max() * 1e3) if far.size else None,
+           "size_median_mm": float(np.nanmedian(size) * 1e3) if ok.any() else None,
+           "description": f"{rows_env.size} evenly spaced held-out samples; convex hull of the "
+                          f"{tips.shape[1]} bounding friction solutions (all eta, no release) with the fitted "
+                          f"friction coefficients; margin {ENVELOPE_NOISE_FACTOR} x the noise rms "
+                          f"({noise['description']})"}
+    echo(f"  envelope: {env['inside']} of {env['n']} inside ({100 * env['fraction_inside']:.0f} %), outside by "
+         f"median {env['outside_median_mm']} mm, max {env['outside_max_mm']} mm")
+    out["envelope"] = env
+    return out
 
 
 # --------------------------------------------------------------------------- helpers of the steps
