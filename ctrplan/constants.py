@@ -31,3 +31,8 @@ PREDICTOR_TOL = 1e-4
 # that moves a tip, a bound or a stability flag by more than the solvers' tolerances (shooting
 # 1e-9 1/m, contact outer loop 1e-6 m), and recompute the shipped maps (docs/boundmaps.md).
 MECHANICS_VERSION = "2026.11.22"
+
+# Relative inflation of the worst-case torsional coupling in the uniqueness screen of the standard
+# model (mechanics/_uniqueness.py): the O(h^2) error of the discretized smallest eigenvalue is far
+# below this, so the screen never certifies a configuration past the continuous critical value.
+UNIQUENESS_SCREEN_MARGIN = 0.1

@@ -183,41 +183,44 @@ RESUME_CONFIGS = CONFIGS + [((0.0, -1.5, 2.5), (0.0, -0.017, -0.060))]
 
 
 def test_resume_after_interruption_computes_only_missing_rows(tmp_path, robot, monkeypatch):
+    """Chunks of two rows: the run dies while computing the second chunk; the checkpoint holds
+    the first chunk, and the rerun computes only the rows that are not in it."""
     alpha, beta = _arrays(RESUME_CONFIGS)
     settings = ModelSettings(ds=DS)
     ck = tmp_path / "out.csv.partial.jsonl"
-    real = batch._task
+    monkeypatch.setattr(batch, "STANDARD_CHUNK", 2)
+    real = batch._chunk_task
     calls = []
 
-    def dying(robot_, a, b, model, s, eta, index):
-        if len(calls) == 2:
+    def dying(robot_, a, b, model, s, eta, indices):
+        if len(calls) == 1:
             raise _Interrupt("killed")
-        calls.append(index)
-        return real(robot_, a, b, model, s, eta, index)
+        calls.append(list(indices))
+        return real(robot_, a, b, model, s, eta, indices)
 
-    monkeypatch.setattr(batch, "_task", dying)
+    monkeypatch.setattr(batch, "_chunk_task", dying)
     with pytest.raises(_Interrupt):
         evaluate_table(robot, alpha, beta, "standard", settings, checkpoint=ck, progress=False, job_key="job-A")
     lines = ck.read_text().splitlines()
     assert json.loads(lines[0]) == {"job_key": "job-A"}
-    assert [json.loads(x)["index"] for x in lines[1:]] == [0, 1]
+    assert [json.loads(x)["indices"] for x in lines[1:]] == [[0, 1]]
 
     # mark the finished rows: a rerun must keep them, not recompute them
-    recs = [json.loads(x) for x in lines[1:]]
-    for rec in recs:
-        rec["rows"][0]["message"] = f"from checkpoint {rec['index']}"
-    ck.write_text("\n".join([lines[0]] + [json.dumps(r) for r in recs]) + "\n")
+    rec = json.loads(lines[1])
+    for index, rows in zip(rec["indices"], rec["rows"]):
+        rows[0]["message"] = f"from checkpoint {index}"
+    ck.write_text("\n".join([lines[0], json.dumps(rec)]) + "\n")
 
     calls.clear()
 
-    def counting(robot_, a, b, model, s, eta, index):
-        calls.append(index)
-        return real(robot_, a, b, model, s, eta, index)
+    def counting(robot_, a, b, model, s, eta, indices):
+        calls.append(list(indices))
+        return real(robot_, a, b, model, s, eta, indices)
 
-    monkeypatch.setattr(batch, "_task", counting)
+    monkeypatch.setattr(batch, "_chunk_task", counting)
     frame = evaluate_table(robot, alpha, beta, "standard", settings, checkpoint=ck, progress=False,
                            job_key="job-A")
-    assert calls == [3, 4]  # 1-based rows not in the checkpoint
+    assert calls == [[3, 4]]  # 1-based rows not in the checkpoint
     assert list(frame["row"]) == [1, 2, 3, 4]
     assert list(frame["message"][:2]) == ["from checkpoint 0", "from checkpoint 1"]
     fresh = evaluate_table(robot, alpha, beta, "standard", settings, progress=False)
@@ -230,18 +233,47 @@ def test_checkpoint_of_another_job_is_discarded(tmp_path, robot, monkeypatch):
     ck.write_text(json.dumps({"job_key": "old"}) + "\n"
                   + json.dumps({"index": 0, "rows": [{"tip_x": 9.0, "row": 1}]}) + "\n")
     calls = []
-    real = batch._task
+    real = batch._chunk_task
 
     def counting(*args):
-        calls.append(args[-1])
+        calls.extend(args[-1])
         return real(*args)
 
-    monkeypatch.setattr(batch, "_task", counting)
+    monkeypatch.setattr(batch, "_chunk_task", counting)
     frame = evaluate_table(robot, alpha, beta, "standard", ModelSettings(ds=DS), checkpoint=ck,
                            progress=False, job_key="new")
     assert calls == [1, 2]
     assert np.all(frame["tip_x"].to_numpy(float) < 1.0)
     assert json.loads(ck.read_text().splitlines()[0]) == {"job_key": "new"}
+
+
+def test_batched_standard_rows_equal_single_solves_with_the_same_stability_flag(robot):
+    """The CLI's batched standard model (uniqueness screen, multistart only where the screen
+    cannot prove one equilibrium, warm starts along the rows) gives the tips and the status of
+    ``solve_standard`` with its multistart search, row by row, on configurations that include
+    elastically unstable ones (Table II robot, tube 3's curved section inside tubes 1 and 2,
+    tubes 2 and 3 opposed). Catches a screen that certifies an unstable configuration, a
+    multistart that differs from solve_standard's, or a warm start that lands on another
+    branch."""
+    from ctrplan.mechanics import solve_standard
+    rng = np.random.default_rng(7)
+    K = 40
+    alpha = np.zeros((K, 3))
+    alpha[:, 1] = rng.uniform(-np.pi, np.pi, K)
+    alpha[:, 2] = alpha[:, 1] + np.pi + rng.normal(0.0, 0.6, K)
+    beta = np.tile([0.0, -0.017, 0.0], (K, 1))
+    beta[:, 2] = rng.uniform(-0.1204, -0.104, K)
+    settings = ModelSettings(ds=DS)
+    rows = batch._standard_rows(robot, alpha, beta, settings, list(range(1, K + 1)))
+    status = []
+    for k in range(K):
+        ref = solve_standard(robot, alpha[k], beta[k], settings)
+        want = "unstable" if ref.diagnostics.unstable else "ok" if ref.diagnostics.converged else "not_converged"
+        status.append(want)
+        assert rows[k]["status"] == want, (k, rows[k]["message"], ref.diagnostics.message)
+        got = np.array([rows[k][c] for c in TIP])
+        np.testing.assert_allclose(got, ref.tip_position, atol=1e-9)
+    assert "unstable" in status and "ok" in status   # both kinds were exercised
 
 
 def test_cli_resumes_from_partial_file_and_removes_it(tmp_path):

@@ -15,9 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 from numba import config, get_num_threads, njit, prange, set_num_threads
 
-from ..constants import GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR
+from ..constants import (DISTINCT_EQUILIBRIUM_TWIST, GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR,
+                         UNIQUENESS_SCREEN_MARGIN)
 from .grid import _grid, packed_sections
 from .results import ModelSettings
+from ._uniqueness import unique_equilibrium_certified
 from .standard import _centerline, _newton, _shoot
 
 __all__ = ["StandardBatch", "solve_standard_batch"]
@@ -40,12 +42,17 @@ class StandardBatch:
     converged : ndarray of bool, shape (K,)
         Newton shooting reached ``shooting_tol``.
     unstable : ndarray of bool, shape (K,)
-        Shooting-Jacobian determinant not positive (the determinant test of
-        :func:`solve_standard`; the multistart search is not run in batch mode).
+        Shooting-Jacobian determinant not positive, or (with ``check_stability``) more than one
+        equilibrium found: the flag of :func:`solve_standard` with the same ``check_stability``.
     valid : ndarray of bool, shape (K,)
         Configuration passed ``Robot.check_configuration`` (``Robot.configurations_possible``).
     iterations : ndarray of int, shape (K,)
-        Newton iterations.
+        Newton iterations (including the multistart search's).
+    n_equilibria : ndarray of int, shape (K,)
+        Equilibria found (0: not checked, without ``check_stability`` or not converged).
+    certified : ndarray of bool, shape (K,)
+        The uniqueness screen proved a single equilibrium (``_uniqueness``; only with
+        ``check_stability``), so no multistart search was needed.
     """
 
     tip_position: np.ndarray
@@ -55,29 +62,82 @@ class StandardBatch:
     unstable: np.ndarray
     valid: np.ndarray
     iterations: np.ndarray
+    n_equilibria: np.ndarray
+    certified: np.ndarray
 
 
 @njit(cache=True)
 def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, gspec,
-               tips, tans, sig_out, conv, unst, iters):
-    """Configuration ``k`` of the batch: grid, Newton shooting (retried from zero twist), tip."""
+               multistart, follow_from, tips, tans, sig_out, conv, unst, iters, n_eq, certified):
+    """Configuration ``k`` of the batch: grid, Newton shooting (retried from zero twist), tip.
+
+    With ``multistart`` > 0, the stability check of :func:`ctrplan.mechanics.solve_standard`:
+    configurations that the uniqueness screen (``_uniqueness``) certifies have one equilibrium
+    and need no search; the others get the multistart search for other equilibria. A certified
+    configuration may also start Newton from ``follow_from`` (the base torsions of the row
+    before; NaN: none), without the coarse-grid predictor: its only equilibrium is found from
+    any start that converges."""
     n = alpha.shape[1]
     s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, gspec[0], gspec[1], gspec[2])
-    if predict:
-        cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds, gspec[0],
-                                         gspec[1], gspec[2])
-    else:   # not read by _shoot without the predictor
-        cs, cpresent, cuhat = s, present, uhat
+    unique = False
+    if multistart > 0:
+        unique = unique_equilibrium_certified(s, first, last, present, uhat, kxy, kxy / ratio,
+                                              UNIQUENESS_SCREEN_MARGIN)
+        certified[k] = unique
     a = alpha[k].copy()
-    sig0, _, it, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, sig_init[k],
-                                             lengths, tol, maxit, predict)
-    if not ok and not predict:   # a given initial guess failed: retry from no twist
-        sig0, _, it2, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths,
-                                                      tol, maxit, np.empty((n, n)))
+    it = 0
+    ok = False
+    if unique and np.all(np.isfinite(follow_from)):
+        sig0, _, it, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, follow_from.copy(), lengths,
+                                                  tol, maxit, np.empty((n, n)))
+    if not ok:
+        if predict:
+            cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
+                                             gspec[0], gspec[1], gspec[2])
+        else:   # not read by _shoot without the predictor
+            cs, cpresent, cuhat = s, present, uhat
+        sig0, _, it2, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a,
+                                                  sig_init[k], lengths, tol, maxit, predict)
         it += it2
+        if not ok and not predict:   # a given initial guess failed: retry from no twist
+            sig0, _, it2, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, np.zeros(n), lengths,
+                                                       tol, maxit, np.empty((n, n)))
+            it += it2
+    unstable = ok and not detJ > 0.0
+    count = 0
+    if ok and multistart > 0 and not unique:
+        # the multistart search of solve_standard (same guesses, same distinctness test)
+        found = np.empty((1 + multistart, n))
+        found[0] = sig0
+        count = 1
+        Jm = np.empty((n, n))
+        for q in range(min(multistart, 2 * (n - 1))):
+            i = 1 + q % (n - 1)
+            g = sig0.copy()
+            g[i] += (1.0 if q < n - 1 else -1.0) * np.pi / lengths[i]
+            g_sig, _, g_it, g_ok, g_det, _, _ = _newton(s, present, uhat, kxy, ratio, a, g, lengths, tol, maxit, Jm)
+            it += g_it
+            if not g_ok or not g_det > 0.0:
+                continue
+            distinct = True
+            for f in range(count):
+                far = 0.0
+                for j in range(n):
+                    far = max(far, abs(g_sig[j] - found[f, j]) * lengths[j])
+                if not far > DISTINCT_EQUILIBRIUM_TWIST:
+                    distinct = False
+                    break
+            if distinct:
+                found[count] = g_sig
+                count += 1
+        if count > 1:
+            unstable = True
+    elif ok and unique:
+        count = 1
+    n_eq[k] = count
     iters[k] = it
     conv[k] = ok
-    unst[k] = ok and not detJ > 0.0
+    unst[k] = unstable
     sig_out[k] = sig0
     _, _, _, R, p, _ = _centerline(s, present, uhat, kxy, psi, sig)
     tips[k] = p[-1]
@@ -86,20 +146,28 @@ def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy,
 
 @njit(cache=True)
 def _batch(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-           gspec, tips, tans, sig_out, conv, unst, iters):
+           gspec, multistart, follow, tips, tans, sig_out, conv, unst, iters, n_eq, certified):
+    n = alpha.shape[1]
+    prev = np.full(n, np.nan)
     for k in range(alpha.shape[0]):
         if valid[k]:
             _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-                       gspec, tips, tans, sig_out, conv, unst, iters)
+                       gspec, multistart, prev, tips, tans, sig_out, conv, unst, iters, n_eq, certified)
+            if follow and conv[k]:
+                prev = sig_out[k].copy()
+            else:
+                prev = np.full(n, np.nan)
 
 
 @njit(cache=True, parallel=True)
 def _batch_parallel(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-                    gspec, tips, tans, sig_out, conv, unst, iters):
+                    gspec, multistart, follow, tips, tans, sig_out, conv, unst, iters, n_eq, certified):
+    n = alpha.shape[1]
     for k in prange(alpha.shape[0]):
         if valid[k]:
             _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-                       gspec, tips, tans, sig_out, conv, unst, iters)
+                       gspec, multistart, np.full(n, np.nan), tips, tans, sig_out, conv, unst, iters, n_eq,
+                       certified)
 
 
 def configuration_arrays(robot, alpha, beta):
@@ -119,7 +187,8 @@ def configuration_arrays(robot, alpha, beta):
 
 
 def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = None, *,
-                         initial_guess=None, n_threads: int = 1) -> StandardBatch:
+                         initial_guess=None, n_threads: int = 1, check_stability: bool = False,
+                         follow: bool = False) -> StandardBatch:
     """Solve the standard zero-clearance model at many configurations in one compiled call.
 
     Parameters
@@ -139,6 +208,15 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     n_threads : int
         Threads sharing the configurations (numba ``prange``, at most ``NUMBA_NUM_THREADS``); 1 (default) runs serially, as
         fits a call from inside a worker process. Results do not depend on it.
+    check_stability : bool
+        Flag configurations with more than one equilibrium as :func:`solve_standard` does
+        (``settings.multistart`` restarts), but run that search only where the uniqueness
+        screen cannot prove a single equilibrium (``_uniqueness``: the worst-case second
+        variation of the energy is positive definite). Default False: determinant test only.
+    follow : bool
+        Rows are a path: where the screen proves a single equilibrium, start Newton from the
+        previous row's base torsions (serial runs only; with ``n_threads`` > 1 it is ignored).
+        The result is the same equilibrium to the shooting tolerance, found in fewer sweeps.
 
     Returns
     -------
@@ -156,7 +234,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     Section II-A of Ha, Fagogenis & Dupont 2019 (refs [10], [11]); the same discretization,
     tolerances and Newton iteration as :func:`solve_standard` with ``check_stability=False``,
     so tips agree with it to the shooting tolerance. The stability flag is the
-    Jacobian-determinant test only.
+    Jacobian-determinant test only, unless ``check_stability``.
     """
     settings = settings or ModelSettings()
     n = robot.n_tubes
@@ -177,9 +255,13 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     conv = np.zeros(K, dtype=bool)
     unst = np.zeros(K, dtype=bool)
     iters = np.zeros(K, dtype=np.int64)
+    n_eq = np.zeros(K, dtype=np.int64)
+    certified = np.zeros(K, dtype=bool)
+    multistart = int(settings.multistart) if check_stability else 0
     args = (alpha, beta, valid, sig_init, initial_guess is None, lengths, brk, nbrk, curv, kxy, ratio,
             float(settings.ds), float(settings.shooting_tol), int(settings.max_shooting_iterations),
-            np.array([GRID_MERGE_TOL, settings.refine_ratio, settings.refine_length]), tips, tans, sig_out, conv, unst, iters)
+            np.array([GRID_MERGE_TOL, settings.refine_ratio, settings.refine_length]), multistart,
+            bool(follow), tips, tans, sig_out, conv, unst, iters, n_eq, certified)
     if int(n_threads) == 1:
         _batch(*args)
     else:
@@ -190,4 +272,5 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
         finally:
             set_num_threads(before)
     return StandardBatch(tip_position=tips, tip_tangent=tans, base_torsion=sig_out, converged=conv,
-                         unstable=unst, valid=valid, iterations=iters)
+                         unstable=unst, valid=valid, iterations=iters, n_equilibria=n_eq,
+                         certified=certified)
