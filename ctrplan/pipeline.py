@@ -198,7 +198,7 @@ def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:
     return {m: out[m] for m in modes}, True
 
 
-def _goal_prediction(goal_docs, compensations, plan, robot) -> dict:
+def _goal_prediction(goal_docs, compensations, plan, robot, errors) -> dict:
     """Per goal: the predicted miss of standard-model IK next to the compensated one (task-space
     goals, with the assumed approach), and the tip predicted at the goal's waypoint of the plan
     (with the history the ordered plan creates there)."""
@@ -209,6 +209,8 @@ def _goal_prediction(goal_docs, compensations, plan, robot) -> dict:
         entry = {"waypoint": int(gi), "final_motion_status": plan["final_motion_status"][k],
                  "planned_eta": _eta_text(planned_eta), "planned_cases": ";".join(planned_cases),
                  "predicted_offset_at_goal_mm": float(pred["offset"][gi] * 1e3)}
+        if k in errors:
+            entry.update({"compensation_used": False, "compensation_message": errors[k]})
         if c is not None:
             assumed_eta, _, assumed_cases = pair_cases(robot, c.eta, c.translation_last)
             entry.update({
@@ -295,12 +297,18 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
     final_motion = sc.planner.final_motion
     t0 = time.perf_counter()
     compensations, goal_q, q_prev = [], [], np.asarray(sc.start, dtype=float)
+    compensation_errors = {}
     for k, (doc, g) in enumerate(zip(sc.goals, goals)):
         c = None
         if isinstance(doc, TaskGoal):
             eta, tl = approach_history(robot, q_prev, g.q, final_motion)
-            c = compensate_goal(doc.tip_position, robot, g.q, eta, tl, settings, tolerance=doc.tolerance,
-                                validity_fn=validity)
+            try:
+                c = compensate_goal(doc.tip_position, robot, g.q, eta, tl, settings, tolerance=doc.tolerance,
+                                    validity_fn=validity)
+            except CtrplanError as exc:   # no prediction at the standard solution: plan to it, say why
+                compensation_errors[k] = f"{type(exc).__name__}: {exc}"
+                echo(f"goal {k + 1}: no compensation ({compensation_errors[k]}); planning to the standard-model goal")
+        if c is not None:
             echo(f"goal {k + 1} ({final_motion}, {c.model} model, eta {_eta_text(c.eta)}): predicted miss of "
                  f"standard-model IK {c.predicted_miss_standard * 1e3:.3f} mm, compensated "
                  f"{c.predicted_miss * 1e3:.3f} mm ({'used' if c.accepted else 'not used: ' + c.message}); "
@@ -390,7 +398,7 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
                    "field_bound_planned_mm": float(field(np.asarray(qp))) * 1e3}
                   for g, qp in zip(goals, goal_q)],
         "final_motion": final_motion,
-        "goal_prediction": _goal_prediction(sc.goals, compensations, aware, robot),
+        "goal_prediction": _goal_prediction(sc.goals, compensations, aware, robot, compensation_errors),
         "bound_map": {"source": map_source, "time_s": map_time, "coordinates": field.coordinate_names,
                       "resolution": list(field.shape), "placement": spec.placement, "key": field.key,
                       "mechanics_version": field.metadata.get("mechanics_version"), "ds_m": settings.ds},
