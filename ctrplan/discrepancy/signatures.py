@@ -399,7 +399,7 @@ def _project_out(C, Y):
     return Y - C @ coef
 
 
-def vector_signature(effect: str, residual, columns, groups, *, sequence=None, control=None,
+def vector_signature(effect: str, residual, columns, groups, *, sequence=None, control=None, signs=None,
                      n_permutations: int = 999, seed: int = 0, description: str = "") -> SignatureTest:
     """Does the residual point along effect-specific vectors? ``e_k ~ sum_j c_j X_kj`` (+ control).
 
@@ -423,6 +423,11 @@ def vector_signature(effect: str, residual, columns, groups, *, sequence=None, c
     control : ndarray, shape (K, 3, c), optional
         Columns of a related effect whose part is removed first (the test then asks what the
         effect explains beyond it).
+    signs : ndarray, shape (K, m), optional
+        A direction series that multiplies the columns (e.g. the direction of the last rotation
+        of each tube for the backlash): the effect's columns are ``signs * columns``, the
+        unsigned ``columns`` join the control (an offset along them is no evidence), and the
+        null shifts only the signs, so it asks whether the *direction* matters.
     n_permutations, seed : int
     description : str
 
@@ -435,11 +440,17 @@ def vector_signature(effect: str, residual, columns, groups, *, sequence=None, c
     E = np.asarray(residual, float)
     X = np.asarray(columns, float).reshape(E.shape[0], 3, -1)
     C = None if control is None else np.asarray(control, float).reshape(E.shape[0], 3, -1)
+    S = None if signs is None else np.asarray(signs, float).reshape(E.shape[0], X.shape[2])
+    if S is not None:
+        C = X.copy() if C is None else np.concatenate([C, X], axis=2)
     keep = np.all(np.isfinite(E), axis=1) & np.all(np.isfinite(X), axis=(1, 2))
     if C is not None:
         keep &= np.all(np.isfinite(C), axis=(1, 2))
     E, X = E[keep], X[keep]
     C = None if C is None else C[keep]
+    S = None if S is None else S[keep]
+    if S is not None and not np.any(S != 0):
+        return untestable(effect, f"its direction series is zero everywhere ({description})")
     k, m = E.shape[0], X.shape[2]
     if k < 3 * (m + 2) or not np.any(np.abs(X) > 0):
         return untestable(effect, f"its displacement vectors vanish or too few samples remain ({k}) "
@@ -459,17 +470,20 @@ def vector_signature(effect: str, residual, columns, groups, *, sequence=None, c
 
     seq = None if sequence is None else np.asarray(sequence)[keep]
     shift = seq is not None and np.unique(seq).size == 1
-    r2 = stat(X)
+    signed = (lambda Sx: X * Sx[:, None, :]) if S is not None else (lambda Sx: Sx)
+    series = S if S is not None else X
+    r2 = stat(signed(series))
     rng = np.random.default_rng(seed)
     null = np.empty(n_permutations)
     for b in range(n_permutations):
         if shift:
             lag = rng.integers(max(1, k // 10), k - max(1, k // 10))
-            null[b] = stat(np.roll(X, lag, axis=0))
+            null[b] = stat(signed(np.roll(series, lag, axis=0)))
         else:
-            null[b] = stat(X[rng.permutation(k)])
+            null[b] = stat(signed(series[rng.permutation(k)]))
     size = float(np.sqrt(max(r2 - float(null.mean()), 0.0) * tss / k))
-    mode = "columns circularly shifted along the trajectory" if shift else "rows permuted"
+    what = "direction series" if S is not None else "columns"
+    mode = f"{what} circularly shifted along the trajectory" if shift else f"{what} permuted over rows"
     n_units = int(np.unique(np.asarray(groups)[keep]).size)
     return SignatureTest(effect, r2, size, _p_value(r2, null), n_permutations, n_units,
                          f"fraction of the residual along {m} displacement vector(s) ({description}); "

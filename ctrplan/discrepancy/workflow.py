@@ -91,6 +91,10 @@ class DiscrepancyOptions:
         :func:`ctrplan.discrepancy.data.load_measured_data`). "tracker" fits a registration.
     calibration_fraction : float
         Share of units (configurations / sequences / time blocks) used for calibration.
+    block_samples : int
+        Length of the time blocks that split one continuous trajectory (every k-th block for
+        calibration, :func:`~ctrplan.discrepancy.data.split_data`); shorter blocks spread the
+        calibration samples over more of the motion.
     max_calibration_samples : int
         Calibration samples used by the least-squares fits (whole units, evenly chosen).
     significance : float
@@ -122,6 +126,7 @@ class DiscrepancyOptions:
     effects: tuple = EFFECTS
     frame: str | None = None
     calibration_fraction: float = 0.25
+    block_samples: int = 100
     max_calibration_samples: int = 300
     significance: float = 0.01
     n_permutations: int = 999
@@ -422,7 +427,8 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                          + json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:12]
     stages = _Stages(out_dir, key)
 
-    cal_rows, val_rows, how = split_data(data, options.calibration_fraction, seed=options.seed)
+    cal_rows, val_rows, how = split_data(data, options.calibration_fraction, block_samples=options.block_samples,
+                                         seed=options.seed)
     fit_rows = _subsample(data, cal_rows, options.max_calibration_samples, options.seed)
     cal, fit_data, val = data.take(cal_rows), data.take(fit_rows), data.take(val_rows)
     n_fit = fit_data.n_samples
@@ -504,11 +510,12 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                                                            "recorded motion to lag behind")
             else:
                 s_dir = rotation_direction(val.alpha, val.sequence)
-                X = np.stack([-s_dir[:, i, None] * jac[i] for i in sorted(jac)], axis=2)
+                tubes = sorted(jac)
+                X = np.stack([-jac[i] for i in tubes], axis=2)
                 tests["backlash"] = vector_signature(
-                    "backlash", E, X, groups, sequence=val.sequence,
-                    description="-s_i d tip/d alpha_i per rotating tube, s_i the direction of its last rotation",
-                    **perm)
+                    "backlash", E, X, groups, sequence=val.sequence, signs=s_dir[:, tubes],
+                    description="-s_i d tip/d alpha_i per rotating tube, s_i the direction of its last rotation; "
+                                "an offset along d tip/d alpha_i is projected out", **perm)
         if "gradual_friction" in effects:
             pairs = [i - 1 for i in sorted(jac) if i >= 1]
             if single or not pairs:
@@ -593,9 +600,14 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                 start = apply_parameters(robot, tuple(base_all), tuple(base_all.values()))
                 init = np.concatenate([base.values, read_parameters(start, extra)])
                 if e in ("backlash", "time_offset"):
+                    # start: best of a 1-D scan, then the effect's own parameters alone with the
+                    # baseline held (a few parameters: cheap steps), then everything together
                     scan = BACKLASH_SCAN if e == "backlash" else TIME_OFFSET_SCAN
                     best = _scan_fit(robot, fit_data, "standard", base_all, extra, scan, settings, options.n_jobs)
-                    init[len(base.names):] = best.values
+                    alone = calibrate(robot, fit_data, "standard", extra, fixed=base_all, initial=best.values,
+                                      settings=settings, n_jobs=options.n_jobs,
+                                      max_evaluations=options.max_evaluations)
+                    init[len(base.names):] = alone.values
                 fit = calibrate(start, fit_data, "standard", names, initial=init, settings=settings,
                                 n_jobs=options.n_jobs, max_evaluations=options.max_evaluations)
             stages.save(f"fit-{e}", fit.as_dict())
