@@ -145,6 +145,10 @@ class DiscrepancyOptions:
         return ModelSettings(ds=self.ds, multistart=0)
 
 
+#: Options added after stages were first written, with their defaults (see the stage key).
+_LATER_OPTIONS = {"block_samples": 100}
+
+
 def _curved_tubes(robot):
     return [i for i, t in enumerate(robot.tubes) if any(not s.is_straight for s in t.sections)]
 
@@ -421,8 +425,11 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     effects = [e for e in effects if e not in skipped]
     # the stages depend on the inputs and on the options that change a fit, not on the number of
     # workers or the tests' permutations and level (the tests are not stored)
+    # (options added later enter the key only when set away from their default, so the stages
+    # of earlier runs stay valid)
     keyed = {k: v for k, v in asdict(options).items()
-             if k not in ("n_jobs", "n_permutations", "significance", "noise_position", "envelope_samples")}
+             if k not in ("n_jobs", "n_permutations", "significance", "noise_position", "envelope_samples")
+             and not (k in _LATER_OPTIONS and v == _LATER_OPTIONS[k])}
     key = hashlib.sha256(Path(robot_path).read_bytes() + Path(data_path).read_bytes()
                          + json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:12]
     stages = _Stages(out_dir, key)
