@@ -630,7 +630,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         held = _error_summary(val_e["position"], val_e["angle"], val_e["seconds"], val.n_samples)
         candidates[e] = {
             "label": EFFECT_LABELS[e], "model": model, "fit": fit.as_dict(),
-            "parameters": shown, "parameters_si": {n: parameter(robot, n).unit for n in shown},
+            "parameters": shown, "units": {n: parameter(robot, n).unit for n in shown},
             "implausible": _implausible(robot, shown),
             "n_parameters": k_total, "bic": bic, "delta_bic": bic - base_bic,
             "held_out": held, "improvement_eq49": test, "improvement_position": pos_test,
