@@ -10,8 +10,16 @@
 3. Discretization convergence: tip-position error [mm] against a step four times finer for the
    standard, clearance and friction models at a few grid configurations, on the default graded
    grid and on the paper's uniform grid.
+4. (issue 14) Every time also as a ratio to the project's own single standard solve
+   (determinant test only) measured in the same run, with mean, median, p90 and max:
+   ``ctrplan evaluate`` through the command line (process start subtracted, measured on a
+   one-row file): the friction model (full bound) on the 4x4x4 grid with ``--jobs 1``, the
+   standard model on the 1307 rows of the measured trajectory (if ../shared/data is there)
+   with ``--jobs 1`` and with the default jobs (throughput scaling), and the in-process bound
+   on the 8x8x8 grid of issue 14 (slowest over median).
 
 Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py [--ref-every 4] [--conv-configs 8]
+      OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py --ratios-only   (section 4 only)
 The machine load (``os.getloadavg``) is printed: timings on a shared machine are noisy.
 """
 
@@ -182,13 +190,131 @@ def convergence_table(robot, n_configs, steps_mm=(12.0, 6.0, 3.0, 1.5), ref_mm=0
             print(f"{name:>17} {ds:>8.2f} {np.mean(nodes):>5.0f} {errs[0]:>10.4f} {errs[1]:>10.4f} {errs[2]:>16.4f}")
 
 
+def _stats(x):
+    x = np.asarray(x, dtype=float)
+    return x.mean(), np.median(x), np.percentile(x, 90), x.max()
+
+
+def _single_standard_times(robot, Q, settings, repeat=5):
+    """Per-configuration time [s] of solve_standard (determinant test only), best of ``repeat``."""
+    no_ms = settings.replace(multistart=0)
+    out = []
+    for q in Q:
+        a, b = robot.configuration(q)
+        best = np.inf
+        for _ in range(repeat):
+            _, t = _t(solve_standard, robot, a, b, no_ms)
+            best = min(best, t)
+        out.append(best)
+    return np.array(out)
+
+
+def _cli(robot_file, configs, model, jobs, out):
+    import subprocess
+    cmd = [sys.executable, "-m", "ctrplan.cli", "evaluate", "--robot", str(robot_file), "--configs", str(configs),
+           "--model", model, "--out", str(out), "--no-progress"]
+    if jobs is not None:
+        cmd += ["--jobs", str(jobs)]
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, capture_output=True)
+    return time.perf_counter() - t0
+
+
+def _write_configs(path, alpha, beta):
+    import pandas as pd
+    n = alpha.shape[1]
+    frame = pd.DataFrame({**{f"alpha_{i + 1}": alpha[:, i] for i in range(n)},
+                          **{f"beta_{i + 1}": beta[:, i] for i in range(n)}})
+    frame.to_csv(path, index=False)
+
+
+def ratio_table(repeat=3):
+    """Section 4: times as ratios to the single standard solve of the same run."""
+    import tempfile
+    from ctrplan.io.tables import load_ha_trajectory
+    robot_file = ROOT / "model" / "ha2019-table2-nominal.toml"
+    robot = load_robot(robot_file)
+    settings = ModelSettings()
+    _, Q = grid_4x4x4(robot)
+    a0, b0 = robot.configuration(Q[0])
+    evaluate_bound(robot, a0, b0, settings)
+    single = _single_standard_times(robot, Q, settings)
+    unit = float(np.median(single))
+    print(f"\n4. Ratios to the project's own single standard solve (determinant test only, Table II "
+          f"robot, 4x4x4 grid): median {unit * 1e3:.3f} ms (mean {single.mean() * 1e3:.3f}, max "
+          f"{single.max() * 1e3:.3f}); load average {os.getloadavg()}")
+    rows = []
+    bound = []
+    for q in Q:
+        a, b = robot.configuration(q)
+        _, t = _t(evaluate_bound, robot, a, b, settings)
+        bound.append(t)
+    rows.append(("full bound, in-process, 4x4x4", "per configuration", bound))
+    grid8 = []
+    for a2 in np.radians(np.arange(0, 360, 45)):
+        for a3 in np.radians(np.arange(0, 360, 45)):
+            for e in np.linspace(0.0, 86.4e-3, 8):
+                grid8.append((np.array([0.0, a2, a3]), np.array([0.0, -0.017, -0.1204 + e])))
+    b8 = []
+    for a, b in grid8:
+        _, t = _t(evaluate_bound, robot, a, b, settings)
+        b8.append(t)
+    rows.append(("full bound, in-process, 8x8x8", "per configuration", b8))
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        A = np.array([robot.configuration(q)[0] for q in Q])
+        B = np.array([robot.configuration(q)[1] for q in Q])
+        _write_configs(tmp / "one.csv", A[:1], B[:1])
+        _write_configs(tmp / "grid.csv", A, B)
+        start = min(_cli(robot_file, tmp / "one.csv", "standard", 1, tmp / "o.csv") for _ in range(repeat))
+        fr = [(_cli(robot_file, tmp / "grid.csv", "friction", 1, tmp / "f.csv") - start) / len(Q)
+              for _ in range(repeat)]
+        rows.append(("CLI friction (full bound), --jobs 1, 4x4x4", f"per configuration, {repeat} runs", fr))
+        data = ROOT.parent / "shared" / "data" / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt"
+        if data.exists():
+            frame = load_ha_trajectory(data)
+            r7 = ROOT / "model" / "ha2019-table7-calibrated.toml"
+            TA = frame[[f"alpha_{i}" for i in (1, 2, 3)]].to_numpy()
+            TB = frame[[f"beta_{i}" for i in (1, 2, 3)]].to_numpy()
+            _write_configs(tmp / "traj.csv", TA, TB)
+            _write_configs(tmp / "one7.csv", TA[:1], TB[:1])
+            start7 = min(_cli(r7, tmp / "one7.csv", "standard", 1, tmp / "o.csv") for _ in range(repeat))
+            s1 = [(_cli(r7, tmp / "traj.csv", "standard", 1, tmp / "s.csv") - start7) / len(TA)
+                  for _ in range(repeat)]
+            s2 = [(_cli(r7, tmp / "traj.csv", "standard", None, tmp / "s.csv") - start7) / len(TA)
+                  for _ in range(repeat)]
+            rows.append((f"CLI standard, --jobs 1, {len(TA)} trajectory rows", f"per configuration, {repeat} runs", s1))
+            rows.append((f"CLI standard, default jobs ({os.cpu_count()}), {len(TA)} rows",
+                         f"per configuration, {repeat} runs", s2))
+            print(f"   throughput scaling, default jobs over --jobs 1: {np.median(s1) / np.median(s2):.2f}x")
+        else:
+            print("   (measured trajectory not found: CLI standard-model rows skipped)")
+        print(f"   process start (one-row file), subtracted: {start:.2f} s")
+    print(f"{'what':<48} {'mean':>9} {'median':>9} {'p90':>9} {'max':>9}   [ms]   {'mean':>7} {'median':>7} "
+          f"{'p90':>7} {'max':>7}   [x single standard solve]")
+    for name, _, ts in rows:
+        m = _stats(np.asarray(ts) * 1e3)
+        r = _stats(np.asarray(ts) / unit)
+        print(f"{name:<48} " + " ".join(f"{v:>9.2f}" for v in m) + "          "
+              + " ".join(f"{v:>7.1f}" for v in r))
+    t8 = np.asarray(b8)
+    print(f"   8x8x8: slowest / median = {t8.max() / np.median(t8):.1f}")
+    print(f"   load average at the end of section 4: {os.getloadavg()}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ds", type=float, default=3e-3)
     ap.add_argument("--ref-every", type=int, default=4, help="run the slow reference on every k-th configuration")
     ap.add_argument("--conv-configs", type=int, default=8)
     ap.add_argument("--skip-convergence", action="store_true")
+    ap.add_argument("--ratios-only", action="store_true", help="run section 4 only")
+    ap.add_argument("--repeat", type=int, default=3, help="command-line runs per measurement (section 4)")
     args = ap.parse_args(argv)
+    if args.ratios_only:
+        print(f"load average (1, 5, 15 min) at start: {os.getloadavg()}, cores: {os.cpu_count()}")
+        ratio_table(args.repeat)
+        return
     robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")
     settings = ModelSettings(ds=args.ds)
     print(f"load average (1, 5, 15 min) at start: {os.getloadavg()}, cores: {os.cpu_count()}")
@@ -196,6 +322,7 @@ def main(argv=None):
     batch_throughput(robot, settings)
     if not args.skip_convergence:
         convergence_table(robot, args.conv_configs)
+    ratio_table(args.repeat)
     print(f"\nload average at end: {os.getloadavg()}")
 
 

@@ -125,10 +125,12 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
                      str(exc), model)]
 
 
-def _standard_rows(robot, alpha, beta, settings, indices):
+def _standard_rows(robot, alpha, beta, settings, indices, n_threads=1):
     """Rows of the standard model for the configurations ``indices`` (1-based row numbers) in one
-    compiled call, with the same status and stability flag as :func:`evaluate_configuration`."""
-    res = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True)
+    compiled call, with the same status and stability flag as :func:`evaluate_configuration`
+    (``n_threads`` > 1: compiled threads share the rows, without the warm starts along them)."""
+    res = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=n_threads == 1,
+                               n_threads=n_threads)
     out = []
     for k, index in enumerate(indices):
         sol = SimpleNamespace(tip_position=res.tip_position[k], tip_tangent=res.tip_tangent[k])
@@ -153,11 +155,11 @@ def _standard_rows(robot, alpha, beta, settings, indices):
     return out
 
 
-def _chunk_task(robot, alpha, beta, model, settings, eta, indices):
+def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1):
     """Evaluate the configurations ``alpha``, ``beta`` (m, n) of the 1-based rows ``indices``;
     returns (indices, list of m lists of rows)."""
     if model == "standard":
-        return indices, [[r] for r in _standard_rows(robot, alpha, beta, settings, indices)]
+        return indices, [[r] for r in _standard_rows(robot, alpha, beta, settings, indices, n_threads)]
     rows = []
     for k, index in enumerate(indices):
         found = evaluate_configuration(robot, alpha[k], beta[k], model, settings,
@@ -169,10 +171,10 @@ def _chunk_task(robot, alpha, beta, model, settings, eta, indices):
 
 
 def _chunks(todo, model, n_jobs):
-    """Split the 0-based rows ``todo`` into tasks: at most the model's chunk size, and at least
-    four tasks per worker so that the workers stay busy to the end."""
+    """Split the 0-based rows ``todo`` into tasks: at most the model's chunk size, and (contact
+    models in worker processes) at least four tasks per worker so that they stay busy to the end."""
     size = STANDARD_CHUNK if model == "standard" else CONTACT_CHUNK
-    if n_jobs != 1 and todo:
+    if n_jobs != 1 and todo and model != "standard":
         size = max(1, min(size, -(-len(todo) // (4 * max(n_jobs, 1)))))
     return [todo[i:i + size] for i in range(0, len(todo), size)]
 
@@ -215,8 +217,10 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
     eta : ndarray of int, shape (K, n - 1), optional
         Per-row friction directions (0 = unknown: all directions).
     n_jobs : int
-        joblib worker processes (1: in this process). The workers are started once and take
-        chunks of rows (``STANDARD_CHUNK``, ``CONTACT_CHUNK``).
+        Parallel workers (1: in this process, serially). The contact models use joblib worker
+        processes, started once, that take chunks of ``CONTACT_CHUNK`` rows. The standard model
+        runs in this process, ``n_jobs`` compiled threads sharing each chunk of
+        ``STANDARD_CHUNK`` rows: its whole run takes less than starting worker processes.
     checkpoint : path, optional
         JSON-lines file of finished chunks; rows already in it (same ``job_key``) are skipped.
     progress : bool
@@ -254,9 +258,12 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
             fh.flush()
     try:
         chunks = _chunks(todo, model, n_jobs)
+        threads = n_jobs if model == "standard" else 1
         tasks = (delayed(_chunk_task)(robot, alpha[c], beta[c], model, settings,
-                                      None if eta is None else eta[c], [k + 1 for k in c]) for c in chunks)
-        runner = Parallel(n_jobs=n_jobs, return_as="generator_unordered") if n_jobs != 1 else None
+                                      None if eta is None else eta[c], [k + 1 for k in c], threads)
+                 for c in chunks)
+        in_process = n_jobs == 1 or model == "standard"
+        runner = None if in_process else Parallel(n_jobs=n_jobs, return_as="generator_unordered")
         results = runner(tasks) if runner is not None else (t[0](*t[1], **t[2]) for t in tasks)
         with tqdm(total=K, initial=K - len(todo), disable=not progress, unit="config",
                   desc=f"{model} model") as bar:

@@ -192,11 +192,11 @@ def test_resume_after_interruption_computes_only_missing_rows(tmp_path, robot, m
     real = batch._chunk_task
     calls = []
 
-    def dying(robot_, a, b, model, s, eta, indices):
+    def dying(robot_, a, b, model, s, eta, indices, n_threads=1):
         if len(calls) == 1:
             raise _Interrupt("killed")
         calls.append(list(indices))
-        return real(robot_, a, b, model, s, eta, indices)
+        return real(robot_, a, b, model, s, eta, indices, n_threads)
 
     monkeypatch.setattr(batch, "_chunk_task", dying)
     with pytest.raises(_Interrupt):
@@ -213,9 +213,9 @@ def test_resume_after_interruption_computes_only_missing_rows(tmp_path, robot, m
 
     calls.clear()
 
-    def counting(robot_, a, b, model, s, eta, indices):
+    def counting(robot_, a, b, model, s, eta, indices, n_threads=1):
         calls.append(list(indices))
-        return real(robot_, a, b, model, s, eta, indices)
+        return real(robot_, a, b, model, s, eta, indices, n_threads)
 
     monkeypatch.setattr(batch, "_chunk_task", counting)
     frame = evaluate_table(robot, alpha, beta, "standard", settings, checkpoint=ck, progress=False,
@@ -236,7 +236,7 @@ def test_checkpoint_of_another_job_is_discarded(tmp_path, robot, monkeypatch):
     real = batch._chunk_task
 
     def counting(*args):
-        calls.extend(args[-1])
+        calls.extend(args[6])
         return real(*args)
 
     monkeypatch.setattr(batch, "_chunk_task", counting)
