@@ -302,6 +302,9 @@ def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane
 @click.option("--noise-position-mm", "noise_mm", type=float, default=None,
               help="rms tip position noise of the sensor [mm] as the data's source states it (default: "
                    "estimated from rests or repeated configurations in the data).")
+@click.option("--reference-mu", "reference_mu", default=None,
+              help="Friction coefficients per pair (e.g. published for the robot) with which the history-aware "
+                   "prediction and the envelope are also evaluated, e.g. 0.22,0.12.")
 @click.option("--envelope-samples", type=int, default=0, show_default=True,
               help="Held-out samples at which to evaluate the friction envelope (all bounding solutions) "
                    "for the coverage figures; 0 skips it.")
@@ -317,7 +320,7 @@ def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane
 @click.option("--jobs", type=int, default=None, help="Worker processes (default: all cores).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--no-progress", is_flag=True, help="Hide progress bars.")
-def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, envelope_samples, frame,
+def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, reference_mu, envelope_samples, frame,
                 calibration_fraction, max_calibration_samples, significance, permutations, ds, jobs, seed,
                 no_progress):
     """Find where model and measurement disagree, name the missing effect, add it, show the gap shrink.
@@ -341,12 +344,21 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, envelope
         raise PhysicalParameterError(f"option --noise-position-mm {noise_mm!r}: must be > 0 mm")
     if envelope_samples < 0:
         raise PhysicalParameterError(f"option --envelope-samples {envelope_samples!r}: must be >= 0")
+    ref_mu = None
+    if reference_mu is not None:
+        from .discrepancy.synth import parse_values
+        from .io.robot_file import load_robot
+
+        ref_mu = parse_values("--reference-mu", reference_mu, load_robot(robot_path).n_tubes - 1)
+        if min(ref_mu) < 0:
+            raise PhysicalParameterError(f"option --reference-mu {reference_mu!r}: must be >= 0")
     opts = DiscrepancyOptions(
         fit=tuple(x.strip() for x in fit.split(",")) if fit else None, effects=chosen, frame=frame,
         calibration_fraction=calibration_fraction, max_calibration_samples=max_calibration_samples,
         significance=significance, n_permutations=permutations, ds=ds or 3e-3,
         n_jobs=jobs or os.cpu_count() or 1, seed=seed,
-        noise_position=None if noise_mm is None else noise_mm * 1e-3, envelope_samples=envelope_samples)
+        noise_position=None if noise_mm is None else noise_mm * 1e-3, envelope_samples=envelope_samples,
+        reference_friction=ref_mu)
     results = run_discrepancy(robot_path, data_path, out_dir, opts, echo=click.echo, progress=not no_progress)
     paths = write_report(results, out_dir)
     click.echo(f"report: {paths['markdown']}")

@@ -210,14 +210,14 @@ def _prediction_section(results: dict) -> list[str]:
     for row in pred["rows"]:
         lines.append(f"| {row['label']} | {row['n']} | {_fmt(row['mean_mm'])} | {_fmt(row['p95_mm'])} | "
                      f"{_fmt(row['max_mm'])} |")
-    env = pred.get("envelope")
-    if env:
-        lines += ["", f"Envelope coverage ({env['description']}): {env['inside']} of {env['n']} measured tips "
-                      f"({100 * env['fraction_inside']:.0f} %) lie inside the envelope of the bounding solutions "
-                      f"plus {env['margin_mm']:.2f} mm of sensor noise; the others lie outside by median "
-                      f"{_fmt(env['outside_median_mm'])} mm, p95 {_fmt(env['outside_p95_mm'])} mm, max "
-                      f"{_fmt(env['outside_max_mm'])} mm. Median envelope size (largest distance between two "
-                      f"bounding tips): {_fmt(env['size_median_mm'])} mm."]
+    for env in pred.get("envelopes") or ([pred["envelope"]] if pred.get("envelope") else []):
+        coeff = ", ".join(f"{k} = {v:.3g}" for k, v in env.get("coefficients", {}).items())
+        lines += ["", f"Envelope coverage ({env.get('label', 'fitted')} coefficients {coeff}; {env['description']}): "
+                      f"{env['inside']} of {env['n']} measured tips ({100 * env['fraction_inside']:.0f} %) lie inside "
+                      f"the envelope of the bounding solutions plus {env['margin_mm']:.2f} mm of sensor noise; the "
+                      f"others lie outside by median {_fmt(env['outside_median_mm'])} mm, p95 "
+                      f"{_fmt(env['outside_p95_mm'])} mm, max {_fmt(env['outside_max_mm'])} mm. Median envelope size "
+                      f"(largest distance between two bounding tips): {_fmt(env['size_median_mm'])} mm."]
     return lines + [""]
 
 

@@ -120,6 +120,9 @@ class DiscrepancyOptions:
     envelope_samples : int
         Held-out samples (evenly spaced) at which the friction envelope (all 2^(n-1) bounding
         solutions) is evaluated for the coverage figures; 0 skips it.
+    reference_friction : tuple of float, shape (n - 1,), or None
+        Friction coefficients [-] (e.g. published for the robot) with which the history-aware
+        prediction and the envelope are also evaluated, next to the fitted ones.
     """
 
     fit: tuple | None = None
@@ -139,6 +142,7 @@ class DiscrepancyOptions:
     seed: int = 0
     noise_position: float | None = None
     envelope_samples: int = 0
+    reference_friction: tuple | None = None
 
     def settings(self) -> ModelSettings:
         # no multistart stability search in calibration: it does not change the solution found
@@ -428,7 +432,8 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     # (options added later enter the key only when set away from their default, so the stages
     # of earlier runs stay valid)
     keyed = {k: v for k, v in asdict(options).items()
-             if k not in ("n_jobs", "n_permutations", "significance", "noise_position", "envelope_samples")
+             if k not in ("n_jobs", "n_permutations", "significance", "noise_position", "envelope_samples",
+                          "reference_friction")
              and not (k in _LATER_OPTIONS and v == _LATER_OPTIONS[k])}
     key = hashlib.sha256(Path(robot_path).read_bytes() + Path(data_path).read_bytes()
                          + json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:12]
@@ -667,7 +672,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
 
     # prediction with the motion history and the friction envelope (issue 13, Sec. 3) --------
     prediction = _prediction_figures(robot, val, base_val, candidates, named, noise, stages, settings, options,
-                                     echo)
+                                     echo, held_out)
 
     # 5. write the updated model and check it reproduces ------------------------------------
     final_params = candidates[named]["_params"] if named else base_all
@@ -769,51 +774,94 @@ def hull_distance(points, x) -> float:
 
 
 def _prediction_figures(robot, val: MeasuredData, base_val, candidates, named, noise, stages, settings, options,
-                        echo) -> dict | None:
+                        echo, held_out) -> dict | None:
     """Held-out prediction error of the standard and the history-aware models (mean, p95, max)
-    and the coverage of the friction envelope; None without a friction candidate."""
-    from ..mechanics import all_eta
-    from .simulate import simulate
+    and the coverage of the friction envelope; None without a friction candidate.
 
+    The history-aware model is the friction model along the recorded history with the friction
+    candidate's calibrated parameters and, when ``options.reference_friction`` is given, also
+    with those coefficients (e.g. published ones) on the same calibrated tube parameters."""
     if "friction" not in candidates:
         return None
     fr = candidates["friction"]
     rows = [{"label": "standard model, calibrated (no history)", **_stats_mm(base_val["position"])},
-            {"label": "history-aware: friction model along the recorded history, "
+            {"label": "history-aware: friction model along the recorded history, fitted "
                       + ", ".join(f"{k} = {v:.3g}" for k, v in fr["parameters"].items()),
              **_stats_mm(fr["_val"]["position"])}]
+    sets = [("fitted", fr["_params"], f"{len(all_eta_n(robot))}")]
+    if options.reference_friction is not None:
+        mu = tuple(float(v) for v in options.reference_friction)
+        ref = dict(fr["_params"])
+        ref.update({f"mu_{k + 1}": v for k, v in enumerate(mu)})
+        tag = "-".join(f"{v:g}" for v in mu)
+        val_ref = held_out(f"reference-friction-{tag}", "friction", ref)
+        rows.append({"label": "history-aware with the reference friction coefficients "
+                              + ", ".join(f"mu_{k + 1} = {v:.3g}" for k, v in enumerate(mu)),
+                     **_stats_mm(val_ref["position"])})
+        sets.append((f"reference {tag}", ref, f"reference-{tag}"))
     if named and named != "friction":
-        rows.append({"label": f"named effect: {candidates[named]['label']}", **_stats_mm(candidates[named]["_val"]["position"])})
+        rows.append({"label": f"named effect: {candidates[named]['label']}",
+                     **_stats_mm(candidates[named]["_val"]["position"])})
     out = {"description": "Held-out tip position errors. Standard: the calibrated baseline, which ignores the "
                           "motion history. History-aware: the friction model (Section III of Ha et al. 2019) with "
                           "each sample's recorded history (eta of the last relative rotation of each pair; the "
-                          "clearance solution after a final translation), parameters calibrated on the "
-                          "calibration split only.", "rows": rows}
+                          "clearance solution after a final translation), tube parameters and friction "
+                          "coefficients calibrated on the calibration split only (reference coefficients, if "
+                          "any, given).", "rows": rows}
     for r in rows:
         echo(f"  prediction: {r['label']}: mean {r['mean_mm']:.3f}, p95 {r['p95_mm']:.3f}, max {r['max_mm']:.3f} mm")
     k_env = min(int(options.envelope_samples), val.n_samples)
     if k_env <= 0:
         return out
-    sigma = noise.get("position_rms_m")
-    margin = ENVELOPE_NOISE_FACTOR * sigma if sigma else 0.0
     rows_env = np.unique(np.linspace(0, val.n_samples - 1, k_env).round().astype(int))
     sub = val.take(rows_env)
-    params = fr["_params"]
-    cached = stages.load(f"envelope-{rows_env.size}")
+    out["envelopes"] = []
+    for label, params, key in sets:
+        stage = f"envelope-{rows_env.size}" if label == "fitted" else f"envelope-{key}-{rows_env.size}"
+        env = _envelope(robot, params, sub, noise, stages, stage, settings, options.n_jobs, echo)
+        env["coefficients"] = {k: float(v) for k, v in params.items() if k.startswith("mu_")}
+        env["label"] = label
+        out["envelopes"].append(env)
+        echo(f"  envelope ({label}): {env['inside']} of {env['n']} inside ({100 * env['fraction_inside']:.0f} %), "
+             f"outside by median {_mm(env['outside_median_mm'])}, max {_mm(env['outside_max_mm'])}; size median "
+             f"{_mm(env['size_median_mm'])}")
+    out["envelope"] = out["envelopes"][0]
+    return out
+
+
+def all_eta_n(robot):
+    from ..mechanics import all_eta
+
+    return all_eta(robot.n_tubes)
+
+
+def _mm(x):
+    return "-" if x is None else f"{x:.2f} mm"
+
+
+def _envelope(robot, params, sub: MeasuredData, noise, stages, stage, settings, n_jobs, echo) -> dict:
+    """Coverage of the friction envelope: the convex hull of the 2^(n-1) bounding friction
+    solutions (fixed eta, no release) at each sample of ``sub``, plus
+    :data:`ENVELOPE_NOISE_FACTOR` times the noise rms."""
+    from .simulate import simulate
+
+    sigma = noise.get("position_rms_m")
+    margin = ENVELOPE_NOISE_FACTOR * sigma if sigma else 0.0
+    cached = stages.load(stage)
     if cached is None:
-        echo(f"  friction envelope: {len(all_eta(robot.n_tubes))} bounding solutions at {rows_env.size} held-out "
-             f"samples ...")
+        etas = all_eta_n(robot)
+        echo(f"  friction envelope: {len(etas)} bounding solutions at {sub.n_samples} held-out samples ...")
         robot_p = apply_parameters(robot, tuple(params), tuple(params.values()))
         R, t = registration_transform(tuple(params), tuple(params.values()))
         tips = []
-        for eta in all_eta(robot.n_tubes):
+        for eta in etas:
             sim = simulate(robot_p, sub.alpha, sub.beta, model="friction",
                            eta=np.tile(np.asarray(eta, int), (sub.n_samples, 1)),
                            translation_last=np.zeros(sub.n_samples, bool), sequence=sub.sequence,
-                           settings=settings, n_jobs=options.n_jobs)
+                           settings=settings, n_jobs=n_jobs)
             tips.append(sim.tip @ R.T + t)
         cached = {"tips": np.stack(tips, axis=1)}
-        stages.save(f"envelope-{rows_env.size}", cached)
+        stages.save(stage, cached)
     tips = np.asarray(cached["tips"], float)            # (k, 2^(n-1), 3) in the data's frame
     dist = np.full(sub.n_samples, np.nan)
     size = np.full(sub.n_samples, np.nan)
@@ -825,21 +873,16 @@ def _prediction_figures(robot, val: MeasuredData, base_val, candidates, named, n
     ok = np.isfinite(dist)
     outside = dist[ok] - margin
     far = outside[outside > 0]
-    env = {"n": int(ok.sum()), "inside": int(np.sum(outside <= 0)),
-           "fraction_inside": float(np.mean(outside <= 0)) if ok.any() else float("nan"),
-           "margin_mm": margin * 1e3,
-           "outside_median_mm": float(np.median(far) * 1e3) if far.size else None,
-           "outside_p95_mm": float(np.percentile(far, 95) * 1e3) if far.size else None,
-           "outside_max_mm": float(far.max() * 1e3) if far.size else None,
-           "size_median_mm": float(np.nanmedian(size) * 1e3) if ok.any() else None,
-           "description": f"{rows_env.size} evenly spaced held-out samples; convex hull of the "
-                          f"{tips.shape[1]} bounding friction solutions (all eta, no release) with the fitted "
-                          f"friction coefficients; margin {ENVELOPE_NOISE_FACTOR} x the noise rms "
-                          f"({noise['description']})"}
-    echo(f"  envelope: {env['inside']} of {env['n']} inside ({100 * env['fraction_inside']:.0f} %), outside by "
-         f"median {env['outside_median_mm']} mm, max {env['outside_max_mm']} mm")
-    out["envelope"] = env
-    return out
+    return {"n": int(ok.sum()), "inside": int(np.sum(outside <= 0)),
+            "fraction_inside": float(np.mean(outside <= 0)) if ok.any() else float("nan"),
+            "margin_mm": margin * 1e3,
+            "outside_median_mm": float(np.median(far) * 1e3) if far.size else None,
+            "outside_p95_mm": float(np.percentile(far, 95) * 1e3) if far.size else None,
+            "outside_max_mm": float(far.max() * 1e3) if far.size else None,
+            "size_median_mm": float(np.nanmedian(size) * 1e3) if ok.any() else None,
+            "description": f"{sub.n_samples} evenly spaced held-out samples; convex hull of the "
+                           f"{tips.shape[1]} bounding friction solutions (all eta, no release); margin "
+                           f"{ENVELOPE_NOISE_FACTOR} x the noise rms ({noise['description']})"}
 
 
 # --------------------------------------------------------------------------- helpers of the steps
@@ -1002,8 +1045,9 @@ def _decide(candidates: dict, eligible: list, units, options) -> dict:
     label = candidates[named]["label"]
     for e in eligible:
         if e not in pool:
-            bad = ", ".join(f"{b['name']} = {b['value']:.4g} {b['unit']} (plausible {b['plausible'][0]:.3g}.."
-                            f"{b['plausible'][1]:.3g})" for b in candidates[e]["implausible"])
+            bad = ", ".join(f"{b['name']} = {b['value']:.4g}{'' if b['unit'] == '-' else ' ' + b['unit']} "
+                            f"(plausible {b['plausible'][0]:.3g}..{b['plausible'][1]:.3g})"
+                            for b in candidates[e]["implausible"])
             out["passed_over_implausible"].append(e)
             out["notes"].append(f"{candidates[e]['label']} also explains the held-out data but needs {bad}; it is "
                                 f"not named while the plausible {label} explains the data")
