@@ -12,8 +12,13 @@
    the error on the held-out split.
 4. Name the missing effect: among candidates whose signature test is significant, whose held-out
    improvement is significant (paired sign-flip test over held-out units) and whose BIC beats
-   the baseline's by :data:`BIC_MARGIN`, the one with the largest held-out improvement; none
-   when nothing beats the noise.
+   the baseline's by :data:`BIC_MARGIN` (eligible), the plausible one (fitted values within
+   their plausible ranges, :mod:`ctrplan.discrepancy.parameters`) with the largest held-out
+   improvement; others that explain the held-out data equally well are listed. When none is
+   named, say whether the baseline's held-out residual is consistent with the sensor noise
+   (stated, or estimated from rests or repeats) or not explained by any candidate.
+   Candidates include the history effects of :mod:`ctrplan.discrepancy.history` (drive
+   backlash, tracker time offset, gradually developing friction).
 5. Write the updated robot model file, load it back and check that it reproduces the errors.
 
 The result is a plain dictionary (JSON-ready) plus arrays for plots; :mod:`ctrplan.discrepancy.report`
