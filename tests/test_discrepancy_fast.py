@@ -12,6 +12,7 @@ import pytest
 from ctrplan.discrepancy import Effects, Noise, synthesize, write_synth
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, estimate_noise, run_discrepancy
 from ctrplan.discrepancy.data import load_measured_data
+from ctrplan.discrepancy.report import write_report
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from ctrplan.mechanics import ModelSettings
 
@@ -61,3 +62,5 @@ def test_fast_noise_only_names_nothing_and_says_it_is_noise(tmp_path):
     assert res["noise"]["noise"]["position_rms_m"] == pytest.approx(0.5e-3, rel=0.15)
     robot = load_robot(PAIR)
     assert estimate_noise(load_measured_data(data, robot))["source"] == "rests"
+    text = Path(write_report(res, tmp_path / "out")["markdown"]).read_text()
+    assert "is consistent with the sensor noise (0.49" in text

@@ -5,6 +5,8 @@
   Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906).
 - :mod:`.effects`: candidate effects (friction, clearance, off-plane precurvature, Poisson
   ratios, registration) as modifications of a robot.
+- :mod:`.history`: effects on the motion history (drive backlash, tracker time offset,
+  gradually developing friction).
 - :mod:`.synth`: measured-like data with hidden effects and sensor noise (``ctrplan synth``).
 - :mod:`.data`: measured data with its motion history, configuration groups and the split.
 - :mod:`.parameters`: calibration parameters and how they change a robot.
