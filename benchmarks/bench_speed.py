@@ -249,7 +249,7 @@ def ratio_table(repeat=3):
         a, b = robot.configuration(q)
         _, t = _t(evaluate_bound, robot, a, b, settings)
         bound.append(t)
-    rows.append(("full bound, in-process, 4x4x4", "per configuration", bound))
+    rows.append(("full bound, in-process, 4x4x4", bound))
     grid8 = []
     for a2 in np.radians(np.arange(0, 360, 45)):
         for a3 in np.radians(np.arange(0, 360, 45)):
@@ -259,7 +259,7 @@ def ratio_table(repeat=3):
     for a, b in grid8:
         _, t = _t(evaluate_bound, robot, a, b, settings)
         b8.append(t)
-    rows.append(("full bound, in-process, 8x8x8", "per configuration", b8))
+    rows.append(("full bound, in-process, 8x8x8", b8))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         A = np.array([robot.configuration(q)[0] for q in Q])
@@ -269,7 +269,7 @@ def ratio_table(repeat=3):
         start = min(_cli(robot_file, tmp / "one.csv", "standard", 1, tmp / "o.csv") for _ in range(repeat))
         fr = [(_cli(robot_file, tmp / "grid.csv", "friction", 1, tmp / "f.csv") - start) / len(Q)
               for _ in range(repeat)]
-        rows.append(("CLI friction (full bound), --jobs 1, 4x4x4", f"per configuration, {repeat} runs", fr))
+        rows.append((f"CLI friction (full bound), --jobs 1, 4x4x4, {repeat} runs", fr))
         data = ROOT.parent / "shared" / "data" / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt"
         if data.exists():
             frame = load_ha_trajectory(data)
@@ -283,16 +283,15 @@ def ratio_table(repeat=3):
                   for _ in range(repeat)]
             s2 = [(_cli(r7, tmp / "traj.csv", "standard", None, tmp / "s.csv") - start7) / len(TA)
                   for _ in range(repeat)]
-            rows.append((f"CLI standard, --jobs 1, {len(TA)} trajectory rows", f"per configuration, {repeat} runs", s1))
-            rows.append((f"CLI standard, default jobs ({os.cpu_count()}), {len(TA)} rows",
-                         f"per configuration, {repeat} runs", s2))
+            rows.append((f"CLI standard, --jobs 1, {len(TA)} trajectory rows", s1))
+            rows.append((f"CLI standard, default jobs ({os.cpu_count()}), {len(TA)} rows", s2))
             print(f"   throughput scaling, default jobs over --jobs 1: {np.median(s1) / np.median(s2):.2f}x")
         else:
             print("   (measured trajectory not found: CLI standard-model rows skipped)")
         print(f"   process start (one-row file), subtracted: {start:.2f} s")
     print(f"{'what':<48} {'mean':>9} {'median':>9} {'p90':>9} {'max':>9}   [ms]   {'mean':>7} {'median':>7} "
           f"{'p90':>7} {'max':>7}   [x single standard solve]")
-    for name, _, ts in rows:
+    for name, ts in rows:
         m = _stats(np.asarray(ts) * 1e3)
         r = _stats(np.asarray(ts) / unit)
         print(f"{name:<48} " + " ".join(f"{v:>9.2f}" for v in m) + "          "

@@ -54,7 +54,9 @@ def main():
 @click.option("--out", "out_path", type=click.Path(dir_okay=False), default=None,
               help="Output CSV (default: <configs>-<model>.csv).")
 @click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")
-@click.option("--jobs", type=int, default=None, help="Worker processes (default: all cores).")
+@click.option("--jobs", type=int, default=None,
+              help="Parallel workers (default: all cores): worker processes for the contact models, "
+                   "compiled threads for the standard model.")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress):
     """Evaluate a model at every configuration of a CSV.
