@@ -36,3 +36,9 @@ MECHANICS_VERSION = "2026.11.22"
 # model (mechanics/_uniqueness.py): the O(h^2) error of the discretized smallest eigenvalue is far
 # below this, so the screen never certifies a configuration past the continuous critical value.
 UNIQUENESS_SCREEN_MARGIN = 0.1
+
+# Motion history (planned paths and recorded data alike): a relative rotation reverses the friction
+# direction only once it has turned back by more than this hysteresis [rad], and a base translation
+# larger than this [m] after a pair's last rotation releases its friction (translation-last).
+HISTORY_ROTATION_TOL = 1e-3
+HISTORY_TRANSLATION_TOL = 1e-4

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..constants import HISTORY_ROTATION_TOL, HISTORY_TRANSLATION_TOL
 from .simulate import _sequence_groups, motion_history
 
 __all__ = ["apply_backlash", "apply_time_offset", "friction_state", "rotation_direction",
@@ -136,8 +137,8 @@ def apply_time_offset(alpha, beta, time, tau: float, sequence=None) -> tuple[np.
     return a_out, b_out
 
 
-def friction_state(alpha, beta, theta_c: float, sequence=None, *, eta=None, rotation_tol: float = 1e-3,
-                   translation_tol: float = 1e-4) -> np.ndarray:
+def friction_state(alpha, beta, theta_c: float, sequence=None, *, eta=None, rotation_tol: float = HISTORY_ROTATION_TOL,
+                   translation_tol: float = HISTORY_TRANSLATION_TOL) -> np.ndarray:
     """Signed friction state e in [-1, 1] of every pair along the motion (Dahl-type development).
 
     Parameters

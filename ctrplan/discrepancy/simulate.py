@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..constants import HISTORY_ROTATION_TOL, HISTORY_TRANSLATION_TOL
 from ..errors import CtrplanError
 from ..io.tables import rotation_directions
 from ..mechanics import ModelSettings, solve_contact, solve_standard
@@ -86,8 +87,8 @@ def _check_joints(alpha, beta):
     return alpha, beta
 
 
-def motion_history(alpha, beta, sequence=None, *, rotation_tol: float = 1e-3,
-                   translation_tol: float = 1e-4) -> History:
+def motion_history(alpha, beta, sequence=None, *, rotation_tol: float = HISTORY_ROTATION_TOL,
+                   translation_tol: float = HISTORY_TRANSLATION_TOL) -> History:
     """Relative rotation directions and translation-last flags along recorded motions.
 
     Parameters
@@ -361,8 +362,8 @@ def _run(tasks, alpha, beta, guess, follow, eta, mu, contact, robot, settings, c
 
 def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None, sequence=None,
              mu=None, settings: ModelSettings | None = None, n_jobs: int = 1, progress: bool = False,
-             check_stability: bool = False, rotation_tol: float = 1e-3,
-             translation_tol: float = 1e-4) -> Simulation:
+             check_stability: bool = False, rotation_tol: float = HISTORY_ROTATION_TOL,
+             translation_tol: float = HISTORY_TRANSLATION_TOL) -> Simulation:
     """Evaluate a model at every sample of a motion history, following the elastic branch.
 
     Parameters

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..constants import HISTORY_ROTATION_TOL, HISTORY_TRANSLATION_TOL
 from ..errors import UnreachableGoalError
 from ..io.tables import rotation_directions
 from .ordering import OrderedPath, OrderedWaypoint
@@ -47,10 +48,10 @@ __all__ = ["PathHistory", "path_history", "approach_history", "end_with", "goal_
 FINAL_MOTIONS = {"translation-last": "translation", "rotation-last": "rotation"}
 DEFAULT_FINAL_MOTION = "translation-last"
 
-# Default hysteresis of a relative rotation [rad] and threshold of a translation [m]
-# (the defaults of ctrplan.discrepancy.simulate.motion_history).
-DEFAULT_ROTATION_TOL = 1e-3
-DEFAULT_TRANSLATION_TOL = 1e-4
+# Default hysteresis of a relative rotation [rad] and threshold of a translation [m], shared with
+# ctrplan.discrepancy.simulate.motion_history (constants).
+DEFAULT_ROTATION_TOL = HISTORY_ROTATION_TOL
+DEFAULT_TRANSLATION_TOL = HISTORY_TRANSLATION_TOL
 
 
 @dataclass(frozen=True, eq=False)
