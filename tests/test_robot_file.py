@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ctrplan.errors import ModelFileError, PhysicalParameterError
-from ctrplan.io.atomic import atomic_path, atomic_write_bytes, atomic_write_text
+from ctrplan.io.atomic import atomic_path, atomic_savez, atomic_write_bytes, atomic_write_text
 from ctrplan.io.robot_file import file_hash, load_robot, robot_from_toml_text
 
 MODEL_DIR = Path(__file__).resolve().parents[1] / "model"
@@ -232,6 +232,26 @@ def test_atomic_path_new_file_failure_leaves_nothing(tmp_path):
 def test_atomic_path_missing_directory(tmp_path):
     with pytest.raises(FileNotFoundError):
         atomic_write_text(tmp_path / "no" / "such.txt", "x")
+
+
+def test_atomic_savez_writes_at_the_given_name_and_a_failure_keeps_the_old_file(tmp_path):
+    """The .npz lands exactly at ``path`` (numpy would append ``.npz`` to a bare name), and an
+    array that fails while being written leaves the previous file and no temporary file."""
+    p = tmp_path / "field.map"
+    atomic_savez(p, values=np.arange(6.0).reshape(2, 3), key=np.array("k1"))
+    with np.load(p) as z:
+        np.testing.assert_array_equal(z["values"], np.arange(6.0).reshape(2, 3))
+        assert str(z["key"]) == "k1"
+
+    class Broken:
+        def __array__(self, dtype=None, copy=None):
+            raise RuntimeError("interrupted while writing")
+
+    with pytest.raises(RuntimeError, match="interrupted"):
+        atomic_savez(p, values=np.zeros(2), broken=Broken())
+    with np.load(p) as z:
+        assert str(z["key"]) == "k1" and z["values"].shape == (2, 3)
+    assert [q.name for q in tmp_path.iterdir()] == ["field.map"]
 
 
 def test_robot_to_toml_round_trips_every_shipped_model_with_model_and_registration():

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path
+from ..io.atomic import atomic_savez
 from ._interp import multilinear
 from .coordinates import MapCoordinates
 from .identity import BoundMapMismatchError
@@ -39,12 +39,6 @@ _WEIGHT_EPS = 1e-12
 
 # Version of the .npz layout written by BoundField.save.
 NPZ_FORMAT_VERSION = 2
-
-
-def _atomic_savez(path: Path, **arrays) -> None:
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
 
 
 def coordinates_from_dict(d: dict) -> MapCoordinates:
@@ -234,8 +228,8 @@ class BoundField:
 
     # ------------------------------------------------------------------ persistence
     def save(self, path) -> Path:
-        """Write the field to one compressed ``.npz`` (atomically) with its key, coordinates and
-        metadata (JSON).
+        """Write the field to one compressed ``.npz`` (atomically, :func:`ctrplan.io.atomic_savez`;
+        missing parent folders are created) with its key, coordinates and metadata (JSON).
 
         Parameters
         ----------
@@ -246,11 +240,12 @@ class BoundField:
         Path
         """
         path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
         arrays = {f"axis_{j}": a for j, a in enumerate(self.axes)}
         coords = json.dumps(self.coordinates.as_dict() if self.coordinates is not None else None)
-        _atomic_savez(path, key=np.array(self.key), periodic=self.periodic, values=self.values,
-                      valid=self.valid, metadata=np.array(json.dumps(self.metadata, default=repr)),
-                      coordinates=np.array(coords), format_version=np.array(NPZ_FORMAT_VERSION), **arrays)
+        atomic_savez(path, key=np.array(self.key), periodic=self.periodic, values=self.values,
+                     valid=self.valid, metadata=np.array(json.dumps(self.metadata, default=repr)),
+                     coordinates=np.array(coords), format_version=np.array(NPZ_FORMAT_VERSION), **arrays)
         return path
 
     @classmethod

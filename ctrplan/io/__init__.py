@@ -5,7 +5,7 @@ Thin layer around the pure numerics: everything here reads or writes files and h
 Formats: ``docs/file-formats.md``.
 """
 
-from .atomic import atomic_path, atomic_write_bytes, atomic_write_text
+from .atomic import atomic_path, atomic_savez, atomic_write_bytes, atomic_write_text
 from .robot_file import file_hash, load_robot, robot_from_toml_text
 from .scenario import Scenario, load_scenario, scenario_from_toml_text
 from .tables import (Measurements, load_ha_trajectory, read_configurations, read_measurements,
@@ -13,6 +13,7 @@ from .tables import (Measurements, load_ha_trajectory, read_configurations, read
 
 __all__ = [
     "atomic_path",
+    "atomic_savez",
     "atomic_write_bytes",
     "atomic_write_text",
     "file_hash",

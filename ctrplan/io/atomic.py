@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes"]
+__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "atomic_savez"]
 
 
 @contextlib.contextmanager
@@ -95,3 +95,27 @@ def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8
         Text encoding; newlines are written as given (no platform translation).
     """
     atomic_write_bytes(path, text.encode(encoding))
+
+
+def atomic_savez(path: str | os.PathLike, **arrays) -> None:
+    """Write ``arrays`` to one compressed ``.npz`` at ``path`` atomically (see :func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Destination file, written exactly there (no ``.npz`` suffix is appended, unlike
+        :func:`numpy.savez_compressed` given a name). Its directory must exist.
+    **arrays : array-like
+        Stored under their keyword names, as :func:`numpy.savez_compressed` stores them.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the destination directory does not exist.
+    Exception
+        Whatever :func:`numpy.savez_compressed` raises; ``path`` is then untouched.
+    """
+    import numpy as np
+
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
