@@ -18,6 +18,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 import click  # noqa: E402
 
 from .errors import CtrplanError, JointLimitError  # noqa: E402
+from .models import MODELS  # noqa: E402
 
 
 def _settings(ds):
@@ -50,7 +51,7 @@ def main():
               help="Robot model file (TOML, SI units).")
 @click.option("--configs", "configs_path", required=True, type=click.Path(exists=True, dir_okay=False),
               help="CSV with alpha_1..n [rad], beta_1..n [m] and optionally eta_1..n-1.")
-@click.option("--model", type=click.Choice(["standard", "clearance", "friction"]), required=True)
+@click.option("--model", type=click.Choice(list(MODELS)), required=True)
 @click.option("--out", "out_path", type=click.Path(dir_okay=False), default=None,
               help="Output CSV (default: <configs>-<model>.csv).")
 @click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")

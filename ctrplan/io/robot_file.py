@@ -23,13 +23,11 @@ import pydantic
 from pydantic import BaseModel, ConfigDict, Field
 
 from ..errors import ModelFileError, PhysicalParameterError
+from ..models import MODELS, check_model
 from ..robot import ROTATION, TRANSLATION, Joint, Robot, Section, TranslationLink, Tube
 
 __all__ = ["load_robot", "robot_from_toml_text", "robot_from_document", "robot_to_toml", "file_hash",
            "RobotDocument", "MODELS"]
-
-#: Mechanics models a file may name as the one its parameters were calibrated for.
-MODELS = ("standard", "clearance", "friction")
 
 MEMORY = "<memory>"
 
@@ -103,7 +101,7 @@ class RobotDocument(_Strict):
 
     name: Annotated[str, Field(min_length=1)]
     source: str = ""
-    model: typing.Literal["standard", "clearance", "friction"] | None = None
+    model: typing.Literal[MODELS] | None = None   # ctrplan.models: the model the parameters were calibrated for
     tracker_registration: RegistrationDoc | None = None
     k_xy_reference_N_m2: PositiveFloat | None = None
     tubes: Annotated[list[TubeDoc], Field(min_length=1)]
@@ -436,10 +434,10 @@ def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
     Raises
     ------
     ValueError
-        ``model`` not one of :data:`MODELS`.
+        ``model`` not one of :data:`ctrplan.models.MODELS`.
     """
-    if model is not None and model not in MODELS:
-        raise ValueError(f"model must be one of {MODELS}, got {model!r}")
+    if model is not None:
+        check_model(model)
     out = [f"# {line}".rstrip() for line in header.splitlines()] if header else []
     out.append("# ctrplan robot model file. Units: SI (m, rad, N m^2); key suffixes name the unit.")
     out.append(f"name = {_toml_str(robot.name)}")

@@ -1,0 +1,76 @@
+"""The registry of mechanics models: the one list of model names the package accepts.
+
+A name here is what ``ctrplan evaluate --model``, a robot file's ``model`` key, the batch
+evaluator and the discrepancy simulator accept. Each entry says in one line what the model is and
+which part of Ha, Fagogenis & Dupont, "Modeling Tube Clearance and Bounding the Effect of Friction
+in Concentric Tube Robot Kinematics", IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906, it
+implements. The solvers themselves are in :mod:`ctrplan.mechanics`.
+
+This module imports nothing heavy, so that the command line can build its options from it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+
+__all__ = ["ModelInfo", "MODEL_INFO", "MODELS", "check_model"]
+
+
+@dataclass(frozen=True)
+class ModelInfo:
+    """One mechanics model of the registry.
+
+    Attributes
+    ----------
+    name : str
+        Its name in files, tables and on the command line.
+    description : str
+        One line: what the model assumes.
+    source : str
+        Where in Ha, Fagogenis & Dupont 2019 it is defined.
+    solver : str
+        The :mod:`ctrplan.mechanics` function that solves it.
+    """
+
+    name: str
+    description: str
+    source: str
+    solver: str
+
+
+#: The mechanics models, by name, in the order the package lists them (read-only mapping).
+MODEL_INFO = MappingProxyType({
+    "standard": ModelInfo("standard", "zero clearance between the tubes, torsionally compliant, no friction",
+                          "Section II-A", "solve_standard"),
+    "clearance": ModelInfo("clearance", "tubes move inside each other's clearance, contact forces, no friction",
+                           "Sections II-B to II-E, Appendices A and B", "solve_clearance"),
+    "friction": ModelInfo("friction", "clearance model with maximal torsional friction in given directions eta",
+                          "Section III, Eqs. (37)-(43)", "solve_friction"),
+})
+
+#: Names of the mechanics models, in registry order: ``("standard", "clearance", "friction")``.
+MODELS: tuple[str, ...] = tuple(MODEL_INFO)
+
+
+def check_model(model: str) -> str:
+    """Return ``model`` if it names a registered mechanics model.
+
+    Parameters
+    ----------
+    model : str
+        A model name.
+
+    Returns
+    -------
+    str
+        ``model`` unchanged.
+
+    Raises
+    ------
+    ValueError
+        ``model`` is not one of :data:`MODELS`; the message lists them.
+    """
+    if model not in MODEL_INFO:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    return model
