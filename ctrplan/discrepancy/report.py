@@ -110,11 +110,15 @@ def write_report(results: dict, out_dir) -> dict:
         redmax = 1.0 - after["position_max_mm"] / base["position_max_mm"]
         change = (f"lowers the maximum by {100 * redmax:.0f}%" if redmax >= 0
                   else f"raises the maximum by {-100 * redmax:.0f}%")
-        lines += [f"**Named missing effect: {results['named_label']}.** Adding it "
+        comb = results.get("combination") or {}
+        label = (comb["tried"][comb["named"]]["label"] if comb.get("named") else results["named_label"])
+        lines += [f"**Named missing effect{'s' if comb.get('named') else ''}: {label}.** Adding "
+                  f"{'them' if comb.get('named') else 'it'} "
                   f"{'lowers' if red >= 0 else 'raises'} the held-out mean tip position error by "
                   f"{100 * abs(red):.0f}% and {change}.", ""]
     else:
         lines += [_no_effect_paragraph(results), ""]
+    lines += _combination_lines(results)
     decision = results.get("decision") or {}
     if named and decision.get("notes"):
         lines += ["Decision:", ""] + [f"- {n}." for n in decision["notes"]] + [""]
@@ -181,6 +185,39 @@ def write_report(results: dict, out_dir) -> dict:
     lines += [f"![{p}]({p})" for p in plots]
     atomic_write_text(out / "report.md", "\n".join(lines) + "\n")
     return {"markdown": str(out / "report.md"), "json": str(out / "results.json"), "plots": plots}
+
+
+def _combination_lines(results: dict) -> list[str]:
+    """The second effect tried on top of the named one: steps of a named pair, every pair tried,
+    fitted values in deg / mm (SI in the JSON)."""
+    from .workflow import display_value
+
+    comb = results.get("combination")
+    if not comb:
+        return []
+    lines = ["## Combination of effects", "",
+             f"Rule for a second effect: {comb['rule']}.", ""]
+    if comb["named"]:
+        c = comb["tried"][comb["named"]]
+        lines += [f"**Named combination: {c['label']}** ({c['model']} model). Steps (held-out):", ""]
+        for k, st in enumerate(comb["steps"], 1):
+            imp = st["improvement_eq49"]
+            lines.append(f"{k}. {st['label']}: mean {st['held_out_mean_mm']:.3f} mm, max {st['held_out_max_mm']:.3f} mm; "
+                         f"Eq. (49) improvement over {'the baseline' if st['over'] == 'baseline' else 'step 1'} "
+                         f"{imp['mean_difference']:.3f} (mm + deg), p = {imp['p_value']:.4f}")
+        lines.append("")
+    if comb["tried"]:
+        lines += ["| pair | fitted parameters | held-out mean [mm] | max [mm] | improvement over the first p | "
+                  "dBIC over the first | converged | named |", "|---|---|---|---|---|---|---|---|"]
+        for e, c in comb["tried"].items():
+            params = ", ".join(display_value(n, v, c["units"][n]) for n, v in c["parameters"].items())
+            lines.append(f"| {c['label']} | {params} | {_fmt(c['held_out']['position_mean_mm'], 3)} | "
+                         f"{_fmt(c['held_out']['position_max_mm'], 3)} | {c['improvement_eq49']['p_value']:.4f} | "
+                         f"{c['delta_bic']:.1f} | {'yes' if c['converged'] else '**no**'} | "
+                         f"{'yes' if e == comb['named'] else 'no'} |")
+        lines.append("")
+    lines += [f"- {n}." for n in comb["notes"]]
+    return lines + ([""] if comb["notes"] else [])
 
 
 def _no_effect_paragraph(results: dict) -> str:

@@ -154,6 +154,9 @@ class DiscrepancyOptions:
         return ModelSettings(ds=self.ds, multistart=0)
 
 
+#: Version of the fitting procedure in the stage key: 2 = two-stage least squares (error components,
+#: then Eq. (49)); stages written by version 1 (Eq. (49) alone, which stopped at its budget) are redone.
+FIT_VERSION = 2
 #: Options added after stages were first written, with their defaults (see the stage key).
 _LATER_OPTIONS = {"block_samples": 100}
 
@@ -440,6 +443,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
              if k not in ("n_jobs", "n_permutations", "significance", "noise_position", "envelope_samples",
                           "reference_friction")
              and not (k in _LATER_OPTIONS and v == _LATER_OPTIONS[k])}
+    keyed["fit_version"] = FIT_VERSION   # stages of an earlier least-squares procedure are not reused
     key = hashlib.sha256(Path(robot_path).read_bytes() + Path(data_path).read_bytes()
                          + json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:12]
     stages = _Stages(out_dir, key)
@@ -675,25 +679,34 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                                       "unexplained" if noise_check["consistent"] is False else "unknown")
         echo("no effect named: " + _no_effect_sentence(decision, noise_check, candidates))
 
+    # 4b. a second effect on top of the named one (issue 13, Sec. 5) ------------------------
+    combination = None
+    if named:
+        combination = _second_effect(robot, data, fit_data, val, named, candidates, base, base_names, units,
+                                     stages, settings, options, echo, held_out)
+    pair = combination["named"] if combination else None
+    final = combination["tried"][pair] if pair else (candidates[named] if named else None)
+    named_effects = ([named] + ([pair] if pair else [])) if named else []
+
     # prediction with the motion history and the friction envelope (issue 13, Sec. 3) --------
     prediction = _prediction_figures(robot, val, base_val, candidates, named, noise, stages, settings, options,
                                      echo, held_out)
 
     # 5. write the updated model and check it reproduces ------------------------------------
-    final_params = candidates[named]["_params"] if named else base_all
-    final_model = _MODEL_OF[named] if named else "standard"
+    final_params = final["_params"] if final else base_all
+    final_model = final["model"] if final else "standard"
     reg_names = [n for n in final_params if n in REGISTRATION]
     registration = None
     if reg_names:
         vals = [final_params.get(n, 0.0) for n in REGISTRATION]
         registration = {"rotation_vector_rad": vals[:3], "translation_m": vals[3:]}
     updated = apply_parameters(robot, tuple(final_params), tuple(final_params.values()))
-    updated = updated.replace(name=f"{robot.name}-{named or 'recalibrated'}",
+    updated = updated.replace(name=f"{robot.name}-{'-'.join(named_effects) or 'recalibrated'}",
                               source=f"{robot.source}; recalibrated by ctrplan discrepancy on {Path(data_path).name}")
     out_dir.mkdir(parents=True, exist_ok=True)
     model_path = out_dir / f"{updated.name}.toml"
     header = (f"Written by `ctrplan discrepancy` from {Path(robot_path).name} and {Path(data_path).name}.\n"
-              f"Named effect: {EFFECT_LABELS[named] if named else 'none'}; evaluate with the "
+              f"Named effect: {' + '.join(EFFECT_LABELS[e] for e in named_effects) or 'none'}; evaluate with the "
               f"{final_model} model.\nCalibrated parameters: "
               + ", ".join(f"{n} = {v:.6g}" for n, v in final_params.items() if n not in REGISTRATION))
     atomic_write_text(model_path, robot_to_toml(updated, header=header, model=final_model,
@@ -707,7 +720,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                                             "parameters": hist_params}, indent=2) + "\n")
     elif side.exists():
         side.unlink()
-    final_val = candidates[named]["_val"] if named else base_val
+    final_val = final["_val"] if final else base_val
     after = _error_summary(final_val["position"], final_val["angle"], final_val["seconds"], val.n_samples)
     # whole configuration groups of a revisiting protocol; a trajectory is re-run whole, since a
     # subsample would break its branch following (each sample starts from the previous one)
@@ -720,7 +733,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
          f"samples: {reproduced} "
          f"(mean {np.nanmean(check['position']) * 1e3:.3f} mm)")
 
-    cautions = _cautions(named, candidates.get(named), base_summary, after, robot)
+    cautions = _cautions(named, final, base_summary, after, robot)
     for line in cautions:
         echo(f"caution: {line}")
 
@@ -734,6 +747,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         "noise": noise_check, "decision": decision,
         "candidates": {e: {k: v for k, v in c.items() if not k.startswith("_")} for e, c in candidates.items()},
         "named_effect": named, "named_label": EFFECT_LABELS[named] if named else None,
+        "named_effects": named_effects, "combination": _public(combination),
         "after": after, "updated_model_file": str(model_path), "updated_model": final_model,
         "reproduced": reproduced, "reproduced_samples": int(check_rows.sum()),
         "reproduced_position_mean_mm": float(np.nanmean(check["position"]) * 1e3),
@@ -1050,8 +1064,8 @@ def _decide(candidates: dict, eligible: list, units, options) -> dict:
     label = candidates[named]["label"]
     for e in eligible:
         if e not in pool:
-            bad = ", ".join(f"{b['name']} = {b['value']:.4g}{'' if b['unit'] == '-' else ' ' + b['unit']} "
-                            f"(plausible {b['plausible'][0]:.3g}..{b['plausible'][1]:.3g})"
+            bad = ", ".join(f"{display_value(b['name'], b['value'], b['unit'])} (plausible "
+                            f"{_range_text(b)})"
                             for b in candidates[e]["implausible"])
             out["passed_over_implausible"].append(e)
             out["notes"].append(f"{candidates[e]['label']} also explains the held-out data but needs {bad}; it is "
@@ -1071,6 +1085,166 @@ def _decide(candidates: dict, eligible: list, units, options) -> dict:
         out["notes"].append(f"{label} is named although its fitted values are implausible: no plausible "
                             f"candidate explains the data")
     return out
+
+
+#: Pairs that are not combined: one already contains the other (friction contains the
+#: clearance model; gradual friction is friction with a friction angle).
+_NOT_COMBINED = ({"friction", "clearance"}, {"gradual_friction", "clearance"}, {"friction", "gradual_friction"})
+_CONTACT = ("friction", "clearance")
+
+
+def _combined_model(first: str, second: str) -> str:
+    """Mechanics model of two effects together: friction if either needs it, else clearance if
+    either needs it, else standard."""
+    models = {_MODEL_OF[first], _MODEL_OF[second]}
+    return next((m for m in ("friction", "clearance") if m in models), "standard")
+
+
+def _effect_names(robot, effect: str, data) -> tuple:
+    """Parameters a candidate reports as its own: :func:`effect_parameters`, plus the friction
+    coefficients that gradual friction carries."""
+    extra = tuple(effect_parameters(robot, effect, data))
+    return extra + (effect_parameters(robot, "friction") if effect == "gradual_friction" else ())
+
+
+def _range_text(b: dict) -> str:
+    lo, hi = b["plausible"]
+    if b["unit"] == "rad":
+        return f"{np.rad2deg(lo):.3g}..{np.rad2deg(hi):.3g} deg"
+    return f"{lo:.3g}..{hi:.3g}" + ("" if b["unit"] == "-" else f" {b['unit']}")
+
+
+def display_value(name: str, value: float, unit: str) -> str:
+    """A parameter for a printed report: rad as deg, m as mm, others in their SI unit."""
+    if unit == "rad":
+        return f"{name} = {np.rad2deg(value):.4g} deg"
+    if unit == "m":
+        return f"{name} = {value * 1e3:.4g} mm"
+    return f"{name} = {value:.4g}" + ("" if unit == "-" else f" {unit}")
+
+
+def _second_effect(robot, data, fit_data, val, named, candidates, base, base_names, units, stages, settings,
+                   options, echo, held_out) -> dict:
+    """Whether a second effect, fitted on top of the named one, still improves the held-out error.
+
+    Tried: every other candidate whose signature test was significant, except pairs in
+    :data:`_NOT_COMBINED` (its values fitted alone may be implausible: alone it absorbs the
+    named effect too). Fit on the calibration split
+    only, starting from the named effect's fit and the second effect's own fit: with the standard
+    model, the second effect's parameters alone (the named fit held), then everything together
+    (nested: the calibration cost cannot rise); with a contact model (dearer by ~30x), the second
+    effect's parameters alone, with ``options.max_contact_evaluations``. The pair is named by
+    the workflow's rule for single effects, with the named effect in place of the baseline: held-out
+    Eq. (49) improvement significant (paired sign-flip test over held-out units, one-sided,
+    ``options.significance``), BIC lower by more than :data:`BIC_MARGIN`, and every fitted value
+    plausible; among such pairs the largest held-out improvement.
+
+    Returns
+    -------
+    dict
+        ``first``, ``named`` (second effect or None), ``tried`` ``{effect: candidate-like dict}``
+        with ``parameters`` [SI], ``units``, ``held_out``, ``improvement_eq49`` (over the named
+        effect alone), ``delta_bic`` (same), ``significant``, ``plausible``, ``fit``; ``steps``
+        (held-out mean and improvement of each step of the named combination), ``notes``.
+    """
+    first = candidates[named]
+    p_first = dict(first["_params"])
+    first_names = _effect_names(robot, named, data)
+    out = {"first": named, "first_label": first["label"], "named": None, "tried": {}, "steps": [], "notes": [],
+           "rule": f"held-out Eq. (49) improvement over {first['label']} alone significant at "
+                   f"{options.significance} (paired sign-flip test), BIC lower by more than {BIC_MARGIN}, fitted "
+                   f"values plausible"}
+    # (not: "plausible alone": fitted alone, an effect absorbs the other one and can look
+    # implausible, e.g. a backlash of 9.9 deg for a hidden 4.6 deg plus a 0.15 s lag; the pair's
+    # own values must be plausible)
+    pool = [e for e in candidates if e != named and {e, named} not in _NOT_COMBINED
+            and candidates[e].get("signature_significant")]
+    skipped = [e for e in candidates if e != named and e not in pool]
+    if skipped:
+        out["notes"].append("not tried on top of " + first["label"] + ": " + ", ".join(
+            f"{candidates[e]['label']} ("
+            + ("contained in it or containing it" if {e, named} in _NOT_COMBINED else "signature not significant")
+            + ")"
+            for e in skipped))
+    for e in pool:
+        model = _combined_model(named, e)
+        second_names = tuple(n for n in _effect_names(robot, e, data) if n not in p_first)
+        if not second_names:
+            continue
+        init2 = np.array([candidates[e]["_params"][n] for n in second_names], float)
+        tag = f"{named}+{e}"
+        done = stages.load(f"fit-{tag}")
+        if done is not None:
+            fit = _result_from(done)
+        else:
+            echo(f"second effect: {candidates[e]['label']} on top of {first['label']} ({model} model) ...")
+            budget = options.max_evaluations if model == "standard" else options.max_contact_evaluations
+            fit = calibrate(robot, fit_data, model, second_names, fixed=p_first, initial=init2, settings=settings,
+                            n_jobs=options.n_jobs, max_evaluations=budget)
+            if model == "standard":
+                names = tuple(p_first) + second_names
+                init = np.concatenate([np.array(list(p_first.values()), float), fit.values])
+                joint = calibrate(robot, fit_data, "standard", names, initial=init, settings=settings,
+                                  n_jobs=options.n_jobs, max_evaluations=options.max_evaluations)
+                if joint.cost <= fit.cost or not fit.converged:
+                    fit = joint
+            stages.save(f"fit-{tag}", fit.as_dict())
+        params = dict(zip(*fit.all_parameters()))
+        val_c = held_out(f"combination-{tag}", model, params)
+        r = eq49_residuals(val_c["position"], val_c["angle"])
+        shown_names = first_names + tuple(n for n in _effect_names(robot, e, data) if n not in first_names)
+        shown = {n: float(params[n]) for n in shown_names}
+        k_total = len(set(base_names) | set(shown_names))
+        bic = information_criterion(fit.cost, fit.n_samples, k_total)
+        test = paired_improvement(first["_r"], r, units, seed=options.seed)
+        held = _error_summary(val_c["position"], val_c["angle"], val_c["seconds"], val.n_samples)
+        implausible = _implausible(robot, shown)
+        c = {"effects": [named, e], "label": f"{first['label']} + {candidates[e]['label']}", "model": model,
+             "fit": fit.as_dict(), "parameters": shown, "units": {n: parameter(robot, n).unit for n in shown},
+             "implausible": implausible, "plausible": not implausible, "n_parameters": k_total, "bic": bic,
+             "delta_bic": bic - first["bic"], "held_out": held, "improvement_eq49": test,
+             "improvement_position": paired_improvement(first["_val"]["position"], val_c["position"], units,
+                                                        seed=options.seed),
+             "converged": bool(fit.converged), "_val": val_c, "_params": params, "_r": r}
+        c["improvement_significant"] = bool(test["p_value"] < options.significance and test["mean_difference"] > 0)
+        c["bic_better"] = bool(c["delta_bic"] < -BIC_MARGIN)
+        c["significant"] = c["improvement_significant"] and c["bic_better"] and c["plausible"]
+        if not fit.converged:
+            c["note"] = "its fit did not converge (stopped at the evaluation budget): the pair may be underrated"
+        out["tried"][e] = c
+        echo(f"  {c['label']}: " + ", ".join(display_value(n, v, c["units"][n]) for n, v in shown.items())
+             + f"; held-out mean {held['position_mean_mm']:.3f} mm (alone {first['held_out']['position_mean_mm']:.3f}); "
+               f"dBIC {c['delta_bic']:.1f}; improvement p = {test['p_value']:.4f}"
+             + ("" if fit.converged else "; fit NOT converged"))
+    passing = [e for e, c in out["tried"].items() if c["significant"]]
+    if passing:
+        second = max(passing, key=lambda e: out["tried"][e]["improvement_eq49"]["mean_difference"])
+        out["named"] = second
+        c = out["tried"][second]
+        base_mean = candidates[named]["held_out"]["position_mean_mm"]
+        out["steps"] = [
+            {"effect": named, "label": first["label"], "held_out_mean_mm": base_mean,
+             "held_out_max_mm": first["held_out"]["position_max_mm"],
+             "improvement_eq49": first["improvement_eq49"], "over": "baseline"},
+            {"effect": second, "label": candidates[second]["label"], "held_out_mean_mm": c["held_out"]["position_mean_mm"],
+             "held_out_max_mm": c["held_out"]["position_max_mm"],
+             "improvement_eq49": c["improvement_eq49"], "over": named}]
+        echo(f"named combination: {c['label']} (held-out mean {base_mean:.3f} -> "
+             f"{c['held_out']['position_mean_mm']:.3f} mm, p = {c['improvement_eq49']['p_value']:.4f})")
+    elif out["tried"]:
+        out["notes"].append("no second effect improves the held-out error of " + first["label"] + " significantly: "
+                            + "; ".join(f"{c['label']}: p = {c['improvement_eq49']['p_value']:.4f}, dBIC "
+                                        f"{c['delta_bic']:.1f}" + ("" if c["plausible"] else ", implausible")
+                                        for c in out["tried"].values()))
+    return out
+
+
+def _public(combination):
+    """The combination without its arrays (JSON)."""
+    if combination is None:
+        return None
+    return {**combination, "tried": {e: {k: v for k, v in c.items() if not k.startswith("_")}
+                                     for e, c in combination["tried"].items()}}
 
 
 def _no_effect_sentence(decision: dict, check: dict, candidates: dict) -> str:
