@@ -1,0 +1,193 @@
+"""Stage functions of :mod:`ctrplan.pipeline`: each returns SI values (m, rad), and the report
+stage alone converts to mm and degrees.
+
+The stages run on the Table VII robot with a synthetic constant bound field (friction 1 mm,
+0.1 rad; translation-last 0.5 mm, 0.05 rad), so no bound map is read or computed and each test
+takes seconds. ``test_pipeline`` checks the whole run's outputs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ctrplan import pipeline
+from ctrplan.boundmap import BoundField, map_coordinates, uniform_axis
+from ctrplan.errors import UnreachableGoalError
+from ctrplan.io.robot_file import load_robot
+from ctrplan.mechanics import solve_standard
+from ctrplan.planning import JointStateSpace
+from ctrplan.planning.verify import DEFAULT_MAX_BODY_STEP
+
+REPO = Path(__file__).resolve().parents[1]
+TABLE7 = REPO / "model" / "ha2019-table7-calibrated.toml"
+SYNTHETIC = (1e-3, 0.1, 5e-4, 0.05)   # position [m], angle [rad], translation-last position, angle
+
+
+def _field(robot, resolution=(4, 4, 3)):
+    coords = map_coordinates(robot)
+    axes = [uniform_axis(lo, hi, n, per) for lo, hi, n, per in zip(coords.lower, coords.upper, resolution,
+                                                                     coords.periodic)]
+    shape = tuple(len(a) for a in axes)
+    values = np.broadcast_to(np.array(SYNTHETIC), shape + (4,)).copy()
+    return BoundField(axes, coords.periodic, values, np.ones(shape, bool), key="synthetic", coordinates=coords)
+
+
+def _write(tmp_path, goals: str, obstacles: str = "", name: str = "stages", output: str = "") -> Path:
+    text = f"""
+name = "{name}"
+robot = "{TABLE7.as_posix()}"
+
+[start]
+q = {{alpha_2 = 0.0, alpha_3 = 0.0, beta_3 = -0.07}}
+{goals}
+{obstacles}
+[planner]
+name = "RRTstar"
+iterations = 20
+seed = 1
+bound_weight = 500.0
+
+[bound_field]
+resolution = [4, 4, 3]
+ds_m = 0.004
+{output}
+[drive]
+control_rate_hz = 250.0
+max_velocity = {{alpha_2 = 1.0, alpha_3 = 1.0, beta_3 = 0.01}}
+max_acceleration = {{alpha_2 = 4.0, alpha_3 = 4.0, beta_3 = 0.04}}
+max_jerk = {{alpha_2 = 40.0, alpha_3 = 40.0, beta_3 = 0.4}}
+"""
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+JOINT_GOAL = """
+[[goals]]
+type = "joint"
+q = {alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}
+"""
+
+
+def test_load_setup_keeps_the_step_in_metres_and_the_default_output_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL), echo=lambda *a: None)
+    assert setup.settings.ds == pytest.approx(0.004, rel=1e-12)       # ds_m = 0.004, not 4
+    assert setup.check_settings.ds == setup.settings.ds and setup.check_settings.multistart == 0
+    assert setup.spec.resolution == (4, 4, 3)
+    np.testing.assert_allclose(setup.scenario.start, [0.0, 0.0, -0.07], atol=0)
+    assert setup.out_dir == Path("out") / "stages"
+    assert pipeline.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "o", echo=lambda *a: None).out_dir \
+        == tmp_path / "o"
+
+
+def test_a_task_goal_given_in_metres_is_resolved_to_a_tip_within_its_tolerance_in_metres(tmp_path):
+    """The goal's tip position and tolerance are in m; the resolved joint vector's standard-model
+    tip (solved here, independently of the stage) is within the tolerance, the stage's tip error
+    is that distance in m, and the field's bound there is the synthetic 1 mm, in m."""
+    robot = load_robot(TABLE7)
+    q_true = np.array([1.0, 0.5, -0.05])
+    alpha, beta = robot.configuration(q_true)
+    setup_probe = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="probe"), echo=lambda *a: None)
+    target = solve_standard(robot, alpha, beta, setup_probe.check_settings).tip_position
+    goal = f"""
+[[goals]]
+type = "task"
+tip_position_m = [{float(target[0])!r}, {float(target[1])!r}, {float(target[2])!r}]
+tolerance_m = 1.0e-3
+"""
+    setup = pipeline.load_setup(_write(tmp_path, goal), echo=lambda *a: None)
+    field = _field(setup.robot)
+    validity = pipeline.check_start(setup, field)
+    resolved = pipeline.resolve_goals(setup, field, validity, echo=lambda *a: None)
+    (g,) = resolved.goals
+    a, b = setup.robot.configuration(g.q)
+    tip = solve_standard(setup.robot, a, b, setup.check_settings).tip_position
+    miss = float(np.linalg.norm(tip - target))
+    assert miss <= 1e-3, miss
+    assert g.tip_error == pytest.approx(miss, abs=1e-6)
+    assert g.bound == pytest.approx(SYNTHETIC[0], rel=1e-9)
+    assert resolved.time_s > 0
+    # joint goals come back from the aiming stage as resolved (no compensation, nothing to say)
+    setup_j = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="joint"), echo=lambda *a: None)
+    resolved_j = pipeline.resolve_goals(setup_j, field, validity, echo=lambda *a: None)
+    aimed = pipeline.aim_goals(setup_j, resolved_j, validity, echo=lambda *a: None)
+    np.testing.assert_array_equal(aimed.q[0], [0.6, -0.4, -0.06])
+    assert aimed.compensations == (None,) and dict(aimed.errors) == {}
+
+
+def test_check_start_rejects_a_start_in_collision(tmp_path):
+    robot = load_robot(TABLE7)
+    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="free"), echo=lambda *a: None)
+    field = _field(robot)
+    assert pipeline.check_start(setup, field)(setup.scenario.start)   # control: free start is valid
+    alpha, beta = robot.configuration(setup.scenario.start)
+    tip = solve_standard(robot, alpha, beta, setup.check_settings).tip_position
+    sphere = f"""
+[[obstacles]]
+type = "sphere"
+center_m = [{float(tip[0])!r}, {float(tip[1])!r}, {float(tip[2])!r}]
+radius_m = 0.004
+"""
+    blocked = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, sphere, name="blocked"), echo=lambda *a: None)
+    with pytest.raises(UnreachableGoalError, match="start configuration"):
+        pipeline.check_start(blocked, field)
+
+
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory):
+    """Stages 1-6 on a short joint-space move with the synthetic field (20 RRT* iterations)."""
+    tmp_path = tmp_path_factory.mktemp("stages")
+    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "out", echo=lambda *a: None)
+    bound_map = pipeline.BoundMapStage(field=_field(setup.robot), source="synthetic", time_s=0.0)
+    validity = pipeline.check_start(setup, bound_map.field)
+    resolved = pipeline.resolve_goals(setup, bound_map.field, validity, echo=lambda *a: None)
+    aimed = pipeline.aim_goals(setup, resolved, validity, echo=lambda *a: None)
+    plans = pipeline.plan_routes(setup, bound_map.field, aimed, compare_blind=True, n_jobs=1, echo=lambda *a: None)
+    traj = pipeline.time_parameterize(setup, plans.aware.ordered)
+    return setup, bound_map, validity, resolved, aimed, plans, traj
+
+
+def test_plan_routes_returns_bounds_and_lengths_in_si_units(planned):
+    setup, _, _, _, aimed, plans, _ = planned
+    assert list(plans.routes) == ["bound_aware", "bound_blind"] and not plans.in_parallel
+    for plan in plans.routes.values():
+        ordered = plan.ordered
+        np.testing.assert_allclose(ordered.q[0], setup.scenario.start, atol=1e-12)
+        np.testing.assert_allclose(ordered.q[-1], aimed.q[-1], atol=1e-9)      # the planned goal is reached
+        # the map's bound of each waypoint's motion, in m (synthetic: 1 mm friction, 0.5 mm after a translation)
+        expected = [SYNTHETIC[2] if m == "translation" else SYNTHETIC[0] for m in ordered.motions]
+        np.testing.assert_allclose(plan.bounds.planned, expected, rtol=1e-12)
+        np.testing.assert_allclose(plan.bounds.dense_given_last,
+                                   [SYNTHETIC[2] if m == "translation" else SYNTHETIC[0]
+                                    for m in plan.bounds.dense_motion], rtol=1e-12)
+        # the path length is the joint-space length of the ordered waypoints [m of the metric]
+        space = JointStateSpace(setup.robot)
+        length = sum(space.distance(a, b) for a, b in zip(ordered.q[:-1], ordered.q[1:]))
+        assert plan.bounds.dense_s[-1] == pytest.approx(length, rel=1e-9)
+        assert plan.max_body_step_m == DEFAULT_MAX_BODY_STEP
+        # exact bounds of the Table VII robot are millimetres, i.e. ~1e-3 in m, and angles in rad
+        exact = plan.bounds.exact
+        assert np.all((exact.position > 1e-5) & (exact.position < 0.03)), exact.position
+        assert np.all((exact.angle > 0) & (exact.angle < 1.0)), exact.angle
+        assert np.all(plan.prediction.offset[plan.prediction.ok] < 0.03)
+
+
+def test_report_stage_converts_the_si_results_to_mm_and_degrees_once(planned):
+    setup, bound_map, validity, resolved, aimed, plans, traj = planned
+    rows = pipeline.path_rows(plans.aware)
+    exact = plans.aware.bounds.exact
+    assert [r["bound_position_m"] for r in rows] == [float(x) for x in exact.position]
+    summary = pipeline.plan_summary(setup, bound_map, validity, resolved, aimed, plans, traj)
+    aware = summary["bound_aware"]
+    assert aware["max_bound_at_waypoints_mm"] == pytest.approx(1e3 * np.nanmax(exact.position), rel=1e-12)
+    assert aware["final_bound_angle_deg"] == pytest.approx(np.degrees(exact.angle[-1]), rel=1e-12)
+    assert aware["final_check"]["max_body_step_mm"] == pytest.approx(1e3 * DEFAULT_MAX_BODY_STEP)
+    assert aware["joint_path_length_m"] == plans.aware.bounds.dense_s[-1]            # m stays m
+    assert summary["goals"][0]["field_bound_planned_mm"] == pytest.approx(1e3 * SYNTHETIC[0], rel=1e-12)
+    assert summary["bound_map"]["ds_m"] == setup.settings.ds
+    assert summary["duration_s"] == traj.duration and summary["times_s"]["total"] is None
+    assert set(summary["comparison"]["final_bound_mm"]) == {"bound_aware", "bound_blind"}
