@@ -172,6 +172,11 @@ def write_report(results: dict, out_dir) -> dict:
     base_fit = results["baseline"]["fit"]
     lines += ["", f"Baseline fit: {base_fit['message']}" + ("" if base_fit.get("converged", True) else
                                                             " (**not converged**)") + "."]
+    cfit = results.get("contact_baseline")
+    if cfit:
+        lines += ["", f"Clearance-model refit of the tube parameters (shared by the clearance and friction candidates): "
+                      f"cost {cfit['cost']:.4g}; {cfit['message']}" + ("" if cfit.get("converged", True) else
+                                                                     " (**not converged**)") + "."]
     if notes:
         lines += ["", "Fits:", ""] + notes
     lines += ["", "Rule: an effect is eligible when its signature test is significant, its held-out improvement "
