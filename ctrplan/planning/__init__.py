@@ -11,7 +11,11 @@ Building blocks (each usable on its own in an OMPL setup, see ``docs/planning.md
 - :class:`BoundCostObjective`: ``ob.OptimizationObjective`` = length + weight x integral of bound.
 - :func:`plan` with :data:`PLANNERS`, :class:`ValidityChecker`, :class:`PlanResult`.
 - :func:`order_path` (rotate, then translate) and :func:`bounds_given_last_motion`.
-- :func:`resolve_goal` for joint or tip-position goals.
+- :func:`resolve_goal` for joint or tip-position goals; :func:`compensate_goal` aims a tip-position
+  goal with the tip predicted for the motion that reaches it (compensated targeting).
+- :func:`path_history`, :func:`approach_history`, :func:`end_with`, :func:`goal_indices`: the
+  friction-relevant motion history of a path (direction of each pair's last relative rotation,
+  translation-last) and the scenario's final motion (:data:`FINAL_MOTIONS`).
 - :class:`~ctrplan.planning.validity.BatchValidityChecker` (states and motions in compiled
   batches, an OMPL motion validator), :class:`~ctrplan.planning.verify.MotionVerifier` (the
   final check of ordered phases) and :func:`plan_route` (plan, order, check, repair).
@@ -21,7 +25,9 @@ from ..boundmap import (QUANTITIES, BoundField, BoundFieldKeyError, Interpolatio
                         interpolation_error)
 from .collision import (BoxObstacle, CapsuleObstacle, CollisionChecker, CollisionReport, MeshObstacle,
                         SphereObstacle, obstacle_from_dict)
-from .goals import GoalSolution, JointGoal, TaskSpaceGoal, resolve_goal
+from .goals import CompensatedGoal, GoalSolution, JointGoal, TaskSpaceGoal, compensate_goal, resolve_goal
+from .history import (DEFAULT_FINAL_MOTION, FINAL_MOTIONS, PathHistory, approach_history, end_with, goal_indices,
+                      path_history)
 from .objective import DEFAULT_BOUND_WEIGHT, BoundCostObjective
 from .ordering import LastMotionBounds, OrderedPath, OrderedWaypoint, bounds_given_last_motion, order_path
 from .planners import PLANNERS, PlanResult, ValidityChecker, plan
@@ -38,7 +44,9 @@ __all__ = [
     "BoundCostObjective", "DEFAULT_BOUND_WEIGHT",
     "PLANNERS", "PlanResult", "ValidityChecker", "plan",
     "OrderedPath", "OrderedWaypoint", "LastMotionBounds", "order_path", "bounds_given_last_motion",
-    "JointGoal", "TaskSpaceGoal", "GoalSolution", "resolve_goal",
+    "JointGoal", "TaskSpaceGoal", "GoalSolution", "resolve_goal", "CompensatedGoal", "compensate_goal",
+    "PathHistory", "path_history", "approach_history", "end_with", "goal_indices", "FINAL_MOTIONS",
+    "DEFAULT_FINAL_MOTION",
     "BatchValidityChecker", "BatchMotionValidator", "use_motion_validator", "MotionVerifier", "MotionCheck",
     "Route", "RouteChecks", "plan_route", "route_checks",
 ]
