@@ -17,6 +17,16 @@ GRID_MERGE_TOL = 1e-9
 # the whole Newton budget (seconds).
 MAX_FAILED_INNER_STEPS = 10
 
+# Mixing parameter beta of the Anderson-accelerated outer loop (_contact_fast.Anderson). With
+# beta = 1 the loop stopped at 1 um steps up to 11.8 um away from the converged solution on the
+# 4x4x4 grid (slow contraction), and some configurations cycled between two contact states;
+# beta = 0.5 brings the first to 3.1 um and ends most cycles (docs/mechanics.md Sec. 10).
+ANDERSON_MIXING = 0.5
+
+# The outer loop gives up, unconverged, when its centerline change has not reached a new minimum
+# for this many iterations (it wanders instead of contracting).
+OUTER_STAGNATION_WINDOW = 15
+
 # The standard model's Newton shooting from no twist is first run on a grid this many times
 # coarser (same breakpoints) and the fine grid's Newton starts from its base torsions: the
 # RK4 solutions differ by little at that step, so the fine Newton needs about two sweeps.
@@ -30,7 +40,7 @@ PREDICTOR_TOL = 1e-4
 # other mechanics is recognised as stale instead of silently used. Bump it with every change
 # that moves a tip, a bound or a stability flag by more than the solvers' tolerances (shooting
 # 1e-9 1/m, contact outer loop 1e-6 m), and recompute the shipped maps (docs/boundmaps.md).
-MECHANICS_VERSION = "2026.11.22"
+MECHANICS_VERSION = "2026.11.22.2"
 
 # Relative inflation of the worst-case torsional coupling in the uniqueness screen of the standard
 # model (mechanics/_uniqueness.py): the O(h^2) error of the discretized smallest eigenvalue is far

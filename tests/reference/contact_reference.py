@@ -2,7 +2,10 @@
 speed work of issue 4). Slow and simple on purpose: tests/test_mechanics_fast_vs_reference.py
 holds the fast path in ctrplan.mechanics to it. Do not optimise; only imports were changed:
 the discrete chain kinematics (ctrplan.mechanics.discrete, not
-changed by the speed work) is shared, not copied.
+changed by the speed work) is shared, not copied. One later change of the outer loop's iteration
+(not of the equations) is mirrored here, so that both solvers follow the same path: the Anderson
+mixing parameter ``constants.ANDERSON_MIXING`` and the stagnation stop
+``constants.OUTER_STAGNATION_WINDOW`` (issue 14).
 
 Original module docstring follows.
 
@@ -44,6 +47,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve
 
+from ctrplan.constants import ANDERSON_MIXING, OUTER_STAGNATION_WINDOW
 from ctrplan.errors import ConvergenceError
 from ctrplan.mechanics.discrete import TubeChain, chain_jacobians, forward_kinematics
 from ctrplan.mechanics.results import ContactSolution, Diagnostics, ModelSettings
@@ -153,8 +157,9 @@ class _Anderson:
     of that. The history is reset whenever the residual grows.
     """
 
-    def __init__(self, depth):
+    def __init__(self, depth, mixing=1.0):
         self.depth = depth
+        self.mixing = mixing
         self.u_hist, self.f_hist, self.g_hist = [], [], []
         self.last = np.inf
 
@@ -171,11 +176,11 @@ class _Anderson:
             self.f_hist.pop(0)
             self.g_hist.pop(0)
         if len(self.f_hist) < 2:
-            return g
+            return g if self.mixing == 1.0 else g - (1.0 - self.mixing) * f
         dF = np.column_stack([self.f_hist[j + 1] - self.f_hist[j] for j in range(len(self.f_hist) - 1)])
         dG = np.column_stack([self.g_hist[j + 1] - self.g_hist[j] for j in range(len(self.g_hist) - 1)])
         gamma = np.linalg.lstsq(dF, f, rcond=None)[0]
-        return g - dG @ gamma
+        return g - dG @ gamma - (1.0 - self.mixing) * (f - dF @ gamma)
 
 
 def _fb(a, b):
@@ -338,7 +343,8 @@ def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, 
     inner_ok = True
     change = np.inf
     outer = 0
-    anderson = _Anderson(settings.anderson_depth)
+    anderson = _Anderson(settings.anderson_depth, ANDERSON_MIXING)
+    best, best_at = np.inf, 0
     u_flat = np.concatenate([u.ravel() for u in u_list])
     for outer in range(1, settings.max_outer_iterations + 1):
         if setup.M == 0:
@@ -362,6 +368,10 @@ def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, 
         if change < settings.outer_tol and inner_ok:
             u_list, fk, u_flat = g_list, fk_g, g_flat
             converged = True
+            break
+        if change < best:
+            best, best_at = change, outer
+        elif outer - best_at >= OUTER_STAGNATION_WINDOW:
             break
         u_flat = anderson.step(u_flat, g_flat, change)
         u_list = setup.split(u_flat)
