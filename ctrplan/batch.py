@@ -22,10 +22,9 @@ from .errors import CtrplanError
 from .mechanics import (ModelSettings, all_eta, evaluate_bound, solve_clearance, solve_friction,
                         solve_standard, solve_standard_batch)
 from .mechanics._lie import angle_between
+from .models import MODELS  # the one registry of models
 
 __all__ = ["MODELS", "evaluate_configuration", "evaluate_table", "job_key"]
-
-MODELS = ("standard", "clearance", "friction")
 
 # Configurations per task: the standard model's compiled batch takes about 0.1-0.4 ms per
 # configuration, so a chunk of this many keeps the per-task overhead (process hand-off, one

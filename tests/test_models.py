@@ -54,4 +54,4 @@ def test_other_modules_use_the_same_model_names():
     simulate = importlib.import_module("ctrplan.discrepancy.simulate")
 
     assert robot_file.MODELS is MODELS
-    assert batch.MODELS == MODELS and simulate.MODELS == MODELS
+    assert batch.MODELS is MODELS and simulate.MODELS is MODELS

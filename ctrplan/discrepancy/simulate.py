@@ -28,10 +28,9 @@ from ..constants import HISTORY_ROTATION_TOL, HISTORY_TRANSLATION_TOL
 from ..errors import CtrplanError
 from ..io.tables import rotation_directions
 from ..mechanics import ModelSettings, solve_contact, solve_standard
+from ..models import MODELS  # the one registry of models
 
 __all__ = ["MODELS", "History", "Simulation", "motion_history", "simulate"]
-
-MODELS = ("standard", "clearance", "friction")
 
 # Rows per parallel task when rows are independent: enough to amortize the inter-process
 # transfer (a contact solve takes ~0.1 s, a task ~1 s), few enough to balance 2-8 workers.
