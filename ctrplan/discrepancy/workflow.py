@@ -30,8 +30,10 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -48,7 +50,14 @@ from .signatures import (EFFECT_LABELS, angle_features, friction_signature, over
                          vector_signature)
 
 __all__ = ["DiscrepancyOptions", "run_discrepancy", "default_baseline_parameters", "effect_parameters",
-           "paired_improvement", "EFFECTS"]
+           "paired_improvement", "EFFECTS", "DiscrepancySetup", "SampleSplit", "HeldOut", "Baseline", "NoiseCheck",
+           "Candidate", "Naming", "Combination", "EnvelopeCoverage", "HistoryPrediction", "UpdatedModel",
+           "Reproduction", "stage_key", "load_inputs", "split_samples", "evaluate_held_out", "calibrate_baseline",
+           "diagnose_residuals", "noise_check", "check_noise", "refit_contact_baseline", "fit_candidates",
+           "name_effect", "fit_second_effect", "predict_with_history", "write_updated_model", "check_reproduction",
+           "discrepancy_results"]
+
+Echo = Callable[[str], Any]
 
 #: Candidate effects, in the order they are tried (gradual friction after friction: it starts
 #: from the friction fit).
@@ -377,46 +386,470 @@ def _result_from(d: dict) -> CalibrationResult:
                              d.get("converged", True))
 
 
-def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions = DiscrepancyOptions(),
-                    echo=print, progress: bool = True) -> dict:
-    """Run the whole workflow and return its results (see the module docstring).
+# --------------------------------------------------------------------------- stage results
+@dataclass(frozen=True, eq=False)
+class DiscrepancySetup:
+    """Stage 1: what a run works on.
+
+    Attributes
+    ----------
+    robot_path, data_path : pathlib.Path
+        The robot model file and the measured data as given.
+    out_dir : pathlib.Path
+        Report folder.
+    robot : Robot
+        The loaded robot (lengths [m], precurvatures [1/m], angles [rad]).
+    data : MeasuredData
+        All measured samples (joints [rad, m], tip [m], time [s]).
+    register : bool
+        The data are in a tracker frame: the baseline fits a registration.
+    settings : ModelSettings
+        Model settings of every fit and evaluation (arc-length step ``ds`` [m], no multistart).
+    base_names : tuple of str
+        Baseline parameters (:mod:`ctrplan.discrepancy.parameters`).
+    effects : tuple of str
+        Candidate effects to test and try, in the order they are tried.
+    skipped : mapping of str to str
+        Requested effects the data cannot show -> why.
+    key : str
+        Stage key (:func:`stage_key`).
+    stages : _Stages
+        Finished stages on disk (``out_dir/.stages``), read and written under ``key``.
+    """
+
+    robot_path: Path
+    data_path: Path
+    out_dir: Path
+    robot: Any
+    data: MeasuredData
+    register: bool
+    settings: ModelSettings
+    base_names: tuple
+    effects: tuple
+    skipped: Mapping[str, str]
+    key: str
+    stages: Any
+
+
+@dataclass(frozen=True, eq=False)
+class SampleSplit:
+    """Stage 2: calibration and held-out samples.
+
+    Attributes
+    ----------
+    how : str
+        One line saying how the split was made (:func:`~ctrplan.discrepancy.data.split_data`).
+    calibration_rows, validation_rows, fit_rows : ndarray of bool, shape (N,)
+        Rows of ``setup.data`` in the calibration split, the held-out split, and the
+        calibration rows the least-squares fits use (at most ``max_calibration_samples``).
+    n_calibration : int
+        Samples in the calibration split.
+    fit_data : MeasuredData
+        The fitted rows.
+    val : MeasuredData
+        The held-out rows (K samples), the only ones any held-out statistic reads.
+    units : ndarray of int, shape (K,)
+        Exchangeable unit of each held-out sample for the paired tests (:func:`_units`).
+    """
+
+    how: str
+    calibration_rows: np.ndarray
+    validation_rows: np.ndarray
+    fit_rows: np.ndarray
+    n_calibration: int
+    fit_data: MeasuredData
+    val: MeasuredData
+    units: np.ndarray
+
+    @property
+    def n_fit(self) -> int:
+        """Samples the fits use."""
+        return self.fit_data.n_samples
+
+
+@dataclass(frozen=True, eq=False)
+class HeldOut:
+    """A model's errors on the held-out samples (the Eq. (49) terms).
+
+    Attributes
+    ----------
+    position : ndarray, shape (K,)
+        Tip position error [m]; NaN where the model failed.
+    angle : ndarray, shape (K,)
+        Tip tangent error [rad]; NaN where it failed or the tangent is not measured.
+    residual_base : ndarray, shape (K, 3)
+        Measured minus predicted tip, rotated into the robot's base frame [m].
+    tip_base : ndarray, shape (K, 3)
+        Predicted tip in the robot's base frame [m].
+    seconds : float
+        Evaluation time [s].
+    """
+
+    position: np.ndarray
+    angle: np.ndarray
+    residual_base: np.ndarray
+    tip_base: np.ndarray
+    seconds: float
+
+    def as_dict(self) -> dict:
+        """The stage file's content (arrays as arrays; SI units)."""
+        return {"position": self.position, "angle": self.angle, "residual_base": self.residual_base,
+                "tip_base": self.tip_base, "seconds": self.seconds}
+
+
+#: ``held_out(name, model, params) -> HeldOut``: :func:`evaluate_held_out` bound to one run.
+HeldOutFn = Callable[[str, str, Mapping], HeldOut]
+
+
+@dataclass(frozen=True, eq=False)
+class Baseline:
+    """Stage 3: the calibrated baseline (standard model).
+
+    Attributes
+    ----------
+    fit : CalibrationResult
+        Its least-squares fit on ``SampleSplit.fit_data`` (cost in (mm + deg)^2, Eq. (49)).
+    params : dict of str to float
+        Every parameter of the fit (fitted and fixed) [SI: 1/m, -, rad, m].
+    bic : float
+        Its Bayesian information criterion (:func:`information_criterion`).
+    held_out : HeldOut
+        Its held-out errors [m, rad].
+    r : ndarray, shape (K,)
+        Its held-out Eq. (49) residuals [mm + deg] (:func:`eq49_residuals`).
+    """
+
+    fit: CalibrationResult
+    params: dict
+    bic: float
+    held_out: HeldOut
+    r: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class NoiseCheck:
+    """Stage 5: is the baseline's held-out residual more than the sensor noise?
+
+    Attributes
+    ----------
+    noise : dict
+        :func:`estimate_noise` (``position_rms_m`` [m] or None, ``source``, ``n``,
+        ``upper_bound``, ``description``).
+    rms_m : float
+        rms of the baseline's held-out position errors [m] (NaN without a finite one).
+    ratio : float or None
+        ``rms_m`` over the noise rms; None when the noise is unknown.
+    consistent : bool or None
+        ``ratio <= NOISE_RATIO``; None when the noise is unknown.
+    """
+
+    noise: dict
+    rms_m: float
+    ratio: float | None
+    consistent: bool | None
+
+    def as_dict(self) -> dict:
+        """The report's form (``results.json["noise"]``; mm)."""
+        sigma = self.noise["position_rms_m"]
+        return {"rms_mm": self.rms_m * 1e3, "noise_rms_mm": None if sigma is None else sigma * 1e3,
+                "ratio": self.ratio, "consistent": self.consistent, "threshold_ratio": NOISE_RATIO,
+                "noise": self.noise}
+
+
+@dataclass(frozen=True, eq=False)
+class Candidate:
+    """A candidate effect (or, in :class:`Combination`, a pair of effects) fitted and evaluated.
+
+    Attributes
+    ----------
+    effects : tuple of str
+        The effect, or the named effect and the second one.
+    label : str
+    model : str
+        Mechanics model it is evaluated with (``"standard"``, ``"clearance"``, ``"friction"``).
+    fit : CalibrationResult
+    params : dict of str to float
+        Every parameter of the fit (fitted and fixed) [SI].
+    shown : dict of str to float
+        The parameters reported as its own [SI: -, 1/m, rad, m, s].
+    units : dict of str to str
+        Unit of each shown parameter.
+    implausible : list of dict
+        Shown values outside their plausible range (:func:`_implausible`; SI).
+    n_parameters : int
+        Parameters counted in its BIC (the baseline's included).
+    bic, delta_bic : float
+        BIC, and its difference to the baseline's (to the named effect's, for a pair).
+    held_out : HeldOut
+        Held-out errors [m, rad].
+    r : ndarray, shape (K,)
+        Held-out Eq. (49) residuals [mm + deg].
+    improvement_eq49, improvement_position : dict
+        :func:`paired_improvement` of the Eq. (49) residuals [mm + deg] and of the position
+        errors [m] over the baseline (over the named effect, for a pair).
+    fit_note : str
+        What its fit says about itself ("" if nothing); for a pair, that its fit stopped at
+        the budget.
+    signature_significant, improvement_significant, bic_better, eligible : bool or None
+        The naming rule's verdicts (:func:`name_effect`; for a pair, :func:`fit_second_effect`
+        sets the last three and ``eligible`` is None).
+    significant : bool or None
+        A pair's verdict (:func:`fit_second_effect`).
+    """
+
+    effects: tuple
+    label: str
+    model: str
+    fit: CalibrationResult
+    params: dict
+    shown: dict
+    units: dict
+    implausible: list
+    n_parameters: int
+    bic: float
+    delta_bic: float
+    held_out: HeldOut
+    r: np.ndarray
+    improvement_eq49: dict
+    improvement_position: dict
+    fit_note: str = ""
+    signature_significant: bool | None = None
+    improvement_significant: bool | None = None
+    bic_better: bool | None = None
+    eligible: bool | None = None
+    significant: bool | None = None
+
+    @property
+    def plausible(self) -> bool:
+        """Every shown value within its plausible range."""
+        return not self.implausible
+
+
+@dataclass(frozen=True, eq=False)
+class Naming:
+    """Stage 7: the named effect.
+
+    Attributes
+    ----------
+    candidates : mapping of str to Candidate
+        Every tried candidate with the naming rule's verdicts.
+    decision : dict
+        :func:`_decide`'s ``named``, ``eligible``, ``equally_good``, ``passed_over_implausible``,
+        ``notes``, and ``no_effect_case`` (``"noise"``, ``"unexplained"``, ``"unknown"``) when
+        none is named.
+    """
+
+    candidates: Mapping[str, Candidate]
+    decision: dict
+
+    @property
+    def named(self) -> str | None:
+        """The named effect, or None."""
+        return self.decision["named"]
+
+
+@dataclass(frozen=True, eq=False)
+class Combination:
+    """Stage 8: a second effect fitted on top of the named one.
+
+    Attributes
+    ----------
+    first, first_label : str
+        The named effect.
+    named : str or None
+        The second effect named with it.
+    tried : mapping of str to Candidate
+        Second effect -> the pair fitted and evaluated.
+    notes : tuple of str
+    rule : str
+        The rule a pair is named by.
+    """
+
+    first: str
+    first_label: str
+    named: str | None
+    tried: Mapping[str, Candidate]
+    notes: tuple
+    rule: str
+
+
+@dataclass(frozen=True, eq=False)
+class EnvelopeCoverage:
+    """Coverage of the friction envelope at evenly spaced held-out samples.
+
+    Attributes
+    ----------
+    n, inside : int
+        Samples with every bounding solution, and those within the envelope plus the margin.
+    fraction_inside : float
+    margin_m : float
+        :data:`ENVELOPE_NOISE_FACTOR` times the noise rms [m] (0 when unknown).
+    outside_median_m, outside_p95_m, outside_max_m : float or None
+        How far beyond the margin the others lie [m]; None if none.
+    size_median_m : float or None
+        Median largest distance between two bounding tips [m].
+    description : str
+    coefficients : dict of str to float
+        Friction coefficients used [-].
+    label : str
+        ``"fitted"`` or ``"reference ..."``.
+    """
+
+    n: int
+    inside: int
+    fraction_inside: float
+    margin_m: float
+    outside_median_m: float | None
+    outside_p95_m: float | None
+    outside_max_m: float | None
+    size_median_m: float | None
+    description: str
+    coefficients: dict
+    label: str
+
+    def as_dict(self) -> dict:
+        """The report's form (mm)."""
+        mm = (lambda x: None if x is None else x * 1e3)
+        return {"n": self.n, "inside": self.inside, "fraction_inside": self.fraction_inside,
+                "margin_mm": self.margin_m * 1e3, "outside_median_mm": mm(self.outside_median_m),
+                "outside_p95_mm": mm(self.outside_p95_m), "outside_max_mm": mm(self.outside_max_m),
+                "size_median_mm": mm(self.size_median_m), "description": self.description,
+                "coefficients": self.coefficients, "label": self.label}
+
+
+@dataclass(frozen=True, eq=False)
+class HistoryPrediction:
+    """Stage 9: held-out errors of the standard and the history-aware models.
+
+    Attributes
+    ----------
+    rows : tuple of (str, ndarray of shape (K,))
+        Label and held-out position errors [m] of each model compared.
+    envelopes : tuple of EnvelopeCoverage
+        Empty when ``options.envelope_samples`` is 0.
+    """
+
+    rows: tuple
+    envelopes: tuple
+
+
+@dataclass(frozen=True, eq=False)
+class UpdatedModel:
+    """Stage 10: the updated robot model file.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The written model file (history effects beside it, :func:`history_sidecar`).
+    model : str
+        Mechanics model it is evaluated with.
+    params : dict of str to float
+        Its calibrated parameters [SI].
+    named_effects : tuple of str
+    candidate : Candidate or None
+        The candidate it comes from (None: the recalibrated baseline).
+    held_out : HeldOut
+        Its held-out errors as the workflow evaluated them [m, rad].
+    """
+
+    path: Path
+    model: str
+    params: dict
+    named_effects: tuple
+    candidate: Candidate | None
+    held_out: HeldOut
+
+
+@dataclass(frozen=True, eq=False)
+class Reproduction:
+    """Stage 11: the written model file reloaded and re-evaluated.
+
+    Attributes
+    ----------
+    rows : ndarray of bool, shape (K,)
+        Held-out samples re-evaluated.
+    position : ndarray, shape (rows.sum(),)
+        Their tip position errors with the reloaded file [m].
+    reproduced : bool
+        Equal to the workflow's errors within 1 nm (NaN where both failed).
+    """
+
+    rows: np.ndarray
+    position: np.ndarray
+    reproduced: bool
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.rows.sum())
+
+
+# --------------------------------------------------------------------------- stages
+def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
+    """The key under which a run's finished stages are stored.
+
+    The stages depend on the inputs and on the options that change a fit, not on the number of
+    workers, the tests' permutations and level (the tests are not stored), the stated noise, the
+    envelope or the reference friction. Options added later (:data:`_LATER_OPTIONS`) enter the
+    key only when set away from their default, so the stages of earlier runs stay valid;
+    :data:`FIT_VERSION` enters it so that stages of an earlier least-squares procedure are not
+    reused.
+
+    Parameters
+    ----------
+    robot_path, data_path : path
+        The input files (their bytes enter the key).
+    options : DiscrepancyOptions
+
+    Returns
+    -------
+    str
+        12 hexadecimal digits of a SHA-256.
+    """
+    keyed = {k: v for k, v in asdict(options).items()
+             if k not in ("n_jobs", "n_permutations", "significance", "noise_position", "envelope_samples",
+                          "reference_friction")
+             and not (k in _LATER_OPTIONS and v == _LATER_OPTIONS[k])}
+    keyed["fit_version"] = FIT_VERSION   # stages of an earlier least-squares procedure are not reused
+    return hashlib.sha256(Path(robot_path).read_bytes() + Path(data_path).read_bytes()
+                          + json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:12]
+
+
+def load_inputs(robot_path, data_path, out_dir, options: DiscrepancyOptions) -> DiscrepancySetup:
+    """Stage 1: read the robot and the data, and choose the baseline parameters and the effects.
+
+    Registration is not a candidate for tracker-frame data (the baseline fits it); friction,
+    clearance and gradual friction need a robot of two or more tubes with diameters; gradual
+    friction needs the friction candidate; backlash needs a rotation that moves in the data and
+    the time offset a ``time`` column (else they are listed in ``skipped``).
 
     Parameters
     ----------
     robot_path : path
-        Robot model file with the candidate effects switched off (or not: the baseline uses
-        the standard model, which ignores friction and clearance).
+        Robot model file (TOML, SI units).
     data_path : path
-        Measured data (:func:`ctrplan.discrepancy.data.load_measured_data`).
+        Measured data (:func:`~ctrplan.discrepancy.data.load_measured_data`; SI units).
     out_dir : path
-        Report folder; finished stages are kept in ``out_dir/.stages`` and reused by a rerun
-        with the same inputs and options.
+        Report folder.
     options : DiscrepancyOptions
-    echo : callable
-        Receives one line per step.
-    progress : bool
-        Progress bars of model evaluations.
 
     Returns
     -------
-    dict
-        JSON-ready results; arrays for plots under the key ``"_arrays"``.
+    DiscrepancySetup
 
     Raises
     ------
     DataFileError
-        Bad data (see :func:`load_measured_data`), or fewer calibration samples than parameters.
+        Bad data.
     ModelFileError, PhysicalParameterError
         Bad robot file.
+    CtrplanError
+        A baseline parameter belongs to a candidate effect.
     """
-    from ..io.robot_file import load_robot, robot_to_toml
+    from ..io.robot_file import load_robot
 
-    t_start = time.perf_counter()
-    out_dir = Path(out_dir)
     robot = load_robot(robot_path)
     data = load_measured_data(data_path, robot, frame=options.frame)
     register = data.frame == "tracker"
-    settings = options.settings()
     base_names = tuple(options.fit) if options.fit else default_baseline_parameters(robot, register)
     effects = [e for e in options.effects if not (e == "registration" and register)]
     for e in effects:
@@ -435,37 +868,116 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     if "time_offset" in effects and data.time is None:
         skipped["time_offset"] = "the data has no 'time' column"
     effects = [e for e in effects if e not in skipped]
-    # the stages depend on the inputs and on the options that change a fit, not on the number of
-    # workers or the tests' permutations and level (the tests are not stored)
-    # (options added later enter the key only when set away from their default, so the stages
-    # of earlier runs stay valid)
-    keyed = {k: v for k, v in asdict(options).items()
-             if k not in ("n_jobs", "n_permutations", "significance", "noise_position", "envelope_samples",
-                          "reference_friction")
-             and not (k in _LATER_OPTIONS and v == _LATER_OPTIONS[k])}
-    keyed["fit_version"] = FIT_VERSION   # stages of an earlier least-squares procedure are not reused
-    key = hashlib.sha256(Path(robot_path).read_bytes() + Path(data_path).read_bytes()
-                         + json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:12]
-    stages = _Stages(out_dir, key)
+    key = stage_key(robot_path, data_path, options)
+    out_dir = Path(out_dir)
+    return DiscrepancySetup(robot_path=Path(robot_path), data_path=Path(data_path), out_dir=out_dir, robot=robot,
+                            data=data, register=register, settings=options.settings(), base_names=base_names,
+                            effects=tuple(effects), skipped=MappingProxyType(skipped), key=key,
+                            stages=_Stages(out_dir, key))
 
+
+def split_samples(setup: DiscrepancySetup, options: DiscrepancyOptions, echo: Echo = print) -> SampleSplit:
+    """Stage 2: split the data into calibration and held-out samples, whole units at a time.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    options : DiscrepancyOptions
+        ``calibration_fraction``, ``block_samples``, ``max_calibration_samples``, ``seed``.
+    echo : callable
+        Progress messages.
+
+    Returns
+    -------
+    SampleSplit
+
+    Raises
+    ------
+    DataFileError
+        Either split empty, or no more fitted samples than the baseline's parameters plus the
+        largest effect's.
+    """
+    data, robot, base_names = setup.data, setup.robot, setup.base_names
     cal_rows, val_rows, how = split_data(data, options.calibration_fraction, block_samples=options.block_samples,
                                          seed=options.seed)
     fit_rows = _subsample(data, cal_rows, options.max_calibration_samples, options.seed)
     cal, fit_data, val = data.take(cal_rows), data.take(fit_rows), data.take(val_rows)
     n_fit = fit_data.n_samples
-    if n_fit <= len(base_names) + max((len(effect_parameters(robot, e)) for e in effects), default=0):
+    if n_fit <= len(base_names) + max((len(effect_parameters(robot, e)) for e in setup.effects), default=0):
         raise DataFileError(f"{data.file}: {n_fit} calibration samples are not more than the "
                             f"{len(base_names)} baseline parameters plus the largest effect's; "
                             f"give more samples")
     echo(f"data: {data.n_samples} samples ({data.frame} frame) from {data.file}; split {how}; "
          f"fitting on {n_fit} calibration samples, validating on {val.n_samples}")
+    return SampleSplit(how=how, calibration_rows=cal_rows, validation_rows=val_rows, fit_rows=fit_rows,
+                       n_calibration=cal.n_samples, fit_data=fit_data, val=val, units=_units(val))
 
-    # 1. baseline ------------------------------------------------------------------------
+
+def evaluate_held_out(setup: DiscrepancySetup, split: SampleSplit, name: str, model: str, params: Mapping,
+                      *, n_jobs: int = 1, progress: bool = True, echo: Echo = print) -> HeldOut:
+    """A model's errors on the held-out samples, read from the stage ``validation-<name>`` if
+    an earlier run finished it, else evaluated and stored there.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : SampleSplit
+    name : str
+        Stage name (e.g. ``"baseline"``, an effect, ``"combination-<a>+<b>"``).
+    model : str
+        ``"standard"``, ``"clearance"`` or ``"friction"``.
+    params : mapping of str to float
+        Parameters applied to the robot (a registration maps into the data's frame) [SI].
+    n_jobs : int
+    progress : bool
+        Progress bar of the evaluation.
+    echo : callable
+
+    Returns
+    -------
+    HeldOut
+        Errors of the K held-out samples [m, rad].
+    """
+    cached = setup.stages.load(f"validation-{name}")
+    if cached is not None:
+        return HeldOut(**{k: np.array(v, float) if isinstance(v, list) else v for k, v in cached.items()})
+    val = split.val
+    echo(f"  evaluating {name} ({model} model) on {val.n_samples} held-out samples ...")
+    pred = predict(setup.robot, tuple(params), tuple(params.values()), val, model, setup.settings,
+                   n_jobs=n_jobs, progress=progress)
+    pos, ang, vec = pose_errors(pred, val)
+    R, _ = registration_transform(tuple(params), tuple(params.values()))
+    res = HeldOut(position=pos, angle=ang, residual_base=vec @ R, tip_base=pred.tip_base, seconds=pred.seconds)
+    setup.stages.save(f"validation-{name}", res.as_dict())
+    return res
+
+
+def calibrate_baseline(setup: DiscrepancySetup, split: SampleSplit, options: DiscrepancyOptions,
+                       held_out: HeldOutFn, echo: Echo = print) -> Baseline:
+    """Stage 3: calibrate the baseline (standard model) on the fitted calibration samples, by
+    least squares on Eq. (49) of Ha, Fagogenis & Dupont 2019 (:func:`calibrate`), and evaluate
+    it on the held-out samples. A baseline fit finished by an earlier run is reused.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : SampleSplit
+    options : DiscrepancyOptions
+        ``max_evaluations``, ``n_jobs``.
+    held_out : callable
+        ``held_out(name, model, params) -> HeldOut`` (:func:`evaluate_held_out` bound to the run).
+    echo : callable
+
+    Returns
+    -------
+    Baseline
+    """
+    stages = setup.stages
     done = stages.load("baseline")
     if done is None:
-        echo(f"calibrating the baseline (standard model) on {', '.join(base_names)} ...")
-        base = calibrate(robot, fit_data, "standard", base_names, settings=settings, n_jobs=options.n_jobs,
-                         register=register, max_evaluations=options.max_evaluations)
+        echo(f"calibrating the baseline (standard model) on {', '.join(setup.base_names)} ...")
+        base = calibrate(setup.robot, split.fit_data, "standard", setup.base_names, settings=setup.settings,
+                         n_jobs=options.n_jobs, register=setup.register, max_evaluations=options.max_evaluations)
         stages.save("baseline", base.as_dict())
     else:
         base = _result_from(done)
@@ -473,26 +985,38 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     echo(f"  baseline: cost {base.cost:.4g} on {base.n_samples} samples, {base.evaluations} model "
          f"evaluations, {base.seconds:.1f} s ({base.message})")
     base_all = dict(zip(*base.all_parameters()))
-
-    def held_out(name, model, params: dict):
-        cached = stages.load(f"validation-{name}")
-        if cached is not None:
-            return {k: np.array(v, float) if isinstance(v, list) else v for k, v in cached.items()}
-        echo(f"  evaluating {name} ({model} model) on {val.n_samples} held-out samples ...")
-        pred = predict(robot, tuple(params), tuple(params.values()), val, model, settings,
-                       n_jobs=options.n_jobs, progress=progress)
-        pos, ang, vec = pose_errors(pred, val)
-        R, _ = registration_transform(tuple(params), tuple(params.values()))
-        res = {"position": pos, "angle": ang, "residual_base": vec @ R, "tip_base": pred.tip_base,
-               "seconds": pred.seconds}
-        stages.save(f"validation-{name}", res)
-        return res
-
     base_val = held_out("baseline", "standard", base_all)
+    return Baseline(fit=base, params=base_all, bic=information_criterion(base.cost, base.n_samples, len(base.names)),
+                    held_out=base_val, r=eq49_residuals(base_val.position, base_val.angle))
 
-    # 2. signature tests on held-out residuals --------------------------------------------
+
+def diagnose_residuals(setup: DiscrepancySetup, split: SampleSplit, baseline: Baseline,
+                       options: DiscrepancyOptions, echo: Echo = print) -> dict:
+    """Stage 4: one signature test per candidate effect on the baseline's held-out residuals
+    (:mod:`ctrplan.discrepancy.signatures`).
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : SampleSplit
+        Only its held-out samples are read.
+    baseline : Baseline
+        Its held-out residual vectors [m] are tested.
+    options : DiscrepancyOptions
+        ``n_permutations``, ``seed``, ``n_jobs``.
+    echo : callable
+
+    Returns
+    -------
+    dict of str to SignatureTest
+        One per candidate effect (``effect_size_m`` [m]), in :data:`EFFECTS` order except the
+        time offset last.
+    """
+    robot, data, val, settings, effects, stages = (setup.robot, setup.data, split.val, setup.settings,
+                                                   setup.effects, setup.stages)
+    base_val, base_all = baseline.held_out, baseline.params
     echo("testing residual signatures ...")
-    E = base_val["residual_base"]
+    E = base_val.residual_base
     groups = val.config_id if _configurations_repeat(val.config_id) else configuration_groups(
         val.alpha, val.beta, TRAJECTORY_ROTATION_BIN, TRAJECTORY_TRANSLATION_BIN)
     base_robot = apply_parameters(robot, tuple(base_all), tuple(base_all.values()))
@@ -512,11 +1036,11 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         tube = _most_strained_tube(robot)
         twist = _twist(base_robot, val.alpha, val.beta, tube, settings)
         tests["poisson"] = regression_signature(
-            "poisson", E, twist_features(twist, base_val["tip_base"]), val.config_id, sequence=val.sequence,
+            "poisson", E, twist_features(twist, base_val.tip_base), val.config_id, sequence=val.sequence,
             description=f"twist of tube {tube + 1} (most strained) and its square, times 1, cos, sin of "
                         f"the tip azimuth", **perm)
     if "registration" in effects:
-        tests["registration"] = registration_signature(E, base_val["tip_base"], val.config_id, **perm)
+        tests["registration"] = registration_signature(E, base_val.tip_base, val.config_id, **perm)
     if {"backlash", "gradual_friction"} & set(effects):
         jac = stages.load("alpha-jacobian")
         if jac is None:
@@ -554,7 +1078,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                     description=f"eta_k exp(-rotation since reversal / {np.rad2deg(FRICTION_ANGLE_REFERENCE):.0f} "
                                 f"deg) d tip/d alpha_(k+1), beyond eta_k d tip/d alpha_(k+1)", **perm)
     if "time_offset" in effects:
-        v = tip_velocity(base_val["tip_base"], val.time, val.sequence)
+        v = tip_velocity(base_val.tip_base, val.time, val.sequence)
         tests["time_offset"] = vector_signature(
             "time_offset", E, -v[:, :, None], groups, sequence=val.sequence,
             description="-d tip/dt of the baseline model along the recorded motion", **perm)
@@ -563,153 +1087,478 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
             echo(f"  {EFFECT_LABELS[e]:>30s}: effect {t.effect_size_m * 1e3:.3f} mm, p = {t.p_value:.4f}")
         else:
             echo(f"  {EFFECT_LABELS[e]:>30s}: {t.description}")
+    return tests
 
-    # noise: is the baseline's held-out residual more than the sensor noise? -----------------
-    noise = estimate_noise(data, options.noise_position)
-    noise_check = _noise_check(base_val["position"], noise)
-    echo(f"  sensor noise: {noise['description']}; held-out baseline rms {noise_check['rms_mm']:.3f} mm"
-         + (f" = {noise_check['ratio']:.2f} x noise" if noise_check["ratio"] is not None else ""))
 
-    # 3. try each candidate ---------------------------------------------------------------
-    units = _units(val)
-    base_r = eq49_residuals(base_val["position"], base_val["angle"])
-    base_bic = information_criterion(base.cost, base.n_samples, len(base.names))
+def noise_check(position, noise: dict) -> NoiseCheck:
+    """Held-out rms position error against the noise rms (ratio <= :data:`NOISE_RATIO`:
+    consistent).
+
+    Parameters
+    ----------
+    position : ndarray, shape (K,)
+        Held-out tip position errors [m]; NaN rows ignored.
+    noise : dict
+        :func:`estimate_noise` (``position_rms_m`` [m] or None).
+
+    Returns
+    -------
+    NoiseCheck
+    """
+    pos = position[np.isfinite(position)]
+    rms = float(np.sqrt(np.mean(pos * pos))) if pos.size else float("nan")
+    sigma = noise["position_rms_m"]
+    ratio = rms / sigma if sigma else None
+    return NoiseCheck(noise=noise, rms_m=rms, ratio=ratio,
+                      consistent=None if ratio is None else bool(ratio <= NOISE_RATIO))
+
+
+def check_noise(setup: DiscrepancySetup, baseline: Baseline, options: DiscrepancyOptions,
+                echo: Echo = print) -> NoiseCheck:
+    """Stage 5: the sensor noise (stated in ``options.noise_position`` [m], else estimated from
+    all the data's rests or repeats, :func:`estimate_noise`) against the baseline's held-out
+    residual (:func:`noise_check`).
+
+    Returns
+    -------
+    NoiseCheck
+    """
+    noise = estimate_noise(setup.data, options.noise_position)
+    check = noise_check(baseline.held_out.position, noise)
+    echo(f"  sensor noise: {noise['description']}; held-out baseline rms {check.rms_m * 1e3:.3f} mm"
+         + (f" = {check.ratio:.2f} x noise" if check.ratio is not None else ""))
+    return check
+
+
+def refit_contact_baseline(setup: DiscrepancySetup, split: SampleSplit, baseline: Baseline,
+                           options: DiscrepancyOptions, echo: Echo = print) -> CalibrationResult | None:
+    """Stage 6a: the baseline parameters refitted once with the clearance model, shared by the
+    clearance and friction candidates (Section V-C; Table VII of Ha et al. 2019), within
+    ``options.max_contact_evaluations``. Reused when an earlier run finished it.
+
+    Returns
+    -------
+    CalibrationResult or None
+        None when neither friction nor clearance is a candidate.
+    """
+    if not ("friction" in setup.effects or "clearance" in setup.effects):
+        return None
+    base = baseline.fit
+    done = setup.stages.load("contact-baseline")
+    if done is None:
+        echo("recalibrating the baseline parameters with the clearance model (shared by the clearance "
+             "and friction candidates) ...")
+        contact = calibrate(setup.robot, split.fit_data, "clearance", base.names, fixed=base.fixed,
+                            initial=base.values, settings=setup.settings, n_jobs=options.n_jobs,
+                            max_evaluations=options.max_contact_evaluations)
+        setup.stages.save("contact-baseline", contact.as_dict())
+    else:
+        contact = _result_from(done)
+    echo(f"  clearance-model parameters: cost {contact.cost:.4g}, {contact.evaluations} evaluations, "
+         f"{contact.seconds:.1f} s" + ("" if contact.converged else "; NOT converged (stopped at its budget)"))
+    return contact
+
+
+def _fit_candidate(setup: DiscrepancySetup, split: SampleSplit, baseline: Baseline, contact_all, friction,
+                   effect: str, options: DiscrepancyOptions, echo: Echo) -> CalibrationResult:
+    """One candidate's fit (read from its stage, else fitted and stored)."""
+    robot, fit_data, settings = setup.robot, split.fit_data, setup.settings
+    base, base_all = baseline.fit, baseline.params
+    model = _MODEL_OF[effect]
+    extra = effect_parameters(robot, effect, setup.data)
+    done = setup.stages.load(f"fit-{effect}")
+    if done is not None:
+        echo(f"candidate {EFFECT_LABELS[effect]}: fit reused from an earlier run")
+        return _result_from(done)
+    echo(f"candidate {EFFECT_LABELS[effect]}: fitting {', '.join(extra) or 'no parameters'} "
+         f"({model} model) ...")
+    if effect == "friction":
+        fit = grid_search_friction(robot, fit_data, contact_all, settings=settings, n_jobs=options.n_jobs,
+                                   coarse=options.friction_grid, search_samples=options.friction_search_samples,
+                                   seed=options.seed, progress=_grid_progress(echo))
+    elif effect == "clearance":
+        fit = calibrate(robot, fit_data, "clearance", (), fixed=contact_all, settings=settings,
+                        n_jobs=options.n_jobs)
+    elif effect == "gradual_friction":
+        fit = _scan_fit(robot, fit_data, "friction", dict(friction.params), "friction_angle", FRICTION_ANGLE_SCAN,
+                        settings, options.n_jobs)
+    else:
+        # nested in the baseline: start at the baseline's values with the effect switched off (so
+        # the fit can only lower the calibration cost), the history effects from the best point
+        # of a 1-D scan
+        names = tuple(base.names) + extra
+        start = apply_parameters(robot, tuple(base_all), tuple(base_all.values()))
+        init = np.concatenate([base.values, read_parameters(start, extra)])
+        if effect in ("backlash", "time_offset"):
+            # start: best of a 1-D scan, then the effect's own parameters alone with the baseline
+            # held (a few parameters: cheap steps), then everything together
+            scan = BACKLASH_SCAN if effect == "backlash" else TIME_OFFSET_SCAN
+            best = _scan_fit(robot, fit_data, "standard", base_all, extra, scan, settings, options.n_jobs)
+            alone = calibrate(robot, fit_data, "standard", extra, fixed=base_all, initial=best.values,
+                              settings=settings, n_jobs=options.n_jobs, max_evaluations=options.max_evaluations)
+            init[len(base.names):] = alone.values
+        fit = calibrate(start, fit_data, "standard", names, initial=init, settings=settings,
+                        n_jobs=options.n_jobs, max_evaluations=options.max_evaluations)
+    setup.stages.save(f"fit-{effect}", fit.as_dict())
+    return fit
+
+
+def fit_candidates(setup: DiscrepancySetup, split: SampleSplit, baseline: Baseline,
+                   contact: CalibrationResult | None, options: DiscrepancyOptions, held_out: HeldOutFn,
+                   echo: Echo = print) -> dict:
+    """Stage 6b: switch each candidate effect on, fit its parameters with the baseline's
+    refitted (friction coefficients by grid search, Section V-C; the clearance and friction
+    candidates from ``contact``'s tube parameters; gradual friction from the friction fit; the
+    others nested in the baseline), and measure its error on the held-out samples. Fits
+    finished by an earlier run are reused.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : SampleSplit
+    baseline : Baseline
+    contact : CalibrationResult or None
+        :func:`refit_contact_baseline`.
+    options : DiscrepancyOptions
+    held_out : callable
+        ``held_out(name, model, params) -> HeldOut``.
+    echo : callable
+
+    Returns
+    -------
+    dict of str to Candidate
+        One per effect of ``setup.effects``, in order, without the naming verdicts.
+    """
+    robot, val, units = setup.robot, split.val, split.units
+    base, base_val = baseline.fit, baseline.held_out
+    contact_all = dict(zip(*contact.all_parameters())) if contact is not None else None
     candidates = {}
-    contact_all = None
-    if "friction" in effects or "clearance" in effects:
-        # The clearance and friction models share the tube parameters (Section V-C): refit the
-        # baseline parameters with the clearance model once, then try both effects from there.
-        done = stages.load("contact-baseline")
-        if done is None:
-            echo("recalibrating the baseline parameters with the clearance model (shared by the clearance "
-                 "and friction candidates) ...")
-            contact = calibrate(robot, fit_data, "clearance", base.names, fixed=base.fixed, initial=base.values,
-                                settings=settings, n_jobs=options.n_jobs,
-                                max_evaluations=options.max_contact_evaluations)
-            stages.save("contact-baseline", contact.as_dict())
-        else:
-            contact = _result_from(done)
-        echo(f"  clearance-model parameters: cost {contact.cost:.4g}, {contact.evaluations} evaluations, "
-             f"{contact.seconds:.1f} s" + ("" if contact.converged else "; NOT converged (stopped at its budget)"))
-        contact_all = dict(zip(*contact.all_parameters()))
-    for e in effects:
+    for e in setup.effects:
         model = _MODEL_OF[e]
-        extra = effect_parameters(robot, e, data)
-        done = stages.load(f"fit-{e}")
-        if done is not None:
-            fit = _result_from(done)
-            echo(f"candidate {EFFECT_LABELS[e]}: fit reused from an earlier run")
-        else:
-            echo(f"candidate {EFFECT_LABELS[e]}: fitting {', '.join(extra) or 'no parameters'} "
-                 f"({model} model) ...")
-            if e == "friction":
-                fit = grid_search_friction(robot, fit_data, contact_all, settings=settings, n_jobs=options.n_jobs,
-                                           coarse=options.friction_grid,
-                                           search_samples=options.friction_search_samples, seed=options.seed,
-                                           progress=_grid_progress(echo))
-            elif e == "clearance":
-                fit = calibrate(robot, fit_data, "clearance", (), fixed=contact_all, settings=settings,
-                                n_jobs=options.n_jobs)
-            elif e == "gradual_friction":
-                fit = _scan_fit(robot, fit_data, "friction", dict(candidates["friction"]["_params"]),
-                                "friction_angle", FRICTION_ANGLE_SCAN, settings, options.n_jobs)
-            else:
-                # nested in the baseline: start at the baseline's values with the effect switched
-                # off (so the fit can only lower the calibration cost), the history effects from
-                # the best point of a 1-D scan
-                names = tuple(base.names) + extra
-                start = apply_parameters(robot, tuple(base_all), tuple(base_all.values()))
-                init = np.concatenate([base.values, read_parameters(start, extra)])
-                if e in ("backlash", "time_offset"):
-                    # start: best of a 1-D scan, then the effect's own parameters alone with the
-                    # baseline held (a few parameters: cheap steps), then everything together
-                    scan = BACKLASH_SCAN if e == "backlash" else TIME_OFFSET_SCAN
-                    best = _scan_fit(robot, fit_data, "standard", base_all, extra, scan, settings, options.n_jobs)
-                    alone = calibrate(robot, fit_data, "standard", extra, fixed=base_all, initial=best.values,
-                                      settings=settings, n_jobs=options.n_jobs,
-                                      max_evaluations=options.max_evaluations)
-                    init[len(base.names):] = alone.values
-                fit = calibrate(start, fit_data, "standard", names, initial=init, settings=settings,
-                                n_jobs=options.n_jobs, max_evaluations=options.max_evaluations)
-            stages.save(f"fit-{e}", fit.as_dict())
+        extra = effect_parameters(robot, e, setup.data)
+        fit = _fit_candidate(setup, split, baseline, contact_all, candidates.get("friction"), e, options, echo)
         params = dict(zip(*fit.all_parameters()))
         val_e = held_out(e, model, params)
-        r = eq49_residuals(val_e["position"], val_e["angle"])
+        r = eq49_residuals(val_e.position, val_e.angle)
         extra_all = tuple(extra) + (effect_parameters(robot, "friction") if e == "gradual_friction" else ())
-        k_total = len(set(base_names) | set(extra_all))
+        k_total = len(set(setup.base_names) | set(extra_all))
         bic = information_criterion(fit.cost, fit.n_samples, k_total)
-        test = paired_improvement(base_r, r, units, seed=options.seed)
-        pos_test = paired_improvement(base_val["position"], val_e["position"], units, seed=options.seed)
+        test = paired_improvement(baseline.r, r, units, seed=options.seed)
+        pos_test = paired_improvement(base_val.position, val_e.position, units, seed=options.seed)
         shown = {n: float(params[n]) for n in extra_all}
-        held = _error_summary(val_e["position"], val_e["angle"], val_e["seconds"], val.n_samples)
-        candidates[e] = {
-            "label": EFFECT_LABELS[e], "model": model, "fit": fit.as_dict(),
-            "parameters": shown, "units": {n: parameter(robot, n).unit for n in shown},
-            "implausible": _implausible(robot, shown),
-            "n_parameters": k_total, "bic": bic, "delta_bic": bic - base_bic,
-            "held_out": held, "improvement_eq49": test, "improvement_position": pos_test,
-            "fit_note": "; ".join(n for n in (
-                ("the clearance-model refit of the tube parameters it shares did not converge (stopped at "
-                 f"the budget of {options.max_contact_evaluations} evaluations): the candidate may be underrated"
-                 if e in ("friction", "clearance", "gradual_friction") and not contact.converged else ""),
-                _fit_note(e, fit, base, held, base_val, val_e)) if n),
-            "_val": val_e, "_params": params, "_r": r}
+        fit_note = "; ".join(n for n in (
+            ("the clearance-model refit of the tube parameters it shares did not converge (stopped at "
+             f"the budget of {options.max_contact_evaluations} evaluations): the candidate may be underrated"
+             if e in ("friction", "clearance", "gradual_friction") and not contact.converged else ""),
+            _fit_note(e, fit, base, base_val, val_e)) if n)
+        c = candidates[e] = Candidate(
+            effects=(e,), label=EFFECT_LABELS[e], model=model, fit=fit, params=params, shown=shown,
+            units={n: parameter(robot, n).unit for n in shown}, implausible=_implausible(robot, shown),
+            n_parameters=k_total, bic=bic, delta_bic=bic - baseline.bic, held_out=val_e, r=r,
+            improvement_eq49=test, improvement_position=pos_test, fit_note=fit_note)
+        held = _error_summary(val_e.position, val_e.angle, val_e.seconds, val.n_samples)
         echo(f"  {EFFECT_LABELS[e]}: {', '.join(f'{n} = {params[n]:.4g}' for n in extra_all) or 'nominal'}; "
              f"held-out mean {held['position_mean_mm']:.3f} mm, max {held['position_max_mm']:.3f} mm; "
-             f"dBIC {bic - base_bic:.1f}; improvement p = {test['p_value']:.4f}"
-             + (f"; {candidates[e]['fit_note']}" if candidates[e]["fit_note"] else ""))
+             f"dBIC {c.delta_bic:.1f}; improvement p = {test['p_value']:.4f}"
+             + (f"; {c.fit_note}" if c.fit_note else ""))
+    return candidates
 
-    # 4. name the missing effect ------------------------------------------------------------
-    base_summary = _error_summary(base_val["position"], base_val["angle"], base_val["seconds"], val.n_samples)
+
+def name_effect(split: SampleSplit, candidates: Mapping[str, Candidate], tests: Mapping, noise: NoiseCheck,
+                options: DiscrepancyOptions, echo: Echo = print) -> Naming:
+    """Stage 7: name the missing effect.
+
+    A candidate is eligible when its signature test is significant, its held-out Eq. (49)
+    improvement is significant (paired sign-flip test over held-out units, one-sided) and its
+    BIC beats the baseline's by more than :data:`BIC_MARGIN`; among the eligible, :func:`_decide`
+    names the plausible one with the largest held-out improvement. When none is named, the
+    decision says whether the baseline's held-out residual is consistent with the noise.
+
+    Parameters
+    ----------
+    split : SampleSplit
+        Its held-out ``units``.
+    candidates : mapping of str to Candidate
+        :func:`fit_candidates`.
+    tests : mapping of str to SignatureTest
+        :func:`diagnose_residuals`.
+    noise : NoiseCheck
+    options : DiscrepancyOptions
+        ``significance``, ``seed``.
+    echo : callable
+
+    Returns
+    -------
+    Naming
+    """
+    judged = {}
     eligible = []
     for e, c in candidates.items():
         sig = tests.get(e)
-        c["signature_significant"] = bool(sig is not None and sig.testable and sig.p_value < options.significance)
-        c["improvement_significant"] = bool(c["improvement_eq49"]["p_value"] < options.significance
-                                            and c["improvement_eq49"]["mean_difference"] > 0)
-        c["bic_better"] = bool(c["delta_bic"] < -BIC_MARGIN)
-        c["eligible"] = c["signature_significant"] and c["improvement_significant"] and c["bic_better"]
-        c["plausible"] = not c["implausible"]
-        if c["eligible"]:
+        signature = bool(sig is not None and sig.testable and sig.p_value < options.significance)
+        improvement = bool(c.improvement_eq49["p_value"] < options.significance
+                           and c.improvement_eq49["mean_difference"] > 0)
+        bic_better = bool(c.delta_bic < -BIC_MARGIN)
+        judged[e] = replace(c, signature_significant=signature, improvement_significant=improvement,
+                            bic_better=bic_better, eligible=signature and improvement and bic_better)
+        if judged[e].eligible:
             eligible.append(e)
-    decision = _decide(candidates, eligible, units, options)
+    decision = _decide({e: _decision_record(c) for e, c in judged.items()}, eligible, split.units, options)
     named = decision["named"]
     if named:
         echo(f"named effect: {EFFECT_LABELS[named]}")
         for line in decision["notes"]:
             echo(f"  {line}")
     else:
-        decision["no_effect_case"] = ("noise" if noise_check["consistent"] else
-                                      "unexplained" if noise_check["consistent"] is False else "unknown")
-        echo("no effect named: " + _no_effect_sentence(decision, noise_check, candidates))
+        decision["no_effect_case"] = ("noise" if noise.consistent else
+                                      "unexplained" if noise.consistent is False else "unknown")
+        echo("no effect named: " + _no_effect_sentence(decision, noise.as_dict(),
+                                                        _candidate_reports(judged, split.val.n_samples)))
+    return Naming(candidates=MappingProxyType(judged), decision=decision)
 
-    # 4b. a second effect on top of the named one (issue 13, Sec. 5) ------------------------
-    combination = None
-    if named:
-        combination = _second_effect(robot, data, fit_data, val, named, candidates, base, base_names, units,
-                                     stages, settings, options, echo, held_out)
-    pair = combination["named"] if combination else None
-    final = combination["tried"][pair] if pair else (candidates[named] if named else None)
+
+def _decision_record(c: Candidate) -> dict:
+    """What :func:`_decide` reads of a candidate."""
+    return {"label": c.label, "plausible": c.plausible, "implausible": c.implausible,
+            "improvement_eq49": c.improvement_eq49, "_r": c.r}
+
+
+def fit_second_effect(setup: DiscrepancySetup, split: SampleSplit, baseline: Baseline, naming: Naming,
+                      options: DiscrepancyOptions, held_out: HeldOutFn, echo: Echo = print) -> Combination | None:
+    """Stage 8: whether a second effect, fitted on top of the named one, still improves the
+    held-out error (issue 13, Sec. 5).
+
+    Tried: every other candidate whose signature test was significant, except pairs in
+    :data:`_NOT_COMBINED` (one contains the other). Fit on the calibration split only, starting
+    from the named effect's fit and the second effect's own fit: with the standard model, the
+    second effect's parameters alone (the named fit held), then everything together (nested: the
+    calibration cost cannot rise); with a contact model (dearer by ~30x), the second effect's
+    parameters alone, with ``options.max_contact_evaluations``. The pair is named by the
+    workflow's rule for single effects, with the named effect in place of the baseline: held-out
+    Eq. (49) improvement significant (paired sign-flip test over held-out units, one-sided,
+    ``options.significance``), BIC lower by more than :data:`BIC_MARGIN`, and every fitted value
+    plausible; among such pairs the largest held-out improvement. (Not "plausible alone": fitted
+    alone, an effect absorbs the other one and can look implausible, e.g. a backlash of 9.9 deg
+    for a hidden 4.6 deg plus a 0.15 s lag; the pair's own values must be plausible.) Fits
+    finished by an earlier run are reused.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : SampleSplit
+    baseline : Baseline
+    naming : Naming
+    options : DiscrepancyOptions
+    held_out : callable
+        ``held_out(name, model, params) -> HeldOut``.
+    echo : callable
+
+    Returns
+    -------
+    Combination or None
+        None when no effect is named.
+    """
+    named = naming.named
+    if not named:
+        return None
+    robot, data, fit_data, val, units, settings = (setup.robot, setup.data, split.fit_data, split.val, split.units,
+                                                   setup.settings)
+    candidates = naming.candidates
+    first = candidates[named]
+    p_first = dict(first.params)
+    first_names = _effect_names(robot, named, data)
+    first_held = _error_summary(first.held_out.position, first.held_out.angle, first.held_out.seconds,
+                                val.n_samples)
+    notes = []
+    rule = (f"held-out Eq. (49) improvement over {first.label} alone significant at {options.significance} "
+            f"(paired sign-flip test), BIC lower by more than {BIC_MARGIN}, fitted values plausible")
+    pool = [e for e in candidates if e != named and {e, named} not in _NOT_COMBINED
+            and candidates[e].signature_significant]
+    skipped = [e for e in candidates if e != named and e not in pool]
+    if skipped:
+        notes.append("not tried on top of " + first.label + ": " + ", ".join(
+            f"{candidates[e].label} ("
+            + ("contained in it or containing it" if {e, named} in _NOT_COMBINED else "signature not significant")
+            + ")"
+            for e in skipped))
+    tried = {}
+    for e in pool:
+        model = _combined_model(named, e)
+        second_names = tuple(n for n in _effect_names(robot, e, data) if n not in p_first)
+        if not second_names:
+            continue
+        init2 = np.array([candidates[e].params[n] for n in second_names], float)
+        tag = f"{named}+{e}"
+        done = setup.stages.load(f"fit-{tag}")
+        if done is not None:
+            fit = _result_from(done)
+        else:
+            echo(f"second effect: {candidates[e].label} on top of {first.label} ({model} model) ...")
+            budget = options.max_evaluations if model == "standard" else options.max_contact_evaluations
+            fit = calibrate(robot, fit_data, model, second_names, fixed=p_first, initial=init2, settings=settings,
+                            n_jobs=options.n_jobs, max_evaluations=budget)
+            if model == "standard":
+                names = tuple(p_first) + second_names
+                init = np.concatenate([np.array(list(p_first.values()), float), fit.values])
+                joint = calibrate(robot, fit_data, "standard", names, initial=init, settings=settings,
+                                  n_jobs=options.n_jobs, max_evaluations=options.max_evaluations)
+                if joint.cost <= fit.cost or not fit.converged:
+                    fit = joint
+            setup.stages.save(f"fit-{tag}", fit.as_dict())
+        params = dict(zip(*fit.all_parameters()))
+        val_c = held_out(f"combination-{tag}", model, params)
+        r = eq49_residuals(val_c.position, val_c.angle)
+        shown_names = first_names + tuple(n for n in _effect_names(robot, e, data) if n not in first_names)
+        shown = {n: float(params[n]) for n in shown_names}
+        k_total = len(set(setup.base_names) | set(shown_names))
+        bic = information_criterion(fit.cost, fit.n_samples, k_total)
+        test = paired_improvement(first.r, r, units, seed=options.seed)
+        implausible = _implausible(robot, shown)
+        improvement = bool(test["p_value"] < options.significance and test["mean_difference"] > 0)
+        bic_better = bool(bic - first.bic < -BIC_MARGIN)
+        c = tried[e] = Candidate(
+            effects=(named, e), label=f"{first.label} + {candidates[e].label}", model=model, fit=fit,
+            params=params, shown=shown, units={n: parameter(robot, n).unit for n in shown},
+            implausible=implausible, n_parameters=k_total, bic=bic, delta_bic=bic - first.bic, held_out=val_c,
+            r=r, improvement_eq49=test,
+            improvement_position=paired_improvement(first.held_out.position, val_c.position, units,
+                                                    seed=options.seed),
+            fit_note="" if fit.converged else ("its fit did not converge (stopped at the evaluation budget): the "
+                                               "pair may be underrated"),
+            improvement_significant=improvement, bic_better=bic_better,
+            significant=improvement and bic_better and not implausible)
+        held = _error_summary(val_c.position, val_c.angle, val_c.seconds, val.n_samples)
+        echo(f"  {c.label}: " + ", ".join(display_value(n, v, c.units[n]) for n, v in shown.items())
+             + f"; held-out mean {held['position_mean_mm']:.3f} mm (alone {first_held['position_mean_mm']:.3f}); "
+               f"dBIC {c.delta_bic:.1f}; improvement p = {test['p_value']:.4f}"
+             + ("" if fit.converged else "; fit NOT converged"))
+    passing = [e for e, c in tried.items() if c.significant]
+    second = None
+    if passing:
+        second = max(passing, key=lambda e: tried[e].improvement_eq49["mean_difference"])
+        c = tried[second]
+        after = _error_summary(c.held_out.position, c.held_out.angle, c.held_out.seconds, val.n_samples)
+        echo(f"named combination: {c.label} (held-out mean {first_held['position_mean_mm']:.3f} -> "
+             f"{after['position_mean_mm']:.3f} mm, p = {c.improvement_eq49['p_value']:.4f})")
+    elif tried:
+        notes.append("no second effect improves the held-out error of " + first.label + " significantly: "
+                     + "; ".join(f"{c.label}: p = {c.improvement_eq49['p_value']:.4f}, dBIC "
+                                 f"{c.delta_bic:.1f}" + ("" if c.plausible else ", implausible")
+                                 for c in tried.values()))
+    return Combination(first=named, first_label=first.label, named=second, tried=MappingProxyType(tried),
+                       notes=tuple(notes), rule=rule)
+
+
+#: What the prediction comparison reports (``results.json["prediction"]["description"]``).
+PREDICTION_DESCRIPTION = (
+    "Held-out tip position errors. Standard: the calibrated baseline, which ignores the motion history. "
+    "History-aware: the friction model (Section III of Ha et al. 2019) with each sample's recorded history "
+    "(eta of the last relative rotation of each pair; the clearance solution after a final translation), tube "
+    "parameters and friction coefficients calibrated on the calibration split only (reference coefficients, if "
+    "any, given).")
+
+
+def predict_with_history(setup: DiscrepancySetup, split: SampleSplit, baseline: Baseline, naming: Naming,
+                         noise: NoiseCheck, options: DiscrepancyOptions, held_out: HeldOutFn,
+                         echo: Echo = print) -> HistoryPrediction | None:
+    """Stage 9: held-out prediction errors of the standard and the history-aware models, and the
+    coverage of the friction envelope (issue 13, Sec. 3).
+
+    The history-aware model is the friction model along the recorded history with the friction
+    candidate's calibrated parameters and, when ``options.reference_friction`` is given, also
+    with those coefficients (e.g. published ones) on the same calibrated tube parameters. With
+    ``options.envelope_samples`` > 0, the envelope (convex hull of the 2^(n-1) bounding friction
+    solutions plus :data:`ENVELOPE_NOISE_FACTOR` times the noise rms) is evaluated at that many
+    evenly spaced held-out samples, for each coefficient set.
+
+    Returns
+    -------
+    HistoryPrediction or None
+        None without a friction candidate.
+    """
+    candidates, named, val = naming.candidates, naming.named, split.val
+    if "friction" not in candidates:
+        return None
+    fr = candidates["friction"]
+    rows = [("standard model, calibrated (no history)", baseline.held_out.position),
+            ("history-aware: friction model along the recorded history, fitted "
+             + ", ".join(f"{k} = {v:.3g}" for k, v in fr.shown.items()), fr.held_out.position)]
+    sets = [("fitted", fr.params, f"{len(all_eta_n(setup.robot))}")]
+    if options.reference_friction is not None:
+        mu = tuple(float(v) for v in options.reference_friction)
+        ref = dict(fr.params)
+        ref.update({f"mu_{k + 1}": v for k, v in enumerate(mu)})
+        tag = "-".join(f"{v:g}" for v in mu)
+        val_ref = held_out(f"reference-friction-{tag}", "friction", ref)
+        rows.append(("history-aware with the reference friction coefficients "
+                     + ", ".join(f"mu_{k + 1} = {v:.3g}" for k, v in enumerate(mu)), val_ref.position))
+        sets.append((f"reference {tag}", ref, f"reference-{tag}"))
+    if named and named != "friction":
+        rows.append((f"named effect: {candidates[named].label}", candidates[named].held_out.position))
+    for label, pos in rows:
+        s = _stats_mm(pos)
+        echo(f"  prediction: {label}: mean {s['mean_mm']:.3f}, p95 {s['p95_mm']:.3f}, max {s['max_mm']:.3f} mm")
+    k_env = min(int(options.envelope_samples), val.n_samples)
+    if k_env <= 0:
+        return HistoryPrediction(rows=tuple(rows), envelopes=())
+    rows_env = np.unique(np.linspace(0, val.n_samples - 1, k_env).round().astype(int))
+    sub = val.take(rows_env)
+    envelopes = []
+    for label, params, key in sets:
+        stage = f"envelope-{rows_env.size}" if label == "fitted" else f"envelope-{key}-{rows_env.size}"
+        env = _envelope(setup.robot, params, sub, noise.noise, setup.stages, stage, setup.settings, options.n_jobs,
+                        echo, coefficients={k: float(v) for k, v in params.items() if k.startswith("mu_")},
+                        label=label)
+        envelopes.append(env)
+        e = env.as_dict()
+        echo(f"  envelope ({label}): {e['inside']} of {e['n']} inside ({100 * e['fraction_inside']:.0f} %), "
+             f"outside by median {_mm(e['outside_median_mm'])}, max {_mm(e['outside_max_mm'])}; size median "
+             f"{_mm(e['size_median_mm'])}")
+    return HistoryPrediction(rows=tuple(rows), envelopes=tuple(envelopes))
+
+
+def _prediction_report(prediction: HistoryPrediction | None) -> dict | None:
+    """``results.json["prediction"]`` (mm)."""
+    if prediction is None:
+        return None
+    out = {"description": PREDICTION_DESCRIPTION,
+           "rows": [{"label": label, **_stats_mm(pos)} for label, pos in prediction.rows]}
+    if prediction.envelopes:
+        out["envelopes"] = [env.as_dict() for env in prediction.envelopes]
+        out["envelope"] = out["envelopes"][0]
+    return out
+
+
+def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Naming,
+                        combination: Combination | None, echo: Echo = print) -> UpdatedModel:
+    """Stage 10: write the robot model file with the named effect(s) and their calibrated
+    parameters (the recalibrated baseline when none is named) into ``setup.out_dir``, atomically;
+    history effects go beside it (:func:`history_sidecar`), a stale sidecar is removed.
+
+    Returns
+    -------
+    UpdatedModel
+    """
+    from ..io.robot_file import robot_to_toml
+
+    robot, named = setup.robot, naming.named
+    pair = combination.named if combination else None
+    final = combination.tried[pair] if pair else (naming.candidates[named] if named else None)
     named_effects = ([named] + ([pair] if pair else [])) if named else []
-
-    # prediction with the motion history and the friction envelope (issue 13, Sec. 3) --------
-    prediction = _prediction_figures(robot, val, base_val, candidates, named, noise, stages, settings, options,
-                                     echo, held_out)
-
-    # 5. write the updated model and check it reproduces ------------------------------------
-    final_params = final["_params"] if final else base_all
-    final_model = final["model"] if final else "standard"
+    final_params = final.params if final else baseline.params
+    final_model = final.model if final else "standard"
     reg_names = [n for n in final_params if n in REGISTRATION]
     registration = None
     if reg_names:
         vals = [final_params.get(n, 0.0) for n in REGISTRATION]
         registration = {"rotation_vector_rad": vals[:3], "translation_m": vals[3:]}
+    data_name = Path(setup.data_path).name
     updated = apply_parameters(robot, tuple(final_params), tuple(final_params.values()))
     updated = updated.replace(name=f"{robot.name}-{'-'.join(named_effects) or 'recalibrated'}",
-                              source=f"{robot.source}; recalibrated by ctrplan discrepancy on {Path(data_path).name}")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    model_path = out_dir / f"{updated.name}.toml"
-    header = (f"Written by `ctrplan discrepancy` from {Path(robot_path).name} and {Path(data_path).name}.\n"
+                              source=f"{robot.source}; recalibrated by ctrplan discrepancy on {data_name}")
+    setup.out_dir.mkdir(parents=True, exist_ok=True)
+    model_path = setup.out_dir / f"{updated.name}.toml"
+    header = (f"Written by `ctrplan discrepancy` from {Path(setup.robot_path).name} and {data_name}.\n"
               f"Named effect: {' + '.join(EFFECT_LABELS[e] for e in named_effects) or 'none'}; evaluate with the "
               f"{final_model} model.\nCalibrated parameters: "
               + ", ".join(f"{n} = {v:.6g}" for n, v in final_params.items() if n not in REGISTRATION))
@@ -724,49 +1573,207 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
                                             "parameters": hist_params}, indent=2) + "\n")
     elif side.exists():
         side.unlink()
-    final_val = final["_val"] if final else base_val
-    after = _error_summary(final_val["position"], final_val["angle"], final_val["seconds"], val.n_samples)
-    # whole configuration groups of a revisiting protocol; a trajectory is re-run whole, since a
-    # subsample would break its branch following (each sample starts from the previous one)
+    return UpdatedModel(path=model_path, model=final_model, params=final_params, named_effects=tuple(named_effects),
+                        candidate=final, held_out=final.held_out if final else baseline.held_out)
+
+
+def check_reproduction(setup: DiscrepancySetup, split: SampleSplit, updated: UpdatedModel,
+                       options: DiscrepancyOptions, echo: Echo = print) -> Reproduction:
+    """Stage 11: load the written model file back (:func:`reproduce_errors`) and check that it
+    gives the workflow's held-out errors: whole configuration groups of a revisiting protocol
+    (at most :data:`REPRODUCE_SAMPLES`); a trajectory is re-run whole, since a subsample would
+    break its branch following (each sample starts from the previous one).
+
+    Returns
+    -------
+    Reproduction
+
+    Raises
+    ------
+    ModelFileError, PhysicalParameterError
+        The written file does not load.
+    """
+    val = split.val
     check_rows = (_subsample(val, np.ones(val.n_samples, bool), REPRODUCE_SAMPLES, options.seed)
                   if _configurations_repeat(val.config_id) else np.ones(val.n_samples, bool))
-    check = reproduce_errors(model_path, val.take(check_rows), settings, n_jobs=options.n_jobs)
-    reproduced = bool(np.allclose(check["position"], final_val["position"][check_rows], atol=1e-9,
+    check = reproduce_errors(updated.path, val.take(check_rows), setup.settings, n_jobs=options.n_jobs)
+    reproduced = bool(np.allclose(check["position"], updated.held_out.position[check_rows], atol=1e-9,
                                   equal_nan=True))
-    echo(f"wrote {model_path}; reloaded, it reproduces the held-out errors of {int(check_rows.sum())} "
+    echo(f"wrote {updated.path}; reloaded, it reproduces the held-out errors of {int(check_rows.sum())} "
          f"samples: {reproduced} "
          f"(mean {np.nanmean(check['position']) * 1e3:.3f} mm)")
+    return Reproduction(rows=check_rows, position=check["position"], reproduced=reproduced)
 
-    cautions = _cautions(named, final, base_summary, after, robot)
+
+def _candidate_report(c: Candidate, n_val: int) -> dict:
+    """A single candidate as ``results.json["candidates"][effect]`` stores it (mm in ``held_out``)."""
+    out = {"label": c.label, "model": c.model, "fit": c.fit.as_dict(), "parameters": c.shown, "units": c.units,
+           "implausible": c.implausible, "n_parameters": c.n_parameters, "bic": c.bic, "delta_bic": c.delta_bic,
+           "held_out": _error_summary(c.held_out.position, c.held_out.angle, c.held_out.seconds, n_val),
+           "improvement_eq49": c.improvement_eq49, "improvement_position": c.improvement_position,
+           "fit_note": c.fit_note}
+    if c.eligible is not None:
+        out.update({"signature_significant": c.signature_significant,
+                    "improvement_significant": c.improvement_significant, "bic_better": c.bic_better,
+                    "eligible": c.eligible, "plausible": c.plausible})
+    return out
+
+
+def _candidate_reports(candidates: Mapping[str, Candidate], n_val: int) -> dict:
+    return {e: _candidate_report(c, n_val) for e, c in candidates.items()}
+
+
+def _pair_report(c: Candidate, n_val: int) -> dict:
+    """A pair as ``results.json["combination"]["tried"][effect]`` stores it (mm in ``held_out``)."""
+    out = {"effects": list(c.effects), "label": c.label, "model": c.model, "fit": c.fit.as_dict(),
+           "parameters": c.shown, "units": c.units, "implausible": c.implausible, "plausible": c.plausible,
+           "n_parameters": c.n_parameters, "bic": c.bic, "delta_bic": c.delta_bic,
+           "held_out": _error_summary(c.held_out.position, c.held_out.angle, c.held_out.seconds, n_val),
+           "improvement_eq49": c.improvement_eq49, "improvement_position": c.improvement_position,
+           "converged": bool(c.fit.converged), "improvement_significant": c.improvement_significant,
+           "bic_better": c.bic_better, "significant": c.significant}
+    if c.fit_note:
+        out["note"] = c.fit_note
+    return out
+
+
+def _combination_report(combination: Combination | None, naming: Naming, n_val: int) -> dict | None:
+    """``results.json["combination"]`` (mm)."""
+    if combination is None:
+        return None
+    tried = {e: _pair_report(c, n_val) for e, c in combination.tried.items()}
+    steps = []
+    if combination.named:
+        first = _candidate_report(naming.candidates[combination.first], n_val)
+        c = tried[combination.named]
+        steps = [
+            {"effect": combination.first, "label": first["label"],
+             "held_out_mean_mm": first["held_out"]["position_mean_mm"],
+             "held_out_max_mm": first["held_out"]["position_max_mm"],
+             "improvement_eq49": first["improvement_eq49"], "over": "baseline"},
+            {"effect": combination.named, "label": naming.candidates[combination.named].label,
+             "held_out_mean_mm": c["held_out"]["position_mean_mm"], "held_out_max_mm": c["held_out"]["position_max_mm"],
+             "improvement_eq49": c["improvement_eq49"], "over": combination.first}]
+    return {"first": combination.first, "first_label": combination.first_label, "named": combination.named,
+            "tried": tried, "steps": steps, "notes": list(combination.notes), "rule": combination.rule}
+
+
+def discrepancy_results(setup: DiscrepancySetup, split: SampleSplit, baseline: Baseline,
+                        contact: CalibrationResult | None, tests: Mapping, noise: NoiseCheck, naming: Naming,
+                        combination: Combination | None, prediction: HistoryPrediction | None,
+                        updated: UpdatedModel, reproduction: Reproduction, options: DiscrepancyOptions,
+                        echo: Echo = print) -> dict:
+    """Stage 12: the run's results as ``results.json`` stores them (report units: keys ending
+    ``_mm`` in mm, ``_deg`` in degrees, others SI), with the cautions a reader must not overlook
+    (echoed).
+
+    Parameters
+    ----------
+    setup, split, baseline, contact, tests, noise, naming, combination, prediction, updated, reproduction
+        The results of stages 1-11.
+    options : DiscrepancyOptions
+    echo : callable
+        Receives the cautions.
+
+    Returns
+    -------
+    dict
+        JSON-ready results (``seconds`` is None: :func:`run_discrepancy` sets it); arrays for plots
+        under ``"_arrays"`` (SI).
+    """
+    val, n_val, named = split.val, split.val.n_samples, naming.named
+    base, base_val = baseline.fit, baseline.held_out
+    base_summary = _error_summary(base_val.position, base_val.angle, base_val.seconds, n_val)
+    final_val = updated.held_out
+    after = _error_summary(final_val.position, final_val.angle, final_val.seconds, n_val)
+    candidates = _candidate_reports(naming.candidates, n_val)
+    combination_report = _combination_report(combination, naming, n_val)
+    pair = combination.named if combination else None
+    final = combination_report["tried"][pair] if pair else (candidates[named] if named else None)
+    cautions = _cautions(named, final, base_summary, after, setup.robot)
     for line in cautions:
         echo(f"caution: {line}")
-
-    results = {
-        "robot_file": str(robot_path), "data_file": str(data_path), "frame": data.frame,
-        "n_samples": data.n_samples, "split": how, "n_calibration": cal.n_samples, "n_fit": n_fit,
-        "n_validation": val.n_samples, "baseline_parameters": list(base_names),
-        "baseline": {"fit": base.as_dict(), "bic": base_bic, "held_out": base_summary},
-        "contact_baseline": contact.as_dict() if contact_all is not None else None,
+    return {
+        "robot_file": str(setup.robot_path), "data_file": str(setup.data_path), "frame": setup.data.frame,
+        "n_samples": setup.data.n_samples, "split": split.how, "n_calibration": split.n_calibration,
+        "n_fit": split.n_fit, "n_validation": n_val, "baseline_parameters": list(setup.base_names),
+        "baseline": {"fit": base.as_dict(), "bic": baseline.bic, "held_out": base_summary},
+        "contact_baseline": contact.as_dict() if contact is not None else None,
         "signature_tests": {e: t.as_dict() for e, t in tests.items()},
-        "skipped_effects": skipped, "prediction": prediction,
-        "noise": noise_check, "decision": decision,
-        "candidates": {e: {k: v for k, v in c.items() if not k.startswith("_")} for e, c in candidates.items()},
+        "skipped_effects": dict(setup.skipped), "prediction": _prediction_report(prediction),
+        "noise": noise.as_dict(), "decision": naming.decision,
+        "candidates": candidates,
         "named_effect": named, "named_label": EFFECT_LABELS[named] if named else None,
-        "named_effects": named_effects, "combination": _public(combination),
-        "after": after, "updated_model_file": str(model_path), "updated_model": final_model,
-        "reproduced": reproduced, "reproduced_samples": int(check_rows.sum()),
-        "reproduced_position_mean_mm": float(np.nanmean(check["position"]) * 1e3),
+        "named_effects": list(updated.named_effects), "combination": combination_report,
+        "after": after, "updated_model_file": str(updated.path), "updated_model": updated.model,
+        "reproduced": reproduction.reproduced, "reproduced_samples": reproduction.n_samples,
+        "reproduced_position_mean_mm": float(np.nanmean(reproduction.position) * 1e3),
         "cautions": cautions,
         "significance": options.significance, "bic_margin": BIC_MARGIN, "options": asdict(options),
-        "seconds": time.perf_counter() - t_start,
-        "_arrays": {"val_eta": val.eta, "val_tip_base": base_val["tip_base"],
-                    "before_position": base_val["position"], "before_angle": base_val["angle"],
-                    "before_residual": base_val["residual_base"],
-                    "after_position": final_val["position"], "after_angle": final_val["angle"],
-                    "after_residual": final_val["residual_base"],
+        "seconds": None,
+        "_arrays": {"val_eta": val.eta, "val_tip_base": base_val.tip_base,
+                    "before_position": base_val.position, "before_angle": base_val.angle,
+                    "before_residual": base_val.residual_base,
+                    "after_position": final_val.position, "after_angle": final_val.angle,
+                    "after_residual": final_val.residual_base,
                     "reduction": (1.0 - after["position_mean_mm"] / base_summary["position_mean_mm"])
                     if base_summary["position_mean_mm"] else None},
     }
+
+
+def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions = DiscrepancyOptions(),
+                    echo=print, progress: bool = True) -> dict:
+    """Run the whole workflow and return its results (see the module docstring).
+
+    Parameters
+    ----------
+    robot_path : path
+        Robot model file with the candidate effects switched off (or not: the baseline uses
+        the standard model, which ignores friction and clearance).
+    data_path : path
+        Measured data (:func:`ctrplan.discrepancy.data.load_measured_data`).
+    out_dir : path
+        Report folder; finished stages are kept in ``out_dir/.stages`` and reused by a rerun
+        with the same inputs and options.
+    options : DiscrepancyOptions
+    echo : callable
+        Receives one line per step.
+    progress : bool
+        Progress bars of model evaluations.
+
+    Returns
+    -------
+    dict
+        JSON-ready results; arrays for plots under the key ``"_arrays"``.
+
+    Raises
+    ------
+    DataFileError
+        Bad data (see :func:`load_measured_data`), or fewer calibration samples than parameters.
+    ModelFileError, PhysicalParameterError
+        Bad robot file.
+    """
+    t_start = time.perf_counter()
+    setup = load_inputs(robot_path, data_path, out_dir, options)
+    split = split_samples(setup, options, echo)
+
+    def held_out(name, model, params) -> HeldOut:
+        return evaluate_held_out(setup, split, name, model, params, n_jobs=options.n_jobs, progress=progress,
+                                 echo=echo)
+
+    baseline = calibrate_baseline(setup, split, options, held_out, echo)
+    tests = diagnose_residuals(setup, split, baseline, options, echo)
+    noise = check_noise(setup, baseline, options, echo)
+    contact = refit_contact_baseline(setup, split, baseline, options, echo)
+    candidates = fit_candidates(setup, split, baseline, contact, options, held_out, echo)
+    naming = name_effect(split, candidates, tests, noise, options, echo)
+    combination = fit_second_effect(setup, split, baseline, naming, options, held_out, echo)
+    prediction = predict_with_history(setup, split, baseline, naming, noise, options, held_out, echo)
+    updated = write_updated_model(setup, baseline, naming, combination, echo)
+    reproduction = check_reproduction(setup, split, updated, options, echo)
+    results = discrepancy_results(setup, split, baseline, contact, tests, noise, naming, combination, prediction,
+                                  updated, reproduction, options, echo)
+    results["seconds"] = time.perf_counter() - t_start
     return results
 
 
@@ -797,62 +1804,6 @@ def hull_distance(points, x) -> float:
     return float(np.linalg.norm(P.T @ w - x))
 
 
-def _prediction_figures(robot, val: MeasuredData, base_val, candidates, named, noise, stages, settings, options,
-                        echo, held_out) -> dict | None:
-    """Held-out prediction error of the standard and the history-aware models (mean, p95, max)
-    and the coverage of the friction envelope; None without a friction candidate.
-
-    The history-aware model is the friction model along the recorded history with the friction
-    candidate's calibrated parameters and, when ``options.reference_friction`` is given, also
-    with those coefficients (e.g. published ones) on the same calibrated tube parameters."""
-    if "friction" not in candidates:
-        return None
-    fr = candidates["friction"]
-    rows = [{"label": "standard model, calibrated (no history)", **_stats_mm(base_val["position"])},
-            {"label": "history-aware: friction model along the recorded history, fitted "
-                      + ", ".join(f"{k} = {v:.3g}" for k, v in fr["parameters"].items()),
-             **_stats_mm(fr["_val"]["position"])}]
-    sets = [("fitted", fr["_params"], f"{len(all_eta_n(robot))}")]
-    if options.reference_friction is not None:
-        mu = tuple(float(v) for v in options.reference_friction)
-        ref = dict(fr["_params"])
-        ref.update({f"mu_{k + 1}": v for k, v in enumerate(mu)})
-        tag = "-".join(f"{v:g}" for v in mu)
-        val_ref = held_out(f"reference-friction-{tag}", "friction", ref)
-        rows.append({"label": "history-aware with the reference friction coefficients "
-                              + ", ".join(f"mu_{k + 1} = {v:.3g}" for k, v in enumerate(mu)),
-                     **_stats_mm(val_ref["position"])})
-        sets.append((f"reference {tag}", ref, f"reference-{tag}"))
-    if named and named != "friction":
-        rows.append({"label": f"named effect: {candidates[named]['label']}",
-                     **_stats_mm(candidates[named]["_val"]["position"])})
-    out = {"description": "Held-out tip position errors. Standard: the calibrated baseline, which ignores the "
-                          "motion history. History-aware: the friction model (Section III of Ha et al. 2019) with "
-                          "each sample's recorded history (eta of the last relative rotation of each pair; the "
-                          "clearance solution after a final translation), tube parameters and friction "
-                          "coefficients calibrated on the calibration split only (reference coefficients, if "
-                          "any, given).", "rows": rows}
-    for r in rows:
-        echo(f"  prediction: {r['label']}: mean {r['mean_mm']:.3f}, p95 {r['p95_mm']:.3f}, max {r['max_mm']:.3f} mm")
-    k_env = min(int(options.envelope_samples), val.n_samples)
-    if k_env <= 0:
-        return out
-    rows_env = np.unique(np.linspace(0, val.n_samples - 1, k_env).round().astype(int))
-    sub = val.take(rows_env)
-    out["envelopes"] = []
-    for label, params, key in sets:
-        stage = f"envelope-{rows_env.size}" if label == "fitted" else f"envelope-{key}-{rows_env.size}"
-        env = _envelope(robot, params, sub, noise, stages, stage, settings, options.n_jobs, echo)
-        env["coefficients"] = {k: float(v) for k, v in params.items() if k.startswith("mu_")}
-        env["label"] = label
-        out["envelopes"].append(env)
-        echo(f"  envelope ({label}): {env['inside']} of {env['n']} inside ({100 * env['fraction_inside']:.0f} %), "
-             f"outside by median {_mm(env['outside_median_mm'])}, max {_mm(env['outside_max_mm'])}; size median "
-             f"{_mm(env['size_median_mm'])}")
-    out["envelope"] = out["envelopes"][0]
-    return out
-
-
 def all_eta_n(robot):
     from ..mechanics import all_eta
 
@@ -863,10 +1814,12 @@ def _mm(x):
     return "-" if x is None else f"{x:.2f} mm"
 
 
-def _envelope(robot, params, sub: MeasuredData, noise, stages, stage, settings, n_jobs, echo) -> dict:
+def _envelope(robot, params, sub: MeasuredData, noise, stages, stage, settings, n_jobs, echo, *,
+              coefficients: dict, label: str) -> EnvelopeCoverage:
     """Coverage of the friction envelope: the convex hull of the 2^(n-1) bounding friction
     solutions (fixed eta, no release) at each sample of ``sub``, plus
-    :data:`ENVELOPE_NOISE_FACTOR` times the noise rms."""
+    :data:`ENVELOPE_NOISE_FACTOR` times the noise rms; the bounding tips are kept in the stage
+    ``stage``."""
     from .simulate import simulate
 
     sigma = noise.get("position_rms_m")
@@ -897,16 +1850,17 @@ def _envelope(robot, params, sub: MeasuredData, noise, stages, stage, settings, 
     ok = np.isfinite(dist)
     outside = dist[ok] - margin
     far = outside[outside > 0]
-    return {"n": int(ok.sum()), "inside": int(np.sum(outside <= 0)),
-            "fraction_inside": float(np.mean(outside <= 0)) if ok.any() else float("nan"),
-            "margin_mm": margin * 1e3,
-            "outside_median_mm": float(np.median(far) * 1e3) if far.size else None,
-            "outside_p95_mm": float(np.percentile(far, 95) * 1e3) if far.size else None,
-            "outside_max_mm": float(far.max() * 1e3) if far.size else None,
-            "size_median_mm": float(np.nanmedian(size) * 1e3) if ok.any() else None,
-            "description": f"{sub.n_samples} evenly spaced held-out samples; convex hull of the "
-                           f"{tips.shape[1]} bounding friction solutions (all eta, no release); margin "
-                           f"{ENVELOPE_NOISE_FACTOR} x the noise rms ({noise['description']})"}
+    return EnvelopeCoverage(
+        n=int(ok.sum()), inside=int(np.sum(outside <= 0)),
+        fraction_inside=float(np.mean(outside <= 0)) if ok.any() else float("nan"), margin_m=margin,
+        outside_median_m=float(np.median(far)) if far.size else None,
+        outside_p95_m=float(np.percentile(far, 95)) if far.size else None,
+        outside_max_m=float(far.max()) if far.size else None,
+        size_median_m=float(np.nanmedian(size)) if ok.any() else None,
+        description=f"{sub.n_samples} evenly spaced held-out samples; convex hull of the "
+                    f"{tips.shape[1]} bounding friction solutions (all eta, no release); margin "
+                    f"{ENVELOPE_NOISE_FACTOR} x the noise rms ({noise['description']})",
+        coefficients=coefficients, label=label)
 
 
 # --------------------------------------------------------------------------- helpers of the steps
@@ -976,18 +1930,6 @@ def estimate_noise(data: MeasuredData, stated: float | None = None) -> dict:
                            "repeated configurations"}
 
 
-def _noise_check(position, noise: dict) -> dict:
-    """Held-out rms position error against the noise rms (ratio <= :data:`NOISE_RATIO`:
-    consistent)."""
-    pos = position[np.isfinite(position)]
-    rms = float(np.sqrt(np.mean(pos * pos))) if pos.size else float("nan")
-    sigma = noise["position_rms_m"]
-    ratio = rms / sigma if sigma else None
-    return {"rms_mm": rms * 1e3, "noise_rms_mm": None if sigma is None else sigma * 1e3,
-            "ratio": ratio, "consistent": None if ratio is None else bool(ratio <= NOISE_RATIO),
-            "threshold_ratio": NOISE_RATIO, "noise": noise}
-
-
 def _scan_fit(robot, data: MeasuredData, model: str, fixed: dict, names, values, settings,
               n_jobs) -> CalibrationResult:
     """Best of a 1-D scan: every parameter in ``names`` set to each of ``values`` in turn, the
@@ -1024,14 +1966,14 @@ def _implausible(robot, params: dict) -> list:
 _NESTED = ("offplane", "poisson", "registration", "backlash", "time_offset")
 
 
-def _fit_note(effect, fit, base, held, base_val, val_e) -> str:
+def _fit_note(effect, fit, base, base_val: HeldOut, val_e: HeldOut) -> str:
     """What a candidate's fit says about itself: not converged, worse on the calibration data
     than the baseline, or better there but worse held-out (overfitting)."""
     notes = []
     if not fit.converged:
         notes.append("its fit did not converge (stopped at the evaluation budget)")
-    base_mean = float(np.nanmean(base_val["position"]))
-    cand_mean = float(np.nanmean(val_e["position"]))
+    base_mean = float(np.nanmean(base_val.position))
+    cand_mean = float(np.nanmean(val_e.position))
     if fit.cost > base.cost * (1 + 1e-9):
         if effect in _NESTED:
             notes.append(f"it fits the calibration data worse than the baseline (cost {fit.cost:.4g} against "
@@ -1126,130 +2068,6 @@ def display_value(name: str, value: float, unit: str) -> str:
     if unit == "m":
         return f"{name} = {value * 1e3:.4g} mm"
     return f"{name} = {value:.4g}" + ("" if unit == "-" else f" {unit}")
-
-
-def _second_effect(robot, data, fit_data, val, named, candidates, base, base_names, units, stages, settings,
-                   options, echo, held_out) -> dict:
-    """Whether a second effect, fitted on top of the named one, still improves the held-out error.
-
-    Tried: every other candidate whose signature test was significant, except pairs in
-    :data:`_NOT_COMBINED` (its values fitted alone may be implausible: alone it absorbs the
-    named effect too). Fit on the calibration split
-    only, starting from the named effect's fit and the second effect's own fit: with the standard
-    model, the second effect's parameters alone (the named fit held), then everything together
-    (nested: the calibration cost cannot rise); with a contact model (dearer by ~30x), the second
-    effect's parameters alone, with ``options.max_contact_evaluations``. The pair is named by
-    the workflow's rule for single effects, with the named effect in place of the baseline: held-out
-    Eq. (49) improvement significant (paired sign-flip test over held-out units, one-sided,
-    ``options.significance``), BIC lower by more than :data:`BIC_MARGIN`, and every fitted value
-    plausible; among such pairs the largest held-out improvement.
-
-    Returns
-    -------
-    dict
-        ``first``, ``named`` (second effect or None), ``tried`` ``{effect: candidate-like dict}``
-        with ``parameters`` [SI], ``units``, ``held_out``, ``improvement_eq49`` (over the named
-        effect alone), ``delta_bic`` (same), ``significant``, ``plausible``, ``fit``; ``steps``
-        (held-out mean and improvement of each step of the named combination), ``notes``.
-    """
-    first = candidates[named]
-    p_first = dict(first["_params"])
-    first_names = _effect_names(robot, named, data)
-    out = {"first": named, "first_label": first["label"], "named": None, "tried": {}, "steps": [], "notes": [],
-           "rule": f"held-out Eq. (49) improvement over {first['label']} alone significant at "
-                   f"{options.significance} (paired sign-flip test), BIC lower by more than {BIC_MARGIN}, fitted "
-                   f"values plausible"}
-    # (not: "plausible alone": fitted alone, an effect absorbs the other one and can look
-    # implausible, e.g. a backlash of 9.9 deg for a hidden 4.6 deg plus a 0.15 s lag; the pair's
-    # own values must be plausible)
-    pool = [e for e in candidates if e != named and {e, named} not in _NOT_COMBINED
-            and candidates[e].get("signature_significant")]
-    skipped = [e for e in candidates if e != named and e not in pool]
-    if skipped:
-        out["notes"].append("not tried on top of " + first["label"] + ": " + ", ".join(
-            f"{candidates[e]['label']} ("
-            + ("contained in it or containing it" if {e, named} in _NOT_COMBINED else "signature not significant")
-            + ")"
-            for e in skipped))
-    for e in pool:
-        model = _combined_model(named, e)
-        second_names = tuple(n for n in _effect_names(robot, e, data) if n not in p_first)
-        if not second_names:
-            continue
-        init2 = np.array([candidates[e]["_params"][n] for n in second_names], float)
-        tag = f"{named}+{e}"
-        done = stages.load(f"fit-{tag}")
-        if done is not None:
-            fit = _result_from(done)
-        else:
-            echo(f"second effect: {candidates[e]['label']} on top of {first['label']} ({model} model) ...")
-            budget = options.max_evaluations if model == "standard" else options.max_contact_evaluations
-            fit = calibrate(robot, fit_data, model, second_names, fixed=p_first, initial=init2, settings=settings,
-                            n_jobs=options.n_jobs, max_evaluations=budget)
-            if model == "standard":
-                names = tuple(p_first) + second_names
-                init = np.concatenate([np.array(list(p_first.values()), float), fit.values])
-                joint = calibrate(robot, fit_data, "standard", names, initial=init, settings=settings,
-                                  n_jobs=options.n_jobs, max_evaluations=options.max_evaluations)
-                if joint.cost <= fit.cost or not fit.converged:
-                    fit = joint
-            stages.save(f"fit-{tag}", fit.as_dict())
-        params = dict(zip(*fit.all_parameters()))
-        val_c = held_out(f"combination-{tag}", model, params)
-        r = eq49_residuals(val_c["position"], val_c["angle"])
-        shown_names = first_names + tuple(n for n in _effect_names(robot, e, data) if n not in first_names)
-        shown = {n: float(params[n]) for n in shown_names}
-        k_total = len(set(base_names) | set(shown_names))
-        bic = information_criterion(fit.cost, fit.n_samples, k_total)
-        test = paired_improvement(first["_r"], r, units, seed=options.seed)
-        held = _error_summary(val_c["position"], val_c["angle"], val_c["seconds"], val.n_samples)
-        implausible = _implausible(robot, shown)
-        c = {"effects": [named, e], "label": f"{first['label']} + {candidates[e]['label']}", "model": model,
-             "fit": fit.as_dict(), "parameters": shown, "units": {n: parameter(robot, n).unit for n in shown},
-             "implausible": implausible, "plausible": not implausible, "n_parameters": k_total, "bic": bic,
-             "delta_bic": bic - first["bic"], "held_out": held, "improvement_eq49": test,
-             "improvement_position": paired_improvement(first["_val"]["position"], val_c["position"], units,
-                                                        seed=options.seed),
-             "converged": bool(fit.converged), "_val": val_c, "_params": params, "_r": r}
-        c["improvement_significant"] = bool(test["p_value"] < options.significance and test["mean_difference"] > 0)
-        c["bic_better"] = bool(c["delta_bic"] < -BIC_MARGIN)
-        c["significant"] = c["improvement_significant"] and c["bic_better"] and c["plausible"]
-        if not fit.converged:
-            c["note"] = "its fit did not converge (stopped at the evaluation budget): the pair may be underrated"
-        out["tried"][e] = c
-        echo(f"  {c['label']}: " + ", ".join(display_value(n, v, c["units"][n]) for n, v in shown.items())
-             + f"; held-out mean {held['position_mean_mm']:.3f} mm (alone {first['held_out']['position_mean_mm']:.3f}); "
-               f"dBIC {c['delta_bic']:.1f}; improvement p = {test['p_value']:.4f}"
-             + ("" if fit.converged else "; fit NOT converged"))
-    passing = [e for e, c in out["tried"].items() if c["significant"]]
-    if passing:
-        second = max(passing, key=lambda e: out["tried"][e]["improvement_eq49"]["mean_difference"])
-        out["named"] = second
-        c = out["tried"][second]
-        base_mean = candidates[named]["held_out"]["position_mean_mm"]
-        out["steps"] = [
-            {"effect": named, "label": first["label"], "held_out_mean_mm": base_mean,
-             "held_out_max_mm": first["held_out"]["position_max_mm"],
-             "improvement_eq49": first["improvement_eq49"], "over": "baseline"},
-            {"effect": second, "label": candidates[second]["label"], "held_out_mean_mm": c["held_out"]["position_mean_mm"],
-             "held_out_max_mm": c["held_out"]["position_max_mm"],
-             "improvement_eq49": c["improvement_eq49"], "over": named}]
-        echo(f"named combination: {c['label']} (held-out mean {base_mean:.3f} -> "
-             f"{c['held_out']['position_mean_mm']:.3f} mm, p = {c['improvement_eq49']['p_value']:.4f})")
-    elif out["tried"]:
-        out["notes"].append("no second effect improves the held-out error of " + first["label"] + " significantly: "
-                            + "; ".join(f"{c['label']}: p = {c['improvement_eq49']['p_value']:.4f}, dBIC "
-                                        f"{c['delta_bic']:.1f}" + ("" if c["plausible"] else ", implausible")
-                                        for c in out["tried"].values()))
-    return out
-
-
-def _public(combination):
-    """The combination without its arrays (JSON)."""
-    if combination is None:
-        return None
-    return {**combination, "tried": {e: {k: v for k, v in c.items() if not k.startswith("_")}
-                                     for e, c in combination["tried"].items()}}
 
 
 def _no_effect_sentence(decision: dict, check: dict, candidates: dict) -> str:
