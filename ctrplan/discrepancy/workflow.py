@@ -21,8 +21,29 @@
    backlash, tracker time offset, gradually developing friction).
 5. Write the updated robot model file, load it back and check that it reproduces the errors.
 
-The result is a plain dictionary (JSON-ready) plus arrays for plots; :mod:`ctrplan.discrepancy.report`
-writes the report folder.
+``run_discrepancy`` composes these stages; each returns a frozen result in SI units (m, rad, s;
+Eq. (49) residuals and costs in the paper's mm + deg), and millimetres and degrees appear only in
+the results dictionary and in progress messages:
+
+1. :func:`load_inputs` -> :class:`DiscrepancySetup`: robot, data, baseline parameters, effects,
+   and the store of finished stages under :func:`stage_key`;
+2. :func:`split_samples` -> :class:`SampleSplit`: calibration, fitted and held-out rows;
+3. :func:`calibrate_baseline` -> :class:`Baseline`, its held-out errors by
+   :func:`evaluate_held_out` -> :class:`HeldOut`;
+4. :func:`diagnose_residuals` -> one :class:`~ctrplan.discrepancy.signatures.SignatureTest` per
+   effect;
+5. :func:`check_noise` -> :class:`NoiseCheck`;
+6. :func:`refit_contact_baseline` and :func:`fit_candidates` -> one :class:`Candidate` per effect;
+7. :func:`name_effect` -> :class:`Naming`;
+8. :func:`fit_second_effect` -> :class:`Combination`;
+9. :func:`predict_with_history` -> :class:`HistoryPrediction` (with :class:`EnvelopeCoverage`);
+10. :func:`write_updated_model` -> :class:`UpdatedModel`, :func:`check_reproduction` ->
+    :class:`Reproduction`;
+11. :func:`discrepancy_results`: the plain dictionary (JSON-ready, mm) plus arrays for plots;
+    :mod:`ctrplan.discrepancy.report` writes the report folder.
+
+Every stage that fits or evaluates reads its result from ``out_dir/.stages`` when an earlier run
+with the same :func:`stage_key` finished it, and stores it there otherwise.
 """
 
 from __future__ import annotations
