@@ -15,6 +15,7 @@ import numpy as np
 
 from ..constants import ANDERSON_MIXING, MAX_FAILED_INNER_STEPS, OUTER_STAGNATION_WINDOW
 from . import _contact_kernels as ck
+from ._chain_kernels import chain_kinematics
 
 __all__ = ["FlatProblem", "Anderson", "run_outer_loop"]
 
@@ -178,7 +179,7 @@ class FlatProblem:
         """Frames (N, 3, 3) and centerline points (N, 3) [m] of all tubes for curvatures u (S, 3)."""
         R = np.empty((self.N, 3, 3))
         p = np.empty((self.N, 3))
-        ck.chain_kinematics(u, self.h, self.alpha, self.beta, self.node_off, R, p)
+        chain_kinematics(u, self.h, self.alpha, self.beta, self.node_off, R, p)
         return R, p
 
     def split_nodes(self, arr):

@@ -21,7 +21,7 @@ from numba import njit
 
 from ..constants import DISTINCT_EQUILIBRIUM_TWIST, PREDICTOR_STEP_FACTOR, PREDICTOR_TOL
 from ..errors import ConvergenceError, ElasticInstabilityError
-from ._contact_kernels import chain_kinematics
+from ._chain_kernels import chain_kinematics
 from ._lie import rot_z
 from .grid import build_grid
 from .results import Diagnostics, ModelSettings, StandardSolution
