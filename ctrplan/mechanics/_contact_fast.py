@@ -16,6 +16,7 @@ import numpy as np
 from ..constants import ANDERSON_MIXING, MAX_FAILED_INNER_STEPS, OUTER_STAGNATION_WINDOW
 from . import _contact_kernels as ck
 from ._chain_kernels import chain_kinematics
+from .packed import pack_robot
 
 __all__ = ["FlatProblem", "Anderson", "run_outer_loop"]
 
@@ -115,14 +116,16 @@ class FlatProblem:
         self.seg_off = (self.node_off - np.arange(n + 1)).astype(np.int64)
         self.s = [g.s[first[i]:last[i] + 1] for i in range(n)]
         self.h = np.concatenate([np.diff(s) for s in self.s])
+        packed = pack_robot(robot)
         uhat, stiff, u0 = [], [], []
-        for i, t in enumerate(robot.tubes):
+        for i in range(n):
             a, b = int(first[i]), int(last[i])
             hi = np.diff(self.s[i])
             uh = np.zeros((hi.size, 3))
             uh[:, :2] = g.precurvature[a:b, i]
             uhat.append(uh)
-            stiff.append(np.column_stack([t.k_xy * hi, t.k_xy * hi, t.k_z * hi]))
+            kxy, kz = packed.k_xy[i], packed.k_z[i]
+            stiff.append(np.column_stack([kxy * hi, kxy * hi, kz * hi]))
             psi = standard.psi_mid[a:b, i]
             ub = standard.bending_mid[a:b]
             c, sn = np.cos(psi), np.sin(psi)
@@ -134,9 +137,9 @@ class FlatProblem:
         self.alpha = np.asarray(standard.alpha, dtype=float)
         self.beta = np.asarray(standard.beta, dtype=float)
         # contacts: every common grid node of each adjacent pair
-        clear = robot.clearances
+        clear = packed.clearance
         mu = np.asarray(mu, dtype=float)
-        r_in, r_out = robot.contact_radii() if np.any(mu > 0) else (np.zeros(n - 1), np.zeros(n - 1))
+        r_in, r_out = packed.contact_radii(robot) if np.any(mu > 0) else (np.zeros(n - 1), np.zeros(n - 1))
         pair, jo, ji, cvec, svec = [], [], [], [], []
         for i in range(n - 1):
             lo = max(first[i], first[i + 1])

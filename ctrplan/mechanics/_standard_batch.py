@@ -17,7 +17,8 @@ from numba import config, get_num_threads, njit, prange, set_num_threads
 
 from ..constants import (DISTINCT_EQUILIBRIUM_TWIST, GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR,
                          UNIQUENESS_SCREEN_MARGIN)
-from .grid import _grid, packed_sections
+from .grid import _grid
+from .packed import pack_robot
 from .results import ModelSettings
 from ._uniqueness import unique_equilibrium_certified
 from .standard import _centerline, _newton, _shoot
@@ -245,10 +246,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     sig_init = (np.zeros((K, n)) if initial_guess is None
                 else np.ascontiguousarray(np.broadcast_to(initial_guess, (K, n)), dtype=float))
     valid = robot.configurations_possible(alpha, beta)
-    brk, nbrk, curv = packed_sections(robot)
-    lengths = np.array([t.length for t in robot.tubes])
-    kxy = np.array([t.k_xy for t in robot.tubes])
-    ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
+    pk = pack_robot(robot)
     tips = np.full((K, 3), np.nan)
     tans = np.full((K, 3), np.nan)
     sig_out = np.full((K, n), np.nan)
@@ -258,7 +256,8 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     n_eq = np.zeros(K, dtype=np.int64)
     certified = np.zeros(K, dtype=bool)
     multistart = int(settings.multistart) if check_stability else 0
-    args = (alpha, beta, valid, sig_init, initial_guess is None, lengths, brk, nbrk, curv, kxy, ratio,
+    args = (alpha, beta, valid, sig_init, initial_guess is None, pk.lengths, pk.breaks, pk.n_breaks,
+            pk.precurvature, pk.k_xy, pk.stiffness_ratio,
             float(settings.ds), float(settings.shooting_tol), int(settings.max_shooting_iterations),
             np.array([GRID_MERGE_TOL, settings.refine_ratio, settings.refine_length]), multistart,
             bool(follow), tips, tans, sig_out, conv, unst, iters, n_eq, certified)

@@ -19,7 +19,8 @@ import numpy as np
 from numba import njit
 
 from ..constants import GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR
-from .grid import _grid, packed_sections
+from .grid import _grid
+from .packed import PackedRobot, pack_robot
 from .results import BODY_TOL, ModelSettings
 from ._standard_batch import configuration_arrays
 from .standard import _centerline, _shoot
@@ -190,20 +191,13 @@ def solve_standard_bodies(robot, alpha, beta, settings: ModelSettings | None = N
     """
     settings = settings or ModelSettings()
     alpha, beta = configuration_arrays(robot, alpha, beta)
-    return _solve_packed(_pack(robot), alpha, beta, robot.configurations_possible(alpha, beta), settings)
+    return _solve_packed(pack_robot(robot), alpha, beta, robot.configurations_possible(alpha, beta), settings)
 
 
-def _pack(robot) -> tuple:
-    """The robot's arrays for the kernels: tube lengths (n,) [m], section breaks (n, B) [m],
-    breaks per tube (n,), precurvatures (n, B - 1, 2) [1/m], k_xy (n,) [N m^2], k_xy / k_z (n,)
-    and outer radii for collision (n,) [m] (``Robot.outer_radius``)."""
-    n = robot.n_tubes
-    brk, nbrk, curv = packed_sections(robot)
-    lengths = np.array([t.length for t in robot.tubes])
-    kxy = np.array([t.k_xy for t in robot.tubes])
-    ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
-    r_out = np.array([robot.outer_radius(i) for i in range(n)])
-    return lengths, brk, nbrk, curv, kxy, ratio, r_out
+def _pack(robot) -> PackedRobot:
+    """The robot's shared :class:`~ctrplan.mechanics.packed.PackedRobot` (kept under this name
+    for ``planning.validity``, which packs once and calls :func:`_solve_packed`)."""
+    return pack_robot(robot)
 
 
 def _body_capacity(lengths, nbrk, settings) -> int:
@@ -216,10 +210,11 @@ def _body_capacity(lengths, nbrk, settings) -> int:
 
 
 def _solve_packed(packed, alpha, beta, valid, settings) -> StandardBodies:
-    """:func:`solve_standard_bodies` on a robot packed by :func:`_pack`, for contiguous
+    """:func:`solve_standard_bodies` on a :class:`PackedRobot` ``packed``, for contiguous
     ``alpha``, ``beta`` (K, n) whose possible configurations are flagged in ``valid`` (K,) (for
     callers that pack the robot once and have checked the configurations already)."""
-    lengths, brk, nbrk, curv, kxy, ratio, r_out = packed
+    lengths, brk, nbrk, curv = packed.lengths, packed.breaks, packed.n_breaks, packed.precurvature
+    kxy, ratio, r_out = packed.k_xy, packed.stiffness_ratio, packed.outer_radius
     K = alpha.shape[0]
     gspec = np.array([GRID_MERGE_TOL, settings.refine_ratio, settings.refine_length])
     ds = float(settings.ds)

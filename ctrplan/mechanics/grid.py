@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit
 
 from ..constants import GRID_MERGE_TOL
+from .packed import pack_robot
 
 __all__ = ["ArcLengthGrid", "build_grid"]
 
@@ -87,28 +88,10 @@ def build_grid(robot, beta, ds: float, refine_ratio: float = 1.0, refine_length:
     if not refine_length >= 0.0:
         raise ValueError(f"refine_length must be >= 0 m, got {refine_length!r}")
     beta = np.ascontiguousarray(beta, dtype=float)
-    brk, nbrk, curv = packed_sections(robot)
-    lengths = np.array([t.length for t in robot.tubes])
-    s, first, last, present, uhat = _grid(beta, lengths, brk, nbrk, curv, float(ds), GRID_MERGE_TOL,
-                                          float(refine_ratio), float(refine_length))
+    pk = pack_robot(robot)
+    s, first, last, present, uhat = _grid(beta, pk.lengths, pk.breaks, pk.n_breaks, pk.precurvature, float(ds),
+                                          GRID_MERGE_TOL, float(refine_ratio), float(refine_length))
     return ArcLengthGrid(s=s, first=first, last=last, present=present, precurvature=uhat)
-
-
-def packed_sections(robot):
-    """Section breaks and precurvatures of every tube as padded arrays for the compiled grid:
-    ``brk`` (n, B) [m] (tube-local, from 0 to the length), ``nbrk`` (n,) breaks per tube,
-    ``curv`` (n, B - 1, 2) [1/m]."""
-    n = robot.n_tubes
-    nb = max(len(t.sections) + 1 for t in robot.tubes)
-    brk = np.zeros((n, nb))
-    curv = np.zeros((n, nb - 1, 2))
-    nbrk = np.zeros(n, dtype=np.int64)
-    for i, t in enumerate(robot.tubes):
-        b = t.section_breaks()
-        brk[i, :b.size] = b
-        nbrk[i] = b.size
-        curv[i, :len(t.sections)] = [sec.precurvature for sec in t.sections]
-    return brk, nbrk, curv
 
 
 @njit(cache=True, inline="always")

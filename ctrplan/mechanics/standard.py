@@ -24,6 +24,7 @@ from ..errors import ConvergenceError, ElasticInstabilityError
 from ._chain_kernels import chain_kinematics
 from ._lie import rot_z
 from .grid import build_grid
+from .packed import pack_robot
 from .results import Diagnostics, ModelSettings, StandardSolution
 
 __all__ = ["solve_standard"]
@@ -219,9 +220,10 @@ class _Problem:
         self.grid = build_grid(robot, self.beta, settings.ds, settings.refine_ratio, settings.refine_length)
         self.settings = settings
         self._coarse = None
-        self.kxy = np.array([t.k_xy for t in robot.tubes])
-        self.ratio = np.array([t.k_xy / t.k_z for t in robot.tubes])
-        self.lengths = np.array([t.length for t in robot.tubes])
+        packed = pack_robot(robot)
+        self.kxy = packed.k_xy
+        self.ratio = packed.stiffness_ratio
+        self.lengths = packed.lengths
 
     def newton(self, sig0, settings, predict=False):
         """Newton shooting on the base torsions (``predict``: from the coarse-grid solution, see
