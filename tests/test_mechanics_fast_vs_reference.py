@@ -166,8 +166,8 @@ def test_compliance_kernels_equal_dense_products(eta):
     M = prob.M
     Wt = np.zeros((2 * M, 2 * M))
     Zt = np.zeros((M, 2 * M))
-    ck.fill_columns(np.arange(M), Wt, Zt, np.zeros(M, dtype=bool), prob.pair, prob.jo, prob.ji, prob._B,
-                    prob._Pc, R, p, prob._H1, prob._H2, prob._F3, prob.tq_out, prob.tq_in, prob.friction)
+    geometry, law = prob.contact_geometry(R, p), prob.contact_law(1.0)
+    ck.fill_columns(np.arange(M), ck.ContactWork(Wt, Zt, np.zeros(M, dtype=bool)), geometry, law)
     W, Z = Wt.T, Zt.T   # stored transposed
     scale = np.abs(W_ref).max()
     assert np.abs(W - W_ref).max() < 1e-10 * scale
@@ -178,8 +178,8 @@ def test_compliance_kernels_equal_dense_products(eta):
     lam = rng.uniform(0.0, 1.0, M) * (rng.uniform(size=M) < 0.4)
     d = rng.normal(scale=1e-5, size=(M, 2))
     g = np.empty_like(u)
-    ck.generalized_curvature(lam, d, prob.Mblk, prob._B, prob.pair, prob.jo, prob.ji, R, p, prob._Omega,
-                             prob._base, prob.node_off, prob.tq_out, prob.tq_in, prob.uhat, prob.kinv, g)
+    ck.generalized_curvature(lam, d, geometry, law, prob._Omega, prob._base, prob.node_off, prob.uhat,
+                             prob.kinv, g)
     phi = -lam[:, None] * np.einsum("kab,kb->ka", ref.Mblk, d)
     g_ref = ref.uhat_flat + ref.kinv * (A.T @ phi.ravel() + zt.T @ lam)
     np.testing.assert_allclose(g.ravel(), g_ref, rtol=1e-9, atol=1e-9 * np.abs(g_ref).max())
@@ -212,9 +212,9 @@ def test_constraint_generation_equals_the_full_complementarity_solve(eta, q):
     def run(solver, *extra):
         W = np.empty((2 * M, 2 * M))
         Z = np.empty((M, 2 * M)) if prob.friction else np.empty((1, 1))
-        return solver(np.zeros(M), prob._dfree, prob.c, prob.Mblk, kappa, tol, 200, W, Z,
-                      np.zeros(M, dtype=np.bool_), prob.pair, prob.jo, prob.ji, prob._B, prob._Pc, R, p,
-                      prob._H1, prob._H2, prob._F3, prob.tq_out, prob.tq_in, prob.friction, *extra)
+        work = ck.ContactWork(W, Z, np.zeros(M, dtype=np.bool_))
+        return solver(np.zeros(M), prob._dfree, prob.contact_geometry(R, p), prob.contact_law(kappa), work,
+                      tol, 200, *extra)
 
     lam_g, d_g, ok_g, _, err_g = run(ck.solve_contacts)
     lam_f, d_f, ok_f, _, err_f = run(ck.complementarity, np.ones(M, dtype=np.bool_))

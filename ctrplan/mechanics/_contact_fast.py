@@ -193,6 +193,17 @@ class FlatProblem:
         """Per-tube views of a segment array (S, ...)."""
         return [arr[self.seg_off[i]:self.seg_off[i + 1]] for i in range(self.n)]
 
+    def contact_geometry(self, R, p):
+        """The contacts and compliance factors of the current linearization (frames R (N, 3, 3),
+        points p (N, 3) [m]) as the kernels take them (:class:`_contact_kernels.ContactGeometry`)."""
+        return ck.ContactGeometry(self.pair, self.jo, self.ji, self._B, self._Pc, R, p, self._H1, self._H2,
+                                  self._F3)
+
+    def contact_law(self, kappa):
+        """Clearances, friction factors and the FB scale ``kappa`` [N/m] as the kernels take them
+        (:class:`_contact_kernels.ContactLaw`)."""
+        return ck.ContactLaw(self.c, self.Mblk, float(kappa), self.tq_out, self.tq_in, self.friction)
+
     def outer_step(self, u, R, p, lam, settings):
         """One re-linearization: returns (lam, F(u), inner ok, Newton iterations)."""
         ck.linearize(u, self.uhat, self.kinv, self.h, self.node_off, R, p, self._Omega, self._base,
@@ -202,18 +213,16 @@ class FlatProblem:
         ck.contact_projections(self._B, p, self.jo, self.ji, self._H1, self._H2, self._Pc)
         M = self.M
         kappa = 1.0 / max(float(np.mean(self._diagW[:, [0, 1], [0, 1]])), 1e-300)
-        Wt = np.empty((2 * M, 2 * M))   # W and Z stored transposed (ck.fill_columns)
-        Zt = np.empty((M, 2 * M)) if self.friction else np.empty((1, 1))
-        have = np.zeros(M, dtype=np.bool_)
-        lam, d, ok, its, _ = ck.solve_contacts(
-            np.asarray(lam, dtype=float), self._dfree, self.c, self.Mblk, kappa,
-            settings.complementarity_tol, settings.max_newton_iterations, Wt, Zt, have,
-            self.pair, self.jo, self.ji, self._B, self._Pc, R, p, self._H1, self._H2, self._F3,
-            self.tq_out, self.tq_in, self.friction)
+        geometry = self.contact_geometry(R, p)
+        law = self.contact_law(kappa)
+        work = ck.ContactWork(np.empty((2 * M, 2 * M)),   # W and Z stored transposed (ck.fill_columns)
+                              np.empty((M, 2 * M)) if self.friction else np.empty((1, 1)),
+                              np.zeros(M, dtype=np.bool_))
+        lam, d, ok, its, _ = ck.solve_contacts(np.asarray(lam, dtype=float), self._dfree, geometry, law, work,
+                                               settings.complementarity_tol, settings.max_newton_iterations)
         g = np.empty_like(u)
-        ck.generalized_curvature(lam, d, self.Mblk, self._B, self.pair, self.jo, self.ji, R, p,
-                                 self._Omega, self._base, self.node_off, self.tq_out, self.tq_in,
-                                 self.uhat, self.kinv, g)
+        ck.generalized_curvature(lam, d, geometry, law, self._Omega, self._base, self.node_off, self.uhat,
+                                 self.kinv, g)
         return lam, g, bool(ok), int(its)
 
 

@@ -39,6 +39,8 @@ the moment of the contact forces about the segment, one backward pass per tube.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -47,6 +49,120 @@ from ._lapack import PIVOT_DTYPE, lu_factor, lu_solve, lu_solve_matrix
 
 _SEPARATION_ROUNDS = 3
 _NONMONOTONE = 5
+
+
+class ContactGeometry(NamedTuple):
+    """The contacts of one linearization and the chain data their compliance is built from.
+
+    M contacts, N nodes of all tubes (flat, see the module docstring).
+
+    Attributes
+    ----------
+    pair : ndarray of int64, shape (M,)
+        Pair index i of each contact (tubes i and i + 1).
+    jo, ji : ndarray of int64, shape (M,)
+        Global node of each contact on the outer and on the inner tube.
+    B : ndarray, shape (M, 3, 2)
+        Contact frame: the two directions normal to the outer tube's tangent
+        (:func:`contact_frames`).
+    Pc : ndarray, shape (M, 2, 3, 2, 3)
+        ``Pc[c, side]`` = (B_c^T H1_j, B_c^T H2_j, B_c^T [p_j]x) at the contact's node j on the
+        outer (side 0) and the inner (side 1) tube (:func:`contact_projections`).
+    R : ndarray, shape (N, 3, 3)
+        Material frames of the nodes.
+    p : ndarray, shape (N, 3)
+        Centerline points [m].
+    H1, H2, F3 : ndarray, shape (N, 3, 3)
+        Prefix-sum compliance factors of :func:`linearize` (module docstring).
+    """
+
+    pair: np.ndarray
+    jo: np.ndarray
+    ji: np.ndarray
+    B: np.ndarray
+    Pc: np.ndarray
+    R: np.ndarray
+    p: np.ndarray
+    H1: np.ndarray
+    H2: np.ndarray
+    F3: np.ndarray
+
+
+class ContactLaw(NamedTuple):
+    """Clearances, friction and scaling of the complementarity conditions (Eqs. (37)-(41)).
+
+    Attributes
+    ----------
+    c : ndarray, shape (M,)
+        Clearance of each contact [m].
+    Mblk : ndarray, shape (M, 2, 2)
+        I + eta mu J (Eqs. (38), (40)).
+    kappa : float
+        Scale of the Fischer-Burmeister function: 1 / mean compliance diagonal [N/m].
+    tq_out, tq_in : ndarray, shape (M,)
+        Friction-torque factors eta mu c r_(i,in) and -eta mu c r_(i+1,out) [m^2] (Eq. (41)).
+    friction : bool
+        Any contact with eta mu != 0 (the Z columns are computed only then).
+    """
+
+    c: np.ndarray
+    Mblk: np.ndarray
+    kappa: float
+    tq_out: np.ndarray
+    tq_in: np.ndarray
+    friction: bool
+
+
+class ContactWork(NamedTuple):
+    """Compliance columns computed so far, filled on demand by :func:`fill_columns`.
+
+    Attributes
+    ----------
+    Wt : ndarray, shape (2M, 2M)
+        W^T [m/N]: column 2e + q of the contact compliance W is row 2e + q.
+    Zt : ndarray, shape (M, 2M), or (1, 1) without friction
+        Z^T [m/N]: column e of the torque-column matrix Z is row e.
+    have : ndarray of bool, shape (M,)
+        Block column e of W (and column e of Z) is computed.
+    """
+
+    Wt: np.ndarray
+    Zt: np.ndarray
+    have: np.ndarray
+
+
+class ContactResult(NamedTuple):
+    """Result of :func:`solve_contacts` and :func:`complementarity`.
+
+    Attributes
+    ----------
+    lam : ndarray, shape (M,)
+        Contact multipliers lambda >= 0 [N/m] (force per unit clearance, phi_c = -lam_c M_c d_c).
+    d : ndarray, shape (M, 2)
+        Contact displacements (offsets of the inner from the outer centerline) [m].
+    ok : bool
+        Converged: max_k |Phi_k| / (kappa c_k) < tol.
+    iterations : int
+        Semismooth Newton iterations.
+    err : float
+        max_k |Phi_k| / (kappa c_k) [-].
+    """
+
+    lam: np.ndarray
+    d: np.ndarray
+    ok: bool
+    iterations: int
+    err: float
+
+
+class _TrialPoint(NamedTuple):
+    """Buffers of a line-search trial point (all shape (M,) but ``d`` (M, 2))."""
+
+    lam: np.ndarray
+    d: np.ndarray
+    phi: np.ndarray
+    da: np.ndarray
+    db: np.ndarray
 
 
 @njit(cache=True)
@@ -263,15 +379,31 @@ def contact_projections(B, p, jo, ji, H1, H2, Pc):
 
 
 @njit(cache=True)
-def fill_columns(cols, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction):
+def fill_columns(cols, work, geometry, law):
     """Compute the block columns ``e in cols`` of W (2M, 2M) [m/N] and the columns of Z (2M, M)
-    [m/N] (torque terms, friction only) that are not computed yet (``have[e]`` False), stored
-    transposed: column 2e + q of W is row 2e + q of ``Wt`` (2M, 2M), column e of Z is row e of
-    ``Zt`` (M, 2M).
+    [m/N] (torque terms, friction only) that are not computed yet (``work.have[e]`` False),
+    stored transposed: column 2e + q of W is row 2e + q of ``work.Wt`` (2M, 2M), column e of Z
+    is row e of ``work.Zt`` (M, 2M).
 
     Z column e is A K^-1 zt_e^T: the displacements caused by the friction torques of contact e
-    (Eq. (41)) per unit multiplier. ``Pc`` from :func:`contact_projections`.
+    (Eq. (41)) per unit multiplier (Appendix A of Ha, Fagogenis & Dupont 2019).
+
+    Parameters
+    ----------
+    cols : ndarray of int64, shape (m,)
+        Contacts whose columns are needed.
+    work : ContactWork
+        ``Wt``, ``Zt`` and ``have``, updated in place.
+    geometry : ContactGeometry
+        ``pair``, ``jo``, ``ji``, ``B``, ``Pc`` (from :func:`contact_projections`), ``R``, ``p``,
+        ``H1``, ``H2``, ``F3``.
+    law : ContactLaw
+        Reads ``tq_out``, ``tq_in`` and ``friction``.
     """
+    Wt, Zt, have = work.Wt, work.Zt, work.have
+    pair, jo, ji, B, Pc = geometry.pair, geometry.jo, geometry.ji, geometry.B, geometry.Pc
+    R, p, H1, H2, F3 = geometry.R, geometry.p, geometry.H1, geometry.H2, geometry.F3
+    tq_out, tq_in, friction = law.tq_out, law.tq_in, law.friction
     M = jo.shape[0]
     PB = np.empty((3, 2))
     U = np.empty((3, 2))
@@ -499,18 +631,48 @@ def _c_entry(Wt, Zt, row, l, e0, e1, friction):
 
 
 @njit(cache=True)
-def _trial(lam, Rs, step, t, lam_t, dfree, c, Mblk, kappa, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2,
-           F3, tq_out, tq_in, friction, work, rows, d_t, phi_t, da_t, db_t):
-    """Line-search trial point: lam_t = max(lam + t step, 0) on the rows ``Rs`` (lam elsewhere),
-    its displacements ``d_t`` and FB residual (``phi_t``, ``da_t``, ``db_t``) in place. Returns
-    (displacements ok, LU factors, pivots, active set, merit)."""
+def _trial(lam, Rs, step, t, dfree, geometry, law, cw, work, rows, trial):
+    """Line-search trial point: ``trial.lam`` = max(lam + t step, 0) on the rows ``Rs`` (lam
+    elsewhere), its displacements ``trial.d`` and FB residual (``trial.phi``, ``trial.da``,
+    ``trial.db``) in place.
+
+    Parameters
+    ----------
+    lam : ndarray, shape (M,)
+        Current multipliers [N/m].
+    Rs : ndarray of int64, shape (nR,)
+        Contacts of the reduced Newton system.
+    step : ndarray, shape (nR,)
+        Newton direction on those rows [N/m].
+    t : float
+        Step length [-].
+    dfree : ndarray, shape (M, 2)
+        Force-free displacements [m].
+    geometry : ContactGeometry
+    law : ContactLaw
+    cw : ContactWork
+        Compliance columns, filled for the trial's active set.
+    work : ndarray of bool, shape (M,)
+        Working set (the merit reads only its rows).
+    rows : ndarray of int64
+        Rows of the displacements to update (the working set's).
+    trial : _TrialPoint
+        Output buffers.
+
+    Returns
+    -------
+    (displacements ok, LU factors, pivots, active set, merit).
+    """
+    lam_t, d_t, phi_t, da_t, db_t = trial.lam, trial.d, trial.phi, trial.da, trial.db
+    c, Mblk, kappa, friction = law.c, law.Mblk, law.kappa, law.friction
+    Wt, Zt = cw.Wt, cw.Zt
     for k in range(lam.shape[0]):
         lam_t[k] = lam[k]
     for ii in range(Rs.shape[0]):
         k = Rs[ii]
         lam_t[k] = max(lam[k] + t * step[ii], 0.0)
     act_n = _active_of(lam_t)
-    fill_columns(act_n, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
+    fill_columns(act_n, cw, geometry, law)
     fok_t, LU_t, piv_t = _displacements(lam_t, act_n, dfree, Mblk, Wt, Zt, friction, d_t, rows)
     m_t = _fb_residual(lam_t, d_t, c, kappa, phi_t, da_t, db_t, work)
     return fok_t, LU_t, piv_t, act_n, m_t
@@ -563,8 +725,7 @@ def _grow_working_set(d, c, pair, tol, work):
 
 
 @njit(cache=True)
-def solve_contacts(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
-                   pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction):
+def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
     """Contact multipliers of one linearization by constraint generation around
     :func:`complementarity`: solve on a working set (the contacts with lambda > 0 and the local
     maxima of the constraint violation along each tube pair), then add the violated local maxima
@@ -574,37 +735,54 @@ def solve_contacts(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
     of the contact regions instead of every contact the force-free shape violates (measured:
     the first linearization from lambda = 0 activated up to 97 of 110 contacts).
 
-    Returns what :func:`complementarity` returns, with the Newton iterations of all rounds and
-    the error over all contacts.
+    Parameters
+    ----------
+    lam0 : ndarray, shape (M,)
+        Starting multipliers [N/m] (negative entries are taken as 0).
+    dfree : ndarray, shape (M, 2)
+        Force-free displacements of this linearization [m] (:func:`contact_frames`).
+    geometry : ContactGeometry
+    law : ContactLaw
+    cw : ContactWork
+        Compliance columns, filled on demand (in place).
+    tol : float
+        Stopping tolerance on max_k |Phi_k| / (kappa c_k) [-].
+    maxit : int
+        Newton iterations per round.
+
+    Returns
+    -------
+    ContactResult
+        What :func:`complementarity` returns, with the Newton iterations of all rounds and the
+        error over all contacts.
     """
+    c, Mblk, friction = law.c, law.Mblk, law.friction
+    pair = geometry.pair
     M = c.shape[0]
     lam = np.maximum(lam0, 0.0)
     work = lam > 0.0
     d = np.empty((M, 2))
     act = _active_of(lam)
-    fill_columns(act, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
-    fok, _, _ = _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, np.arange(M))
+    fill_columns(act, cw, geometry, law)
+    fok, _, _ = _displacements(lam, act, dfree, Mblk, cw.Wt, cw.Zt, friction, d, np.arange(M))
     if fok:
         _grow_working_set(d, c, pair, tol, work)
     else:
         work[:] = True
     total = 0
     for _ in range(M + 1):
-        lam, d, ok, its, err = complementarity(lam, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt,
-                                               have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in,
-                                               friction, work)
+        lam, d, ok, its, err = complementarity(lam, dfree, geometry, law, cw, tol, maxit, work)
         total += its
         if not ok:
-            return lam, d, False, total, err
+            return ContactResult(lam, d, False, total, err)
         added, worst = _grow_working_set(d, c, pair, tol, work)
         if added == 0:
-            return lam, d, True, total, max(err, worst)
-    return lam, d, False, total, err
+            return ContactResult(lam, d, True, total, max(err, worst))
+    return ContactResult(lam, d, False, total, err)
 
 
 @njit(cache=True)
-def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
-                    pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction, work):
+def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
     """Semismooth Fischer-Burmeister Newton on the contact complementarity conditions of one
     linearization (same iteration as the reference ``_Complementarity.solve``), over the
     contacts of the working set ``work`` (bool, shape (M,); the others are held at lambda = 0).
@@ -616,15 +794,31 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
     updated only on the working set (the merit and the Newton matrix read no other rows); the
     returned d is complete.
 
+    Parameters
+    ----------
+    lam0 : ndarray, shape (M,)
+        Starting multipliers [N/m] (negative entries are taken as 0).
+    dfree : ndarray, shape (M, 2)
+        Force-free displacements of this linearization [m] (:func:`contact_frames`).
+    geometry : ContactGeometry
+    law : ContactLaw
+    cw : ContactWork
+        Compliance columns, filled on demand (in place).
+    tol : float
+        Stopping tolerance on max_k |Phi_k| / (kappa c_k) [-].
+    maxit : int
+        Newton iterations at most.
+    work : ndarray of bool, shape (M,)
+        Working set.
+
     Returns
     -------
-    lam : ndarray, shape (M,)
-    d : ndarray, shape (M, 2)
-    ok : bool
-    iterations : int
-    err : float
-        max_k |Phi_k| / (kappa c_k).
+    ContactResult
+        ``lam`` (M,) [N/m], ``d`` (M, 2) [m], ``ok``, ``iterations`` and
+        ``err`` = max_k |Phi_k| / (kappa c_k).
     """
+    c, Mblk, kappa, friction = law.c, law.Mblk, law.kappa, law.friction
+    Wt, Zt = cw.Wt, cw.Zt
     M = c.shape[0]
     lam = np.maximum(lam0, 0.0)
     d = np.empty((M, 2))
@@ -637,8 +831,9 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
     db_t = np.empty(M)
     lam_t = np.empty(M)
     act = _active_of(lam)
-    fill_columns(act, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
+    fill_columns(act, cw, geometry, law)
     rows = np.nonzero(work)[0]
+    trial = _TrialPoint(lam_t, d_t, phi_t, da_t, db_t)
     lu_ok, LU, piv = _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, rows)
     merit = _fb_residual(lam, d, c, kappa, phi, da, db, work)
     hist = np.zeros(_NONMONOTONE)
@@ -647,7 +842,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
         err = _max_scaled(phi, c, kappa)
         if err < tol:
             _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
-            return lam, d, True, it - 1, err
+            return ContactResult(lam, d, True, it - 1, err)
         # reduced set: rows with db != 0, lam > 0 or phi != 0
         nR = 0
         for k in range(M):
@@ -659,7 +854,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
             if db[k] != 0.0 or lam[k] > 0.0 or phi[k] != 0.0:
                 Rs[i] = k
                 i += 1
-        fill_columns(Rs, Wt, Zt, have, pair, jo, ji, B, Pc, R, p, H1, H2, F3, tq_out, tq_in, friction)
+        fill_columns(Rs, cw, geometry, law)
         # Only the projection d_k . (dd_k / dlambda) enters the Newton matrix, so the derivative
         # D = C - W_(:, a) L_a S^-1 C_a (C[:, l] = Z[:, l] - W[:, l-block] M_l d_l) is formed
         # projected on d_k for the rows of R, and in full only for the active rows (C_a).
@@ -747,7 +942,7 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
             if not np.all(np.isfinite(Jc)):
                 # a non-finite Newton matrix (LAPACK would print an error): no step possible
                 _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
-                return lam, d, False, it, _max_scaled(phi, c, kappa)
+                return ContactResult(lam, d, False, it, _max_scaled(phi, c, kappa))
             rr = np.empty(nR)
             for ii in range(nR):
                 rr[ii] = -phi[Rs[ii]]
@@ -788,24 +983,22 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
                 break
             lu_solve(J2, pJ, rhs2)
             direction = rhs2
-            fok_t, LU_t, piv_t, act_n, m_t = _trial(
-                lam, Rs, direction, 1.0, lam_t, dfree, c, Mblk, kappa, Wt, Zt, have, pair, jo, ji, B, Pc, R, p,
-                H1, H2, F3, tq_out, tq_in, friction, work, rows, d_t, phi_t, da_t, db_t)
+            fok_t, LU_t, piv_t, act_n, m_t = _trial(lam, Rs, direction, 1.0, dfree, geometry, law, cw, work,
+                                                    rows, trial)
             if fok_t and m_t <= (1.0 - 1e-4) * ref_merit:
                 accepted = True
                 break
         t = 1.0
         for _ in range(0 if accepted else 40):
-            fok_t, LU_t, piv_t, act_n, m_t = _trial(
-                lam, Rs, stepR, t, lam_t, dfree, c, Mblk, kappa, Wt, Zt, have, pair, jo, ji, B, Pc, R, p,
-                H1, H2, F3, tq_out, tq_in, friction, work, rows, d_t, phi_t, da_t, db_t)
+            fok_t, LU_t, piv_t, act_n, m_t = _trial(lam, Rs, stepR, t, dfree, geometry, law, cw, work, rows,
+                                                    trial)
             if fok_t and m_t <= (1.0 - 1e-4 * t) * ref_merit:
                 accepted = True
                 break
             t *= 0.5
         if not accepted:
             _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
-            return lam, d, False, it, _max_scaled(phi, c, kappa)
+            return ContactResult(lam, d, False, it, _max_scaled(phi, c, kappa))
         lam[:] = lam_t
         d[:, :] = d_t
         phi[:] = phi_t
@@ -819,18 +1012,39 @@ def complementarity(lam0, dfree, c, Mblk, kappa, tol, maxit, Wt, Zt, have,
         lu_ok = True   # an accepted trial's factorization succeeded
     err = _max_scaled(phi, c, kappa)
     _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
-    return lam, d, err < tol, maxit, err
+    return ContactResult(lam, d, err < tol, maxit, err)
 
 
 @njit(cache=True)
-def generalized_curvature(lam, d, Mblk, B, pair, jo, ji, R, p, Omega, base, node_off,
-                          tq_out, tq_in, uhat, kinv, out):
+def generalized_curvature(lam, d, geometry, law, Omega, base, node_off, uhat, kinv, out):
     """Fixed-point map u -> uhat + K^-1 (A^T phi + zt^T lam) of the outer loop (stationarity,
-    Eqs. (34)-(36) and (41)), in place into ``out`` (S, 3) [1/m].
+    Eqs. (34)-(36) and (41) of Ha, Fagogenis & Dupont 2019), in place into ``out``.
 
     phi_c = -lam_c M_c d_c; the force on the outer tube's centerline is B_c phi_c and minus that
     on the inner tube's; friction torques tau lam about each tube's tangent.
+
+    Parameters
+    ----------
+    lam : ndarray, shape (M,)
+        Contact multipliers [N/m].
+    d : ndarray, shape (M, 2)
+        Contact displacements [m].
+    geometry : ContactGeometry
+        Reads ``pair``, ``jo``, ``ji``, ``B``, ``R`` and ``p`` (``Pc``, ``H1``, ``H2``, ``F3``
+        are not used).
+    law : ContactLaw
+        Reads ``Mblk``, ``tq_out`` and ``tq_in``.
+    Omega, base : ndarray, shape (S, 3, 3)
+        From :func:`linearize` [m], [m^2].
+    node_off : ndarray of int64, shape (n + 1,)
+        Tube t owns global nodes ``node_off[t]:node_off[t + 1]``.
+    uhat, kinv : ndarray, shape (S, 3)
+        Precurvatures [1/m] and inverse stiffnesses 1 / (k h) [1/(N m^3)].
+    out : ndarray, shape (S, 3)
+        Output: the curvatures of the map [1/m].
     """
+    Mblk, tq_out, tq_in = law.Mblk, law.tq_out, law.tq_in
+    B, jo, ji, R, p = geometry.B, geometry.jo, geometry.ji, geometry.R, geometry.p
     N = p.shape[0]
     n = node_off.shape[0] - 1
     Fn = np.zeros((N, 3))
