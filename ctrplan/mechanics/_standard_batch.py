@@ -11,6 +11,7 @@ with no Python work per configuration.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import config, get_num_threads, njit, prange, set_num_threads
@@ -67,10 +68,102 @@ class StandardBatch:
     certified: np.ndarray
 
 
+class BatchTubes(NamedTuple):
+    """The arrays of :class:`~ctrplan.mechanics.packed.PackedRobot` that the batch kernels read
+    (n tubes, B breaks at most per tube).
+
+    Attributes
+    ----------
+    lengths : ndarray, shape (n,)
+        Tube lengths [m].
+    breaks : ndarray, shape (n, B)
+        Tube-local section breaks [m].
+    n_breaks : ndarray of int64, shape (n,)
+        Breaks per tube.
+    precurvature : ndarray, shape (n, B - 1, 2)
+        Section precurvatures [1/m].
+    k_xy : ndarray, shape (n,)
+        Bending stiffnesses [N m^2].
+    stiffness_ratio : ndarray, shape (n,)
+        k_xy / k_z [-].
+    """
+
+    lengths: np.ndarray
+    breaks: np.ndarray
+    n_breaks: np.ndarray
+    precurvature: np.ndarray
+    k_xy: np.ndarray
+    stiffness_ratio: np.ndarray
+
+
+class BatchOptions(NamedTuple):
+    """Discretization and solver options of the batch kernels (from ``ModelSettings``).
+
+    Attributes
+    ----------
+    ds : float
+        Largest grid step [m].
+    merge_tol, refine_ratio, refine_length : float
+        Grid options of ``grid._grid``: breakpoint merge tolerance [m], step at a breakpoint of
+        the overlap as a fraction of ``ds`` [-], grading length [m].
+    tol : float
+        Shooting tolerance on the tip torsions [1/m].
+    maxit : int
+        Newton iterations per start.
+    multistart : int
+        Restarts of the multistart search (0: determinant test only).
+    predict : bool
+        Start from zero twist through the coarse-grid predictor (no ``initial_guess`` given).
+    follow : bool
+        Rows are a path (serial runs only, see :func:`solve_standard_batch`).
+    """
+
+    ds: float
+    merge_tol: float
+    refine_ratio: float
+    refine_length: float
+    tol: float
+    maxit: int
+    multistart: int
+    predict: bool
+    follow: bool
+
+
+class BatchOutput(NamedTuple):
+    """Per-configuration outputs of the batch kernels, written in place (K configurations,
+    n tubes); the fields of :class:`StandardBatch` of the same names.
+
+    Attributes
+    ----------
+    tips, tans : ndarray, shape (K, 3)
+        Tip positions [m] and unit tip tangents.
+    sig_out : ndarray, shape (K, n)
+        Base torsions [1/m].
+    conv, unst : ndarray of bool, shape (K,)
+        Converged; unstable.
+    iters, n_eq : ndarray of int64, shape (K,)
+        Newton iterations; equilibria found.
+    certified : ndarray of bool, shape (K,)
+        Uniqueness screen passed.
+    """
+
+    tips: np.ndarray
+    tans: np.ndarray
+    sig_out: np.ndarray
+    conv: np.ndarray
+    unst: np.ndarray
+    iters: np.ndarray
+    n_eq: np.ndarray
+    certified: np.ndarray
+
+
 @njit(cache=True)
-def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, gspec,
-               multistart, follow_from, tips, tans, sig_out, conv, unst, iters, n_eq, certified):
+def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out):
     """Configuration ``k`` of the batch: grid, Newton shooting (retried from zero twist), tip.
+
+    ``alpha``, ``beta`` (K, n) [rad], [m]; ``sig_init`` (K, n) [1/m] starts; ``tubes`` a
+    :class:`BatchTubes`, ``opts`` a :class:`BatchOptions`; ``follow_from`` (n,) [1/m];
+    results into row ``k`` of ``out`` (:class:`BatchOutput`).
 
     With ``multistart`` > 0, the stability check of :func:`ctrplan.mechanics.solve_standard`:
     configurations that the uniqueness screen (``_uniqueness``) certifies have one equilibrium
@@ -78,8 +171,15 @@ def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy,
     configuration may also start Newton from ``follow_from`` (the base torsions of the row
     before; NaN: none), without the coarse-grid predictor: its only equilibrium is found from
     any start that converges."""
+    lengths, brk, nbrk, curv = tubes.lengths, tubes.breaks, tubes.n_breaks, tubes.precurvature
+    kxy, ratio = tubes.k_xy, tubes.stiffness_ratio
+    ds, tol, maxit, multistart, predict = opts.ds, opts.tol, opts.maxit, opts.multistart, opts.predict
+    merge_tol, refine_ratio, refine_length = opts.merge_tol, opts.refine_ratio, opts.refine_length
+    tips, tans, sig_out, conv, unst = out.tips, out.tans, out.sig_out, out.conv, out.unst
+    iters, n_eq, certified = out.iters, out.n_eq, out.certified
     n = alpha.shape[1]
-    s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, gspec[0], gspec[1], gspec[2])
+    s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, merge_tol, refine_ratio,
+                                          refine_length)
     unique = False
     if multistart > 0:
         unique = unique_equilibrium_certified(s, first, last, present, uhat, kxy, kxy / ratio,
@@ -94,7 +194,7 @@ def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy,
     if not ok:
         if predict:
             cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
-                                             gspec[0], gspec[1], gspec[2])
+                                             merge_tol, refine_ratio, refine_length)
         else:   # not read by _shoot without the predictor
             cs, cpresent, cuhat = s, present, uhat
         sig0, _, it2, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a,
@@ -146,29 +246,42 @@ def _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy,
 
 
 @njit(cache=True)
-def _batch(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-           gspec, multistart, follow, tips, tans, sig_out, conv, unst, iters, n_eq, certified):
+def _batch(alpha, beta, valid, sig_init, tubes, opts, out):
+    """All configurations in order (serial; with ``opts.follow``, each certified row starts
+    from the previous row's base torsions).
+
+    Parameters
+    ----------
+    alpha, beta : ndarray, shape (K, n)
+        Base rotations [rad] and translations [m].
+    valid : ndarray of bool, shape (K,)
+        Configurations to solve (the others are left as initialized).
+    sig_init : ndarray, shape (K, n)
+        Starting base torsions [1/m] (read when ``opts.predict`` is False).
+    tubes : BatchTubes
+    opts : BatchOptions
+    out : BatchOutput
+        Written in place.
+    """
     n = alpha.shape[1]
     prev = np.full(n, np.nan)
     for k in range(alpha.shape[0]):
         if valid[k]:
-            _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-                       gspec, multistart, prev, tips, tans, sig_out, conv, unst, iters, n_eq, certified)
-            if follow and conv[k]:
-                prev = sig_out[k].copy()
+            _solve_one(k, alpha, beta, sig_init, tubes, opts, prev, out)
+            if opts.follow and out.conv[k]:
+                prev = out.sig_out[k].copy()
             else:
                 prev = np.full(n, np.nan)
 
 
 @njit(cache=True, parallel=True)
-def _batch_parallel(alpha, beta, valid, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-                    gspec, multistart, follow, tips, tans, sig_out, conv, unst, iters, n_eq, certified):
+def _batch_parallel(alpha, beta, valid, sig_init, tubes, opts, out):
+    """:func:`_batch` with the configurations shared by numba threads (``prange``); no
+    following (``opts.follow`` is ignored). Same parameters."""
     n = alpha.shape[1]
     for k in prange(alpha.shape[0]):
         if valid[k]:
-            _solve_one(k, alpha, beta, sig_init, predict, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit,
-                       gspec, multistart, np.full(n, np.nan), tips, tans, sig_out, conv, unst, iters, n_eq,
-                       certified)
+            _solve_one(k, alpha, beta, sig_init, tubes, opts, np.full(n, np.nan), out)
 
 
 def configuration_arrays(robot, alpha, beta):
@@ -256,11 +369,13 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     n_eq = np.zeros(K, dtype=np.int64)
     certified = np.zeros(K, dtype=bool)
     multistart = int(settings.multistart) if check_stability else 0
-    args = (alpha, beta, valid, sig_init, initial_guess is None, pk.lengths, pk.breaks, pk.n_breaks,
-            pk.precurvature, pk.k_xy, pk.stiffness_ratio,
-            float(settings.ds), float(settings.shooting_tol), int(settings.max_shooting_iterations),
-            np.array([GRID_MERGE_TOL, settings.refine_ratio, settings.refine_length]), multistart,
-            bool(follow), tips, tans, sig_out, conv, unst, iters, n_eq, certified)
+    tubes = BatchTubes(pk.lengths, pk.breaks, pk.n_breaks, pk.precurvature, pk.k_xy, pk.stiffness_ratio)
+    opts = BatchOptions(ds=float(settings.ds), merge_tol=float(GRID_MERGE_TOL),
+                        refine_ratio=float(settings.refine_ratio), refine_length=float(settings.refine_length),
+                        tol=float(settings.shooting_tol), maxit=int(settings.max_shooting_iterations),
+                        multistart=multistart, predict=initial_guess is None, follow=bool(follow))
+    out = BatchOutput(tips, tans, sig_out, conv, unst, iters, n_eq, certified)
+    args = (alpha, beta, valid, sig_init, tubes, opts, out)
     if int(n_threads) == 1:
         _batch(*args)
     else:
