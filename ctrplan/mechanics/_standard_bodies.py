@@ -14,6 +14,7 @@ The kernels of ``_standard_batch`` are reused unchanged; only the body extractio
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -22,7 +23,7 @@ from ..constants import GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR
 from .grid import _grid
 from .packed import PackedRobot, pack_robot
 from .results import BODY_TOL, ModelSettings
-from ._standard_batch import configuration_arrays
+from ._standard_batch import BatchOptions, BatchTubes, configuration_arrays
 from .standard import _centerline, _shoot
 
 __all__ = ["StandardBodies", "solve_standard_bodies"]
@@ -32,6 +33,21 @@ _PREDICTOR_STEP_FACTOR = PREDICTOR_STEP_FACTOR  # frozen into the compiled code
 # s >= max(beta) - _BODY_TOL, and tube i is present at s when
 # beta_i - _BODY_TOL <= s <= beta_i + L_i + _BODY_TOL (results.BODY_TOL, frozen into the kernels).
 _BODY_TOL = BODY_TOL
+
+
+class _BodiesOutput(NamedTuple):
+    """Outputs of :func:`_bodies`, written in place (K configurations, P points at most per
+    body): ``points`` (K, P, 3) [m], ``radii`` (K, P) [m], ``counts`` (K,) int64, ``tips``
+    (K, 3) [m], ``conv`` and ``unst`` (K,) bool, ``iters`` (K,) int64 (the fields of
+    :class:`StandardBodies`)."""
+
+    points: np.ndarray
+    radii: np.ndarray
+    counts: np.ndarray
+    tips: np.ndarray
+    conv: np.ndarray
+    unst: np.ndarray
+    iters: np.ndarray
 
 
 @dataclass
@@ -88,15 +104,19 @@ class StandardBodies:
 
 
 @njit(cache=True)
-def _body_counts(alpha, beta, valid, lengths, brk, nbrk, curv, ds, gspec, counts):
+def _body_counts(alpha, beta, valid, tubes, opts, counts):
     """Body points of each possible configuration (grid nodes with s >= max(beta) - tol), to
     size the padded outputs exactly when the capacity bound of :func:`_solve_packed` did not
-    hold; writes ``counts`` (K,) and returns their maximum."""
+    hold; writes ``counts`` (K,) and returns their maximum. ``alpha``, ``beta`` (K, n) [rad],
+    [m]; ``valid`` (K,) bool; ``tubes`` a ``BatchTubes``, ``opts`` a ``BatchOptions``
+    (``_standard_batch``)."""
+    lengths, brk, nbrk, curv = tubes.lengths, tubes.breaks, tubes.n_breaks, tubes.precurvature
+    ds, merge_tol, refine_ratio, refine_length = opts.ds, opts.merge_tol, opts.refine_ratio, opts.refine_length
     largest = 0
     for k in range(alpha.shape[0]):
         if not valid[k]:
             continue
-        s, _, _, _, _ = _grid(beta[k], lengths, brk, nbrk, curv, ds, gspec[0], gspec[1], gspec[2])
+        s, _, _, _, _ = _grid(beta[k], lengths, brk, nbrk, curv, ds, merge_tol, refine_ratio, refine_length)
         front = np.max(beta[k]) - _BODY_TOL
         c = 0
         for q in range(s.shape[0]):
@@ -108,22 +128,45 @@ def _body_counts(alpha, beta, valid, lengths, brk, nbrk, curv, ds, gspec, counts
 
 
 @njit(cache=True)
-def _bodies(alpha, beta, valid, lengths, brk, nbrk, curv, kxy, ratio, ds, tol, maxit, gspec, r_out,
-            points, radii, counts, tips, conv, unst, iters):
+def _bodies(alpha, beta, valid, tubes, opts, r_out, out):
     """Per possible configuration k: the grid, Newton shooting from no twist through the coarse
     predictor (``_shoot`` with ``predict``, as ``_standard_batch._solve_one`` with no initial
-    guess), the centerline, and the body of ``StandardSolution.body`` written into ``points[k]``
-    (P, 3) and ``radii[k]`` (P,), with its length in ``counts[k]``; -1 there if the body has
-    more than P points (the caller then sizes the arrays exactly and runs again)."""
+    guess), the centerline, and the body of ``StandardSolution.body`` written into
+    ``out.points[k]`` (P, 3) and ``out.radii[k]`` (P,), with its length in ``out.counts[k]``;
+    -1 there if the body has more than P points (the caller then sizes the arrays exactly and
+    runs again).
+
+    Parameters
+    ----------
+    alpha, beta : ndarray, shape (K, n)
+        Base rotations [rad] and translations [m].
+    valid : ndarray of bool, shape (K,)
+        Configurations to solve.
+    tubes : BatchTubes
+        From the packed robot (``_standard_batch``).
+    opts : BatchOptions
+        Reads ``ds``, the grid options, ``tol`` and ``maxit``.
+    r_out : ndarray, shape (n,)
+        Outer radius of each tube for collision checking [m].
+    out : _BodiesOutput
+        Written in place.
+    """
+    lengths, brk, nbrk, curv = tubes.lengths, tubes.breaks, tubes.n_breaks, tubes.precurvature
+    kxy, ratio = tubes.k_xy, tubes.stiffness_ratio
+    ds, tol, maxit = opts.ds, opts.tol, opts.maxit
+    merge_tol, refine_ratio, refine_length = opts.merge_tol, opts.refine_ratio, opts.refine_length
+    points, radii, counts, tips = out.points, out.radii, out.counts, out.tips
+    conv, unst, iters = out.conv, out.unst, out.iters
     n = alpha.shape[1]
     cap = points.shape[1]
     for k in range(alpha.shape[0]):
         if not valid[k]:
             continue
         b = beta[k]
-        s, first, last, present, uhat = _grid(b, lengths, brk, nbrk, curv, ds, gspec[0], gspec[1], gspec[2])
-        cs, _, _, cpresent, cuhat = _grid(b, lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds, gspec[0],
-                                          gspec[1], gspec[2])
+        s, first, last, present, uhat = _grid(b, lengths, brk, nbrk, curv, ds, merge_tol, refine_ratio,
+                                              refine_length)
+        cs, _, _, cpresent, cuhat = _grid(b, lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds, merge_tol,
+                                          refine_ratio, refine_length)
         a = alpha[k].copy()
         _, _, it, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, np.zeros(n),
                                               lengths, tol, maxit, True)
@@ -213,13 +256,15 @@ def _solve_packed(packed, alpha, beta, valid, settings) -> StandardBodies:
     """:func:`solve_standard_bodies` on a :class:`PackedRobot` ``packed``, for contiguous
     ``alpha``, ``beta`` (K, n) whose possible configurations are flagged in ``valid`` (K,) (for
     callers that pack the robot once and have checked the configurations already)."""
-    lengths, brk, nbrk, curv = packed.lengths, packed.breaks, packed.n_breaks, packed.precurvature
-    kxy, ratio, r_out = packed.k_xy, packed.stiffness_ratio, packed.outer_radius
+    tubes = BatchTubes(packed.lengths, packed.breaks, packed.n_breaks, packed.precurvature, packed.k_xy,
+                       packed.stiffness_ratio)
+    opts = BatchOptions(ds=float(settings.ds), merge_tol=float(GRID_MERGE_TOL),
+                        refine_ratio=float(settings.refine_ratio), refine_length=float(settings.refine_length),
+                        tol=float(settings.shooting_tol), maxit=int(settings.max_shooting_iterations),
+                        multistart=0, predict=True, follow=False)
     K = alpha.shape[0]
-    gspec = np.array([GRID_MERGE_TOL, settings.refine_ratio, settings.refine_length])
-    ds = float(settings.ds)
     counts = np.zeros(K, dtype=np.int64)
-    P = _body_capacity(lengths, nbrk, settings) if K else 0
+    P = _body_capacity(packed.lengths, packed.n_breaks, settings) if K else 0
     for attempt in range(2):
         points = np.full((K, P, 3), np.nan)
         radii = np.full((K, P), np.nan)
@@ -228,12 +273,11 @@ def _solve_packed(packed, alpha, beta, valid, settings) -> StandardBodies:
         unst = np.zeros(K, dtype=bool)
         iters = np.zeros(K, dtype=np.int64)
         if K:
-            _bodies(alpha, beta, valid, lengths, brk, nbrk, curv, kxy, ratio, ds, float(settings.shooting_tol),
-                    int(settings.max_shooting_iterations), gspec, r_out, points, radii, counts, tips, conv, unst,
-                    iters)
+            _bodies(alpha, beta, valid, tubes, opts, packed.outer_radius,
+                    _BodiesOutput(points, radii, counts, tips, conv, unst, iters))
         if not np.any(counts < 0):
             break
-        P = int(_body_counts(alpha, beta, valid, lengths, brk, nbrk, curv, ds, gspec, counts))
+        P = int(_body_counts(alpha, beta, valid, tubes, opts, counts))
     P = int(counts.max()) if K else 0
     points = np.ascontiguousarray(points[:, :P])
     radii = np.ascontiguousarray(radii[:, :P])
