@@ -104,3 +104,19 @@ def test_friction_radii_missing_only_fail_where_friction_acts():
     np.testing.assert_array_equal(pk.clearance, [5e-5])
     with pytest.raises(PhysicalParameterError, match="needs a diameter"):
         pk.contact_radii(robot)
+
+
+def test_read_only_arrays_do_not_recompile_per_robot():
+    """numba types read-only arrays apart from writable ones: one specialization serves every
+    robot's packing (no compilation per call or per robot)."""
+    from ctrplan.mechanics.grid import _grid
+
+    robot = table2_robot()
+    beta = np.array(robot.home_beta)
+    build_grid(robot, beta, 3e-3)
+    n_signatures = len(_grid.signatures)
+    for mu in (0.1, 0.3):
+        other = table2_robot(mu=mu)
+        build_grid(other, beta, 3e-3)
+        build_grid(other, beta, 2e-3, 0.5, 0.01)
+    assert len(_grid.signatures) == n_signatures
