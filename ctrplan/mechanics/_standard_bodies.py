@@ -237,11 +237,6 @@ def solve_standard_bodies(robot, alpha, beta, settings: ModelSettings | None = N
     return _solve_packed(pack_robot(robot), alpha, beta, robot.configurations_possible(alpha, beta), settings)
 
 
-def _pack(robot) -> PackedRobot:
-    """The robot's shared :class:`~ctrplan.mechanics.packed.PackedRobot` (kept under this name
-    for ``planning.validity``, which packs once and calls :func:`_solve_packed`)."""
-    return pack_robot(robot)
-
 
 def _body_capacity(lengths, nbrk, settings) -> int:
     """Points allocated per body before solving: the grid's own node bound (``grid._grid``'s

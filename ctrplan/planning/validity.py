@@ -301,10 +301,11 @@ class BatchValidityChecker:
         """Standard-model bodies of (alpha, beta) (k, n); a batch whose compiled solve raises
         is redone one configuration at a time, and configurations that raise are invalid (as
         in ``ValidityChecker``). Returns (StandardBodies, failed (k,) bool)."""
-        from ..mechanics._standard_bodies import StandardBodies, _pack, _solve_packed  # noqa: PLC0415
+        from ..mechanics._standard_bodies import StandardBodies, _solve_packed  # noqa: PLC0415
+        from ..mechanics.packed import pack_robot  # noqa: PLC0415
 
         if self._packed is None:
-            self._packed = _pack(self.robot)
+            self._packed = pack_robot(self.robot)
         k = alpha.shape[0]
         alpha = np.ascontiguousarray(alpha)
         beta = np.ascontiguousarray(beta)
