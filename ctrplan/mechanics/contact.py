@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..constants import OUTER_STAGNATION_WINDOW
 from ..errors import ConvergenceError
 from ._contact_fast import FlatProblem, run_outer_loop
 from .results import ContactSolution, Diagnostics, ModelSettings
@@ -133,9 +134,15 @@ def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, 
     lines = [x.copy() for x in prob.split_nodes(p)]
     Rt, pt = frames[tip_tube], lines[tip_tube]
     model = "clearance" if eta is None else f"friction eta={eta.astype(int).tolist()}"
-    msg = (f"{model}: converged in {outer} outer iterations" if converged else
-           f"{model}: not converged after {outer} outer iterations (centerline change "
-           f"{change:.3g} m, complementarity {'ok' if inner_ok else 'failed'})")
+    if converged:
+        msg = f"{model}: converged in {outer} outer iterations"
+    else:
+        why = ""
+        if inner_ok and outer < settings.max_outer_iterations:
+            why = (f"; stopped: no new smallest centerline change in {OUTER_STAGNATION_WINDOW} "
+                   f"iterations")
+        msg = (f"{model}: not converged after {outer} outer iterations (centerline change "
+               f"{change:.3g} m, complementarity {'ok' if inner_ok else 'failed'}{why})")
     diag = Diagnostics(converged=converged, iterations=outer, inner_iterations=inner_total,
                        unstable=standard.diagnostics.unstable, n_equilibria=standard.diagnostics.n_equilibria,
                        message=msg, residual=viol)
