@@ -185,8 +185,10 @@ class DiscrepancyOptions:
 
 
 #: Version of the fitting procedure in the stage key: 2 = two-stage least squares (error components,
-#: then Eq. (49)); stages written by version 1 (Eq. (49) alone, which stopped at its budget) are redone.
-FIT_VERSION = 2
+#: then Eq. (49)); 3 = stage 2 with the norms' curvature in its Gauss-Newton model and the BIC
+#: stopping rule (:data:`~ctrplan.discrepancy.calibrate.BIC_TOLERANCE`). Stages written by an
+#: earlier version (1: Eq. (49) alone; 2: stage 2 stopped at its budget) are redone.
+FIT_VERSION = 3
 #: Options added after stages were first written, with their defaults (see the stage key).
 _LATER_OPTIONS = {"block_samples": 100}
 
