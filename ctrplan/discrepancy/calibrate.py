@@ -435,6 +435,15 @@ class _Eq49Model:
         #: and the cost there.
         self.remaining, self.cost = np.inf, np.nan
 
+    def bic_left(self, n_samples: int) -> float:
+        """BIC change ``N ln(cost / (cost - remaining))`` the model still predicts at the last
+        Jacobian (0 at a zero cost, inf before the first Jacobian)."""
+        if not np.isfinite(self.remaining):
+            return np.inf
+        if self.cost <= 0.0:
+            return 0.0
+        return float(n_samples * np.log(self.cost / max(self.cost - self.remaining, 1e-300 * self.cost)))
+
     def fun(self, x):
         h = self.obj.residuals(x)
         rows = np.zeros((h.size, self.width))
@@ -596,7 +605,7 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
 
     def settled(intermediate_result):
         """Stop (``StopIteration``: status -2) when the predicted further decrease is negligible."""
-        if k * np.log(eq49.cost / max(eq49.cost - eq49.remaining, 1e-300 * eq49.cost)) < BIC_TOLERANCE:
+        if eq49.bic_left(k) < BIC_TOLERANCE:
             raise StopIteration
 
     left = max(2, (max_evaluations - obj.evaluations) // per_step)
@@ -604,7 +613,7 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     sol = least_squares(eq49.fun, x1, jac=eq49.jac, max_nfev=left, callback=settled, **kw)
     r = obj.residuals(sol.x)
     converged = bool(sol.status > 0 or sol.status == -2)
-    left_bic = k * np.log(eq49.cost / max(eq49.cost - eq49.remaining, 1e-300 * eq49.cost))
+    left_bic = eq49.bic_left(k)
     how = (f"the predicted further decrease {eq49.remaining:.3g} (mm + deg)^2 changes the BIC by "
            f"{left_bic:.2g} < {BIC_TOLERANCE:g}" if sol.status == -2 else sol.message)
     msg = (f"least squares: error components {first.nfev} steps ({'converged' if first.status > 0 else 'budget'}), "
