@@ -200,3 +200,37 @@ def test_shooting_restarts_where_newton_stalls():
         uniform = solve_standard(robot, a, b, settings.replace(refine_ratio=1.0), check_stability=False)
         assert np.linalg.norm(st.tip_position - uniform.tip_position) < 1e-6
         np.testing.assert_allclose(batch.tip_position[k], st.tip_position, atol=1e-10)
+
+
+# The 8x8x8 grid of issue 14 (alpha_2, alpha_3 in steps of 45 deg, beta_3 = -120.4 mm plus
+# tube 3's curved exposure): its five configurations with three equilibria (found by the
+# multistart search of the all-fine-grid reference) and unique neighbours of each.
+_GRID8_MULTISTABLE = [(0, 180, 0.0), (0, 180, 12.343), (0, 180, 24.686), (90, 225, 0.0), (270, 135, 0.0)]
+_GRID8_UNIQUE = [(0, 180, 37.029), (45, 225, 0.0), (0, 135, 0.0), (90, 180, 0.0), (270, 90, 0.0)]
+
+
+@pytest.mark.parametrize("a2, a3, e", _GRID8_MULTISTABLE + _GRID8_UNIQUE)
+def test_coarse_grid_multistart_finds_what_the_fine_search_finds(a2, a3, e):
+    """The multistart search solves its restarts on the predictor's coarse grid and confirms
+    only distinct candidates on the fine one (issue 14). It must count the same equilibria as
+    the frozen reference, which solves every restart on the fine grid: a search that misses a
+    branch (e.g. compares a coarse solution with the wrong tolerance, or drops the confirmed
+    candidates) fails on the multistable rows, one that invents branches on the unique rows.
+    Single solver and batch both."""
+    from ctrplan.mechanics import solve_standard_batch
+    from reference import standard_reference
+
+    robot = table2_robot()
+    alpha = np.radians([0.0, a2, a3])
+    beta = np.array([0.0, -0.017, -0.1204 + e * 1e-3])
+    settings = ModelSettings()
+    ref = standard_reference.solve_standard(robot, alpha, beta, settings)
+    expected = 3 if (a2, a3, e) in _GRID8_MULTISTABLE else 1
+    assert ref.diagnostics.n_equilibria == expected          # the premise, from the reference
+    single = solve_standard(robot, alpha, beta, settings)
+    batch = solve_standard_batch(robot, alpha[None], beta[None], settings, check_stability=True)
+    assert single.diagnostics.n_equilibria == expected
+    assert single.diagnostics.unstable == (expected > 1)
+    if not batch.certified[0]:
+        assert batch.n_equilibria[0] == expected
+    assert bool(batch.unstable[0]) == (expected > 1)

@@ -16,13 +16,13 @@ from typing import NamedTuple
 import numpy as np
 from numba import config, get_num_threads, njit, prange, set_num_threads
 
-from ..constants import (DISTINCT_EQUILIBRIUM_TWIST, GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR,
+from ..constants import (GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR,
                          UNIQUENESS_SCREEN_MARGIN)
 from .grid import _grid
 from .packed import pack_robot
 from .results import ModelSettings
 from ._uniqueness import unique_equilibrium_certified
-from .standard import _centerline, _newton, _shoot
+from .standard import _centerline, _multistart_search, _newton, _shoot
 
 __all__ = ["StandardBatch", "solve_standard_batch"]
 
@@ -188,6 +188,8 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out):
     a = alpha[k].copy()
     it = 0
     ok = False
+    cs, cpresent, cuhat = s, present, uhat   # the coarse grid, once built
+    have_coarse = False
     if unique and np.all(np.isfinite(follow_from)):
         sig0, _, it, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, follow_from.copy(), lengths,
                                                   tol, maxit, np.empty((n, n)))
@@ -195,8 +197,7 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out):
         if predict:
             cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
                                              merge_tol, refine_ratio, refine_length)
-        else:   # not read by _shoot without the predictor
-            cs, cpresent, cuhat = s, present, uhat
+            have_coarse = True
         sig0, _, it2, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a,
                                                   sig_init[k], lengths, tol, maxit, predict)
         it += it2
@@ -207,30 +208,13 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out):
     unstable = ok and not detJ > 0.0
     count = 0
     if ok and multistart > 0 and not unique:
-        # the multistart search of solve_standard (same guesses, same distinctness test)
-        found = np.empty((1 + multistart, n))
-        found[0] = sig0
-        count = 1
-        Jm = np.empty((n, n))
-        for q in range(min(multistart, 2 * (n - 1))):
-            i = 1 + q % (n - 1)
-            g = sig0.copy()
-            g[i] += (1.0 if q < n - 1 else -1.0) * np.pi / lengths[i]
-            g_sig, _, g_it, g_ok, g_det, _, _ = _newton(s, present, uhat, kxy, ratio, a, g, lengths, tol, maxit, Jm)
-            it += g_it
-            if not g_ok or not g_det > 0.0:
-                continue
-            distinct = True
-            for f in range(count):
-                far = 0.0
-                for j in range(n):
-                    far = max(far, abs(g_sig[j] - found[f, j]) * lengths[j])
-                if not far > DISTINCT_EQUILIBRIUM_TWIST:
-                    distinct = False
-                    break
-            if distinct:
-                found[count] = g_sig
-                count += 1
+        # the multistart search of solve_standard (same guesses, coarse-grid restarts)
+        if not have_coarse:
+            cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
+                                             merge_tol, refine_ratio, refine_length)
+        count, ms_it = _multistart_search(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, sig0, lengths,
+                                          tol, maxit, multistart)
+        it += ms_it
         if count > 1:
             unstable = True
     elif ok and unique:

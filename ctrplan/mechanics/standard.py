@@ -30,6 +30,7 @@ from .results import Diagnostics, ModelSettings, StandardSolution
 __all__ = ["solve_standard"]
 
 _PREDICTOR_TOL = PREDICTOR_TOL  # module-level constant, frozen into the compiled code
+_DISTINCT_TWIST = DISTINCT_EQUILIBRIUM_TWIST
 # Newton shooting gives up a start when its residual has not fallen below _STALL_FACTOR times
 # its best for _STALL_ITERATIONS iterations
 _STALL_FACTOR = 0.9
@@ -383,6 +384,65 @@ def _shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, sig0, lengths, 
     return x, res, total, ok, detJ, psi, sig
 
 
+@njit(cache=True, error_model="numpy")
+def _multistart_search(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, sig0, lengths, tol, maxit,
+                       count):
+    """Multistart search for other stable equilibria than the one at base torsions ``sig0``
+    (n,) [1/m] on the grid ``s``: the first ``count`` of the guesses sig0 + pi / L_i, then
+    sig0 - pi / L_i, of extra twist on each inner tube i (round-robin), each solved by damped
+    Newton on the coarse grid ``cs`` (``cpresent``, ``cuh``: the predictor's grid) to the
+    shooting tolerance ``tol``. A coarse solution with a positive shooting-Jacobian determinant
+    whose base torsions differ from every equilibrium found so far by more than
+    ``DISTINCT_EQUILIBRIUM_TWIST`` (in twist, |d sigma_i| L_i [rad]) is confirmed on the fine
+    grid (one chord step with the coarse Jacobian, then Newton); only a fine solution that
+    converges, is stable-looking (det > 0) and is distinct by the same test counts.
+
+    The guesses are the ones the search has always used; only where they are solved changed
+    (issue 14): a coarse sweep costs about a quarter of a fine one, and a restart that returns
+    to the known equilibrium, the usual case, needs no fine sweep at all. Measured against
+    the all-fine search on the grids and trajectory of docs/mechanics.md, Sec. 2: the same
+    configurations flagged.
+
+    Returns (number of equilibria found, including the one at ``sig0``; Newton iterations).
+    """
+    n = sig0.shape[0]
+    found = np.empty((1 + count, n))
+    found[0] = sig0
+    n_found = 1
+    its = 0
+    Jc = np.empty((n, n))
+    Jf = np.empty((n, n))
+    for q in range(min(count, 2 * (n - 1))):
+        i = 1 + q % (n - 1)
+        g = sig0.copy()
+        g[i] += (1.0 if q < n - 1 else -1.0) * np.pi / lengths[i]
+        c_sig, _, c_it, c_ok, c_det, _, _ = _newton(cs, cpresent, cuh, kxy, ratio, alpha, g, lengths, tol, maxit, Jc)
+        its += c_it
+        if not c_ok or not c_det > 0.0 or not _distinct(c_sig, found, n_found, lengths):
+            continue
+        x1 = _chord_step(s, present, uh, kxy, ratio, alpha, c_sig, Jc, lengths)
+        its += 1
+        f_sig, _, f_it, f_ok, f_det, _, _ = _newton(s, present, uh, kxy, ratio, alpha, x1, lengths, tol, maxit, Jf)
+        its += f_it
+        if f_ok and f_det > 0.0 and _distinct(f_sig, found, n_found, lengths):
+            found[n_found] = f_sig
+            n_found += 1
+    return n_found, its
+
+
+@njit(cache=True, inline="always")
+def _distinct(sig, found, n_found, lengths):
+    """Whether base torsions ``sig`` (n,) differ from each of the first ``n_found`` rows of
+    ``found`` by more than ``DISTINCT_EQUILIBRIUM_TWIST`` in twist (max_i |d sigma_i| L_i)."""
+    for f in range(n_found):
+        far = 0.0
+        for j in range(sig.shape[0]):
+            far = max(far, abs(sig[j] - found[f, j]) * lengths[j])
+        if not far > _DISTINCT_TWIST:
+            return False
+    return True
+
+
 @njit(cache=True, error_model="numpy", inline="always")
 def _mean_bending(angle, present, uh, kxy):
     """Shared bending curvature (u_x, u_y) [1/m] = sum_i k_i R_z(angle_i) uhat_i / sum_i k_i over
@@ -462,19 +522,6 @@ def _assemble(problem, sig0, psi, sig, diag) -> StandardSolution:
         bending_mid=ub, grid=g)
 
 
-def _multistart_guesses(problem, sig0, count):
-    """Initial base torsions that put about +pi, then -pi, of extra twist on each inner tube
-    (round-robin over the tubes, so every inner tube gets a guess once ``count >= n - 1``)."""
-    guesses = []
-    n = problem.robot.n_tubes
-    for sign in (1.0, -1.0):
-        for i in range(1, n):
-            g = np.array(sig0, dtype=float)
-            g[i] += sign * np.pi / problem.lengths[i]
-            guesses.append(g)
-    return guesses[:count]
-
-
 def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
                    initial_guess=None, check_stability: bool = True,
                    raise_on_failure: bool = False) -> StandardSolution:
@@ -498,7 +545,8 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
         then restarts from plus and minus pi / L_i of twist on each inner tube i).
     check_stability : bool
         Run the multistart search for other equilibria (skipped when ``settings.multistart``
-        is 0). The Jacobian-determinant test always runs.
+        is 0; restarts solved on the predictor's coarse grid, distinct candidates confirmed on
+        the fine one: :func:`_multistart_search`). The Jacobian-determinant test always runs.
     raise_on_failure : bool
         Raise instead of flagging in ``diagnostics``.
 
@@ -537,15 +585,12 @@ def solve_standard(robot, alpha, beta, settings: ModelSettings | None = None, *,
     if ok and check_stability and settings.multistart > 0:
         # equilibria are told apart by their base torsions (the shooting unknowns): two
         # solutions of the BVP with the same base torsions are the same solution
-        found = [sig0]
-        for guess in _multistart_guesses(problem, sig0, settings.multistart):
-            g_sig, _, g_it, g_ok, g_det, _ = problem.newton(guess, settings)
-            iters += g_it
-            if not g_ok or not g_det > 0.0:
-                continue
-            if all(np.max(np.abs(g_sig - f) * problem.lengths) > DISTINCT_EQUILIBRIUM_TWIST for f in found):
-                found.append(g_sig)
-        n_eq = len(found)
+        g, c = problem.grid, problem._coarse_grid()
+        n_eq, ms_it = _multistart_search(g.s, g.present, g.precurvature, c.s, c.present, c.precurvature,
+                                         problem.kxy, problem.ratio, problem.alpha, np.asarray(sig0, dtype=float),
+                                         problem.lengths, float(settings.shooting_tol),
+                                         int(settings.max_shooting_iterations), int(settings.multistart))
+        iters += ms_it
         if n_eq > 1:
             unstable = True
     if unstable:
