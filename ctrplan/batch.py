@@ -19,8 +19,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import CtrplanError
-from .mechanics import (ModelSettings, all_eta, evaluate_bound, solve_clearance, solve_friction,
-                        solve_standard, solve_standard_batch)
+from .mechanics import ModelSettings, solve_standard, solve_standard_batch
 from .mechanics._lie import angle_between
 from .models import MODELS  # the one registry of models
 
@@ -93,6 +92,9 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
         std = solve_standard(robot, alpha, beta, settings)
         if model == "standard":
             return [_row(alpha, beta, None, std, _status(std.diagnostics), std.diagnostics.message, model)]
+        # the contact models are imported here, not at the top: a standard-model run does not
+        # load them (ctrplan.mechanics imports them lazily, 0.3 s of process start)
+        from .mechanics import all_eta, evaluate_bound, solve_clearance, solve_friction
         if model == "clearance":
             cl = solve_clearance(robot, alpha, beta, settings, standard=std)
             row = _row(alpha, beta, None, cl, _status(cl.diagnostics), cl.diagnostics.message, model)

@@ -12,16 +12,37 @@
 All from Ha, Fagogenis & Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906.
 """
 
+import importlib
+
 from ..constants import MECHANICS_VERSION
-from .bound import all_eta, evaluate_bound
-from .contact import solve_clearance, solve_contact, solve_friction
 from .discrete import TubeChain, chain_jacobians, forward_kinematics
 from .grid import ArcLengthGrid, build_grid
-from .prediction import PAIR_CASES, Prediction, pair_cases, predict_tip
 from .results import BoundResult, ContactSolution, Diagnostics, ModelSettings, StandardSolution
 from ._standard_batch import StandardBatch, solve_standard_batch
 from ._standard_bodies import StandardBodies, solve_standard_bodies
 from .standard import solve_standard
+
+# The contact models (and the bound and prediction built on them) are imported on first use
+# (PEP 562): they load scipy's LAPACK and the contact kernels, about 0.3 s of every process
+# start that a standard-model-only command (`ctrplan evaluate --model standard`) does not need.
+_LAZY = {"all_eta": ".bound", "evaluate_bound": ".bound",
+         "solve_clearance": ".contact", "solve_contact": ".contact", "solve_friction": ".contact",
+         "PAIR_CASES": ".prediction", "Prediction": ".prediction", "pair_cases": ".prediction",
+         "predict_tip": ".prediction"}
+
+
+def __getattr__(name):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = [
     "MECHANICS_VERSION", "solve_standard", "solve_standard_batch", "StandardBatch", "solve_clearance", "solve_friction", "solve_contact", "evaluate_bound",

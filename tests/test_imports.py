@@ -1,0 +1,39 @@
+"""The package's import structure: what a standard-model-only command loads."""
+
+import subprocess
+import sys
+
+import pytest
+
+
+def test_standard_model_command_path_does_not_load_the_contact_stack():
+    """`ctrplan evaluate --model standard` imports ctrplan.batch and runs the standard batch; the
+    contact kernels and scipy's LAPACK (about 0.3 s of process start) are not needed there and
+    must stay unloaded. Fails if an eager import of a contact-model name comes back (in
+    ctrplan.mechanics or ctrplan.batch). Run in a fresh interpreter: this test process has
+    long imported everything."""
+    code = ("import sys, numpy as np\n"
+            "import ctrplan.batch\n"
+            "from ctrplan.mechanics import ModelSettings, solve_standard, solve_standard_batch\n"
+            "print(','.join(m for m in ('ctrplan.mechanics.contact', 'ctrplan.mechanics._contact_kernels',\n"
+            "                           'ctrplan.mechanics._lapack', 'scipy.linalg') if m in sys.modules))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""
+
+
+def test_contact_model_names_resolve_on_first_use():
+    """The lazily imported names are the real functions, are listed by dir(), and an unknown
+    name still raises AttributeError."""
+    import ctrplan.mechanics as mechanics
+    from ctrplan.mechanics import evaluate_bound, predict_tip, solve_friction
+    from ctrplan.mechanics.bound import evaluate_bound as direct_bound
+    from ctrplan.mechanics.contact import solve_friction as direct_friction
+    from ctrplan.mechanics.prediction import predict_tip as direct_predict
+
+    assert evaluate_bound is direct_bound
+    assert solve_friction is direct_friction
+    assert predict_tip is direct_predict
+    assert {"evaluate_bound", "solve_clearance", "PAIR_CASES"} <= set(dir(mechanics))
+    assert set(mechanics.__all__) <= set(dir(mechanics))
+    with pytest.raises(AttributeError, match="no_such_solver"):
+        mechanics.no_such_solver  # noqa: B018
