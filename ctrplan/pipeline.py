@@ -236,6 +236,9 @@ class WaypointPredictions:
         Contact solves made (the others reused the exact bound's solutions).
     time_s : float
         [s]
+    shape : tuple of (ndarray, shape (N_k, 3), or None), length K
+        Predicted centerline of the innermost tube (base to tip) [m], from the same solution as
+        ``tip``; None where the prediction failed.
     """
 
     tip: np.ndarray
@@ -249,6 +252,7 @@ class WaypointPredictions:
     message: list
     n_solved: int
     time_s: float
+    shape: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -563,6 +567,7 @@ def _predictions(ordered, robot, settings, exact) -> WaypointPredictions:
     eta_used = np.zeros((K, m), dtype=int)
     cases, models, messages = [""] * K, [""] * K, [""] * K
     ok = np.zeros(K, dtype=bool)
+    shapes = [None] * K
     n_solved = 0
     for k in range(K):
         res = exact.results[k]
@@ -580,10 +585,11 @@ def _predictions(ordered, robot, settings, exact) -> WaypointPredictions:
         n_solved += not p.reused
         tips[k], offsets[k], eta_used[k] = p.tip_position, p.offset, p.eta
         cases[k], models[k], ok[k] = ";".join(p.cases), p.model, p.ok
+        shapes[k] = np.asarray(p.solution.centerlines[-1])
         messages[k] = p.solution.diagnostics.message
     return WaypointPredictions(tip=tips, offset=offsets, eta=hist.eta, translation_last=hist.translation_last,
                                eta_used=eta_used, cases=cases, model=models, ok=ok, message=messages,
-                               n_solved=n_solved, time_s=time.perf_counter() - t0)
+                               n_solved=n_solved, time_s=time.perf_counter() - t0, shape=tuple(shapes))
 
 
 def _plan_mode(job: _PlanJob) -> RoutePlan:
@@ -898,10 +904,14 @@ def plan_summary(setup: PlanSetup, bound_map: BoundMapStage, validity, resolved:
 
 
 def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo: Echo = print) -> dict:
-    """Write path.csv, trajectory.csv, the figures and summary.json (last) into ``setup.out_dir``.
+    """Write path.csv, trajectory.csv, the figures, the interactive view ``plan.html`` and
+    summary.json (last) into ``setup.out_dir``.
 
     Every file is written atomically (:func:`ctrplan.report.write_plan_outputs`); the figures
-    plot bounds in mm.
+    plot bounds in mm. ``plan.html`` (:func:`ctrplan.view.write_plan_view`) shows the bound-aware
+    plan at every ordered waypoint (standard, predicted and friction-solution shapes), the
+    obstacles and the goal tips (task-space targets; the standard-model tip at a joint goal's
+    waypoint), with no further model solves.
 
     Parameters
     ----------
@@ -922,6 +932,7 @@ def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo
     """
     from .plots import plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes
     from .report import format_summary, write_plan_outputs
+    from .view import PLAN_VIEW_FILE, write_plan_view
 
     sc, robot = setup.scenario, setup.robot
     shapes, tips = [], []
@@ -946,7 +957,32 @@ def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo
                               s_label="joint-space path length [m, weighted metric]",
                               title=f"{sc.name}: interpolated bound along the ordered path")
 
-    figures = {"robot_shapes.png": fig_shapes, "bound_along_path.png": fig_bound}
+    aware = plans.aware
+    exact = aware.bounds.exact
+    results = exact.results
+    targets = []
+    for doc, gi in zip(sc.goals, aware.goal_indices):
+        tip = getattr(doc, "tip_position", None)
+        if tip is None and results[gi] is not None:
+            tip = results[gi].standard.tip_position
+        targets.append(np.full(3, np.nan) if tip is None else np.asarray(tip, dtype=float))
+    pred = aware.prediction
+
+    def view(path):
+        write_plan_view(
+            path, [None if r is None else r.standard.centerline for r in results],
+            friction_tips=[None if r is None else [f.tip_position for f in r.friction.values()]
+                           for r in results],
+            friction_shapes=[None if r is None else [f.centerlines[-1] for f in r.friction.values()]
+                             for r in results],
+            predicted_tips=pred.tip, predicted_shapes=pred.shape or None, obstacles=obstacles,
+            targets=np.array(targets).reshape(-1, 3),
+            step_labels=[str(k) for k in range(len(results))],
+            step_notes=[f"{m}, bound {1e3 * b:.2f} mm, predicted offset {1e3 * o:.2f} mm"
+                        for m, b, o in zip(aware.ordered.motions, exact.position, pred.offset)],
+            title=f"{sc.name} (bound-aware plan)")
+
+    figures = {"robot_shapes.png": fig_shapes, "bound_along_path.png": fig_bound, PLAN_VIEW_FILE: view}
     if traj is not None:
         figures["joint_trajectories.png"] = lambda path: plot_joint_trajectories(
             path, traj, robot.joint_names, [j.kind for j in robot.joints], title=f"{sc.name}: drive trajectory")

@@ -191,3 +191,47 @@ def test_report_stage_converts_the_si_results_to_mm_and_degrees_once(planned):
     assert summary["bound_map"]["ds_m"] == setup.settings.ds
     assert summary["duration_s"] == traj.duration and summary["times_s"]["total"] is None
     assert set(summary["comparison"]["final_bound_mm"]) == {"bound_aware", "bound_blind"}
+
+
+def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, monkeypatch):
+    """``write_report`` writes ``plan.html`` beside the other outputs: one slider step per ordered
+    waypoint, the standard centerline and friction tips of the exact bound in mm, the joint
+    goal's tip as the target."""
+    import re
+
+    from ctrplan import view
+
+    setup, bound_map, validity, resolved, aimed, plans, traj = planned
+    rows = pipeline.path_rows(plans.aware)
+    summary = pipeline.plan_summary(setup, bound_map, validity, resolved, aimed, plans, traj)
+    captured = {}
+    write = view.write_plan_view
+
+    def spy(path, standard, **kw):        # keeps what write_report gives the view, and writes it
+        captured.update(kw, standard=standard)
+        return write(path, standard, **kw)
+
+    monkeypatch.setattr(view, "write_plan_view", spy)
+    written = pipeline.write_report(setup, plans, traj, rows, summary, echo=lambda *a: None)
+    html = written["plan.html"].read_text(encoding="utf-8")
+    K = len(plans.aware.ordered)
+    assert len(re.findall(r'"method":\s*"update"', html)) == K
+    assert not re.search(r"<script[^>]*src=[\"']?https?:", html)
+    fig = view.plan_view_figure(**captured)
+    exact = plans.aware.bounds.exact
+    for k in (0, K - 1):
+        (std,) = [t for t in fig.data if t.name == f"standard (waypoint {k})"]
+        np.testing.assert_allclose(np.column_stack([std.x, std.y, std.z]),
+                                   1e3 * exact.results[k].standard.centerline, atol=1e-4)
+        (tips,) = [t for t in fig.data if t.name == f"friction tips (waypoint {k})"]
+        np.testing.assert_allclose(np.column_stack([tips.x, tips.y, tips.z]),
+                                   1e3 * np.array([f.tip_position for f in exact.results[k].friction.values()]),
+                                   atol=1e-4)
+        assert len(tips.x) == 2 ** (setup.robot.n_tubes - 1)
+    pred = plans.aware.prediction
+    ok = np.flatnonzero(pred.ok)
+    assert ok.size and all(np.allclose(pred.shape[k][-1], pred.tip[k]) for k in ok)  # shape ends at the tip
+    (target,) = [t for t in fig.data if t.name == "targets"]
+    gi = plans.aware.goal_indices[0]
+    np.testing.assert_allclose([target.x[0], target.y[0], target.z[0]],
+                               1e3 * exact.results[gi].standard.tip_position, atol=1e-4)

@@ -190,12 +190,25 @@ class MeshObstacle:
     def world_vertices(self) -> np.ndarray:
         """Mesh vertices in the world frame, shape (V, 3) [m], transformed exactly as in
         :meth:`collision_object` (used for the obstacle's axis-aligned box)."""
+        return self.world_triangles()[0]
+
+    def world_triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        """The mesh in the world frame, transformed exactly as in :meth:`collision_object`.
+
+        Returns
+        -------
+        vertices : ndarray, shape (V, 3)
+            [m].
+        faces : ndarray of int, shape (F, 3)
+            Vertex indices of each triangle.
+        """
         import trimesh
 
         mesh = trimesh.load(str(Path(self.path)), force="mesh")
         verts = _positive(self.scale, f"{self.name}: scale") * np.asarray(mesh.vertices, dtype=float)
         verts = verts @ rotation_from_rpy(_vec3(self.rpy_rad, f"{self.name}: rpy_rad")).T
-        return verts + _vec3(self.translation_m, f"{self.name}: translation_m")
+        return (verts + _vec3(self.translation_m, f"{self.name}: translation_m"),
+                np.asarray(mesh.faces, dtype=np.int64))
 
 
 _OBSTACLE_TYPES = {"sphere": SphereObstacle, "capsule": CapsuleObstacle, "box": BoxObstacle,
