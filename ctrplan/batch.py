@@ -93,7 +93,7 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
         if model == "standard":
             return [_row(alpha, beta, None, std, _status(std.diagnostics), std.diagnostics.message, model)]
         # the contact models are imported here, not at the top: a standard-model run does not
-        # load them (ctrplan.mechanics imports them lazily, 0.3 s of process start)
+        # import them (ctrplan.mechanics imports them lazily; about 40 ms)
         from .mechanics import all_eta, evaluate_bound, solve_clearance, solve_friction
         if model == "clearance":
             cl = solve_clearance(robot, alpha, beta, settings, standard=std)

@@ -8,8 +8,8 @@ import pytest
 
 def test_standard_model_command_path_does_not_load_the_contact_stack():
     """`ctrplan evaluate --model standard` imports ctrplan.batch and runs the standard batch; the
-    contact kernels and scipy's LAPACK (about 0.3 s of process start) are not needed there and
-    must stay unloaded. Fails if an eager import of a contact-model name comes back (in
+    contact kernels are not needed there and must stay unimported (scipy.linalg too, at import
+    time: numba loads it later, with the compiled kernels). Fails if an eager import of a contact-model name comes back (in
     ctrplan.mechanics or ctrplan.batch). Run in a fresh interpreter: this test process has
     long imported everything."""
     code = ("import sys, numpy as np\n"

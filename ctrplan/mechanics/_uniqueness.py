@@ -31,9 +31,10 @@ lumped at the interval ends (trapezoidal rule), the coupling scaled up by
 ``1 + UNIQUENESS_SCREEN_MARGIN`` so that the O(h^2) discretization error of the smallest
 eigenvalue cannot turn a marginal case into a certificate. The matrix is block tridiagonal
 (one n x n block per grid node); a block Cholesky factorization succeeds exactly when it is
-positive definite. Cost: O(G n^3) with no allocation per node; 37 us per
-configuration on the trajectory rows of the Table VII robot (G about 148; 74 us when each node
-allocated its blocks, measured 22 November 2026 at load 3).
+positive definite. Cost: O(G n^3) with no allocation per node: 59 us per configuration on the
+trajectory rows of the Table VII robot, 57 us with the Table II robot (G about 148), against 122
+and 120 us when each node allocated its blocks (both versions in one process, median of 5,
+idle, 22 November 2026; a slow day for this machine).
 """
 
 from __future__ import annotations
