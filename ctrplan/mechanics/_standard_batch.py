@@ -168,9 +168,13 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out):
     With ``multistart`` > 0, the stability check of :func:`ctrplan.mechanics.solve_standard`:
     configurations that the uniqueness screen (``_uniqueness``) certifies have one equilibrium
     and need no search; the others get the multistart search for other equilibria. A certified
-    configuration may also start Newton from ``follow_from`` (the base torsions of the row
-    before; NaN: none), without the coarse-grid predictor: its only equilibrium is found from
-    any start that converges."""
+    configuration may also start from ``follow_from`` (the base torsions of the row before;
+    NaN: none): its only equilibrium is found from any start that converges. With ``predict``
+    that start feeds the coarse-grid predictor (``standard._shoot``: coarse Newton, chord step,
+    fine Newton), otherwise Newton on the fine grid. Starting the fine Newton from the previous
+    row directly, as before issue 14 target 2, took fewer but dearer iterations: 0.67 against
+    0.50 ms per row without following on the Table VII trajectory (all rows certified), 0.45
+    with the predictor (CPU time, docs/mechanics.md, Sec. 10)."""
     lengths, brk, nbrk, curv = tubes.lengths, tubes.breaks, tubes.n_breaks, tubes.precurvature
     kxy, ratio = tubes.k_xy, tubes.stiffness_ratio
     ds, tol, maxit, multistart, predict = opts.ds, opts.tol, opts.maxit, opts.multistart, opts.predict
@@ -191,10 +195,17 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out):
     cs, cpresent, cuhat = s, present, uhat   # the coarse grid, once built
     have_coarse = False
     if unique and np.all(np.isfinite(follow_from)):
-        sig0, _, it, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, follow_from.copy(), lengths,
-                                                  tol, maxit, np.empty((n, n)))
-    if not ok:
         if predict:
+            cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
+                                             merge_tol, refine_ratio, refine_length)
+            have_coarse = True
+            sig0, _, it, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a,
+                                                     follow_from.copy(), lengths, tol, maxit, True)
+        else:
+            sig0, _, it, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, follow_from.copy(), lengths,
+                                                      tol, maxit, np.empty((n, n)))
+    if not ok:
+        if predict and not have_coarse:
             cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
                                              merge_tol, refine_ratio, refine_length)
             have_coarse = True
@@ -312,9 +323,11 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
         screen cannot prove a single equilibrium (``_uniqueness``: the worst-case second
         variation of the energy is positive definite). Default False: determinant test only.
     follow : bool
-        Rows are a path: where the screen proves a single equilibrium, start Newton from the
-        previous row's base torsions (serial runs only; with ``n_threads`` > 1 it is ignored).
-        The result is the same equilibrium to the shooting tolerance, found in fewer sweeps.
+        Rows are a path: where the screen proves a single equilibrium, start from the previous
+        row's base torsions (through the coarse-grid predictor when no ``initial_guess`` is
+        given; serial runs only, with ``n_threads`` > 1 it is ignored). The result is the same
+        equilibrium to the shooting tolerance (tips within 2e-11 m on the trajectory), found in
+        fewer sweeps.
 
     Returns
     -------
