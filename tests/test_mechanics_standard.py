@@ -85,6 +85,42 @@ def test_detects_elastic_instability():
         solve_standard(unstable, *unstable.configuration([np.pi - 0.05]), raise_on_failure=True)
 
 
+@pytest.mark.parametrize("theta", [np.pi, np.pi - 0.02])
+def test_stability_determinant_from_the_predictor_has_the_fine_grids_sign(theta):
+    """``standard._shoot`` takes the shooting-Jacobian determinant (the elastic-stability test)
+    from the coarse predictor unless it is small, and only then sweeps the fine grid with
+    sensitivities. Across the bifurcation of two equal tubes at 180 deg (L^2 kappa^2 (1 + nu) =
+    (pi/2)^2 at 1/kappa = 0.1089 m for L = 0.15 m; Dupont et al. 2010) the determinant passes
+    through zero: the returned one must have the sign of the fine grid's own determinant at the
+    returned base torsion, and equal it to 1e-3 relative where it came from the predictor."""
+    from ctrplan.mechanics.packed import pack_robot
+    from ctrplan.mechanics.standard import _COARSE_DET_MIN, _newton, _Problem
+
+    settings = ModelSettings()
+    dets = []
+    for radius in np.linspace(0.100, 0.118, 10):
+        robot = _long_pair(1 / radius)
+        packed = pack_robot(robot)
+        alpha, beta = robot.configuration([theta])
+        problem = _Problem(robot, alpha, beta, settings)
+        sig0, _, _, ok, det, _ = problem.newton(np.zeros(2), settings, predict=True)
+        assert ok
+        g = problem.grid
+        _, _, _, ok_f, det_fine, _, _ = _newton(g.s, g.present, g.precurvature, packed.k_xy, packed.stiffness_ratio,
+                                                alpha, sig0, packed.lengths, settings.shooting_tol,
+                                                settings.max_shooting_iterations, np.empty((2, 2)))
+        assert ok_f
+        assert np.sign(det) == np.sign(det_fine)
+        if abs(det) >= _COARSE_DET_MIN:
+            assert abs(det - det_fine) <= 1e-3 * abs(det_fine)
+        else:
+            assert det == det_fine   # the fine sweep's own value
+        dets.append(det_fine)
+    dets = np.array(dets)
+    assert np.any(dets > 0) and np.any(dets < 0)          # the family crosses the bifurcation
+    assert np.any(np.abs(dets) < _COARSE_DET_MIN)         # and exercises the fine fallback
+
+
 def test_follows_a_branch_from_an_initial_guess():
     """Continuation in the base angle with the previous base torsion keeps the solution on
     one branch: the tip moves continuously."""

@@ -35,6 +35,13 @@ _DISTINCT_TWIST = DISTINCT_EQUILIBRIUM_TWIST
 # its best for _STALL_ITERATIONS iterations
 _STALL_FACTOR = 0.9
 _STALL_ITERATIONS = 20
+# :func:`_shoot` takes the sign of the shooting-Jacobian determinant (the elastic-stability test)
+# from the coarse predictor when |det| is at least this (J = d sigma(L) / d sigma0 is
+# dimensionless; det = 1 without coupling); below, from a fine sweep with sensitivities.
+# Measured on 9634 configurations (the Ha trajectory, the 8x8x8 grid of issue 14 and 3000
+# random ones, Table II and VII robots): coarse and fine determinants differ by 8e-8 relative
+# (median), 1.3e-5 (p99), 1.9e-3 at most, so above 0.05 the sign cannot differ.
+_COARSE_DET_MIN = 0.05
 # a multistart restart is abandoned once its coarse Newton iterate is within _RETURN_TWIST [rad]
 # (max_i |d sigma_i| L_i) of an equilibrium already found and has at least halved its distance
 # to them in the last iteration (_newton_core). Measured on the trajectory, 8x8x8 grid and 3000
@@ -401,12 +408,19 @@ def _shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, sig0, lengths, 
             i = 1 + (start - 1) % (n - 1)
             g[i] += (1.0 if start <= n - 1 else -1.0) * np.pi / lengths[i]
         if predict:
-            c0, _, cit, cok, _, _, _ = _newton(cs, cpresent, cuh, kxy, ratio, alpha, g, lengths,
-                                               max(tol, _PREDICTOR_TOL), maxit, Jc)
+            c0, _, cit, cok, c_det, _, _ = _newton(cs, cpresent, cuh, kxy, ratio, alpha, g, lengths,
+                                                   max(tol, _PREDICTOR_TOL), maxit, Jc)
             total += cit
             if cok:
                 x1 = _chord_step(s, present, uh, kxy, ratio, alpha, c0, Jc, lengths)
                 total += 1
+                if abs(c_det) >= _COARSE_DET_MIN:
+                    # check x1 with a sweep without sensitivities (it records the node angles and
+                    # torsions); the determinant's sign is the predictor's (see _COARSE_DET_MIN)
+                    _, r1, _, _, psi, sig, _ = _integrate(s, present, uh, kxy, ratio, alpha, x1, True, False)
+                    res = np.max(np.abs(r1))
+                    if np.all(np.isfinite(r1)) and res < tol:
+                        return x1, res, total + 1, True, c_det, psi, sig
                 x, res, it, ok, detJ, psi, sig = _newton(s, present, uh, kxy, ratio, alpha, x1, lengths, tol, maxit,
                                                          Jc)
                 total += it
