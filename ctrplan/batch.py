@@ -129,8 +129,8 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
 def _standard_rows(robot, alpha, beta, settings, indices, n_threads=1):
     """Rows of the standard model for the configurations ``indices`` (1-based row numbers) in one
     compiled call, with the same status and stability flag as :func:`evaluate_configuration`
-    (``n_threads`` > 1: compiled threads share the rows, without the warm starts along them)."""
-    res = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=n_threads == 1,
+    (``n_threads`` > 1: compiled threads share the rows, each following one contiguous block)."""
+    res = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True,
                                n_threads=n_threads)
     out = []
     for k, index in enumerate(indices):

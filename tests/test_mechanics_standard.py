@@ -208,6 +208,36 @@ def test_batch_equals_single_solves():
         solve_standard_batch(robot, alpha, beta, settings, n_threads=0)
 
 
+def test_threads_following_blocks_of_a_path_equal_the_serial_follow():
+    """With ``follow`` and two threads each thread follows one contiguous block of the rows
+    (issue 14: the default-jobs command line). On a seeded path through certified and
+    uncertified rows, with one impossible row inside it, every row must get the serial
+    follow's flags and, to the shooting tolerance, its tips: a block boundary off by one
+    (a row skipped or solved twice) leaves NaN or a wrong row, and a block that started from
+    another block's torsions could land on another equilibrium."""
+    from ctrplan.mechanics import solve_standard_batch
+
+    robot = table2_robot()
+    rng = np.random.default_rng(23)
+    t = np.linspace(0.0, 1.0, 41)
+    qs = np.column_stack([2.5 * np.sin(2 * np.pi * t) + 0.05 * rng.standard_normal(t.size),
+                          np.pi * (2 * t - 1), -0.104 + 0.07 * t])
+    configs = [robot.configuration(q) for q in qs]
+    alpha = np.array([a for a, _ in configs])
+    beta = np.array([b for _, b in configs])
+    beta[17, 2] = 0.01   # impossible row inside a block
+    settings = ModelSettings(ds=3e-3)
+    serial = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True)
+    par = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True, n_threads=2)
+    assert serial.certified.any() and not serial.certified[serial.valid].all()
+    assert not par.valid[17] and np.all(np.isnan(par.tip_position[17]))
+    ok = serial.valid
+    assert np.all(np.isfinite(par.tip_position[ok]))
+    np.testing.assert_allclose(par.tip_position[ok], serial.tip_position[ok], atol=1e-10)
+    for flag in ("converged", "unstable", "n_equilibria", "certified"):
+        np.testing.assert_array_equal(getattr(par, flag), getattr(serial, flag))
+
+
 def test_shooting_restarts_where_newton_stalls():
     """At these two joint values (seeded random draws of the batch benchmark) damped Newton from
     no twist stalls at a local minimum of the shooting residual with a singular Jacobian (the

@@ -115,7 +115,7 @@ class BatchOptions(NamedTuple):
     predict : bool
         Start from zero twist through the coarse-grid predictor (no ``initial_guess`` given).
     follow : bool
-        Rows are a path (serial runs only, see :func:`solve_standard_batch`).
+        Rows are a path (see :func:`solve_standard_batch`).
     """
 
     ds: float
@@ -270,13 +270,26 @@ def _batch(alpha, beta, valid, sig_init, tubes, opts, out):
 
 
 @njit(cache=True, parallel=True)
-def _batch_parallel(alpha, beta, valid, sig_init, tubes, opts, out):
-    """:func:`_batch` with the configurations shared by numba threads (``prange``); no
-    following (``opts.follow`` is ignored). Same parameters."""
-    n = alpha.shape[1]
-    for k in prange(alpha.shape[0]):
-        if valid[k]:
-            _solve_one(k, alpha, beta, sig_init, tubes, opts, np.full(n, np.nan), out)
+def _batch_parallel(alpha, beta, valid, sig_init, tubes, opts, out, n_blocks):
+    """:func:`_batch` with the configurations shared by numba threads (``prange``). With
+    ``opts.follow`` the rows are cut into ``n_blocks`` contiguous blocks, one per task, each
+    followed in order as by :func:`_batch` (a block's first row starts without a previous row);
+    without, the rows themselves are shared. Same parameters, and ``n_blocks`` (int >= 1)."""
+    K, n = alpha.shape
+    if opts.follow:
+        for b in prange(n_blocks):
+            prev = np.full(n, np.nan)
+            for k in range(b * K // n_blocks, (b + 1) * K // n_blocks):
+                if valid[k]:
+                    _solve_one(k, alpha, beta, sig_init, tubes, opts, prev, out)
+                    if out.conv[k]:
+                        prev = out.sig_out[k].copy()
+                    else:
+                        prev = np.full(n, np.nan)
+    else:
+        for k in prange(K):
+            if valid[k]:
+                _solve_one(k, alpha, beta, sig_init, tubes, opts, np.full(n, np.nan), out)
 
 
 def configuration_arrays(robot, alpha, beta):
@@ -325,9 +338,9 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
     follow : bool
         Rows are a path: where the screen proves a single equilibrium, start from the previous
         row's base torsions (through the coarse-grid predictor when no ``initial_guess`` is
-        given; serial runs only, with ``n_threads`` > 1 it is ignored). The result is the same
-        equilibrium to the shooting tolerance (tips within 2e-11 m on the trajectory), found in
-        fewer sweeps.
+        given; with ``n_threads`` > 1 each thread follows one contiguous block of the rows). The
+        result is the same equilibrium to the shooting tolerance (tips within 2e-11 m on the
+        trajectory), found in fewer sweeps.
 
     Returns
     -------
@@ -379,7 +392,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
         before = get_num_threads()
         set_num_threads(min(int(n_threads), config.NUMBA_NUM_THREADS))
         try:
-            _batch_parallel(*args)
+            _batch_parallel(*args, get_num_threads())
         finally:
             set_num_threads(before)
     return StandardBatch(tip_position=tips, tip_tangent=tans, base_torsion=sig_out, converged=conv,
