@@ -192,23 +192,19 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out):
     a = alpha[k].copy()
     it = 0
     ok = False
-    cs, cpresent, cuhat = s, present, uhat   # the coarse grid, once built
-    have_coarse = False
+    # the coarse grid: read by the predictor and by the multistart search
+    cs, cpresent, cuhat = s, present, uhat
+    if predict or (multistart > 0 and not unique):
+        cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
+                                         merge_tol, refine_ratio, refine_length)
     if unique and np.all(np.isfinite(follow_from)):
         if predict:
-            cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
-                                             merge_tol, refine_ratio, refine_length)
-            have_coarse = True
             sig0, _, it, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a,
                                                      follow_from.copy(), lengths, tol, maxit, True)
         else:
             sig0, _, it, ok, detJ, psi, sig = _newton(s, present, uhat, kxy, ratio, a, follow_from.copy(), lengths,
                                                       tol, maxit, np.empty((n, n)))
     if not ok:
-        if predict and not have_coarse:
-            cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
-                                             merge_tol, refine_ratio, refine_length)
-            have_coarse = True
         sig0, _, it2, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a,
                                                   sig_init[k], lengths, tol, maxit, predict)
         it += it2
@@ -220,9 +216,6 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out):
     count = 0
     if ok and multistart > 0 and not unique:
         # the multistart search of solve_standard (same guesses, coarse-grid restarts)
-        if not have_coarse:
-            cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
-                                             merge_tol, refine_ratio, refine_length)
         count, ms_it = _multistart_search(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, sig0, lengths,
                                           tol, maxit, multistart)
         it += ms_it

@@ -504,13 +504,7 @@ def _nearest_twist(sig, found, n_found, lengths):
 def _distinct(sig, found, n_found, lengths):
     """Whether base torsions ``sig`` (n,) differ from each of the first ``n_found`` rows of
     ``found`` by more than ``DISTINCT_EQUILIBRIUM_TWIST`` in twist (max_i |d sigma_i| L_i)."""
-    for f in range(n_found):
-        far = 0.0
-        for j in range(sig.shape[0]):
-            far = max(far, abs(sig[j] - found[f, j]) * lengths[j])
-        if not far > _DISTINCT_TWIST:
-            return False
-    return True
+    return _nearest_twist(sig, found, n_found, lengths) > _DISTINCT_TWIST
 
 
 @njit(cache=True, error_model="numpy", inline="always")
