@@ -21,7 +21,7 @@ from ..constants import (GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR,
 from .grid import _grid
 from .packed import pack_robot
 from .results import ModelSettings
-from ._uniqueness import unique_equilibrium_certified
+from ._uniqueness import unique_equilibrium_certified_at
 from .standard import _centerline, _multistart_search, _newton, _shoot
 
 __all__ = ["StandardBatch", "solve_standard_batch"]
@@ -186,8 +186,8 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out):
                                           refine_length)
     unique = False
     if multistart > 0:
-        unique = unique_equilibrium_certified(s, first, last, present, uhat, kxy, kxy / ratio,
-                                              UNIQUENESS_SCREEN_MARGIN)
+        unique = unique_equilibrium_certified_at(s, first, last, present, uhat, kxy, kxy / ratio,
+                                                 UNIQUENESS_SCREEN_MARGIN, alpha[k])
         certified[k] = unique
     a = alpha[k].copy()
     it = 0
