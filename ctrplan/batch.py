@@ -126,41 +126,55 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
                      str(exc), model)]
 
 
-def _standard_rows(robot, alpha, beta, settings, indices, n_threads=1):
+def _standard_columns(robot, alpha, beta, settings, indices, n_threads=1):
     """Rows of the standard model for the configurations ``indices`` (1-based row numbers) in one
     compiled call, with the same status and stability flag as :func:`evaluate_configuration`
-    (``n_threads`` > 1: compiled threads share the rows, each following one contiguous block)."""
+    (``n_threads`` > 1: compiled threads share the rows, each following one contiguous block).
+
+    Returns the rows as columns (dict of column name -> list, one entry per configuration):
+    built with array operations, not a dict per row, which cost about as much as the compiled
+    solve once the uniqueness screen certified most rows (issue 14)."""
     res = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True,
                                n_threads=n_threads)
-    out = []
-    for k, index in enumerate(indices):
-        sol = SimpleNamespace(tip_position=res.tip_position[k], tip_tangent=res.tip_tangent[k])
-        if not res.valid[k]:
-            try:
-                robot.check_configuration(alpha[k], beta[k])
-                message = "kinematically impossible configuration"
-            except CtrplanError as exc:
-                message = str(exc)
-            row = _row(alpha[k], beta[k], None, None, "error", message, "standard")
-        elif not res.converged[k]:
-            row = _row(alpha[k], beta[k], None, sol, "not_converged", "shooting did not converge", "standard")
-        elif res.unstable[k]:
-            n_eq = int(res.n_equilibria[k])
-            message = (f"elastically unstable: {n_eq} equilibria found by the multistart search" if n_eq > 1
-                       else "elastically unstable: shooting Jacobian determinant <= 0")
-            row = _row(alpha[k], beta[k], None, sol, "unstable", message, "standard")
-        else:
-            row = _row(alpha[k], beta[k], None, sol, "ok", "converged", "standard")
-        row["row"] = index
-        out.append(row)
-    return out
+    n = robot.n_tubes
+    K = len(indices)
+    valid, conv, unst = res.valid, res.converged, res.unstable
+    status = np.full(K, "ok", dtype=object)
+    message = np.full(K, "converged", dtype=object)
+    status[unst] = "unstable"
+    message[unst] = "elastically unstable: shooting Jacobian determinant <= 0"
+    for k in np.flatnonzero(unst & (res.n_equilibria > 1)):
+        message[k] = f"elastically unstable: {int(res.n_equilibria[k])} equilibria found by the multistart search"
+    status[~conv] = "not_converged"
+    message[~conv] = "shooting did not converge"
+    tips = res.tip_position.copy()
+    tans = res.tip_tangent.copy()
+    for k in np.flatnonzero(~valid):
+        status[k] = "error"
+        try:
+            robot.check_configuration(alpha[k], beta[k])
+            message[k] = "kinematically impossible configuration"
+        except CtrplanError as exc:
+            message[k] = str(exc)
+        tips[k] = np.nan
+        tans[k] = np.nan
+    cols = {f"alpha_{i + 1}": alpha[:, i].tolist() for i in range(n)}
+    cols.update({f"beta_{i + 1}": beta[:, i].tolist() for i in range(n)})
+    for j, c in enumerate("xyz"):
+        cols[f"tip_{c}"] = tips[:, j].tolist()
+    for j, c in enumerate("xyz"):
+        cols[f"tangent_{c}"] = tans[:, j].tolist()
+    cols.update(status=status.tolist(), model=["standard"] * K, message=message.tolist(),
+                row=[int(i) for i in indices])
+    return cols
 
 
 def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1):
     """Evaluate the configurations ``alpha``, ``beta`` (m, n) of the 1-based rows ``indices``;
-    returns (indices, list of m lists of rows)."""
+    returns (indices, list of m lists of rows), or for the standard model (indices, columns) with
+    the columns of :func:`_standard_columns`."""
     if model == "standard":
-        return indices, [[r] for r in _standard_rows(robot, alpha, beta, settings, indices, n_threads)]
+        return indices, _standard_columns(robot, alpha, beta, settings, indices, n_threads)
     rows = []
     for k, index in enumerate(indices):
         found = evaluate_configuration(robot, alpha[k], beta[k], model, settings,
@@ -180,27 +194,54 @@ def _chunks(todo, model, n_jobs):
     return [todo[i:i + size] for i in range(0, len(todo), size)]
 
 
-def _read_checkpoint(ck: Path, job_key: str) -> dict[int, list]:
-    """Finished rows of a checkpoint (0-based row -> rows), or {} if it belongs to another job
-    (then it is deleted). Lines cut by an interruption are skipped. Reads both the per-chunk
-    lines ({"indices", "rows"}) and the per-row lines of earlier versions ({"index", "rows"})."""
-    done: dict[int, list] = {}
+def _read_checkpoint(ck: Path, job_key: str) -> tuple[dict[int, list | None], list[dict]]:
+    """Finished rows of a checkpoint, or nothing if it belongs to another job (then it is
+    deleted). Lines cut by an interruption are skipped. Reads the per-chunk lines of rows
+    ({"indices", "rows"}: contact models) and of columns ({"indices", "columns"}: the standard
+    model), and the per-row lines of earlier versions ({"index", "rows"}).
+
+    Returns
+    -------
+    done : dict
+        0-based row -> its list of row dicts, or None where the row is in ``columns``.
+    columns : list of dict
+        Column chunks (column name -> list of values, with the 1-based ``row``).
+    """
+    done: dict[int, list | None] = {}
+    columns: list[dict] = []
     with open(ck) as fh:
         lines = fh.read().splitlines()
     if not lines or json.loads(lines[0]).get("job_key") != job_key:
         ck.unlink()
-        return done
+        return done, columns
     for line in lines[1:]:
         try:
             rec = json.loads(line)
         except json.JSONDecodeError:  # a line cut by an interruption
             continue
-        if "indices" in rec:
+        if "columns" in rec:
+            columns.append(rec["columns"])
+            for index in rec["indices"]:
+                done[int(index)] = None
+        elif "indices" in rec:
             for index, rows in zip(rec["indices"], rec["rows"]):
                 done[int(index)] = rows
         else:
             done[int(rec["index"])] = rec["rows"]
-    return done
+    return done, columns
+
+
+def _assemble(done: dict, columns: list[dict], K: int) -> pd.DataFrame:
+    """All finished rows as one frame in input order (column ``row``; rows of one configuration
+    keep their order)."""
+    parts = [pd.DataFrame(c) for c in columns]
+    rows = [r for k in range(K) if done[k] is not None for r in done[k]]
+    if rows:
+        parts.append(pd.DataFrame(rows))
+    if not parts:
+        return pd.DataFrame()
+    frame = parts[0] if len(parts) == 1 else pd.concat(parts, ignore_index=True)
+    return frame.sort_values("row", kind="stable").reset_index(drop=True)
 
 
 def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | None = None, eta=None,
@@ -248,7 +289,7 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
     beta = np.asarray(beta, dtype=float)
     K = alpha.shape[0]
     ck = Path(checkpoint) if checkpoint is not None else None
-    done = _read_checkpoint(ck, job_key) if ck is not None and ck.exists() else {}
+    done, columns = _read_checkpoint(ck, job_key) if ck is not None and ck.exists() else ({}, [])
     todo = [k for k in range(K) if k not in done]
     fh = None
     if ck is not None:
@@ -269,17 +310,23 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
         with tqdm(total=K, initial=K - len(todo), disable=not progress, unit="config",
                   desc=f"{model} model") as bar:
             for indices, rows in results:
-                for index, r in zip(indices, rows):
-                    done[index - 1] = r
+                if isinstance(rows, dict):      # the standard model's columns
+                    columns.append(rows)
+                    for index in indices:
+                        done[index - 1] = None
+                    record = {"indices": [i - 1 for i in indices], "columns": rows}
+                else:
+                    for index, r in zip(indices, rows):
+                        done[index - 1] = r
+                    record = {"indices": [i - 1 for i in indices], "rows": rows}
                 if fh is not None:
-                    fh.write(json.dumps({"indices": [i - 1 for i in indices], "rows": rows}) + "\n")
+                    fh.write(json.dumps(record) + "\n")
                     fh.flush()
                 bar.update(len(indices))
     finally:
         if fh is not None:
             fh.close()
-    rows = [r for k in range(K) for r in done[k]]
-    return pd.DataFrame(rows)
+    return _assemble(done, columns, K)
 
 
 def job_key(robot_file_text: str, config_file_text: str, model: str, settings: ModelSettings) -> str:
