@@ -238,6 +238,43 @@ def test_threads_following_blocks_of_a_path_equal_the_serial_follow():
         np.testing.assert_array_equal(getattr(par, flag), getattr(serial, flag))
 
 
+def test_following_a_path_meets_the_shooting_tolerance_at_every_row():
+    """Rows that follow one another (``follow``) are solved by quasi-Newton sweeps from the rows
+    before (``_standard_batch._follow_shoot``: Broyden updates on the coarse grid, the
+    fine-coarse offset extrapolated, chord steps on the fine grid). At every row of a smooth
+    seeded path the returned base torsions, re-integrated on the fine grid, give tip torsions
+    below the shooting tolerance, and the tips equal those of rows solved from scratch to
+    1e-10 m, with the same flags. Catches a follow path that accepts an iterate short of the
+    tolerance, takes the tip from another sweep than the returned one, or lands on another
+    equilibrium."""
+    from ctrplan.mechanics import solve_standard_batch
+    from ctrplan.mechanics.grid import build_grid
+    from ctrplan.mechanics.packed import pack_robot
+    from ctrplan.mechanics.standard import _integrate
+
+    robot = table2_robot()
+    rng = np.random.default_rng(29)
+    t = np.linspace(0.0, 1.0, 121)
+    qs = np.column_stack([1.2 * np.sin(2 * np.pi * t) + 0.01 * rng.standard_normal(t.size),
+                          0.8 + 0.6 * np.cos(3 * np.pi * t), -0.09 + 0.05 * t])
+    configs = [robot.configuration(q) for q in qs]
+    alpha = np.array([a for a, _ in configs])
+    beta = np.array([b for _, b in configs])
+    settings = ModelSettings(ds=3e-3)
+    fol = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True)
+    ind = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=False)
+    assert fol.certified.sum() > 100 and fol.converged.all()
+    np.testing.assert_allclose(fol.tip_position, ind.tip_position, atol=1e-10)
+    for flag in ("converged", "unstable", "n_equilibria", "certified"):
+        np.testing.assert_array_equal(getattr(fol, flag), getattr(ind, flag))
+    pk = pack_robot(robot)
+    for k in range(len(qs)):
+        g = build_grid(robot, beta[k], settings.ds, settings.refine_ratio, settings.refine_length)
+        _, r, _, _, _, _, _ = _integrate(g.s, g.present, g.precurvature, pk.k_xy, pk.stiffness_ratio, alpha[k],
+                                         fol.base_torsion[k], False, False)
+        assert np.max(np.abs(r)) < settings.shooting_tol, k
+
+
 def test_shooting_restarts_where_newton_stalls():
     """At these two joint values (seeded random draws of the batch benchmark) damped Newton from
     no twist stalls at a local minimum of the shooting residual with a singular Jacobian (the
