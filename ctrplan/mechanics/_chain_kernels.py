@@ -58,6 +58,34 @@ def _skew_form(d0, c1, c2, x, y, z, M):
     M[2, 1] = c1 * x + c2 * y * z
 
 
+@njit(cache=True, inline="always")
+def advance(R0, p0, x, y, z, hk, E, vz, R1, p1):
+    """One step of Eqs. (3), (57) over a segment of length ``hk`` [m] with rotation vector
+    phi = u hk = (x, y, z): R1 = R0 exp([phi]x), p1 = p0 + R0 V(phi) e_z hk, from the frame R0
+    (3, 3) and point p0 (3,) [m] into R1, p1 (which must not alias them); E (3, 3) and vz (3,)
+    are work space. Shared by :func:`chain_kinematics` and the standard model's tip
+    (``standard._tip_frame``), so both give bitwise the same numbers."""
+    th = np.sqrt(x * x + y * y + z * z)
+    s1, ca_, cb, _, _ = _coefficients(th)
+    th2 = th * th
+    # exp([phi]x) = (1 - a th^2) I + s1 [phi]x + a phi phi^T
+    _skew_form(1.0 - ca_ * th2, s1, ca_, x, y, z, E)
+    # V e_z h = ((1 - b th^2) e_z + a phi x e_z + b phi phi_z) h
+    vz[0] = (ca_ * y + cb * x * z) * hk
+    vz[1] = (-ca_ * x + cb * y * z) * hk
+    vz[2] = (1.0 - cb * th2 + cb * z * z) * hk
+    for a in range(3):
+        acc = p0[a]
+        for b in range(3):
+            acc += R0[a, b] * vz[b]
+        p1[a] = acc
+        for b in range(3):
+            r = 0.0
+            for q in range(3):
+                r += R0[a, q] * E[q, b]
+            R1[a, b] = r
+
+
 @njit(cache=True)
 def chain_kinematics(u, h, alpha, beta, node_off, R, p):
     """Forward kinematics of all tubes (Eqs. (3), (57)), in place.
@@ -103,22 +131,4 @@ def chain_kinematics(u, h, alpha, beta, node_off, R, p):
             x = u[k, 0] * hk
             y = u[k, 1] * hk
             z = u[k, 2] * hk
-            th = np.sqrt(x * x + y * y + z * z)
-            s1, ca_, cb, _, _ = _coefficients(th)
-            th2 = th * th
-            # exp([phi]x) = (1 - a th^2) I + s1 [phi]x + a phi phi^T
-            _skew_form(1.0 - ca_ * th2, s1, ca_, x, y, z, E)
-            # V e_z h = ((1 - b th^2) e_z + a phi x e_z + b phi phi_z) h
-            vz[0] = (ca_ * y + cb * x * z) * hk
-            vz[1] = (-ca_ * x + cb * y * z) * hk
-            vz[2] = (1.0 - cb * th2 + cb * z * z) * hk
-            for a in range(3):
-                acc = p[j, a]
-                for b in range(3):
-                    acc += R[j, a, b] * vz[b]
-                p[j + 1, a] = acc
-                for b in range(3):
-                    r = 0.0
-                    for q in range(3):
-                        r += R[j, a, q] * E[q, b]
-                    R[j + 1, a, b] = r
+            advance(R[j], p[j], x, y, z, hk, E, vz, R[j + 1], p[j + 1])

@@ -4,8 +4,8 @@ Per configuration, the same steps as :func:`ctrplan.mechanics.solve_standard` wi
 ``check_stability=False``: the common arc-length grid of Section II-C of Ha, Fagogenis & Dupont
 2019 (``grid.build_grid``), damped Newton shooting on the base torsions with the exact
 variational Jacobian (``standard._shoot``: coarse-grid predictor, then ``standard._newton``),
-and the tip of the shared centerline from midpoint curvatures (``standard._tip_frame``), all in numba
-with no Python work per configuration.
+and the tip of the shared centerline from midpoint curvatures (``standard._tip_frame``), all in
+numba with no Python work per configuration.
 """
 
 from __future__ import annotations
@@ -174,9 +174,9 @@ def _follow_shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, lengths,
     coarse solution plus the offset, extrapolated the same way, and takes chord steps with the
     coarse Jacobian until a sweep meets ``tol``. On the measured trajectory (Table VII robot,
     300 rows) that is 4.6 coarse and 1.6 fine sweeps per row (without extrapolation 5.0 and
-    1.9), against 2.6 coarse sweeps with sensitivities and 2 fine ones of the predictor. Each iteration must
-    decrease the residual; anything else gives up (``ok`` False, ``state`` unchanged) and the
-    caller solves the row from scratch (:func:`standard._shoot`).
+    1.9), against 2.6 coarse sweeps with sensitivities and 2 fine ones of the predictor. Each
+    iteration must decrease the residual; anything else gives up (``ok`` False, ``state``
+    unchanged) and the caller solves the row from scratch (:func:`standard._shoot`).
 
     Returns (sig0, residual, sweeps, ok, detJ, psi, sigma) like :func:`standard._newton`, with
     detJ the determinant of the coarse quasi-Newton Jacobian (used only for rows that the
@@ -270,8 +270,8 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out, state):
     such a row is first solved by :func:`_follow_shoot` from the rows before (``state``
     (n + 4, n), carried along the rows; see there), and if that gives up, from ``follow_from``
     through the coarse-grid predictor (``standard._shoot``: coarse Newton, chord step, fine
-    Newton); without ``predict`` by Newton on the fine grid. Starting the fine Newton from the previous
-    row directly, as before issue 14 target 2, took fewer but dearer iterations: 0.67 against
+    Newton); without ``predict`` by Newton on the fine grid. Starting the fine Newton from the
+    previous row directly, as before issue 14 target 2, took fewer but dearer iterations: 0.67 against
     0.50 ms per row without following on the Table VII trajectory (all rows certified), 0.45
     with the predictor (CPU time, docs/mechanics.md, Sec. 10)."""
     lengths, brk, nbrk, curv = tubes.lengths, tubes.breaks, tubes.n_breaks, tubes.precurvature
