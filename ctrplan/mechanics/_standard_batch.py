@@ -340,6 +340,22 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out, state):
 
 
 @njit(cache=True)
+def _rows(lo, hi, alpha, beta, valid, sig_init, tubes, opts, out):
+    """Rows ``lo`` to ``hi - 1`` in order; with ``opts.follow``, each certified row starts from
+    the row before (its base torsions and the quasi-Newton state of :func:`_follow_shoot`)."""
+    n = alpha.shape[1]
+    prev = np.full(n, np.nan)
+    state = np.full((n + 4, n), np.nan)
+    for k in range(lo, hi):
+        if valid[k]:
+            _solve_one(k, alpha, beta, sig_init, tubes, opts, prev, out, state)
+            if opts.follow and out.conv[k]:
+                prev = out.sig_out[k].copy()
+            else:
+                prev = np.full(n, np.nan)
+
+
+@njit(cache=True)
 def _batch(alpha, beta, valid, sig_init, tubes, opts, out):
     """All configurations in order (serial; with ``opts.follow``, each certified row starts
     from the previous row's base torsions).
@@ -357,16 +373,7 @@ def _batch(alpha, beta, valid, sig_init, tubes, opts, out):
     out : BatchOutput
         Written in place.
     """
-    n = alpha.shape[1]
-    prev = np.full(n, np.nan)
-    state = np.full((n + 4, n), np.nan)
-    for k in range(alpha.shape[0]):
-        if valid[k]:
-            _solve_one(k, alpha, beta, sig_init, tubes, opts, prev, out, state)
-            if opts.follow and out.conv[k]:
-                prev = out.sig_out[k].copy()
-            else:
-                prev = np.full(n, np.nan)
+    _rows(0, alpha.shape[0], alpha, beta, valid, sig_init, tubes, opts, out)
 
 
 @njit(cache=True, parallel=True)
@@ -378,15 +385,7 @@ def _batch_parallel(alpha, beta, valid, sig_init, tubes, opts, out, n_blocks):
     K, n = alpha.shape
     if opts.follow:
         for b in prange(n_blocks):
-            prev = np.full(n, np.nan)
-            state = np.full((n + 4, n), np.nan)
-            for k in range(b * K // n_blocks, (b + 1) * K // n_blocks):
-                if valid[k]:
-                    _solve_one(k, alpha, beta, sig_init, tubes, opts, prev, out, state)
-                    if out.conv[k]:
-                        prev = out.sig_out[k].copy()
-                    else:
-                        prev = np.full(n, np.nan)
+            _rows(b * K // n_blocks, (b + 1) * K // n_blocks, alpha, beta, valid, sig_init, tubes, opts, out)
     else:
         for k in prange(K):
             if valid[k]:

@@ -52,8 +52,8 @@ node, with a closed-form 3 x 3 factorization (leading minors and adjugate) for t
 the 1307 trajectory rows, Table II robot, the screen with the base rotations takes 34 us and the
 worst-case one 18 us per configuration beyond building the grid, against 86 and 53 us for the
 previous version (assembled arrays, general Cholesky factor and inverse per node); both in one
-process, best of 4, load about 1, 22 November 2026, identical results on those rows and on 3000
-random configurations of the Table II, Table VII and Table I robots.
+process, best of 4, nothing else running (load not recorded), 22 November 2026; identical
+results on those rows and on 3000 random configurations of the Table II, VII and I robots.
 """
 
 from __future__ import annotations
