@@ -275,17 +275,18 @@ def test_following_a_path_meets_the_shooting_tolerance_at_every_row():
         assert np.max(np.abs(r)) < settings.shooting_tol, k
 
 
-def test_three_tube_sweep_equals_the_general_integrator():
-    """The three-tube RK4 sweep without sensitivities (``standard._integrate3``: the torsion
-    ODE in the pairwise form sum_j b_ij sin(theta_i - theta_j), scalar state, coefficients
-    recomputed only where the precurvatures or the tubes present change) gives the final
-    angles and torsions and every node record of the general n-tube loop (which, with
-    sensitivities, still integrates u_xy x R_z(psi_i) uhat_i tube by tube) to rounding, on
-    seeded random grids whose precurvatures point in all directions (not only along x) and
-    change in runs of intervals, as do the tubes present (also without the precurvatures). Catches a sign or a pair swapped in
-    the pairwise form, a precurvature direction dropped, a tube that is absent but still
-    twisted, and coefficients kept past a change of the interval data."""
-    from ctrplan.mechanics.standard import _integrate
+def test_three_tube_sweeps_equal_the_general_integrator():
+    """The three-tube RK4 sweeps (``standard._integrate3`` and, with the variational equations,
+    ``_integrate3_sens``: the torsion ODE in the pairwise form sum_j b_ij sin(theta_i -
+    theta_j), scalar state, coefficients recomputed only where the interval data change) give
+    the final angles, torsions and sensitivities d(psi, sigma) / d sigma0 and every node record
+    of the general n-tube loop (``_integrate_general``, which integrates
+    u_xy x R_z(psi_i) uhat_i tube by tube) to rounding, on seeded random grids whose
+    precurvatures point in all directions (not only along x) and change in runs of intervals,
+    as do the tubes present (also without the precurvatures). Catches a sign or a pair swapped
+    in the pairwise form or its Jacobian, a precurvature direction dropped, a tube that is
+    absent but still twisted, and coefficients kept past a change of the interval data."""
+    from ctrplan.mechanics.standard import _integrate, _integrate_general
 
     rng = np.random.default_rng(41)
     for _ in range(40):
@@ -307,15 +308,17 @@ def test_three_tube_sweep_equals_the_general_integrator():
         ratio = rng.uniform(1.0, 1.6, 3)
         psi0 = rng.uniform(-np.pi, np.pi, 3)
         sig0 = rng.normal(0.0, 5.0, 3)
-        fast = _integrate(s, present, uh, kxy, ratio, psi0, sig0, True, False)
-        general = _integrate(s, present, uh, kxy, ratio, psi0, sig0, True, True)
-        for i in (0, 1, 4, 5, 6):
-            scale = max(1.0, np.max(np.abs(general[i])))
-            np.testing.assert_allclose(fast[i], general[i], rtol=0, atol=1e-12 * scale)
-        # without records: the same final state
-        bare = _integrate(s, present, uh, kxy, ratio, psi0, sig0, False, False)
-        np.testing.assert_array_equal(bare[0], fast[0])
-        np.testing.assert_array_equal(bare[1], fast[1])
+        for with_sens in (False, True):
+            fast = _integrate(s, present, uh, kxy, ratio, psi0, sig0, True, with_sens)
+            general = _integrate_general(s, present, uh, kxy, ratio, psi0, sig0, True, with_sens)
+            for i in range(7):
+                assert fast[i].shape == general[i].shape
+                scale = max(1.0, np.max(np.abs(general[i]), initial=0.0))
+                np.testing.assert_allclose(fast[i], general[i], rtol=0, atol=1e-12 * scale)
+            # without records: the same final state
+            bare = _integrate(s, present, uh, kxy, ratio, psi0, sig0, False, with_sens)
+            for i in range(4):
+                np.testing.assert_array_equal(bare[i], fast[i])
 
 
 def test_shooting_restarts_where_newton_stalls():

@@ -162,6 +162,38 @@ def _both_rhs(psi, sig, Sp, Ss, present, uh, kxy, ratio, ax, ay, dpsi, dsig, dSp
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _pair_coefficients(pr, u, kxy, ratio):
+    """Coefficients of the pairwise torsion ODE of :func:`_integrate3` on one interval: masks
+    m_i (1.0 where tube i is present), direction differences c_ij = phi_j - phi_i [rad] and
+    b_ij = (k_(i,xy) / k_(i,z)) k_(j,xy) |uhat_i| |uhat_j| / sum k_xy [1/m^2] (0 with tube i or
+    j absent), as (m0, m1, m2, c01, c02, c12, a01, a10, a02, a20, a12, a21) with a_ij = b_ij."""
+    m0 = 1.0 if pr[0] else 0.0
+    m1 = 1.0 if pr[1] else 0.0
+    m2 = 1.0 if pr[2] else 0.0
+    ksum = m0 * kxy[0] + m1 * kxy[1] + m2 * kxy[2]
+    w = 1.0 / ksum if ksum > 0.0 else 0.0
+    n0 = np.hypot(u[0, 0], u[0, 1]) * m0
+    n1 = np.hypot(u[1, 0], u[1, 1]) * m1
+    n2 = np.hypot(u[2, 0], u[2, 1]) * m2
+    f0 = np.arctan2(u[0, 1], u[0, 0])
+    f1 = np.arctan2(u[1, 1], u[1, 0])
+    f2 = np.arctan2(u[2, 1], u[2, 0])
+    return (m0, m1, m2, f1 - f0, f2 - f0, f2 - f1,
+            ratio[0] * kxy[1] * n0 * n1 * w, ratio[1] * kxy[0] * n0 * n1 * w,
+            ratio[0] * kxy[2] * n0 * n2 * w, ratio[2] * kxy[0] * n0 * n2 * w,
+            ratio[1] * kxy[2] * n1 * n2 * w, ratio[2] * kxy[1] * n1 * n2 * w)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _same_interval_data(present, uh, j, last):
+    """Intervals ``j`` and ``last`` have the same tubes present and the same precurvatures."""
+    for i in range(3):
+        if present[j, i] != present[last, i] or uh[j, i, 0] != uh[last, i, 0] or uh[j, i, 1] != uh[last, i, 1]:
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21):
     """Torsion rates dsigma_i of three tubes in the pairwise form of :func:`_integrate3`."""
     s01 = np.sin(p1 - p0 + c01)
@@ -207,31 +239,8 @@ def _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record):
         h = s[j + 1] - s[j]
         pr = present[j]
         u = uh[j]
-        if last < 0 or not (pr[0] == present[last, 0] and pr[1] == present[last, 1]
-                            and pr[2] == present[last, 2]
-                            and u[0, 0] == uh[last, 0, 0] and u[0, 1] == uh[last, 0, 1]
-                            and u[1, 0] == uh[last, 1, 0] and u[1, 1] == uh[last, 1, 1]
-                            and u[2, 0] == uh[last, 2, 0] and u[2, 1] == uh[last, 2, 1]):
-            m0 = 1.0 if pr[0] else 0.0
-            m1 = 1.0 if pr[1] else 0.0
-            m2 = 1.0 if pr[2] else 0.0
-            ksum = m0 * kxy[0] + m1 * kxy[1] + m2 * kxy[2]
-            w = 1.0 / ksum if ksum > 0.0 else 0.0
-            n0 = np.hypot(u[0, 0], u[0, 1]) * m0
-            n1 = np.hypot(u[1, 0], u[1, 1]) * m1
-            n2 = np.hypot(u[2, 0], u[2, 1]) * m2
-            f0 = np.arctan2(u[0, 1], u[0, 0])
-            f1 = np.arctan2(u[1, 1], u[1, 0])
-            f2 = np.arctan2(u[2, 1], u[2, 0])
-            c01 = f1 - f0
-            c02 = f2 - f0
-            c12 = f2 - f1
-            a01 = ratio[0] * kxy[1] * n0 * n1 * w
-            a10 = ratio[1] * kxy[0] * n0 * n1 * w
-            a02 = ratio[0] * kxy[2] * n0 * n2 * w
-            a20 = ratio[2] * kxy[0] * n0 * n2 * w
-            a12 = ratio[1] * kxy[2] * n1 * n2 * w
-            a21 = ratio[2] * kxy[1] * n1 * n2 * w
+        if last < 0 or not _same_interval_data(present, uh, j, last):
+            m0, m1, m2, c01, c02, c12, a01, a10, a02, a20, a12, a21 = _pair_coefficients(pr, u, kxy, ratio)
             last = j
         hh = 0.5 * h
         e10, e11, e12 = _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
@@ -291,9 +300,161 @@ def _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record):
     return psi, sig, np.zeros((n, 0)), np.zeros((n, 0)), rec_psi, rec_sig, rec_dsig
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _pair_jacobian_apply(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21, S, out):
+    """out = (d sigma' / d psi) S for the pairwise form of :func:`_integrate3`, S and out (3, 3):
+    with C_ij = cos(theta_j - theta_i), row 0 is a01 C01 (S0 - S1) + a02 C02 (S0 - S2), row 1
+    -a10 C01 (S0 - S1) + a12 C12 (S1 - S2), row 2 -a20 C02 (S0 - S2) - a21 C12 (S1 - S2)."""
+    g01 = np.cos(p1 - p0 + c01)
+    g02 = np.cos(p2 - p0 + c02)
+    g12 = np.cos(p2 - p1 + c12)
+    for q in range(3):
+        d01 = S[0, q] - S[1, q]
+        d02 = S[0, q] - S[2, q]
+        d12 = S[1, q] - S[2, q]
+        out[0, q] = a01 * g01 * d01 + a02 * g02 * d02
+        out[1, q] = a12 * g12 * d12 - a10 * g01 * d01
+        out[2, q] = -a20 * g02 * d02 - a21 * g12 * d12
+
+
+@njit(cache=True, error_model="numpy")
+def _integrate3_sens(s, present, uh, kxy, ratio, psi0, sig0, record):
+    """:func:`_integrate3` with the variational equations: d(psi, sigma) / d sigma0 (3, 3) by
+    the same RK4 steps, with the Jacobian of the pairwise form
+    (:func:`_pair_jacobian_apply`; three cosines of angle differences per stage). Agrees with
+    the general loop of :func:`_integrate` to rounding.
+
+    Returns what :func:`_integrate` returns with ``with_sens`` True.
+    """
+    G = s.shape[0]
+    rec_psi = np.zeros((G if record else 1, 3))
+    rec_sig = np.zeros((G if record else 1, 3))
+    rec_dsig = np.zeros((G if record else 1, 3))
+    p0 = psi0[0]
+    p1 = psi0[1]
+    p2 = psi0[2]
+    q0 = sig0[0]
+    q1 = sig0[1]
+    q2 = sig0[2]
+    Sp = np.zeros((3, 3))
+    Ss = np.eye(3)
+    T = np.empty((3, 3))
+    K1 = np.empty((3, 3))
+    K2 = np.empty((3, 3))
+    K3 = np.empty((3, 3))
+    K4 = np.empty((3, 3))
+    m = np.zeros(3)
+    m0 = m1 = m2 = 0.0
+    c01 = c02 = c12 = 0.0
+    a01 = a10 = a02 = a20 = a12 = a21 = 0.0
+    last = -1
+    for j in range(G - 1):
+        h = s[j + 1] - s[j]
+        if last < 0 or not _same_interval_data(present, uh, j, last):
+            m0, m1, m2, c01, c02, c12, a01, a10, a02, a20, a12, a21 = _pair_coefficients(present[j], uh[j], kxy,
+                                                                                          ratio)
+            m[0] = m0
+            m[1] = m1
+            m[2] = m2
+            last = j
+        hh = 0.5 * h
+        e10, e11, e12 = _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
+        if record:
+            rec_psi[j, 0] = p0
+            rec_psi[j, 1] = p1
+            rec_psi[j, 2] = p2
+            rec_sig[j, 0] = q0
+            rec_sig[j, 1] = q1
+            rec_sig[j, 2] = q2
+            rec_dsig[j, 0] = e10
+            rec_dsig[j, 1] = e11
+            rec_dsig[j, 2] = e12
+        # sensitivities: Sp' = m Ss (rows of absent tubes stay), Ss' = (d sigma' / d psi) Sp;
+        # the stage-k rates of Sp are m (Ss + f K_(k-1)), so only K_k (the Ss rates) are kept
+        _pair_jacobian_apply(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21, Sp, K1)
+        t0 = p0 + hh * q0 * m0
+        t1 = p1 + hh * q1 * m1
+        t2 = p2 + hh * q2 * m2
+        e20, e21, e22 = _pair_rates(t0, t1, t2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
+        for i in range(3):
+            for q in range(3):
+                T[i, q] = Sp[i, q] + hh * m[i] * Ss[i, q]
+        _pair_jacobian_apply(t0, t1, t2, c01, c02, c12, a01, a10, a02, a20, a12, a21, T, K2)
+        r20 = q0 + hh * e10
+        r21 = q1 + hh * e11
+        r22 = q2 + hh * e12
+        t0 = p0 + hh * r20 * m0
+        t1 = p1 + hh * r21 * m1
+        t2 = p2 + hh * r22 * m2
+        e30, e31, e32 = _pair_rates(t0, t1, t2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
+        for i in range(3):
+            for q in range(3):
+                T[i, q] = Sp[i, q] + hh * m[i] * (Ss[i, q] + hh * K1[i, q])
+        _pair_jacobian_apply(t0, t1, t2, c01, c02, c12, a01, a10, a02, a20, a12, a21, T, K3)
+        r30 = q0 + hh * e20
+        r31 = q1 + hh * e21
+        r32 = q2 + hh * e22
+        t0 = p0 + h * r30 * m0
+        t1 = p1 + h * r31 * m1
+        t2 = p2 + h * r32 * m2
+        e40, e41, e42 = _pair_rates(t0, t1, t2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
+        for i in range(3):
+            for q in range(3):
+                T[i, q] = Sp[i, q] + h * m[i] * (Ss[i, q] + hh * K2[i, q])
+        _pair_jacobian_apply(t0, t1, t2, c01, c02, c12, a01, a10, a02, a20, a12, a21, T, K4)
+        r40 = q0 + h * e30
+        r41 = q1 + h * e31
+        r42 = q2 + h * e32
+        f = h / 6.0
+        p0 += m0 * f * (q0 + 2.0 * r20 + 2.0 * r30 + r40)
+        p1 += m1 * f * (q1 + 2.0 * r21 + 2.0 * r31 + r41)
+        p2 += m2 * f * (q2 + 2.0 * r22 + 2.0 * r32 + r42)
+        q0 += m0 * f * (e10 + 2.0 * e20 + 2.0 * e30 + e40)
+        q1 += m1 * f * (e11 + 2.0 * e21 + 2.0 * e31 + e41)
+        q2 += m2 * f * (e12 + 2.0 * e22 + 2.0 * e32 + e42)
+        for i in range(3):
+            for q in range(3):
+                # Sp rates: m Ss, m (Ss + hh K1), m (Ss + hh K2), m (Ss + h K3)
+                Sp[i, q] += m[i] * f * (6.0 * Ss[i, q] + h * (K1[i, q] + K2[i, q] + K3[i, q]))
+                Ss[i, q] += f * (K1[i, q] + 2.0 * K2[i, q] + 2.0 * K3[i, q] + K4[i, q])
+    if record:
+        e10, e11, e12 = _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
+        rec_psi[G - 1, 0] = p0
+        rec_psi[G - 1, 1] = p1
+        rec_psi[G - 1, 2] = p2
+        rec_sig[G - 1, 0] = q0
+        rec_sig[G - 1, 1] = q1
+        rec_sig[G - 1, 2] = q2
+        rec_dsig[G - 1, 0] = e10
+        rec_dsig[G - 1, 1] = e11
+        rec_dsig[G - 1, 2] = e12
+    psi = np.empty(3)
+    sig = np.empty(3)
+    psi[0] = p0
+    psi[1] = p1
+    psi[2] = p2
+    sig[0] = q0
+    sig[1] = q1
+    sig[2] = q2
+    return psi, sig, Sp, Ss, rec_psi, rec_sig, rec_dsig
+
+
 @njit(cache=True, error_model="numpy")
 def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
-    """Classical RK4 over the grid intervals, one step per interval (allocation-free inner loop).
+    """Classical RK4 over the grid intervals, one step per interval: the three-tube kernels
+    (:func:`_integrate3`, :func:`_integrate3_sens`) for three tubes, else the general loop
+    (:func:`_integrate_general`). Returns what :func:`_integrate_general` returns."""
+    if psi0.shape[0] == 3:
+        if with_sens:
+            return _integrate3_sens(s, present, uh, kxy, ratio, psi0, sig0, record)
+        return _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record)
+    return _integrate_general(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens)
+
+
+@njit(cache=True, error_model="numpy")
+def _integrate_general(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
+    """Classical RK4 over the grid intervals for any number of tubes, one step per interval
+    (allocation-free inner loop).
 
     The torsion ODE and its variational equations are separate inline kernels. The earlier
     form (one right-hand side for both, with shared work arrays) took 80-85 us per sweep with
@@ -306,8 +467,6 @@ def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
     when ``record``, psi, sigma and sigma' at every node.
     """
     n = psi0.shape[0]
-    if n == 3 and not with_sens:
-        return _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record)
     G = s.shape[0]
     m = n if with_sens else 0
     psi = psi0.copy()
