@@ -202,6 +202,30 @@ def _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21):
     return -a01 * s01 - a02 * s02, a10 * s01 - a12 * s12, a20 * s02 + a21 * s12
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _record_node(rec_psi, rec_sig, rec_dsig, j, p0, p1, p2, q0, q1, q2, e0, e1, e2):
+    """Node ``j`` of the three-tube sweeps' records: psi, sigma and sigma' (3,) each."""
+    rec_psi[j, 0] = p0
+    rec_psi[j, 1] = p1
+    rec_psi[j, 2] = p2
+    rec_sig[j, 0] = q0
+    rec_sig[j, 1] = q1
+    rec_sig[j, 2] = q2
+    rec_dsig[j, 0] = e0
+    rec_dsig[j, 1] = e1
+    rec_dsig[j, 2] = e2
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _vector3(x0, x1, x2):
+    """The array (x0, x1, x2)."""
+    v = np.empty(3)
+    v[0] = x0
+    v[1] = x1
+    v[2] = x2
+    return v
+
+
 @njit(cache=True, error_model="numpy")
 def _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record):
     """:func:`_integrate` without sensitivities for three tubes, in the pairwise form of the
@@ -214,11 +238,11 @@ def _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record):
     stage takes three sines of angle differences instead of a sine and a cosine per tube, and
     the state lives in scalars. The per-interval coefficients are recomputed only where the
     precurvatures or the tubes present change. Same RK4 steps and node records as
-    :func:`_integrate`; the results agree to rounding (4e-15 rad on the Ha trajectory's grids),
-    not bitwise. Measured on those grids (Table II robot, one sweep each, same process): 34-46 us
-    against 52-74 us for :func:`_integrate`.
+    :func:`_integrate_general`; the results agree to rounding (4e-15 rad on the Ha trajectory's
+    grids), not bitwise. Measured on those grids (Table II robot, one sweep each, same process):
+    34-46 us against 52-74 us for the general loop.
 
-    Returns what :func:`_integrate` returns with ``with_sens`` False.
+    Returns what :func:`_integrate_general` returns with ``with_sens`` False.
     """
     n = 3
     G = s.shape[0]
@@ -245,15 +269,7 @@ def _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record):
         hh = 0.5 * h
         e10, e11, e12 = _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
         if record:
-            rec_psi[j, 0] = p0
-            rec_psi[j, 1] = p1
-            rec_psi[j, 2] = p2
-            rec_sig[j, 0] = q0
-            rec_sig[j, 1] = q1
-            rec_sig[j, 2] = q2
-            rec_dsig[j, 0] = e10
-            rec_dsig[j, 1] = e11
-            rec_dsig[j, 2] = e12
+            _record_node(rec_psi, rec_sig, rec_dsig, j, p0, p1, p2, q0, q1, q2, e10, e11, e12)
         # stage k: psi rates (r) and sigma rates (e); tubes not present keep psi and sigma
         e20, e21, e22 = _pair_rates(p0 + hh * q0 * m0, p1 + hh * q1 * m1, p2 + hh * q2 * m2,
                                     c01, c02, c12, a01, a10, a02, a20, a12, a21)
@@ -280,23 +296,9 @@ def _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record):
     if record:
         # derivative at the last node, evaluated with the last interval's data
         e10, e11, e12 = _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
-        rec_psi[G - 1, 0] = p0
-        rec_psi[G - 1, 1] = p1
-        rec_psi[G - 1, 2] = p2
-        rec_sig[G - 1, 0] = q0
-        rec_sig[G - 1, 1] = q1
-        rec_sig[G - 1, 2] = q2
-        rec_dsig[G - 1, 0] = e10
-        rec_dsig[G - 1, 1] = e11
-        rec_dsig[G - 1, 2] = e12
-    psi = np.empty(n)
-    sig = np.empty(n)
-    psi[0] = p0
-    psi[1] = p1
-    psi[2] = p2
-    sig[0] = q0
-    sig[1] = q1
-    sig[2] = q2
+        _record_node(rec_psi, rec_sig, rec_dsig, G - 1, p0, p1, p2, q0, q1, q2, e10, e11, e12)
+    psi = _vector3(p0, p1, p2)
+    sig = _vector3(q0, q1, q2)
     return psi, sig, np.zeros((n, 0)), np.zeros((n, 0)), rec_psi, rec_sig, rec_dsig
 
 
@@ -322,9 +324,9 @@ def _integrate3_sens(s, present, uh, kxy, ratio, psi0, sig0, record):
     """:func:`_integrate3` with the variational equations: d(psi, sigma) / d sigma0 (3, 3) by
     the same RK4 steps, with the Jacobian of the pairwise form
     (:func:`_pair_jacobian_apply`; three cosines of angle differences per stage). Agrees with
-    the general loop of :func:`_integrate` to rounding.
+    :func:`_integrate_general` to rounding.
 
-    Returns what :func:`_integrate` returns with ``with_sens`` True.
+    Returns what :func:`_integrate_general` returns with ``with_sens`` True.
     """
     G = s.shape[0]
     rec_psi = np.zeros((G if record else 1, 3))
@@ -360,15 +362,7 @@ def _integrate3_sens(s, present, uh, kxy, ratio, psi0, sig0, record):
         hh = 0.5 * h
         e10, e11, e12 = _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
         if record:
-            rec_psi[j, 0] = p0
-            rec_psi[j, 1] = p1
-            rec_psi[j, 2] = p2
-            rec_sig[j, 0] = q0
-            rec_sig[j, 1] = q1
-            rec_sig[j, 2] = q2
-            rec_dsig[j, 0] = e10
-            rec_dsig[j, 1] = e11
-            rec_dsig[j, 2] = e12
+            _record_node(rec_psi, rec_sig, rec_dsig, j, p0, p1, p2, q0, q1, q2, e10, e11, e12)
         # sensitivities: Sp' = m Ss (rows of absent tubes stay), Ss' = (d sigma' / d psi) Sp;
         # the stage-k rates of Sp are m (Ss + f K_(k-1)), so only K_k (the Ss rates) are kept
         _pair_jacobian_apply(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21, Sp, K1)
@@ -419,23 +413,9 @@ def _integrate3_sens(s, present, uh, kxy, ratio, psi0, sig0, record):
                 Ss[i, q] += f * (K1[i, q] + 2.0 * K2[i, q] + 2.0 * K3[i, q] + K4[i, q])
     if record:
         e10, e11, e12 = _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21)
-        rec_psi[G - 1, 0] = p0
-        rec_psi[G - 1, 1] = p1
-        rec_psi[G - 1, 2] = p2
-        rec_sig[G - 1, 0] = q0
-        rec_sig[G - 1, 1] = q1
-        rec_sig[G - 1, 2] = q2
-        rec_dsig[G - 1, 0] = e10
-        rec_dsig[G - 1, 1] = e11
-        rec_dsig[G - 1, 2] = e12
-    psi = np.empty(3)
-    sig = np.empty(3)
-    psi[0] = p0
-    psi[1] = p1
-    psi[2] = p2
-    sig[0] = q0
-    sig[1] = q1
-    sig[2] = q2
+        _record_node(rec_psi, rec_sig, rec_dsig, G - 1, p0, p1, p2, q0, q1, q2, e10, e11, e12)
+    psi = _vector3(p0, p1, p2)
+    sig = _vector3(q0, q1, q2)
     return psi, sig, Sp, Ss, rec_psi, rec_sig, rec_dsig
 
 
