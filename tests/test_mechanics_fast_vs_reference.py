@@ -167,7 +167,8 @@ def test_compliance_kernels_equal_dense_products(eta):
     Wt = np.zeros((2 * M, 2 * M))
     Zt = np.zeros((M, 2 * M))
     geometry, law = prob.contact_geometry(R, p), prob.contact_law(1.0)
-    ck.fill_columns(np.arange(M), ck.ContactWork(Wt, Zt, np.zeros(M, dtype=bool)), geometry, law)
+    ck.fill_columns(np.arange(M), ck.ContactWork(Wt, Zt, np.zeros(M, dtype=bool), np.ones(M, dtype=bool)),
+                    geometry, law)
     W, Z = Wt.T, Zt.T   # stored transposed
     scale = np.abs(W_ref).max()
     assert np.abs(W - W_ref).max() < 1e-10 * scale
@@ -178,11 +179,20 @@ def test_compliance_kernels_equal_dense_products(eta):
     lam = rng.uniform(0.0, 1.0, M) * (rng.uniform(size=M) < 0.4)
     d = rng.normal(scale=1e-5, size=(M, 2))
     g = np.empty_like(u)
-    ck.generalized_curvature(lam, d, geometry, law, prob._Omega, prob._base, prob.node_off, prob.uhat,
-                             prob.kinv, g)
+    ck.generalized_curvature(lam, d, geometry, law, prob.uhat, g)
     phi = -lam[:, None] * np.einsum("kab,kb->ka", ref.Mblk, d)
     g_ref = ref.uhat_flat + ref.kinv * (A.T @ phi.ravel() + zt.T @ lam)
     np.testing.assert_allclose(g.ravel(), g_ref, rtol=1e-9, atol=1e-9 * np.abs(g_ref).max())
+    # displacements without W's columns: dfree + W phi + Z lam (phi = 0 without the forces),
+    # written only outside the known rows
+    known = rng.uniform(size=M) < 0.3
+    for with_forces in (True, False):
+        d_out = d.copy()
+        ck._complete_displacements(lam, d_out, known, with_forces, prob._dfree, geometry, law)
+        d_ref = dfree_ref + (W_ref @ phi.ravel() if with_forces else 0.0) + Z_ref @ lam
+        np.testing.assert_array_equal(d_out[known], d[known])
+        err = np.abs(d_out[~known].ravel() - d_ref.reshape(M, 2)[~known].ravel()).max()
+        assert err < 1e-9 * np.abs(d_ref).max()
 
 
 @pytest.mark.parametrize("eta", [None, (1, -1), (-1, 1)])
@@ -212,7 +222,7 @@ def test_constraint_generation_equals_the_full_complementarity_solve(eta, q):
     def run(solver, *extra):
         W = np.empty((2 * M, 2 * M))
         Z = np.empty((M, 2 * M)) if prob.friction else np.empty((1, 1))
-        work = ck.ContactWork(W, Z, np.zeros(M, dtype=np.bool_))
+        work = ck.ContactWork(W, Z, np.zeros(M, dtype=np.bool_), np.zeros(M, dtype=np.bool_))
         return solver(np.zeros(M), prob._dfree, prob.contact_geometry(R, p), prob.contact_law(kappa), work,
                       tol, 200, *extra)
 

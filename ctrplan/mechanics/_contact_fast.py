@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import ANDERSON_MIXING, MAX_FAILED_INNER_STEPS, OUTER_STAGNATION_WINDOW
+from ..constants import (ANDERSON_MIXING, INNER_TOL_FACTOR, INNER_TOL_MAX, MAX_FAILED_INNER_STEPS,
+                         OUTER_STAGNATION_WINDOW)
 from . import _contact_kernels as ck
 from ._chain_kernels import chain_kinematics
 from .packed import pack_robot
@@ -197,15 +198,16 @@ class FlatProblem:
         """The contacts and compliance factors of the current linearization (frames R (N, 3, 3),
         points p (N, 3) [m]) as the kernels take them (:class:`_contact_kernels.ContactGeometry`)."""
         return ck.ContactGeometry(self.pair, self.jo, self.ji, self._B, self._Pc, R, p, self._H1, self._H2,
-                                  self._F3)
+                                  self._F3, self._Omega, self._base, self.kinv, self.node_off)
 
     def contact_law(self, kappa):
         """Clearances, friction factors and the FB scale ``kappa`` [N/m] as the kernels take them
         (:class:`_contact_kernels.ContactLaw`)."""
         return ck.ContactLaw(self.c, self.Mblk, float(kappa), self.tq_out, self.tq_in, self.friction)
 
-    def outer_step(self, u, R, p, lam, settings):
-        """One re-linearization: returns (lam, F(u), inner ok, Newton iterations)."""
+    def outer_step(self, u, R, p, lam, settings, tol=None):
+        """One re-linearization: returns (lam, F(u), inner ok, Newton iterations); the
+        complementarity solve stops at ``tol`` (default ``settings.complementarity_tol``)."""
         ck.linearize(u, self.uhat, self.kinv, self.h, self.node_off, R, p, self._Omega, self._base,
                      self._H1, self._H2, self._F3, self._Jpv)
         ck.contact_frames(R, p, self.jo, self.ji, self._Jpv, self._B, self._dfree, self._diagW,
@@ -217,13 +219,26 @@ class FlatProblem:
         law = self.contact_law(kappa)
         work = ck.ContactWork(np.empty((2 * M, 2 * M)),   # W and Z stored transposed (ck.fill_columns)
                               np.empty((M, 2 * M)) if self.friction else np.empty((1, 1)),
-                              np.zeros(M, dtype=np.bool_))
+                              np.zeros(M, dtype=np.bool_), np.zeros(M, dtype=np.bool_))
         lam, d, ok, its, _ = ck.solve_contacts(np.asarray(lam, dtype=float), self._dfree, geometry, law, work,
-                                               settings.complementarity_tol, settings.max_newton_iterations)
+                                               settings.complementarity_tol if tol is None else tol,
+                                               settings.max_newton_iterations)
         g = np.empty_like(u)
-        ck.generalized_curvature(lam, d, geometry, law, self._Omega, self._base, self.node_off, self.uhat,
-                                 self.kinv, g)
+        ck.generalized_curvature(lam, d, geometry, law, self.uhat, g)
         return lam, g, bool(ok), int(its)
+
+
+def _inner_tolerance(change, settings):
+    """Tolerance of the complementarity solve of one outer iteration (inexact fixed-point
+    iteration): ``INNER_TOL_FACTOR`` x (last centerline change / ``outer_tol``) x
+    ``complementarity_tol``, between ``complementarity_tol`` and ``INNER_TOL_MAX`` (this at the
+    first iteration). Far from the fixed point the multipliers of a linearization that will be
+    replaced anyway need not be exact; an iteration counts as converged only when its solve used
+    ``complementarity_tol`` itself."""
+    tol = settings.complementarity_tol
+    if not np.isfinite(change):
+        return max(tol, INNER_TOL_MAX)
+    return min(max(tol, INNER_TOL_MAX), max(tol, tol * INNER_TOL_FACTOR * change / settings.outer_tol))
 
 
 def run_outer_loop(prob, u, lam, settings):
@@ -261,14 +276,15 @@ def run_outer_loop(prob, u, lam, settings):
         if prob.M == 0:
             converged = True
             break
-        lam, g, inner_ok, its = prob.outer_step(u, R, p, lam, settings)
+        inner_tol = _inner_tolerance(change, settings)
+        lam, g, inner_ok, its = prob.outer_step(u, R, p, lam, settings, inner_tol)
         inner_total += its
         failed_in_a_row = 0 if inner_ok else failed_in_a_row + 1
         if failed_in_a_row >= MAX_FAILED_INNER_STEPS:
             break
         Rg, pg = prob.kinematics(g)
         change = float(np.max(np.abs(pg - p)))
-        if change < settings.outer_tol and inner_ok:
+        if change < settings.outer_tol and inner_ok and inner_tol <= settings.complementarity_tol:
             u, R, p = g, Rg, pg
             converged = True
             break

@@ -49,6 +49,9 @@ from ._lapack import PIVOT_DTYPE, lu_factor, lu_solve, lu_solve_matrix
 
 _SEPARATION_ROUNDS = 3
 _NONMONOTONE = 5
+# Working-set rounds that will be followed by another are solved only to this scaled residual
+# (solve_contacts); the last round is solved to the caller's tolerance.
+_ROUND_TOL = 1e-3
 
 
 class ContactGeometry(NamedTuple):
@@ -74,6 +77,12 @@ class ContactGeometry(NamedTuple):
         Centerline points [m].
     H1, H2, F3 : ndarray, shape (N, 3, 3)
         Prefix-sum compliance factors of :func:`linearize` (module docstring).
+    Omega, base : ndarray, shape (S, 3, 3)
+        Per-segment Jacobian factors of :func:`linearize` [m], [m^2].
+    kinv : ndarray, shape (S, 3)
+        Inverse stiffnesses 1 / (k h) [1/(N m^3)].
+    node_off : ndarray of int64, shape (n + 1,)
+        Tube t owns global nodes ``node_off[t]:node_off[t + 1]``.
     """
 
     pair: np.ndarray
@@ -86,6 +95,10 @@ class ContactGeometry(NamedTuple):
     H1: np.ndarray
     H2: np.ndarray
     F3: np.ndarray
+    Omega: np.ndarray
+    base: np.ndarray
+    kinv: np.ndarray
+    node_off: np.ndarray
 
 
 class ContactLaw(NamedTuple):
@@ -114,7 +127,8 @@ class ContactLaw(NamedTuple):
 
 
 class ContactWork(NamedTuple):
-    """Compliance columns computed so far, filled on demand by :func:`fill_columns`.
+    """Compliance columns computed so far, filled on demand by :func:`fill_columns` on the rows
+    of :func:`extend_rows`.
 
     Attributes
     ----------
@@ -123,12 +137,16 @@ class ContactWork(NamedTuple):
     Zt : ndarray, shape (M, 2M), or (1, 1) without friction
         Z^T [m/N]: column e of the torque-column matrix Z is row e.
     have : ndarray of bool, shape (M,)
-        Block column e of W (and column e of Z) is computed.
+        Block column e of W (and column e of Z) is computed, on the rows ``rows``.
+    rows : ndarray of bool, shape (M,)
+        The contacts whose rows of every computed column are valid (start all False; the
+        solver extends them to its working set: no other row of W or Z is read).
     """
 
     Wt: np.ndarray
     Zt: np.ndarray
     have: np.ndarray
+    rows: np.ndarray
 
 
 class ContactResult(NamedTuple):
@@ -378,12 +396,106 @@ def contact_projections(B, p, jo, ji, H1, H2, Pc):
                 Pc[c, side, 2, q, 2] = b0 * P1 - b1 * P0
 
 
+@njit(cache=True, inline="always")
+def _fill_column(e, rows, cw, geometry, law, PB, U, Vv, w, g1):
+    """Block column e of W and column e of Z (friction) on the contacts ``rows`` (int64 array),
+    stored transposed in ``cw.Wt`` and ``cw.Zt``; ``PB``, ``U``, ``Vv`` (3, 2), ``w``, ``g1`` (3,)
+    are scratch."""
+    Wt, Zt = cw.Wt, cw.Zt
+    pair, jo, ji, B, Pc = geometry.pair, geometry.jo, geometry.ji, geometry.B, geometry.Pc
+    R, p, H1, H2, F3 = geometry.R, geometry.p, geometry.H1, geometry.H2, geometry.F3
+    tq_out, tq_in, friction = law.tq_out, law.tq_in, law.friction
+    nr = rows.shape[0]
+    for idx in range(nr):
+        c = rows[idx]
+        Wt[2 * e, 2 * c] = 0.0
+        Wt[2 * e, 2 * c + 1] = 0.0
+        Wt[2 * e + 1, 2 * c] = 0.0
+        Wt[2 * e + 1, 2 * c + 1] = 0.0
+        if friction:
+            Zt[e, 2 * c] = 0.0
+            Zt[e, 2 * c + 1] = 0.0
+    for side in range(2):
+        te = pair[e] + side
+        je = jo[e] if side == 0 else ji[e]
+        se = 1.0 if side == 0 else -1.0
+        tau = tq_out[e] if side == 0 else tq_in[e]
+        pe = p[je]
+        # PB = [p_e]x B_e ; U = H1_je^T B_e ; Vv = H2_je^T B_e
+        for q in range(2):
+            PB[0, q] = pe[1] * B[e, 2, q] - pe[2] * B[e, 1, q]
+            PB[1, q] = pe[2] * B[e, 0, q] - pe[0] * B[e, 2, q]
+            PB[2, q] = pe[0] * B[e, 1, q] - pe[1] * B[e, 0, q]
+            for a in range(3):
+                su = 0.0
+                sv = 0.0
+                for r in range(3):
+                    su += H1[je, r, a] * B[e, r, q]
+                    sv += H2[je, r, a] * B[e, r, q]
+                U[a, q] = su
+                Vv[a, q] = sv
+        with_torque = friction and tau != 0.0
+        if with_torque:
+            # t_e; w = F3_je t_e; g1 = H2_je t_e + [p_e]x w  (for contacts distal to e)
+            t0 = R[je, 0, 2]
+            t1 = R[je, 1, 2]
+            t2 = R[je, 2, 2]
+            for a in range(3):
+                w[a] = F3[je, a, 0] * t0 + F3[je, a, 1] * t1 + F3[je, a, 2] * t2
+                g1[a] = H2[je, a, 0] * t0 + H2[je, a, 1] * t1 + H2[je, a, 2] * t2
+            g1[0] += pe[1] * w[2] - pe[2] * w[1]
+            g1[1] += pe[2] * w[0] - pe[0] * w[2]
+            g1[2] += pe[0] * w[1] - pe[1] * w[0]
+        for idx in range(nr):
+            c = rows[idx]
+            if pair[c] == te:
+                jc = jo[c]
+                sc = 1.0
+                sd = 0
+            elif pair[c] + 1 == te:
+                jc = ji[c]
+                sc = -1.0
+                sd = 1
+            else:
+                continue
+            f = sc * se
+            if jc <= je:
+                # B_c^T (H1_jc + H2_jc [p_e]x) B_e = Pc0 B_e + Pc1 PB
+                for q1 in range(2):
+                    for q2 in range(2):
+                        v = 0.0
+                        for a in range(3):
+                            v += Pc[c, sd, 0, q1, a] * B[e, a, q2] + Pc[c, sd, 1, q1, a] * PB[a, q2]
+                        Wt[2 * e + q2, 2 * c + q1] += f * v
+                if with_torque:
+                    # B_c^T H2_jc t_e
+                    for q1 in range(2):
+                        Zt[e, 2 * c + q1] += sc * tau * (Pc[c, sd, 1, q1, 0] * R[je, 0, 2]
+                                                        + Pc[c, sd, 1, q1, 1] * R[je, 1, 2]
+                                                        + Pc[c, sd, 1, q1, 2] * R[je, 2, 2])
+            else:
+                # B_c^T (H1_je^T - [p_c]x H2_je^T) B_e = B_c^T U - Pc2 Vv
+                for q1 in range(2):
+                    for q2 in range(2):
+                        v = 0.0
+                        for a in range(3):
+                            v += B[c, a, q1] * U[a, q2] - Pc[c, sd, 2, q1, a] * Vv[a, q2]
+                        Wt[2 * e + q2, 2 * c + q1] += f * v
+                if with_torque:
+                    # B_c^T ((H2_je - [p_c - p_e]x F3_je) t_e) = B_c^T g1 - Pc2 w
+                    for q1 in range(2):
+                        v = 0.0
+                        for a in range(3):
+                            v += B[c, a, q1] * g1[a] - Pc[c, sd, 2, q1, a] * w[a]
+                        Zt[e, 2 * c + q1] += sc * tau * v
+
+
 @njit(cache=True)
 def fill_columns(cols, work, geometry, law):
     """Compute the block columns ``e in cols`` of W (2M, 2M) [m/N] and the columns of Z (2M, M)
-    [m/N] (torque terms, friction only) that are not computed yet (``work.have[e]`` False),
-    stored transposed: column 2e + q of W is row 2e + q of ``work.Wt`` (2M, 2M), column e of Z
-    is row e of ``work.Zt`` (M, 2M).
+    [m/N] (torque terms, friction only) that are not computed yet (``work.have[e]`` False), on
+    the rows ``work.rows``, stored transposed: column 2e + q of W is row 2e + q of ``work.Wt``
+    (2M, 2M), column e of Z is row e of ``work.Zt`` (M, 2M).
 
     Z column e is A K^-1 zt_e^T: the displacements caused by the friction torques of contact e
     (Eq. (41)) per unit multiplier (Appendix A of Ha, Fagogenis & Dupont 2019).
@@ -393,18 +505,14 @@ def fill_columns(cols, work, geometry, law):
     cols : ndarray of int64, shape (m,)
         Contacts whose columns are needed.
     work : ContactWork
-        ``Wt``, ``Zt`` and ``have``, updated in place.
+        ``Wt``, ``Zt`` and ``have``, updated in place; ``rows`` read.
     geometry : ContactGeometry
         ``pair``, ``jo``, ``ji``, ``B``, ``Pc`` (from :func:`contact_projections`), ``R``, ``p``,
         ``H1``, ``H2``, ``F3``.
     law : ContactLaw
         Reads ``tq_out``, ``tq_in`` and ``friction``.
     """
-    Wt, Zt, have = work.Wt, work.Zt, work.have
-    pair, jo, ji, B, Pc = geometry.pair, geometry.jo, geometry.ji, geometry.B, geometry.Pc
-    R, p, H1, H2, F3 = geometry.R, geometry.p, geometry.H1, geometry.H2, geometry.F3
-    tq_out, tq_in, friction = law.tq_out, law.tq_in, law.friction
-    M = jo.shape[0]
+    rows = np.nonzero(work.rows)[0]
     PB = np.empty((3, 2))
     U = np.empty((3, 2))
     Vv = np.empty((3, 2))
@@ -412,86 +520,40 @@ def fill_columns(cols, work, geometry, law):
     g1 = np.empty(3)
     for idx in range(cols.shape[0]):
         e = cols[idx]
-        if have[e]:
+        if work.have[e]:
             continue
-        have[e] = True
-        for r in range(2 * M):
-            Wt[2 * e, r] = 0.0
-            Wt[2 * e + 1, r] = 0.0
-            if friction:
-                Zt[e, r] = 0.0
-        for side in range(2):
-            te = pair[e] + side
-            je = jo[e] if side == 0 else ji[e]
-            se = 1.0 if side == 0 else -1.0
-            tau = tq_out[e] if side == 0 else tq_in[e]
-            pe = p[je]
-            # PB = [p_e]x B_e ; U = H1_je^T B_e ; Vv = H2_je^T B_e
-            for q in range(2):
-                PB[0, q] = pe[1] * B[e, 2, q] - pe[2] * B[e, 1, q]
-                PB[1, q] = pe[2] * B[e, 0, q] - pe[0] * B[e, 2, q]
-                PB[2, q] = pe[0] * B[e, 1, q] - pe[1] * B[e, 0, q]
-                for a in range(3):
-                    su = 0.0
-                    sv = 0.0
-                    for r in range(3):
-                        su += H1[je, r, a] * B[e, r, q]
-                        sv += H2[je, r, a] * B[e, r, q]
-                    U[a, q] = su
-                    Vv[a, q] = sv
-            with_torque = friction and tau != 0.0
-            if with_torque:
-                # t_e; w = F3_je t_e; g1 = H2_je t_e + [p_e]x w  (for contacts distal to e)
-                t0 = R[je, 0, 2]
-                t1 = R[je, 1, 2]
-                t2 = R[je, 2, 2]
-                for a in range(3):
-                    w[a] = F3[je, a, 0] * t0 + F3[je, a, 1] * t1 + F3[je, a, 2] * t2
-                    g1[a] = H2[je, a, 0] * t0 + H2[je, a, 1] * t1 + H2[je, a, 2] * t2
-                g1[0] += pe[1] * w[2] - pe[2] * w[1]
-                g1[1] += pe[2] * w[0] - pe[0] * w[2]
-                g1[2] += pe[0] * w[1] - pe[1] * w[0]
-            for c in range(M):
-                if pair[c] == te:
-                    jc = jo[c]
-                    sc = 1.0
-                    sd = 0
-                elif pair[c] + 1 == te:
-                    jc = ji[c]
-                    sc = -1.0
-                    sd = 1
-                else:
-                    continue
-                f = sc * se
-                if jc <= je:
-                    # B_c^T (H1_jc + H2_jc [p_e]x) B_e = Pc0 B_e + Pc1 PB
-                    for q1 in range(2):
-                        for q2 in range(2):
-                            v = 0.0
-                            for a in range(3):
-                                v += Pc[c, sd, 0, q1, a] * B[e, a, q2] + Pc[c, sd, 1, q1, a] * PB[a, q2]
-                            Wt[2 * e + q2, 2 * c + q1] += f * v
-                    if with_torque:
-                        # B_c^T H2_jc t_e
-                        for q1 in range(2):
-                            Zt[e, 2 * c + q1] += sc * tau * (Pc[c, sd, 1, q1, 0] * R[je, 0, 2]
-                                                            + Pc[c, sd, 1, q1, 1] * R[je, 1, 2]
-                                                            + Pc[c, sd, 1, q1, 2] * R[je, 2, 2])
-                else:
-                    # B_c^T (H1_je^T - [p_c]x H2_je^T) B_e = B_c^T U - Pc2 Vv
-                    for q1 in range(2):
-                        for q2 in range(2):
-                            v = 0.0
-                            for a in range(3):
-                                v += B[c, a, q1] * U[a, q2] - Pc[c, sd, 2, q1, a] * Vv[a, q2]
-                            Wt[2 * e + q2, 2 * c + q1] += f * v
-                    if with_torque:
-                        # B_c^T ((H2_je - [p_c - p_e]x F3_je) t_e) = B_c^T g1 - Pc2 w
-                        for q1 in range(2):
-                            v = 0.0
-                            for a in range(3):
-                                v += B[c, a, q1] * g1[a] - Pc[c, sd, 2, q1, a] * w[a]
-                            Zt[e, 2 * c + q1] += sc * tau * v
+        work.have[e] = True
+        _fill_column(e, rows, work, geometry, law, PB, U, Vv, w, g1)
+
+
+@njit(cache=True)
+def extend_rows(mask, work, geometry, law):
+    """Extend the valid rows ``work.rows`` of the computed columns to the contacts of ``mask``
+    (bool, shape (M,)): the entries of every computed column on the contacts added (W is
+    symmetric, but the transposed storage keeps a column's rows contiguous, so they are computed
+    like a column's other entries, by :func:`fill_columns`' block formulas)."""
+    M = mask.shape[0]
+    n_new = 0
+    for c in range(M):
+        if mask[c] and not work.rows[c]:
+            n_new += 1
+    if n_new == 0:
+        return
+    new = np.empty(n_new, dtype=np.int64)
+    i = 0
+    for c in range(M):
+        if mask[c] and not work.rows[c]:
+            new[i] = c
+            i += 1
+            work.rows[c] = True
+    PB = np.empty((3, 2))
+    U = np.empty((3, 2))
+    Vv = np.empty((3, 2))
+    w = np.empty(3)
+    g1 = np.empty(3)
+    for e in range(M):
+        if work.have[e]:
+            _fill_column(e, new, work, geometry, law, PB, U, Vv, w, g1)
 
 
 @njit(cache=True)
@@ -572,13 +634,55 @@ def _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, rows):
 
 
 @njit(cache=True)
-def _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok):
-    """d on every contact with the LU factors the Newton loop already has for ``act``
-    (``lu_ok`` False: they failed, d = dfree + Z lam as :func:`_displacements` leaves it)."""
-    rows = np.arange(d.shape[0])
-    _free_displacements(lam, act, dfree, Zt, friction, d, rows)
-    if lu_ok and act.shape[0] > 0:
-        _active_correction(lam, act, Mblk, Wt, d, rows, LU, piv)
+def _complete_displacements(lam, d, known, with_forces, dfree, geometry, law):
+    """d on the contacts outside ``known`` (bool, shape (M,)), from the multipliers and the
+    displacements d_a of the active contacts, without the columns of W:
+    d = dfree + B^T S J_p K^-1 (A^T phi + zt^T lam), phi_a = -lam_a M_a d_a (``with_forces``
+    False: phi = 0, d = dfree + Z lam). Costs O(nodes + contacts): one backward pass for the
+    generalized forces (:func:`_curvature_change`) and one forward pass for J_p of them.
+    Rows in ``known`` are left alone."""
+    B, jo, ji, p = geometry.B, geometry.jo, geometry.ji, geometry.p
+    Omega, base, node_off = geometry.Omega, geometry.base, geometry.node_off
+    v = np.empty((Omega.shape[0], 3))
+    _curvature_change(lam, d, geometry, law, with_forces, v)
+    Jv = np.empty((p.shape[0], 3))
+    n = node_off.shape[0] - 1
+    for t in range(n):
+        j0 = node_off[t]
+        k0 = j0 - t
+        nseg = node_off[t + 1] - j0 - 1
+        b0 = 0.0
+        b1 = 0.0
+        b2 = 0.0
+        o0 = 0.0
+        o1 = 0.0
+        o2 = 0.0
+        for m in range(nseg + 1):
+            j = j0 + m
+            # J_p v at node j = sum_(k<j) base_k v_k - [p_j]x sum_(k<j) Omega_k v_k
+            Jv[j, 0] = b0 - (p[j, 1] * o2 - p[j, 2] * o1)
+            Jv[j, 1] = b1 - (p[j, 2] * o0 - p[j, 0] * o2)
+            Jv[j, 2] = b2 - (p[j, 0] * o1 - p[j, 1] * o0)
+            if m == nseg:
+                break
+            k = k0 + m
+            v0 = v[k, 0]
+            v1 = v[k, 1]
+            v2 = v[k, 2]
+            b0 += base[k, 0, 0] * v0 + base[k, 0, 1] * v1 + base[k, 0, 2] * v2
+            b1 += base[k, 1, 0] * v0 + base[k, 1, 1] * v1 + base[k, 1, 2] * v2
+            b2 += base[k, 2, 0] * v0 + base[k, 2, 1] * v1 + base[k, 2, 2] * v2
+            o0 += Omega[k, 0, 0] * v0 + Omega[k, 0, 1] * v1 + Omega[k, 0, 2] * v2
+            o1 += Omega[k, 1, 0] * v0 + Omega[k, 1, 1] * v1 + Omega[k, 1, 2] * v2
+            o2 += Omega[k, 2, 0] * v0 + Omega[k, 2, 1] * v1 + Omega[k, 2, 2] * v2
+    for c in range(known.shape[0]):
+        if known[c]:
+            continue
+        a = jo[c]
+        b = ji[c]
+        for q in range(2):
+            d[c, q] = dfree[c, q] + (B[c, 0, q] * (Jv[a, 0] - Jv[b, 0]) + B[c, 1, q] * (Jv[a, 1] - Jv[b, 1])
+                                     + B[c, 2, q] * (Jv[a, 2] - Jv[b, 2]))
 
 
 @njit(cache=True, inline="always")
@@ -735,6 +839,12 @@ def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
     of the contact regions instead of every contact the force-free shape violates (measured:
     the first linearization from lambda = 0 activated up to 97 of 110 contacts).
 
+    A round stops at the scaled residual ``_ROUND_TOL`` (or ``tol`` if larger): its multipliers
+    only decide which contacts are added. When no contact is added, the same set is solved on to
+    ``tol``, and the set is checked again. Only the working set's rows of W and Z are computed
+    (``cw.rows``, :func:`extend_rows`); the displacements of the other contacts, needed for the
+    violation check, come from :func:`_complete_displacements`.
+
     Parameters
     ----------
     lam0 : ndarray, shape (M,)
@@ -763,21 +873,26 @@ def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
     work = lam > 0.0
     d = np.empty((M, 2))
     act = _active_of(lam)
+    extend_rows(work, cw, geometry, law)
     fill_columns(act, cw, geometry, law)
-    fok, _, _ = _displacements(lam, act, dfree, Mblk, cw.Wt, cw.Zt, friction, d, np.arange(M))
+    fok, _, _ = _displacements(lam, act, dfree, Mblk, cw.Wt, cw.Zt, friction, d, act)
     if fok:
+        _complete_displacements(lam, d, work, True, dfree, geometry, law)
         _grow_working_set(d, c, pair, tol, work)
     else:
         work[:] = True
     total = 0
-    for _ in range(M + 1):
-        lam, d, ok, its, err = complementarity(lam, dfree, geometry, law, cw, tol, maxit, work)
+    round_tol = max(tol, _ROUND_TOL)
+    for _ in range(M + 2):   # at most M growing rounds and one that finishes a loose one
+        lam, d, ok, its, err = complementarity(lam, dfree, geometry, law, cw, round_tol, maxit, work)
         total += its
         if not ok:
             return ContactResult(lam, d, False, total, err)
         added, worst = _grow_working_set(d, c, pair, tol, work)
         if added == 0:
-            return ContactResult(lam, d, True, total, max(err, worst))
+            if err < tol:
+                return ContactResult(lam, d, True, total, max(err, worst))
+            round_tol = tol
     return ContactResult(lam, d, False, total, err)
 
 
@@ -831,6 +946,7 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
     db_t = np.empty(M)
     lam_t = np.empty(M)
     act = _active_of(lam)
+    extend_rows(work, cw, geometry, law)
     fill_columns(act, cw, geometry, law)
     rows = np.nonzero(work)[0]
     trial = _TrialPoint(lam_t, d_t, phi_t, da_t, db_t)
@@ -841,7 +957,7 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
     for it in range(1, maxit + 1):
         err = _max_scaled(phi, c, kappa)
         if err < tol:
-            _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
+            _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
             return ContactResult(lam, d, True, it - 1, err)
         # reduced set: rows with db != 0, lam > 0 or phi != 0
         nR = 0
@@ -941,7 +1057,7 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
         else:
             if not np.all(np.isfinite(Jc)):
                 # a non-finite Newton matrix (LAPACK would print an error): no step possible
-                _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
+                _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
                 return ContactResult(lam, d, False, it, _max_scaled(phi, c, kappa))
             rr = np.empty(nR)
             for ii in range(nR):
@@ -997,7 +1113,7 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
                 break
             t *= 0.5
         if not accepted:
-            _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
+            _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
             return ContactResult(lam, d, False, it, _max_scaled(phi, c, kappa))
         lam[:] = lam_t
         d[:, :] = d_t
@@ -1011,12 +1127,12 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
         piv = piv_t
         lu_ok = True   # an accepted trial's factorization succeeded
     err = _max_scaled(phi, c, kappa)
-    _all_displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, LU, piv, lu_ok)
+    _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
     return ContactResult(lam, d, err < tol, maxit, err)
 
 
 @njit(cache=True)
-def generalized_curvature(lam, d, geometry, law, Omega, base, node_off, uhat, kinv, out):
+def generalized_curvature(lam, d, geometry, law, uhat, out):
     """Fixed-point map u -> uhat + K^-1 (A^T phi + zt^T lam) of the outer loop (stationarity,
     Eqs. (34)-(36) and (41) of Ha, Fagogenis & Dupont 2019), in place into ``out``.
 
@@ -1028,21 +1144,31 @@ def generalized_curvature(lam, d, geometry, law, Omega, base, node_off, uhat, ki
     lam : ndarray, shape (M,)
         Contact multipliers [N/m].
     d : ndarray, shape (M, 2)
-        Contact displacements [m].
+        Contact displacements [m] (read only where lam > 0).
     geometry : ContactGeometry
-        Reads ``pair``, ``jo``, ``ji``, ``B``, ``R`` and ``p`` (``Pc``, ``H1``, ``H2``, ``F3``
-        are not used).
+        Reads ``pair``, ``jo``, ``ji``, ``B``, ``R``, ``p``, ``Omega``, ``base``, ``kinv`` and
+        ``node_off`` (``Pc``, ``H1``, ``H2``, ``F3`` are not used).
     law : ContactLaw
         Reads ``Mblk``, ``tq_out`` and ``tq_in``.
-    Omega, base : ndarray, shape (S, 3, 3)
-        From :func:`linearize` [m], [m^2].
-    node_off : ndarray of int64, shape (n + 1,)
-        Tube t owns global nodes ``node_off[t]:node_off[t + 1]``.
-    uhat, kinv : ndarray, shape (S, 3)
-        Precurvatures [1/m] and inverse stiffnesses 1 / (k h) [1/(N m^3)].
+    uhat : ndarray, shape (S, 3)
+        Precurvatures [1/m].
     out : ndarray, shape (S, 3)
         Output: the curvatures of the map [1/m].
     """
+    _curvature_change(lam, d, geometry, law, True, out)
+    for k in range(out.shape[0]):
+        for q in range(3):
+            out[k, q] += uhat[k, q]
+
+
+@njit(cache=True)
+def _curvature_change(lam, d, geometry, law, with_forces, out):
+    """K^-1 (A^T phi + zt^T lam) [1/m] into ``out`` (S, 3): the curvature change caused by the
+    contact forces phi_c = -lam_c M_c d_c (zero if not ``with_forces``) and the friction torques
+    (Eqs. (34)-(36), (41) of Ha, Fagogenis & Dupont 2019), by suffix sums of the forces and their
+    moments along each tube (module docstring). Reads ``Omega``, ``base``, ``kinv`` and
+    ``node_off`` from ``geometry``; d only where lam > 0."""
+    Omega, base, kinv, node_off = geometry.Omega, geometry.base, geometry.kinv, geometry.node_off
     Mblk, tq_out, tq_in = law.Mblk, law.tq_out, law.tq_in
     B, jo, ji, R, p = geometry.B, geometry.jo, geometry.ji, geometry.R, geometry.p
     N = p.shape[0]
@@ -1053,8 +1179,11 @@ def generalized_curvature(lam, d, geometry, law, Omega, base, node_off, uhat, ki
         lc = lam[c]
         if lc == 0.0:
             continue
-        f0 = -lc * (Mblk[c, 0, 0] * d[c, 0] + Mblk[c, 0, 1] * d[c, 1])
-        f1 = -lc * (Mblk[c, 1, 0] * d[c, 0] + Mblk[c, 1, 1] * d[c, 1])
+        f0 = 0.0
+        f1 = 0.0
+        if with_forces:
+            f0 = -lc * (Mblk[c, 0, 0] * d[c, 0] + Mblk[c, 0, 1] * d[c, 1])
+            f1 = -lc * (Mblk[c, 1, 0] * d[c, 0] + Mblk[c, 1, 1] * d[c, 1])
         for side in range(2):
             j = jo[c] if side == 0 else ji[c]
             s = 1.0 if side == 0 else -1.0
@@ -1090,4 +1219,4 @@ def generalized_curvature(lam, d, geometry, law, Omega, base, node_off, uhat, ki
             for q in range(3):
                 g = (base[k, 0, q] * sf0 + base[k, 1, q] * sf1 + base[k, 2, q] * sf2
                      + Omega[k, 0, q] * st0 + Omega[k, 1, q] * st1 + Omega[k, 2, q] * st2)
-                out[k, q] = uhat[k, q] + kinv[k, q] * g
+                out[k, q] = kinv[k, q] * g
