@@ -25,7 +25,9 @@ so the 3x3 spatial compliance between nodes j <= l of one tube, with D_k = K_k^-
 and the block W_ce = A_c K^-1 A_e^T of the contact compliance of Appendix A (Eqs. (50)-(56)),
 A_c = B_c^T S_c J_p, is a sum over the (at most two) tubes that contacts c and e share. A
 block costs O(1) instead of O(number of unknowns); blocks are computed column by column only
-for the contacts the semismooth Newton method actually touches (active or violated ones).
+for the contacts the semismooth Newton method actually touches (active or violated ones), and
+only on the rows of its working set (the displacements of the other contacts, needed only to
+check them for violation, come from the generalized forces, :func:`_complete_displacements`).
 The columns are stored as rows (arrays ``Wt`` = W^T and ``Zt`` = Z^T, C order), so that
 computing a column and reading it back are both contiguous.
 
@@ -512,6 +514,12 @@ def fill_columns(cols, work, geometry, law):
     law : ContactLaw
         Reads ``tq_out``, ``tq_in`` and ``friction``.
     """
+    missing = 0
+    for idx in range(cols.shape[0]):
+        if not work.have[cols[idx]]:
+            missing += 1
+    if missing == 0:   # the usual case in a line-search trial
+        return
     rows = np.nonzero(work.rows)[0]
     PB = np.empty((3, 2))
     U = np.empty((3, 2))
