@@ -235,3 +235,41 @@ def test_constraint_generation_equals_the_full_complementarity_solve(eta, q):
     # the stopping test |Phi_k| / (kappa c_k) < tol allows |d_k| up to c_k / (1 - tol), i.e.
     # |d_k|^2 / c_k^2 - 1 up to about 2 tol (seen: 1.8e-6 with tol = 1e-6)
     assert np.all(np.sum(d_g ** 2, axis=1) <= prob.c ** 2 * (1 + 2 * tol))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_anderson_step_equals_the_least_squares_mixing(seed):
+    """The compiled Anderson step of the outer loop (_contact_fast.Anderson) against its
+    definition with a dense least-squares solve: gamma = argmin |f - dF gamma| over the last
+    ``depth`` differences of the residuals f = g - u, next iterate g - dG gamma - (1 - beta)
+    (f - dF gamma); the history restarts when the residual size grows. Seeded random iterates of
+    a contraction, a history longer than the depth, one growing residual, and a repeated residual
+    (a zero difference column, which the least-squares solve drops)."""
+    from ctrplan.mechanics._contact_fast import Anderson
+
+    rng = np.random.default_rng(seed)
+    size, depth, beta = 60, 3, 0.5
+    A = 0.2 * rng.standard_normal((size, size))
+    fast = Anderson(depth, beta)
+    f_hist, g_hist, last = [], [], np.inf
+    u = rng.standard_normal(size)
+    sizes = [1.0, 0.5, 0.3, 0.2, 0.4, 0.1, 0.05, 0.02]   # the fifth grows: history restarts
+    for k, res in enumerate(sizes):
+        g = np.tanh(A @ u) + 1.0
+        if k == 6:
+            g = u + f_hist[-1]    # the same residual as the step before: dF has a zero column
+        if res > last:
+            f_hist, g_hist = [], []
+        last = res
+        f = g - u
+        f_hist, g_hist = (f_hist + [f])[-(depth + 1):], (g_hist + [g])[-(depth + 1):]
+        if len(f_hist) < 2:
+            expected = g - (1 - beta) * f
+        else:
+            dF = np.column_stack(np.diff(f_hist, axis=0))
+            dG = np.column_stack(np.diff(g_hist, axis=0))
+            gamma = np.linalg.lstsq(dF, f, rcond=None)[0]
+            expected = g - dG @ gamma - (1 - beta) * (f - dF @ gamma)
+        got = fast.step(u, g, res)
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10 * np.abs(expected).max())
+        u = got

@@ -12,6 +12,7 @@ dense (2M x number of unknowns) constraint Jacobian.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ..constants import (ANDERSON_MIXING, INNER_TOL_FACTOR, INNER_TOL_MAX, MAX_FAILED_INNER_STEPS,
                          OUTER_STAGNATION_WINDOW)
@@ -38,12 +39,21 @@ class Anderson:
         ``u_bar + beta f_bar`` with ``u_bar``, ``f_bar`` the least-squares combinations of the
         past iterates and their residuals f = F(u) - u (beta = 1: ``g_bar``, undamped). Not
         applied when ``depth`` is 0.
+
+    Notes
+    -----
+    The history lives in two preallocated (depth + 1, size) arrays, oldest first, and the
+    least-squares problem min |f - dF gamma| is solved by :func:`_anderson_combination` (a
+    compiled QR of the at most ``depth`` difference columns) instead of ``np.linalg.lstsq``
+    on stacked columns, which cost 10 times more than the rest of a step at these sizes.
     """
 
     def __init__(self, depth, mixing=1.0):
-        self.depth = depth
+        self.depth = int(depth)
         self.mixing = float(mixing)
-        self.f_hist, self.g_hist = [], []
+        self.F = None   # residual history f = g - u, (depth + 1, size), oldest first
+        self.G = None   # image history g = F(u)
+        self.count = 0
         self.last = np.inf
 
     def step(self, u, g, residual_size):
@@ -51,24 +61,102 @@ class Anderson:
         if self.depth <= 0:
             return g
         if residual_size > self.last:
-            self.f_hist, self.g_hist = [], []
+            self.count = 0
         self.last = residual_size
         f = g - u
         if not (np.all(np.isfinite(f)) and np.all(np.isfinite(g))):
-            self.f_hist, self.g_hist = [], []      # restart the history; plain fixed-point step
+            self.count = 0      # restart the history; plain fixed-point step
             return g
-        self.f_hist.append(f)
-        self.g_hist.append(g)
-        if len(self.f_hist) > self.depth + 1:
-            self.f_hist.pop(0)
-            self.g_hist.pop(0)
-        if len(self.f_hist) < 2:
+        if self.F is None or self.F.shape[1] != f.size:
+            self.F = np.empty((self.depth + 1, f.size))
+            self.G = np.empty((self.depth + 1, f.size))
+            self.count = 0
+        if self.count == self.depth + 1:
+            self.F[:-1] = self.F[1:]
+            self.G[:-1] = self.G[1:]
+            self.count -= 1
+        self.F[self.count] = f
+        self.G[self.count] = g
+        self.count += 1
+        if self.count < 2:
             return g if self.mixing == 1.0 else g - (1.0 - self.mixing) * f
-        dF = np.column_stack([self.f_hist[j + 1] - self.f_hist[j] for j in range(len(self.f_hist) - 1)])
-        dG = np.column_stack([self.g_hist[j + 1] - self.g_hist[j] for j in range(len(self.g_hist) - 1)])
-        gamma = np.linalg.lstsq(dF, f, rcond=None)[0]
-        # g_bar - (1 - beta) f_bar = u_bar + beta f_bar  (g = u + f)
-        return g - dG @ gamma - (1.0 - self.mixing) * (f - dF @ gamma)
+        out = np.empty_like(g)
+        _anderson_combination(self.F, self.G, self.count, self.mixing, out)
+        return out
+
+
+@njit(cache=True)
+def _anderson_combination(F, G, m, mixing, out):
+    """Anderson (type II) mixing of the ``m`` newest history rows (oldest first) of the residuals
+    ``F`` and images ``G`` (each (depth + 1, size)), into ``out`` (size,):
+
+        gamma = argmin |f - dF gamma|,  out = g - dG gamma - (1 - mixing) (f - dF gamma),
+
+    dF, dG the m - 1 successive differences and f, g the newest rows. The least-squares problem
+    is solved by modified Gram-Schmidt with one re-orthogonalization; a difference column whose
+    part orthogonal to the earlier ones is below 1e-12 of the largest column norm is left out
+    (gamma 0), as a rank-revealing least-squares solve would drop it."""
+    k = m - 1
+    n = F.shape[1]
+    f = F[m - 1]
+    g = G[m - 1]
+    Q = np.empty((k, n))
+    Rm = np.zeros((k, k))
+    keep = np.zeros(k, dtype=np.bool_)
+    scale = 0.0
+    for j in range(k):
+        s = 0.0
+        for i in range(n):
+            v = F[j + 1, i] - F[j, i]
+            Q[j, i] = v
+            s += v * v
+        scale = max(scale, np.sqrt(s))
+    for j in range(k):
+        for _ in range(2):
+            for q in range(j):
+                if not keep[q]:
+                    continue
+                r = 0.0
+                for i in range(n):
+                    r += Q[q, i] * Q[j, i]
+                Rm[q, j] += r
+                for i in range(n):
+                    Q[j, i] -= r * Q[q, i]
+        s = 0.0
+        for i in range(n):
+            s += Q[j, i] * Q[j, i]
+        s = np.sqrt(s)
+        if s > 1e-12 * scale and s > 0.0:
+            keep[j] = True
+            Rm[j, j] = s
+            for i in range(n):
+                Q[j, i] /= s
+    # gamma = R^-1 Q^T f on the kept columns
+    gamma = np.zeros(k)
+    qf = np.zeros(k)
+    for j in range(k):
+        if keep[j]:
+            r = 0.0
+            for i in range(n):
+                r += Q[j, i] * f[i]
+            qf[j] = r
+    for j in range(k - 1, -1, -1):
+        if not keep[j]:
+            continue
+        r = qf[j]
+        for q in range(j + 1, k):
+            if keep[q]:
+                r -= Rm[j, q] * gamma[q]
+        gamma[j] = r / Rm[j, j]
+    damp = 1.0 - mixing
+    for i in range(n):
+        fb = f[i]
+        gb = g[i]
+        for j in range(k):
+            if keep[j]:
+                fb -= (F[j + 1, i] - F[j, i]) * gamma[j]
+                gb -= (G[j + 1, i] - G[j, i]) * gamma[j]
+        out[i] = gb - damp * fb
 
 
 _ROT90 = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -178,6 +266,12 @@ class FlatProblem:
         self._dfree = np.empty((self.M, 2))
         self._diagW = np.empty((self.M, 2, 2))
         self._Pc = np.empty((self.M, 2, 3, 2, 3))
+        # W and Z stored transposed (ck.fill_columns), reused by every linearization: only the
+        # entries flagged in ``have`` (columns) and ``rows`` are ever read
+        M = self.M
+        self._work = ck.ContactWork(np.empty((2 * M, 2 * M)),
+                                    np.empty((M, 2 * M)) if self.friction else np.empty((1, 1)),
+                                    np.zeros(M, dtype=np.bool_), np.zeros(M, dtype=np.bool_))
 
     def kinematics(self, u):
         """Frames (N, 3, 3) and centerline points (N, 3) [m] of all tubes for curvatures u (S, 3)."""
@@ -214,12 +308,13 @@ class FlatProblem:
                           self._H1, self._H2, self.pair)
         ck.contact_projections(self._B, p, self.jo, self.ji, self._H1, self._H2, self._Pc)
         M = self.M
-        kappa = 1.0 / max(float(np.mean(self._diagW[:, [0, 1], [0, 1]])), 1e-300)
+        diag_sum = float(self._diagW[:, 0, 0].sum() + self._diagW[:, 1, 1].sum())
+        kappa = 1.0 / max(diag_sum / (2 * M), 1e-300)
         geometry = self.contact_geometry(R, p)
         law = self.contact_law(kappa)
-        work = ck.ContactWork(np.empty((2 * M, 2 * M)),   # W and Z stored transposed (ck.fill_columns)
-                              np.empty((M, 2 * M)) if self.friction else np.empty((1, 1)),
-                              np.zeros(M, dtype=np.bool_), np.zeros(M, dtype=np.bool_))
+        work = self._work
+        work.have[:] = False   # no column or row of this linearization computed yet
+        work.rows[:] = False
         lam, d, ok, its, _ = ck.solve_contacts(np.asarray(lam, dtype=float), self._dfree, geometry, law, work,
                                                settings.complementarity_tol if tol is None else tol,
                                                settings.max_newton_iterations)
