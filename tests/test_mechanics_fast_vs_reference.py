@@ -273,3 +273,25 @@ def test_anderson_step_equals_the_least_squares_mixing(seed):
         got = fast.step(u, g, res)
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10 * np.abs(expected).max())
         u = got
+
+
+def test_problem_with_other_directions_equals_a_fresh_one():
+    """FlatProblem.with_directions (the bound's friction solves reuse the clearance problem's
+    arrays) gives the same law as building the problem for those directions, keeps the
+    original's, and owns its scratch arrays."""
+    from ctrplan.mechanics._contact_fast import FlatProblem
+
+    robot = table2_robot()
+    alpha, beta = robot.configuration([0.3, 2.5, -0.09])
+    st = solve_standard(robot, alpha, beta, SETTINGS, check_stability=False)
+    base = FlatProblem(robot, st, None, np.zeros(2))
+    for eta in [(1, 1), (1, -1), (-1, 1)]:
+        fresh = FlatProblem(robot, st, eta, robot.friction_coefficients)
+        derived = base.with_directions(robot, eta, robot.friction_coefficients)
+        assert derived.friction and not base.friction
+        for name in ["Mblk", "tq_out", "tq_in", "c", "pair", "jo", "ji", "uhat", "kinv", "u0", "h"]:
+            np.testing.assert_array_equal(getattr(derived, name), getattr(fresh, name), err_msg=name)
+        assert derived._work.Zt.shape == fresh._work.Zt.shape
+        assert not np.shares_memory(derived._dfree, base._dfree)
+        assert not np.shares_memory(derived._work.Wt, base._work.Wt)
+        np.testing.assert_array_equal(base.Mblk, np.broadcast_to(np.eye(2), base.Mblk.shape))

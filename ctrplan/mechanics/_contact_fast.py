@@ -11,6 +11,8 @@ dense (2M x number of unknowns) constraint Jacobian.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from numba import njit
 
@@ -227,8 +229,6 @@ class FlatProblem:
         self.beta = np.asarray(standard.beta, dtype=float)
         # contacts: every common grid node of each adjacent pair
         clear = packed.clearance
-        mu = np.asarray(mu, dtype=float)
-        r_in, r_out = packed.contact_radii(robot) if np.any(mu > 0) else (np.zeros(n - 1), np.zeros(n - 1))
         pair, jo, ji, cvec, svec = [], [], [], [], []
         for i in range(n - 1):
             lo = max(first[i], first[i + 1])
@@ -246,16 +246,28 @@ class FlatProblem:
         self.c = cat(cvec, float)
         self.s_contact = cat(svec, float)
         self.M = self.pair.size
+        self.N = int(self.node_off[-1])
+        self.S = self.h.size
+        self._packed = packed
+        self._set_law(robot, eta, mu)
+        self._allocate_work()
+
+    def _set_law(self, robot, eta, mu):
+        """The friction directions' part: ``Mblk``, ``tq_out``, ``tq_in``, ``friction``."""
+        n = self.n
+        mu = np.asarray(mu, dtype=float)
+        r_in, r_out = (self._packed.contact_radii(robot) if np.any(mu > 0)
+                       else (np.zeros(n - 1), np.zeros(n - 1)))
         eta = np.zeros(n - 1) if eta is None else np.asarray(eta, dtype=float)
         em = (eta * mu)[self.pair]
         self.Mblk = np.eye(2)[None, :, :] + em[:, None, None] * _ROT90[None, :, :]
         self.tq_out = em * self.c * r_in[self.pair]
         self.tq_in = -em * self.c * r_out[self.pair]
         self.friction = bool(np.any(em != 0.0))
-        # work arrays
-        N = int(self.node_off[-1])
-        S = self.h.size
-        self.N, self.S = N, S
+
+    def _allocate_work(self):
+        """Scratch arrays of the linearization kernels (each problem owns its own)."""
+        N, S = self.N, self.S
         self._Omega = np.empty((S, 3, 3))
         self._base = np.empty((S, 3, 3))
         self._H1 = np.empty((N, 3, 3))
@@ -272,6 +284,16 @@ class FlatProblem:
         self._work = ck.ContactWork(np.empty((2 * M, 2 * M)),
                                     np.empty((M, 2 * M)) if self.friction else np.empty((1, 1)),
                                     np.zeros(M, dtype=np.bool_), np.zeros(M, dtype=np.bool_))
+
+    def with_directions(self, robot, eta, mu):
+        """The same configuration with other friction directions ``eta`` (n - 1,) and
+        coefficients ``mu`` (n - 1,): shares the grid, stiffness and contact arrays (read only)
+        and gets its own friction law and scratch arrays. Costs a tenth of building the problem
+        again (the five solves of a bound share one configuration)."""
+        other = copy.copy(self)
+        other._set_law(robot, eta, mu)
+        other._allocate_work()
+        return other
 
     def kinematics(self, u):
         """Frames (N, 3, 3) and centerline points (N, 3) [m] of all tubes for curvatures u (S, 3)."""
