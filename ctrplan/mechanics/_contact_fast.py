@@ -288,8 +288,8 @@ class FlatProblem:
     def with_directions(self, robot, eta, mu):
         """The same configuration with other friction directions ``eta`` (n - 1,) and
         coefficients ``mu`` (n - 1,): shares the grid, stiffness and contact arrays (read only)
-        and gets its own friction law and scratch arrays. Costs a tenth of building the problem
-        again (the five solves of a bound share one configuration)."""
+        and gets its own friction law and scratch arrays. Costs about a fifth of building the
+        problem again (measured 70 vs 330 us; the five solves of a bound share one configuration)."""
         other = copy.copy(self)
         other._set_law(robot, eta, mu)
         other._allocate_work()
