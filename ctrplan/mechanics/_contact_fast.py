@@ -331,7 +331,7 @@ class FlatProblem:
         ck.contact_projections(self._B, p, self.jo, self.ji, self._H1, self._H2, self._Pc)
         M = self.M
         diag_sum = float(self._diagW[:, 0, 0].sum() + self._diagW[:, 1, 1].sum())
-        kappa = 1.0 / max(diag_sum / (2 * M), 1e-300)
+        kappa = 1.0 / max(diag_sum / max(2 * M, 1), 1e-300)
         geometry = self.contact_geometry(R, p)
         law = self.contact_law(kappa)
         work = self._work
