@@ -47,7 +47,8 @@ class Anderson:
     The history lives in two preallocated (depth + 1, size) arrays, oldest first, and the
     least-squares problem min |f - dF gamma| is solved by :func:`_anderson_combination` (a
     compiled QR of the at most ``depth`` difference columns) instead of ``np.linalg.lstsq``
-    on stacked columns, which cost 10 times more than the rest of a step at these sizes.
+    on stacked columns (cProfile of the 4x4x4 bounds, 1098 unknowns: 162 us per ``lstsq`` call
+    against 32 us per compiled combination; issue 14).
     """
 
     def __init__(self, depth, mixing=1.0):
@@ -289,7 +290,13 @@ class FlatProblem:
         """The same configuration with other friction directions ``eta`` (n - 1,) and
         coefficients ``mu`` (n - 1,): shares the grid, stiffness and contact arrays (read only)
         and gets its own friction law and scratch arrays. Costs about a fifth of building the
-        problem again (measured 70 vs 330 us; the five solves of a bound share one configuration)."""
+        problem again (measured 70 vs 330 us; the five solves of a bound share one configuration).
+
+        Raises
+        ------
+        PhysicalParameterError
+            Friction (mu > 0) on a pair without tube diameters (``Robot.contact_radii``).
+        """
         other = copy.copy(self)
         other._set_law(robot, eta, mu)
         other._allocate_work()
