@@ -883,7 +883,7 @@ def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
     act = _active_of(lam)
     extend_rows(work, cw, geometry, law)
     fill_columns(act, cw, geometry, law)
-    fok, _, _ = _displacements(lam, act, dfree, Mblk, cw.Wt, cw.Zt, friction, d, act)
+    fok, LU, piv = _displacements(lam, act, dfree, Mblk, cw.Wt, cw.Zt, friction, d, act)
     if fok:
         _complete_displacements(lam, d, work, True, dfree, geometry, law)
         _grow_working_set(d, c, pair, tol, work)
@@ -892,7 +892,12 @@ def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
     total = 0
     round_tol = max(tol, _ROUND_TOL)
     for _ in range(M + 2):   # at most M growing rounds and one that finishes a loose one
-        lam, d, ok, its, err = complementarity(lam, dfree, geometry, law, cw, round_tol, maxit, work)
+        # a round starts from the multipliers the last one ended with: the factorization of
+        # S = I + W_aa L_a is the same (it does not depend on the working set), so it is handed
+        # over instead of computed again (2.8 rounds per linearization on the 4x4x4 grid)
+        res, LU, piv, fok = _complementarity_from(lam, dfree, geometry, law, cw, round_tol, maxit, work,
+                                                  LU, piv, fok)
+        lam, d, ok, its, err = res
         total += its
         if not ok:
             return ContactResult(lam, d, False, total, err)
@@ -940,6 +945,22 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
         ``lam`` (M,) [N/m], ``d`` (M, 2) [m], ``ok``, ``iterations`` and
         ``err`` = max_k |Phi_k| / (kappa c_k).
     """
+    lam = np.maximum(lam0, 0.0)
+    act = _active_of(lam)
+    extend_rows(work, cw, geometry, law)
+    fill_columns(act, cw, geometry, law)
+    d = np.empty((lam.shape[0], 2))
+    lu_ok, LU, piv = _displacements(lam, act, dfree, law.Mblk, cw.Wt, cw.Zt, law.friction, d, act)
+    return _complementarity_from(lam, dfree, geometry, law, cw, tol, maxit, work, LU, piv, lu_ok)[0]
+
+
+@njit(cache=True)
+def _complementarity_from(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0):
+    """:func:`complementarity` given the LU factors ``LU0``, ``piv0`` of S = I + W_aa L_a at
+    lam0's active set (``lu_ok0`` False: S was singular or not finite, as
+    :func:`_displacements` reports it). Returns (ContactResult, LU, piv, lu_ok) with the factors
+    at the returned multipliers, which the next round of :func:`solve_contacts` starts from.
+    The displacements and iterates are those of :func:`complementarity` to the bit."""
     c, Mblk, kappa, friction = law.c, law.Mblk, law.kappa, law.friction
     Wt, Zt = cw.Wt, cw.Zt
     M = c.shape[0]
@@ -958,7 +979,10 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
     fill_columns(act, cw, geometry, law)
     rows = np.nonzero(work)[0]
     trial = _TrialPoint(lam_t, d_t, phi_t, da_t, db_t)
-    lu_ok, LU, piv = _displacements(lam, act, dfree, Mblk, Wt, Zt, friction, d, rows)
+    _free_displacements(lam, act, dfree, Zt, friction, d, rows)
+    LU, piv, lu_ok = LU0, piv0, lu_ok0
+    if lu_ok and act.shape[0] > 0:
+        _active_correction(lam, act, Mblk, Wt, d, rows, LU, piv)
     merit = _fb_residual(lam, d, c, kappa, phi, da, db, work)
     hist = np.zeros(_NONMONOTONE)
     hist[0] = merit
@@ -966,7 +990,7 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
         err = _max_scaled(phi, c, kappa)
         if err < tol:
             _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
-            return ContactResult(lam, d, True, it - 1, err)
+            return ContactResult(lam, d, True, it - 1, err), LU, piv, lu_ok
         # reduced set: rows with db != 0, lam > 0 or phi != 0
         nR = 0
         for k in range(M):
@@ -1066,7 +1090,7 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
             if not np.all(np.isfinite(Jc)):
                 # a non-finite Newton matrix (LAPACK would print an error): no step possible
                 _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
-                return ContactResult(lam, d, False, it, _max_scaled(phi, c, kappa))
+                return ContactResult(lam, d, False, it, _max_scaled(phi, c, kappa)), LU, piv, lu_ok
             rr = np.empty(nR)
             for ii in range(nR):
                 rr[ii] = -phi[Rs[ii]]
@@ -1122,7 +1146,7 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
             t *= 0.5
         if not accepted:
             _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
-            return ContactResult(lam, d, False, it, _max_scaled(phi, c, kappa))
+            return ContactResult(lam, d, False, it, _max_scaled(phi, c, kappa)), LU, piv, lu_ok
         lam[:] = lam_t
         d[:, :] = d_t
         phi[:] = phi_t
@@ -1136,7 +1160,7 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
         lu_ok = True   # an accepted trial's factorization succeeded
     err = _max_scaled(phi, c, kappa)
     _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
-    return ContactResult(lam, d, err < tol, maxit, err)
+    return ContactResult(lam, d, err < tol, maxit, err), LU, piv, lu_ok
 
 
 @njit(cache=True)
