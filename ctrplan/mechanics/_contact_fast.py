@@ -12,6 +12,7 @@ dense (2M x number of unknowns) constraint Jacobian.
 from __future__ import annotations
 
 import copy
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -60,32 +61,54 @@ class Anderson:
         self.last = np.inf
 
     def step(self, u, g, residual_size):
-        """Next iterate from the current one ``u`` (S*3,) and its image ``g = F(u)`` (S*3,)."""
+        """Next iterate from the current one ``u`` (S*3,) and its image ``g = F(u)`` (S*3,):
+        ``g`` itself when nothing is mixed, else a new array (:func:`_anderson_step`)."""
         if self.depth <= 0:
             return g
-        if residual_size > self.last:
+        if self.F is None or self.F.shape[1] != g.size:
+            self.F = np.empty((self.depth + 1, g.size))
+            self.G = np.empty((self.depth + 1, g.size))
             self.count = 0
-        self.last = residual_size
-        f = g - u
-        if not (np.all(np.isfinite(f)) and np.all(np.isfinite(g))):
-            self.count = 0      # restart the history; plain fixed-point step
-            return g
-        if self.F is None or self.F.shape[1] != f.size:
-            self.F = np.empty((self.depth + 1, f.size))
-            self.G = np.empty((self.depth + 1, f.size))
-            self.count = 0
-        if self.count == self.depth + 1:
-            self.F[:-1] = self.F[1:]
-            self.G[:-1] = self.G[1:]
-            self.count -= 1
-        self.F[self.count] = f
-        self.G[self.count] = g
-        self.count += 1
-        if self.count < 2:
-            return g if self.mixing == 1.0 else g - (1.0 - self.mixing) * f
         out = np.empty_like(g)
-        _anderson_combination(self.F, self.G, self.count, self.mixing, out)
-        return out
+        mixed, self.count, self.last = _anderson_step(self.F, self.G, self.count, self.last, u, g,
+                                                      residual_size, self.depth, self.mixing, out)
+        return out if mixed else g
+
+
+@njit(cache=True)
+def _anderson_step(F, G, count, last, u, g, residual_size, depth, mixing, out):
+    """One step of :class:`Anderson` on the history ``F``, ``G`` ((depth + 1, size), the
+    ``count`` newest rows valid, oldest first) and the last residual size ``last``: appends
+    f = g - u and g, restarting the history when the residual grew or is not finite, and writes
+    the next iterate into ``out`` (size,). Returns (mixed, count, last); ``mixed`` False: the
+    next iterate is ``g`` itself (``out`` not written)."""
+    if depth <= 0:
+        return False, count, last
+    if residual_size > last:
+        count = 0
+    last = residual_size
+    n = g.shape[0]
+    for i in range(n):
+        if not (np.isfinite(g[i] - u[i]) and np.isfinite(g[i])):
+            return False, 0, last      # restart the history; plain fixed-point step
+    if count == depth + 1:
+        for j in range(depth):
+            F[j] = F[j + 1]
+            G[j] = G[j + 1]
+        count -= 1
+    for i in range(n):
+        F[count, i] = g[i] - u[i]
+        G[count, i] = g[i]
+    count += 1
+    if count < 2:
+        if mixing == 1.0:
+            return False, count, last
+        damp = 1.0 - mixing
+        for i in range(n):
+            out[i] = g[i] - damp * F[count - 1, i]
+        return True, count, last
+    _anderson_combination(F, G, count, mixing, out)
+    return True, count, last
 
 
 @njit(cache=True)
@@ -331,38 +354,182 @@ class FlatProblem:
     def outer_step(self, u, R, p, lam, settings, tol=None):
         """One re-linearization: returns (lam, F(u), inner ok, Newton iterations); the
         complementarity solve stops at ``tol`` (default ``settings.complementarity_tol``)."""
-        ck.linearize(u, self.uhat, self.kinv, self.h, self.node_off, R, p, self._Omega, self._base,
-                     self._H1, self._H2, self._F3, self._Jpv)
-        ck.contact_frames(R, p, self.jo, self.ji, self._Jpv, self._B, self._dfree, self._diagW,
-                          self._H1, self._H2, self.pair)
-        ck.contact_projections(self._B, p, self.jo, self.ji, self._H1, self._H2, self._Pc)
-        M = self.M
-        diag_sum = float(self._diagW[:, 0, 0].sum() + self._diagW[:, 1, 1].sum())
-        kappa = 1.0 / max(diag_sum / max(2 * M, 1), 1e-300)
-        geometry = self.contact_geometry(R, p)
-        law = self.contact_law(kappa)
-        work = self._work
-        work.have[:] = False   # no column or row of this linearization computed yet
-        work.rows[:] = False
-        lam, d, ok, its, _ = ck.solve_contacts(np.asarray(lam, dtype=float), self._dfree, geometry, law, work,
-                                               settings.complementarity_tol if tol is None else tol,
-                                               settings.max_newton_iterations)
         g = np.empty_like(u)
-        ck.generalized_curvature(lam, d, geometry, law, self.uhat, g)
+        lam, ok, its = _outer_step(u, R, p, np.asarray(lam, dtype=float), self.outer_arrays(), self.outer_scratch(),
+                                   self._work, settings.complementarity_tol if tol is None else tol,
+                                   int(settings.max_newton_iterations), g)
         return lam, g, bool(ok), int(its)
 
+    def outer_arrays(self):
+        """The read-only arrays of the compiled outer loop (:class:`OuterArrays`)."""
+        return OuterArrays(self.uhat, self.kinv, self.h, self.node_off, self.alpha, self.beta, self.pair, self.jo,
+                           self.ji, self.c, self.Mblk, self.tq_out, self.tq_in, self.friction)
 
-def _inner_tolerance(change, settings):
+    def outer_scratch(self):
+        """This problem's scratch arrays of the linearization kernels (:class:`OuterScratch`)."""
+        return OuterScratch(self._Omega, self._base, self._H1, self._H2, self._F3, self._Jpv, self._B, self._dfree,
+                            self._diagW, self._Pc)
+
+
+class OuterArrays(NamedTuple):
+    """The arrays of a :class:`FlatProblem` that the compiled outer loop reads (same names and
+    shapes as there): ``uhat``, ``kinv`` (S, 3), ``h`` (S,), ``node_off`` (n + 1,), ``alpha``,
+    ``beta`` (n,), ``pair``, ``jo``, ``ji``, ``c`` (M,), ``Mblk`` (M, 2, 2), ``tq_out``, ``tq_in``
+    (M,), ``friction``."""
+
+    uhat: np.ndarray
+    kinv: np.ndarray
+    h: np.ndarray
+    node_off: np.ndarray
+    alpha: np.ndarray
+    beta: np.ndarray
+    pair: np.ndarray
+    jo: np.ndarray
+    ji: np.ndarray
+    c: np.ndarray
+    Mblk: np.ndarray
+    tq_out: np.ndarray
+    tq_in: np.ndarray
+    friction: bool
+
+
+class OuterScratch(NamedTuple):
+    """Scratch arrays of the linearization kernels (``ck.linearize``, ``ck.contact_frames``,
+    ``ck.contact_projections``), owned by one :class:`FlatProblem`."""
+
+    Omega: np.ndarray
+    base: np.ndarray
+    H1: np.ndarray
+    H2: np.ndarray
+    F3: np.ndarray
+    Jpv: np.ndarray
+    B: np.ndarray
+    dfree: np.ndarray
+    diagW: np.ndarray
+    Pc: np.ndarray
+
+
+class OuterOptions(NamedTuple):
+    """Stopping rules and constants of :func:`_outer_loop` (from ``ModelSettings`` and
+    ``constants``): outer and complementarity tolerances [m], [-], iteration limits, Anderson
+    depth and mixing, the stagnation window, the failed-solve limit and the inexact inner
+    tolerance's factor and ceiling."""
+
+    outer_tol: float
+    complementarity_tol: float
+    max_newton: int
+    max_outer: int
+    depth: int
+    mixing: float
+    window: int
+    max_failed: int
+    inner_factor: float
+    inner_max: float
+
+
+@njit(cache=True)
+def _outer_step(u, R, p, lam, arr, scr, work, tol, maxit, g):
+    """One re-linearization at curvatures ``u`` (S, 3) with frames ``R`` (N, 3, 3) and points
+    ``p`` (N, 3): the compliance factors, the contact frames, the multipliers to ``tol``
+    (``ck.solve_contacts`` from ``lam`` (M,)) and the image F(u) into ``g`` (S, 3). Returns
+    (lam, ok, Newton iterations)."""
+    ck.linearize(u, arr.uhat, arr.kinv, arr.h, arr.node_off, R, p, scr.Omega, scr.base, scr.H1, scr.H2, scr.F3,
+                 scr.Jpv)
+    ck.contact_frames(R, p, arr.jo, arr.ji, scr.Jpv, scr.B, scr.dfree, scr.diagW, scr.H1, scr.H2, arr.pair)
+    ck.contact_projections(scr.B, p, arr.jo, arr.ji, scr.H1, scr.H2, scr.Pc)
+    M = arr.c.shape[0]
+    diag_sum = 0.0
+    for k in range(M):
+        diag_sum += scr.diagW[k, 0, 0]
+    for k in range(M):
+        diag_sum += scr.diagW[k, 1, 1]
+    kappa = 1.0 / max(diag_sum / max(2 * M, 1), 1e-300)
+    geometry = ck.ContactGeometry(arr.pair, arr.jo, arr.ji, scr.B, scr.Pc, R, p, scr.H1, scr.H2, scr.F3, scr.Omega,
+                                  scr.base, arr.kinv, arr.node_off)
+    law = ck.ContactLaw(arr.c, arr.Mblk, kappa, arr.tq_out, arr.tq_in, arr.friction)
+    work.have[:] = False   # no column or row of this linearization computed yet
+    work.rows[:] = False
+    lam, d, ok, its, _ = ck.solve_contacts(lam, scr.dfree, geometry, law, work, tol, maxit)
+    ck.generalized_curvature(lam, d, geometry, law, arr.uhat, g)
+    return lam, ok, its
+
+
+@njit(cache=True)
+def _inner_tolerance(change, opt):
     """Tolerance of the complementarity solve of one outer iteration (inexact fixed-point
-    iteration): ``INNER_TOL_FACTOR`` x (last centerline change / ``outer_tol``) x
-    ``complementarity_tol``, between ``complementarity_tol`` and ``INNER_TOL_MAX`` (this at the
-    first iteration). Far from the fixed point the multipliers of a linearization that will be
-    replaced anyway need not be exact; an iteration counts as converged only when its solve used
-    ``complementarity_tol`` itself."""
-    tol = settings.complementarity_tol
+    iteration): ``opt.inner_factor`` x (last centerline change / ``outer_tol``) x
+    ``complementarity_tol``, between ``complementarity_tol`` and ``opt.inner_max`` (this at the
+    first iteration; ``constants.INNER_TOL_FACTOR``, ``INNER_TOL_MAX``). Far from the fixed
+    point the multipliers of a linearization that will be replaced anyway need not be exact; an
+    iteration counts as converged only when its solve used ``complementarity_tol`` itself."""
+    tol = opt.complementarity_tol
     if not np.isfinite(change):
-        return max(tol, INNER_TOL_MAX)
-    return min(max(tol, INNER_TOL_MAX), max(tol, tol * INNER_TOL_FACTOR * change / settings.outer_tol))
+        return max(tol, opt.inner_max)
+    return min(max(tol, opt.inner_max), max(tol, tol * opt.inner_factor * change / opt.outer_tol))
+
+
+@njit(cache=True)
+def _outer_loop(u, lam, arr, scr, work, opt):
+    """:func:`run_outer_loop` compiled: the same iteration, stopping rules and Anderson steps,
+    without a Python call per outer iteration (about a tenth of the bound's time in cProfile
+    of the 4x4x4 grid, issue 14). ``u`` (S, 3) and ``lam`` (M,) are not modified."""
+    N = arr.node_off[-1]
+    S = u.shape[0]
+    M = arr.c.shape[0]
+    R = np.empty((N, 3, 3))
+    p = np.empty((N, 3))
+    chain_kinematics(u, arr.h, arr.alpha, arr.beta, arr.node_off, R, p)
+    converged = False
+    inner_total = 0
+    inner_ok = True
+    change = np.inf
+    outer = 0
+    failed_in_a_row = 0
+    depth = max(opt.depth, 0)
+    Fh = np.empty((depth + 1, 3 * S))
+    Gh = np.empty((depth + 1, 3 * S))
+    count = 0
+    last = np.inf
+    best = np.inf
+    best_at = 0
+    lam = lam.copy()
+    for outer in range(1, opt.max_outer + 1):
+        if M == 0:
+            converged = True
+            break
+        inner_tol = _inner_tolerance(change, opt)
+        g = np.empty((S, 3))
+        lam, inner_ok, its = _outer_step(u, R, p, lam, arr, scr, work, inner_tol, opt.max_newton, g)
+        inner_total += its
+        failed_in_a_row = 0 if inner_ok else failed_in_a_row + 1
+        if failed_in_a_row >= opt.max_failed:
+            break
+        Rg = np.empty((N, 3, 3))
+        pg = np.empty((N, 3))
+        chain_kinematics(g, arr.h, arr.alpha, arr.beta, arr.node_off, Rg, pg)
+        change = 0.0
+        for j in range(N):
+            for q in range(3):
+                change = max(change, abs(pg[j, q] - p[j, q]))
+        if change < opt.outer_tol and inner_ok and inner_tol <= opt.complementarity_tol:
+            u, R, p = g, Rg, pg
+            converged = True
+            break
+        if change < best:
+            best, best_at = change, outer
+        elif outer - best_at >= opt.window:
+            break
+        out = np.empty((S, 3))
+        mixed, count, last = _anderson_step(Fh, Gh, count, last, u.reshape(3 * S), g.reshape(3 * S), change,
+                                            opt.depth, opt.mixing, out.reshape(3 * S))
+        if not mixed:
+            u, R, p = g, Rg, pg
+        else:
+            u = out
+            R = np.empty((N, 3, 3))
+            p = np.empty((N, 3))
+            chain_kinematics(u, arr.h, arr.alpha, arr.beta, arr.node_off, R, p)
+    return u, R, p, lam, converged, outer, inner_total, inner_ok, change
 
 
 def run_outer_loop(prob, u, lam, settings):
@@ -387,39 +554,11 @@ def run_outer_loop(prob, u, lam, settings):
     -------
     u, R, p, lam, converged, outer iterations, Newton iterations, inner ok, last change [m]
     """
-    R, p = prob.kinematics(u)
-    converged = False
-    inner_total = 0
-    inner_ok = True
-    change = np.inf
-    outer = 0
-    failed_in_a_row = 0
-    anderson = Anderson(settings.anderson_depth, ANDERSON_MIXING)
-    best, best_at = np.inf, 0
-    for outer in range(1, settings.max_outer_iterations + 1):
-        if prob.M == 0:
-            converged = True
-            break
-        inner_tol = _inner_tolerance(change, settings)
-        lam, g, inner_ok, its = prob.outer_step(u, R, p, lam, settings, inner_tol)
-        inner_total += its
-        failed_in_a_row = 0 if inner_ok else failed_in_a_row + 1
-        if failed_in_a_row >= MAX_FAILED_INNER_STEPS:
-            break
-        Rg, pg = prob.kinematics(g)
-        change = float(np.max(np.abs(pg - p)))
-        if change < settings.outer_tol and inner_ok and inner_tol <= settings.complementarity_tol:
-            u, R, p = g, Rg, pg
-            converged = True
-            break
-        if change < best:
-            best, best_at = change, outer
-        elif outer - best_at >= OUTER_STAGNATION_WINDOW:
-            break
-        u_new = anderson.step(u.ravel(), g.ravel(), change)
-        if np.shares_memory(u_new, g):  # no mixing this step
-            u, R, p = g, Rg, pg
-        else:
-            u = u_new.reshape(-1, 3)
-            R, p = prob.kinematics(u)
-    return u, R, p, lam, converged, outer, inner_total, inner_ok, change
+    opt = OuterOptions(float(settings.outer_tol), float(settings.complementarity_tol),
+                       int(settings.max_newton_iterations), int(settings.max_outer_iterations),
+                       int(settings.anderson_depth), float(ANDERSON_MIXING), int(OUTER_STAGNATION_WINDOW),
+                       int(MAX_FAILED_INNER_STEPS), float(INNER_TOL_FACTOR), float(INNER_TOL_MAX))
+    u, R, p, lam, converged, outer, inner_total, inner_ok, change = _outer_loop(
+        np.ascontiguousarray(u, dtype=float), np.ascontiguousarray(lam, dtype=float), prob.outer_arrays(),
+        prob.outer_scratch(), prob._work, opt)
+    return u, R, p, lam, bool(converged), int(outer), int(inner_total), bool(inner_ok), float(change)
