@@ -1,0 +1,125 @@
+"""The full bound of this checkout against another commit, side by side (issue 14).
+
+Absolute times on the shared machines drift by 2-3x between runs, so a speed change of the
+contact solver is measured against the code before it in one run: the other commit is checked
+out into a temporary git worktree, and the two codes run alternately in separate processes
+(``--runs`` each, one after the other), each timing ``evaluate_bound`` at every configuration
+of the grid in CPU time (``time.process_time``). Each code's figure is the per-configuration
+minimum over its runs, which removes most of the load that other processes put on the machine.
+
+Printed: mean, median, p90 and max of those minima for both codes, the ratio of their medians
+and the median of the per-configuration ratios, the run medians (to show the noise), outer and
+Newton iterations per contact solve, unconverged solves, the largest tip difference between the
+two codes [um] (converged solutions) and the load average at the start and the end.
+
+Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_bound_ab.py --base fd0e2f1 [--runs 6] [--grid 4|8]
+Grids: the paper's 4x4x4 grid (Section IV-D, Table II robot) or the 8x8x8 grid of issue 14.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _configurations(robot, grid):
+    """(alpha, beta) pairs of the grid [rad], [m]."""
+    if grid == "4":
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+        from paper_section_4d import grid_4x4x4
+        _, Q = grid_4x4x4(robot)
+        return [robot.configuration(q) for q in Q]
+    out = []
+    for a2 in np.radians(np.arange(0, 360, 45)):
+        for a3 in np.radians(np.arange(0, 360, 45)):
+            for e in np.linspace(0.0, 86.4e-3, 8):
+                out.append((np.array([0.0, a2, a3]), np.array([0.0, -0.017, -0.1204 + e])))
+    return out
+
+
+def child(out, grid):
+    """Time the bound at every configuration with the ``ctrplan`` on ``sys.path``; save to ``out``."""
+    from ctrplan.io.robot_file import load_robot
+    from ctrplan.mechanics import ModelSettings, evaluate_bound
+    robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")
+    settings = ModelSettings()
+    configs = _configurations(robot, grid)
+    evaluate_bound(robot, *configs[0], settings)     # compile or load the kernels first
+    T, tips, iters = [], [], []
+    for a, b in configs:
+        t0 = time.process_time()
+        r = evaluate_bound(robot, a, b, settings)
+        T.append(time.process_time() - t0)
+        solves = [r.clearance] + [r.friction[k] for k in sorted(r.friction)]
+        tips.append(np.array([s.tip_position for s in solves]))
+        iters.append([(s.diagnostics.iterations, s.diagnostics.inner_iterations, s.diagnostics.converged)
+                      for s in solves])
+    np.savez(out, T=np.array(T) * 1e3, tips=np.array(tips), iters=np.array(iters, dtype=float))
+
+
+def _run(code_root, out, grid, cache_dir):
+    env = dict(os.environ, PYTHONPATH=str(code_root), OPENBLAS_NUM_THREADS="1", NUMBA_CACHE_DIR=str(cache_dir))
+    subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", str(out), "--grid", grid],
+                   check=True, env=env, cwd=str(code_root))
+    return np.load(out)
+
+
+def _stats(x):
+    return f"mean {x.mean():7.1f}  median {np.median(x):7.1f}  p90 {np.percentile(x, 90):7.1f}  max {x.max():7.1f}"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--base", help="git revision to compare against (e.g. a commit hash); required")
+    ap.add_argument("--runs", type=int, default=6, help="runs of each code, alternated")
+    ap.add_argument("--grid", choices=("4", "8"), default="4")
+    ap.add_argument("--child", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.child:
+        child(args.child, args.grid)
+        return
+    if not args.base:
+        ap.error("--base is required (the git revision to compare against)")
+    print(f"load average at the start: {os.getloadavg()}")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        base = tmp / "base"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base), args.base],
+                       check=True, capture_output=True)
+        try:
+            runs = {"base": [], "this": []}
+            for k in range(args.runs):
+                for name, code, cache in (("base", base, tmp / "cache-base"), ("this", ROOT, tmp / "cache-this")):
+                    runs[name].append(_run(code, tmp / f"{name}{k}.npz", args.grid, cache))
+                    print(f"  run {k + 1} {name}: median {np.median(runs[name][-1]['T']):.1f} ms", flush=True)
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)], check=False)
+    print(f"load average at the end: {os.getloadavg()}")
+    T = {n: np.array([r["T"] for r in v]) for n, v in runs.items()}
+    best = {n: t.min(axis=0) for n, t in T.items()}
+    print(f"\nfull bound per configuration, {args.grid}x{args.grid}x{args.grid} grid, CPU time [ms], "
+          f"per-configuration minimum over {args.runs} runs:")
+    for n in ("base", "this"):
+        it = runs[n][0]["iters"]
+        print(f"  {n:5s} {_stats(best[n])}   outer/solve {it[:, :, 0].mean():.2f}  "
+              f"Newton/solve {it[:, :, 1].mean():.1f}  unconverged solves {int((it[:, :, 2] == 0).sum())}")
+        print(f"        run medians {np.round(np.median(T[n], axis=1), 1).tolist()}")
+    print(f"  this / base: ratio of medians {np.median(best['this']) / np.median(best['base']):.3f}, "
+          f"median per-configuration ratio {np.median(best['this'] / best['base']):.3f}")
+    ok = (runs["base"][0]["iters"][:, :, 2] == 1) & (runs["this"][0]["iters"][:, :, 2] == 1)
+    diff = np.linalg.norm(runs["this"][0]["tips"] - runs["base"][0]["tips"], axis=2) * 1e6
+    print(f"  tips, this against base, solves converged in both: max {diff[ok].max():.3f} um, "
+          f"99th percentile {np.percentile(diff[ok], 99):.3f} um")
+
+
+if __name__ == "__main__":
+    main()
