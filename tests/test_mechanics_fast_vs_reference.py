@@ -125,7 +125,7 @@ def test_bound_matches_reference_many(q):
 
 def _linearize_kernels(prob, u, R, p):
     """Run the per-linearization kernels of the compiled contact solver on ``prob`` at the
-    curvatures u (S, 3) with frames R and points p (what ``FlatProblem.outer_step`` does first)."""
+    curvatures u (S, 3) with frames R and points p (what ``_contact_fast._outer_step`` does first)."""
     from ctrplan.mechanics import _contact_kernels as ck
 
     ck.linearize(u, prob.uhat, prob.kinv, prob.h, prob.node_off, R, p, prob._Omega, prob._base,

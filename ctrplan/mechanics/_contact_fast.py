@@ -31,7 +31,9 @@ class Anderson:
 
     The re-linearization loop of Section II-E converges linearly (the geometric stiffness of
     the contact forces is not in the linearization); mixing the last few iterates removes most
-    of that. The history is reset whenever the residual grows.
+    of that. The history is reset whenever the residual grows. The compiled outer loop
+    (:func:`_outer_loop`) calls :func:`_anderson_step` on its own history arrays; this class keeps
+    that history for a Python caller, with the same step.
 
     Parameters
     ----------
@@ -350,15 +352,6 @@ class FlatProblem:
         """Clearances, friction factors and the FB scale ``kappa`` [N/m] as the kernels take them
         (:class:`_contact_kernels.ContactLaw`)."""
         return ck.ContactLaw(self.c, self.Mblk, float(kappa), self.tq_out, self.tq_in, self.friction)
-
-    def outer_step(self, u, R, p, lam, settings, tol=None):
-        """One re-linearization: returns (lam, F(u), inner ok, Newton iterations); the
-        complementarity solve stops at ``tol`` (default ``settings.complementarity_tol``)."""
-        g = np.empty_like(u)
-        lam, ok, its = _outer_step(u, R, p, np.asarray(lam, dtype=float), self.outer_arrays(), self.outer_scratch(),
-                                   self._work, settings.complementarity_tol if tol is None else tol,
-                                   int(settings.max_newton_iterations), g)
-        return lam, g, bool(ok), int(its)
 
     def outer_arrays(self):
         """The read-only arrays of the compiled outer loop (:class:`OuterArrays`)."""
