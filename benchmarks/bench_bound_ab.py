@@ -47,7 +47,16 @@ def _configurations(robot, grid):
 
 
 def child(out, grid):
-    """Time the bound at every configuration with the ``ctrplan`` on ``sys.path``; save to ``out``."""
+    """Time the bound at every configuration with the ``ctrplan`` on ``PYTHONPATH``; save to ``out``.
+
+    Raises
+    ------
+    RuntimeError
+        If ``ctrplan`` was imported from elsewhere (the comparison would time one code twice)."""
+    import ctrplan
+    root = Path(os.environ["PYTHONPATH"]).resolve()
+    if root not in Path(ctrplan.__file__).resolve().parents:
+        raise RuntimeError(f"ctrplan imported from {ctrplan.__file__}, not from {root}")
     from ctrplan.io.robot_file import load_robot
     from ctrplan.mechanics import ModelSettings, evaluate_bound
     robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")
