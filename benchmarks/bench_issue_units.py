@@ -1,0 +1,211 @@
+"""Issue 14's figures in its own unit, the C++ standard solve, by timing the code it measured.
+
+Issue 14 sets its targets as multiples of the C++ standard solve of hjhdog1/ConcentricTubes,
+which is not in this project (no licence). It also states what the code of its day cost in that
+unit: ``ctrplan evaluate --model friction --jobs 1`` on the 4x4x4 grid took 1269x the C++
+solve per configuration, and ``ctrplan evaluate --model standard --jobs 1`` on the 1307 rows of
+the measured trajectory 45x. That code is still in the history, so this script times it and
+this checkout side by side, alternately, in separate processes, and converts:
+
+    this checkout in C++ solves = (issue's figure) x (this checkout's time / issue code's time).
+
+The two conversions (friction, standard) are independent estimates of the C++ solve's time on
+this machine; both are printed, with the project's own single standard solve (determinant test
+only) in the same unit for each (the issue says that was 4-7x at its day: a check of the
+calibration).
+
+The issue code defaults to 10e8828, the last commit before ``evaluate`` ran the standard model
+in batch (90fc8e6): the issue describes a command that "solves one configuration at a time with
+the multistart stability search, and pays joblib and JSON checkpoint overhead per row", which is
+that commit's. The issue's figures were taken on another machine, so the conversion assumes
+both codes slow down alike from one machine to another.
+
+Each command's time per configuration is (T(K rows) - T(1 row)) / (K - 1), both runs of the same
+command and code, wall time: the process start, imports and loading of compiled kernels cancel.
+Each T is the shortest of ``--repeat`` commands (the 1307-row standard run is a few tenths of a
+second of work behind about a second of process start, which alone varies by 0.1 s). Figures
+are medians over ``--runs`` runs of each code, alternated (per-run values printed).
+
+Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_issue_units.py [--issue-commit 10e8828] [--runs 3] [--repeat 3]
+Needs ../shared/data/ha-three-tube-trajectory/ for the standard-model row (skipped without it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt"
+ROBOT = ROOT / "model" / "ha2019-table2-nominal.toml"
+# issue 14: the code of its day, in C++ standard solves per configuration
+ISSUE_FRICTION_X = 1269.0
+ISSUE_STANDARD_X = 45.0
+# issue 14's targets, in the same unit
+TARGET_FRICTION_X = 300.0
+TARGET_STANDARD_X = 2.0
+
+_CLI = ("import sys, ctrplan\n"
+        "root = sys.argv.pop(1)\n"
+        "if not ctrplan.__file__.startswith(root):\n"
+        "    raise RuntimeError(f'ctrplan imported from {ctrplan.__file__}, not from {root}')\n"
+        "from ctrplan.cli import main\n"
+        "sys.argv[0] = 'ctrplan'\n"
+        "main()\n")
+
+_SINGLE = """
+import sys, time, numpy as np, ctrplan
+root = sys.argv[1]
+if not ctrplan.__file__.startswith(root):
+    raise RuntimeError(f'ctrplan imported from {ctrplan.__file__}, not from {root}')
+sys.path.insert(0, sys.argv[2])
+from paper_section_4d import grid_4x4x4
+from ctrplan.io.robot_file import load_robot
+from ctrplan.mechanics import ModelSettings, solve_standard
+robot = load_robot(sys.argv[3])
+_, Q = grid_4x4x4(robot)
+settings = ModelSettings().replace(multistart=0)
+solve_standard(robot, *robot.configuration(Q[0]), settings)
+best = []
+for q in Q:
+    a, b = robot.configuration(q)
+    t = np.inf
+    for _ in range(5):
+        t0 = time.perf_counter()
+        solve_standard(robot, a, b, settings)
+        t = min(t, time.perf_counter() - t0)
+    best.append(t)
+print(float(np.median(best)))
+"""
+
+
+def _env(code, cache):
+    return dict(os.environ, PYTHONPATH=str(code), OPENBLAS_NUM_THREADS="1", NUMBA_CACHE_DIR=str(cache))
+
+
+def _cli_time(code, cache, configs, model, out):
+    """Wall time [s] of ``ctrplan evaluate --jobs 1`` of the checkout ``code`` (run from it)."""
+    for f in (out, out.with_name(out.name + ".partial.jsonl")):
+        f.unlink(missing_ok=True)
+    cmd = [sys.executable, "-c", _CLI, str(code), "evaluate", "--robot", str(ROBOT), "--configs", str(configs),
+           "--model", model, "--out", str(out), "--jobs", "1", "--no-progress"]
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, capture_output=True, env=_env(code, cache), cwd=str(code))
+    return time.perf_counter() - t0
+
+
+def _single(code, cache):
+    """Median over the 4x4x4 grid of the best-of-5 single standard solve [s] of checkout ``code``."""
+    r = subprocess.run([sys.executable, "-c", _SINGLE, str(code), str(ROOT / "benchmarks"), str(ROBOT)],
+                       check=True, capture_output=True, text=True, env=_env(code, cache), cwd=str(code))
+    return float(r.stdout.split()[-1])
+
+
+def _write_configs(path, alpha, beta):
+    import pandas as pd
+    n = alpha.shape[1]
+    pd.DataFrame({**{f"alpha_{i + 1}": alpha[:, i] for i in range(n)},
+                  **{f"beta_{i + 1}": beta[:, i] for i in range(n)}}).to_csv(path, index=False)
+
+
+def _inputs(tmp):
+    """Config files: the 4x4x4 grid, the trajectory (None if absent), and their first rows."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from paper_section_4d import grid_4x4x4
+    from ctrplan.io.robot_file import load_robot
+    robot = load_robot(ROBOT)
+    _, Q = grid_4x4x4(robot)
+    A = np.array([robot.configuration(q)[0] for q in Q])
+    B = np.array([robot.configuration(q)[1] for q in Q])
+    files = {"grid": (tmp / "grid.csv", len(Q)), "grid1": (tmp / "grid1.csv", 1)}
+    _write_configs(files["grid"][0], A, B)
+    _write_configs(files["grid1"][0], A[:1], B[:1])
+    if DATA.exists():
+        from ctrplan.io.tables import load_ha_trajectory
+        frame = load_ha_trajectory(DATA)
+        TA = frame[[f"alpha_{i}" for i in (1, 2, 3)]].to_numpy()
+        TB = frame[[f"beta_{i}" for i in (1, 2, 3)]].to_numpy()
+        files["traj"] = (tmp / "traj.csv", len(TA))
+        files["traj1"] = (tmp / "traj1.csv", 1)
+        _write_configs(files["traj"][0], TA, TB)
+        _write_configs(files["traj1"][0], TA[:1], TB[:1])
+    return files
+
+
+def _per_configuration(code, cache, files, key, model, tmp, repeat):
+    """(T(K rows) - T(1 row)) / (K - 1) [s], each T the shortest of ``repeat`` commands."""
+    out = tmp / "out.csv"
+    (f, K), (f1, _) = files[key], files[key + "1"]
+    t = min(_cli_time(code, cache, f, model, out) for _ in range(repeat))
+    t1 = min(_cli_time(code, cache, f1, model, out) for _ in range(repeat))
+    return (t - t1) / (K - 1)
+
+
+def _measure(code, cache, files, tmp, repeat):
+    """Per-configuration times [s] of one run of checkout ``code``."""
+    r = {"friction": _per_configuration(code, cache, files, "grid", "friction", tmp, repeat)}
+    if "traj" in files:
+        r["standard"] = _per_configuration(code, cache, files, "traj", "standard", tmp, repeat)
+    r["single"] = _single(code, cache)
+    return r
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--issue-commit", default="10e8828", help="the code issue 14 measured (default 10e8828)")
+    ap.add_argument("--runs", type=int, default=3, help="runs of each code, alternated")
+    ap.add_argument("--repeat", type=int, default=3,
+                    help="commands per figure in a run (the shortest counts: the process start is noisy)")
+    args = ap.parse_args(argv)
+    print(f"load average at the start: {os.getloadavg()}")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        files = _inputs(tmp)
+        if "traj" not in files:
+            print(f"   ({DATA} not found: the standard-model conversion is skipped)")
+        old = tmp / "issue"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(old), args.issue_commit],
+                       check=True, capture_output=True)
+        codes = {"issue": (old, tmp / "cache-issue"), "this": (ROOT, tmp / "cache-this")}
+        try:
+            for code, cache in codes.values():      # compile or cache every kernel once, untimed
+                _cli_time(code, cache, files["grid1"][0], "friction", tmp / "out.csv")
+                if "traj" in files:
+                    _cli_time(code, cache, files["traj"][0], "standard", tmp / "out.csv")
+            runs = {name: [] for name in codes}
+            for k in range(args.runs):
+                order = list(codes) if k % 2 == 0 else list(codes)[::-1]
+                for name in order:
+                    runs[name].append(_measure(*codes[name], files, tmp, args.repeat))
+                    print(f"  run {k + 1} {name:5s} " + "  ".join(f"{m} {v * 1e3:.3f} ms" for m, v in
+                                                               runs[name][-1].items()), flush=True)
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(old)], check=False)
+    print(f"load average at the end: {os.getloadavg()}")
+    med = {name: {m: float(np.median([r[m] for r in rs])) for m in rs[0]} for name, rs in runs.items()}
+    print(f"\nmedians over {args.runs} runs [ms per configuration]:")
+    for name in codes:
+        print(f"  {name:5s} " + "  ".join(f"{m} {v * 1e3:.3f}" for m, v in med[name].items()))
+    conversions = [("friction", ISSUE_FRICTION_X, TARGET_FRICTION_X)]
+    if "standard" in med["this"]:
+        conversions.append(("standard", ISSUE_STANDARD_X, TARGET_STANDARD_X))
+    for model, issue_x, _ in conversions:
+        cpp = med["issue"][model] / issue_x
+        print(f"\nC++ solve estimated from the issue's {model} figure ({issue_x:.0f}x): {cpp * 1e6:.1f} us")
+        for m, issue_m, target in conversions:
+            x = med["this"][m] / cpp
+            print(f"  this checkout, CLI {m:8s} --jobs 1: {x:7.1f}x the C++ solve (target <= {target:.0f}x; "
+                  f"issue code {med['issue'][m] / cpp:.1f}x)")
+        print(f"  own single standard solve: this {med['this']['single'] / cpp:.2f}x, issue code "
+              f"{med['issue']['single'] / cpp:.2f}x (the issue: 4-7x)")
+
+
+if __name__ == "__main__":
+    main()
