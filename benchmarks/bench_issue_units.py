@@ -22,11 +22,13 @@ both codes slow down alike from one machine to another.
 
 Each command's time per configuration is (T(K rows) - T(1 row)) / (K - 1), both runs of the same
 command and code, wall time: the process start, imports and loading of compiled kernels cancel.
-Each T is the shortest of ``--repeat`` commands (the 1307-row standard run is a few tenths of a
-second of work behind about a second of process start, which alone varies by 0.1 s). Figures
+Each T is the shortest of ``--repeat`` commands. The standard model reads the 1307 trajectory
+rows ``--tile`` (4) times over: once, they are 0.15 s of work behind about 1.1 s of process
+start, which alone varies by 0.1 s (one such run gave -0.07 ms per row); the rows after the
+first pass cost what the first did (each pass starts from scratch at its first row). Figures
 are medians over ``--runs`` runs of each code, alternated (per-run values printed).
 
-Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_issue_units.py [--issue-commit 10e8828] [--runs 3] [--repeat 3]
+Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_issue_units.py [--issue-commit 10e8828] [--runs 3] [--repeat 3] [--tile 4]
 Needs ../shared/data/ha-three-tube-trajectory/ for the standard-model row (skipped without it).
 """
 
@@ -115,8 +117,9 @@ def _write_configs(path, alpha, beta):
                   **{f"beta_{i + 1}": beta[:, i] for i in range(n)}}).to_csv(path, index=False)
 
 
-def _inputs(tmp):
-    """Config files: the 4x4x4 grid, the trajectory (None if absent), and their first rows."""
+def _inputs(tmp, tile):
+    """Config files: the 4x4x4 grid, the trajectory ``tile`` times over (left out if absent),
+    and their first rows."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from paper_section_4d import grid_4x4x4
     from ctrplan.io.robot_file import load_robot
@@ -132,9 +135,9 @@ def _inputs(tmp):
         frame = load_ha_trajectory(DATA)
         TA = frame[[f"alpha_{i}" for i in (1, 2, 3)]].to_numpy()
         TB = frame[[f"beta_{i}" for i in (1, 2, 3)]].to_numpy()
-        files["traj"] = (tmp / "traj.csv", len(TA))
+        files["traj"] = (tmp / "traj.csv", tile * len(TA))
         files["traj1"] = (tmp / "traj1.csv", 1)
-        _write_configs(files["traj"][0], TA, TB)
+        _write_configs(files["traj"][0], np.tile(TA, (tile, 1)), np.tile(TB, (tile, 1)))
         _write_configs(files["traj1"][0], TA[:1], TB[:1])
     return files
 
@@ -163,11 +166,13 @@ def main(argv=None):
     ap.add_argument("--runs", type=int, default=3, help="runs of each code, alternated")
     ap.add_argument("--repeat", type=int, default=3,
                     help="commands per figure in a run (the shortest counts: the process start is noisy)")
+    ap.add_argument("--tile", type=int, default=4,
+                    help="the trajectory's rows this many times over in the standard-model command")
     args = ap.parse_args(argv)
     print(f"load average at the start: {os.getloadavg()}")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        files = _inputs(tmp)
+        files = _inputs(tmp, args.tile)
         if "traj" not in files:
             print(f"   ({DATA} not found: the standard-model conversion is skipped)")
         old = tmp / "issue"
