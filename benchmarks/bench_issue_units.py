@@ -24,8 +24,8 @@ Each command's time per configuration is (T(K rows) - T(1 row)) / (K - 1), both 
 command and code, wall time: the process start, imports and loading of compiled kernels cancel.
 Each T is the shortest of ``--repeat`` commands. The standard model reads the 1307 trajectory
 rows ``--tile`` (4) times over: once, they are 0.15 s of work behind about 1.1 s of process
-start, which alone varies by 0.1 s (one such run gave -0.07 ms per row); the rows after the
-first pass cost what the first did (each pass starts from scratch at its first row). Figures
+start, which alone varies by 0.1 s (one such run gave -0.07 ms per row); the passes after the
+first cost what it did (only each pass's first row follows a distant row, the last one). Figures
 are medians over ``--runs`` runs of each code, alternated (per-run values printed).
 
 Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_issue_units.py [--issue-commit 10e8828] [--runs 3] [--repeat 3] [--tile 4]
