@@ -344,14 +344,14 @@ class FlatProblem:
 
     def contact_geometry(self, R, p):
         """The contacts and compliance factors of the current linearization (frames R (N, 3, 3),
-        points p (N, 3) [m]) as the kernels take them (:class:`_contact_kernels.ContactGeometry`)."""
-        return ck.ContactGeometry(self.pair, self.jo, self.ji, self._B, self._Pc, R, p, self._H1, self._H2,
-                                  self._F3, self._Omega, self._base, self.kinv, self.node_off)
+        points p (N, 3) [m]) as the kernels take them (:class:`_contact_kernels.ContactGeometry`,
+        built by :func:`_contact_geometry`, as in the compiled outer loop)."""
+        return _contact_geometry(self.outer_arrays(), self.outer_scratch(), R, p)
 
     def contact_law(self, kappa):
         """Clearances, friction factors and the FB scale ``kappa`` [N/m] as the kernels take them
-        (:class:`_contact_kernels.ContactLaw`)."""
-        return ck.ContactLaw(self.c, self.Mblk, float(kappa), self.tq_out, self.tq_in, self.friction)
+        (:class:`_contact_kernels.ContactLaw`, built by :func:`_contact_law`)."""
+        return _contact_law(self.outer_arrays(), float(kappa))
 
     def outer_arrays(self):
         """The read-only arrays of the compiled outer loop (:class:`OuterArrays`)."""
@@ -421,6 +421,22 @@ class OuterOptions(NamedTuple):
 
 
 @njit(cache=True)
+def _contact_geometry(arr, scr, R, p):
+    """:class:`_contact_kernels.ContactGeometry` of a problem's arrays ``arr``
+    (:class:`OuterArrays`) and scratch ``scr`` (:class:`OuterScratch`) at frames ``R``
+    (N, 3, 3) and points ``p`` (N, 3) [m]."""
+    return ck.ContactGeometry(arr.pair, arr.jo, arr.ji, scr.B, scr.Pc, R, p, scr.H1, scr.H2, scr.F3, scr.Omega,
+                              scr.base, arr.kinv, arr.node_off)
+
+
+@njit(cache=True)
+def _contact_law(arr, kappa):
+    """:class:`_contact_kernels.ContactLaw` of a problem's arrays ``arr`` (:class:`OuterArrays`)
+    with the FB scale ``kappa`` [N/m]."""
+    return ck.ContactLaw(arr.c, arr.Mblk, kappa, arr.tq_out, arr.tq_in, arr.friction)
+
+
+@njit(cache=True)
 def _outer_step(u, R, p, lam, arr, scr, work, tol, maxit, g):
     """One re-linearization at curvatures ``u`` (S, 3) with frames ``R`` (N, 3, 3) and points
     ``p`` (N, 3): the compliance factors, the contact frames, the multipliers to ``tol``
@@ -437,9 +453,8 @@ def _outer_step(u, R, p, lam, arr, scr, work, tol, maxit, g):
     for k in range(M):
         diag_sum += scr.diagW[k, 1, 1]
     kappa = 1.0 / max(diag_sum / max(2 * M, 1), 1e-300)
-    geometry = ck.ContactGeometry(arr.pair, arr.jo, arr.ji, scr.B, scr.Pc, R, p, scr.H1, scr.H2, scr.F3, scr.Omega,
-                                  scr.base, arr.kinv, arr.node_off)
-    law = ck.ContactLaw(arr.c, arr.Mblk, kappa, arr.tq_out, arr.tq_in, arr.friction)
+    geometry = _contact_geometry(arr, scr, R, p)
+    law = _contact_law(arr, kappa)
     work.have[:] = False   # no column or row of this linearization computed yet
     work.rows[:] = False
     lam, d, ok, its, _ = ck.solve_contacts(lam, scr.dfree, geometry, law, work, tol, maxit)
