@@ -111,10 +111,13 @@ def _single(code, cache):
 
 
 def _write_configs(path, alpha, beta):
+    """Configurations (K, n) [rad], [m] as a CSV that ``evaluate --configs`` reads
+    (``ctrplan.io.tables.write_table``, the project's schema)."""
     import pandas as pd
+    from ctrplan.io.tables import write_table
     n = alpha.shape[1]
-    pd.DataFrame({**{f"alpha_{i + 1}": alpha[:, i] for i in range(n)},
-                  **{f"beta_{i + 1}": beta[:, i] for i in range(n)}}).to_csv(path, index=False)
+    write_table(path, pd.DataFrame({**{f"alpha_{i + 1}": alpha[:, i] for i in range(n)},
+                                    **{f"beta_{i + 1}": beta[:, i] for i in range(n)}}))
 
 
 def _inputs(tmp, tile):
