@@ -28,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _checkouts import ROOT, child_env, worktree  # noqa: E402
 
 
 def _configurations(robot, grid):
@@ -76,9 +77,8 @@ def child(out, grid):
 
 
 def _run(code_root, out, grid, cache_dir):
-    env = dict(os.environ, PYTHONPATH=str(code_root), OPENBLAS_NUM_THREADS="1", NUMBA_CACHE_DIR=str(cache_dir))
     subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", str(out), "--grid", grid],
-                   check=True, env=env, cwd=str(code_root))
+                   check=True, env=child_env(code_root, cache_dir), cwd=str(code_root))
     return np.load(out)
 
 
@@ -101,17 +101,12 @@ def main(argv=None):
     print(f"load average at the start: {os.getloadavg()}")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        base = tmp / "base"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base), args.base],
-                       check=True, capture_output=True)
-        try:
+        with worktree(args.base, tmp / "base") as base:
             runs = {"base": [], "this": []}
             for k in range(args.runs):
                 for name, code, cache in (("base", base, tmp / "cache-base"), ("this", ROOT, tmp / "cache-this")):
                     runs[name].append(_run(code, tmp / f"{name}{k}.npz", args.grid, cache))
                     print(f"  run {k + 1} {name}: median {np.median(runs[name][-1]['T']):.1f} ms", flush=True)
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)], check=False)
     print(f"load average at the end: {os.getloadavg()}")
     T = {n: np.array([r["T"] for r in v]) for n, v in runs.items()}
     best = {n: t.min(axis=0) for n, t in T.items()}

@@ -44,7 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _checkouts import ROOT, child_env, worktree  # noqa: E402
+
 DATA = ROOT.parent / "shared" / "data" / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt"
 ROBOT = ROOT / "model" / "ha2019-table2-nominal.toml"
 # issue 14: the code of its day, in C++ standard solves per configuration
@@ -88,10 +90,6 @@ print(float(np.median(best)))
 """
 
 
-def _env(code, cache):
-    return dict(os.environ, PYTHONPATH=str(code), OPENBLAS_NUM_THREADS="1", NUMBA_CACHE_DIR=str(cache))
-
-
 def _cli_time(code, cache, configs, model, out):
     """Wall time [s] of ``ctrplan evaluate --jobs 1`` of the checkout ``code`` (run from it)."""
     for f in (out, out.with_name(out.name + ".partial.jsonl")):
@@ -99,14 +97,14 @@ def _cli_time(code, cache, configs, model, out):
     cmd = [sys.executable, "-c", _CLI, str(code), "evaluate", "--robot", str(ROBOT), "--configs", str(configs),
            "--model", model, "--out", str(out), "--jobs", "1", "--no-progress"]
     t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True, env=_env(code, cache), cwd=str(code))
+    subprocess.run(cmd, check=True, capture_output=True, env=child_env(code, cache), cwd=str(code))
     return time.perf_counter() - t0
 
 
 def _single(code, cache):
     """Median over the 4x4x4 grid of the best-of-5 single standard solve [s] of checkout ``code``."""
     r = subprocess.run([sys.executable, "-c", _SINGLE, str(code), str(ROOT / "benchmarks"), str(ROBOT)],
-                       check=True, capture_output=True, text=True, env=_env(code, cache), cwd=str(code))
+                       check=True, capture_output=True, text=True, env=child_env(code, cache), cwd=str(code))
     return float(r.stdout.split()[-1])
 
 
@@ -128,8 +126,7 @@ def _inputs(tmp, tile):
     from ctrplan.io.robot_file import load_robot
     robot = load_robot(ROBOT)
     _, Q = grid_4x4x4(robot)
-    A = np.array([robot.configuration(q)[0] for q in Q])
-    B = np.array([robot.configuration(q)[1] for q in Q])
+    A, B = (np.array(x) for x in zip(*(robot.configuration(q) for q in Q)))
     files = {"grid": (tmp / "grid.csv", len(Q)), "grid1": (tmp / "grid1.csv", 1)}
     _write_configs(files["grid"][0], A, B)
     _write_configs(files["grid1"][0], A[:1], B[:1])
@@ -178,11 +175,8 @@ def main(argv=None):
         files = _inputs(tmp, args.tile)
         if "traj" not in files:
             print(f"   ({DATA} not found: the standard-model conversion is skipped)")
-        old = tmp / "issue"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(old), args.issue_commit],
-                       check=True, capture_output=True)
-        codes = {"issue": (old, tmp / "cache-issue"), "this": (ROOT, tmp / "cache-this")}
-        try:
+        with worktree(args.issue_commit, tmp / "issue") as old:
+            codes = {"issue": (old, tmp / "cache-issue"), "this": (ROOT, tmp / "cache-this")}
             for code, cache in codes.values():      # compile or cache every kernel once, untimed
                 _cli_time(code, cache, files["grid1"][0], "friction", tmp / "out.csv")
                 if "traj" in files:
@@ -194,8 +188,6 @@ def main(argv=None):
                     runs[name].append(_measure(*codes[name], files, tmp, args.repeat))
                     print(f"  run {k + 1} {name:5s} " + "  ".join(f"{m} {v * 1e3:.3f} ms" for m, v in
                                                                runs[name][-1].items()), flush=True)
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(old)], check=False)
     print(f"load average at the end: {os.getloadavg()}")
     med = {name: {m: float(np.median([r[m] for r in rs])) for m in rs[0]} for name, rs in runs.items()}
     print(f"\nmedians over {args.runs} runs [ms per configuration]:")
@@ -207,7 +199,7 @@ def main(argv=None):
     for model, issue_x, _ in conversions:
         cpp = med["issue"][model] / issue_x
         print(f"\nC++ solve estimated from the issue's {model} figure ({issue_x:.0f}x): {cpp * 1e6:.1f} us")
-        for m, issue_m, target in conversions:
+        for m, _, target in conversions:
             x = med["this"][m] / cpp
             print(f"  this checkout, CLI {m:8s} --jobs 1: {x:7.1f}x the C++ solve (target <= {target:.0f}x; "
                   f"issue code {med['issue'][m] / cpp:.1f}x)")
