@@ -104,6 +104,16 @@ def _inverse_from_cholesky(L, out, y):
             out[i, c] = y[i]
 
 
+@njit(cache=True, inline="always")
+def _same_interval(present, uhat, j, k):
+    """Intervals ``j`` and ``k`` have the same tubes present and the same precurvatures (so every
+    per-interval constant of the screen is the same on both)."""
+    for i in range(present.shape[1]):
+        if present[j, i] != present[k, i] or uhat[j, i, 0] != uhat[k, i, 0] or uhat[j, i, 1] != uhat[k, i, 1]:
+            return False
+    return True
+
+
 @njit(cache=True)
 def _twist_bounds(s, first, last, present, uhat, kxy, kz, Delta):
     """A priori bound on the twist of every equilibrium, |psi_i(s_j) - alpha_i| <= Delta[j, i].
@@ -112,25 +122,37 @@ def _twist_bounds(s, first, last, present, uhat, kxy, kz, Delta):
     psi_i'(tip) = 0 (free tip), so |psi_i'(s)| <= int_s^tip sum_(l != i) w_il / K / k_(i,z) and
     |psi_i(s) - alpha_i| <= int_base^s of that. The first bound is piecewise linear in s on the
     grid (w / K constant per interval), so the trapezoidal rule integrates it exactly. Writes
-    ``Delta`` (G, n) [rad] on each tube's nodes (others untouched)."""
+    ``Delta`` (G, n) [rad] on each tube's nodes (others untouched). The torque densities
+    sum_(l != i) w_il / K are computed once per run of intervals with the same data."""
     n = kxy.shape[0]
+    G1 = present.shape[0]
+    rate = np.zeros((G1, n))     # sum_(l != i) w_il / K on interval j (0 where tube i is absent)
+    un = np.zeros(n)
+    for j in range(G1):
+        if j > 0 and _same_interval(present, uhat, j, j - 1):
+            for i in range(n):
+                rate[j, i] = rate[j - 1, i]
+            continue
+        K = 0.0
+        for l in range(n):
+            if present[j, l]:
+                K += kxy[l]
+            un[l] = np.sqrt(uhat[j, l, 0] ** 2 + uhat[j, l, 1] ** 2)
+        for i in range(n):
+            if not present[j, i]:
+                continue
+            t = 0.0
+            for l in range(n):
+                if l != i and present[j, l]:
+                    t += kxy[i] * kxy[l] * un[i] * un[l]
+            if K > 0.0:
+                t /= K
+            rate[j, i] = t
     smax = np.zeros(s.shape[0])
     for i in range(n):
         smax[last[i]] = 0.0
         for j in range(last[i] - 1, first[i] - 1, -1):
-            t = 0.0
-            if present[j, i]:
-                K = 0.0
-                for l in range(n):
-                    if present[j, l]:
-                        K += kxy[l]
-                ui = np.sqrt(uhat[j, i, 0] ** 2 + uhat[j, i, 1] ** 2)
-                for l in range(n):
-                    if l != i and present[j, l]:
-                        t += kxy[i] * kxy[l] * ui * np.sqrt(uhat[j, l, 0] ** 2 + uhat[j, l, 1] ** 2)
-                if K > 0.0:
-                    t /= K
-            smax[j] = smax[j + 1] + t * (s[j + 1] - s[j]) / kz[i]
+            smax[j] = smax[j + 1] + rate[j, i] * (s[j + 1] - s[j]) / kz[i]
         Delta[first[i], i] = 0.0
         for j in range(first[i], last[i]):
             Delta[j + 1, i] = Delta[j, i] + 0.5 * (s[j + 1] - s[j]) * (smax[j] + smax[j + 1])
@@ -227,19 +249,25 @@ def _certified(s, first, last, present, uhat, kxy, kz, margin, alpha):
     S = np.empty((n, n))
     Sinv = np.zeros((n, n))
     y = np.empty(n)
+    K = 0.0
     for j in range(G):
         for i in range(n):
             bcur[i] = 0.0
         h = s[j + 1] - s[j] if j < G - 1 else 0.0
         if h > 0.0:
-            K = 0.0
+            # K, |uhat_i| and the precurvature directions depend on the interval's data only
+            same = j > 0 and _same_interval(present, uhat, j, j - 1)
+            if not same:
+                K = 0.0
             for i in range(n):
                 if present[j, i]:
-                    K += kxy[i]
                     a = kz[i] / h
                     Dcur[i, i] += a
                     Dnext[i, i] += a
                     bcur[i] = -a
+                    if same:
+                        continue
+                    K += kxy[i]
                     u0 = uhat[j, i, 0]
                     u1 = uhat[j, i, 1]
                     un[i] = np.sqrt(u0 * u0 + u1 * u1)

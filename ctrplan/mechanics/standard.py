@@ -196,9 +196,9 @@ def _same_interval_data(present, uh, j, last):
 @njit(cache=True, error_model="numpy", inline="always")
 def _pair_rates(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21):
     """Torsion rates dsigma_i of three tubes in the pairwise form of :func:`_integrate3`."""
-    s01 = np.sin(p1 - p0 + c01)
-    s02 = np.sin(p2 - p0 + c02)
-    s12 = np.sin(p2 - p1 + c12)
+    s01 = np.sin(p1 - p0 + c01) if a01 != 0.0 or a10 != 0.0 else 0.0
+    s02 = np.sin(p2 - p0 + c02) if a02 != 0.0 or a20 != 0.0 else 0.0
+    s12 = np.sin(p2 - p1 + c12) if a12 != 0.0 or a21 != 0.0 else 0.0
     return -a01 * s01 - a02 * s02, a10 * s01 - a12 * s12, a20 * s02 + a21 * s12
 
 
@@ -308,9 +308,9 @@ def _pair_jacobian_apply(p0, p1, p2, c01, c02, c12, a01, a10, a02, a20, a12, a21
     """out = (d sigma' / d psi) S for the pairwise form of :func:`_integrate3`, S and out (3, 3):
     with C_ij = cos(theta_j - theta_i), row 0 is a01 C01 (S0 - S1) + a02 C02 (S0 - S2), row 1
     -a10 C01 (S0 - S1) + a12 C12 (S1 - S2), row 2 -a20 C02 (S0 - S2) - a21 C12 (S1 - S2)."""
-    g01 = np.cos(p1 - p0 + c01)
-    g02 = np.cos(p2 - p0 + c02)
-    g12 = np.cos(p2 - p1 + c12)
+    g01 = np.cos(p1 - p0 + c01) if a01 != 0.0 or a10 != 0.0 else 0.0
+    g02 = np.cos(p2 - p0 + c02) if a02 != 0.0 or a20 != 0.0 else 0.0
+    g12 = np.cos(p2 - p1 + c12) if a12 != 0.0 or a21 != 0.0 else 0.0
     for q in range(3):
         d01 = S[0, q] - S[1, q]
         d02 = S[0, q] - S[2, q]
@@ -783,19 +783,25 @@ def _distinct(sig, found, n_found, lengths):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _mean_bending(angle, present, uh, kxy):
+def _mean_bending(angle, present, uh, j, kxy):
     """Shared bending curvature (u_x, u_y) [1/m] = sum_i k_i R_z(angle_i) uhat_i / sum_i k_i over
-    the tubes present (angle (n,) [rad], present (n,), uh (n, 2) [1/m], kxy (n,))."""
+    the tubes present on interval ``j`` (angle (n,) [rad], present (G - 1, n), uh (G - 1, n, 2)
+    [1/m], kxy (n,)). A tube without precurvature there adds its stiffness to the sum but no
+    bending, so its angle's sine and cosine are not evaluated (the sums are the same, bit for
+    bit: its terms were +-0)."""
     ks = 0.0
     bx = 0.0
     by = 0.0
     for i in range(angle.shape[0]):
-        if present[i]:
-            c = np.cos(angle[i])
-            sn = np.sin(angle[i])
+        if present[j, i]:
             ks += kxy[i]
-            bx += kxy[i] * (c * uh[i, 0] - sn * uh[i, 1])
-            by += kxy[i] * (sn * uh[i, 0] + c * uh[i, 1])
+            u0 = uh[j, i, 0]
+            u1 = uh[j, i, 1]
+            if u0 != 0.0 or u1 != 0.0:
+                c = np.cos(angle[i])
+                sn = np.sin(angle[i])
+                bx += kxy[i] * (c * u0 - sn * u1)
+                by += kxy[i] * (sn * u0 + c * u1)
     ks = max(ks, 1e-300)
     return bx / ks, by / ks
 
@@ -824,12 +830,12 @@ def _centerline(s, present, uh, kxy, psi, sig):
         for i in range(n):
             psi_mid[j, i] = 0.5 * (psi[j, i] + psi[j + 1, i]) + hj * (sig[j, i] - sig[j + 1, i]) / 8.0
             sig_mid[j, i] = 1.5 * (psi[j + 1, i] - psi[j, i]) / hj - 0.25 * (sig[j, i] + sig[j + 1, i])
-        ub[j, 0], ub[j, 1] = _mean_bending(psi_mid[j], present[j], uh[j], kxy)
+        ub[j, 0], ub[j, 1] = _mean_bending(psi_mid[j], present, uh, j, kxy)
         ucurv[j, 0] = ub[j, 0]
         ucurv[j, 1] = ub[j, 1]
     for q in range(G):
         j = min(q, G - 2)
-        bend[q, 0], bend[q, 1] = _mean_bending(psi[q], present[j], uh[j], kxy)
+        bend[q, 0], bend[q, 1] = _mean_bending(psi[q], present, uh, j, kxy)
     R = np.empty((G, 3, 3))
     p = np.empty((G, 3))
     node_off = np.array([0, G], dtype=np.int64)
@@ -841,11 +847,14 @@ def _centerline(s, present, uh, kxy, psi, sig):
 def _tip_frame(s, present, uh, kxy, psi, sig):
     """Tip position (3,) [m] and frame (3, 3) of :func:`_centerline`, with the same arithmetic
     (Hermite midpoint angles, shared bending, the step of ``chain_kinematics``) but without the
-    per-node arrays and the bending at the nodes, which a batch of tips does not read: bitwise
-    the same tip."""
+    per-node arrays and the bending at the nodes, which a batch of tips does not read: the same
+    tip. Only the midpoint angles of tubes with precurvature on an interval are formed (the
+    others do not bend it), and an interval without bending (no tube there has precurvature)
+    moves the point along the tangent without the exponential: exp(0) = I and V(0) e_z = e_z,
+    so the step of ``chain_kinematics`` gives the same numbers (up to the sign of exact zeros)."""
     G = s.shape[0]
     n = psi.shape[1]
-    pm = np.empty(n)
+    pm = np.zeros(n)
     R = np.eye(3)
     Rn = np.empty((3, 3))
     p = np.zeros(3)
@@ -855,9 +864,17 @@ def _tip_frame(s, present, uh, kxy, psi, sig):
     vz = np.empty(3)
     for j in range(G - 1):
         hk = s[j + 1] - s[j]
+        bends = False
         for i in range(n):
-            pm[i] = 0.5 * (psi[j, i] + psi[j + 1, i]) + hk * (sig[j, i] - sig[j + 1, i]) / 8.0
-        bx, by = _mean_bending(pm, present[j], uh[j], kxy)
+            if present[j, i] and (uh[j, i, 0] != 0.0 or uh[j, i, 1] != 0.0):
+                pm[i] = 0.5 * (psi[j, i] + psi[j + 1, i]) + hk * (sig[j, i] - sig[j + 1, i]) / 8.0
+                bends = True
+        if not bends:
+            p[0] += R[0, 2] * hk
+            p[1] += R[1, 2] * hk
+            p[2] += R[2, 2] * hk
+            continue
+        bx, by = _mean_bending(pm, present, uh, j, kxy)
         advance(R, p, bx * hk, by * hk, 0.0 * hk, hk, E, vz, Rn, pn)
         R, Rn = Rn, R
         p, pn = pn, p
