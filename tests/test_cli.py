@@ -270,7 +270,7 @@ def test_batched_standard_rows_equal_single_solves_with_the_same_stability_flag(
     beta[:, 2] = rng.uniform(-0.1204, -0.104, K)
     settings = ModelSettings(ds=DS)
     cols = batch._standard_columns(robot, alpha, beta, settings, list(range(1, K + 1)))
-    assert cols["row"] == list(range(1, K + 1))
+    assert cols["row"].tolist() == list(range(1, K + 1))
     rows = [{c: v[k] for c, v in cols.items()} for k in range(K)]
     status = []
     for k in range(K):

@@ -242,7 +242,29 @@ def write_table(path: str | os.PathLike, frame: pd.DataFrame) -> None:
         _check_units(col, values, file)
     ordered = sorted(frame.columns, key=lambda c: _sort_key(c, list(frame.columns)))
     with atomic_path(path) as tmp:
-        frame[ordered].to_csv(tmp, index=False, lineterminator="\n")
+        _write_csv(frame[ordered], tmp)
+
+
+def _write_csv(frame: pd.DataFrame, path) -> None:
+    """``frame`` as CSV text at ``path``: one header line, no index, ``\\n`` line ends, NaN and
+    None as empty cells, numbers in a form that reads back to the same double, text values in
+    double quotes (the header only where a name needs them).
+
+    The rows are written by Apache Arrow's CSV writer, not ``DataFrame.to_csv``: formatting the
+    floats took pandas about 11 us per row of a standard-model result (12 numbers), Arrow about
+    3 us (issue 14, 5228 rows; every number read back bit for bit)."""
+    import csv
+    import io
+
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    header = io.StringIO()
+    csv.writer(header, lineterminator="\n").writerow([str(c) for c in frame.columns])
+    table = pa.Table.from_pandas(frame, preserve_index=False)
+    with open(path, "wb") as fh:
+        fh.write(header.getvalue().encode())
+        pacsv.write_csv(table, fh, write_options=pacsv.WriteOptions(include_header=False))
 
 
 # --------------------------------------------------------------------------- Ha et al. data
