@@ -285,19 +285,20 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out, state):
     n = alpha.shape[1]
     s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, ds, merge_tol, refine_ratio,
                                           refine_length)
+    # the coarse grid: read by the predictor, the uniqueness screen and the multistart search
+    cs, cpresent, cuhat = s, present, uhat
+    if predict or multistart > 0:
+        cs, cfirst, clast, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
+                                                   merge_tol, refine_ratio, refine_length)
     unique = False
     if multistart > 0:
-        unique = unique_equilibrium_certified_at(s, first, last, present, uhat, kxy, kxy / ratio,
+        # on the coarse grid (a quarter of the nodes): see _uniqueness, "Grid"
+        unique = unique_equilibrium_certified_at(cs, cfirst, clast, cpresent, cuhat, kxy, kxy / ratio,
                                                  UNIQUENESS_SCREEN_MARGIN, alpha[k])
         certified[k] = unique
     a = alpha[k].copy()
     it = 0
     ok = False
-    # the coarse grid: read by the predictor and by the multistart search
-    cs, cpresent, cuhat = s, present, uhat
-    if predict or (multistart > 0 and not unique):
-        cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * ds,
-                                         merge_tol, refine_ratio, refine_length)
     if unique and np.all(np.isfinite(follow_from)):
         if predict:
             if np.all(np.isfinite(state[n:n + 2])):
