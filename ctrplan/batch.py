@@ -25,10 +25,13 @@ from .models import MODELS  # the one registry of models
 
 __all__ = ["MODELS", "evaluate_configuration", "evaluate_table", "job_key"]
 
-# Configurations per task: the standard model's compiled batch takes about 0.1-0.4 ms per
-# configuration, so a chunk of this many keeps the per-task overhead (process hand-off, one
-# checkpoint line) small; a contact-model configuration takes 10-100 ms.
-STANDARD_CHUNK = 256
+# Configurations per task: the standard model's compiled batch takes about 0.05-0.4 ms per
+# configuration, so a chunk of this many keeps the per-task overhead (one checkpoint line, the
+# start of the compiled threads, and per thread a first row that follows no other) small: on
+# the trajectory four times over with two threads, 32 us per row in chunks of 256, 29 in chunks
+# of 1024 and 28 in one chunk, against 55 on one thread (issue 14); a contact-model
+# configuration takes 10-100 ms.
+STANDARD_CHUNK = 2048
 CONTACT_CHUNK = 4
 
 
@@ -170,26 +173,38 @@ def _standard_columns(robot, alpha, beta, settings, indices, n_threads=1):
 
 
 def _columns_record(indices, cols) -> dict:
-    """Checkpoint line of a chunk of columns (:func:`_standard_columns`): float columns as
-    base64 of their little-endian float64 bytes (``arrays``; exact, and about a tenth of the
-    time of writing the numbers as JSON text, which took 4.4 us per standard-model row,
-    issue 14), the others as JSON lists (``columns``)."""
-    arrays, plain = {}, {}
+    """Checkpoint line of a chunk of columns (:func:`_standard_columns`): float and integer
+    columns as base64 of their little-endian float64 / int64 bytes (``arrays``, ``integers``;
+    exact, and about a tenth of the time of writing the numbers as JSON text, which took 4.4 us
+    per standard-model row, issue 14), text columns as their distinct values and base64 int32
+    codes (``categories``)."""
+    arrays, integers, categories = {}, {}, {}
     for name, values in cols.items():
         values = np.asarray(values)
         if values.dtype.kind == "f":
             arrays[name] = base64.b64encode(values.astype("<f8").tobytes()).decode("ascii")
+        elif values.dtype.kind in "iu":
+            integers[name] = base64.b64encode(values.astype("<i8").tobytes()).decode("ascii")
         else:
-            plain[name] = values.tolist()
-    return {"indices": [int(i) - 1 for i in indices], "columns": plain, "arrays": arrays}
+            uniq, codes = np.unique(values.astype(str), return_inverse=True)
+            categories[name] = {"values": uniq.tolist(),
+                                "codes": base64.b64encode(codes.astype("<i4").tobytes()).decode("ascii")}
+    return {"indices": [int(i) - 1 for i in indices], "columns": {}, "arrays": arrays,
+            "integers": integers, "categories": categories}
 
 
 def _record_columns(rec: dict) -> dict:
     """The columns of a checkpoint line written by :func:`_columns_record` (or, by earlier
-    versions, with every column a JSON list)."""
-    cols = dict(rec["columns"])
+    versions, with columns as JSON lists in ``columns``; a column there takes precedence)."""
+    cols = {}
     for name, text in rec.get("arrays", {}).items():
         cols[name] = np.frombuffer(base64.b64decode(text), dtype="<f8").astype(float)
+    for name, text in rec.get("integers", {}).items():
+        cols[name] = np.frombuffer(base64.b64decode(text), dtype="<i8").astype(np.int64)
+    for name, cat in rec.get("categories", {}).items():
+        codes = np.frombuffer(base64.b64decode(cat["codes"]), dtype="<i4")
+        cols[name] = np.asarray(cat["values"], dtype=object)[codes]
+    cols.update(rec["columns"])
     return cols
 
 
@@ -265,6 +280,8 @@ def _assemble(done: dict, columns: list[dict], K: int) -> pd.DataFrame:
     if not parts:
         return pd.DataFrame()
     frame = parts[0] if len(parts) == 1 else pd.concat(parts, ignore_index=True)
+    if frame["row"].is_monotonic_increasing:    # chunks finished in order (the usual case)
+        return frame.reset_index(drop=True)
     return frame.sort_values("row", kind="stable").reset_index(drop=True)
 
 

@@ -423,7 +423,7 @@ def _integrate3_sens(s, present, uh, kxy, ratio, psi0, sig0, record):
     return psi, sig, Sp, Ss, rec_psi, rec_sig, rec_dsig
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
     """Classical RK4 over the grid intervals, one step per interval: the three-tube kernels
     (:func:`_integrate3`, :func:`_integrate3_sens`) for three tubes, else the general loop
