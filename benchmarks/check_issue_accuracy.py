@@ -15,7 +15,7 @@ which is checked out into a temporary git worktree; both codes run the same comm
 
 A tip that moved by more than 0.01 mm can have moved towards the solution: the issue's code
 stopped the outer loop of the contact models with an error of up to 11.8 um on this grid (full
-Anderson steps; docs/mechanics.md Sec. 5, "Why beta = 0.5"). Each such solution is therefore
+Anderson steps; docs/mechanics.md Sec. 4, "Why beta = 0.5"). Each such solution is therefore
 also solved tightly (this checkout, ``outer_tol`` = ``complementarity_tol`` = 1e-9) and both
 codes' tips are measured against it. The check passes if every moved tip is closer to the tight
 solve now than before and no flag is lost; the literal 0.01 mm is printed either way.
