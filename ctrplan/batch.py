@@ -186,8 +186,10 @@ def _columns_record(indices, cols) -> dict:
         elif values.dtype.kind in "iu":
             integers[name] = base64.b64encode(values.astype("<i8").tobytes()).decode("ascii")
         else:
-            uniq, codes = np.unique(values.astype(str), return_inverse=True)
-            categories[name] = {"values": uniq.tolist(),
+            # hashed, not sorted: np.unique of the strings took 0.75 us per row, about a
+            # fifth of what does not run on threads in a command-line run (issue 14)
+            codes, uniq = pd.factorize(values, use_na_sentinel=False)
+            categories[name] = {"values": [str(v) for v in uniq],
                                 "codes": base64.b64encode(codes.astype("<i4").tobytes()).decode("ascii")}
     return {"indices": [int(i) - 1 for i in indices], "columns": {}, "arrays": arrays,
             "integers": integers, "categories": categories}

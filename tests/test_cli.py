@@ -232,6 +232,27 @@ def test_resume_after_interruption_computes_only_missing_rows(tmp_path, robot, m
     np.testing.assert_array_equal(frame[TIP].to_numpy(float), fresh[TIP].to_numpy(float))
 
 
+def test_checkpoint_line_of_columns_reads_back_exactly():
+    """A standard-model chunk written to the checkpoint (floats and integers as bytes, text as
+    distinct values and codes) reads back to the same columns: floats bit for bit (NaN of a
+    failed row included), integers, and text whose first-seen order differs from its sorted
+    order (a code paired with the wrong value would swap "ok" and "unstable" rows)."""
+    rng = np.random.default_rng(7)
+    cols = {"tip_x": rng.normal(size=6) * 1e-2, "row": np.array([3, 4, 5, 6, 7, 8], dtype=np.int64),
+            "status": np.array(["unstable", "ok", "unstable", "error", "ok", "ok"], dtype=object),
+            "message": np.array(["b", "a", "b", "c", "a", "a"], dtype=object)}
+    cols["tip_x"][3] = np.nan
+    rec = json.loads(json.dumps(batch._columns_record([3, 4, 5, 6, 7, 8], cols)))
+    back = batch._record_columns(rec)
+    assert rec["indices"] == [2, 3, 4, 5, 6, 7]
+    assert set(back) == set(cols)
+    np.testing.assert_array_equal(back["tip_x"].view(np.int64), cols["tip_x"].view(np.int64))
+    np.testing.assert_array_equal(back["row"], cols["row"])
+    assert back["row"].dtype == np.int64
+    for name in ("status", "message"):
+        assert back[name].tolist() == cols[name].tolist()
+
+
 def test_checkpoint_of_another_job_is_discarded(tmp_path, robot, monkeypatch):
     alpha, beta = _arrays(CONFIGS[:2])
     ck = tmp_path / "ck.jsonl"
