@@ -234,11 +234,15 @@ def write_table(path: str | os.PathLike, frame: pd.DataFrame) -> None:
     for col in frame.columns:
         if _schema_rank(col) is None or col in _TEXT_COLUMNS:
             continue
-        values = pd.to_numeric(frame[col], errors="coerce").to_numpy(float)
-        bad = np.flatnonzero(np.isnan(values) & frame[col].notna().to_numpy())
-        if bad.size:
-            raise DataFileError(f"{file}: column '{col}', {_row(bad[0])}: non-numeric value "
-                                f"{frame[col].iloc[bad[0]]!r}")
+        series = frame[col]
+        if series.dtype.kind in "fiub":
+            values = series.to_numpy(float)   # numeric already: nothing to coerce
+        else:
+            values = pd.to_numeric(series, errors="coerce").to_numpy(float)
+            bad = np.flatnonzero(np.isnan(values) & series.notna().to_numpy())
+            if bad.size:
+                raise DataFileError(f"{file}: column '{col}', {_row(bad[0])}: non-numeric value "
+                                    f"{series.iloc[bad[0]]!r}")
         _check_units(col, values, file)
     ordered = sorted(frame.columns, key=lambda c: _sort_key(c, list(frame.columns)))
     with atomic_path(path) as tmp:
