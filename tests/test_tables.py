@@ -109,6 +109,19 @@ def test_millimetres_detected(tmp_path):
     assert not (tmp_path / "w.csv").exists()
 
 
+def test_write_table_names_non_numeric_and_out_of_unit_cells(tmp_path):
+    """Schema columns are checked whatever their dtype: text in a numeric column (object dtype)
+    is named with its row, and an integer column in millimetres is caught like a float one."""
+    out = tmp_path / "w.csv"
+    with pytest.raises(DataFileError, match=r"'beta_1', row 2 \(line 3\): non-numeric value 'x'"):
+        write_table(out, pd.DataFrame({"beta_1": [-0.017, "x"]}))
+    with pytest.raises(DataFileError, match=r"'tip_z', row 1 \(line 2\): value 155.0 looks like millimetres"):
+        write_table(out, pd.DataFrame({"tip_z": np.array([155], dtype=np.int64)}))
+    assert not out.exists()
+    write_table(out, pd.DataFrame({"beta_1": [-0.017, np.nan], "status": ["ok", "error"]}))
+    assert out.read_text().splitlines()[1:] == ["-0.017,\"ok\"", ",\"error\""]
+
+
 def test_degrees_detected(tmp_path):
     p = _csv(tmp_path, "alpha_1,beta_1\n180.0,0\n")
     with pytest.raises(DataFileError, match="looks like degrees"):
