@@ -132,7 +132,7 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
 def _standard_columns(robot, alpha, beta, settings, indices, n_threads=1):
     """Rows of the standard model for the configurations ``indices`` (1-based row numbers) in one
     compiled call, with the same status and stability flag as :func:`evaluate_configuration`
-    (``n_threads`` > 1: compiled threads share the rows, each following one contiguous block).
+    (``n_threads`` > 1: compiled threads share the rows in contiguous blocks, each followed in order).
 
     Returns the rows as columns (dict of column name -> array, one entry per configuration):
     built with array operations, not a dict per row, which cost about as much as the compiled

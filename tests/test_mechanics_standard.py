@@ -208,14 +208,19 @@ def test_batch_equals_single_solves():
         solve_standard_batch(robot, alpha, beta, settings, n_threads=0)
 
 
-def test_threads_following_blocks_of_a_path_equal_the_serial_follow():
-    """With ``follow`` and two threads each thread follows one contiguous block of the rows
-    (issue 14: the default-jobs command line). On a seeded path through certified and
-    uncertified rows, with one impossible row inside it, every row must get the serial
-    follow's flags and, to the shooting tolerance, its tips: a block boundary off by one
-    (a row skipped or solved twice) leaves NaN or a wrong row, and a block that started from
-    another block's torsions could land on another equilibrium."""
-    from ctrplan.mechanics import solve_standard_batch
+@pytest.mark.parametrize("block_min_rows", [128, 4])
+def test_threads_following_blocks_of_a_path_equal_the_serial_follow(monkeypatch, block_min_rows):
+    """With ``follow`` and two threads the threads take contiguous blocks of the rows, handed
+    out one at a time, and follow each (issue 14: the default-jobs command line): here two
+    blocks (the default minimum of 128 rows) or ten (a minimum of 4 rows, so that block ends fall
+    inside the path). On a seeded path through certified and uncertified rows, with one
+    impossible row inside it, every row must get the serial follow's flags and, to the shooting
+    tolerance, its tips: a block boundary off by one (a row skipped or solved twice) leaves NaN
+    or a wrong row, and a block that started from another block's torsions could land on
+    another equilibrium."""
+    from ctrplan.mechanics import _standard_batch, solve_standard_batch
+
+    monkeypatch.setattr(_standard_batch, "_FOLLOW_BLOCK_MIN_ROWS", block_min_rows)
 
     robot = table2_robot()
     rng = np.random.default_rng(23)
