@@ -263,15 +263,18 @@ def _certified(s, first, last, present, uhat, kxy, kz, margin, alpha):
     Sinv = np.zeros((n, n))
     y = np.empty(n)
     K = 0.0
+    held = -1
     for j in range(G):
         for i in range(n):
             bcur[i] = 0.0
         h = s[j + 1] - s[j] if j < G - 1 else 0.0
         if h > 0.0:
-            # K, |uhat_i| and the precurvature directions depend on the interval's data only
-            same = j > 0 and _same_interval(present, uhat, j, j - 1)
+            # K, |uhat_i| and the precurvature directions depend on the interval's data only:
+            # kept from interval ``held``, the last one they were computed for
+            same = held >= 0 and _same_interval(present, uhat, j, held)
             if not same:
                 K = 0.0
+                held = j
             for i in range(n):
                 if present[j, i]:
                     a = kz[i] / h
