@@ -7,9 +7,27 @@ from __future__ import annotations
 import contextlib
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+
+# ``python -c`` program that runs the ``ctrplan`` command line of the checkout given as its first
+# argument, and refuses to run one imported from anywhere else (a comparison would time or
+# compare one code twice)
+_CLI = ("import sys, ctrplan\n"
+        "root = sys.argv.pop(1)\n"
+        "if not ctrplan.__file__.startswith(root):\n"
+        "    raise RuntimeError(f'ctrplan imported from {ctrplan.__file__}, not from {root}')\n"
+        "from ctrplan.cli import main\n"
+        "sys.argv[0] = 'ctrplan'\n"
+        "main()\n")
+
+
+def cli_command(code, *args):
+    """Command (list of str) that runs ``ctrplan *args`` from the checkout ``code``; run it with
+    ``env=child_env(code, cache)`` and ``cwd=code``."""
+    return [sys.executable, "-c", _CLI, str(code), *map(str, args)]
 
 
 @contextlib.contextmanager

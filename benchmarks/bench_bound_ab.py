@@ -34,17 +34,12 @@ from _checkouts import ROOT, child_env, worktree  # noqa: E402
 
 def _configurations(robot, grid):
     """(alpha, beta) pairs of the grid [rad], [m]."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from paper_section_4d import grid_4x4x4, grid_8x8x8
     if grid == "4":
-        sys.path.insert(0, str(ROOT / "benchmarks"))
-        from paper_section_4d import grid_4x4x4
         _, Q = grid_4x4x4(robot)
         return [robot.configuration(q) for q in Q]
-    out = []
-    for a2 in np.radians(np.arange(0, 360, 45)):
-        for a3 in np.radians(np.arange(0, 360, 45)):
-            for e in np.linspace(0.0, 86.4e-3, 8):
-                out.append((np.array([0.0, a2, a3]), np.array([0.0, -0.017, -0.1204 + e])))
-    return out
+    return grid_8x8x8()
 
 
 def child(out, grid):

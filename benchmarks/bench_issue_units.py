@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _checkouts import ROOT, child_env, worktree  # noqa: E402
+from _checkouts import ROOT, child_env, cli_command, worktree  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt"
 ROBOT = ROOT / "model" / "ha2019-table2-nominal.toml"
@@ -56,13 +56,6 @@ ISSUE_STANDARD_X = 45.0
 TARGET_FRICTION_X = 300.0
 TARGET_STANDARD_X = 2.0
 
-_CLI = ("import sys, ctrplan\n"
-        "root = sys.argv.pop(1)\n"
-        "if not ctrplan.__file__.startswith(root):\n"
-        "    raise RuntimeError(f'ctrplan imported from {ctrplan.__file__}, not from {root}')\n"
-        "from ctrplan.cli import main\n"
-        "sys.argv[0] = 'ctrplan'\n"
-        "main()\n")
 
 _SINGLE = """
 import sys, time, numpy as np, ctrplan
@@ -94,8 +87,8 @@ def _cli_time(code, cache, configs, model, out):
     """Wall time [s] of ``ctrplan evaluate --jobs 1`` of the checkout ``code`` (run from it)."""
     for f in (out, out.with_name(out.name + ".partial.jsonl")):
         f.unlink(missing_ok=True)
-    cmd = [sys.executable, "-c", _CLI, str(code), "evaluate", "--robot", str(ROBOT), "--configs", str(configs),
-           "--model", model, "--out", str(out), "--jobs", "1", "--no-progress"]
+    cmd = cli_command(code, "evaluate", "--robot", ROBOT, "--configs", configs, "--model", model, "--out", out,
+                      "--jobs", 1, "--no-progress")
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, capture_output=True, env=child_env(code, cache), cwd=str(code))
     return time.perf_counter() - t0

@@ -37,18 +37,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _checkouts import ROOT, child_env, worktree  # noqa: E402
+from _checkouts import ROOT, child_env, cli_command, worktree  # noqa: E402
 
 ROBOT = ROOT / "model" / "ha2019-table2-nominal.toml"
 TIP_TOL_MM = 0.01   # issue 14, target 3
 
-_CLI = ("import sys, ctrplan\n"
-        "root = sys.argv.pop(1)\n"
-        "if not ctrplan.__file__.startswith(root):\n"
-        "    raise RuntimeError(f'ctrplan imported from {ctrplan.__file__}, not from {root}')\n"
-        "from ctrplan.cli import main\n"
-        "sys.argv[0] = 'ctrplan'\n"
-        "main()\n")
 
 
 def _evaluate(code, cache, configs, model, out, jobs):
@@ -59,8 +52,8 @@ def _evaluate(code, cache, configs, model, out, jobs):
     subprocess.CalledProcessError
         If the command fails (its output is printed)."""
     import pandas as pd
-    cmd = [sys.executable, "-c", _CLI, str(code), "evaluate", "--robot", str(ROBOT), "--configs", str(configs),
-           "--model", model, "--out", str(out), "--jobs", str(jobs), "--no-progress"]
+    cmd = cli_command(code, "evaluate", "--robot", ROBOT, "--configs", configs, "--model", model, "--out", out,
+                      "--jobs", jobs, "--no-progress")
     r = subprocess.run(cmd, capture_output=True, text=True, env=child_env(code, cache), cwd=str(code))
     if r.returncode:
         print(r.stdout, r.stderr)
@@ -71,21 +64,16 @@ def _evaluate(code, cache, configs, model, out, jobs):
 def _grids(tmp):
     """The 4x4x4 grid (Section IV-D) and the 8x8x8 grid of issue 14 as configuration files."""
     import pandas as pd
-    from paper_section_4d import grid_4x4x4
+    from paper_section_4d import grid_4x4x4, grid_8x8x8
 
     from ctrplan.io.robot_file import load_robot
     from ctrplan.io.tables import write_table
     robot = load_robot(ROBOT)
     _, Q = grid_4x4x4(robot)
     A4, B4 = (np.array(x) for x in zip(*(robot.configuration(q) for q in Q)))
-    A8, B8 = [], []
-    for a2 in np.radians(np.arange(0, 360, 45)):
-        for a3 in np.radians(np.arange(0, 360, 45)):
-            for e in np.linspace(0.0, 86.4e-3, 8):
-                A8.append([0.0, a2, a3])
-                B8.append([0.0, -0.017, -0.1204 + e])
+    A8, B8 = (np.array(x) for x in zip(*grid_8x8x8()))
     files = {}
-    for name, A, B in (("grid4", A4, B4), ("grid8", np.array(A8), np.array(B8))):
+    for name, A, B in (("grid4", A4, B4), ("grid8", A8, B8)):
         files[name] = tmp / f"{name}.csv"
         write_table(files[name], pd.DataFrame({**{f"alpha_{i + 1}": A[:, i] for i in range(3)},
                                                **{f"beta_{i + 1}": B[:, i] for i in range(3)}}))
@@ -97,8 +85,16 @@ def _tip_mm(frame):
 
 
 def compare_friction(old, new):
-    """Largest and 99th-percentile tip difference [mm] over solutions ok in both, and the keys
-    (row, eta...) whose status differs. Rows are matched on ``row`` and the eta columns."""
+    """Compare the friction tables of the issue's code (``old``) and this checkout (``new``),
+    rows matched on ``row`` and the eta columns. Returns the largest and 99th-percentile tip
+    difference [mm] over the solutions ok in both, their number, the keys (row, eta...) whose
+    status differs (with both statuses), and the merged rows ok in both whose tips moved by more
+    than ``TIP_TOL_MM`` (with ``moved_mm``).
+
+    Raises
+    ------
+    RuntimeError
+        If a (row, eta) is in one table only."""
     keys = ["row"] + sorted(c for c in old.columns if c.startswith("eta_"))
     m = old.merge(new, on=keys, suffixes=("_old", "_new"), how="outer", indicator=True)
     if (m["_merge"] != "both").any():

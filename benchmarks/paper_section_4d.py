@@ -42,6 +42,19 @@ def grid_4x4x4(robot):
     return names, np.stack([m.ravel() for m in mesh], axis=1)
 
 
+def grid_8x8x8():
+    """The 8x8x8 grid of issue 14 for the same robot: alpha_2 and alpha_3 in steps of 45 deg from
+    0, beta_1 = 0, beta_2 = -17 mm and beta_3 = -120.4 mm plus 8 even steps of tube 3's
+    curved-section exposure from 0 to 86.4 mm. Returns a list of 512 (alpha (3,) [rad],
+    beta (3,) [m]) pairs, beta_3 varying fastest."""
+    out = []
+    for a2 in np.radians(np.arange(0, 360, 45)):
+        for a3 in np.radians(np.arange(0, 360, 45)):
+            for e in np.linspace(0.0, 86.4e-3, 8):
+                out.append((np.array([0.0, a2, a3]), np.array([0.0, -0.017, -0.1204 + e])))
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robot", default=str(ROOT / "model" / "ha2019-table2-nominal.toml"))

@@ -27,7 +27,6 @@ from .standard import _damping, _integrate, _multistart_search, _newton, _shoot,
 __all__ = ["StandardBatch", "solve_standard_batch"]
 
 _PREDICTOR_STEP_FACTOR = PREDICTOR_STEP_FACTOR  # frozen into the compiled code
-# following rows (:func:`_follow_shoot`): coarse quasi-Newton sweeps and fine chord sweeps at most
 # With ``follow`` on threads, the rows are cut into contiguous blocks of at least this many rows,
 # up to _FOLLOW_BLOCKS_PER_THREAD per thread, handed out one at a time: a thread slowed by
 # another process then takes fewer blocks instead of holding the others at the end of the call
@@ -37,6 +36,7 @@ _PREDICTOR_STEP_FACTOR = PREDICTOR_STEP_FACTOR  # frozen into the compiled code
 # nothing measurable at 128 rows.
 _FOLLOW_BLOCK_MIN_ROWS = 128
 _FOLLOW_BLOCKS_PER_THREAD = 8
+# following rows (:func:`_follow_shoot`): coarse quasi-Newton sweeps and fine chord sweeps at most
 _FOLLOW_COARSE_SWEEPS = 8
 _FOLLOW_FINE_SWEEPS = 3
 
