@@ -238,6 +238,53 @@ def test_constraint_generation_equals_the_full_complementarity_solve(eta, q):
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
+def test_newton_residual_is_min_on_active_contacts_and_stops_on_fischer_burmeister(seed):
+    """The complementarity residual of the Newton method (``_contact_kernels._residual``),
+    written out here from its definition: with a = c lambda, b = kappa c (c / |d| - 1), the
+    Fischer-Burmeister function FB(a, b) = a + b - sqrt(a^2 + b^2) on every contact of the
+    working set (``natural`` False), or min(a, b) on those with lambda > 0 (``natural`` True),
+    with the matching partial derivatives; phi = 0 outside the working set. The stopping
+    measure max |FB| / (kappa c) is the same in both modes: the natural residual can be half
+    of FB where a is small and b < 0, and a stopping test on it would accept twice the
+    violation. Seeded contacts: separated, violated, loaded and degenerate (a = b)."""
+    from ctrplan.mechanics import _contact_kernels as ck
+
+    rng = np.random.default_rng(seed)
+    M, kappa = 40, 3.0e3
+    c = rng.uniform(0.05e-3, 0.2e-3, M)
+    lam = np.where(rng.uniform(size=M) < 0.6, rng.uniform(0.0, 5.0, M), 0.0)
+    ratio = rng.uniform(0.5, 1.5, M)                     # |d| / c: violated where > 1
+    angle = rng.uniform(0.0, 2 * np.pi, M)
+    d = (ratio * c)[:, None] * np.column_stack([np.cos(angle), np.sin(angle)])
+    # two degenerate contacts: lambda chosen so that a = b
+    for k in (0, 1):
+        ratio[k] = 0.9
+        d[k] = ratio[k] * c[k] * np.array([1.0, 0.0])
+        lam[k] = kappa * (1 / ratio[k] - 1)
+    work = rng.uniform(size=M) < 0.8
+    work[:2] = True
+    a = c * lam
+    b = kappa * c * (c / np.linalg.norm(d, axis=1) - 1)
+    r = np.hypot(a, b)
+    fb = a + b - r
+    err_ref = np.max(np.abs(fb[work]) / (kappa * c[work]))
+    for natural in (False, True):
+        phi, da, db = np.empty(M), np.empty(M), np.empty(M)
+        merit, err = ck._residual(lam, d, c, kappa, phi, da, db, work, natural)
+        nat = natural & (lam > 0)
+        phi_ref = np.where(nat, np.minimum(a, b), fb)
+        da_ref = np.where(nat, (a <= b).astype(float), 1 - a / r)
+        db_ref = np.where(nat, (a > b).astype(float), 1 - b / r)
+        phi_ref[~work], da_ref[~work], db_ref[~work] = 0.0, 1.0, 0.0
+        np.testing.assert_allclose(phi, phi_ref, rtol=1e-12, atol=1e-12 * np.abs(a).max())
+        np.testing.assert_allclose(da, da_ref, atol=1e-12)
+        np.testing.assert_allclose(db, db_ref, atol=1e-12)
+        assert merit == pytest.approx(np.sum(phi_ref ** 2), rel=1e-12)
+        assert err == pytest.approx(err_ref, rel=1e-12)
+    assert np.any(work & (lam > 0) & (np.abs(np.minimum(a, b)) < 0.6 * np.abs(fb)))   # case present
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
 def test_anderson_step_equals_the_least_squares_mixing(seed):
     """The compiled Anderson step of the outer loop (_contact_fast.Anderson) against its
     definition with a dense least-squares solve: gamma = argmin |f - dF gamma| over the last

@@ -51,6 +51,9 @@ from ._lapack import PIVOT_DTYPE, lu_factor, lu_solve, lu_solve_matrix
 
 _SEPARATION_ROUNDS = 3
 _NONMONOTONE = 5
+# Newton iterations with the natural residual (_residual) without a new smallest merit before
+# the solve starts again with Fischer-Burmeister (_complementarity_from)
+_NATURAL_STALL = 10
 # Working-set rounds that will be followed by another are solved only to this scaled residual
 # (solve_contacts); the last round is solved to the caller's tolerance.
 _ROUND_TOL = 1e-3
@@ -701,10 +704,23 @@ def _offset_norm(d, c, k):
 
 
 @njit(cache=True)
-def _fb_residual(lam, d, c, kappa, phi, da, db, work):
-    """Fischer-Burmeister residual FB(c lam, kappa c (c / |d| - 1)) and its partial
-    derivatives over the working set ``work`` (contacts outside it count as separated: phi = 0,
-    no Newton row); returns the merit |phi|^2.
+def _residual(lam, d, c, kappa, phi, da, db, work, natural):
+    """Complementarity residual Phi_k(c lam, kappa c (c / |d| - 1)) and its partial derivatives
+    da, db over the working set ``work`` (contacts outside it count as separated: phi = 0, no
+    Newton row); returns the merit |phi|^2 and the stopping measure
+    max_k |FB_k| / (kappa c_k), always of the Fischer-Burmeister function.
+
+    Phi_k is the Fischer-Burmeister function FB(a, b) = a + b - sqrt(a^2 + b^2) for a contact
+    at lambda = 0 and, when ``natural`` is True, the natural residual min(a, b) for a contact
+    with lambda > 0. Both vanish exactly where a >= 0, b >= 0, a b = 0, so the solution is the
+    same; they differ in the path. Near a degenerate contact (lambda and gap both near 0) FB
+    blends the two conditions and Newton converges linearly; min(a, b) picks one (release the
+    contact, or close its gap), which cut the Newton iterations of a bound by a third (issue
+    14, fifteenth session). At lambda = 0 FB keeps its diagonal term c da in the Newton row of
+    a violated contact; min(a, b) has none there, and for neighbouring violated contacts,
+    nearly collinear, the Newton matrix became singular (steps 400 times lambda). |FB| lies
+    between 2 - sqrt(2) and 2 + sqrt(2) times |min| (about 2 |min| where a is small and
+    b < 0), so the stopping measure stays that of FB, as before.
 
     The gap is measured as c / |d| - 1 rather than (c^2 - |d|^2) / (2 c^2): the two agree to
     first order at |d| = c (same stopping test), but |d| falls roughly like 1 / lambda as a
@@ -712,6 +728,7 @@ def _fb_residual(lam, d, c, kappa, phi, da, db, work):
     large violation in a few steps instead of growing 1 + w lambda by a factor 1.5 per step
     (measured: 5 instead of 23 iterations on the first working set of a hard start)."""
     merit = 0.0
+    err = 0.0
     for k in range(lam.shape[0]):
         if not work[k]:
             phi[k] = 0.0
@@ -721,15 +738,29 @@ def _fb_residual(lam, d, c, kappa, phi, da, db, work):
         a = c[k] * lam[k]
         b = kappa * c[k] * (c[k] / _offset_norm(d, c, k) - 1.0)
         r = np.sqrt(a * a + b * b)
-        phi[k] = a + b - r
-        if r < 1e-300:
-            da[k] = 1.0 - 1.0 / np.sqrt(2.0)
-            db[k] = 1.0 - 1.0 / np.sqrt(2.0)
+        fb = a + b - r
+        e = abs(fb) / (kappa * c[k])
+        if e > err:
+            err = e
+        if natural and lam[k] > 0.0:
+            if a <= b:
+                phi[k] = a
+                da[k] = 1.0
+                db[k] = 0.0
+            else:
+                phi[k] = b
+                da[k] = 0.0
+                db[k] = 1.0
         else:
-            da[k] = 1.0 - a / r
-            db[k] = 1.0 - b / r
+            phi[k] = fb
+            if r < 1e-300:
+                da[k] = 1.0 - 1.0 / np.sqrt(2.0)
+                db[k] = 1.0 - 1.0 / np.sqrt(2.0)
+            else:
+                da[k] = 1.0 - a / r
+                db[k] = 1.0 - b / r
         merit += phi[k] * phi[k]
-    return merit
+    return merit, err
 
 
 @njit(cache=True, inline="always")
@@ -743,10 +774,10 @@ def _c_entry(Wt, Zt, row, l, e0, e1, friction):
 
 
 @njit(cache=True)
-def _trial(lam, Rs, step, t, dfree, geometry, law, cw, work, rows, trial):
+def _trial(lam, Rs, step, t, dfree, geometry, law, cw, work, rows, trial, natural):
     """Line-search trial point: ``trial.lam`` = max(lam + t step, 0) on the rows ``Rs`` (lam
-    elsewhere), its displacements ``trial.d`` and FB residual (``trial.phi``, ``trial.da``,
-    ``trial.db``) in place.
+    elsewhere), its displacements ``trial.d`` and complementarity residual (``trial.phi``,
+    ``trial.da``, ``trial.db``; :func:`_residual` with ``natural``) in place.
 
     Parameters
     ----------
@@ -773,7 +804,7 @@ def _trial(lam, Rs, step, t, dfree, geometry, law, cw, work, rows, trial):
 
     Returns
     -------
-    (displacements ok, LU factors, pivots, active set, merit).
+    (displacements ok, LU factors, pivots, active set, merit, FB stopping measure).
     """
     lam_t, d_t, phi_t, da_t, db_t = trial.lam, trial.d, trial.phi, trial.da, trial.db
     c, Mblk, kappa, friction = law.c, law.Mblk, law.kappa, law.friction
@@ -786,18 +817,8 @@ def _trial(lam, Rs, step, t, dfree, geometry, law, cw, work, rows, trial):
     act_n = _active_of(lam_t)
     fill_columns(act_n, cw, geometry, law)
     fok_t, LU_t, piv_t = _displacements(lam_t, act_n, dfree, Mblk, Wt, Zt, friction, d_t, rows)
-    m_t = _fb_residual(lam_t, d_t, c, kappa, phi_t, da_t, db_t, work)
-    return fok_t, LU_t, piv_t, act_n, m_t
-
-
-@njit(cache=True)
-def _max_scaled(phi, c, kappa):
-    err = 0.0
-    for k in range(phi.shape[0]):
-        v = abs(phi[k]) / (kappa * c[k])
-        if v > err:
-            err = v
-    return err
+    m_t, e_t = _residual(lam_t, d_t, c, kappa, phi_t, da_t, db_t, work, natural)
+    return fok_t, LU_t, piv_t, act_n, m_t, e_t
 
 
 @njit(cache=True)
@@ -911,9 +932,11 @@ def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
 
 @njit(cache=True)
 def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
-    """Semismooth Fischer-Burmeister Newton on the contact complementarity conditions of one
-    linearization (same iteration as the reference ``_Complementarity.solve``), over the
-    contacts of the working set ``work`` (bool, shape (M,); the others are held at lambda = 0).
+    """Semismooth Newton on the contact complementarity conditions of one linearization, over
+    the contacts of the working set ``work`` (bool, shape (M,); the others are held at
+    lambda = 0). The reference ``_Complementarity.solve`` uses the Fischer-Burmeister function
+    on every contact; here the active contacts use the natural residual min(a, b) until a line
+    search fails (:func:`_residual`). Same conditions, same stopping test, fewer iterations.
 
     The Newton system is reduced exactly to the contacts whose row is not trivial (active,
     violated, or with a non-zero residual): a contact with lambda = 0 and a positive gap has
@@ -960,7 +983,32 @@ def _complementarity_from(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0,
     lam0's active set (``lu_ok0`` False: S was singular or not finite, as
     :func:`_displacements` reports it). Returns (ContactResult, LU, piv, lu_ok) with the factors
     at the returned multipliers, which the next round of :func:`solve_contacts` starts from.
-    The displacements and iterates are those of :func:`complementarity` to the bit."""
+    The displacements and iterates are those of :func:`complementarity` to the bit.
+
+    Newton runs first with the natural residual on the active contacts (:func:`_residual`). If
+    that gives up (a line search without descent, or ``_NATURAL_STALL`` iterations without a new
+    smallest merit), it starts again from lam0 with the Fischer-Burmeister function on every
+    contact, with ``maxit`` iterations of its own; the iterations of both are counted. (Going on
+    from where the natural residual gave up instead failed on the all-contact solves of
+    tests/test_mechanics_fast_vs_reference.py: its iterates had wandered to a merit of the same
+    size but 10 times the largest residual, where FB's line search stalled.)"""
+    res, LU, piv, lu_ok, gave_up = _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0,
+                                           lu_ok0, True)
+    if not gave_up:
+        return res, LU, piv, lu_ok
+    used = res.iterations
+    res, LU, piv, lu_ok, _ = _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0,
+                                     False)
+    return ContactResult(res.lam, res.d, res.ok, used + res.iterations, res.err), LU, piv, lu_ok
+
+
+@njit(cache=True)
+def _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0, natural):
+    """The Newton iteration of :func:`_complementarity_from`, with the natural residual on the
+    active contacts (``natural`` True) or Fischer-Burmeister on all. Returns (ContactResult,
+    LU, piv, lu_ok, gave_up); ``gave_up`` is True only with ``natural``, when a line search
+    found no descent or the merit made no new minimum in ``_NATURAL_STALL`` iterations, and the
+    result is then to be discarded."""
     c, Mblk, kappa, friction = law.c, law.Mblk, law.kappa, law.friction
     Wt, Zt = cw.Wt, cw.Zt
     M = c.shape[0]
@@ -983,14 +1031,17 @@ def _complementarity_from(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0,
     LU, piv, lu_ok = LU0, piv0, lu_ok0
     if lu_ok and act.shape[0] > 0:
         _active_correction(lam, act, Mblk, Wt, d, rows, LU, piv)
-    merit = _fb_residual(lam, d, c, kappa, phi, da, db, work)
+    merit, err = _residual(lam, d, c, kappa, phi, da, db, work, natural)
     hist = np.zeros(_NONMONOTONE)
     hist[0] = merit
+    best = merit
+    it_best = 0
     for it in range(1, maxit + 1):
-        err = _max_scaled(phi, c, kappa)
         if err < tol:
             _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
-            return ContactResult(lam, d, True, it - 1, err), LU, piv, lu_ok
+            return ContactResult(lam, d, True, it - 1, err), LU, piv, lu_ok, False
+        if natural and it - it_best > _NATURAL_STALL:
+            return ContactResult(lam, d, False, it - 1, err), LU, piv, lu_ok, True
         # reduced set: rows with db != 0, lam > 0 or phi != 0
         nR = 0
         for k in range(M):
@@ -1090,7 +1141,7 @@ def _complementarity_from(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0,
             if not np.all(np.isfinite(Jc)):
                 # a non-finite Newton matrix (LAPACK would print an error): no step possible
                 _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
-                return ContactResult(lam, d, False, it, _max_scaled(phi, c, kappa)), LU, piv, lu_ok
+                return ContactResult(lam, d, False, it, err), LU, piv, lu_ok, natural
             rr = np.empty(nR)
             for ii in range(nR):
                 rr[ii] = -phi[Rs[ii]]
@@ -1131,36 +1182,46 @@ def _complementarity_from(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0,
                 break
             lu_solve(J2, pJ, rhs2)
             direction = rhs2
-            fok_t, LU_t, piv_t, act_n, m_t = _trial(lam, Rs, direction, 1.0, dfree, geometry, law, cw, work,
-                                                    rows, trial)
+            fok_t, LU_t, piv_t, act_n, m_t, e_t = _trial(lam, Rs, direction, 1.0, dfree, geometry, law,
+                                                         cw, work, rows, trial, natural)
             if fok_t and m_t <= (1.0 - 1e-4) * ref_merit:
                 accepted = True
                 break
         t = 1.0
         for _ in range(0 if accepted else 40):
-            fok_t, LU_t, piv_t, act_n, m_t = _trial(lam, Rs, stepR, t, dfree, geometry, law, cw, work, rows,
-                                                    trial)
+            fok_t, LU_t, piv_t, act_n, m_t, e_t = _trial(lam, Rs, stepR, t, dfree, geometry, law, cw,
+                                                         work, rows, trial, natural)
             if fok_t and m_t <= (1.0 - 1e-4 * t) * ref_merit:
                 accepted = True
                 break
             t *= 0.5
         if not accepted:
+            if natural:
+                # no descent for the natural residual's merit (a kink of min(a, b) or a nearly
+                # singular set of gap rows; 8x8x8 grid of issue 14: 10 solves failed without
+                # the fallback)
+                return ContactResult(lam, d, False, it, err), LU, piv, lu_ok, True
             _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
-            return ContactResult(lam, d, False, it, _max_scaled(phi, c, kappa)), LU, piv, lu_ok
+            return ContactResult(lam, d, False, it, err), LU, piv, lu_ok, False
         lam[:] = lam_t
         d[:, :] = d_t
         phi[:] = phi_t
         da[:] = da_t
         db[:] = db_t
         merit = m_t
+        err = e_t
+        if merit < best:
+            best = merit
+            it_best = it
         hist[it % _NONMONOTONE] = merit
         act = act_n
         LU = LU_t
         piv = piv_t
         lu_ok = True   # an accepted trial's factorization succeeded
-    err = _max_scaled(phi, c, kappa)
+    if natural and err >= tol:
+        return ContactResult(lam, d, False, maxit, err), LU, piv, lu_ok, True
     _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
-    return ContactResult(lam, d, err < tol, maxit, err), LU, piv, lu_ok
+    return ContactResult(lam, d, err < tol, maxit, err), LU, piv, lu_ok, False
 
 
 @njit(cache=True)

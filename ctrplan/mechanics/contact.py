@@ -22,8 +22,9 @@ at an active contact, Eq. (33)), and, for friction (Eqs. (37)-(43)):
   torques about each tube's axis of Eq. (41) (see the errata note on Eq. (42)).
 
 Instead of the paper's fixed-step projected gradient ascent on the dual (Section II-E), the
-multipliers are found by a semismooth (Fischer-Burmeister) Newton method on the complementarity
-conditions lambda_k >= 0, c_k^2 - |d_k|^2 >= 0, lambda_k (c_k^2 - |d_k|^2) = 0, with the
+multipliers are found by a semismooth Newton method on the complementarity conditions
+lambda_k >= 0, c_k^2 - |d_k|^2 >= 0, lambda_k (c_k^2 - |d_k|^2) = 0 (natural residual min(a, b)
+on loaded contacts, Fischer-Burmeister on the others and as the fallback), with the
 Woodbury-type reduction of Appendix A (Eqs. (50)-(56)) restricted to active contacts: all that
 is needed is the contact compliance W = A K^-1 A^T. Without friction this is exactly the
 optimum of the convex dual (26); with friction, where Q(lambda) of Eq. (45) is not symmetric,
