@@ -887,7 +887,7 @@ def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
     tol : float
         Stopping tolerance on max_k |Phi_k| / (kappa c_k) [-].
     maxit : int
-        Newton iterations per round.
+        Newton iterations per round (and per phase of :func:`_complementarity_from`).
 
     Returns
     -------
@@ -935,8 +935,9 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
     """Semismooth Newton on the contact complementarity conditions of one linearization, over
     the contacts of the working set ``work`` (bool, shape (M,); the others are held at
     lambda = 0). The reference ``_Complementarity.solve`` uses the Fischer-Burmeister function
-    on every contact; here the active contacts use the natural residual min(a, b) until a line
-    search fails (:func:`_residual`). Same conditions, same stopping test, fewer iterations.
+    on every contact; here the active contacts use the natural residual min(a, b) unless that
+    gives up (:func:`_residual`, :func:`_complementarity_from`). Same conditions, same stopping
+    test, fewer iterations.
 
     The Newton system is reduced exactly to the contacts whose row is not trivial (active,
     violated, or with a non-zero residual): a contact with lambda = 0 and a positive gap has
@@ -958,7 +959,7 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
     tol : float
         Stopping tolerance on max_k |Phi_k| / (kappa c_k) [-].
     maxit : int
-        Newton iterations at most.
+        Newton iterations at most, for each of the two phases of :func:`_complementarity_from`.
     work : ndarray of bool, shape (M,)
         Working set.
 
@@ -1198,8 +1199,8 @@ def _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0,
         if not accepted:
             if natural:
                 # no descent for the natural residual's merit (a kink of min(a, b) or a nearly
-                # singular set of gap rows; 8x8x8 grid of issue 14: 10 solves failed without
-                # the fallback)
+                # singular set of gap rows; 8x8x8 grid of issue 14: 10 more solves failed
+                # without a fallback)
                 return ContactResult(lam, d, False, it, err), LU, piv, lu_ok, True
             _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
             return ContactResult(lam, d, False, it, err), LU, piv, lu_ok, False

@@ -57,7 +57,8 @@ class ModelSettings:
         Tolerance of the contact complementarity solve, relative to the clearance [-].
     max_newton_iterations : int
         Semismooth-Newton iterations of one contact solve on one working set (the solve grows
-        its working set of contacts in rounds; each round has this budget).
+        its working set of contacts in rounds; each round has this budget, and again if its
+        natural-residual phase gives up and it starts over with Fischer-Burmeister).
 
     Raises
     ------
