@@ -43,7 +43,6 @@ ROBOT = ROOT / "model" / "ha2019-table2-nominal.toml"
 TIP_TOL_MM = 0.01   # issue 14, target 3
 
 
-
 def _evaluate(code, cache, configs, model, out, jobs):
     """Run ``ctrplan evaluate`` of the checkout ``code``; returns its output table.
 
@@ -80,8 +79,9 @@ def _grids(tmp):
     return files
 
 
-def _tip_mm(frame):
-    return frame[["tip_x", "tip_y", "tip_z"]].to_numpy(float) * 1e3
+def _tip_mm(frame, suffix=""):
+    """Tip positions [mm], shape (rows, 3), of an output table (columns ``tip_x`` + ``suffix`` ...)."""
+    return frame[[f"tip_{a}{suffix}" for a in "xyz"]].to_numpy(float) * 1e3
 
 
 def compare_friction(old, new):
@@ -100,8 +100,7 @@ def compare_friction(old, new):
     if (m["_merge"] != "both").any():
         raise RuntimeError(f"friction rows of one code only: {m.loc[m['_merge'] != 'both', keys].to_dict('records')}")
     both_ok = (m["status_old"] == "ok") & (m["status_new"] == "ok")
-    d = np.linalg.norm(m.loc[both_ok, ["tip_x_old", "tip_y_old", "tip_z_old"]].to_numpy(float)
-                       - m.loc[both_ok, ["tip_x_new", "tip_y_new", "tip_z_new"]].to_numpy(float), axis=1) * 1e3
+    d = np.linalg.norm(_tip_mm(m.loc[both_ok], "_old") - _tip_mm(m.loc[both_ok], "_new"), axis=1)
     differ = m.loc[m["status_old"] != m["status_new"], keys + ["status_old", "status_new"]]
     moved = m.loc[both_ok].assign(moved_mm=d)
     moved = moved.loc[moved["moved_mm"] > TIP_TOL_MM]
@@ -118,16 +117,15 @@ def against_tight(moved):
     robot = load_robot(ROBOT)
     tight = ModelSettings(outer_tol=1e-9, complementarity_tol=1e-9, max_outer_iterations=2000)
     out = []
-    for _, r in moved.iterrows():
+    for i, r in moved.iterrows():
         alpha = r[[f"alpha_{i}_old" for i in (1, 2, 3)]].to_numpy(float)
         beta = r[[f"beta_{i}_old" for i in (1, 2, 3)]].to_numpy(float)
         eta = r[sorted(c for c in moved.columns if c.startswith("eta_"))].to_numpy(int)
         row = evaluate_configuration(robot, alpha, beta, "friction", tight, eta)[0]
-        t = np.array([row["tip_x"], row["tip_y"], row["tip_z"]])
-        old = r[["tip_x_old", "tip_y_old", "tip_z_old"]].to_numpy(float)
-        new = r[["tip_x_new", "tip_y_new", "tip_z_new"]].to_numpy(float)
+        t = np.array([row["tip_x"], row["tip_y"], row["tip_z"]]) * 1e3
+        old, new = _tip_mm(moved.loc[[i]], "_old")[0], _tip_mm(moved.loc[[i]], "_new")[0]
         out.append((int(r["row"]), tuple(int(e) for e in eta), float(r["moved_mm"]), row["status"],
-                    float(np.linalg.norm(old - t)) * 1e3, float(np.linalg.norm(new - t)) * 1e3))
+                    float(np.linalg.norm(old - t)), float(np.linalg.norm(new - t))))
     return out
 
 
