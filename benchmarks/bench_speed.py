@@ -20,8 +20,9 @@
    2 threads). The rows are read ``--tile`` (8) times over, and the runs with one and with the
    default jobs alternate: read once, the rows are about 0.1 s of work behind 1.2 s of process
    start; one pass, the runs of each jobs setting back to back, gave 1.41-1.51x in two runs,
-   the rows 8 times over, alternated, 1.63x and 1.65x (2026-11-23; the two-thread runs still
-   scatter on this shared machine),
+   the rows 8 times over, alternated, 1.6-2.0x in the runs since (the two-thread runs scatter
+   on this shared machine, 1.73-3.00x run by run in one benchmark; dated figures in
+   docs/mechanics.md Sec. 10),
    and the in-process bound on the 8x8x8 grid of issue 14 (slowest over median).
 
 Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py [--ref-every 4] [--conv-configs 8]

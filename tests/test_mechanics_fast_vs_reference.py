@@ -175,6 +175,23 @@ def test_compliance_kernels_equal_dense_products(eta):
     np.testing.assert_allclose(prob._diagW[:, [0, 1], [0, 1]].ravel(), np.diag(W_ref), rtol=1e-10)
     if eta:
         assert np.abs(Z - Z_ref).max() < 1e-10 * np.abs(Z_ref).max()
+    # Filled as the solver fills them: a few columns on part of the rows, then the rows extended
+    # and the other columns filled. The block of a row whose own column is already computed is
+    # copied from it (W symmetric), so each off-diagonal block comes from one of the two block
+    # formulas depending on the order: ascending, descending and a random order check both
+    # formulas on every block, and the copy's transposition.
+    for order in (np.arange(M), np.arange(M)[::-1], rng.permutation(M)):
+        cw = ck.ContactWork(np.full((2 * M, 2 * M), np.nan), np.full((M, 2 * M), np.nan),
+                            np.zeros(M, dtype=bool), np.zeros(M, dtype=bool))
+        first_rows = np.zeros(M, dtype=bool)
+        first_rows[order[:M // 2]] = True
+        ck.extend_rows(first_rows, cw, geometry, law)
+        ck.fill_columns(order[:M // 4], cw, geometry, law)
+        ck.extend_rows(np.ones(M, dtype=bool), cw, geometry, law)
+        ck.fill_columns(order, cw, geometry, law)
+        assert np.abs(cw.Wt.T - W_ref).max() < 1e-10 * scale   # NaN (an entry never set) fails
+        if eta:
+            assert np.abs(cw.Zt.T - Z_ref).max() < 1e-10 * np.abs(Z_ref).max()
     np.testing.assert_allclose(prob._dfree.ravel(), dfree_ref, atol=1e-12 * np.abs(dfree_ref).max() + 1e-15)
     lam = rng.uniform(0.0, 1.0, M) * (rng.uniform(size=M) < 0.4)
     d = rng.normal(scale=1e-5, size=(M, 2))

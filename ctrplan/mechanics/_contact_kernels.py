@@ -402,21 +402,35 @@ def contact_projections(B, p, jo, ji, H1, H2, Pc):
 
 
 @njit(cache=True, inline="always")
-def _fill_column(e, rows, cw, geometry, law, PB, U, Vv, w, g1):
+def _fill_column(e, rows, cw, geometry, law, PB, U, Vv, w, g1, mirror):
     """Block column e of W and column e of Z (friction) on the contacts ``rows`` (int64 array),
     stored transposed in ``cw.Wt`` and ``cw.Zt``; ``PB``, ``U``, ``Vv`` (3, 2), ``w``, ``g1`` (3,)
-    are scratch."""
+    are scratch.
+
+    ``mirror`` True: W is symmetric (W = A K^-1 A^T), so the block of a row c whose own column
+    is already computed (``cw.have[c]``, c != e) on the row e (``cw.rows[e]``) is copied,
+    transposed, from that column instead of computed (half the blocks of a working set filled
+    column by column). The caller must have set ``cw.have[e]`` and no other flag of a column
+    not yet computed. Z has no such symmetry and is always computed."""
     Wt, Zt = cw.Wt, cw.Zt
     pair, jo, ji, B, Pc = geometry.pair, geometry.jo, geometry.ji, geometry.B, geometry.Pc
     R, p, H1, H2, F3 = geometry.R, geometry.p, geometry.H1, geometry.H2, geometry.F3
     tq_out, tq_in, friction = law.tq_out, law.tq_in, law.friction
+    have = cw.have
+    mirror = mirror and cw.rows[e]
     nr = rows.shape[0]
     for idx in range(nr):
         c = rows[idx]
-        Wt[2 * e, 2 * c] = 0.0
-        Wt[2 * e, 2 * c + 1] = 0.0
-        Wt[2 * e + 1, 2 * c] = 0.0
-        Wt[2 * e + 1, 2 * c + 1] = 0.0
+        if mirror and c != e and have[c]:
+            Wt[2 * e, 2 * c] = Wt[2 * c, 2 * e]
+            Wt[2 * e, 2 * c + 1] = Wt[2 * c + 1, 2 * e]
+            Wt[2 * e + 1, 2 * c] = Wt[2 * c, 2 * e + 1]
+            Wt[2 * e + 1, 2 * c + 1] = Wt[2 * c + 1, 2 * e + 1]
+        else:
+            Wt[2 * e, 2 * c] = 0.0
+            Wt[2 * e, 2 * c + 1] = 0.0
+            Wt[2 * e + 1, 2 * c] = 0.0
+            Wt[2 * e + 1, 2 * c + 1] = 0.0
         if friction:
             Zt[e, 2 * c] = 0.0
             Zt[e, 2 * c + 1] = 0.0
@@ -464,9 +478,12 @@ def _fill_column(e, rows, cw, geometry, law, PB, U, Vv, w, g1):
             else:
                 continue
             f = sc * se
+            nq = 0 if mirror and c != e and have[c] else 2   # 0: the W block was copied
+            if nq == 0 and not with_torque:
+                continue
             if jc <= je:
                 # B_c^T (H1_jc + H2_jc [p_e]x) B_e = Pc0 B_e + Pc1 PB
-                for q1 in range(2):
+                for q1 in range(nq):
                     for q2 in range(2):
                         v = 0.0
                         for a in range(3):
@@ -480,7 +497,7 @@ def _fill_column(e, rows, cw, geometry, law, PB, U, Vv, w, g1):
                                                         + Pc[c, sd, 1, q1, 2] * R[je, 2, 2])
             else:
                 # B_c^T (H1_je^T - [p_c]x H2_je^T) B_e = B_c^T U - Pc2 Vv
-                for q1 in range(2):
+                for q1 in range(nq):
                     for q2 in range(2):
                         v = 0.0
                         for a in range(3):
@@ -534,7 +551,7 @@ def fill_columns(cols, work, geometry, law):
         if work.have[e]:
             continue
         work.have[e] = True
-        _fill_column(e, rows, work, geometry, law, PB, U, Vv, w, g1)
+        _fill_column(e, rows, work, geometry, law, PB, U, Vv, w, g1, True)
 
 
 @njit(cache=True)
@@ -564,7 +581,7 @@ def extend_rows(mask, work, geometry, law):
     g1 = np.empty(3)
     for e in range(M):
         if work.have[e]:
-            _fill_column(e, new, work, geometry, law, PB, U, Vv, w, g1)
+            _fill_column(e, new, work, geometry, law, PB, U, Vv, w, g1, False)
 
 
 @njit(cache=True)
@@ -916,8 +933,11 @@ def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
         # a round starts from the multipliers the last one ended with: the factorization of
         # S = I + W_aa L_a is the same (it does not depend on the working set), so it is handed
         # over instead of computed again (2.8 rounds per linearization on the 4x4x4 grid)
+        # a round whose start already meets round_tol goes on to tol at once: the working set
+        # was just grown from these displacements, so the check after a round of no iterations
+        # would add nothing, and the round that finishes to tol would start from the same point
         res, LU, piv, fok = _complementarity_from(lam, dfree, geometry, law, cw, round_tol, maxit, work,
-                                                  LU, piv, fok)
+                                                  LU, piv, fok, tol)
         lam, d, ok, its, err = res
         total += its
         if not ok:
@@ -975,16 +995,18 @@ def complementarity(lam0, dfree, geometry, law, cw, tol, maxit, work):
     fill_columns(act, cw, geometry, law)
     d = np.empty((lam.shape[0], 2))
     lu_ok, LU, piv = _displacements(lam, act, dfree, law.Mblk, cw.Wt, cw.Zt, law.friction, d, act)
-    return _complementarity_from(lam, dfree, geometry, law, cw, tol, maxit, work, LU, piv, lu_ok)[0]
+    return _complementarity_from(lam, dfree, geometry, law, cw, tol, maxit, work, LU, piv, lu_ok, tol)[0]
 
 
 @njit(cache=True)
-def _complementarity_from(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0):
+def _complementarity_from(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0, tight):
     """:func:`complementarity` given the LU factors ``LU0``, ``piv0`` of S = I + W_aa L_a at
     lam0's active set (``lu_ok0`` False: S was singular or not finite, as
-    :func:`_displacements` reports it). Returns (ContactResult, LU, piv, lu_ok) with the factors
-    at the returned multipliers, which the next round of :func:`solve_contacts` starts from.
-    The displacements and iterates are those of :func:`complementarity` to the bit.
+    :func:`_displacements` reports it), and a second tolerance ``tight`` <= ``tol``: if lam0
+    already meets ``tol``, the solve goes on to ``tight`` (for :func:`solve_contacts`' rounds).
+    Returns (ContactResult, LU, piv, lu_ok) with the factors at the returned multipliers, which
+    the next round of :func:`solve_contacts` starts from. With ``tight`` = ``tol`` the
+    displacements and iterates are those of :func:`complementarity` to the bit.
 
     Newton runs first with the natural residual on the active contacts (:func:`_residual`). If
     that gives up (a line search without descent, or ``_NATURAL_STALL`` iterations without a new
@@ -994,19 +1016,20 @@ def _complementarity_from(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0,
     tests/test_mechanics_fast_vs_reference.py: its iterates had wandered to a merit of the same
     size but 10 times the largest residual, where FB's line search stalled.)"""
     res, LU, piv, lu_ok, gave_up = _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0,
-                                           lu_ok0, True)
+                                           lu_ok0, True, tight)
     if not gave_up:
         return res, LU, piv, lu_ok
     used = res.iterations
     res, LU, piv, lu_ok, _ = _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0,
-                                     False)
+                                     False, tight)
     return ContactResult(res.lam, res.d, res.ok, used + res.iterations, res.err), LU, piv, lu_ok
 
 
 @njit(cache=True)
-def _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0, natural):
+def _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0, natural, tight):
     """The Newton iteration of :func:`_complementarity_from`, with the natural residual on the
-    active contacts (``natural`` True) or Fischer-Burmeister on all. Returns (ContactResult,
+    active contacts (``natural`` True) or Fischer-Burmeister on all, to ``tol``, or to ``tight``
+    if lam0 already meets ``tol``. Returns (ContactResult,
     LU, piv, lu_ok, gave_up); ``gave_up`` is True only with ``natural``, when a line search
     found no descent or the merit made no new minimum in ``_NATURAL_STALL`` iterations, and the
     result is then to be discarded."""
@@ -1038,6 +1061,8 @@ def _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0,
     best = merit
     it_best = 0
     for it in range(1, maxit + 1):
+        if it == 1 and err < tol:
+            tol = tight
         if err < tol:
             _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
             return ContactResult(lam, d, True, it - 1, err), LU, piv, lu_ok, False
@@ -1140,8 +1165,10 @@ def _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0,
             stepR = rhs
         else:
             if not np.all(np.isfinite(Jc)):
-                # a non-finite Newton matrix (LAPACK would print an error): no step possible
-                _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
+                # a non-finite Newton matrix (LAPACK would print an error): no step possible;
+                # the natural phase's result is discarded, so its displacements are not completed
+                if not natural:
+                    _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)
                 return ContactResult(lam, d, False, it, err), LU, piv, lu_ok, natural
             rr = np.empty(nR)
             for ii in range(nR):
