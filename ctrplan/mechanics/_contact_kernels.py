@@ -29,7 +29,8 @@ for the contacts the semismooth Newton method actually touches (active or violat
 only on the rows of its working set (the displacements of the other contacts, needed only to
 check them for violation, come from the generalized forces, :func:`_complete_displacements`).
 The columns are stored as rows (arrays ``Wt`` = W^T and ``Zt`` = Z^T, C order), so that
-computing a column and reading it back are both contiguous.
+computing a column and reading it back are both contiguous. W is symmetric: a block whose
+transposed block is already computed is copied (:func:`_fill_column`).
 
 **Dense solves by LAPACK.** The active block of Appendix A and the Newton matrix are factored
 by LAPACK's ``dgetrf`` (``_lapack``), 2.1-2.5x faster than a compiled triple loop at these sizes.
@@ -887,7 +888,9 @@ def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
 
     A round stops at the scaled residual ``_ROUND_TOL`` (or ``tol`` if larger): its multipliers
     only decide which contacts are added. When no contact is added, the same set is solved on to
-    ``tol``, and the set is checked again. Only the working set's rows of W and Z are computed
+    ``tol``, and the set is checked again. A round whose starting point already meets the loose
+    tolerance is solved on to ``tol`` at once (it would end without an iteration and add no
+    contact: same iterates, without the empty round's set-up and displacement completion). Only the working set's rows of W and Z are computed
     (``cw.rows``, :func:`extend_rows`); the displacements of the other contacts, needed for the
     violation check, come from :func:`_complete_displacements`.
 
