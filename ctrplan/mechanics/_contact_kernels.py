@@ -890,9 +890,10 @@ def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
     only decide which contacts are added. When no contact is added, the same set is solved on to
     ``tol``, and the set is checked again. A round whose starting point already meets the loose
     tolerance is solved on to ``tol`` at once (it would end without an iteration and add no
-    contact: same iterates, without the empty round's set-up and displacement completion). Only the working set's rows of W and Z are computed
-    (``cw.rows``, :func:`extend_rows`); the displacements of the other contacts, needed for the
-    violation check, come from :func:`_complete_displacements`.
+    contact: same iterates, without the empty round's set-up and displacement completion). Only
+    the working set's rows of W and Z are computed (``cw.rows``, :func:`extend_rows`); the
+    displacements of the other contacts, needed for the violation check, come from
+    :func:`_complete_displacements`.
 
     Parameters
     ----------
@@ -1032,10 +1033,10 @@ def _complementarity_from(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0,
 def _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0, natural, tight):
     """The Newton iteration of :func:`_complementarity_from`, with the natural residual on the
     active contacts (``natural`` True) or Fischer-Burmeister on all, to ``tol``, or to ``tight``
-    if lam0 already meets ``tol``. Returns (ContactResult,
-    LU, piv, lu_ok, gave_up); ``gave_up`` is True only with ``natural``, when a line search
-    found no descent or the merit made no new minimum in ``_NATURAL_STALL`` iterations, and the
-    result is then to be discarded."""
+    if lam0 already meets ``tol``. Returns (ContactResult, LU, piv, lu_ok, gave_up);
+    ``gave_up`` is True only with ``natural``, when a line search found no descent or the merit
+    made no new minimum in ``_NATURAL_STALL`` iterations, and the result is then to be
+    discarded."""
     c, Mblk, kappa, friction = law.c, law.Mblk, law.kappa, law.friction
     Wt, Zt = cw.Wt, cw.Zt
     M = c.shape[0]
