@@ -35,6 +35,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _checkouts import ROOT, child_env, cli_command, worktree  # noqa: E402
@@ -117,13 +118,13 @@ def against_tight(moved):
     robot = load_robot(ROBOT)
     tight = ModelSettings(outer_tol=1e-9, complementarity_tol=1e-9, max_outer_iterations=2000)
     out = []
-    for i, r in moved.iterrows():
-        alpha = r[[f"alpha_{i}_old" for i in (1, 2, 3)]].to_numpy(float)
-        beta = r[[f"beta_{i}_old" for i in (1, 2, 3)]].to_numpy(float)
+    for idx, r in moved.iterrows():
+        alpha = r[[f"alpha_{j}_old" for j in (1, 2, 3)]].to_numpy(float)
+        beta = r[[f"beta_{j}_old" for j in (1, 2, 3)]].to_numpy(float)
         eta = r[sorted(c for c in moved.columns if c.startswith("eta_"))].to_numpy(int)
         row = evaluate_configuration(robot, alpha, beta, "friction", tight, eta)[0]
-        t = np.array([row["tip_x"], row["tip_y"], row["tip_z"]]) * 1e3
-        old, new = _tip_mm(moved.loc[[i]], "_old")[0], _tip_mm(moved.loc[[i]], "_new")[0]
+        t = _tip_mm(pd.DataFrame([row]))[0]
+        old, new = _tip_mm(moved.loc[[idx]], "_old")[0], _tip_mm(moved.loc[[idx]], "_new")[0]
         out.append((int(r["row"]), tuple(int(e) for e in eta), float(r["moved_mm"]), row["status"],
                     float(np.linalg.norm(old - t)), float(np.linalg.norm(new - t))))
     return out
