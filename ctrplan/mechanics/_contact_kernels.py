@@ -1242,7 +1242,7 @@ def _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0,
         db[:] = db_t
         merit = m_t
         err = e_t
-        if merit < best:
+        if natural and merit < best:   # the stall counter is read only in the natural phase
             best = merit
             it_best = it
         hist[it % _NONMONOTONE] = merit
