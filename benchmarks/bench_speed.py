@@ -17,16 +17,18 @@
    standard model on the 1307 rows of the measured trajectory (if ../shared/data is there)
    with ``--jobs 1`` for the Table II robot (as issue 14 measures it) and the Table VII robot,
    and with the default jobs for Table II (throughput scaling; also of the batch call itself on
-   2 threads). The rows are read ``--tile`` (8) times over, and the runs with one and with the
+   2 threads). The rows are read ``--tile`` (32) times over, and the runs with one and with the
    default jobs alternate: read once, the rows are about 0.1 s of work behind 1.2 s of process
    start; one pass, the runs of each jobs setting back to back, gave 1.41-1.51x in two runs,
-   the rows 8 times over, alternated, 1.6-2.0x in the runs since (the two-thread runs scatter
-   on this shared machine, 1.73-3.00x run by run in one benchmark; dated figures in
-   docs/mechanics.md Sec. 10),
+   the rows 8 times over, alternated, 1.6-2.0x in the runs after that. At 8 times over, the
+   work (about 0.7 s with ``--jobs 1``) was still half the process start subtracted from it:
+   one run gave 1.39x (1.29-1.52 run by run), and the next, 32 times over, gave 1.76x
+   (1.58-1.86). The batch call itself scaled 1.58x and 2.00x in those two runs, so part of
+   that difference was the machine. Dated figures are in docs/mechanics.md Sec. 10,
    and the in-process bound on the 8x8x8 grid of issue 14 (slowest over median).
 
 Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py [--ref-every 4] [--conv-configs 8]
-      OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py --ratios-only [--repeat 3] [--tile 8]
+      OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py --ratios-only [--repeat 3] [--tile 32]
       (section 4 only)
 The machine load (``os.getloadavg``) is printed: timings on a shared machine are noisy.
 """
@@ -236,7 +238,7 @@ def _write_configs(path, alpha, beta):
     frame.to_csv(path, index=False)
 
 
-def ratio_table(repeat=3, tile=8):
+def ratio_table(repeat=3, tile=32):
     """Section 4: times as ratios to the single standard solve of the same run; the trajectory's
     rows are read ``tile`` times over by the command-line standard-model runs."""
     import tempfile
@@ -346,7 +348,7 @@ def main(argv=None):
     ap.add_argument("--skip-convergence", action="store_true")
     ap.add_argument("--ratios-only", action="store_true", help="run section 4 only")
     ap.add_argument("--repeat", type=int, default=3, help="command-line runs per measurement (section 4)")
-    ap.add_argument("--tile", type=int, default=8,
+    ap.add_argument("--tile", type=int, default=32,
                     help="times the trajectory's rows are repeated in the command-line standard-model runs")
     args = ap.parse_args(argv)
     if args.ratios_only:
