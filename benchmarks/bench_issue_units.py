@@ -23,12 +23,16 @@ both codes slow down alike from one machine to another.
 Each command's time per configuration is (T(K rows) - T(1 row)) / (K - 1), both runs of the same
 command and code, wall time: the process start, imports and loading of compiled kernels cancel.
 Each T is the shortest of ``--repeat`` commands. The standard model reads the 1307 trajectory
-rows ``--tile`` (4) times over: once, they are 0.15 s of work behind about 1.1 s of process
-start, which alone varies by 0.1 s (one such run gave -0.07 ms per row); the passes after the
+rows ``--tile`` (4) times over for the issue's code and ``--this-tile`` (32) times over for this
+checkout: once, they are 0.15 s of work behind about 1.1 s of process start, which alone varies
+by 0.1 s (one such run gave -0.07 ms per row). At 4 times over, this checkout's rows were still
+only about 0.35 s of work: the same code measured 0.063 and 0.076 ms per row in two sessions.
+The issue's code needs no more, with about 8 s of work at 4 times over. The passes after the
 first cost what it did (only each pass's first row follows a distant row, the last one). Figures
 are medians over ``--runs`` runs of each code, alternated (per-run values printed).
 
-Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_issue_units.py [--issue-commit 10e8828] [--runs 3] [--repeat 3] [--tile 4]
+Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_issue_units.py [--issue-commit 10e8828] [--runs 3] [--repeat 3]
+      [--tile 4] [--this-tile 32]
 Needs ../shared/data/ha-three-tube-trajectory/ for the standard-model row (skipped without it).
 """
 
@@ -111,9 +115,10 @@ def _write_configs(path, alpha, beta):
                                     **{f"beta_{i + 1}": beta[:, i] for i in range(n)}}))
 
 
-def _inputs(tmp, tile):
-    """Config files: the 4x4x4 grid, the trajectory ``tile`` times over (left out if absent),
-    and their first rows."""
+def _inputs(tmp, tile, this_tile):
+    """Config files: the 4x4x4 grid, the trajectory ``tile`` times over (``traj``, for the
+    issue's code) and ``this_tile`` times over (``traj_this``, for this checkout), left out if
+    absent, and their first rows."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from paper_section_4d import grid_4x4x4
     from ctrplan.io.robot_file import load_robot
@@ -132,6 +137,9 @@ def _inputs(tmp, tile):
         files["traj1"] = (tmp / "traj1.csv", 1)
         _write_configs(files["traj"][0], np.tile(TA, (tile, 1)), np.tile(TB, (tile, 1)))
         _write_configs(files["traj1"][0], TA[:1], TB[:1])
+        files["traj_this"] = (tmp / "traj_this.csv", this_tile * len(TA))
+        files["traj_this1"] = files["traj1"]
+        _write_configs(files["traj_this"][0], np.tile(TA, (this_tile, 1)), np.tile(TB, (this_tile, 1)))
     return files
 
 
@@ -144,11 +152,12 @@ def _per_configuration(code, cache, files, key, model, tmp, repeat):
     return (t - t1) / (K - 1)
 
 
-def _measure(code, cache, files, tmp, repeat):
-    """Per-configuration times [s] of one run of checkout ``code``."""
+def _measure(code, cache, traj, files, tmp, repeat):
+    """Per-configuration times [s] of one run of checkout ``code``, its standard model on the
+    trajectory file ``files[traj]``."""
     r = {"friction": _per_configuration(code, cache, files, "grid", "friction", tmp, repeat)}
-    if "traj" in files:
-        r["standard"] = _per_configuration(code, cache, files, "traj", "standard", tmp, repeat)
+    if traj in files:
+        r["standard"] = _per_configuration(code, cache, files, traj, "standard", tmp, repeat)
     r["single"] = _single(code, cache)
     return r
 
@@ -160,17 +169,19 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=3,
                     help="commands per figure in a run (the shortest counts: the process start is noisy)")
     ap.add_argument("--tile", type=int, default=4,
-                    help="the trajectory's rows this many times over in the standard-model command")
+                    help="the trajectory's rows this many times over in the issue code's standard-model command")
+    ap.add_argument("--this-tile", type=int, default=32,
+                    help="the same for this checkout's command, whose rows cost a twentieth")
     args = ap.parse_args(argv)
     print(f"load average at the start: {os.getloadavg()}")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        files = _inputs(tmp, args.tile)
+        files = _inputs(tmp, args.tile, args.this_tile)
         if "traj" not in files:
             print(f"   ({DATA} not found: the standard-model conversion is skipped)")
         with worktree(args.issue_commit, tmp / "issue") as old:
-            codes = {"issue": (old, tmp / "cache-issue"), "this": (ROOT, tmp / "cache-this")}
-            for code, cache in codes.values():      # compile or cache every kernel once, untimed
+            codes = {"issue": (old, tmp / "cache-issue", "traj"), "this": (ROOT, tmp / "cache-this", "traj_this")}
+            for code, cache, _ in codes.values():      # compile or cache every kernel once, untimed
                 _cli_time(code, cache, files["grid1"][0], "friction", tmp / "out.csv")
                 if "traj" in files:
                     _cli_time(code, cache, files["traj"][0], "standard", tmp / "out.csv")
