@@ -27,6 +27,14 @@ ANDERSON_MIXING = 0.5
 # for this many iterations (it wanders instead of contracting).
 OUTER_STAGNATION_WINDOW = 15
 
+# Continuation of a friction solution in mu (mechanics/continuation.py): first and largest step
+# and smallest step, as fractions of the robot's mu, and the growth of the step after a converged
+# solve. 1/256 brackets where a branch ends to within 0.0008 at mu = 0.2; on the four folds of
+# the 8x8x8 grid of issue 14 that took 14-16 solves from a first step of 1/4.
+CONTINUATION_INITIAL_STEP = 0.25
+CONTINUATION_MIN_STEP = 1.0 / 256
+CONTINUATION_GROWTH = 1.5
+
 # Inexact outer iterations of the contact models (_contact_fast._inner_tolerance): each
 # complementarity solve stops at INNER_TOL_FACTOR x (last centerline change / outer_tol) x
 # complementarity_tol, at most INNER_TOL_MAX (the first one) and at least complementarity_tol,

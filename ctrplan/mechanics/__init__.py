@@ -4,6 +4,8 @@
 - :func:`solve_clearance`: clearance model (Sections II-B to II-E, Appendices A and B).
 - :func:`solve_friction`: one maximal torsional friction solution (Section III).
 - :func:`evaluate_bound`: the per-configuration friction bound over all 2^(n-1) directions.
+- :func:`continue_friction`: one friction solution followed in mu from the clearance solution
+  (where it ends below the robot's mu, under maximal friction the tubes snap).
 - :func:`predict_tip`: the tip and shape after a given motion history (Section V-B).
 - :func:`solve_standard_batch`: the standard model at many configurations in one compiled call.
 
@@ -28,6 +30,7 @@ from .standard import solve_standard
 # idle; no difference within noise over 12 alternated runs): numba's own linear algebra loads
 # scipy.linalg anyway when the compiled standard kernels are loaded.
 _LAZY = {"all_eta": ".bound", "evaluate_bound": ".bound",
+         "continue_friction": ".continuation", "FrictionBranch": ".continuation",
          "solve_clearance": ".contact", "solve_contact": ".contact", "solve_friction": ".contact",
          "PAIR_CASES": ".prediction", "Prediction": ".prediction", "pair_cases": ".prediction",
          "predict_tip": ".prediction"}
@@ -55,7 +58,7 @@ def __dir__():
 
 __all__ = [
     "MECHANICS_VERSION", "solve_standard", "solve_standard_batch", "StandardBatch", "solve_clearance", "solve_friction", "solve_contact", "evaluate_bound",
-    "all_eta", "ModelSettings", "StandardSolution", "ContactSolution", "BoundResult", "Diagnostics",
+    "all_eta", "continue_friction", "FrictionBranch", "ModelSettings", "StandardSolution", "ContactSolution", "BoundResult", "Diagnostics",
     "TubeChain", "forward_kinematics", "chain_jacobians", "ArcLengthGrid", "build_grid",
     "StandardBodies", "solve_standard_bodies",
     "predict_tip", "Prediction", "pair_cases", "PAIR_CASES",
