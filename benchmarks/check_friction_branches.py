@@ -1,0 +1,102 @@
+"""Is every friction solution of a grid the one friction builds up from the clearance solution?
+
+For each configuration of the paper's 4x4x4 grid or the 8x8x8 grid of issue 14 (Table II robot)
+whose standard solution is stable and whose clearance solve converged, every friction solution
+of ``evaluate_bound`` (all 2^(n-1) directions eta) is compared with the same solution followed in
+mu from the clearance solution (``continue_friction``, docs/mechanics.md Sec. 5):
+
+- a solve that converged directly should end where the branch ends, at the robot's mu (printed if
+  the branch stops short or ends more than ``--tol-um`` away);
+- a solve that did not converge is printed with where its branch ends: a fold below the robot's mu
+  (no equilibrium near the branch under maximal friction) or, if the branch reaches mu, a solver
+  failure of the direct solve.
+
+Then a summary and the time of the bounds and of the continuations [ms]. Exits with status 1 if
+a direct solve that did not converge has a branch that reaches mu (a solver failure).
+
+Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/check_friction_branches.py [--grid 4|8] [--ds 3e-3] [--tol-um 10]
+(about 10 s on the 4x4x4 grid and 1 min on the 8x8x8 grid at the default step, one thread)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from paper_section_4d import grid_4x4x4, grid_8x8x8  # noqa: E402
+
+from ctrplan.io.robot_file import load_robot  # noqa: E402
+from ctrplan.mechanics import ModelSettings, continue_friction, evaluate_bound  # noqa: E402
+
+ROBOT = ROOT / "model" / "ha2019-table2-nominal.toml"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--grid", choices=("4", "8"), default="8", help="4x4x4 (paper) or 8x8x8 (issue 14)")
+    ap.add_argument("--ds", type=float, default=3e-3, help="largest arc-length step [m]")
+    ap.add_argument("--tol-um", type=float, default=10.0,
+                    help="largest distance [um] of a directly converged tip from its branch's end")
+    args = ap.parse_args(argv)
+    robot = load_robot(ROBOT)
+    settings = ModelSettings(ds=args.ds)
+    if args.grid == "4":
+        _, q = grid_4x4x4(robot)
+        configs = [robot.configuration(x) for x in q]
+    else:
+        configs = grid_8x8x8()
+    print(f"load average at the start: {os.getloadavg()}")
+    t_bound, t_cont = [], []
+    direct_ok, on_branch, far, folds, solver_failures, skipped = 0, 0, [], [], [], 0
+    for i, (alpha, beta) in enumerate(configs):
+        t0 = time.perf_counter()
+        b = evaluate_bound(robot, alpha, beta, settings)
+        t_bound.append(time.perf_counter() - t0)
+        if b.standard.diagnostics.unstable or not b.clearance.diagnostics.converged:
+            skipped += 1
+            continue
+        for eta, f in b.friction.items():
+            t0 = time.perf_counter()
+            br = continue_friction(robot, alpha, beta, eta, settings, standard=b.standard, clearance=b.clearance)
+            t_cont.append(time.perf_counter() - t0)
+            d_um = np.linalg.norm(br.solution.tip_position - f.tip_position) * 1e6
+            where = (f"configuration {i}, alpha {np.round(np.degrees(alpha), 1)} deg, "
+                     f"beta {np.round(np.asarray(beta) * 1e3, 2)} mm, eta {eta}")
+            if f.diagnostics.converged:
+                direct_ok += 1
+                if br.reached and d_um <= args.tol_um:
+                    on_branch += 1
+                else:
+                    far.append(d_um)
+                    print(f"converged off its branch: {where}: {br.message}; direct tip {d_um / 1e3:.3f} mm "
+                          f"from the branch's end ({f.diagnostics.iterations} outer iterations)")
+            elif br.reached:
+                solver_failures.append(where)
+                print(f"SOLVER FAILURE: {where}: the branch reaches mu ({br.solves} solves) but the direct "
+                      f"solve did not converge ({f.diagnostics.message})")
+            else:
+                folds.append(where)
+                print(f"fold: {where}: {br.message}")
+    print(f"load average at the end: {os.getloadavg()}")
+    print(f"\n{len(configs)} configurations, {skipped} skipped (standard model unstable or clearance "
+          f"not converged); {direct_ok} friction solves converged directly, {on_branch} of them at their "
+          f"branch's end within {args.tol_um:g} um, {len(far)} off it"
+          + (f" (up to {max(far) / 1e3:.3f} mm)" if far else ""))
+    print(f"unconverged solves: {len(folds)} at a fold of their branch below mu, {len(solver_failures)} "
+          f"solver failures (branch reaches mu)")
+    for name, t in (("bound", t_bound), ("continuation", t_cont)):
+        t = np.array(t) * 1e3
+        print(f"{name:12s} [ms]: mean {t.mean():.1f}  median {np.median(t):.1f}  p90 {np.percentile(t, 90):.1f}  "
+              f"max {t.max():.1f}  (n = {t.size}; the first includes compilation or loading)")
+    return 1 if solver_failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
