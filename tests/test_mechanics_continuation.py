@@ -33,9 +33,9 @@ def fold(robot):
 
 def test_a_branch_that_reaches_mu_ends_at_the_direct_solution(robot):
     """Same configuration, the other direction: the branch reaches mu = 0.2 and ends at the
-    friction solution solved directly from the clearance solution (a wrongly scaled mu or a lost
-    warm start would end elsewhere). It starts at the clearance solution, and along it the tip
-    moves at a nearly steady rate (no fold near)."""
+    friction solution solved directly from the clearance solution (a last step to the wrong
+    fraction of mu would end elsewhere). It starts at the clearance solution, and along it the
+    tip moves at a nearly steady rate (no fold near)."""
     branch = continue_friction(robot, FOLD_ALPHA, BETA, (1, 1))
     assert isinstance(branch, FrictionBranch)
     assert branch.reached and branch.critical_mu is None and np.isnan(branch.failed_fraction)
