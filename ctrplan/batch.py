@@ -57,8 +57,24 @@ def _row(alpha, beta, eta, sol, status, message, model):
     return row
 
 
+def _explained(message, robot, alpha, beta, eta, settings, standard, clearance):
+    """``message`` of an unconverged friction solve, with where its branch in mu ends
+    (:func:`ctrplan.mechanics.continue_friction`): a fold below the robot's mu, or mu reached
+    (then the direct solve failed)."""
+    from .mechanics import continue_friction
+    if not clearance.diagnostics.converged:
+        return f"{message}; not explained: the clearance solve did not converge"
+    try:
+        branch = continue_friction(robot, alpha, beta, eta, settings, standard=standard, clearance=clearance)
+    except (CtrplanError, np.linalg.LinAlgError, FloatingPointError) as exc:
+        return f"{message}; not explained: {exc}"
+    verdict = ("snaps under friction" if not branch.reached else
+               "solver failure: the branch reaches the robot's mu")
+    return f"{message}; {verdict}: {branch.message}"
+
+
 def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettings | None = None,
-                           eta=None) -> list[dict]:
+                           eta=None, *, explain_failures: bool = False) -> list[dict]:
     """Evaluate one configuration; returns rows in the project's CSV schema.
 
     Parameters
@@ -72,6 +88,11 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
         Friction directions (+1 CCW, -1 CW). For the friction model: None or any zero entry
         evaluates all 2^(n-1) directions and adds the bound columns ``bound_tip_m`` and
         ``bound_tangent_rad`` (Section III of Ha et al. 2019); otherwise only that direction.
+    explain_failures : bool
+        For each friction solve that did not converge, follow it in mu from the clearance
+        solution (:func:`ctrplan.mechanics.continue_friction`) and add to its message whether its
+        branch ends at a fold below the robot's mu ("snaps under friction") or reaches mu
+        ("solver failure"). Costs about 14-16 friction solves per such row.
 
     Returns
     -------
@@ -109,8 +130,10 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
             cl = solve_clearance(robot, alpha, beta, settings, standard=std)
             fr = solve_friction(robot, alpha, beta, np.asarray(eta, dtype=int), settings, standard=std,
                                 warm_start=cl)
-            row = _row(alpha, beta, np.asarray(eta, dtype=int), fr, _status(fr.diagnostics),
-                       fr.diagnostics.message, model)
+            message = fr.diagnostics.message
+            if explain_failures and not fr.diagnostics.converged:
+                message = _explained(message, robot, alpha, beta, np.asarray(eta, dtype=int), settings, std, cl)
+            row = _row(alpha, beta, np.asarray(eta, dtype=int), fr, _status(fr.diagnostics), message, model)
             row["translation_last_tip_m"] = float(np.linalg.norm(cl.tip_position - std.tip_position))
             row["translation_last_tangent_rad"] = float(angle_between(cl.tip_tangent, std.tip_tangent))
             return [row]
@@ -118,7 +141,10 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
         rows = []
         for e in all_eta(robot.n_tubes):
             f = b.friction[e]
-            row = _row(alpha, beta, np.asarray(e), f, _status(f.diagnostics), f.diagnostics.message, model)
+            message = f.diagnostics.message
+            if explain_failures and not f.diagnostics.converged:
+                message = _explained(message, robot, alpha, beta, e, settings, b.standard, b.clearance)
+            row = _row(alpha, beta, np.asarray(e), f, _status(f.diagnostics), message, model)
             row.update(bound_tip_m=b.position, bound_tangent_rad=b.angle,
                        translation_last_tip_m=b.translation_last_position,
                        translation_last_tangent_rad=b.translation_last_angle)
@@ -210,7 +236,7 @@ def _record_columns(rec: dict) -> dict:
     return cols
 
 
-def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1):
+def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1, explain_failures=False):
     """Evaluate the configurations ``alpha``, ``beta`` (m, n) of the 1-based rows ``indices``;
     returns (indices, list of m lists of rows), or for the standard model (indices, columns) with
     the columns of :func:`_standard_columns`."""
@@ -219,7 +245,7 @@ def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1):
     rows = []
     for k, index in enumerate(indices):
         found = evaluate_configuration(robot, alpha[k], beta[k], model, settings,
-                                       None if eta is None else eta[k])
+                                       None if eta is None else eta[k], explain_failures=explain_failures)
         for r in found:
             r["row"] = index
         rows.append(found)
@@ -289,7 +315,7 @@ def _assemble(done: dict, columns: list[dict], K: int) -> pd.DataFrame:
 
 def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | None = None, eta=None,
                    *, n_jobs: int = 1, checkpoint: str | os.PathLike | None = None,
-                   progress: bool = True, job_key: str = "") -> pd.DataFrame:
+                   progress: bool = True, job_key: str = "", explain_failures: bool = False) -> pd.DataFrame:
     """Evaluate K configurations in chunks, in parallel, resuming from a checkpoint.
 
     Parameters
@@ -313,6 +339,8 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
     job_key : str
         Identifies the job (robot file, inputs, model, settings); a checkpoint with another key
         is not reused.
+    explain_failures : bool
+        Contact models: see :func:`evaluate_configuration`.
 
     Returns
     -------
@@ -345,7 +373,8 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
         chunks = _chunks(todo, model, n_jobs)
         threads = n_jobs if model == "standard" else 1
         tasks = (delayed(_chunk_task)(robot, alpha[c], beta[c], model, settings,
-                                      None if eta is None else eta[c], [k + 1 for k in c], threads)
+                                      None if eta is None else eta[c], [k + 1 for k in c], threads,
+                                      explain_failures)
                  for c in chunks)
         in_process = n_jobs == 1 or model == "standard"
         runner = None if in_process else Parallel(n_jobs=n_jobs, return_as="generator_unordered")
@@ -372,7 +401,11 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
     return _assemble(done, columns, K)
 
 
-def job_key(robot_file_text: str, config_file_text: str, model: str, settings: ModelSettings) -> str:
+def job_key(robot_file_text: str, config_file_text: str, model: str, settings: ModelSettings,
+            explain_failures: bool = False) -> str:
     """Checkpoint key of a batch job (sha256 of its inputs)."""
-    payload = json.dumps([robot_file_text, config_file_text, model, settings.as_dict()], sort_keys=True)
+    inputs = [robot_file_text, config_file_text, model, settings.as_dict()]
+    if explain_failures:    # appended only when set: keys of jobs without it stay as they were
+        inputs.append("explain_failures")
+    payload = json.dumps(inputs, sort_keys=True)
     return hashlib.sha256(payload.encode()).hexdigest()

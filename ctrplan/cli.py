@@ -59,7 +59,11 @@ def main():
               help="Parallel workers (default: all cores): worker processes for the contact models, "
                    "compiled threads for the standard model.")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
-def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress):
+@click.option("--explain-failures", is_flag=True,
+              help="Friction model: follow each friction solution that did not converge in mu from the "
+                   "clearance solution, and say in its message whether it snaps under friction (its branch "
+                   "ends at a fold below mu) or the solver failed. About 15 extra solves per such row.")
+def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, explain_failures):
     """Evaluate a model at every configuration of a CSV.
 
     One output row per configuration, and per friction direction eta for the friction model
@@ -70,6 +74,8 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress):
     from .io.robot_file import load_robot
     from .io.tables import read_configurations, write_table
 
+    if explain_failures and model != "friction":
+        raise click.UsageError(f"--explain-failures applies to --model friction only, not {model!r}")
     robot = load_robot(robot_path)
     alpha, beta, eta, _ = read_configurations(configs_path, robot.n_tubes)
     import numpy as np
@@ -83,10 +89,12 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress):
             raise JointLimitError(f"{configs_path}: row {k + 1}: {exc}") from None
     settings = _settings(ds)
     out = Path(out_path) if out_path else Path(configs_path).with_name(Path(configs_path).stem + f"-{model}.csv")
-    key = job_key(Path(robot_path).read_text(), Path(configs_path).read_text(), model, settings)
+    key = job_key(Path(robot_path).read_text(), Path(configs_path).read_text(), model, settings,
+                  explain_failures)
     ck = out.with_name(out.name + ".partial.jsonl")
     frame = evaluate_table(robot, alpha, beta, model, settings, eta, n_jobs=jobs or os.cpu_count() or 1,
-                           checkpoint=ck, progress=not no_progress, job_key=key)
+                           checkpoint=ck, progress=not no_progress, job_key=key,
+                           explain_failures=explain_failures)
     write_table(out, frame)
     ck.unlink(missing_ok=True)
     bad = frame[frame["status"] != "ok"]

@@ -204,11 +204,11 @@ def test_resume_after_interruption_computes_only_missing_rows(tmp_path, robot, m
     real = batch._chunk_task
     calls = []
 
-    def dying(robot_, a, b, model, s, eta, indices, n_threads=1):
+    def dying(robot_, a, b, model, s, eta, indices, *options):
         if len(calls) == 1:
             raise _Interrupt("killed")
         calls.append(list(indices))
-        return real(robot_, a, b, model, s, eta, indices, n_threads)
+        return real(robot_, a, b, model, s, eta, indices, *options)
 
     monkeypatch.setattr(batch, "_chunk_task", dying)
     with pytest.raises(_Interrupt):
@@ -224,9 +224,9 @@ def test_resume_after_interruption_computes_only_missing_rows(tmp_path, robot, m
 
     calls.clear()
 
-    def counting(robot_, a, b, model, s, eta, indices, n_threads=1):
+    def counting(robot_, a, b, model, s, eta, indices, *options):
         calls.append(list(indices))
-        return real(robot_, a, b, model, s, eta, indices, n_threads)
+        return real(robot_, a, b, model, s, eta, indices, *options)
 
     monkeypatch.setattr(batch, "_chunk_task", counting)
     frame = evaluate_table(robot, alpha, beta, "standard", settings, checkpoint=ck, progress=False,
@@ -364,6 +364,48 @@ def test_configuration_with_inner_base_in_front_names_the_row(tmp_path, monkeypa
     assert "row 2" in err and "tube 3" in err and "in front" in err
     assert "row 1" not in err
     assert not out.exists()
+
+
+# configuration 97 of issue 14's 8x8x8 grid and its mirror image 481: under maximal friction in
+# directions (-1, -1), resp. (1, 1), the friction branch ends at a fold below mu = 0.2 (0.194 at
+# ds = 4 mm; docs/mechanics.md Sec. 5), so the direct solve does not converge
+FOLD_CONFIGS = [((0.0, np.pi / 4, np.pi), (0.0, -0.017, -0.1204 + 0.0864 / 7)),
+                ((0.0, 7 * np.pi / 4, np.pi), (0.0, -0.017, -0.1204 + 0.0864 / 7))]
+
+
+def test_explain_failures_says_where_an_unconverged_friction_solution_snaps(tmp_path):
+    """With --explain-failures, each unconverged friction row's message gains where its branch
+    in mu ends; nothing else in the table changes (tips, statuses, the converged rows' messages)."""
+    configs = _write(tmp_path / "fold.csv", _csv_text(FOLD_CONFIGS + CONFIGS[1:2]))
+    plain = _evaluate(configs, "friction", tmp_path / "plain.csv")
+    res = CliRunner().invoke(cli.main, ["evaluate", "--robot", str(TABLE2), "--configs", str(configs),
+                                        "--model", "friction", "--out", str(tmp_path / "explained.csv"),
+                                        "--explain-failures", *FAST])
+    assert res.exit_code == 0, (res.output, res.exception)
+    explained = pd.read_csv(tmp_path / "explained.csv")
+    np.testing.assert_array_equal(explained[TIP].to_numpy(float), plain[TIP].to_numpy(float))
+    assert (explained["status"] == plain["status"]).all()
+    failed = plain["status"] == "not_converged"
+    assert failed[plain["row"] <= 2].any() and not failed[plain["row"] == 3].any()
+    assert (explained["message"][~failed] == plain["message"][~failed]).all()
+    for before, after in zip(plain["message"][failed], explained["message"][failed]):
+        assert after.startswith(before + "; snaps under friction: friction branch ends between mu = 0.19")
+    assert "snaps under friction" in res.output
+
+
+def test_explain_failures_is_for_the_friction_model_only(tmp_path):
+    configs = _write(tmp_path / "c.csv", _csv_text(CONFIGS[:1]))
+    res = CliRunner().invoke(cli.main, ["evaluate", "--robot", str(TABLE2), "--configs", str(configs),
+                                        "--model", "standard", "--explain-failures", *FAST])
+    assert res.exit_code == 2 and "--explain-failures" in res.output and "friction" in res.output
+    assert not (tmp_path / "c-standard.csv").exists()
+
+
+def test_job_key_tells_explained_runs_apart():
+    """A checkpoint of a run without --explain-failures holds other messages: not reused by a
+    run with it (and keys of runs without it are those of before the option)."""
+    args = ("robot", "configs", "friction", ModelSettings())
+    assert job_key(*args) == job_key(*args, False) != job_key(*args, True)
 
 
 def test_unknown_model_is_a_usage_error(tmp_path):
