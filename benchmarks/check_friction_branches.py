@@ -14,8 +14,10 @@ mu from the clearance solution (``continue_friction``, docs/mechanics.md Sec. 5)
 Then a summary and the time of the bounds and of the continuations [ms], and the slowest bounds
 with how nonlinear their branches are: the largest, over eta, ratio of the tip's rate per unit mu
 on the branch's last step to that on its first, or its inverse if larger (1 on a straight branch;
-infinite where a branch ends at a fold; NaN where the configuration was skipped). Exits with status 1 if a direct solve
-that did not converge has a branch that reaches mu (a solver failure).
+infinite where a branch ends at a fold; NaN where the configuration was skipped).
+
+Exits with status 1 if a direct solve that did not converge has a branch that reaches mu (a
+solver failure).
 
 Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/check_friction_branches.py [--grid 4|8] [--ds 3e-3] [--tol-um 10]
 (about 10 s on the 4x4x4 grid and 1 min on the 8x8x8 grid at the default step, one thread)
