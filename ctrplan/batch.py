@@ -57,13 +57,14 @@ def _row(alpha, beta, eta, sol, status, message, model):
     return row
 
 
-def _explained(message, robot, alpha, beta, eta, settings, standard, clearance):
-    """``message`` of an unconverged friction solve, with where its branch in mu ends
-    (:func:`ctrplan.mechanics.continue_friction`): a fold below the robot's mu, or mu reached
-    (then the direct solve failed)."""
+def _friction_message(sol, explain, robot, alpha, beta, eta, settings, standard, clearance):
+    """The message of friction solution ``sol``; with ``explain``, if it did not converge, also
+    where its branch in mu ends (:func:`ctrplan.mechanics.continue_friction`): a fold below the
+    robot's mu, or mu reached (then the direct solve failed)."""
+    message = sol.diagnostics.message
+    if not explain or sol.diagnostics.converged:
+        return message
     from .mechanics import continue_friction
-    if not clearance.diagnostics.converged:
-        return f"{message}; not explained: the clearance solve did not converge"
     try:
         branch = continue_friction(robot, alpha, beta, eta, settings, standard=standard, clearance=clearance)
     except (CtrplanError, np.linalg.LinAlgError, FloatingPointError) as exc:
@@ -130,9 +131,8 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
             cl = solve_clearance(robot, alpha, beta, settings, standard=std)
             fr = solve_friction(robot, alpha, beta, np.asarray(eta, dtype=int), settings, standard=std,
                                 warm_start=cl)
-            message = fr.diagnostics.message
-            if explain_failures and not fr.diagnostics.converged:
-                message = _explained(message, robot, alpha, beta, np.asarray(eta, dtype=int), settings, std, cl)
+            message = _friction_message(fr, explain_failures, robot, alpha, beta, np.asarray(eta, dtype=int),
+                                        settings, std, cl)
             row = _row(alpha, beta, np.asarray(eta, dtype=int), fr, _status(fr.diagnostics), message, model)
             row["translation_last_tip_m"] = float(np.linalg.norm(cl.tip_position - std.tip_position))
             row["translation_last_tangent_rad"] = float(angle_between(cl.tip_tangent, std.tip_tangent))
@@ -141,9 +141,8 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
         rows = []
         for e in all_eta(robot.n_tubes):
             f = b.friction[e]
-            message = f.diagnostics.message
-            if explain_failures and not f.diagnostics.converged:
-                message = _explained(message, robot, alpha, beta, e, settings, b.standard, b.clearance)
+            message = _friction_message(f, explain_failures, robot, alpha, beta, e, settings, b.standard,
+                                        b.clearance)
             row = _row(alpha, beta, np.asarray(e), f, _status(f.diagnostics), message, model)
             row.update(bound_tip_m=b.position, bound_tangent_rad=b.angle,
                        translation_last_tip_m=b.translation_last_position,

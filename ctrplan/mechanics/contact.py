@@ -102,9 +102,7 @@ def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, 
     settings = settings or ModelSettings()
     n = robot.n_tubes
     if eta is not None:
-        eta = np.asarray(eta, dtype=float).reshape(-1)
-        if eta.size != n - 1 or not np.all(np.isin(eta, (-1.0, 1.0))):
-            raise ValueError(f"eta must hold {n - 1} values of +1 or -1, got {eta}")
+        eta = friction_directions(eta, n)
         mu = np.asarray(robot.friction_coefficients if mu is None else mu, dtype=float)
     else:
         mu = np.zeros(n - 1) if mu is None else np.asarray(mu, dtype=float)
@@ -156,6 +154,21 @@ def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, 
         contact_gap=gaps, eta=np.zeros(n - 1, dtype=int) if eta is None else eta.astype(int), mu=mu,
         tip_position=pt[-1].copy(), tip_tangent=Rt[-1][:, 2].copy(), tip_rotation=Rt[-1].copy(),
         diagnostics=diag, multipliers=lam)
+
+
+def friction_directions(eta, n_tubes: int) -> np.ndarray:
+    """``eta`` as a float array of shape (n_tubes - 1,) of +1 (CCW) and -1 (CW) (Eq. (39) of Ha
+    et al. 2019).
+
+    Raises
+    ------
+    ValueError
+        ``eta`` does not hold n_tubes - 1 values of +1 or -1.
+    """
+    eta = np.asarray(eta, dtype=float).reshape(-1)
+    if eta.size != n_tubes - 1 or not np.all(np.isin(eta, (-1.0, 1.0))):
+        raise ValueError(f"eta must hold {n_tubes - 1} values of +1 or -1, got {eta}")
+    return eta
 
 
 # The last problem built, with the robot and standard solution it was built from: the clearance

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..constants import CONTINUATION_GROWTH, CONTINUATION_INITIAL_STEP, CONTINUATION_MIN_STEP
 from ..errors import ConvergenceError
-from .contact import solve_contact
+from .contact import friction_directions, solve_contact
 from .results import ContactSolution, ModelSettings
 from .standard import solve_standard
 
@@ -154,9 +154,7 @@ def continue_friction(robot, alpha, beta, eta, settings: ModelSettings | None = 
     """
     settings = settings or ModelSettings()
     n = robot.n_tubes
-    eta = np.asarray(eta, dtype=float).reshape(-1)
-    if eta.size != n - 1 or not np.all(np.isin(eta, (-1.0, 1.0))):
-        raise ValueError(f"eta must hold {n - 1} values of +1 or -1, got {eta}")
+    eta = friction_directions(eta, n)
     mu = np.asarray(robot.friction_coefficients if mu is None else mu, dtype=float).reshape(-1)
     if mu.size != n - 1 or not np.all(np.isfinite(mu)) or np.any(mu < 0):
         raise ValueError(f"mu must hold {n - 1} finite non-negative friction coefficients, got {mu}")
@@ -196,5 +194,5 @@ def continue_friction(robot, alpha, beta, eta, settings: ModelSettings | None = 
     sensitivity = moved / (np.diff(fractions) * top) if top > 0 else np.zeros_like(moved)
     return FrictionBranch(eta=eta.astype(int), mu=mu, fraction=fractions, tip_position=tips,
                           tip_sensitivity=sensitivity, solution=current,
-                          failed_fraction=float("nan") if fractions[-1] == 1.0 else float(failed),
+                          failed_fraction=float(failed),    # NaN at 1: every failure was passed
                           solves=solves)
