@@ -4,7 +4,7 @@ The friction bound of Ha, Fagogenis & Dupont 2019 (doi:10.1109/TRO.2018.2878906;
 its translation-last variant, Section V-B) costs tens of milliseconds per configuration, far too
 much inside a sampling planner. A bound map evaluates it once on a grid and interpolates:
 
-- :mod:`~ctrplan.boundmap.coordinates`: the map's coordinates, the base rotations and
+- :mod:`~ctrplan.coordinates`: the map's coordinates, the base rotations and
   translations relative to tube 1 on which the bound depends (a six-joint robot has a 4-D map);
 - :mod:`~ctrplan.boundmap.axes`: the grid spec (:class:`MapSpec`), uniform or adaptive nodes;
 - :mod:`~ctrplan.boundmap.field`: :class:`BoundField`, the grid and its interpolation;
@@ -20,7 +20,7 @@ from .accuracy import InterpolationError, interpolation_error, sample_exact
 from .axes import PLACEMENTS, MapSpec, place_nodes, uniform_axis
 from .compute import (DEFAULT_CHUNK_SIZE, BoundMapRun, SchedulerUnreachableError, compute_bound_map_store,
                       compute_field, evaluate_configuration, start_local_cluster)
-from .coordinates import MapCoordinates, map_coordinates
+from ..coordinates import MapCoordinates, map_coordinates
 from .field import QUANTITIES, UNITS, BoundField
 from .files import compute_bound_map, default_spec, load_or_compute_bound_map, map_paths
 from .identity import (BoundFieldKeyError, BoundMapMismatchError, MapIdentity, evaluator_name, field_key,

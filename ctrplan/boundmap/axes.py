@@ -1,6 +1,6 @@
 """Where a bound map's nodes lie along each map coordinate.
 
-A map is a tensor grid over the map coordinates (:mod:`ctrplan.boundmap.coordinates`):
+A map is a tensor grid over the map coordinates (:mod:`ctrplan.coordinates`):
 
 - a **periodic** rotation coordinate has ``n`` uniform nodes ``-pi + 2 pi k / n``,
   ``k = 0..n-1`` (no duplicated endpoint; interpolation wraps round);
@@ -58,7 +58,7 @@ class MapSpec:
     ----------
     resolution : tuple of int, shape (d,)
         Nodes per map coordinate (>= 2), in the order of
-        :attr:`~ctrplan.boundmap.coordinates.MapCoordinates.names`.
+        :attr:`~ctrplan.coordinates.MapCoordinates.names`.
     placement : {"uniform", "adaptive"}
         Node placement along bounded coordinates (periodic ones are always uniform).
     pilot_lines : int, keyword-only

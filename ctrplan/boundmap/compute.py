@@ -9,7 +9,7 @@ Steps of :func:`compute_bound_map_store`:
    like the chunks (locally or on the cluster). The pilots are written into the new store with
    the axes (an interruption during the pilots repeats them; they are a few percent of a map);
 3. the missing chunks, each a block of nodes evaluated at their representative configurations
-   (:meth:`~ctrplan.boundmap.coordinates.MapCoordinates.configuration`); only this process (the
+   (:meth:`~ctrplan.coordinates.MapCoordinates.configuration`); only this process (the
    client) writes the store, as results arrive, so the workers need no shared file system.
 """
 
@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import CtrplanError
 from .axes import pilot_design, place_nodes, uniform_axis
-from .coordinates import map_coordinates
+from ..coordinates import map_coordinates
 from .field import QUANTITIES, BoundField
 from .identity import as_spec, map_identity
 from .store import BoundMapStore, chunk_shape_for

@@ -10,7 +10,7 @@ or found the standard model elastically unstable are invalid: a query that draws
 ``invalid_value`` (default +inf) and :meth:`BoundField.is_valid` is False there.
 
 Queries are joint vectors; the field maps them to its coordinates
-(:class:`~ctrplan.boundmap.coordinates.MapCoordinates`: base rotations and translations relative
+(:class:`~ctrplan.coordinates.MapCoordinates`: base rotations and translations relative
 to tube 1, on which the bound depends) and interpolates there. Axes may be nonuniform
 (:mod:`ctrplan.boundmap.axes`).
 """
@@ -24,7 +24,7 @@ import numpy as np
 
 from ..io.atomic import atomic_savez
 from ._interp import multilinear
-from .coordinates import MapCoordinates
+from ..coordinates import MapCoordinates
 from .identity import BoundMapMismatchError
 
 __all__ = ["QUANTITIES", "UNITS", "BoundField"]

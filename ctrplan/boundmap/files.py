@@ -22,7 +22,7 @@ import numpy as np
 
 from .axes import MapSpec
 from .compute import DEFAULT_CHUNK_SIZE, compute_bound_map_store
-from .coordinates import map_coordinates
+from ..coordinates import map_coordinates
 from .identity import BoundFieldKeyError, BoundMapMismatchError, map_identity
 from .store import STORE_SUFFIX, IncompleteBoundMapError, load_bound_map
 

@@ -20,7 +20,7 @@ import numpy as np
 from .. import constants
 from ..errors import CtrplanError
 from .axes import MapSpec
-from .coordinates import map_coordinates
+from ..coordinates import map_coordinates
 
 __all__ = ["FORMAT_VERSION", "BoundFieldKeyError", "BoundMapMismatchError", "MapIdentity", "map_identity",
            "field_key", "evaluator_name", "as_spec", "settings_dict", "canonical_robot"]

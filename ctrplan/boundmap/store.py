@@ -25,7 +25,7 @@ at any moment resumes from the chunks whose ``done`` flag is set.
 
 The group's attributes identify the map (:class:`~ctrplan.boundmap.identity.MapIdentity`: robot
 file hash, model settings, grid spec, evaluator, mechanics version, key) and hold the map
-coordinates (:class:`~ctrplan.boundmap.coordinates.MapCoordinates`). Resuming into, or loading
+coordinates (:class:`~ctrplan.coordinates.MapCoordinates`). Resuming into, or loading
 with a key, a store made for anything else raises
 :class:`~ctrplan.boundmap.identity.BoundMapMismatchError` naming the attribute and both values.
 """

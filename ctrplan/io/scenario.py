@@ -16,6 +16,7 @@ from typing import Annotated, Literal, Mapping, Union
 import numpy as np
 from pydantic import Field
 
+from ..coordinates import map_coordinates
 from ..errors import JointLimitError, ModelFileError
 from ..robot import Robot
 from .robot_file import MAX_METRES, _Strict, load_robot, parse_toml, read_text, validate_document
@@ -299,7 +300,7 @@ class BoundFieldSettings:
     ----------
     resolution : tuple of int or None, shape (d,)
         Grid nodes per map coordinate (base rotations, then translations, of tubes 2..n
-        relative to tube 1 that the joints change; ``ctrplan.boundmap.map_coordinates``); None
+        relative to tube 1 that the joints change; ``ctrplan.coordinates.map_coordinates``); None
         for the default.
     placement : {"uniform", "adaptive"}
         Node placement along bounded coordinates (``ctrplan.boundmap.MapSpec``).
@@ -517,8 +518,6 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
 
     bf = doc.bound_field
     if bf.resolution is not None:
-        from ..boundmap.coordinates import map_coordinates
-
         names = map_coordinates(robot).names
         if len(bf.resolution) != len(names):
             raise ModelFileError(file, "bound_field.resolution",

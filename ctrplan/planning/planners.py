@@ -20,6 +20,7 @@ from ompl import base as ob, geometric as og, util as ou
 
 from ..errors import CtrplanError, UnreachableGoalError
 from .space import JointStateSpace
+from .validity import DEFAULT_VALIDITY_RESOLUTION, use_motion_validator
 
 __all__ = ["PLANNERS", "PlanResult", "ValidityChecker", "plan", "DEFAULT_ITERATIONS",
            "DEFAULT_VALIDITY_RESOLUTION"]
@@ -37,10 +38,6 @@ PLANNERS = {
 # Default planner iterations (RRT* finds a first solution on the paper's 3-joint space within a
 # few hundred iterations; more iterations only improve the cost).
 DEFAULT_ITERATIONS = 2000
-
-# Default spacing of validity checks along a motion [m of the weighted joint metric]: 2 mm is
-# 0.1 rad of rotation at 0.02 m/rad, small against the bound field's cells and obstacles.
-DEFAULT_VALIDITY_RESOLUTION = 2e-3
 
 # Rounds of cost-aware partial shortcutting after planning.
 DEFAULT_SHORTCUT_ROUNDS = 5
@@ -282,8 +279,6 @@ def _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, t
 
     si = objective.getSpaceInformation() if prebuilt else ob.SpaceInformation(js.space)
     if hasattr(validity_fn, "check_motion") and hasattr(validity_fn, "motion_states"):
-        from .validity import use_motion_validator  # noqa: PLC0415 (imports this module)
-
         use_motion_validator(si, js, validity_fn)
     else:
         si.setStateValidityChecker(lambda s: bool(validity_fn(js.to_numpy(s))))

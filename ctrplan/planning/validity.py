@@ -30,11 +30,14 @@ from ompl import base as ob
 
 from ..errors import CtrplanError
 from ..robot import ROTATION
-from .planners import DEFAULT_VALIDITY_RESOLUTION
 from .space import JointStateSpace, wrap_angle
 
 __all__ = ["BatchValidityChecker", "BatchMotionValidator", "use_motion_validator", "bisection_order",
-           "DEFAULT_MOTION_BATCH"]
+           "DEFAULT_MOTION_BATCH", "DEFAULT_VALIDITY_RESOLUTION"]
+
+# Default spacing of validity checks along a motion [m of the weighted joint metric]: 2 mm is
+# 0.1 rad of rotation at 0.02 m/rad, small against the bound field's cells and obstacles.
+DEFAULT_VALIDITY_RESOLUTION = 2e-3
 
 # Motion states evaluated per compiled call by check_motion after the end state [-]: a motion
 # costs one call for its end state (the state most often invalid: the planner's new sample),

@@ -1,0 +1,147 @@
+"""The import graph of ctrplan: no circle, and no import up the layers.
+
+Read from the sources with Python's ``ast`` (every import statement, also those inside
+functions, which is where a circle usually hides), without importing the package.
+"""
+
+from __future__ import annotations
+
+import ast
+import collections
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "ctrplan"
+
+#: Layers of the package's components, lowest first. A module may import from its own component
+#: and from components of lower layers only (never from another component of its own layer).
+LAYERS = (
+    ("errors", "constants", "models"),
+    ("history",),                              # pure numerics of motion history
+    ("robot",),
+    ("coordinates", "effects"),                # robot-level quantities and the registry of effects
+    ("io",),                                   # files -> robots, scenarios, tables
+    ("mechanics",),                            # the models and the bound
+    ("batch", "boundmap", "trajectory"),
+    ("planning",),
+    ("plots", "report"),
+    ("view",),                                 # the interactive view draws with plots' helpers
+    ("discrepancy", "pipeline"),
+    ("cli",),
+)
+
+
+def _modules() -> dict:
+    out = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+def _graph(modules: dict) -> dict:
+    """Module -> the ctrplan modules it imports (a ``from X import Y`` names X.Y when that is a
+    module, else X)."""
+    edges = collections.defaultdict(set)
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = package.split(".")[: len(package.split(".")) - (node.level - 1)]
+                    target = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    target = node.module or ""
+                if not target.startswith("ctrplan"):
+                    continue
+                for alias in node.names:
+                    sub = f"{target}.{alias.name}"
+                    edges[name].add(sub if sub in modules else target)
+            elif isinstance(node, ast.Import):
+                edges[name].update(a.name for a in node.names if a.name.startswith("ctrplan"))
+    return edges
+
+
+def _component(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "ctrplan"
+
+
+def test_the_layers_name_every_component():
+    """A new component must be given a layer (else the rule below would not see it)."""
+    components = {_component(m) for m in _modules()} - {"ctrplan"}
+    named = {c for layer in LAYERS for c in layer}
+    assert components <= named, f"components without a layer: {sorted(components - named)}"
+
+
+def test_no_import_runs_up_the_layers():
+    """Catches e.g. io importing boundmap, or mechanics importing planning."""
+    level = {c: k for k, layer in enumerate(LAYERS) for c in layer}
+    modules = _modules()
+    bad = []
+    for src, targets in _graph(modules).items():
+        a = _component(src)
+        if a == "ctrplan":
+            continue            # the package's own __init__ re-exports the public names
+        for dst in targets:
+            b = _component(dst)
+            if b in (a, "ctrplan"):
+                continue
+            if level[b] >= level[a]:
+                bad.append(f"{src} imports {dst} ({a} is in layer {level[a]}, {b} in layer {level[b]})")
+    assert not bad, "\n".join(bad)
+
+
+def test_no_import_circle():
+    """Strongly connected components of the module graph (Tarjan): none may hold two modules.
+    Catches e.g. planning.planners and planning.validity importing each other."""
+    modules = _modules()
+    edges = _graph(modules)
+    index, low, stack, on_stack, circles = {}, {}, [], set(), []
+    counter = [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in edges.get(v, ()):
+            if w not in modules:
+                continue
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            scc = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                scc.append(w)
+                if w == v:
+                    break
+            if len(scc) > 1:
+                circles.append(sorted(scc))
+
+    for m in sorted(modules):
+        if m not in index:
+            visit(m)
+    assert not circles, f"import circles: {circles}"
+
+
+def test_the_graph_reader_sees_relative_and_function_level_imports(tmp_path, monkeypatch):
+    """The reader itself: a relative import inside a function counts, and one running up the
+    layers is reported (so a passing test above means something)."""
+    pkg = tmp_path / "ctrplan"
+    (pkg / "io").mkdir(parents=True)
+    (pkg / "boundmap").mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "io" / "__init__.py").write_text("")
+    (pkg / "boundmap" / "__init__.py").write_text("")
+    (pkg / "boundmap" / "grid.py").write_text("X = 1\n")
+    (pkg / "io" / "scenario.py").write_text("def f():\n    from ..boundmap.grid import X\n    return X\n")
+    monkeypatch.setattr(__import__(__name__), "PACKAGE", pkg)
+    modules = _modules()
+    assert "ctrplan.boundmap.grid" in _graph(modules)["ctrplan.io.scenario"]
