@@ -35,7 +35,7 @@ def main(argv=None):
     ap.add_argument("--data", default=None, help="paper-protocol CSV from `ctrplan synth` (default: generate)")
     args = ap.parse_args(argv)
 
-    from ctrplan.discrepancy import Effects, synthesize, write_synth
+    from ctrplan.discrepancy import synthesize, write_synth
     from ctrplan.discrepancy.report import write_report
     from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
     from ctrplan.io.robot_file import load_robot, robot_to_toml
@@ -45,7 +45,7 @@ def main(argv=None):
     robot = load_robot(ROOT / "model" / "ha2019-table7-calibrated.toml")
     t0 = time.perf_counter()
     if args.data is None:
-        res = synthesize(robot, Effects(friction_coefficients=(0.22, 0.12)), protocol="paper", grid=args.grid,
+        res = synthesize(robot, {"friction": {"mu_1": 0.22, "mu_2": 0.12}}, protocol="paper", grid=args.grid,
                          seed=0, n_jobs=args.jobs)
         data = out / "paper-protocol-friction.csv"
         write_synth(data, res)

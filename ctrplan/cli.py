@@ -209,6 +209,18 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
     click.echo(f"wrote {path}: {int(field.valid.sum())} of {field.valid.size} nodes valid; {stats}")
 
 
+def _effect_options(command):
+    """One ``ctrplan synth`` option per registered effect that has one (``Effect.synth_option``)."""
+    from .effects import REGISTRY
+
+    for effect in reversed(list(REGISTRY.values())):
+        if effect.synth_option:
+            note = " (trajectory protocol)" if effect.needs_motion else ""
+            command = click.option(effect.synth_option, f"effect__{effect.name}", default=None,
+                                   help=f"{effect.label}: {effect.synth_help}{note} Default: off.")(command)
+    return command
+
+
 @main.command()
 @click.option("--robot", "robot_path", required=True, type=click.Path(exists=True, dir_okay=False),
               help="Nominal robot model file (TOML, SI units).")
@@ -219,21 +231,7 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
                    "continuous motion with reversals at 10 Hz.")
 @click.option("--grid", type=int, default=8, show_default=True, help="Paper protocol: nodes per joint.")
 @click.option("--samples", type=int, default=1200, show_default=True, help="Trajectory protocol: samples.")
-@click.option("--mu", default=None, help="Friction coefficient per tube pair, e.g. 0.22,0.12 (default: off).")
-@click.option("--clearance-m", "clearance", default=None, help="Radial clearance per pair [m] (default: off).")
-@click.option("--offplane-per-m", "offplane", default=None,
-              help="Off-plane (x) precurvature added per tube [1/m] (default: off).")
-@click.option("--poisson", default=None, help="Poisson ratio per tube (default: the robot's).")
-@click.option("--registration", default=None,
-              help="Robot-to-tracker transform 'rx,ry,rz,tx,ty,tz' (rotation vector [rad], translation [m]).")
-@click.option("--backlash-rad", "backlash", default=None,
-              help="Dead band of each tube's rotation drive [rad], e.g. 0,0.05,0.03 (trajectory protocol; "
-                   "default: off).")
-@click.option("--time-offset-s", "time_offset", default=None,
-              help="Lag of the tracker readings behind the joint readings [s] (trajectory protocol; default: off).")
-@click.option("--friction-angle-rad", "friction_angle", default=None,
-              help="Relative rotation over which friction develops after a reversal [rad] (needs --mu; "
-                   "trajectory protocol; default: off, friction switches at once).")
+@_effect_options
 @click.option("--noise-position-mm", "noise_mm", type=float, default=1.4, show_default=True,
               help="rms tip position noise [mm].")
 @click.option("--noise-angle-deg", "noise_deg", type=float, default=0.5, show_default=True,
@@ -242,34 +240,34 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
 @click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")
 @click.option("--jobs", type=int, default=None, help="Worker processes (default: all cores).")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
-def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane, poisson, registration,
-          backlash, time_offset, friction_angle, noise_mm, noise_deg, seed, ds, jobs, no_progress):
-    """Generate measured-like data from a robot model with hidden effects and sensor noise."""
+def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, seed, ds, jobs, no_progress,
+          **effect_options):
+    """Generate measured-like data from a robot model with hidden effects and sensor noise.
+
+    Each effect option takes comma-separated values of the effect's parameters in SI units, in
+    the order of its parameters (one per tube or pair; see ``docs/discrepancy.md``).
+    """
     import numpy as np
 
-    from .discrepancy.effects import Effects
     from .discrepancy.synth import Noise, parse_values, synthesize, write_synth
+    from .effects import REGISTRY, EffectSet
     from .errors import PhysicalParameterError
     from .io.robot_file import file_hash, load_robot
 
     robot = load_robot(robot_path)
-    n = robot.n_tubes
-    fields = {}
-    for option, text, name, count in (("--mu", mu, "friction_coefficients", n - 1),
-                                      ("--clearance-m", clearance, "clearances", n - 1),
-                                      ("--offplane-per-m", offplane, "offplane_precurvature", n),
-                                      ("--poisson", poisson, "poisson_ratios", n),
-                                      ("--registration", registration, "registration", 6),
-                                      ("--backlash-rad", backlash, "backlash", n),
-                                      ("--time-offset-s", time_offset, "time_offset", 1),
-                                      ("--friction-angle-rad", friction_angle, "friction_angle", 1)):
+    values, used = {}, []
+    for key, text in effect_options.items():
         if text is None:
             continue
-        fields[name] = parse_values(option, text, count)
+        effect = REGISTRY[key.split("__", 1)[1]]
+        names = effect.parameter_names(robot)
+        parsed = parse_values(effect.synth_option, text, len(names))
         try:
-            Effects(**{name: fields[name]})
+            EffectSet({effect.name: dict(zip(names, parsed))}, robot)
         except PhysicalParameterError as exc:
-            raise PhysicalParameterError(f"option {option} {text!r}: {exc}") from None
+            raise PhysicalParameterError(f"option {effect.synth_option} {text!r}: {exc}") from None
+        values[effect.name] = dict(zip(names, parsed))
+        used.append(effect.synth_option)
     for option, value in (("--noise-position-mm", noise_mm), ("--noise-angle-deg", noise_deg)):
         if not np.isfinite(value) or value < 0:
             raise PhysicalParameterError(f"option {option} {value!r}: must be >= 0")
@@ -278,17 +276,15 @@ def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane
             raise PhysicalParameterError(f"option {option} {value!r}: must be >= {low}")
     if ds is not None and not (np.isfinite(ds) and ds > 0):
         raise PhysicalParameterError(f"option --ds {ds!r}: must be > 0 m")
+    moving = []
     try:
-        effects = Effects(**fields)
-        if effects.history_on and protocol != "trajectory":
+        effects = EffectSet(values, robot)
+        moving = [REGISTRY[n].synth_option for n in effects.active() if REGISTRY[n].needs_motion]
+        if moving and protocol != "trajectory":
             raise PhysicalParameterError("needs --protocol trajectory (the paper protocol solves every target "
                                          "without its approach path)")
-        if effects.friction_angle is not None and not effects.friction_on:
-            raise PhysicalParameterError("needs positive friction coefficients (--mu)")
     except PhysicalParameterError as exc:
-        used = [o for o, v in (("--backlash-rad", backlash), ("--time-offset-s", time_offset),
-                               ("--friction-angle-rad", friction_angle)) if v is not None]
-        raise PhysicalParameterError(f"option {used[-1] if used else '--mu'}: {exc}") from None
+        raise PhysicalParameterError(f"option {(moving or used or ['--effects'])[-1]}: {exc}") from None
     noise = Noise(position_rms=noise_mm * 1e-3, angle_rms=float(np.deg2rad(noise_deg)))
     result = synthesize(robot, effects, protocol=protocol, grid=grid, samples=samples, noise=noise,
                         seed=seed, settings=_settings(ds), n_jobs=jobs or os.cpu_count() or 1,
@@ -311,9 +307,9 @@ def synth(robot_path, out_path, protocol, grid, samples, mu, clearance, offplane
 @click.option("--fit", default=None,
               help="Baseline parameters, comma-separated (default: precurvature_y_i of curved tubes, "
                    "k_xy_relative_2..n, and the registration for tracker-frame data).")
-@click.option("--effects", default=",".join(("friction", "clearance", "offplane", "poisson", "registration",
-                                              "backlash", "time_offset", "gradual_friction")),
-              show_default=True, help="Candidate effects to test and try.")
+@click.option("--effects", default=None,
+              help="Candidate effects to test and try, comma-separated (default: every registered effect: "
+                   "friction, clearance, offplane, poisson, registration, backlash, time_offset, gradual_friction).")
 @click.option("--noise-position-mm", "noise_mm", type=float, default=None,
               help="rms tip position noise of the sensor [mm] as the data's source states it (default: "
                    "estimated from rests or repeated configurations in the data).")
@@ -343,14 +339,17 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
     Interrupted runs resume from <out>/.stages (finished calibrations and evaluations are kept).
     """
     from .discrepancy.report import write_report
-    from .discrepancy.workflow import EFFECTS, DiscrepancyOptions, run_discrepancy
+    from .discrepancy.workflow import DiscrepancyOptions, run_discrepancy
+    from .effects import REGISTRY
     from .errors import PhysicalParameterError
 
-    chosen = tuple(e.strip() for e in effects.split(",") if e.strip())
-    bad = [e for e in chosen if e not in EFFECTS]
-    if bad:
-        raise PhysicalParameterError(f"option --effects {effects!r}: unknown effect {bad[0]!r}; "
-                                     f"expected some of {', '.join(EFFECTS)}")
+    chosen = None
+    if effects is not None:
+        chosen = tuple(e.strip() for e in effects.split(",") if e.strip())
+        bad = [e for e in chosen if e not in REGISTRY]
+        if bad:
+            raise PhysicalParameterError(f"option --effects {effects!r}: unknown effect {bad[0]!r}; "
+                                         f"expected some of {', '.join(REGISTRY)}")
     if not 0.0 < calibration_fraction < 1.0:
         raise PhysicalParameterError(f"option --calibration-fraction {calibration_fraction!r}: must be in (0, 1)")
     if ds is not None and not ds > 0:

@@ -42,10 +42,12 @@ from .boundmap import MapSpec, default_spec, load_or_compute_bound_map
 from .errors import JointLimitError, UnreachableGoalError
 from .errors import CtrplanError
 from .io.scenario import TaskGoal, load_scenario
-from .mechanics import ModelSettings, evaluate_bound, pair_cases, predict_tip
+from .effects import REGISTRY, robot_effects
+from .history import pair_friction
+from .mechanics import ModelSettings, evaluate_bound, predict_tip
 from .planning import BoundCostObjective, JointStateSpace, bounds_given_last_motion, resolve_goal
 from .planning.goals import compensate_goal
-from .planning.history import approach_history, end_with, goal_indices, path_history
+from .planning.history import approach_history, approach_rows, end_with, goal_indices, path_history
 from .planning.route import DEFAULT_REWIRE_FACTOR, plan_route, route_checks
 
 __all__ = ["run_plan", "map_spec", "PlanSetup", "BoundMapStage", "ResolvedGoals", "AimedGoals", "PathBounds",
@@ -227,6 +229,9 @@ class WaypointPredictions:
         Its distance from the standard model's tip [m]; NaN where it failed.
     eta, translation_last : ndarray, shape (K, n_tubes - 1)
         The path's history per pair (:func:`ctrplan.planning.history.path_history`).
+    state : HistoryState
+        The whole history state of the path (offsets of the configuration the tubes reach, e.g.
+        a drive's backlash; friction state per pair).
     eta_used : ndarray of int, shape (K, n_tubes - 1)
         Friction direction applied per pair (0: frictionless there).
     cases, model, message : list of str, length K
@@ -252,6 +257,7 @@ class WaypointPredictions:
     message: list
     n_solved: int
     time_s: float
+    state: Any = None
     shape: tuple = ()
 
 
@@ -488,14 +494,19 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo: Echo = 
     sc, robot = setup.scenario, setup.robot
     final_motion = sc.planner.final_motion
     t0 = time.perf_counter()
-    compensations, goal_q, q_prev = [], [], np.asarray(sc.start, dtype=float)
+    compensations, goal_q = [], []
+    motion = [np.asarray(sc.start, dtype=float)]      # the assumed motion so far (approaches to the goals)
     errors = {}
     for k, (doc, g) in enumerate(zip(sc.goals, resolved.goals)):
         c = None
         if isinstance(doc, TaskGoal):
-            eta, tl = approach_history(robot, q_prev, g.q, final_motion)
+            before = np.array(motion)
+
+            def state_at(q, before=before):
+                return approach_history(robot, before[-1], q, final_motion, before=before)
+
             try:
-                c = compensate_goal(doc.tip_position, robot, g.q, eta, tl, setup.settings, tolerance=doc.tolerance,
+                c = compensate_goal(doc.tip_position, robot, g.q, state_at, setup.settings, tolerance=doc.tolerance,
                                     validity_fn=validity)
             except CtrplanError as exc:   # no prediction at the standard solution: plan to it, say why
                 errors[k] = f"{type(exc).__name__}: {exc}"
@@ -507,7 +518,7 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo: Echo = 
                  f"q = {np.round(c.q, 4).tolist()}")
         compensations.append(c)
         goal_q.append(c.q if c is not None else g.q)
-        q_prev = goal_q[-1]
+        motion += list(approach_rows(robot, motion[-1], goal_q[-1], final_motion)[1:])
     return AimedGoals(final_motion=final_motion, q=tuple(goal_q), compensations=tuple(compensations),
                       errors=MappingProxyType(errors), time_s=time.perf_counter() - t0)
 
@@ -561,6 +572,7 @@ def _predictions(ordered, robot, settings, exact) -> WaypointPredictions:
     get NaN."""
     t0 = time.perf_counter()
     hist = path_history(robot, ordered.q)
+    mu_robot = robot.friction_coefficients
     K, m = len(ordered), robot.n_tubes - 1
     tips = np.full((K, 3), np.nan)
     offsets = np.full(K, np.nan)
@@ -571,15 +583,15 @@ def _predictions(ordered, robot, settings, exact) -> WaypointPredictions:
     n_solved = 0
     for k in range(K):
         res = exact.results[k]
-        eta, tl = hist.at(k)
+        state = hist.at(k)
         try:
             if res is None:
                 raise CtrplanError("the exact bound failed here")
             alpha, beta = robot.configuration(ordered.q[k], check_limits=False)
-            p = predict_tip(robot, alpha, beta, eta, tl, settings, bound=res)
+            p = predict_tip(robot, alpha, beta, settings=settings, state=state, bound=res)
         except (CtrplanError, np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
             messages[k] = f"{type(exc).__name__}: {exc}"
-            eta_used[k], _, c = pair_cases(robot, eta, tl)
+            eta_used[k], _, c = pair_friction(state, mu_robot)
             cases[k] = ";".join(c)
             continue
         n_solved += not p.reused
@@ -587,9 +599,9 @@ def _predictions(ordered, robot, settings, exact) -> WaypointPredictions:
         cases[k], models[k], ok[k] = ";".join(p.cases), p.model, p.ok
         shapes[k] = np.asarray(p.solution.centerlines[-1])
         messages[k] = p.solution.diagnostics.message
-    return WaypointPredictions(tip=tips, offset=offsets, eta=hist.eta, translation_last=hist.translation_last,
+    return WaypointPredictions(tip=tips, offset=offsets, eta=hist.eta, translation_last=hist.released,
                                eta_used=eta_used, cases=cases, model=models, ok=ok, message=messages,
-                               n_solved=n_solved, time_s=time.perf_counter() - t0, shape=tuple(shapes))
+                               n_solved=n_solved, time_s=time.perf_counter() - t0, state=hist, shape=tuple(shapes))
 
 
 def _plan_mode(job: _PlanJob) -> RoutePlan:
@@ -811,14 +823,14 @@ def _goal_prediction(goal_docs, aimed: AimedGoals, plan: RoutePlan, robot) -> di
     pred = plan.prediction
     out = {}
     for k, (doc, c, gi) in enumerate(zip(goal_docs, aimed.compensations, plan.goal_indices)):
-        planned_eta, _, planned_cases = pair_cases(robot, *(pred.eta[gi], pred.translation_last[gi]))
+        planned_eta, _, planned_cases = pair_friction(pred.state.at(gi), robot.friction_coefficients)
         entry = {"waypoint": int(gi), "final_motion_status": plan.final_motion_status[k],
                  "planned_eta": _eta_text(planned_eta), "planned_cases": ";".join(planned_cases),
                  "predicted_offset_at_goal_mm": float(pred.offset[gi] * 1e3)}
         if k in aimed.errors:
             entry.update({"compensation_used": False, "compensation_message": aimed.errors[k]})
         if c is not None:
-            assumed_eta, _, assumed_cases = pair_cases(robot, c.eta, c.translation_last)
+            assumed_eta, _, assumed_cases = pair_friction(c.state, robot.friction_coefficients)
             entry.update({
                 "assumed_eta": _eta_text(assumed_eta), "assumed_cases": ";".join(assumed_cases),
                 "planned_history_as_assumed": bool(np.array_equal(assumed_eta, planned_eta)
@@ -833,6 +845,21 @@ def _goal_prediction(goal_docs, aimed: AimedGoals, plan: RoutePlan, robot) -> di
                 "tolerance_mm": float(doc.tolerance * 1e3),
             })
         out[f"goal_{k + 1}"] = entry
+    return out
+
+
+def _robot_effects(robot) -> dict:
+    """The robot file's history and measurement effects (its ``[effects]``) and what planning
+    does with each (``Effect.plan``); values under keys with their unit suffix."""
+    from .effects import file_key
+
+    out = {}
+    effects = robot_effects(robot)
+    for name in effects:
+        entry = REGISTRY[name]
+        specs = {p.name: p for p in entry.parameters(robot)}
+        out[name] = {"label": entry.label, **{file_key(specs[p]): v for p, v in effects[name].items()},
+                     "planning": entry.plan}
     return out
 
 
@@ -869,6 +896,7 @@ def plan_summary(setup: PlanSetup, bound_map: BoundMapStage, validity, resolved:
                    "field_bound_planned_mm": float(field(np.asarray(qp))) * 1e3}
                   for g, qp in zip(resolved.goals, aimed.q)],
         "final_motion": aimed.final_motion,
+        "robot_effects": _robot_effects(robot),
         "goal_prediction": _goal_prediction(sc.goals, aimed, aware, robot),
         "bound_map": {"source": bound_map.source, "time_s": bound_map.time_s, "coordinates": field.coordinate_names,
                       "resolution": list(field.shape), "placement": setup.spec.placement, "key": field.key,

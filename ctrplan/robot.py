@@ -214,6 +214,11 @@ class Robot:
     clearances_override : tuple of float or None, shape (n - 1,)
         Radial clearance c_i [m] of each pair. ``None``: from diameters,
         ``c_i = r_(i,in) - r_(i+1,out)`` (Eq. (15)).
+    effects : tuple
+        Effects on the motion or the measurement that the robot file records (its ``[effects]``
+        table, e.g. drive backlash): ``((effect, ((parameter, value), ...)), ...)`` in SI units,
+        validated by :func:`ctrplan.effects.effects_from_file`; read them with
+        :func:`ctrplan.effects.robot_effects`.
     """
 
     name: str
@@ -225,6 +230,7 @@ class Robot:
     links: tuple[TranslationLink, ...] = ()
     source: str = ""
     clearances_override: tuple[float, ...] | None = None
+    effects: tuple = ()
     metadata: dict = field(default_factory=dict, compare=False, hash=False)
 
     def __post_init__(self):

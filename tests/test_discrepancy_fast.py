@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import Effects, Noise, synthesize, write_synth
-from ctrplan.discrepancy.workflow import DiscrepancyOptions, estimate_noise, run_discrepancy
+from ctrplan.discrepancy import Noise, synthesize, write_synth
+from ctrplan.discrepancy.decision import estimate_noise
+from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.discrepancy.data import load_measured_data
 from ctrplan.discrepancy.report import write_report
 from ctrplan.io.robot_file import load_robot, robot_to_toml
@@ -53,7 +54,7 @@ def test_fast_hidden_backlash_is_named_with_its_size(tmp_path):
     baseline residual is reported as NOT consistent with the 0.5 mm noise. Catches a broken
     play operator, a signature or naming rule that cannot see backlash, and the old report that
     called any unexplained residual "consistent with noise"."""
-    res, _ = _case(tmp_path, Effects(backlash=(0.0, 0.08)), seed=1)
+    res, _ = _case(tmp_path, {"backlash": {"backlash_2": 0.08}}, seed=1)
     assert res["named_effect"] == "backlash", res["decision"]
     assert res["candidates"]["backlash"]["parameters"]["backlash_2"] == pytest.approx(0.08, rel=0.2)
     assert res["noise"]["consistent"] is False and res["noise"]["ratio"] > 2
@@ -74,7 +75,7 @@ def test_fast_two_hidden_effects_are_named_as_a_combination_best_first(tmp_path)
     lag alone improves the held-out error most and is named first, and backlash fitted on top of
     it improves the held-out error significantly again; the pair recovers both truths. Catches a
     workflow that can name only one effect, names the weaker one first, or fits the pair badly."""
-    res, _ = _case(tmp_path, Effects(backlash=(0.0, 0.08), time_offset=(0.15,)), seed=1)
+    res, _ = _case(tmp_path, {"backlash": {"backlash_2": 0.08}, "time_offset": {"time_offset": 0.15}}, seed=1)
     assert res["named_effects"] == ["time_offset", "backlash"], (res["decision"], res["combination"])
     cands = res["candidates"]
     assert (cands["time_offset"]["improvement_eq49"]["mean_difference"]
@@ -94,7 +95,7 @@ def test_fast_noise_only_names_nothing_and_says_it_is_noise(tmp_path):
     """No hidden effect: nothing is named, and the report says the residual is consistent with
     the noise that the data's rests show (estimated within 15 % of the 0.5 mm truth). Catches
     naming on noise and a noise estimate that is off."""
-    res, data = _case(tmp_path, Effects(), seed=2)
+    res, data = _case(tmp_path, {}, seed=2)
     assert res["named_effect"] is None, res["decision"]
     assert res["decision"]["no_effect_case"] == "noise"
     assert res["noise"]["noise"]["position_rms_m"] == pytest.approx(0.5e-3, rel=0.15)

@@ -1,21 +1,23 @@
-"""History effects (drive backlash, tracker time offset, gradually developing friction): their
-operators, signature tests, synth options, plausibility and ambiguity rules, and (slow) the
-workflow naming each when hidden in a continuous trajectory."""
+"""History effects (drive backlash, tracker time offset, gradually developing friction) in the
+discrepancy workflow: their parameters, synth options, signature tests, plausibility and
+ambiguity rules, and (slow) the workflow naming each when hidden in a continuous trajectory.
+The operators themselves are tested in tests/test_history.py."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import Effects, Noise, synthesize, write_synth
-from ctrplan.discrepancy.history import (apply_backlash, apply_time_offset, friction_state, rotation_direction,
-                                         rotation_since_reversal, tip_velocity)
-from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, history_parameters, parameter
-from ctrplan.discrepancy.signatures import vector_signature
-from ctrplan.discrepancy.workflow import (DiscrepancyOptions, _decide, estimate_noise, hull_distance,
-                                         run_discrepancy)
+from ctrplan.discrepancy import Noise, synthesize, write_synth
+from ctrplan.discrepancy.decision import decide
+from ctrplan.discrepancy.envelope import hull_distance
+from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, needs_solve, parameter, read_parameters
+from ctrplan.discrepancy.signatures import tip_velocity, vector_signature
+from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
+from ctrplan.effects import EffectSet
 from ctrplan.errors import PhysicalParameterError
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from ctrplan.mechanics import ModelSettings
@@ -26,64 +28,6 @@ PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
 COARSE = ModelSettings(ds=6e-3)
 
 
-# --------------------------------------------------------------------------- operators
-def test_backlash_lags_by_half_the_band_after_each_reversal():
-    """Play operator: moving up, the tube lags by b/2; after the reversal it stays put until the
-    motor has crossed the band, then lags by b/2 the other way. Catches a lag on the wrong side,
-    a full-band lag, or a lag without reversal."""
-    up = np.linspace(0.0, 1.0, 11)
-    motor = np.concatenate([up, up[::-1][1:]])[:, None] * np.array([[0.0, 1.0]])
-    a = apply_backlash(motor, [0.0, 0.2])
-    np.testing.assert_allclose(a[:, 0], 0.0)
-    np.testing.assert_allclose(a[1:11, 1], motor[1:11, 1] - 0.1, atol=1e-12)     # lagging below
-    np.testing.assert_allclose(a[11, 1], a[10, 1])                               # inside the band: stays
-    np.testing.assert_allclose(a[13:, 1], motor[13:, 1] + 0.1, atol=1e-12)       # lagging above
-    assert np.all(np.abs(a - motor) <= 0.1 + 1e-12)
-    # direction of the last rotation, the sign of the lag
-    s = rotation_direction(motor)
-    assert s[5, 1] == 1 and s[-1, 1] == -1 and np.all(s[:, 0] == 0)
-    with pytest.raises(ValueError, match="backlash widths"):
-        apply_backlash(motor, [0.0, -0.1])
-
-
-def test_time_offset_interpolates_the_joint_record():
-    """Joints at t - tau by linear interpolation, held at the record's start; a ramp shifted by
-    0.25 s reads 0.25 s x slope lower. Catches a shift of the wrong sign or by whole samples."""
-    t = np.arange(10) * 0.1
-    alpha = np.column_stack([np.zeros(10), t * 2.0])
-    beta = np.column_stack([np.zeros(10), -0.05 + 0.01 * t])
-    a, b = apply_time_offset(alpha, beta, t, 0.25)
-    np.testing.assert_allclose(a[5:, 1], 2.0 * (t[5:] - 0.25), atol=1e-12)
-    np.testing.assert_allclose(a[:3, 1], 0.0, atol=1e-12)
-    np.testing.assert_allclose(b[5:, 1], -0.05 + 0.01 * (t[5:] - 0.25), atol=1e-12)
-    with pytest.raises(ValueError, match="needs sample times"):
-        apply_time_offset(alpha, beta, None, 0.1)
-    v = tip_velocity(np.column_stack([t, 0 * t, 0 * t]), t)
-    np.testing.assert_allclose(v[:, 0], 1.0)
-
-
-def test_friction_state_develops_exponentially_and_translation_releases_it():
-    """Dahl-type state: after a long positive rotation e ~ +1; after reversing by theta_c it is
-    1 - 2 exp(-1); theta_c = 0 gives the abrupt eta of the paper; a translation resets it to 0.
-    Catches a wrong law, a missing release or a state that does not restart."""
-    theta = np.deg2rad(10.0)
-    rel = np.concatenate([np.linspace(0, 1.5, 151), np.linspace(1.5, 1.5 - theta, 11)[1:]])
-    alpha = np.column_stack([np.zeros(rel.size), rel])
-    beta = np.tile([0.0, -0.02], (rel.size, 1))
-    e = friction_state(alpha, beta, theta)
-    assert e[150, 0] == pytest.approx(1.0 - np.exp(-1.5 / theta), abs=1e-9)      # from 0: 1 - exp(-r/theta)
-    assert e[-1, 0] == pytest.approx(-1.0 + (1.0 + e[150, 0]) * np.exp(-1.0), abs=1e-9)
-    assert e[-1, 0] == pytest.approx(-(1 - 2 * np.exp(-1.0)), abs=1e-3)
-    e0 = friction_state(alpha, beta, 0.0)
-    assert e0[100, 0] == 1 and e0[-1, 0] == -1
-    alpha2 = np.vstack([alpha, np.repeat(alpha[-1:], 3, axis=0)])
-    beta2 = np.vstack([beta, [[0.0, -0.019], [0.0, -0.018], [0.0, -0.017]]])   # a translation after it
-    e2 = friction_state(alpha2, beta2, theta)
-    assert e2[-4, 0] == pytest.approx(e[-1, 0]) and np.all(e2[-3:, 0] == 0.0)
-    d = rotation_since_reversal(alpha)
-    assert d[150, 0] == pytest.approx(1.5) and d[-1, 0] == pytest.approx(theta)
-
-
 # --------------------------------------------------------------------------- parameters, synth
 def test_history_parameters_have_units_bounds_and_plausible_ranges():
     """Catches a history parameter that changes the robot, has no unit or plausible range, or
@@ -91,14 +35,16 @@ def test_history_parameters_have_units_bounds_and_plausible_ranges():
     robot = load_robot(TABLE7)
     for name, unit in (("backlash_2", "rad"), ("time_offset", "s"), ("friction_angle", "rad")):
         p = parameter(robot, name)
-        assert p.history and not p.mechanical and p.unit == unit and p.plausible is not None
+        assert needs_solve(robot, name) and p.unit == unit and p.plausible is not None
+    assert not needs_solve(robot, "registration_tx")
     assert parameter(robot, "mu_1").is_plausible(0.22) and not parameter(robot, "mu_1").is_plausible(1.075)
     assert apply_parameters(robot, ("backlash_2", "time_offset"), (0.05, 0.1)) == robot
-    h = history_parameters(robot, ("backlash_3", "time_offset", "precurvature_y_3"), (0.05, 0.1, 15.0))
-    np.testing.assert_allclose(h["backlash"], [0, 0, 0.05])
-    assert h["time_offset"] == 0.1
+    es, rest = EffectSet.from_parameters(robot, ("backlash_3", "time_offset", "precurvature_y_3"), (0.05, 0.1, 15.0))
+    assert es.to_dict() == {"backlash": {"backlash_3": 0.05}, "time_offset": {"time_offset": 0.1}}
+    assert rest == {"precurvature_y_3": 15.0}
+    np.testing.assert_allclose(read_parameters(robot, ("backlash_2", "mu_1", "poisson_ratio_3")), [0.0, 0.22, -0.1543])
     with pytest.raises(ParameterError, match="outside"):
-        history_parameters(robot, ("backlash_2",), (-0.1,))
+        apply_parameters(robot, ("backlash_2",), (-0.1,))
 
 
 def test_synth_hides_history_effects_and_refuses_them_on_the_paper_protocol():
@@ -108,17 +54,17 @@ def test_synth_hides_history_effects_and_refuses_them_on_the_paper_protocol():
     robot = load_robot(TABLE7).replace(friction_coefficients=(0.0, 0.0))
     clean = Noise(position_rms=0.0, angle_rms=0.0)
     kw = dict(protocol="trajectory", samples=120, noise=clean, seed=3, settings=COARSE)
-    base = synthesize(robot, Effects(), **kw).frame
-    for eff in (Effects(backlash=(0.0, 0.08, 0.08)), Effects(time_offset=(0.2,))):
+    base = synthesize(robot, {}, **kw).frame
+    for eff in ({"backlash": {"backlash_2": 0.08, "backlash_3": 0.08}}, {"time_offset": {"time_offset": 0.2}}):
         f = synthesize(robot, eff, **kw).frame
         joints = [c for c in base if c.startswith(("alpha", "beta", "eta"))]
         assert f[joints].equals(base[joints])
         moved = np.linalg.norm(f[["tip_x", "tip_y", "tip_z"]].values - base[["tip_x", "tip_y", "tip_z"]].values, axis=1)
         assert moved.max() > 1e-3
     with pytest.raises(PhysicalParameterError, match="trajectory protocol"):
-        synthesize(robot, Effects(backlash=(0, 0.1, 0.1)), protocol="paper", grid=2, noise=clean, settings=COARSE)
-    with pytest.raises(PhysicalParameterError, match="friction coefficients"):
-        synthesize(robot, Effects(friction_angle=(0.1,)), **kw)
+        synthesize(robot, {"backlash": {"backlash_2": 0.1}}, protocol="paper", grid=2, noise=clean, settings=COARSE)
+    with pytest.raises(PhysicalParameterError, match="needs the effect 'friction'"):
+        synthesize(robot, {"gradual_friction": {"friction_angle": 0.1}}, **kw)
 
 
 def test_cli_synth_history_options(tmp_path):
@@ -132,10 +78,14 @@ def test_cli_synth_history_options(tmp_path):
                                   "--samples", "40", "--backlash-rad", "0,0.05", "--time-offset-s", "0.1",
                                   "--ds", "0.006", "--jobs", "1", "--no-progress"])
     assert r.exit_code == 0, r.output
-    assert '"backlash": [\n      0.0,\n      0.05' in (tmp_path / "s.csv.truth.json").read_text()
-    r = CliRunner().invoke(main, ["synth", "--robot", str(PAIR), "--out", str(out), "--friction-angle-rad", "0.1",
-                                  "--protocol", "trajectory", "--samples", "40"])
-    assert r.exit_code != 0 and "--friction-angle-rad" in str(r.exception)
+    truth = json.loads((tmp_path / "s.csv.truth.json").read_text())
+    assert truth["effects"] == {"backlash": {"backlash_1": 0.0, "backlash_2": 0.05}, "time_offset": {"time_offset": 0.1}}
+    frictionless = tmp_path / "pair.toml"
+    frictionless.write_text(robot_to_toml(load_robot(PAIR).replace(friction_coefficients=(0.0,))))
+    r = CliRunner().invoke(main, ["synth", "--robot", str(frictionless), "--out", str(out), "--friction-angle-rad",
+                                  "0.1", "--protocol", "trajectory", "--samples", "40"])
+    assert r.exit_code != 0 and "--friction-angle-rad" in str(r.exception) and "needs the effect 'friction'" in str(
+        r.exception)
 
 
 # --------------------------------------------------------------------------- signatures and rules
@@ -171,12 +121,12 @@ def test_decision_passes_over_implausible_values_and_lists_equally_good_effects(
         "time_offset": {"label": "time offset", "plausible": True, "implausible": [],
                         "improvement_eq49": {"mean_difference": 1.85}, "_r": r_fr + rng.normal(0, 0.01, 200)},
     }
-    d = _decide(cands, ["friction", "backlash", "time_offset"], units, DiscrepancyOptions())
+    d = decide(cands, ["friction", "backlash", "time_offset"], units, DiscrepancyOptions())
     assert d["named"] == "backlash" and d["passed_over_implausible"] == ["friction"]
     assert [x["effect"] for x in d["equally_good"]] == ["time_offset"]
     assert any("equally well" in n for n in d["notes"])
     cands["time_offset"]["_r"] = r_fr + 0.5                  # clearly worse held out
-    assert _decide(cands, ["friction", "backlash", "time_offset"], units, DiscrepancyOptions())["equally_good"] == []
+    assert decide(cands, ["friction", "backlash", "time_offset"], units, DiscrepancyOptions())["equally_good"] == []
 
 
 def test_hull_distance():
@@ -211,7 +161,7 @@ def test_hidden_backlash_on_a_trajectory_is_named_not_friction(tmp_path):
     """Hidden 4 deg dead band in the drives of tubes 2 and 3: backlash is named, friction is not
     (a friction model imitates part of the hysteresis, but a translation releases friction and
     not the play). Catches a workflow that mistakes backlash for friction (issue 13, Sec. 4)."""
-    res = _trajectory_case(tmp_path, Effects(backlash=(0.0, 0.07, 0.07)), seed=11)
+    res = _trajectory_case(tmp_path, {"backlash": {"backlash_2": 0.07, "backlash_3": 0.07}}, seed=11)
     assert res["named_effect"] == "backlash", res["decision"]
     assert "friction" not in [d["effect"] for d in res["decision"]["equally_good"]]
     assert res["noise"]["consistent"] is False
@@ -221,7 +171,7 @@ def test_hidden_backlash_on_a_trajectory_is_named_not_friction(tmp_path):
 def test_hidden_friction_on_a_trajectory_is_named_not_backlash(tmp_path):
     """Hidden friction (0.22, 0.12) along a continuous trajectory: friction (abrupt or
     gradual) is named, backlash is not. Catches a backlash candidate that absorbs friction."""
-    res = _trajectory_case(tmp_path, Effects(friction_coefficients=(0.22, 0.12)), seed=12,
+    res = _trajectory_case(tmp_path, {"friction": {"mu_1": 0.22, "mu_2": 0.12}}, seed=12,
                            truth_robot=load_robot(TABLE7))
     assert res["named_effect"] in ("friction", "gradual_friction"), res["decision"]
     assert "backlash" not in [d["effect"] for d in res["decision"]["equally_good"]]
@@ -231,7 +181,7 @@ def test_hidden_friction_on_a_trajectory_is_named_not_backlash(tmp_path):
 def test_hidden_time_offset_on_a_trajectory_is_named(tmp_path):
     """Hidden 0.2 s tracker lag: the time offset is named with tau within 0.05 s. Catches
     the old report, which called this trajectory's residual consistent with noise."""
-    res = _trajectory_case(tmp_path, Effects(time_offset=(0.2,)), seed=13)
+    res = _trajectory_case(tmp_path, {"time_offset": {"time_offset": 0.2}}, seed=13)
     assert res["named_effect"] == "time_offset", res["decision"]
     assert res["candidates"]["time_offset"]["parameters"]["time_offset"] == pytest.approx(0.2, abs=0.05)
     assert res["noise"]["consistent"] is False
@@ -244,7 +194,8 @@ def test_hidden_gradual_friction_on_a_trajectory_is_named_not_backlash(tmp_path)
     theta_c within 10 deg of the truth. Catches a friction-angle fit that cannot see the ramp and
     a backlash candidate that absorbs it (issue 13, Sec. 4)."""
     theta = float(np.deg2rad(20.0))
-    res = _trajectory_case(tmp_path, Effects(friction_coefficients=(0.22, 0.12), friction_angle=(theta,)), seed=14,
+    res = _trajectory_case(tmp_path, {"friction": {"mu_1": 0.22, "mu_2": 0.12},
+                                      "gradual_friction": {"friction_angle": theta}}, seed=14,
                            truth_robot=load_robot(TABLE7), candidates=("friction", "backlash", "gradual_friction"),
                            jobs=1)
     assert res["named_effect"] == "gradual_friction", (res["decision"], {e: c["held_out"] for e, c in

@@ -1,22 +1,18 @@
-"""ctrplan.discrepancy.simulate (models along a motion history) and .effects.
+"""ctrplan.discrepancy.simulate (models along a motion).
 
-Motion history: eta_k of Eq. (38) of Ha, Fagogenis & Dupont 2019 (doi:10.1109/TRO.2018.2878906)
-from the joint values, and the translation-last release of Section V-B. Simulation: branch
-following of the standard model, the friction/clearance choice per sample, robustness to failing
-samples, parallel = serial. Robots: tests/_robots.py at a coarse ds for speed.
+Branch following of the standard model, the friction/clearance choice per sample from the
+friction applied per pair (Sections III and V-B of Ha, Fagogenis & Dupont 2019,
+doi:10.1109/TRO.2018.2878906; the history rule itself is tested in tests/test_history.py),
+robustness to failing samples, parallel = serial. Robots: tests/_robots.py at a coarse ds for speed.
 """
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import (Effects, apply_effects, apply_registration, motion_history,
-                                 simulate)
-from ctrplan.errors import ModelFileError, PhysicalParameterError
-from ctrplan.io.tables import rotation_directions
+from ctrplan.discrepancy import simulate
+from ctrplan.history import MotionRecord, motion_state
 from ctrplan.mechanics import ModelSettings, solve_clearance, solve_contact, solve_friction, solve_standard
 from ctrplan.robot import Joint, Robot, Section, Tube
 
@@ -30,66 +26,6 @@ PI = np.pi
 def _configs(robot, q):
     a, b = zip(*[robot.configuration(x) for x in q])
     return np.array(a), np.array(b)
-
-
-# --------------------------------------------------------------------------- motion_history
-def _three_tube(alpha2, alpha3, beta3):
-    K = len(alpha2)
-    alpha = np.column_stack([np.zeros(K), alpha2, alpha3])
-    beta = np.column_stack([np.zeros(K), np.full(K, -0.017), beta3])
-    return alpha, beta
-
-
-def test_history_reversal_and_translation_after_rotation():
-    # alpha_2 up, then back down (reversal), then beta_3 moves, then alpha_2 moves again
-    a2 = [0.0, 0.1, 0.2, 0.15, 0.1, 0.1, 0.1, 0.2]
-    b3 = [-0.05, -0.05, -0.05, -0.05, -0.05, -0.06, -0.06, -0.06]
-    alpha, beta = _three_tube(a2, np.zeros(8), b3)
-    h = motion_history(alpha, beta, np.zeros(8, dtype=int))
-    # pair 1: alpha_2 - alpha_1; pair 2: alpha_3 - alpha_2 = -alpha_2 (opposite direction)
-    assert h.eta[:, 0].tolist() == [0, 1, 1, -1, -1, -1, -1, 1]
-    assert h.eta[:, 1].tolist() == [0, -1, -1, 1, 1, 1, 1, -1]
-    assert h.translation_last.tolist() == [False, False, False, False, False, True, True, False]
-    assert np.array_equal(h.eta, rotation_directions(alpha))
-
-
-def test_history_jitter_below_tolerance_neither_flips_nor_counts_as_rotation():
-    a2 = [0.0, 0.2, 0.2 - 4e-4, 0.2 + 3e-4, 0.2, 0.2]
-    b3 = [-0.05, -0.05, -0.05, -0.05, -0.052, -0.052]
-    alpha, beta = _three_tube(a2, np.zeros(6), b3)
-    h = motion_history(alpha, beta, np.zeros(6, dtype=int), rotation_tol=1e-3)
-    assert h.eta[:, 0].tolist() == [0, 1, 1, 1, 1, 1]
-    assert h.translation_last.tolist() == [False] * 4 + [True, True]
-
-
-def test_history_translation_during_rotation_is_not_translation_last():
-    a2 = np.linspace(0.0, 0.5, 6)
-    b3 = np.linspace(-0.05, -0.06, 6)
-    alpha, beta = _three_tube(a2, np.zeros(6), b3)
-    h = motion_history(alpha, beta, np.zeros(6, dtype=int))
-    assert not h.translation_last.any()
-    assert h.eta[1:, 0].tolist() == [1] * 5
-
-
-def test_history_new_sequence_resets_and_ids_may_interleave():
-    a2 = [0.0, 0.3, 1.0, 0.6, 0.2, 1.2]
-    seq = [0, 0, 1, 0, 1, 1]
-    alpha, beta = _three_tube(a2, np.zeros(6), np.full(6, -0.05))
-    h = motion_history(alpha, beta, seq)
-    # sequence 0: rows 0, 1, 3 -> 0.0, 0.3, 0.6; sequence 1: rows 2, 4, 5 -> 1.0, 0.2, 1.2
-    assert h.eta[:, 0].tolist() == [0, 1, 0, 1, -1, 1]
-    none = motion_history(alpha, beta, None)
-    assert not none.eta.any() and not none.translation_last.any()
-
-
-def test_history_rejects_bad_inputs():
-    alpha, beta = _three_tube([0.0, 0.1], [0.0, 0.0], [-0.05, -0.05])
-    with pytest.raises(ValueError, match="integers"):
-        motion_history(alpha, beta, [0.0, 0.5])
-    with pytest.raises(ValueError, match="shape"):
-        motion_history(alpha, beta[:, :2], [0, 0])
-    with pytest.raises(ValueError, match="tolerances"):
-        motion_history(alpha, beta, [0, 0], rotation_tol=0.0)
 
 
 # --------------------------------------------------------------------------- simulate
@@ -152,9 +88,9 @@ def test_branch_following_stays_on_the_branch_near_multiple_equilibria():
 
 def test_friction_model_chooses_friction_or_clearance_per_sample(robot, path):
     alpha, beta = path
-    eta = np.array([[1, -1], [1, -1], [0, 1], [0, 0], [-1, 1], [1, 1]])
-    tl = np.array([False, True, False, False, False, False])
-    sim = simulate(robot, alpha, beta, model="friction", eta=eta, translation_last=tl, settings=SETTINGS)
+    # applied friction per pair: sample 1 released, sample 2 with pair 1 never rotated, sample 3 neither
+    eta = np.array([[1, -1], [0, 0], [0, 1], [0, 0], [-1, 1], [1, 1]])
+    sim = simulate(robot, alpha, beta, model="friction", eta=eta, settings=SETTINGS)
     assert sim.ok.all(), sim.message
     mu = np.asarray(robot.friction_coefficients)
     np.testing.assert_array_equal(sim.mu, [mu, [0, 0], [0, mu[1]], [0, 0], mu, mu])
@@ -173,11 +109,12 @@ def test_friction_model_chooses_friction_or_clearance_per_sample(robot, path):
 def test_friction_history_from_sequence(robot, path):
     alpha, beta = path
     sim = simulate(robot, alpha, beta, model="friction", sequence=np.zeros(len(alpha), int), settings=SETTINGS)
-    h = motion_history(alpha, beta, np.zeros(len(alpha), int))
-    # every step rotates and translates together: friction everywhere but at the first sample
-    assert not h.translation_last.any()
-    np.testing.assert_array_equal(sim.eta[1:], h.eta[1:])
-    assert sim.n_released == 1 and (sim.mu[0] == 0).all()
+    h = motion_state(MotionRecord(alpha, beta))
+    # tubes 2 and 3 turn together: pair 1 rotates (and translates) in every step, so it carries
+    # friction everywhere but at the first sample; pair 2 never rotates: no friction
+    assert not h.released[:, 0].any() and not h.eta[:, 1].any()
+    np.testing.assert_array_equal(sim.eta[1:, 0], h.eta[1:, 0])
+    assert sim.n_released == 1 and (sim.mu[0] == 0).all() and (sim.mu[:, 1] == 0).all()
     with pytest.raises(ValueError, match="eta or sequence"):
         simulate(robot, alpha, beta, model="friction", settings=SETTINGS)
 
@@ -208,37 +145,3 @@ def test_repeated_configuration_reuses_and_warm_starts(robot, path):
     assert sim.n_standard == 2 and sim.n_contact == 10 and sim.n_warm == 8
     cold = solve_friction(robot, rep_a[5], rep_b[5], eta[5], SETTINGS)
     np.testing.assert_allclose(sim.tip[5], cold.tip_position, atol=2e-6)
-
-
-# --------------------------------------------------------------------------- effects
-def test_apply_effects_changes_the_robot():
-    r = table2_robot(mu=0.2)
-    e = Effects(friction_coefficients=(0.1, 0.3), clearances=(1e-4, 2e-4),
-                offplane_precurvature=(0.5, -1.0, 2.0), poisson_ratios=(0.3, 0.35, -0.15))
-    m = apply_effects(r, e)
-    assert m.friction_coefficients == (0.1, 0.3)
-    np.testing.assert_allclose(m.clearances, [1e-4, 2e-4])
-    assert m.tubes[2].poisson_ratio == -0.15
-    assert m.tubes[1].sections[0].precurvature == (0.0, 0.0)          # straight collar stays straight
-    assert m.tubes[1].sections[1].precurvature[0] == pytest.approx(r.tubes[1].sections[1].precurvature[0] - 1.0)
-    assert m.tubes[2].sections[1].precurvature[1] == r.tubes[2].sections[1].precurvature[1]
-    assert apply_effects(r, Effects()) == r
-    with pytest.raises(PhysicalParameterError, match="offplane_precurvature"):
-        apply_effects(r, Effects(offplane_precurvature=(1.0, 2.0)))
-    with pytest.raises(PhysicalParameterError, match="clearances"):
-        Effects(clearances=(0.0, 1e-4))
-    with pytest.raises(PhysicalParameterError, match="poisson_ratios"):
-        Effects(poisson_ratios=(0.3, 0.6, 0.3))
-
-
-def test_registration_and_json_round_trip():
-    e = Effects(registration=(0.0, 0.0, PI / 2, 0.01, 0.0, 0.0), poisson_ratios=(0.3, 0.3, 0.2))
-    tip, tan = apply_registration(np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]), e)
-    np.testing.assert_allclose(tip, [[0.01, 1.0, 0.0]], atol=1e-15)
-    np.testing.assert_allclose(tan, [[-1.0, 0.0, 0.0]], atol=1e-15)
-    back = Effects.from_dict(json.loads(json.dumps(e.to_dict())))
-    assert back == e and back.active() == ["poisson_ratios", "registration"]
-    with pytest.raises(ModelFileError, match="friction"):
-        Effects.from_dict({"friction": [0.1]}, "truth.json")
-    with pytest.raises(ModelFileError, match="clearances"):
-        Effects.from_dict({"clearances": [-1.0]}, "truth.json")

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import Effects, Noise, synthesize, write_synth
-from ctrplan.discrepancy import workflow as wf
+from ctrplan.discrepancy import Noise, synthesize, write_synth
+from ctrplan.discrepancy import decision, evaluation, fitting, options, setup as setup_stage, signatures, split as split_stage, stages
 from ctrplan.discrepancy.calibrate import pose_errors, predict
 from ctrplan.discrepancy.workflow import DiscrepancyOptions
 from ctrplan.io.robot_file import load_robot, robot_to_toml
@@ -40,17 +40,17 @@ def staged(tmp_path_factory):
     model = tmp / "pair.toml"
     model.write_text(robot_to_toml(robot, header="Table I tube pair, friction off"))
     data = tmp / "d.csv"
-    write_synth(data, synthesize(robot, Effects(time_offset=(LAG_S,)), protocol="trajectory", samples=500,
+    write_synth(data, synthesize(robot, {"time_offset": {"time_offset": LAG_S}}, protocol="trajectory", samples=500,
                                  noise=Noise(position_rms=0.5e-3, angle_rms=float(np.deg2rad(0.3))), seed=1,
                                  settings=ModelSettings(ds=6e-3)))
-    setup = wf.load_inputs(model, data, tmp / "out", OPTIONS)
-    split = wf.split_samples(setup, OPTIONS, _quiet)
+    setup = setup_stage.load_inputs(model, data, tmp / "out", OPTIONS)
+    split = split_stage.split_samples(setup, OPTIONS, _quiet)
 
     def held_out(name, model_name, params):
-        return wf.evaluate_held_out(setup, split, name, model_name, params, progress=False, echo=_quiet)
+        return evaluation.evaluate_held_out(setup, split, name, model_name, params, progress=False, echo=_quiet)
 
-    baseline = wf.calibrate_baseline(setup, split, OPTIONS, held_out, _quiet)
-    candidates = wf.fit_candidates(setup, split, baseline, None, OPTIONS, held_out, _quiet)
+    baseline = fitting.calibrate_baseline(setup, split, OPTIONS, held_out, _quiet)
+    candidates = fitting.fit_candidates(setup, split, baseline, None, OPTIONS, held_out, _quiet)
     return setup, split, baseline, candidates
 
 
@@ -91,12 +91,12 @@ def test_time_offset_candidate_is_fitted_in_seconds_and_its_errors_are_in_metres
     cand_mean = float(np.nanmean(c.held_out.position))
     assert 3e-4 < cand_mean < base_mean < 1e-2, (cand_mean, base_mean)       # m
     assert c.improvement_position["mean_difference"] == pytest.approx(base_mean - cand_mean, rel=0.3)
-    tests = wf.diagnose_residuals(setup, split, baseline, OPTIONS, _quiet)
+    tests = signatures.diagnose_residuals(setup, split, baseline, OPTIONS, _quiet)
     assert 1e-4 < tests["time_offset"].effect_size_m < 1e-2
-    noise = wf.check_noise(setup, baseline, OPTIONS, _quiet)
-    naming = wf.name_effect(split, candidates, tests, noise, OPTIONS, _quiet)
+    noise = decision.check_noise(setup, baseline, OPTIONS, _quiet)
+    naming = decision.name_effect(split, candidates, tests, noise, OPTIONS, _quiet)
     assert naming.named == "time_offset" and naming.candidates["time_offset"].eligible
-    report = wf._candidate_report(naming.candidates["time_offset"], split.val.n_samples)
+    report = fitting.candidate_report(naming.candidates["time_offset"], split.val.n_samples)
     assert report["parameters"]["time_offset"] == c.shown["time_offset"]                  # s stays s
     assert report["held_out"]["position_mean_mm"] == pytest.approx(1e3 * cand_mean, rel=1e-12)
 
@@ -107,31 +107,34 @@ def test_noise_check_is_in_metres_and_the_report_form_in_millimetres():
     an rms kept in mm in the stage result or converted twice."""
     pos = np.array([1e-3, -1e-3, 1e-3, np.nan, 1e-3])       # |errors| are what the stage sees
     noise = {"position_rms_m": 0.8e-3, "source": "stated", "n": 0, "upper_bound": False, "description": "x"}
-    check = wf.noise_check(np.abs(pos), noise)
+    check = decision.noise_check(np.abs(pos), noise)
     assert check.rms_m == pytest.approx(1e-3, rel=1e-12)
     assert check.ratio == pytest.approx(1.25, rel=1e-12) and check.consistent is True
     d = check.as_dict()
     assert d["rms_mm"] == pytest.approx(1.0, rel=1e-12) and d["noise_rms_mm"] == pytest.approx(0.8, rel=1e-12)
-    assert wf.noise_check(np.abs(pos) * 2, noise).consistent is False
-    assert wf.noise_check(np.abs(pos), {**noise, "position_rms_m": None}).consistent is None
+    assert decision.noise_check(np.abs(pos) * 2, noise).consistent is False
+    assert decision.noise_check(np.abs(pos), {**noise, "position_rms_m": None}).consistent is None
 
 
-def test_stage_key_ignores_workers_and_tests_and_stays_what_earlier_runs_wrote(tmp_path):
+def test_stage_key_ignores_workers_and_tests_and_follows_fits_inputs_and_procedure(tmp_path, monkeypatch):
     """The key is unchanged by the workers, the permutations, the level, the stated noise, the
-    envelope, the reference friction and a later option left at its default, changes with an
-    option that changes a fit, and equals the key pinned for this fit version (so a rerun reuses
-    the stages of the same procedure; a new fit version changes it on purpose). Catches a key
-    that sends every rerun back to the start, or reuses stages fitted with other options."""
+    envelope and the reference friction; it changes with an option that changes a fit, with the
+    effects tried, with either input file's bytes, and with the fitting procedure's version.
+    Catches a key that sends every rerun back to the start, or reuses stages fitted with other
+    options, other data or an earlier procedure."""
     robot, data = tmp_path / "r.toml", tmp_path / "d.csv"
     robot.write_bytes(b"robot")
     data.write_bytes(b"data")
     base = DiscrepancyOptions()
-    key = wf.stage_key(robot, data, base)
-    # what the workflow writes with fit version 3 (version 2 wrote "abf0c123fc9b": its fits stopped
-    # at the budget, so they are redone, issue 13 Sec. 5)
-    assert key == "5d6a1720f8ae"
+    key = stages.stage_key(robot, data, base)
     same = DiscrepancyOptions(n_jobs=2, n_permutations=99, significance=0.05, noise_position=2e-4,
-                              envelope_samples=10, reference_friction=(0.2,), block_samples=100)
-    assert wf.stage_key(robot, data, same) == key
-    for changed in (DiscrepancyOptions(ds=6e-3), DiscrepancyOptions(block_samples=50), DiscrepancyOptions(seed=1)):
-        assert wf.stage_key(robot, data, changed) != key
+                              envelope_samples=10, reference_friction=(0.2,))
+    assert stages.stage_key(robot, data, same) == key
+    for changed in (DiscrepancyOptions(ds=6e-3), DiscrepancyOptions(block_samples=50), DiscrepancyOptions(seed=1),
+                    DiscrepancyOptions(effects=("backlash",))):
+        assert stages.stage_key(robot, data, changed) != key
+    data.write_bytes(b"data2")
+    assert stages.stage_key(robot, data, base) != key
+    data.write_bytes(b"data")
+    monkeypatch.setattr(stages, "FIT_VERSION", options.FIT_VERSION + 1)
+    assert stages.stage_key(robot, data, base) != key

@@ -18,7 +18,8 @@ import pytest
 from click.testing import CliRunner
 
 from ctrplan import cli
-from ctrplan.discrepancy import Effects, motion_history
+from ctrplan.effects import EffectSet
+from ctrplan.history import MotionRecord, motion_state
 from ctrplan.discrepancy.synth import (Noise, add_noise, approach_path, paper_protocol, synthesize,
                                        trajectory_protocol, truth_model, truth_path, _reversals)
 from ctrplan.errors import PhysicalParameterError
@@ -68,8 +69,8 @@ def test_paper_protocol_eta_columns_match_the_realised_approach(robot):
         rel = np.diff(path, axis=1)
         np.testing.assert_allclose(rel[-1] - rel[0], eta * np.pi / 2)      # 90 deg per pair
         beta = np.repeat(row[BETA].to_numpy(float)[None], len(path), axis=0)
-        h = motion_history(path, beta, np.zeros(len(path), int))
-        assert h.eta[-1].tolist() == eta.tolist() and not h.translation_last[-1]
+        h = motion_state(MotionRecord(path, beta))
+        assert h.eta[-1].tolist() == eta.tolist() and not h.released[-1].any()
         assert path[0, 0] == path[-1, 0]                                   # tube 1 does not move
 
 
@@ -80,8 +81,8 @@ def test_trajectory_protocol_has_reversals_and_translation_last(robot):
     for j in ("alpha_2", "alpha_3", "beta_3"):
         assert _reversals(f[j]) >= 2, j
     alpha, beta = f[ALPHA].to_numpy(), f[BETA].to_numpy()
-    h = motion_history(alpha, beta, f["sequence"].to_numpy())
-    assert 0.05 < h.translation_last.mean() < 0.8
+    h = motion_state(MotionRecord(alpha, beta, sequence=f["sequence"].to_numpy()))
+    assert 0.05 < h.released.any(axis=1).mean() < 0.8
     assert (h.eta[1:] != 0).mean() > 0.5
     for k in range(0, 1200, 97):
         robot.check_configuration(alpha[k], beta[k])
@@ -113,7 +114,7 @@ def test_noise_statistics():
 @pytest.fixture(scope="module")
 def clean(robot):
     """Grid-3 paper protocol, no effects, no noise (standard truth)."""
-    return synthesize(robot, Effects(), grid=3, noise=NO_NOISE, settings=SETTINGS)
+    return synthesize(robot, {}, grid=3, noise=NO_NOISE, settings=SETTINGS)
 
 
 def test_standard_truth_is_the_standard_model_and_noise_rms_on_the_grid(robot, clean):
@@ -124,27 +125,27 @@ def test_standard_truth_is_the_standard_model_and_noise_rms_on_the_grid(robot, c
         np.testing.assert_allclose(f.loc[k, TIP].to_numpy(float), std.tip_position, atol=1e-12)
     # the approach does not matter without friction: four equal rows per configuration
     assert (f.groupby("config_id")[TIP].nunique() == 1).all().all()
-    noisy = synthesize(robot, Effects(), grid=3, settings=SETTINGS, seed=4)
+    noisy = synthesize(robot, {}, grid=3, settings=SETTINGS, seed=4)
     err = noisy.frame[TIP].to_numpy() - f[TIP].to_numpy()
     assert np.sqrt(np.mean(np.sum(err ** 2, axis=1))) == pytest.approx(1.4e-3, rel=0.2)
     assert (noisy.frame.groupby("config_id")[TIP].nunique() == 4).all().all()   # independent noise
 
 
 def test_seeded_reproducibility(robot):
-    a = synthesize(robot, Effects(), grid=2, settings=SETTINGS, seed=7)
-    b = synthesize(robot, Effects(), grid=2, settings=SETTINGS, seed=7)
-    c = synthesize(robot, Effects(), grid=2, settings=SETTINGS, seed=8)
+    a = synthesize(robot, {}, grid=2, settings=SETTINGS, seed=7)
+    b = synthesize(robot, {}, grid=2, settings=SETTINGS, seed=7)
+    c = synthesize(robot, {}, grid=2, settings=SETTINGS, seed=8)
     pd.testing.assert_frame_equal(a.frame, b.frame)
     assert not np.allclose(a.frame[TIP], c.frame[TIP])
 
 
 def test_effects_change_the_tips_and_friction_separates_the_approaches(robot, clean):
     ref = clean.frame[clean.frame["config_id"] < 8]
-    off = synthesize(robot, Effects(offplane_precurvature=(0.0, 0.0, 2.0)), grid=3, noise=NO_NOISE,
+    off = synthesize(robot, {"offplane": {"precurvature_x_3": 2.0}}, grid=3, noise=NO_NOISE,
                      settings=SETTINGS)
     d = np.linalg.norm(off.frame[TIP].to_numpy() - clean.frame[TIP].to_numpy(), axis=1)
     assert np.median(d) > 1e-4
-    fr = synthesize(robot, Effects(friction_coefficients=(0.3, 0.3)), grid=2, noise=NO_NOISE,
+    fr = synthesize(robot, {"friction": {"mu_1": 0.3, "mu_2": 0.3}}, grid=2, noise=NO_NOISE,
                     settings=SETTINGS)
     assert fr.truth["truth_model"] == "friction"
     # alpha_3 - alpha_2 = pi at alpha_2 = 0 is past the bifurcation (unstable): dropped, listed
@@ -153,14 +154,15 @@ def test_effects_change_the_tips_and_friction_separates_the_approaches(robot, cl
     assert all("unstable" in d["message"] for d in dropped)
     spread = fr.frame.groupby("config_id")[TIP].agg(lambda x: x.max() - x.min()).to_numpy().max(axis=1)
     assert np.max(spread) > 5e-4            # the four approaches end at different tips
-    assert truth_model(Effects(clearances=(1e-4, 1e-4))) == "clearance"
-    assert truth_model(Effects(friction_coefficients=(0.0, 0.0))) == "standard"
+    assert truth_model(EffectSet.from_values(robot, {"clearance": (1e-4, 1e-4)})) == "clearance"
+    assert truth_model(EffectSet.from_values(robot, {"friction": (0.0, 0.0)})) == "standard"
     assert len(ref) == 32
 
 
 def test_registration_is_applied(robot, clean):
     reg = (0.1, -0.2, 0.3, 0.01, -0.02, 0.03)
-    moved = synthesize(robot, Effects(registration=reg), grid=3, noise=NO_NOISE, settings=SETTINGS)
+    moved = synthesize(robot, EffectSet.from_values(robot, {"registration": reg}), grid=3, noise=NO_NOISE,
+                       settings=SETTINGS)
     from scipy.spatial.transform import Rotation
 
     R = Rotation.from_rotvec(reg[:3]).as_matrix()
@@ -171,11 +173,11 @@ def test_registration_is_applied(robot, clean):
 
 
 def test_trajectory_synth_friction_uses_the_history(robot):
-    res = synthesize(robot, Effects(friction_coefficients=(0.3, 0.3)), protocol="trajectory",
+    res = synthesize(robot, {"friction": {"mu_1": 0.3, "mu_2": 0.3}}, protocol="trajectory",
                      samples=30, noise=NO_NOISE, settings=SETTINGS, seed=2)
     f = res.frame
     assert res.truth["truth_model"] == "friction" and len(f) + res.truth["counts"]["dropped"] == 30
-    h = motion_history(f[ALPHA].to_numpy(), f[BETA].to_numpy(), f["sequence"].to_numpy())
+    h = motion_state(MotionRecord(f[ALPHA].to_numpy(), f[BETA].to_numpy(), sequence=f["sequence"].to_numpy()))
     np.testing.assert_array_equal(f[["eta_1", "eta_2"]].to_numpy(), h.eta)
 
 
@@ -189,7 +191,9 @@ def test_cli_synth_smoke_and_bad_options(tmp_path):
     m = read_measurements(out, 3)
     truth = json.loads(Path(truth_path(out)).read_text())
     assert m.tip.shape == (truth["counts"]["rows"], 3) and m.eta is not None and m.tangent is not None
-    assert truth["effects"] == {"friction_coefficients": [0.2, 0.1], "registration": [0, 0, 0.1, 0.001, 0, 0]}
+    assert truth["effects"] == {"friction": {"mu_1": 0.2, "mu_2": 0.1},
+                                "registration": dict(zip([f"registration_{a}" for a in ("rx", "ry", "rz", "tx", "ty", "tz")],
+                                                         [0, 0, 0.1, 0.001, 0, 0]))}
     assert truth["truth_model"] == "friction" and truth["counts"]["rows"] + truth["counts"]["dropped"] == 32
     assert len(truth["robot_file_hash"]) == 64
     for bad, needle in ((["--mu", "0.2"], "--mu '0.2'"), (["--poisson", "0.3,0.7,0.3"], "--poisson"),

@@ -11,14 +11,18 @@ import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
-from ctrplan.discrepancy import Effects, Noise, synthesize, write_synth
+from ctrplan.discrepancy import Noise, synthesize, write_synth
 from ctrplan.discrepancy.calibrate import grid_search_friction
 from ctrplan.discrepancy.data import MeasuredData, load_measured_data, split_data
+from ctrplan.discrepancy.decision import cautions
+from ctrplan.discrepancy.output import reproduce_errors
 from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, read_parameters
 from ctrplan.discrepancy.report import write_report
 from ctrplan.discrepancy.signatures import friction_signature, regression_signature, registration_signature
-from ctrplan.discrepancy.workflow import (DiscrepancyOptions, _cautions, _configurations_repeat, _units,
-                                         reproduce_errors, run_discrepancy)
+from ctrplan.discrepancy.split import configurations_repeat, exchangeable_units
+from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
+from ctrplan.history import MotionRecord
+from ctrplan.effects import EffectSet
 from ctrplan.errors import DataFileError
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from ctrplan.mechanics import ModelSettings
@@ -101,7 +105,8 @@ def test_parameters_round_trip_and_refuse_what_does_not_exist():
     assert moved.tubes[2].sections[0].is_straight and moved.tubes[0] == robot.tubes[0].__class__(
         **{**robot.tubes[0].__dict__, "poisson_ratio": 0.2})
     for bad, match in (("precurvature_y_4", "has 3 tubes"), ("k_xy_relative_1", "stiffness reference"),
-                       ("mu_3", "has 2 pairs"), ("twist_1", "unknown calibration parameter")):
+                       ("mu_3", r"unknown calibration parameter .mu_3.*\(friction: mu_1, mu_2;"),
+                       ("twist_1", "unknown calibration parameter")):
         with pytest.raises(ParameterError, match=match):
             apply_parameters(robot, (bad,), (1.0,))
     with pytest.raises(ParameterError, match="outside"):
@@ -112,8 +117,10 @@ def _toy_data(config_id, sequence):
     k = len(config_id)
     z = np.zeros((k, 3))
     return MeasuredData(alpha=z, beta=z, tip=z, tangent=None, eta=np.zeros((k, 2), int),
-                        translation_last=np.zeros(k, bool), sequence=np.asarray(sequence),
-                        config_id=np.asarray(config_id), subset=None, time=None, file="toy", frame="robot")
+                        translation_last=np.zeros((k, 2), bool), sequence=np.asarray(sequence),
+                        config_id=np.asarray(config_id), subset=None, time=None, file="toy", frame="robot",
+                        record=MotionRecord(z, z, sequence=np.asarray(sequence)), rows=np.arange(k),
+                        given_eta=np.zeros((k, 2), int))
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -139,10 +146,10 @@ def test_a_trajectory_that_passes_home_twice_is_not_a_repeated_protocol():
     them (the paper's grid from four directions); a trajectory that returns home once must get
     binned groups and time-block units, or its friction test has almost no informative group."""
     grid = np.repeat(np.arange(64), 4)                 # 64 configurations x 4 directions
-    assert _configurations_repeat(grid)
+    assert configurations_repeat(grid)
     path = np.concatenate([[0], np.arange(1, 999), [0], [0]])   # starts and ends at home
-    assert not _configurations_repeat(path)
-    units = _units(_toy_data(path, np.zeros(path.size, int)), block=50)
+    assert not configurations_repeat(path)
+    units = exchangeable_units(_toy_data(path, np.zeros(path.size, int)), block=50)
     assert np.unique(units).size == 21              # time blocks, not ~1000 single-row units
 
 # --------------------------------------------------------------------------- signature tests
@@ -175,7 +182,7 @@ def test_hidden_registration_is_recovered_and_the_updated_model_reproduces_the_e
     robot, model = _no_effects_model(tmp_path)
     rv, t = np.array([0.05, -0.1, 0.3]), np.array([0.012, -0.004, 0.02])
     data = tmp_path / "reg.csv"
-    _synth(robot, Effects(registration=tuple(rv) + tuple(t)), data, grid=3)
+    _synth(robot, EffectSet.from_values(robot, {"registration": tuple(rv) + tuple(t)}), data, grid=3)
     out = tmp_path / "out"
     opts = DiscrepancyOptions(effects=("offplane",), frame="tracker", ds=6e-3, n_permutations=99,
                               calibration_fraction=0.5, n_jobs=1)
@@ -217,7 +224,7 @@ def test_an_interrupted_run_resumes_from_finished_stages(tmp_path):
 
     robot, model = _no_effects_model(tmp_path)
     data = tmp_path / "d.csv"
-    _synth(robot, Effects(), data, grid=3)
+    _synth(robot, {}, data, grid=3)
     fit = ("precurvature_y_3", "k_xy_relative_3")
     opts = DiscrepancyOptions(fit=fit, effects=("offplane",), ds=6e-3, n_permutations=99, calibration_fraction=0.5,
                               n_jobs=1)
@@ -256,7 +263,7 @@ def test_an_interrupted_run_resumes_from_finished_stages(tmp_path):
 def test_hidden_friction_is_named_and_the_gap_shrinks_by_40_percent(tmp_path):
     robot, model = _no_effects_model(tmp_path)
     data = tmp_path / "friction.csv"
-    _synth(load_robot(TABLE7), Effects(friction_coefficients=(0.22, 0.12)), data, grid=5,
+    _synth(load_robot(TABLE7), {"friction": {"mu_1": 0.22, "mu_2": 0.12}}, data, grid=5,
            settings=ModelSettings())
     res = run_discrepancy(model, data, tmp_path / "out", DiscrepancyOptions(n_jobs=2, n_permutations=199),
                           echo=print, progress=False)
@@ -271,7 +278,7 @@ def test_hidden_friction_is_named_and_the_gap_shrinks_by_40_percent(tmp_path):
 def test_hidden_offplane_precurvature_is_named_not_friction(tmp_path):
     robot, model = _no_effects_model(tmp_path, offplane_zero=True)
     data = tmp_path / "offplane.csv"
-    _synth(robot, Effects(offplane_precurvature=(0.0, 0.5, 2.5)), data, grid=5)
+    _synth(robot, EffectSet.from_values(robot, {"offplane": (0.0, 0.5, 2.5)}), data, grid=5)
     opts = DiscrepancyOptions(n_jobs=2, n_permutations=199, ds=6e-3, friction_grid=(0.0, 0.15, 0.3),
                               friction_search_samples=48)
     res = run_discrepancy(model, data, tmp_path / "out", opts, echo=print, progress=False)
@@ -284,7 +291,7 @@ def test_hidden_offplane_precurvature_is_named_not_friction(tmp_path):
 def test_noise_only_names_no_effect(tmp_path):
     robot, model = _no_effects_model(tmp_path)
     data = tmp_path / "noise.csv"
-    _synth(robot, Effects(), data, grid=5, seed=4)
+    _synth(robot, {}, data, grid=5, seed=4)
     opts = DiscrepancyOptions(n_jobs=2, n_permutations=199, ds=6e-3, friction_grid=(0.0, 0.15, 0.3),
                               friction_search_samples=48)
     res = run_discrepancy(model, data, tmp_path / "out", opts, echo=print, progress=False)
@@ -325,7 +332,7 @@ def test_friction_grid_search_extends_past_the_coarse_grid_edge(tmp_path):
     the refinements land on the hidden value."""
     pair = load_robot(ROOT / "model" / "ha2019-table1-tube-pair.toml")
     data = tmp_path / "pair.csv"
-    _synth(pair, Effects(friction_coefficients=(0.55,)), data, grid=3, noise=Noise(position_rms=0.0, angle_rms=0.0))
+    _synth(pair, {"friction": {"mu_1": 0.55}}, data, grid=3, noise=Noise(position_rms=0.0, angle_rms=0.0))
     off = pair.replace(friction_coefficients=(0.0,))
     fit = grid_search_friction(off, load_measured_data(data, off), {}, settings=COARSE, coarse=(0.0, 0.1, 0.2))
     assert fit.values == pytest.approx([0.55], abs=1e-9)
@@ -335,9 +342,10 @@ def test_friction_grid_search_extends_past_the_coarse_grid_edge(tmp_path):
 def test_cautions_flag_an_implausible_friction_coefficient_and_a_worse_maximum():
     before = {"position_mean_mm": 5.2, "position_max_mm": 16.8}
     worse_max = {"position_mean_mm": 4.3, "position_max_mm": 23.2}
-    cand = {"parameters": {"mu_1": 0.975, "mu_2": 0.05}}
-    notes = _cautions("friction", cand, before, worse_max)
+    cand = {"parameters": {"mu_1": 0.975, "mu_2": 0.05},
+            "implausible": [{"name": "mu_1", "value": 0.975, "plausible": [0.0, 0.5], "unit": "-", "why": "NiTi"}]}
+    notes = cautions("friction", cand, before, worse_max)
     assert len(notes) == 2 and "mu_1 = 0.975" in notes[0] and "16.80 to 23.20 mm" in notes[1]
-    assert _cautions("friction", {"parameters": {"mu_1": 0.22, "mu_2": 0.12}}, before,
-                     {"position_mean_mm": 2.0, "position_max_mm": 8.0}) == []
-    assert _cautions(None, None, before, before) == []
+    assert cautions("friction", {"parameters": {"mu_1": 0.22, "mu_2": 0.12}, "implausible": []}, before,
+                    {"position_mean_mm": 2.0, "position_max_mm": 8.0}) == []
+    assert cautions(None, None, before, before) == []

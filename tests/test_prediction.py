@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from ctrplan.errors import JointLimitError
+from ctrplan.history import PairState
 from ctrplan.mechanics import (ModelSettings, PAIR_CASES, all_eta, evaluate_bound, predict_tip, solve_clearance,
                                solve_friction)
 from ctrplan.planning.goals import compensate_goal
@@ -132,11 +133,11 @@ def test_path_history_tracks_eta_and_translation_last_per_pair(robot):
                   [1.0, -0.5, -0.05]])   # alpha_3 up: rel 2 +
     h = path_history(robot, q)
     np.testing.assert_array_equal(h.eta, [[0, 0], [1, -1], [1, -1], [1, -1], [1, -1], [1, 1]])
-    np.testing.assert_array_equal(h.translation_last, [[False, False], [False, False], [True, True],
-                                                       [True, False], [True, True], [True, False]])
+    np.testing.assert_array_equal(h.released, [[False, False], [False, False], [True, True],
+                                               [True, False], [True, True], [True, False]])
     # a translation below the 0.1 mm threshold does not release
     h2 = path_history(robot, np.array([[0.0, 0.0, -0.07], [1.0, 0.0, -0.07], [1.0, 0.0, -0.07 + 5e-5]]))
-    np.testing.assert_array_equal(h2.translation_last[-1], [False, False])
+    np.testing.assert_array_equal(h2.released[-1], [False, False])
     with pytest.raises(ValueError, match=r"q must have shape \(K, 3\)"):
         path_history(robot, np.zeros((4, 2)))
 
@@ -145,15 +146,20 @@ def test_approach_history_follows_the_final_motion_and_the_short_way(robot):
     """From the start to a goal: translation-last releases every pair, rotation-last keeps the
     directions, which follow the short way round (+3 rad then -3 rad on alpha_3 - alpha_2 = -6 rad
     read the short way is +0.28 rad: eta +1). Catches the long way round and a swapped order."""
-    eta, tl = approach_history(robot, [0.0, 0.0, -0.07], [1.0, 3.0, -0.06], "translation-last")
-    np.testing.assert_array_equal(eta, [1, 1])
-    np.testing.assert_array_equal(tl, [True, True])
-    eta, tl = approach_history(robot, [0.0, 0.0, -0.07], [1.0, -1.0, -0.06], "rotation-last")
-    np.testing.assert_array_equal(eta, [1, -1])
-    np.testing.assert_array_equal(tl, [False, False])
+    s = approach_history(robot, [0.0, 0.0, -0.07], [1.0, 3.0, -0.06], "translation-last")
+    np.testing.assert_array_equal(s.eta, [1, 1])
+    np.testing.assert_array_equal(s.released, [True, True])
+    s = approach_history(robot, [0.0, 0.0, -0.07], [1.0, -1.0, -0.06], "rotation-last")
+    np.testing.assert_array_equal(s.eta, [1, -1])
+    np.testing.assert_array_equal(s.released, [False, False])
     # alpha_3 from +3 to -3 rad: the short way is +0.28 rad (across pi), so rel 2 rises: eta +1
-    eta, _ = approach_history(robot, [0.0, 3.0, -0.07], [0.0, -3.0, -0.07], "rotation-last")
-    np.testing.assert_array_equal(eta, [0, 1])
+    s = approach_history(robot, [0.0, 3.0, -0.07], [0.0, -3.0, -0.07], "rotation-last")
+    np.testing.assert_array_equal(s.eta, [0, 1])
+    # with the motion before: pair 1 rotated earlier, so it has a direction although the
+    # segment does not rotate it
+    s = approach_history(robot, [0.0, 3.0, -0.07], [0.0, -3.0, -0.07], "rotation-last",
+                         before=[[-0.5, 3.0, -0.07], [0.0, 3.0, -0.07]])
+    np.testing.assert_array_equal(s.eta, [1, 1])
     with pytest.raises(ValueError, match="final_motion must be one of"):
         approach_history(robot, [0.0, 0.0, -0.07], [1.0, 3.0, -0.06], "rotation_last")
 
@@ -191,7 +197,7 @@ def test_compensated_goal_puts_the_predicted_tip_on_the_target(robot):
 
     target = solve_standard(robot, alpha, beta, SETTINGS).tip_position     # standard IK exact at q_std
     for eta, tl, model in (((1, -1), True, "clearance"), ((1, -1), False, "friction")):
-        c = compensate_goal(target, robot, q_std, eta, tl, SETTINGS, tolerance=1e-3)
+        c = compensate_goal(target, robot, q_std, PairState.abrupt(eta, tl), SETTINGS, tolerance=1e-3)
         assert c.model == model and c.accepted and c.converged, c.message
         assert c.predicted_miss < 1e-5
         assert c.predicted_miss_standard > 5e-4                                # the uncompensated miss is real
@@ -200,8 +206,57 @@ def test_compensated_goal_puts_the_predicted_tip_on_the_target(robot):
         assert c.standard_tip_error == pytest.approx(np.linalg.norm(p.standard.tip_position - target), abs=1e-9)
         assert c.iterations <= 8
     # an invalid compensated configuration is not used
-    c = compensate_goal(target, robot, q_std, (1, -1), True, SETTINGS, tolerance=1e-3, validity_fn=lambda q: False)
+    c = compensate_goal(target, robot, q_std, PairState.abrupt((1, -1), True), SETTINGS, tolerance=1e-3,
+                        validity_fn=lambda q: False)
     assert not c.accepted and "invalid" in c.message
     np.testing.assert_array_equal(c.q, q_std)
     with pytest.raises(ValueError, match="tolerance must be > 0"):
-        compensate_goal(target, robot, q_std, (1, -1), True, SETTINGS, tolerance=0.0)
+        compensate_goal(target, robot, q_std, PairState.abrupt((1, -1), True), SETTINGS, tolerance=0.0)
+
+
+# ------------------------------------------------------------------------------ drive backlash
+def test_a_dead_band_shifts_the_prediction_by_the_band_and_compensation_removes_it(robot):
+    """A robot file with a 5 deg dead band on tube 2's drive (friction off: only the play acts).
+    Approaching the same commanded alpha_2 from below and from above moves the predicted tip by
+    |d tip/d alpha_2| x 5 deg, half of it on each side of the drive centred in its band; the
+    Jacobian is the standard model's, by central differences here. Compensated targeting with
+    the approach's history puts the predicted tip within a 0.5 mm tolerance where the
+    uncompensated goal misses it. Catches a prediction that ignores the file's backlash, a lag of
+    the whole band (or of none) on each side, a lag of the wrong sign, and a compensation that
+    ignores the state."""
+    from ctrplan.mechanics import solve_standard
+
+    band = float(np.deg2rad(5.0))
+    r = robot.replace(friction_coefficients=(0.0, 0.0), effects=(("backlash", (("backlash_2", band),)),))
+    goal = np.array([2.0, 1.0, -0.06])
+    alpha, beta = r.configuration(goal)
+    below = approach_history(r, goal - [0.4, 0.0, 0.0], goal)          # the drive last turned +: the tube lags
+    above = approach_history(r, goal + [0.4, 0.0, 0.0], goal)
+    assert below.alpha_offset[1] == pytest.approx(-band / 2) and above.alpha_offset[1] == pytest.approx(band / 2)
+    p_below = predict_tip(r, alpha, beta, settings=SETTINGS, state=below)
+    p_above = predict_tip(r, alpha, beta, settings=SETTINGS, state=above)
+    centred = predict_tip(r, alpha, beta, settings=SETTINGS, state=PairState(
+        np.zeros(3), np.zeros(3), below.eta, below.released, below.friction))
+
+    def tip(a2):
+        a = alpha.copy()
+        a[1] = a2
+        return solve_standard(r, a, beta, SETTINGS).tip_position
+
+    h = 1e-4
+    jac = (tip(alpha[1] + h) - tip(alpha[1] - h)) / (2 * h)               # d tip / d alpha_2 [m/rad]
+    np.testing.assert_allclose(p_above.tip_position - p_below.tip_position, jac * band, rtol=0.05,
+                               atol=0.02 * np.linalg.norm(jac) * band)
+    for p, side in ((p_below, -1), (p_above, +1)):
+        np.testing.assert_allclose(p.tip_position - centred.tip_position, side * jac * band / 2, rtol=0.05,
+                                   atol=0.02 * np.linalg.norm(jac) * band)
+    with pytest.raises(ValueError, match="history effects"):
+        predict_tip(r, alpha, beta, (1, -1), False, SETTINGS)
+    # compensated targeting: the standard-model IK goal for this target misses by the lag
+    target = tip(alpha[1])
+    start = goal - [0.4, 0.0, 0.0]
+    c = compensate_goal(target, r, goal, lambda q: approach_history(r, start, q), SETTINGS, tolerance=0.5e-3)
+    assert c.accepted and c.predicted_miss < 0.5e-3, c.message
+    assert c.predicted_miss_standard > 0.5e-3
+    again = predict_tip(r, *r.configuration(c.q), settings=SETTINGS, state=approach_history(r, start, c.q))
+    assert np.linalg.norm(again.tip_position - target) < 0.5e-3

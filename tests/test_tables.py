@@ -10,7 +10,8 @@ import pytest
 
 from ctrplan.errors import DataFileError
 from ctrplan.io.tables import (config_columns, load_ha_trajectory, read_configurations,
-                               read_measurements, rotation_directions, write_table)
+                               read_measurements, write_table)
+from ctrplan.history import rotation_directions
 
 HA_DATA = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
            / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt").resolve()

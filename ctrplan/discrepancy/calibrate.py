@@ -27,11 +27,11 @@ from scipy.spatial.transform import Rotation
 from ..errors import CtrplanError
 from ..mechanics import ModelSettings
 from .data import MeasuredData
-from .effects import transform_poses
-from .parameters import REGISTRATION, apply_parameters, parameter, registration_transform
+from ..effects import EffectSet, apply_output_effects, robot_effects
+from .parameters import REGISTRATION, apply_parameters, needs_solve, parameter
 
 __all__ = ["Prediction", "CalibrationResult", "predict", "pose_errors", "eq49_residuals", "calibrate",
-           "grid_search_friction", "kabsch_registration", "information_criterion"]
+           "grid_search", "grid_search_friction", "kabsch_registration", "information_criterion"]
 
 #: Eq. (49) weighting: this many metres of position error weigh as ...
 POSITION_UNIT = 1e-3
@@ -61,9 +61,10 @@ NORM_FLOOR = 1e-3
 #: Smallest cosine of the tangent error in the model's ``d angle / d sin(angle)`` (errors near
 #: 90 deg are failures of the fit, not its working range).
 COS_FLOOR = 0.1
-#: Largest friction coefficient the grid search extends its coarse grid to (NiTi on NiTi is
-#: far below; the paper's calibrated values are 0.22 and 0.12, Table VII).
-MU_GRID_LIMIT = 1.0
+#: The grid search extends its coarse grid up to this multiple of the parameters' plausible
+#: upper limit (friction coefficients: 2 x 0.5 = 1.0, where NiTi on NiTi is far below; the paper's
+#: calibrated values are 0.22 and 0.12, Table VII), or to their optimizer bound.
+GRID_LIMIT_FACTOR = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,6 +79,8 @@ class Prediction:
         Unit tangents, in the data's frame.
     tip_base : ndarray, shape (K, 3)
         [m], in the robot base frame.
+    tangent_base : ndarray, shape (K, 3)
+        Unit tangents in the robot base frame.
     ok : ndarray of bool, shape (K,)
     message : list of str
     seconds : float
@@ -87,6 +90,7 @@ class Prediction:
     tip: np.ndarray
     tangent: np.ndarray
     tip_base: np.ndarray
+    tangent_base: np.ndarray
     ok: np.ndarray
     message: list
     seconds: float
@@ -152,16 +156,21 @@ def predict(robot, names, values, data: MeasuredData, model: str, settings: Mode
             *, n_jobs: int = 1, progress: bool = False) -> Prediction:
     """Evaluate a model with the given parameters at every sample of ``data``.
 
-    Follows each sequence's history (each sample solved from the previous one; friction
-    directions from ``data.eta``, twist released after a translation) through
-    :func:`ctrplan.discrepancy.simulate.simulate`.
+    The named effects are applied where they act (:mod:`ctrplan.effects`): the mechanical ones
+    to the robot, the history ones to the whole recorded motion (drive backlash, tracker time
+    offset, gradual friction; :meth:`MeasuredData.state`), the output ones (registration) to the
+    computed tip poses. Each sequence is followed in order (each sample solved from the previous
+    one; :func:`ctrplan.discrepancy.simulate.simulate`) with the friction the history state
+    applies.
 
     Parameters
     ----------
     robot : Robot
     names : sequence of str
-        Parameters to set (:mod:`ctrplan.discrepancy.parameters`), registration included.
+        Parameters to set (baseline parameters, :mod:`ctrplan.discrepancy.parameters`, and effect
+        parameters, :mod:`ctrplan.effects`), registration included.
     values : array-like, shape (m,)
+        In the parameters' units (SI).
     data : MeasuredData
     model : {"standard", "clearance", "friction"}
     settings : ModelSettings, optional
@@ -171,76 +180,31 @@ def predict(robot, names, values, data: MeasuredData, model: str, settings: Mode
     Returns
     -------
     Prediction
+        Tips (K, 3) [m] in the data's frame and in the robot base frame, tangents, ok flags.
 
     Raises
     ------
     ParameterError, PhysicalParameterError
         Parameter values that give an impossible robot.
+    ValueError
+        A time offset on data without times.
     """
     from .simulate import simulate
 
     t0 = time.perf_counter()
     names = tuple(names)
+    values = np.asarray(values, float)
     robot_p = apply_parameters(robot, names, values)
-    alpha, beta, eta, tlast, mu = history_inputs(robot_p, names, values, data, model)
-    sim = simulate(robot_p, alpha, beta, model=model, eta=eta, translation_last=tlast, mu=mu,
-                   sequence=data.sequence, settings=settings, n_jobs=n_jobs, progress=progress)
+    effects, _ = EffectSet.from_parameters(robot, names, values)
+    state = data.state(robot_p, effects)
+    eta, mu = state.applied(robot_p.friction_coefficients)
+    sim = simulate(robot_p, state.alpha, state.beta, model=model, eta=eta if model == "friction" else None,
+                   mu=mu if model == "friction" else None, sequence=data.sequence, settings=settings, n_jobs=n_jobs,
+                   progress=progress)
     tip_base = np.asarray(sim.tip, float)
-    tip, tangent = transform_poses(tip_base, sim.tangent, *registration_transform(names, values))
-    return Prediction(tip=tip, tangent=tangent, tip_base=tip_base, ok=np.asarray(sim.ok, bool),
-                      message=list(sim.message), seconds=time.perf_counter() - t0)
-
-
-def history_inputs(robot, names, values, data: MeasuredData, model: str):
-    """The motion history a model is evaluated along, after the named history effects.
-
-    Time offset first (joints interpolated at ``time - tau``), then the drive backlash (play
-    operator on the base angles), then, for the friction model with ``friction_angle``, the
-    developing friction state (:mod:`ctrplan.discrepancy.history`). Without history parameters
-    the data's own history is returned unchanged.
-
-    Returns
-    -------
-    alpha, beta : ndarray, shape (K, n)
-        [rad], [m].
-    eta : ndarray of int, shape (K, n - 1)
-    translation_last : ndarray of bool, shape (K,)
-    mu : ndarray, shape (K, n - 1), or None
-        Per-sample friction coefficients (gradual friction), else None (the robot's).
-
-    Raises
-    ------
-    ParameterError
-        A time offset on data without times.
-    """
-    from .history import apply_backlash, apply_time_offset, friction_state
-    from .parameters import ParameterError, history_parameters
-    from .simulate import motion_history
-
-    h = history_parameters(robot, names, values)
-    if not h:
-        return data.alpha, data.beta, data.eta, data.translation_last, None
-    alpha, beta = data.alpha, data.beta
-    if h.get("time_offset") is not None:
-        if data.time is None:
-            raise ParameterError(f"{data.file}: a time offset needs sample times (a 'time' column)")
-        alpha, beta = apply_time_offset(alpha, beta, data.time, h["time_offset"], data.sequence)
-    if "backlash" in h:
-        alpha = apply_backlash(alpha, h["backlash"], data.sequence)
-    eta, tlast = data.eta, data.translation_last
-    multi = np.unique(data.sequence).size < data.n_samples
-    if multi and (h.get("time_offset") or "backlash" in h):
-        hist = motion_history(alpha, beta, data.sequence)
-        # one-sample sequences keep the file's directions (e.g. the paper protocol's approach)
-        eta = np.where(hist.eta != 0, hist.eta, data.eta)
-        tlast = hist.translation_last
-    mu = None
-    if model == "friction" and h.get("friction_angle") is not None:
-        e = friction_state(alpha, beta, h["friction_angle"], data.sequence, eta=eta)
-        eta = np.sign(e).astype(int)
-        mu = np.abs(e) * np.asarray(robot.friction_coefficients, float)[None, :]
-        tlast = np.zeros(data.n_samples, dtype=bool)   # the state already released the twist
-    return alpha, beta, eta, tlast, mu
+    tip, tangent = apply_output_effects(tip_base, sim.tangent, robot_effects(robot_p).merged(effects))
+    return Prediction(tip=tip, tangent=tangent, tip_base=tip_base, tangent_base=np.asarray(sim.tangent, float),
+                      ok=np.asarray(sim.ok, bool), message=list(sim.message), seconds=time.perf_counter() - t0)
 
 
 def pose_errors(pred: Prediction, data: MeasuredData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -337,7 +301,7 @@ class _Objective:
         self.fixed = dict(fixed)
         self.all_names = tuple(self.fixed) + self.names
         # parameters that need a new model solve: mechanical and history ones (not registration)
-        self.mech = [k for k, nm in enumerate(self.all_names) if parameter(robot, nm).needs_solve]
+        self.mech = [k for k, nm in enumerate(self.all_names) if needs_solve(robot, nm)]
         self._cache: dict = {}
         self.evaluations = 0
 
@@ -356,8 +320,10 @@ class _Objective:
             if len(self._cache) > 64:
                 self._cache.clear()
             self._cache[key] = base
-        tip, tangent = transform_poses(base.tip_base, base.tangent, *registration_transform(self.all_names, v))
-        return Prediction(tip=tip, tangent=tangent, tip_base=base.tip_base,
+        out_names = [nm for k, nm in enumerate(self.all_names) if k not in set(self.mech)]
+        effects, _ = EffectSet.from_parameters(self.robot, out_names, [v[self.all_names.index(nm)] for nm in out_names])
+        tip, tangent = apply_output_effects(base.tip_base, base.tangent_base, robot_effects(self.robot).merged(effects))
+        return Prediction(tip=tip, tangent=tangent, tip_base=base.tip_base, tangent_base=base.tangent_base,
                           ok=base.ok, message=base.message, seconds=base.seconds)
 
     def residuals(self, x):
@@ -590,7 +556,7 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
                                  time.perf_counter() - t0, "nothing to fit: evaluated only")
     scale = np.array([p.scale for p in specs])
     # registration columns of the finite-difference Jacobian re-use the cached mechanics
-    n_mech = sum(1 for p in specs if p.needs_solve)
+    n_mech = sum(1 for nm in names if needs_solve(robot, nm))
     per_step = n_mech + 1
     kw = dict(bounds=(lower, upper), x_scale=scale, diff_step=DIFF_STEP, method="trf", xtol=XTOL, ftol=FTOL)
     # stage 1: error components (smooth), at most half the budget
@@ -625,29 +591,34 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
                              obj.evaluations, time.perf_counter() - t0, msg, converged)
 
 
-def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: ModelSettings | None = None,
-                         n_jobs: int = 1, coarse=(0.0, 0.1, 0.2, 0.3, 0.4), refinements: int = 2,
-                         search_samples: int = 96, seed: int = 0, progress=None) -> CalibrationResult:
-    """Friction coefficients mu_1..mu_(n-1) by grid search (Section V-C: "calibrated during a
-    second pass using a 2-D grid search to avoid local minima"), other parameters ``fixed``.
+def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
+                settings: ModelSettings | None = None, n_jobs: int = 1, coarse=(0.0, 0.1, 0.2, 0.3, 0.4),
+                refinements: int = 2, search_samples: int = 96, seed: int = 0, progress=None) -> CalibrationResult:
+    """Parameters by grid search, other parameters ``fixed``: the paper's calibration of the
+    friction coefficients (Section V-C: "calibrated during a second pass using a 2-D grid search
+    to avoid local minima").
 
-    The coarse grid (``coarse`` per pair) is scored on at most ``search_samples`` calibration
-    samples made of whole configuration groups; while its best point lies on the grid's upper
-    edge, the grid grows by one step (up to mu = ``MU_GRID_LIMIT``). Then ``refinements`` rounds
-    of a 3^(n-1) grid with half the previous step around the best point are scored on the whole
+    The coarse grid (``coarse`` per parameter) is scored on at most ``search_samples``
+    calibration samples made of whole configuration groups; while its best point lies on the
+    grid's upper edge, the grid grows by one step (up to :data:`GRID_LIMIT_FACTOR` times the
+    parameters' plausible upper limit, or their optimizer bound). Then ``refinements`` rounds of
+    a 3^m grid with half the previous step around the best point are scored on the whole
     calibration set.
 
     Parameters
     ----------
     robot : Robot
     data : MeasuredData
-        Calibration samples (their eta and translation_last select the friction solution).
+        Calibration samples.
     fixed : dict
         ``{name: value}`` of the other parameters (e.g. the calibrated baseline, registration).
+    names : sequence of str
+        The m gridded parameters (e.g. ``mu_1``, ``mu_2``).
+    model : {"standard", "clearance", "friction"}
     settings : ModelSettings, optional
     n_jobs : int
     coarse : sequence of float
-        Coarse grid values of every mu [-], increasing, >= 0.
+        Coarse grid values of every parameter, increasing, >= their lower bound.
     refinements : int
     search_samples : int
     seed : int
@@ -661,8 +632,12 @@ def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: Mo
         With the score of every grid point in ``message``.
     """
     t0 = time.perf_counter()
-    m = robot.n_tubes - 1
-    names = tuple(f"mu_{k + 1}" for k in range(m))
+    names = tuple(names)
+    m = len(names)
+    specs = [parameter(robot, n) for n in names]
+    limit = min(min(p.upper for p in specs),
+                min(GRID_LIMIT_FACTOR * p.plausible[1] if p.plausible else p.upper for p in specs))
+    lowest = max(p.lower for p in specs)
     coarse = np.asarray(sorted(coarse), float)
     groups = np.unique(data.config_id)
     rng = np.random.default_rng(seed)
@@ -670,8 +645,8 @@ def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: Mo
     n_groups = max(1, min(groups.size, int(search_samples // max(rows_per_group, 1))))
     chosen = rng.choice(groups, size=n_groups, replace=False)
     sub = data.take(np.isin(data.config_id, chosen))
-    obj_sub = _Objective(robot, sub, "friction", names, fixed, settings, n_jobs)
-    obj_all = _Objective(robot, data, "friction", names, fixed, settings, n_jobs)
+    obj_sub = _Objective(robot, sub, model, names, fixed, settings, n_jobs)
+    obj_all = _Objective(robot, data, model, names, fixed, settings, n_jobs)
     grid = list(itertools.product(coarse, repeat=m))
     step = float(np.min(np.diff(coarse))) if coarse.size > 1 else 0.05
     total = len(grid) + refinements * (3 ** m)
@@ -680,11 +655,11 @@ def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: Mo
     def scan(obj, points, costs):
         """Cost of every grid point (each distinct point solved once, ``costs`` kept across
         calls); the best point scored so far."""
-        for mu in points:
-            mu = tuple(round(float(v), 6) for v in mu)
-            if mu not in costs:
-                r = obj.residuals(np.array(mu))
-                costs[mu] = float(r @ r)
+        for q in points:
+            q = tuple(round(float(v), 6) for v in q)
+            if q not in costs:
+                r = obj.residuals(np.array(q))
+                costs[q] = float(r @ r)
             done[0] += 1
             if progress:
                 progress(done[0], total)
@@ -695,21 +670,28 @@ def grid_search_friction(robot, data: MeasuredData, fixed: dict, *, settings: Mo
     best, cost = scan(obj_sub, grid, coarse_costs)
     # a best point on the grid's upper edge is no minimum: extend the grid there by whole steps
     axis = list(coarse)
-    while coarse.size > 1 and max(best) >= axis[-1] - 1e-9 and axis[-1] + step <= MU_GRID_LIMIT + 1e-9:
+    while coarse.size > 1 and max(best) >= axis[-1] - 1e-9 and axis[-1] + step <= limit + 1e-9:
         axis.append(round(axis[-1] + step, 6))
         new = [q for q in itertools.product(axis, repeat=m) if max(q) >= axis[-1] - 1e-9]
         total += len(new)
         best, cost = scan(obj_sub, new, coarse_costs)
-    trail = [f"coarse grid {axis[0]:g}..{axis[-1]:g} on {sub.n_samples} samples: best mu {best} cost {cost:.4g}"]
+    trail = [f"coarse grid {axis[0]:g}..{axis[-1]:g} on {sub.n_samples} samples: best {names} {best} cost {cost:.4g}"]
     best_all = np.array(best)
     for _ in range(refinements):
         step /= 2.0
-        best, cost = scan(obj_all, (np.maximum(best_all + step * np.array(d), 0.0)
+        best, cost = scan(obj_all, (np.maximum(best_all + step * np.array(d), lowest)
                                     for d in itertools.product((-1, 0, 1), repeat=m)), {})
         best_all = np.array(best)
-        trail.append(f"refined (step {step:.4g}) on {data.n_samples} samples: best mu {best} cost {cost:.4g}")
+        trail.append(f"refined (step {step:.4g}) on {data.n_samples} samples: best {best} cost {cost:.4g}")
     r = obj_all.residuals(best_all)
-    return CalibrationResult("friction", names, best_all, np.zeros(m), dict(fixed), float(r @ r),
+    return CalibrationResult(model, names, best_all, np.zeros(m), dict(fixed), float(r @ r),
                              data.n_samples, int((r == FAILED_RESIDUAL).sum()),
                              obj_sub.evaluations + obj_all.evaluations, time.perf_counter() - t0,
                              "; ".join(trail))
+
+
+def grid_search_friction(robot, data: MeasuredData, fixed: dict, **kwargs) -> CalibrationResult:
+    """The friction coefficients mu_1..mu_(n-1) by :func:`grid_search` with the friction model
+    (keyword arguments as there)."""
+    return grid_search(robot, data, fixed, tuple(f"mu_{k + 1}" for k in range(robot.n_tubes - 1)), "friction",
+                       **kwargs)

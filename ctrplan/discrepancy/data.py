@@ -10,8 +10,10 @@ Two inputs are accepted:
 - the whitespace format of Ha's measured trajectory (``../shared/data/ha-three-tube-trajectory``),
   read by :func:`ctrplan.io.tables.load_ha_trajectory` (any file not ending in ``.csv``).
 
-Where ``eta`` is missing (or 0) it is derived from the sample order within each sequence, with
-whether a translation came after the last rotation (:func:`ctrplan.discrepancy.simulate.motion_history`).
+The motion history of every sample (direction of each pair's last rotation, release by a later
+translation, history effects such as backlash or a tracker lag) is read by
+:mod:`ctrplan.history` along the whole recorded motion, so that a subset of samples (a
+calibration block) keeps the history of the samples before it.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import CtrplanError, DataFileError
+from ..history import HistoryState, MotionRecord, motion_state
 from ..io.tables import read_measurements
 
 __all__ = ["MeasuredData", "load_measured_data", "configuration_groups", "split_data"]
@@ -46,9 +49,12 @@ class MeasuredData:
     tangent : ndarray or None, shape (K, 3)
         Measured unit tip tangents.
     eta : ndarray of int, shape (K, n - 1)
-        Direction of the last relative rotation of each pair (+1 CCW, -1 CW, 0 unknown), Eq. (38).
-    translation_last : ndarray of bool, shape (K,)
-        A translation came after the last rotation (twist released, Section V-B).
+        Direction of the last relative rotation of each pair (+1 CCW, -1 CW, 0 unknown), Eq. (38),
+        from the recorded motion (:func:`ctrplan.history.motion_state`), or from the file's
+        ``eta_*`` columns where the record holds no rotation of the pair (e.g. one sample per
+        sequence).
+    translation_last : ndarray of bool, shape (K, n - 1)
+        A translation came after the pair's last rotation (twist released, Section V-B).
     sequence : ndarray of int, shape (K,)
         Continuous-motion id; rows of one sequence are in time order.
     config_id : ndarray of int, shape (K,)
@@ -59,6 +65,12 @@ class MeasuredData:
     file : str
     frame : {"robot", "tracker"}
         Frame of ``tip`` and ``tangent``.
+    record : MotionRecord
+        The whole recorded motion (every row of the file), joints [rad, m], times [s].
+    rows : ndarray of int, shape (K,)
+        Index of each sample in ``record``.
+    given_eta : ndarray of int, shape (N, n - 1)
+        The file's ``eta_*`` columns for the whole record (0 where not given).
     """
 
     alpha: np.ndarray
@@ -73,19 +85,49 @@ class MeasuredData:
     time: np.ndarray | None
     file: str
     frame: str
+    record: MotionRecord
+    rows: np.ndarray
+    given_eta: np.ndarray
 
     @property
     def n_samples(self) -> int:
         return self.alpha.shape[0]
 
     def take(self, rows) -> "MeasuredData":
-        """The rows ``rows`` (index array or boolean mask), in their original order."""
+        """The rows ``rows`` (index array or boolean mask), in their original order; the record
+        stays whole, so their history is the one the whole motion gives."""
         rows = np.flatnonzero(rows) if np.asarray(rows).dtype == bool else np.asarray(rows, dtype=int)
         pick = (lambda a: None if a is None else a[rows])
         return replace(self, alpha=self.alpha[rows], beta=self.beta[rows], tip=self.tip[rows],
                        tangent=pick(self.tangent), eta=self.eta[rows],
                        translation_last=self.translation_last[rows], sequence=self.sequence[rows],
-                       config_id=self.config_id[rows], subset=pick(self.subset), time=pick(self.time))
+                       config_id=self.config_id[rows], subset=pick(self.subset), time=pick(self.time),
+                       rows=self.rows[rows])
+
+    def state(self, robot, effects=None) -> HistoryState:
+        """The history state of these samples with ``robot``'s and the given history effects,
+        computed along the whole recorded motion (:func:`ctrplan.effects.history_state`, tracker
+        effects included) and taken at :attr:`rows`.
+
+        Parameters
+        ----------
+        robot : Robot
+        effects : mapping, optional
+            ``{effect: {parameter: value}}`` [SI].
+
+        Returns
+        -------
+        HistoryState
+            K samples.
+
+        Raises
+        ------
+        ValueError
+            A time offset on data without times.
+        """
+        from ..effects import history_state
+
+        return history_state(robot, self.record, effects, given_eta=self.given_eta).take(self.rows)
 
 
 def _is_whitespace_format(path: Path) -> bool:
@@ -117,8 +159,6 @@ def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = No
         than 2 samples, a bad ``subset`` value, or a configuration outside the robot's joint
         limits (named by row).
     """
-    from .simulate import motion_history
-
     path = Path(path)
     file = str(path)
     n = robot.n_tubes
@@ -149,11 +189,14 @@ def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = No
             robot.check_configuration(tmp["alpha"][r], tmp["beta"][r])
         except CtrplanError as exc:  # JointLimitError / PhysicalParameterError
             raise DataFileError(f"{file}: row {r + 1}: {exc}") from None
-    hist = motion_history(tmp["alpha"], tmp["beta"], sequence)
-    eta = hist.eta.copy()
-    if tmp["eta"] is not None:
-        given = tmp["eta"] != 0
-        eta[given] = tmp["eta"][given]
+    time = tmp["time"]
+    try:
+        record = MotionRecord(tmp["alpha"], tmp["beta"], time, sequence)
+    except ValueError as exc:
+        raise DataFileError(f"{file}: {exc}") from None
+    given_eta = (np.zeros((k, n - 1), dtype=int) if tmp["eta"] is None
+                 else np.asarray(tmp["eta"], dtype=int).reshape(k, n - 1))
+    hist = motion_state(record, given_eta=given_eta)
     if "config_id" in table:
         config_id = pd.to_numeric(table["config_id"], errors="coerce").to_numpy(float)
         bad = np.flatnonzero(~np.isfinite(config_id))
@@ -171,9 +214,9 @@ def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = No
             raise DataFileError(f"{file}: column 'subset', row {bad[0] + 1}: {subset[bad[0]]!r} is "
                                 f"neither 'calibration' nor 'validation'")
     return MeasuredData(alpha=tmp["alpha"], beta=tmp["beta"], tip=tmp["tip"], tangent=tmp["tangent"],
-                        eta=eta.astype(int), translation_last=np.asarray(hist.translation_last, bool),
-                        sequence=sequence, config_id=config_id, subset=subset, time=tmp["time"],
-                        file=file, frame=frame)
+                        eta=hist.eta.astype(int), translation_last=np.asarray(hist.released, bool),
+                        sequence=sequence, config_id=config_id, subset=subset, time=time,
+                        file=file, frame=frame, record=record, rows=np.arange(k), given_eta=given_eta)
 
 
 def _frame_to_arrays(table: pd.DataFrame, n: int, file: str) -> dict:

@@ -195,7 +195,7 @@ def write_report(results: dict, out_dir) -> dict:
 def _combination_lines(results: dict) -> list[str]:
     """The second effect tried on top of the named one: steps of a named pair, every pair tried,
     fitted values in deg / mm (SI in the JSON)."""
-    from .workflow import display_value
+    from .fitting import display_value
 
     comb = results.get("combination")
     if not comb:

@@ -23,6 +23,10 @@ stiffness / Poisson    residual explained by the twist of the most         as ab
 registration           a rigid pattern: residual = t + w x p               sign flips per group
 =====================  ==================================================  =======================
 
+Which test an effect uses, and with which features, is the effect's own
+(``Effect.signature`` of :mod:`ctrplan.effects`); :class:`SignatureContext` gives it the
+held-out arrays and the tests, and :func:`diagnose_residuals` runs every candidate's.
+
 Regression tests use the fraction of residual variance explained by the effect's features
 (least squares with intercept, the three residual components pooled) as statistic, and the RMS
 of the explained part (less the mean explained by chance under the null) as effect size. When configurations repeat (e.g. the four approach
@@ -37,21 +41,16 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["SignatureTest", "friction_signature", "regression_signature", "registration_signature",
-           "vector_signature", "untestable",
-           "overlap_features", "angle_features", "twist_features", "EFFECT_LABELS"]
+from ..effects import REGISTRY
 
-#: Human-readable effect names used in reports.
-EFFECT_LABELS = {
-    "friction": "torsional friction",
-    "clearance": "clearance",
-    "offplane": "off-plane precurvature",
-    "poisson": "stiffness ratio / Poisson ratio (torsional stiffness)",
-    "registration": "registration",
-    "backlash": "drive backlash",
-    "time_offset": "time offset (tracker lag)",
-    "gradual_friction": "gradually developing friction",
-}
+__all__ = ["SignatureTest", "SignatureContext", "diagnose_residuals", "friction_signature", "regression_signature",
+           "registration_signature", "vector_signature", "untestable", "tip_velocity", "label"]
+
+
+def label(effect: str) -> str:
+    """The report label of a registered effect (its name otherwise)."""
+    e = REGISTRY.get(effect)
+    return e.label if e is not None else effect
 
 
 @dataclass(frozen=True)
@@ -61,7 +60,7 @@ class SignatureTest:
     Attributes
     ----------
     effect : str
-        Key of :data:`EFFECT_LABELS`.
+        Name of the effect (:data:`ctrplan.effects.REGISTRY`).
     statistic : float
         Observed test statistic (its meaning in ``description``).
     effect_size_m : float
@@ -86,9 +85,15 @@ class SignatureTest:
     description: str
     testable: bool = True
 
+    def _replace_effect(self, effect: str) -> "SignatureTest":
+        """The same test filed under another effect name."""
+        from dataclasses import replace
+
+        return replace(self, effect=effect)
+
     def as_dict(self) -> dict:
         d = asdict(self)
-        d["label"] = EFFECT_LABELS.get(self.effect, self.effect)
+        d["label"] = label(self.effect)
         d["effect_size_mm"] = self.effect_size_m * 1e3
         return d
 
@@ -324,67 +329,6 @@ def registration_signature(residual, model_tip, groups, *, n_permutations: int =
                          "sign flips per configuration group")
 
 
-# --------------------------------------------------------------------------- features
-def overlap_features(robot, beta) -> np.ndarray:
-    """Tube-overlap features of the clearance signature, shape (K, 3 (n - 1)) [m].
-
-    For each pair (i, i+1): the length over which curved sections of both overlap, the length of
-    tube i+1's straight (transmission) sections inside curved sections of tube i, and of tube
-    i's straight sections around curved sections of tube i+1 (Section II-B: clearance lets an
-    inner tube move inside an outer one where their curvatures differ).
-    """
-    beta = np.atleast_2d(np.asarray(beta, float))
-    n = robot.n_tubes
-    out = np.zeros((beta.shape[0], 3 * (n - 1)))
-
-    def spans(i, b, curved):
-        br = robot.tubes[i].section_breaks() + b
-        return [(br[j], br[j + 1]) for j, sec in enumerate(robot.tubes[i].sections)
-                if (not sec.is_straight) == curved]
-
-    def overlap(a, c):
-        return sum(max(0.0, min(x1, y1) - max(x0, y0)) for x0, x1 in a for y0, y1 in c)
-
-    for r, b in enumerate(beta):
-        for i in range(n - 1):
-            co, ci = spans(i, b[i], True), spans(i + 1, b[i + 1], True)
-            so, si = spans(i, b[i], False), spans(i + 1, b[i + 1], False)
-            out[r, 3 * i:3 * i + 3] = (overlap(co, ci), overlap(si, co), overlap(so, ci))
-    return out
-
-
-def angle_features(alpha, moving=None) -> np.ndarray:
-    """First and second harmonics of the absolute tube angles, shape (K, 4 m).
-
-    Parameters
-    ----------
-    alpha : ndarray, shape (K, n) [rad]
-    moving : sequence of int, optional
-        Tubes to use (default: those whose angle varies in the data).
-    """
-    alpha = np.asarray(alpha, float)
-    if moving is None:
-        moving = [i for i in range(alpha.shape[1]) if np.ptp(alpha[:, i]) > 1e-6]
-    cols = []
-    for i in moving:
-        a = alpha[:, i]
-        cols += [np.cos(a), np.sin(a), np.cos(2 * a), np.sin(2 * a)]
-    return np.column_stack(cols) if cols else np.zeros((alpha.shape[0], 0))
-
-
-def twist_features(twist, model_tip) -> np.ndarray:
-    """Twist features of the stiffness / Poisson signature, shape (K, 6).
-
-    ``[tau, tau^2] x [1, cos phi, sin phi]`` with ``tau`` the twist of the most strained tube
-    [rad] and ``phi`` the azimuth of the model tip (the direction the residual takes rotates
-    with the bending plane).
-    """
-    twist = np.asarray(twist, float)
-    phi = np.arctan2(model_tip[:, 1], model_tip[:, 0])
-    base = [np.ones_like(phi), np.cos(phi), np.sin(phi)]
-    return np.column_stack([t * b for t in (twist, twist ** 2) for b in base])
-
-
 # --------------------------------------------------------------------------- vector patterns
 def untestable(effect: str, reason: str) -> SignatureTest:
     """A signature test that cannot run on the data: ``reason`` completes "not testable, because"."""
@@ -488,3 +432,206 @@ def vector_signature(effect: str, residual, columns, groups, *, sequence=None, c
     return SignatureTest(effect, r2, size, _p_value(r2, null), n_permutations, n_units,
                          f"fraction of the residual along {m} displacement vector(s) ({description}); "
                          f"null: {mode}")
+
+
+# --------------------------------------------------------------------------- context and stage
+def tip_velocity(tip, time, sequence=None) -> np.ndarray:
+    """Tip velocity along each sequence by central differences in time, shape (K, 3) [m/s].
+
+    Within runs of contiguous samples (a gap longer than 1.5 median steps, e.g. between the
+    held-out blocks of a trajectory, starts a new run); one-sided at run ends; NaN for runs of
+    one sample, NaN tips, or without times.
+
+    Parameters
+    ----------
+    tip : array-like, shape (K, 3) [m]
+    time : array-like, shape (K,) [s], or None
+    sequence : array-like of int, shape (K,), optional
+    """
+    from ..history import sequence_segments
+
+    tip = np.asarray(tip, dtype=float)
+    K = tip.shape[0]
+    v = np.full((K, 3), np.nan)
+    if time is None:
+        return v
+    t = np.asarray(time, dtype=float)
+    for idx in sequence_segments(sequence, K):
+        if idx.size < 2:
+            continue
+        dt = np.diff(t[idx])
+        step = np.median(dt[dt > 0]) if np.any(dt > 0) else 0.0
+        cuts = np.flatnonzero((dt > 1.5 * step) | (dt <= 0)) + 1
+        for run in np.split(idx, cuts):
+            if run.size >= 2:
+                v[run] = np.gradient(tip[run], t[run], axis=0)
+    return v
+
+
+class SignatureContext:
+    """What a signature test of an effect entry (``Effect.signature``) reads and runs.
+
+    Attributes
+    ----------
+    robot : Robot
+        The robot as loaded.
+    base_robot : Robot
+        The calibrated baseline robot (its Jacobians and twists).
+    data : MeasuredData
+        The held-out samples (K).
+    residual : ndarray, shape (K, 3)
+        Baseline residual ``p_measured - p_model`` in the robot base frame [m].
+    model_tip : ndarray, shape (K, 3)
+        Baseline model tip in the robot base frame [m].
+    groups : ndarray of int, shape (K,)
+        Configuration groups (exact configurations when the protocol revisits them, else bins of
+        nearby configurations).
+    state : HistoryState
+        The held-out samples' history along the whole recorded motion (no history effects).
+
+    Parameters
+    ----------
+    settings : ModelSettings
+    n_jobs, n_permutations, seed : int
+    cache : StageStore, optional
+        Keeps the Jacobians across runs.
+    """
+
+    def __init__(self, robot, base_robot, data, residual, model_tip, groups, settings, *, n_jobs=1,
+                 n_permutations=999, seed=0, cache=None, alpha_step=1e-3):
+        self.robot, self.base_robot, self.data = robot, base_robot, data
+        self.residual, self.model_tip, self.groups = residual, model_tip, groups
+        self.settings, self.n_jobs, self.cache, self.alpha_step = settings, n_jobs, cache, alpha_step
+        self._perm = dict(n_permutations=n_permutations, seed=seed)
+        self._jac = {}
+        self.state = data.state(robot)
+
+    # ---------------------------------------------------------------- quantities
+    def alpha_jacobian(self, tubes) -> dict:
+        """d tip / d alpha_i of the baseline along the held-out motion, per tube i:
+        ``{i: ndarray (K, 3) [m/rad]}`` by central differences of ``alpha_step``, branch
+        following (NaN where a solve failed)."""
+        from .simulate import simulate
+
+        stored = self.cache.load("alpha-jacobian") if self.cache is not None and not self._jac else None
+        if stored:
+            self._jac.update({int(i): np.array(v, float) for i, v in stored.items()})
+        missing = [i for i in tubes if i not in self._jac]
+        for i in missing:
+            tips = []
+            for sign in (1.0, -1.0):
+                a = self.data.alpha.copy()
+                a[:, i] += sign * self.alpha_step
+                tips.append(simulate(self.base_robot, a, self.data.beta, model="standard", sequence=self.data.sequence,
+                                     settings=self.settings, n_jobs=self.n_jobs).tip)
+            self._jac[i] = (tips[0] - tips[1]) / (2.0 * self.alpha_step)
+        if missing and self.cache is not None:
+            self.cache.save("alpha-jacobian", {str(i): v for i, v in self._jac.items()})
+        return {i: self._jac[i] for i in tubes}
+
+    def twist(self, tube: int) -> np.ndarray:
+        """Twist psi(end) - psi(base) of one tube in the baseline's standard model, shape (K,) [rad]."""
+        from ..errors import CtrplanError
+        from ..mechanics import solve_standard
+
+        out = np.full(self.data.n_samples, np.nan)
+        for k in range(self.data.n_samples):
+            try:
+                sol = solve_standard(self.base_robot, self.data.alpha[k], self.data.beta[k], self.settings)
+            except CtrplanError:
+                continue
+            psi = sol.psi[:, tube]
+            fin = np.flatnonzero(np.isfinite(psi))
+            if fin.size:
+                out[k] = psi[fin[-1]] - psi[fin[0]]
+        return out
+
+    def tip_velocity(self) -> np.ndarray:
+        """Velocity of the baseline's model tip along the recorded motion, shape (K, 3) [m/s]."""
+        return tip_velocity(self.model_tip, self.data.time, self.data.sequence)
+
+    def drive_directions(self) -> np.ndarray:
+        """Direction of the last rotation of each drive, shape (K, n), along the whole record."""
+        from ..history import drive_directions
+
+        rec = self.data.record
+        return drive_directions(rec.alpha, sequence=rec.sequence)[self.data.rows]
+
+    def rotation_since_reversal(self) -> np.ndarray:
+        """Relative rotation of each pair since its last reversal, shape (K, n - 1) [rad]."""
+        from ..history import rotation_since_reversal
+
+        rec = self.data.record
+        return rotation_since_reversal(rec.alpha, sequence=rec.sequence)[self.data.rows]
+
+    # ---------------------------------------------------------------- tests
+    def direction_test(self, effect: str) -> SignatureTest:
+        """:func:`friction_signature` on the held-out eta and configuration groups."""
+        return friction_signature(self.residual, self.data.eta, self.groups, **self._perm)._replace_effect(effect)
+
+    def regression_test(self, effect: str, features, description: str) -> SignatureTest:
+        """:func:`regression_signature` of ``features`` (K, p)."""
+        return regression_signature(effect, self.residual, features, self.data.config_id, sequence=self.data.sequence,
+                                    description=description, **self._perm)
+
+    def rigid_test(self, effect: str) -> SignatureTest:
+        """:func:`registration_signature` at the model tips."""
+        return registration_signature(self.residual, self.model_tip, self.data.config_id,
+                                      **self._perm)._replace_effect(effect)
+
+    def vector_test(self, effect: str, columns, description: str, *, signs=None, control=None) -> SignatureTest:
+        """:func:`vector_signature` of ``columns`` (K, 3, m)."""
+        return vector_signature(effect, self.residual, columns, self.groups, sequence=self.data.sequence,
+                                signs=signs, control=control, description=description, **self._perm)
+
+    def untestable(self, effect: str, reason: str) -> SignatureTest:
+        """:func:`untestable`."""
+        return untestable(effect, reason)
+
+
+def diagnose_residuals(setup, split, baseline, options, echo=print) -> dict:
+    """Stage 4: one signature test per candidate effect on the baseline's held-out residuals.
+
+    Each effect's own test (``Effect.signature``) runs on a :class:`SignatureContext` of the
+    held-out samples.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : SampleSplit
+        Only its held-out samples are read.
+    baseline : Baseline
+        Its held-out residual vectors [m] are tested.
+    options : DiscrepancyOptions
+        ``n_permutations``, ``seed``, ``n_jobs``.
+    echo : callable
+
+    Returns
+    -------
+    dict of str to SignatureTest
+        One per candidate effect (``effect_size_m`` [m]), in registry order.
+    """
+    from .data import configuration_groups
+    from .options import ALPHA_STEP, TRAJECTORY_ROTATION_BIN, TRAJECTORY_TRANSLATION_BIN
+    from .parameters import apply_parameters
+    from .split import configurations_repeat
+
+    val, params = split.val, baseline.params
+    echo("testing residual signatures ...")
+    groups = val.config_id if configurations_repeat(val.config_id) else configuration_groups(
+        val.alpha, val.beta, TRAJECTORY_ROTATION_BIN, TRAJECTORY_TRANSLATION_BIN)
+    base_robot = apply_parameters(setup.robot, tuple(params), tuple(params.values()))
+    ctx = SignatureContext(setup.robot, base_robot, val, baseline.held_out.residual_base, baseline.held_out.tip_base,
+                           groups, setup.settings, n_jobs=options.n_jobs, n_permutations=options.n_permutations,
+                           seed=options.seed, cache=setup.stages, alpha_step=ALPHA_STEP)
+    tests = {}
+    for e in setup.effects:
+        entry = REGISTRY[e]
+        tests[e] = (entry.signature(ctx) if entry.signature is not None
+                    else untestable(e, "its entry defines no signature test"))
+    for e, t in tests.items():
+        if t.testable:
+            echo(f"  {label(e):>30s}: effect {t.effect_size_m * 1e3:.3f} mm, p = {t.p_value:.4f}")
+        else:
+            echo(f"  {label(e):>30s}: {t.description}")
+    return tests

@@ -1,20 +1,12 @@
-"""The robot models evaluated along a measured motion history.
+"""The robot models evaluated along a measured or planned motion.
 
-:func:`motion_history` reads, from the joint values of a recorded motion, the direction of the
-last relative rotation of each tube pair (the eta_k of Eq. (38) of Ha, Fagogenis & Dupont,
-IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906) and whether a translation followed it
-(which releases the friction-induced twist, Section V-B). :func:`simulate` evaluates the
-standard, clearance or friction model at every sample, following the elastic branch along each
-motion (each solve starts from the previous sample's solution) and in parallel over independent
-motions or chunks of samples.
-
-Friction model along a history (Section III and V-B): a sample with relative rotation direction
-eta and no translation since the last relative rotation gets the maximal torsional friction
-solution with the robot's friction coefficients; a translation after the last rotation releases
-the twist ("translation-last", close to the frictionless solution), so such a sample gets the
-clearance solution (mu = 0). A pair without history (eta 0) gets mu = 0 for that pair only (the
-other pairs keep their friction); when every pair ends with mu = 0 the sample is solved with the
-clearance model.
+:func:`simulate` evaluates the standard, clearance or friction model at every sample (Ha,
+Fagogenis & Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906), following the elastic
+branch along each motion (each solve starts from the previous sample's solution) and in
+parallel over independent motions or chunks of samples. The friction applied per pair and
+sample (direction and coefficient) comes from the motion history, read by
+:mod:`ctrplan.history` (:meth:`ctrplan.history.HistoryState.applied`); a sample whose pairs all
+carry no friction is solved with the clearance model.
 """
 
 from __future__ import annotations
@@ -24,13 +16,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..constants import HISTORY_ROTATION_TOL, HISTORY_TRANSLATION_TOL
 from ..errors import CtrplanError
-from ..io.tables import rotation_directions
+from ..history import MotionRecord, motion_state, sequence_segments
 from ..mechanics import ModelSettings, solve_contact, solve_standard
 from ..models import MODELS  # the one registry of models
 
-__all__ = ["MODELS", "History", "Simulation", "motion_history", "simulate"]
+__all__ = ["MODELS", "Simulation", "simulate"]
 
 # Rows per parallel task when rows are independent: enough to amortize the inter-process
 # transfer (a contact solve takes ~0.1 s, a task ~1 s), few enough to balance 2-8 workers.
@@ -43,39 +34,10 @@ _CONTACT_COST_S = 0.1
 _MIN_PARALLEL_SECONDS = 2.0
 
 
-# --------------------------------------------------------------------------- history
-@dataclass(frozen=True, eq=False)
-class History:
-    """Friction-relevant motion history at each sample.
-
-    Attributes
-    ----------
-    eta : ndarray of int, shape (K, n - 1)
-        Direction of the last relative rotation of tube i+1 with respect to tube i within the
-        sample's sequence: +1 CCW (``alpha_(i+1) - alpha_i`` increasing), -1 CW, 0 none yet.
-    translation_last : ndarray of bool, shape (K,)
-        True when a base translation came after the last relative rotation of the sequence.
-    """
-
-    eta: np.ndarray
-    translation_last: np.ndarray
-
-
 def _sequence_groups(sequence, K: int) -> list[np.ndarray] | None:
-    """Row indices of each sequence (ascending sequence id, rows in table order), or None."""
-    if sequence is None:
-        return None
-    seq = np.asarray(sequence)
-    if seq.shape != (K,):
-        raise ValueError(f"sequence must have shape ({K},), got {seq.shape}")
-    seqf = seq.astype(float)
-    if not np.all(np.isfinite(seqf)) or np.any(seqf != np.round(seqf)):
-        bad = np.flatnonzero(~np.isfinite(seqf) | (seqf != np.round(np.nan_to_num(seqf))))[0]
-        raise ValueError(f"sequence ids must be integers; row {bad + 1} has {seq[bad]!r}")
-    ids = seqf.astype(np.int64)
-    order = np.argsort(ids, kind="stable")
-    cuts = np.flatnonzero(np.diff(ids[order])) + 1
-    return np.split(order, cuts)
+    """Row indices of each sequence (:func:`ctrplan.history.sequence_segments`), or None when
+    every row is independent."""
+    return None if sequence is None else sequence_segments(sequence, K)
 
 
 def _check_joints(alpha, beta):
@@ -84,76 +46,6 @@ def _check_joints(alpha, beta):
     if alpha.ndim != 2 or beta.shape != alpha.shape:
         raise ValueError(f"alpha and beta must both have shape (K, n), got {alpha.shape} and {beta.shape}")
     return alpha, beta
-
-
-def motion_history(alpha, beta, sequence=None, *, rotation_tol: float = HISTORY_ROTATION_TOL,
-                   translation_tol: float = HISTORY_TRANSLATION_TOL) -> History:
-    """Relative rotation directions and translation-last flags along recorded motions.
-
-    Parameters
-    ----------
-    alpha : array-like, shape (K, n)
-        Base rotations [rad], rows in time order within each sequence.
-    beta : array-like, shape (K, n)
-        Base translations [m].
-    sequence : array-like of int, shape (K,), optional
-        Motion id of each row. Rows of one id form one continuous motion, in table order (the
-        ids need not be contiguous); each sequence starts without history. ``None``: every row
-        is independent (no history: eta 0, translation_last False).
-    rotation_tol : float
-        Rotation hysteresis [rad], > 0: eta of a pair flips only once its relative angle has
-        come back more than this from its latest extreme (as
-        :func:`ctrplan.io.tables.rotation_directions`, which computes eta here), and a relative
-        rotation counts as "the last rotation" once any pair's relative angle has moved more
-        than this since the previous one.
-    translation_tol : float
-        [m], > 0: a translation counts once some base has moved more than this since the last
-        relative rotation.
-
-    Returns
-    -------
-    History
-        ``eta`` (K, n - 1) in {-1, 0, +1} (eta_k of Eq. (38) of Ha et al. 2019);
-        ``translation_last`` (K,) (Section V-B). The first sample of a sequence has eta 0 and
-        translation_last False.
-
-    Raises
-    ------
-    ValueError
-        Shapes that do not match, non-integer sequence ids, tolerances <= 0.
-
-    Notes
-    -----
-    Rotating all tubes together (no relative rotation) neither sets eta nor counts as a
-    rotation. Within a sequence, a "rotation event" happens at sample k when some pair's
-    relative angle differs by more than ``rotation_tol`` from its value at the previous event
-    (the first sample is the first reference); ``translation_last[k]`` is True when, after the
-    latest event, some base translation differs by more than ``translation_tol`` from its
-    value at that event.
-    """
-    alpha, beta = _check_joints(alpha, beta)
-    if not rotation_tol > 0 or not translation_tol > 0:
-        raise ValueError(f"tolerances must be > 0, got rotation_tol={rotation_tol!r} rad, "
-                         f"translation_tol={translation_tol!r} m")
-    K, n = alpha.shape
-    eta = np.zeros((K, n - 1), dtype=int)
-    tlast = np.zeros(K, dtype=bool)
-    groups = _sequence_groups(sequence, K)
-    if groups is None:
-        return History(eta=eta, translation_last=tlast)
-    rel_all = np.diff(alpha, axis=1)
-    for idx in groups:
-        eta[idx] = rotation_directions(alpha[idx], tol=rotation_tol)
-        rel = rel_all[idx]
-        b = beta[idx]
-        rel_ref, beta_ref, translated = rel[0], b[0], False
-        for j in range(1, idx.size):
-            if n > 1 and np.max(np.abs(rel[j] - rel_ref)) > rotation_tol:
-                rel_ref, beta_ref, translated = rel[j], b[j], False
-            elif np.max(np.abs(b[j] - beta_ref)) > translation_tol:
-                translated = True
-            tlast[idx[j]] = translated
-    return History(eta=eta, translation_last=tlast)
 
 
 # --------------------------------------------------------------------------- results
@@ -359,33 +251,29 @@ def _run(tasks, alpha, beta, guess, follow, eta, mu, contact, robot, settings, c
     return tip, tan, ok, msg, torsion, counts
 
 
-def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None, sequence=None,
-             mu=None, settings: ModelSettings | None = None, n_jobs: int = 1, progress: bool = False,
-             check_stability: bool = False, rotation_tol: float = HISTORY_ROTATION_TOL,
-             translation_tol: float = HISTORY_TRANSLATION_TOL) -> Simulation:
+def simulate(robot, alpha, beta, *, model: str, eta=None, mu=None, sequence=None,
+             settings: ModelSettings | None = None, n_jobs: int = 1, progress: bool = False,
+             check_stability: bool = False) -> Simulation:
     """Evaluate a model at every sample of a motion history, following the elastic branch.
 
     Parameters
     ----------
     robot : Robot
-        Apply candidate effects first with :func:`~ctrplan.discrepancy.effects.apply_effects`.
+        Apply candidate effects first (:func:`ctrplan.effects.apply_robot_effects`).
     alpha, beta : array-like, shape (K, n)
-        Base rotations [rad] and translations [m].
+        Base rotations [rad] and translations [m] the tubes reach (after history effects:
+        :attr:`ctrplan.history.HistoryState.alpha`).
     model : {"standard", "clearance", "friction"}
         Zero-clearance model (Section II-A), clearance model (Sections II-B to II-E) or
         maximal torsional friction model with the robot's friction coefficients (Section III)
         of Ha, Fagogenis & Dupont 2019.
     eta : array-like of int, shape (K, n - 1), optional
-        Friction direction of each pair per sample (+1, -1, 0 unknown; Eq. (38)). Friction
-        model only; default from :func:`motion_history` of ``sequence``.
-    translation_last : array-like of bool, shape (K,), optional
-        Whether a translation followed the last rotation. Friction model only; default from
-        :func:`motion_history` when ``sequence`` is given, else all False.
+        Friction direction applied per pair and sample (+1, -1; 0: the pair carries no friction
+        there), Eq. (38). Friction model only; default: the state of
+        :func:`ctrplan.history.motion_state` along each ``sequence``.
     mu : array-like, shape (K, n - 1), optional
-        Friction coefficient of each pair per sample [-], >= 0, in place of
-        ``robot.friction_coefficients`` (friction model only; e.g. partly developed friction,
-        :func:`~ctrplan.discrepancy.history.friction_state`). The release rules below apply
-        to it as to the robot's.
+        Friction coefficient applied per pair and sample [-], >= 0 (e.g. partly developed
+        friction); default the robot's where ``eta`` is not 0, else 0. Friction model only.
     sequence : array-like of int, shape (K,), optional
         Motion id per row (rows of one id in time order). Rows of a sequence are solved in
         order, each standard solve starting from the previous sample's base torsions (branch
@@ -403,8 +291,6 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None,
         shootings each); samples with several equilibria are then flagged not ok. Default
         False: along a history the followed branch is the answer; the shooting-Jacobian test
         for equilibria past a bifurcation still runs.
-    rotation_tol, translation_tol : float
-        Passed to :func:`motion_history` [rad], [m].
 
     Returns
     -------
@@ -435,11 +321,11 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None,
     warm-started from a clearance solve there: a cold friction solve can fail after its whole
     iteration budget where the warm one converges in a few steps.
 
-    Friction model per sample: ``mu_i = robot.friction_coefficients[i]`` if ``eta_i != 0`` and
-    not ``translation_last``, else 0 (translation-last releases the twist, Section V-B; a pair
-    without history is taken frictionless); if all ``mu_i`` are 0 the clearance model is
-    solved. Pairs with ``mu_i = 0`` are passed to the solver with eta +1 (no effect since the
-    friction terms scale with eta_i mu_i, Eqs. (40)-(41)).
+    Friction model per sample: the given directions and coefficients (the rule that derives
+    them from a motion, release by a translation included, is :mod:`ctrplan.history`'s); if all
+    ``mu_i`` are 0 the clearance model is solved. Pairs with ``mu_i = 0`` are passed to the
+    solver with eta +1 (no effect since the friction terms scale with eta_i mu_i, Eqs.
+    (40)-(41)).
     """
     t0 = time.perf_counter()
     if model not in MODELS:
@@ -464,29 +350,20 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, translation_last=None,
         if eta is None:
             if groups is None:
                 raise ValueError("model 'friction' needs eta or sequence (the motion history)")
-            hist = motion_history(alpha, beta, sequence, rotation_tol=rotation_tol,
-                                  translation_tol=translation_tol)
-            eta = hist.eta
-            if translation_last is None:
-                translation_last = hist.translation_last
+            state = motion_state(MotionRecord(alpha, beta, sequence=sequence))
+            eta, mu_default = state.applied(robot.friction_coefficients)
+            mu = mu_default if mu is None else mu
         eta = np.asarray(eta)
         if eta.shape != (K, n - 1) or not np.all(np.isin(eta, (-1, 0, 1))):
             raise ValueError(f"eta must have shape ({K}, {n - 1}) with values -1, 0, +1")
         eta = eta.astype(int)
-        if translation_last is None:
-            translation_last = (motion_history(alpha, beta, sequence, rotation_tol=rotation_tol,
-                                               translation_tol=translation_tol).translation_last
-                                if groups is not None else np.zeros(K, dtype=bool))
-        tl = np.asarray(translation_last, dtype=bool)
-        if tl.shape != (K,):
-            raise ValueError(f"translation_last must have shape ({K},), got {tl.shape}")
         if mu is None:
-            mu_rows = np.broadcast_to(np.asarray(robot.friction_coefficients, dtype=float)[None, :], (K, n - 1))
+            mu_rows = np.where(eta != 0, np.asarray(robot.friction_coefficients, dtype=float)[None, :], 0.0)
         else:
             mu_rows = np.asarray(mu, dtype=float)
             if mu_rows.shape != (K, n - 1) or not np.all(np.isfinite(mu_rows)) or np.any(mu_rows < 0):
                 raise ValueError(f"mu must have shape ({K}, {n - 1}) with finite values >= 0")
-        active = (eta != 0) & ~tl[:, None] & (mu_rows > 0.0)
+        active = (eta != 0) & (mu_rows > 0.0)
         mu_used = np.where(active, mu_rows, 0.0)
         eta_used = np.where(active, eta, 0)
         n_released = int(np.sum(~np.any(active, axis=1)))

@@ -1,8 +1,8 @@
 """Measured-like data from a robot model with hidden effects (``ctrplan synth``).
 
-The "truth" is a robot model with the chosen :class:`~ctrplan.discrepancy.effects.Effects`
-applied, evaluated along one of two protocols, mapped to the tracker frame by the registration
-and perturbed by sensor noise:
+The "truth" is a robot model with the chosen effects applied (an :class:`ctrplan.effects.EffectSet`
+of registered effects), evaluated along one of two protocols, shown as the measurement shows it
+(e.g. in the tracker frame of a registration) and perturbed by sensor noise:
 
 - ``paper``: Section V-C of Ha, Fagogenis & Dupont, IEEE T-RO 35(2) 2019,
   doi:10.1109/TRO.2018.2878906: an N x N x ... grid over the robot's joints, each configuration
@@ -11,11 +11,12 @@ and perturbed by sensor noise:
 - ``trajectory``: a seeded continuous joint motion with reversals, sampled at 10 Hz, like the
   measured trajectory of Ha et al.'s robot (``load_ha_trajectory``).
 
-Truth model: the friction model when a friction coefficient is positive (with the friction
-directions of the approach or of the motion history, :func:`~.simulate.simulate`); else the
-clearance model when clearances are set; else the standard model. History effects (drive
-backlash, a tracker time lag, gradually developing friction; :mod:`.history`) change the
-motion the truth is evaluated along, not the recorded joints (trajectory protocol only). Noise defaults to the
+Truth model: the most complete mechanics model the active effects need
+(:func:`ctrplan.effects.model_of`: friction when a friction coefficient is positive, with the
+friction state of the approach or of the motion history, :mod:`ctrplan.history`; else the
+clearance model when clearances are set; else the standard model). History effects (drive
+backlash, a tracker time lag, gradually developing friction) change the motion the truth is
+evaluated along, not the recorded joints (trajectory protocol only). Noise defaults to the
 paper's EM sensor (Section V-C): 1.4 mm rms position, 0.5 deg rms orientation.
 
 The truth (effects, seed, counts) goes to a JSON sidecar for tests and reports; analysis code
@@ -33,12 +34,12 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ..effects import REGISTRY, EffectSet, apply_output_effects, apply_robot_effects, history_state, model_of
 from ..errors import PhysicalParameterError
+from ..history import MotionRecord, motion_state
 from ..mechanics import ModelSettings
 from ..robot import ROTATION, TRANSLATION
-from .effects import HISTORY_FIELDS, Effects, apply_effects, apply_registration
-from .history import apply_backlash, apply_time_offset, friction_state
-from .simulate import motion_history, simulate
+from .simulate import simulate
 
 __all__ = ["PROTOCOLS", "Noise", "SynthResult", "truth_model", "paper_protocol",
            "trajectory_protocol", "approach_path", "add_noise", "synthesize", "parse_values", "truth_path",
@@ -105,14 +106,11 @@ class SynthResult:
     truth: dict
 
 
-def truth_model(effects: Effects) -> str:
-    """Model that generates the data: ``"friction"`` if a friction coefficient is positive,
-    else ``"clearance"`` if clearances are set, else ``"standard"``."""
-    if effects.friction_on:
-        return "friction"
-    if effects.clearance_on:
-        return "clearance"
-    return "standard"
+def truth_model(effects) -> str:
+    """Model that generates the data: the most complete one the active effects need
+    (``"friction"`` if a friction coefficient is positive, else ``"clearance"`` if clearances
+    are set, else ``"standard"``; :func:`ctrplan.effects.model_of`)."""
+    return model_of(effects)
 
 
 # --------------------------------------------------------------------------- protocols
@@ -347,7 +345,7 @@ def add_noise(tip, tangent, noise: Noise, rng: np.random.Generator):
 
 
 # --------------------------------------------------------------------------- driver
-def synthesize(robot, effects: Effects = Effects(), *, protocol: str = "paper", grid: int = 8,
+def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
                samples: int = TRAJECTORY_SAMPLES, noise: Noise = Noise(), seed: int = 0,
                settings: ModelSettings | None = None, n_jobs: int = 1,
                progress: bool = False) -> SynthResult:
@@ -357,8 +355,9 @@ def synthesize(robot, effects: Effects = Effects(), *, protocol: str = "paper", 
     ----------
     robot : Robot
         The nominal robot (effects are applied to it).
-    effects : Effects
-        Hidden effects; the registration maps the robot frame to the tracker frame.
+    effects : EffectSet or mapping, optional
+        Hidden effects ``{effect: {parameter: value}}`` of the registry (:mod:`ctrplan.effects`),
+        SI units; e.g. the registration maps the robot frame to the tracker frame.
     protocol : {"paper", "trajectory"}
         See :func:`paper_protocol` and :func:`trajectory_protocol`.
     grid : int
@@ -382,23 +381,23 @@ def synthesize(robot, effects: Effects = Effects(), *, protocol: str = "paper", 
     Raises
     ------
     PhysicalParameterError
-        Unknown protocol, effects that do not fit the robot, friction without a clearance.
+        Unknown protocol or effect, effects that do not fit the robot, an effect that needs
+        another one (gradual friction without friction), history effects on the paper protocol,
+        friction without a clearance.
     """
     t0 = time.perf_counter()
     if protocol not in PROTOCOLS:
         raise PhysicalParameterError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
     settings = settings or ModelSettings()
     rng = np.random.default_rng(seed)
-    truth_robot = apply_effects(robot, effects)
+    effects = EffectSet(effects or {}, robot)
+    truth_robot = apply_robot_effects(robot, effects)
     model = truth_model(effects)
-    if effects.history_on and protocol != "trajectory":
+    moving = [n for n in effects.active() if REGISTRY[n].needs_motion]
+    if moving and protocol != "trajectory":
         raise PhysicalParameterError(
-            f"effects {', '.join(f for f in HISTORY_FIELDS if getattr(effects, f) is not None)} change the "
-            f"motion history and need the trajectory protocol (protocol {protocol!r} solves every target "
-            f"without its approach path)")
-    if effects.friction_angle is not None and not effects.friction_on:
-        raise PhysicalParameterError("effect 'friction_angle' (gradual friction) needs positive friction "
-                                     "coefficients")
+            f"effects {', '.join(moving)} change the motion history and need the trajectory protocol (protocol "
+            f"{protocol!r} solves every target without its approach path)")
     if model != "standard":
         try:
             truth_robot.clearances  # noqa: B018
@@ -414,8 +413,9 @@ def synthesize(robot, effects: Effects = Effects(), *, protocol: str = "paper", 
         alpha, beta = frame[acols].to_numpy(float), frame[bcols].to_numpy(float)
         eta = frame[ecols].to_numpy(int)
         if model == "friction":
-            sim = simulate(truth_robot, alpha, beta, model=model, eta=eta,
-                           translation_last=np.zeros(len(frame), dtype=bool), settings=settings,
+            state = motion_state(MotionRecord(alpha, beta, sequence=frame["sequence"].to_numpy(int)), given_eta=eta)
+            eta_a, mu_a = state.applied(truth_robot.friction_coefficients)
+            sim = simulate(truth_robot, alpha, beta, model=model, eta=eta_a, mu=mu_a, settings=settings,
                            n_jobs=n_jobs, progress=progress)
         else:  # the approach does not matter: solve each configuration once
             first = ~frame["config_id"].duplicated().to_numpy()
@@ -430,30 +430,22 @@ def synthesize(robot, effects: Effects = Effects(), *, protocol: str = "paper", 
         frame = trajectory_protocol(robot, rng, samples)
         alpha, beta = frame[acols].to_numpy(float), frame[bcols].to_numpy(float)
         seq = frame["sequence"].to_numpy(int)
-        hist = motion_history(alpha, beta, seq)
+        record = MotionRecord(alpha, beta, frame["time"].to_numpy(float), seq)
+        hist = motion_state(record)
         for i, c in enumerate(ecols):
             frame[c] = hist.eta[:, i]   # what the recorded joints say
-        # the truth moves along the history the tubes really saw
-        a_t, b_t = alpha, beta
-        if effects.time_offset is not None:
-            a_t, b_t = apply_time_offset(alpha, beta, frame["time"].to_numpy(float), effects.time_offset[0], seq)
-        if effects.backlash is not None:
-            a_t = apply_backlash(a_t, effects.backlash, seq)
-        hist_t = motion_history(a_t, b_t, seq) if (a_t is not alpha or b_t is not beta) else hist
-        eta_t, tl_t, mu_t = hist_t.eta, hist_t.translation_last, None
-        if effects.friction_angle is not None:
-            e = friction_state(a_t, b_t, effects.friction_angle[0], seq)
-            eta_t = np.sign(e).astype(int)
-            mu_t = np.abs(e) * np.asarray(truth_robot.friction_coefficients, float)[None, :]
-            tl_t = np.zeros(len(frame), dtype=bool)
-        sim = simulate(truth_robot, a_t, b_t, model=model, eta=eta_t, translation_last=tl_t, mu=mu_t,
-                       sequence=seq, settings=settings, n_jobs=n_jobs, progress=progress)
+        # the truth moves along the history the tubes really saw (and the tracker showed)
+        state = history_state(truth_robot, record, effects)
+        eta_t, mu_t = state.applied(truth_robot.friction_coefficients)
+        sim = simulate(truth_robot, state.alpha, state.beta, model=model, eta=eta_t if model == "friction" else None,
+                       mu=mu_t if model == "friction" else None, sequence=seq, settings=settings, n_jobs=n_jobs,
+                       progress=progress)
         extra = {"samples": int(samples), "rate_hz": TRAJECTORY_RATE_HZ,
-                 "translation_last_samples": int(hist.translation_last.sum()),
+                 "translation_last_samples": int(np.any(hist.released, axis=1).sum()),
                  "reversals": {j.name: _reversals(frame[j.name]) for j in robot.joints}}
     if protocol == "trajectory" or model == "friction":
         tip, tangent, ok, message = sim.tip, sim.tangent, sim.ok, sim.message
-    tip, tangent = apply_registration(tip, tangent, effects)
+    tip, tangent = apply_output_effects(tip, tangent, effects)
     tip_n, tan_n = add_noise(np.nan_to_num(tip), np.nan_to_num(tangent, nan=1.0), noise, rng)
     for j, c in enumerate(("tip_x", "tip_y", "tip_z")):
         frame[c] = tip_n[:, j]

@@ -8,8 +8,7 @@ Formats: ``docs/file-formats.md``.
 from .atomic import atomic_path, atomic_savez, atomic_write_bytes, atomic_write_text
 from .robot_file import file_hash, load_robot, robot_from_toml_text
 from .scenario import Scenario, load_scenario, scenario_from_toml_text
-from .tables import (Measurements, load_ha_trajectory, read_configurations, read_measurements,
-                     rotation_directions, write_table)
+from .tables import Measurements, load_ha_trajectory, read_configurations, read_measurements, write_table
 
 __all__ = [
     "atomic_path",
@@ -26,6 +25,5 @@ __all__ = [
     "load_ha_trajectory",
     "read_configurations",
     "read_measurements",
-    "rotation_directions",
     "write_table",
 ]

@@ -96,6 +96,20 @@ class RegistrationDoc(_Strict):
     translation_m: Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
+class EffectsSourceDoc(_Strict):
+    """Where the values of a robot file's ``[effects]`` come from (``[effects_source]``)."""
+
+    method: str = ""
+    data_file: str = ""
+    data_sha256: str = ""
+    date: str = ""
+    samples: Annotated[int, Field(ge=0)] | None = None
+    held_out_position_mean_m: Annotated[float, Field(ge=0.0)] | None = None
+    held_out_position_p95_m: Annotated[float, Field(ge=0.0)] | None = None
+    held_out_position_max_m: Annotated[float, Field(ge=0.0)] | None = None
+    note: str = ""
+
+
 class RobotDocument(_Strict):
     """Schema of a robot model file (see ``docs/file-formats.md``)."""
 
@@ -109,6 +123,10 @@ class RobotDocument(_Strict):
     home: HomeDoc | None = None
     links: list[LinkDoc] = []
     joints: list[JointDoc] = []
+    # effects on the motion or the measurement: {effect: {parameter key: value}}, checked against
+    # the registry of ctrplan.effects once the robot is built
+    effects: dict[str, dict[str, typing.Any]] = {}
+    effects_source: EffectsSourceDoc | None = None
 
 
 # --------------------------------------------------------------------------- error reporting
@@ -345,21 +363,30 @@ def robot_from_document(doc: RobotDocument, file: str = MEMORY) -> Robot:
         joints.append(Joint(kind=kind, tube=int(m.group(2)) - 1, lower=jd.lower, upper=jd.upper))
 
     try:
-        return Robot(name=doc.name, tubes=tubes, friction_coefficients=friction,
-                     joints=tuple(joints), home_alpha=home_alpha, home_beta=home_beta,
-                     links=tuple(links), source=doc.source, clearances_override=clearances,
-                     metadata={"file": file,
+        robot = Robot(name=doc.name, tubes=tubes, friction_coefficients=friction,
+                      joints=tuple(joints), home_alpha=home_alpha, home_beta=home_beta,
+                      links=tuple(links), source=doc.source, clearances_override=clearances,
+                      metadata={"file": file,
                                "k_xy_reference_N_m2": doc.k_xy_reference_N_m2,
                                "model": doc.model,
                                "tracker_registration": (
                                    None if doc.tracker_registration is None else
                                    {"rotation_vector_rad": list(doc.tracker_registration.rotation_vector_rad),
-                                    "translation_m": list(doc.tracker_registration.translation_m)})})
+                                    "translation_m": list(doc.tracker_registration.translation_m)}),
+                                "effects_source": (None if doc.effects_source is None
+                                                   else doc.effects_source.model_dump())})
     except PhysicalParameterError as exc:
         hint = ""
         if clearances is not None:
             hint = f" (clearances set by [[pairs]] clearance_m = {list(clearances)!r} m)"
         raise PhysicalParameterError(f"{file}: {exc}{hint}") from exc
+    if doc.effects:
+        from ..effects import effects_from_file
+
+        robot = robot.replace(effects=effects_from_file(robot, doc.effects, file))
+    elif doc.effects_source is not None:
+        raise ModelFileError(file, "effects_source", "describes the source of [effects], but the file has none")
+    return robot
 
 
 def _build_tube(doc: RobotDocument, i: int, file: str) -> Tube:
@@ -408,7 +435,7 @@ def _vec(v) -> str:
 
 
 def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
-                  registration: dict | None = None) -> str:
+                  registration: dict | None = None, effects_source: dict | None = None) -> str:
     """Write a robot as the text of a robot model file (the inverse of :func:`robot_from_toml_text`).
 
     Stiffnesses are written as absolute ``k_xy_N_m2``; clearances as ``clearance_m`` only when
@@ -426,6 +453,10 @@ def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
     registration : dict, optional
         ``{"rotation_vector_rad": (3,), "translation_m": (3,)}``: tracker frame from robot base
         frame, ``p_tracker = R p_base + t`` (table ``[tracker_registration]``).
+    effects_source : dict, optional
+        Where ``robot.effects`` come from (table ``[effects_source]``: ``method``,
+        ``data_file``, ``data_sha256``, ``date``, ``samples``, ``held_out_position_mean_m``,
+        ``held_out_position_p95_m``, ``held_out_position_max_m``, ``note``).
 
     Returns
     -------
@@ -469,6 +500,16 @@ def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
         out += ["", "[tracker_registration]                # p_tracker = R(rotation_vector) p_base + t",
                 f"rotation_vector_rad = {_vec(registration['rotation_vector_rad'])}",
                 f"translation_m = {_vec(registration['translation_m'])}"]
+    if robot.effects:
+        from ..effects import effects_to_file
+
+        out += effects_to_file(robot)
+        if effects_source:
+            out += ["", "[effects_source]"]
+            for key, value in effects_source.items():
+                if value is None:
+                    continue
+                out.append(f"{key} = {_toml_str(value) if isinstance(value, str) else repr(value)}")
     return "\n".join(out) + "\n"
 
 

@@ -42,6 +42,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataFileError
+from ..history import rotation_directions
 from .atomic import atomic_path
 from .robot_file import MAX_METRES
 
@@ -53,7 +54,6 @@ __all__ = [
     "read_measurements",
     "write_table",
     "load_ha_trajectory",
-    "rotation_directions",
 ]
 
 # Column name pattern -> (unit, meaning). The order here is the canonical column order.
@@ -305,7 +305,7 @@ def load_ha_trajectory(path: str | os.PathLike) -> pd.DataFrame:
     -------
     pandas.DataFrame, K rows
         Columns ``time`` [s], ``sequence`` (0: one continuous motion), ``alpha_1..n``
-        [rad], ``beta_1..n`` [m], ``eta_1..n-1`` (from :func:`rotation_directions` on the
+        [rad], ``beta_1..n`` [m], ``eta_1..n-1`` (from :func:`ctrplan.history.rotation_directions` on the
         recorded history), ``tip_x..z`` [m], ``tangent_x..z``, ``R_11..R_33``.
 
     Raises
@@ -351,48 +351,6 @@ def load_ha_trajectory(path: str | os.PathLike) -> pd.DataFrame:
         for b in range(3):
             data[f"R_{a + 1}{b + 1}"] = rot[:, a, b]
     return pd.DataFrame(data)
-
-
-def rotation_directions(alpha, tol: float = 1e-3) -> np.ndarray:
-    """Direction of the last relative rotation of each adjacent tube pair along a motion.
-
-    ``eta[k, i]`` is +1 if ``alpha_(i+1) - alpha_i`` was last increasing (CCW about +z by the
-    right-hand rule), -1 if decreasing, 0 if it has not yet moved, with hysteresis ``tol``: the
-    direction flips only once the relative angle has come back more than ``tol`` from its
-    latest extreme (so encoder jitter does not flip it). This is the eta_k of Eq. (38) for a
-    history of pure rotations.
-
-    Parameters
-    ----------
-    alpha : array-like, shape (K, n)
-        Base rotations along the motion, in time order [rad].
-    tol : float
-        Hysteresis [rad], > 0.
-
-    Returns
-    -------
-    eta : ndarray of int, shape (K, n - 1)
-    """
-    alpha = np.asarray(alpha, dtype=float)
-    if alpha.ndim != 2:
-        raise ValueError(f"alpha must have shape (K, n), got {alpha.shape}")
-    if not tol > 0:
-        raise ValueError(f"tol must be > 0 rad, got {tol!r}")
-    rel = np.diff(alpha, axis=1)
-    eta = np.zeros(rel.shape, dtype=int)
-    for i in range(rel.shape[1]):
-        state, anchor = 0, rel[0, i] if len(rel) else 0.0
-        for k, x in enumerate(rel[:, i]):
-            if state >= 0 and x > anchor and (state == 1 or x - anchor > tol):
-                state, anchor = 1, x
-            elif state <= 0 and x < anchor and (state == -1 or anchor - x > tol):
-                state, anchor = -1, x
-            elif state == 1 and anchor - x > tol:
-                state, anchor = -1, x
-            elif state == -1 and x - anchor > tol:
-                state, anchor = 1, x
-            eta[k, i] = state
-    return eta
 
 
 # --------------------------------------------------------------------------- helpers

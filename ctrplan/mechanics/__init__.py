@@ -32,7 +32,7 @@ from .standard import solve_standard
 _LAZY = {"all_eta": ".bound", "evaluate_bound": ".bound",
          "continue_friction": ".continuation", "FrictionBranch": ".continuation",
          "solve_clearance": ".contact", "solve_contact": ".contact", "solve_friction": ".contact",
-         "PAIR_CASES": ".prediction", "Prediction": ".prediction", "pair_cases": ".prediction",
+         "PAIR_CASES": ".prediction", "Prediction": ".prediction",
          "predict_tip": ".prediction"}
 
 
@@ -61,5 +61,5 @@ __all__ = [
     "all_eta", "continue_friction", "FrictionBranch", "ModelSettings", "StandardSolution", "ContactSolution", "BoundResult", "Diagnostics",
     "TubeChain", "forward_kinematics", "chain_jacobians", "ArcLengthGrid", "build_grid",
     "StandardBodies", "solve_standard_bodies",
-    "predict_tip", "Prediction", "pair_cases", "PAIR_CASES",
+    "predict_tip", "Prediction", "PAIR_CASES",
 ]

@@ -9,17 +9,17 @@ that reaches a configuration, one of them is the prediction, not only a bound:
 - a pair whose last rotation was followed by a translation ("translation-last") is released:
   friction then acts mostly along the axis and the tip sits near the frictionless clearance
   solution (Section V-B, Figs. 19-21), so the pair gets mu = 0;
-- a pair that has not rotated yet (eta_k = 0, no history) gets mu = 0, the policy of
-  :func:`ctrplan.discrepancy.simulate.simulate`;
-- a pair whose robot friction coefficient is 0 is frictionless anyway.
+- a pair that has not rotated yet (eta_k = 0, no history) gets mu = 0;
+- a pair whose robot friction coefficient is 0 is frictionless anyway;
+- with gradually developing friction, the friction state e_k in [-1, 1] scales the coefficient.
 
 When every pair ends with mu = 0 the prediction is the clearance solution (Sections II-B to
 II-E); otherwise it is the friction solution with the per-pair eta and mu.
 
-Pure numerics: arrays and dataclasses in and out. Deriving eta and the translation-last flags
-from a joint-space motion is the caller's business (planned paths:
-:func:`ctrplan.planning.history.path_history`; recorded motions:
-:func:`ctrplan.discrepancy.simulate.motion_history`).
+Pure numerics: arrays and dataclasses in and out. The history of a configuration, as one rule
+for planned and recorded motions, is :mod:`ctrplan.history`'s (:class:`ctrplan.history.PairState`,
+with the robot file's history effects: :func:`ctrplan.effects.history_state`; planned paths:
+:func:`ctrplan.planning.path_history`).
 """
 
 from __future__ import annotations
@@ -29,19 +29,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ConvergenceError
+from ..history import PAIR_CASES, PairState, pair_friction
 from .contact import solve_contact
 from .results import ContactSolution, ModelSettings, StandardSolution
 from .standard import solve_standard
 
-__all__ = ["Prediction", "predict_tip", "pair_cases", "PAIR_CASES"]
-
-# What governs each pair in a prediction (one line each; ``Prediction.cases``).
-PAIR_CASES = {
-    "friction": "last motion of the pair a relative rotation: maximal torsional friction in direction eta",
-    "translation_last": "a translation followed the pair's last relative rotation: released (mu = 0)",
-    "no_history": "the pair has not rotated yet (eta 0): taken frictionless (mu = 0)",
-    "frictionless": "the robot's friction coefficient of the pair is 0",
-}
+__all__ = ["Prediction", "predict_tip", "PAIR_CASES"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,6 +64,9 @@ class Prediction:
         Which case governs each pair: a key of :data:`PAIR_CASES`.
     model : {"clearance", "friction"}
         The model solved: ``"clearance"`` when every pair has mu = 0.
+    alpha, beta : ndarray, shape (n,)
+        The configuration solved: the commanded one plus the state's offsets (e.g. the lag of a
+        drive with backlash) [rad], [m].
     reused : bool
         The solution was taken from a given :class:`~ctrplan.mechanics.BoundResult` (no solve).
     """
@@ -83,6 +79,8 @@ class Prediction:
     mu: np.ndarray
     cases: tuple
     model: str
+    alpha: np.ndarray
+    beta: np.ndarray
     reused: bool = False
 
     @property
@@ -96,52 +94,39 @@ class Prediction:
         return bool(self.solution.diagnostics.ok)
 
 
-def _history_arrays(robot, eta, translation_last):
-    """Checked eta (n-1,) int in {-1, 0, 1} and translation-last flags (n-1,) bool."""
+def _state(robot, eta, translation_last, state) -> PairState:
+    """The history of the prediction: ``state``, or the paper's abrupt model for ``eta`` and
+    ``translation_last`` on a robot without history effects."""
     m = robot.n_tubes - 1
+    if state is not None:
+        if eta is not None:
+            raise ValueError("give either eta and translation_last, or state, not both")
+        if np.shape(state.eta) != (m,) or np.shape(state.alpha_offset) != (robot.n_tubes,):
+            raise ValueError(f"state is for {np.size(state.eta) + 1} tubes; robot {robot.name!r} has {robot.n_tubes}")
+        return state
+    if eta is None:
+        raise ValueError("give eta (and translation_last) or a state (ctrplan.history.PairState)")
+    from ..effects import REGISTRY, robot_effects
+
+    file_effects = robot_effects(robot)
+    acting = [n for n in file_effects.active()
+              if REGISTRY[n].operator is not None or REGISTRY[n].friction_angle is not None]
+    if acting:
+        raise ValueError(f"robot {robot.name!r} has history effects ({', '.join(REGISTRY[n].label for n in acting)}): "
+                         f"the prediction needs the configuration's state with them, state=... "
+                         f"(ctrplan.effects.history_state of the motion, or ctrplan.planning.approach_history)")
     e = np.asarray(eta)
     if e.shape == () and m == 1:
         e = e.reshape(1)
     if e.shape != (m,):
         raise ValueError(f"eta must have shape ({m},) (one value per tube pair of robot {robot.name!r}), "
                          f"got shape {e.shape}")
-    ef = e.astype(float)
-    if not np.all(np.isin(ef, (-1.0, 0.0, 1.0))):
-        raise ValueError(f"eta values must be -1, 0 or +1 (0: the pair has not rotated yet), got {e.tolist()}")
-    t = np.asarray(translation_last)
-    if t.shape == ():
-        t = np.full(m, t)
-    if t.shape != (m,):
-        raise ValueError(f"translation_last must be one bool or shape ({m},), got shape {t.shape}")
-    if t.dtype != bool and not np.all(np.isin(t.astype(float), (0.0, 1.0))):
-        raise ValueError(f"translation_last must hold booleans, got {t.tolist()}")
-    return ef.astype(int), t.astype(bool)
+    return PairState.abrupt(e, translation_last, robot.n_tubes)
 
 
-def pair_cases(robot, eta, translation_last) -> tuple[np.ndarray, np.ndarray, tuple]:
-    """Per-pair friction state of a history: (eta applied (n-1,) int, mu applied (n-1,), cases).
-
-    Parameters and errors as :func:`predict_tip`.
-    """
-    e, t = _history_arrays(robot, eta, translation_last)
-    mu_robot = np.asarray(robot.friction_coefficients, dtype=float)
-    cases = []
-    for ek, tk, mk in zip(e, t, mu_robot):
-        if not mk > 0.0:
-            cases.append("frictionless")
-        elif ek == 0:
-            cases.append("no_history")
-        elif tk:
-            cases.append("translation_last")
-        else:
-            cases.append("friction")
-    active = np.array([c == "friction" for c in cases], dtype=bool)
-    return np.where(active, e, 0), np.where(active, mu_robot, 0.0), tuple(cases)
-
-
-def predict_tip(robot, alpha, beta, eta, translation_last=False, settings: ModelSettings | None = None, *,
-                standard: StandardSolution | None = None, bound=None, warm_start=None,
-                initial_guess=None) -> Prediction:
+def predict_tip(robot, alpha, beta, eta=None, translation_last=False, settings: ModelSettings | None = None, *,
+                state: PairState | None = None, standard: StandardSolution | None = None, bound=None,
+                warm_start=None, initial_guess=None) -> Prediction:
     """Predict the tip and the shape of a configuration reached by a given motion history.
 
     Parameters
@@ -150,25 +135,31 @@ def predict_tip(robot, alpha, beta, eta, translation_last=False, settings: Model
         Needs clearances (tube diameters or the override) and, for a friction prediction, the
         diameters of each pair (Eq. (41)).
     alpha : array-like, shape (n,)
-        Base rotations [rad].
+        Commanded base rotations [rad].
     beta : array-like, shape (n,)
-        Base translations [m].
-    eta : array-like of int, shape (n - 1,)
+        Commanded base translations [m].
+    eta : array-like of int, shape (n - 1,), optional
         Direction of the last relative rotation of tube i+1 with respect to tube i per pair:
         +1 CCW (``alpha_(i+1) - alpha_i`` increasing), -1 CW, 0 the pair has not rotated yet
-        (eta_k of Eqs. (38)-(39)).
+        (eta_k of Eqs. (38)-(39)); the paper's abrupt friction model. Give this or ``state``.
     translation_last : bool or array-like of bool, shape (n - 1,)
         Per pair: a base translation came after the pair's last relative rotation (Section
         V-B). One bool applies to every pair. Default False.
     settings : ModelSettings, optional
+    state : PairState, optional, keyword-only
+        The configuration's history (:mod:`ctrplan.history`): offsets of the configuration the
+        tubes reach from the commanded one (a drive's backlash), direction, release and friction
+        state per pair (gradually developing friction). Needed when the robot file has history
+        effects (:func:`ctrplan.effects.history_state` of the motion;
+        :func:`ctrplan.planning.approach_history` for one approach).
     standard : StandardSolution, optional, keyword-only
-        Standard solution at this configuration (solved if not given).
+        Standard solution at the configuration the tubes reach (solved if not given).
     bound : BoundResult, optional, keyword-only
-        :func:`~ctrplan.mechanics.evaluate_bound` at this configuration with the same settings:
-        its clearance solution or its friction solution for these directions is reused when the
-        prediction needs exactly that one (every pair with friction active, or none), so a
-        prediction next to a bound costs no solve. A partial history (some pairs released) is
-        solved, warm-started from its clearance solution.
+        :func:`~ctrplan.mechanics.evaluate_bound` at the commanded configuration with the same
+        settings: its clearance solution or its friction solution for these directions is reused
+        when the prediction needs exactly that one (every pair with its full friction, or none,
+        and no offset), so a prediction next to a bound costs no solve. A partial history (some
+        pairs released or partly developed) is solved, warm-started from its clearance solution.
     warm_start : ContactSolution, optional, keyword-only
         A contact solution at a nearby configuration to start the friction solve from (used only
         when its grid matches; a friction solve that does not converge from it is repeated from
@@ -186,7 +177,8 @@ def predict_tip(robot, alpha, beta, eta, translation_last=False, settings: Model
     ------
     ValueError
         ``eta`` not of shape (n - 1,) or not in {-1, 0, +1}; ``translation_last`` not one bool
-        or shape (n - 1,).
+        or shape (n - 1,); neither or both of ``eta`` and ``state``; ``eta`` on a robot whose
+        file has history effects (they need ``state``).
     JointLimitError
         Kinematically impossible configuration.
     ConvergenceError
@@ -203,16 +195,21 @@ def predict_tip(robot, alpha, beta, eta, translation_last=False, settings: Model
     brings the tip close to the frictionless solution, here the clearance model (Sections II-B
     to II-E, Eqs. (10)-(36)). Per pair ``mu_k = robot.friction_coefficients[k]`` if
     ``eta_k != 0`` and not ``translation_last[k]``, else 0; with every mu_k = 0 the clearance
-    model is solved. The paper's friction model assumes rotations "of sufficient angle" for the
-    full Coulomb force to develop; a small last rotation is treated as a full one. Pairs with
+    model is solved (with ``state``: ``mu_k = |e_k| mu_robot_k`` in direction sign(e_k)). The
+    paper's friction model assumes rotations "of sufficient angle" for the full Coulomb force to
+    develop; with ``eta`` a small last rotation is treated as a full one. Pairs with
     mu_k = 0 are passed to the solver with eta +1 (the friction terms scale with eta_k mu_k,
     Eqs. (40)-(41)). The solution does not depend on the path beyond (eta, translation-last):
     the quasi-static model has no other memory.
     """
     settings = settings or ModelSettings()
-    eta_used, mu_used, cases = pair_cases(robot, eta, translation_last)
-    alpha = np.asarray(alpha, dtype=float)
-    beta = np.asarray(beta, dtype=float)
+    st = _state(robot, eta, translation_last, state)
+    eta_used, mu_used, cases = pair_friction(st, robot.friction_coefficients)
+    shifted = bool(np.any(st.alpha_offset != 0.0) or np.any(st.beta_offset != 0.0))
+    alpha = np.asarray(alpha, dtype=float) + st.alpha_offset
+    beta = np.asarray(beta, dtype=float) + st.beta_offset
+    if shifted:
+        bound = None        # the bound is at the commanded configuration, the tubes are elsewhere
     if bound is not None and standard is None:
         standard = bound.standard
     if standard is None:
@@ -228,7 +225,7 @@ def predict_tip(robot, alpha, beta, eta, translation_last=False, settings: Model
             sol, reused = bound.clearance, True
         else:
             mu_robot = np.asarray(robot.friction_coefficients, dtype=float)
-            if np.array_equal(mu_used > 0.0, mu_robot > 0.0):   # every pair that can carry friction does
+            if np.array_equal(mu_used, mu_robot):   # every pair that can carry friction does, fully
                 key = tuple(int(e) if e != 0 else 1 for e in eta_used)
                 if key in bound.friction:
                     sol, reused = bound.friction[key], True
@@ -255,4 +252,4 @@ def predict_tip(robot, alpha, beta, eta, translation_last=False, settings: Model
     return Prediction(tip_position=np.asarray(sol.tip_position, dtype=float).copy(),
                       tip_tangent=np.asarray(sol.tip_tangent, dtype=float).copy(), solution=sol,
                       standard=standard, eta=eta_used.astype(int), mu=mu_used, cases=cases,
-                      model="friction" if friction else "clearance", reused=reused)
+                      model="friction" if friction else "clearance", alpha=alpha, beta=beta, reused=reused)

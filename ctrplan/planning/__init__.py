@@ -26,8 +26,7 @@ from ..boundmap import (QUANTITIES, BoundField, BoundFieldKeyError, Interpolatio
 from .collision import (BoxObstacle, CapsuleObstacle, CollisionChecker, CollisionReport, MeshObstacle,
                         SphereObstacle, obstacle_from_dict)
 from .goals import CompensatedGoal, GoalSolution, JointGoal, TaskSpaceGoal, compensate_goal, resolve_goal
-from .history import (DEFAULT_FINAL_MOTION, FINAL_MOTIONS, PathHistory, approach_history, end_with, goal_indices,
-                      path_history)
+from .history import DEFAULT_FINAL_MOTION, FINAL_MOTIONS, approach_history, end_with, goal_indices, path_history
 from .objective import DEFAULT_BOUND_WEIGHT, BoundCostObjective
 from .ordering import LastMotionBounds, OrderedPath, OrderedWaypoint, bounds_given_last_motion, order_path
 from .planners import PLANNERS, PlanResult, ValidityChecker, plan
@@ -45,7 +44,7 @@ __all__ = [
     "PLANNERS", "PlanResult", "ValidityChecker", "plan",
     "OrderedPath", "OrderedWaypoint", "LastMotionBounds", "order_path", "bounds_given_last_motion",
     "JointGoal", "TaskSpaceGoal", "GoalSolution", "resolve_goal", "CompensatedGoal", "compensate_goal",
-    "PathHistory", "path_history", "approach_history", "end_with", "goal_indices", "FINAL_MOTIONS",
+    "path_history", "approach_history", "end_with", "goal_indices", "FINAL_MOTIONS",
     "DEFAULT_FINAL_MOTION",
     "BatchValidityChecker", "BatchMotionValidator", "use_motion_validator", "MotionVerifier", "MotionCheck",
     "Route", "RouteChecks", "plan_route", "route_checks",

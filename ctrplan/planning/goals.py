@@ -264,9 +264,13 @@ class CompensatedGoal:
     target : ndarray, shape (3,)
         Target tip position [m].
     eta : ndarray of int, shape (n - 1,)
-        Friction direction per pair of the assumed final approach (Eq. (39)).
+        Friction direction per pair of the assumed final approach (Eq. (39)), at the compensated goal.
     translation_last : ndarray of bool, shape (n - 1,)
         Per pair: a translation follows the pair's last rotation in the assumed approach.
+    state : PairState
+        The assumed history at the compensated goal (:mod:`ctrplan.history`): offsets of the
+        configuration the tubes reach (drive backlash) [rad, m], directions, release and
+        friction state per pair.
     predicted_tip_standard : ndarray, shape (3,)
         Predicted tip at ``q_standard`` with that history [m].
     predicted_miss_standard : float
@@ -299,6 +303,7 @@ class CompensatedGoal:
     target: np.ndarray
     eta: np.ndarray
     translation_last: np.ndarray
+    state: object
     predicted_tip_standard: np.ndarray
     predicted_miss_standard: float
     predicted_tip: np.ndarray
@@ -312,12 +317,12 @@ class CompensatedGoal:
     message: str
 
 
-def compensate_goal(target, robot, q_standard, eta, translation_last, settings=None, *, tolerance: float,
+def compensate_goal(target, robot, q_standard, state, settings=None, *, tolerance: float,
                     validity_fn=None, predict=None, tip_tol: float = COMPENSATION_TIP_TOL,
                     max_iterations: int = COMPENSATION_MAX_ITERATIONS) -> CompensatedGoal:
-    """Joint vector whose predicted tip is on the target, for a fixed final-approach history.
+    """Joint vector whose predicted tip is on the target, for the history of its final approach.
 
-    Quasi-Newton on the residual ``r(q) = p_pred(q; eta, translation_last) - target``:
+    Quasi-Newton on the residual ``r(q) = p_pred(q; history(q)) - target``:
     ``q <- q - D (J D)^+ r(q)`` with ``D = diag(1, 0.01 m/rad)`` (minimum-norm step of a
     redundant robot), a backtracking line search on ``|r|`` and translations kept in their
     limits. ``J`` starts as the standard model's tip Jacobian at ``q_standard`` (finite
@@ -332,11 +337,11 @@ def compensate_goal(target, robot, q_standard, eta, translation_last, settings=N
     robot : Robot
     q_standard : array-like, shape (n_joints,)
         Standard-model IK solution to start from (:func:`resolve_goal`) [rad or m].
-    eta : array-like of int, shape (n - 1,)
-        Friction directions of the final approach (+1, -1, 0 none; Eq. (39)), e.g. from
-        :func:`ctrplan.planning.history.approach_history`.
-    translation_last : bool or array-like of bool, shape (n - 1,)
-        Per pair: a translation follows the pair's last rotation (Section V-B).
+    state : PairState or callable
+        The history at the goal (:class:`ctrplan.history.PairState`), or ``state(q) ->
+        PairState`` for a goal ``q`` (e.g. :func:`ctrplan.planning.history.approach_history` of
+        the approach to ``q``, so that the lag of a drive with backlash and the friction state
+        follow the goal as it moves).
     settings : ModelSettings, optional
     tolerance : float, keyword-only
         Goal tolerance [m], > 0: the compensated solution is accepted only within it.
@@ -344,8 +349,8 @@ def compensate_goal(target, robot, q_standard, eta, translation_last, settings=N
         ``validity_fn(q) -> bool`` (limits, stability, collisions); an invalid compensated
         configuration is not accepted.
     predict : callable, optional, keyword-only
-        ``predict(robot, alpha, beta, eta, translation_last, settings, warm_start=...) ->
-        Prediction``; default :func:`ctrplan.mechanics.predict_tip`.
+        ``predict(robot, alpha, beta, settings=..., state=..., warm_start=...) -> Prediction``;
+        default :func:`ctrplan.mechanics.predict_tip`.
     tip_tol : float, keyword-only
         Stop when the predicted miss is below this [m] (default 10 um).
     max_iterations : int, keyword-only
@@ -360,7 +365,7 @@ def compensate_goal(target, robot, q_standard, eta, translation_last, settings=N
     Raises
     ------
     ValueError
-        ``target`` not 3 finite numbers, ``tolerance`` <= 0, bad ``eta`` / ``translation_last``
+        ``target`` not 3 finite numbers, ``tolerance`` <= 0, a state that does not fit the robot
         (see :func:`ctrplan.mechanics.predict_tip`), ``q_standard`` of the wrong length.
     CtrplanError
         The prediction fails at ``q_standard`` itself (e.g. ``ConvergenceError`` of the standard
@@ -370,8 +375,9 @@ def compensate_goal(target, robot, q_standard, eta, translation_last, settings=N
     -----
     Prediction: Section V-B with Sections II (clearance model) and III (friction model, Eqs.
     (37)-(47)) of Ha, Fagogenis & Dupont, IEEE T-RO 35(2):353-370, 2019,
-    doi:10.1109/TRO.2018.2878906. The history is held fixed while q moves: a small change of the
-    goal does not change the direction of the final rotations.
+    doi:10.1109/TRO.2018.2878906. A fixed ``state`` is held while q moves (a small change of the
+    goal does not change the direction of the final rotations); a callable one is re-read at
+    every trial goal.
     """
     from ..mechanics import ModelSettings, predict_tip, solve_standard  # noqa: PLC0415
 
@@ -393,14 +399,16 @@ def compensate_goal(target, robot, q_standard, eta, translation_last, settings=N
     scale = np.where(rot, 1.0, _TRANSLATION_SCALE)
     fd = np.where(rot, _FD_STEP_ROTATION, _FD_STEP_TRANSLATION)
     n_pred = 0
-    last = {"sol": None}
+    last = {"sol": None, "state": None}
+    state_at = state if callable(state) else (lambda q: state)
 
     def prediction(q):
         nonlocal n_pred
         alpha, beta = robot.configuration(q)
         n_pred += 1
-        p = predict(robot, alpha, beta, eta, translation_last, settings, warm_start=last["sol"])
-        last["sol"] = p.solution
+        s = state_at(q)
+        p = predict(robot, alpha, beta, settings=settings, state=s, warm_start=last["sol"])
+        last["sol"], last["state"] = p.solution, s
         return p
 
     def std_tip(q):
@@ -410,7 +418,10 @@ def compensate_goal(target, robot, q_standard, eta, translation_last, settings=N
             raise ValueError("standard model did not converge")
         return np.asarray(sol.tip_position, dtype=float)
 
-    def jacobian(q, p0):
+    def jacobian(q):
+        # the standard model's tip Jacobian at the commanded q (the prediction's own standard
+        # solution may sit at another configuration, e.g. behind a drive's dead band)
+        p0 = std_tip(q)
         J = np.empty((3, nj))
         for j in range(nj):
             h = fd[j] if q[j] + fd[j] <= hi[j] else -fd[j]
@@ -425,7 +436,7 @@ def compensate_goal(target, robot, q_standard, eta, translation_last, settings=N
     q, p, miss = q0.copy(), first, miss0
     it, message = 0, ""
     try:
-        J = jacobian(q, p.standard.tip_position) if miss > tip_tol else None
+        J = jacobian(q) if miss > tip_tol else None
         while miss > tip_tol and it < max_iterations:
             it += 1
             r = p.tip_position - target
@@ -453,6 +464,7 @@ def compensate_goal(target, robot, q_standard, eta, translation_last, settings=N
             q, p, miss = q_new, p_new, miss_new
     except (CtrplanError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
         message = f"stopped after {it} iterations: {type(exc).__name__}: {exc}"
+    p_state = state_at(q)
     q = np.where(periodic, wrap_angle(q), q)
     converged = miss <= tip_tol
     std_err = float(np.linalg.norm(p.standard.tip_position - target))
@@ -468,8 +480,8 @@ def compensate_goal(target, robot, q_standard, eta, translation_last, settings=N
                    f"within tolerance after {it} iterations ({message or 'iteration limit'})")
     return CompensatedGoal(
         q=q if accepted else q0.copy(), q_compensated=q, q_standard=q0.copy(), target=target,
-        eta=np.asarray(eta, dtype=int).reshape(-1).copy(),
-        translation_last=np.broadcast_to(np.asarray(translation_last, dtype=bool), first.eta.shape).copy(),
+        eta=np.asarray(p_state.eta, dtype=int).copy(), translation_last=np.asarray(p_state.released, bool).copy(),
+        state=p_state,
         predicted_tip_standard=tip0, predicted_miss_standard=miss0, predicted_tip=p.tip_position.copy(),
         predicted_miss=miss, standard_tip_error=std_err, model=p.model, converged=converged, accepted=accepted,
         iterations=it, n_predictions=n_pred, message=message)

@@ -2,163 +2,87 @@
 
 Ha, Fagogenis & Dupont 2019 (Section V-B, doi:10.1109/TRO.2018.2878906): the friction state of a
 tube pair is set by the direction eta_k of its last relative rotation (Eqs. (38)-(39)), and a
-translation after that rotation releases the friction-induced twist ("translation-last"). This
-module reads both from a sequence of joint waypoints, for
-:func:`ctrplan.mechanics.predict_tip`:
+translation after that rotation releases the friction-induced twist ("translation-last"). The
+rule is :mod:`ctrplan.history`'s, the same for recorded motions; this module applies it to
+joint-space paths, with the history effects of the robot file that act on the robot (drive
+backlash, gradually developing friction; a tracker's time offset concerns measurements only),
+for :func:`ctrplan.mechanics.predict_tip`:
 
-- :func:`path_history`: eta and the translation-last flag of every pair at every waypoint;
-- :func:`approach_history`: the history at a goal reached by one straight segment from a given
-  configuration, executed rotation-then-translation or translation-then-rotation (what the
+- :func:`path_history`: the history state at every waypoint of a path;
+- :func:`approach_history`: the state at a goal reached by one straight segment, executed
+  rotation-then-translation or translation-then-rotation, after the motion so far (what the
   compensated inverse kinematics assumes before the plan exists);
 - :func:`end_with`: reorder the two phases before a waypoint so that the motion reaching it ends
   with the requested kind (``"translation-last"`` or ``"rotation-last"``), if the reordered
   phases pass a motion check.
 
-Rules (the same as :func:`ctrplan.discrepancy.simulate.motion_history` except that the
-translation-last flag is kept **per pair**):
-
-- eta_k follows the relative angle ``alpha_(k+1) - alpha_k`` with the hysteresis of
-  :func:`ctrplan.io.tables.rotation_directions` (0 until the pair has rotated);
-- a step that changes rotations and translations together is executed as its rotation, then its
-  translation (the order of :func:`~ctrplan.planning.order_path`);
-- pair k is translation-last at a waypoint when some base translation changed by more than
-  ``translation_tol`` after the pair's last relative rotation. Any base counts, as in
-  ``motion_history`` and the translation-last bound of the bound map (clearance model for the
-  whole robot after a final translation); a rotation of another pair afterwards does not
-  restore the released pair's friction (``motion_history`` keeps one flag per sample, which a
-  later rotation of any pair clears).
+A planned path is ordered into pure rotation and pure translation phases
+(:func:`~ctrplan.planning.order_path`); a step that changes rotations and translations together
+counts as concurrent (:mod:`ctrplan.history`): order the path first.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from ..constants import HISTORY_ROTATION_TOL, HISTORY_TRANSLATION_TOL
+from ..effects import history_state
 from ..errors import UnreachableGoalError
-from ..io.tables import rotation_directions
+from ..history import HistoryState, MotionRecord, PairState
 from .ordering import OrderedPath, OrderedWaypoint
 from .space import wrap_angle
 
-__all__ = ["PathHistory", "path_history", "approach_history", "end_with", "goal_indices", "FINAL_MOTIONS",
-           "DEFAULT_FINAL_MOTION"]
+__all__ = ["path_history", "approach_history", "approach_rows", "end_with", "goal_indices", "FINAL_MOTIONS", "DEFAULT_FINAL_MOTION"]
 
 # Final motions a scenario may ask for ([planner] final_motion) and the motion kind each ends with.
 FINAL_MOTIONS = {"translation-last": "translation", "rotation-last": "rotation"}
 DEFAULT_FINAL_MOTION = "translation-last"
 
-# Default hysteresis of a relative rotation [rad] and threshold of a translation [m], shared with
-# ctrplan.discrepancy.simulate.motion_history (constants).
-DEFAULT_ROTATION_TOL = HISTORY_ROTATION_TOL
-DEFAULT_TRANSLATION_TOL = HISTORY_TRANSLATION_TOL
 
-
-@dataclass(frozen=True, eq=False)
-class PathHistory:
-    """Friction-relevant history at each waypoint of a path.
-
-    Attributes
-    ----------
-    eta : ndarray of int, shape (K, n - 1)
-        Direction of the last relative rotation of tube k+1 with respect to tube k: +1 CCW
-        (``alpha_(k+1) - alpha_k`` increasing), -1 CW, 0 none yet (Eq. (39)).
-    translation_last : ndarray of bool, shape (K, n - 1)
-        A base translation came after the pair's last relative rotation (Section V-B).
-    """
-
-    eta: np.ndarray
-    translation_last: np.ndarray
-
-    def at(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """(eta (n - 1,), translation_last (n - 1,)) at waypoint ``k``."""
-        return self.eta[k].copy(), self.translation_last[k].copy()
-
-
-def path_history(robot, q, *, rotation_tol: float = DEFAULT_ROTATION_TOL,
-                 translation_tol: float = DEFAULT_TRANSLATION_TOL) -> PathHistory:
-    """Motion history at every waypoint of a joint-space path.
-
-    Parameters
-    ----------
-    robot : Robot
-    q : array-like, shape (K, n_joints)
-        Waypoints in path order [rad or m], periodic angles **continuous** (as
-        :class:`~ctrplan.planning.OrderedPath` holds them; see
-        :func:`~ctrplan.planning.unwrap_path`). The robot moves in a straight line between
-        consecutive waypoints; a step changing rotations and translations is executed rotation
-        first. The first waypoint has no history.
-    rotation_tol : float, keyword-only
-        Hysteresis of a relative rotation [rad], > 0.
-    translation_tol : float, keyword-only
-        Smallest base translation that releases friction [m], > 0.
-
-    Returns
-    -------
-    PathHistory
-        ``eta`` (K, n - 1) and ``translation_last`` (K, n - 1).
-
-    Raises
-    ------
-    ValueError
-        ``q`` not of shape (K, n_joints) or not finite; tolerances <= 0.
-    JointLimitError
-        A waypoint the robot cannot take (``Robot.configuration``).
-    """
+def _record(robot, q) -> MotionRecord:
     q = np.asarray(q, dtype=float)
     nj = len(robot.joints)
     if q.ndim != 2 or q.shape[1] != nj or q.shape[0] < 1:
         raise ValueError(f"q must have shape (K, {nj}) ({', '.join(robot.joint_names)}), got {q.shape}")
     if not np.all(np.isfinite(q)):
         raise ValueError("q must be finite")
-    if not rotation_tol > 0 or not translation_tol > 0:
-        raise ValueError(f"tolerances must be > 0, got rotation_tol={rotation_tol!r} rad, "
-                         f"translation_tol={translation_tol!r} m")
     conf = [robot.configuration(qk, check_limits=False) for qk in q]
-    alpha = np.array([c[0] for c in conf])
-    beta = np.array([c[1] for c in conf])
-    K, n = alpha.shape
-    eta = rotation_directions(alpha, tol=rotation_tol) if n > 1 else np.zeros((K, 0), dtype=int)
-    rel = np.diff(alpha, axis=1)
-    tlast = np.zeros((K, n - 1), dtype=bool)
-    rel_ref = rel[0].copy()
-    beta_ref = np.repeat(beta[:1], n - 1, axis=0)        # (n - 1, n): base translations at each pair's last rotation
-    translated = np.zeros(n - 1, dtype=bool)
-    for k in range(1, K):
-        rotated = np.abs(rel[k] - rel_ref) > rotation_tol
-        # the rotation of this step happens first, with the translations still at beta[k - 1]
-        rel_ref[rotated] = rel[k][rotated]
-        beta_ref[rotated] = beta[k - 1]
-        translated[rotated] = False
-        translated |= np.max(np.abs(beta[k][None, :] - beta_ref), axis=1) > translation_tol
-        tlast[k] = translated
-    return PathHistory(eta=eta.astype(int), translation_last=tlast)
+    return MotionRecord(np.array([c[0] for c in conf]), np.array([c[1] for c in conf]))
 
 
-def approach_history(robot, q_from, q_to, final_motion: str = DEFAULT_FINAL_MOTION, *,
-                     rotation_tol: float = DEFAULT_ROTATION_TOL,
-                     translation_tol: float = DEFAULT_TRANSLATION_TOL) -> tuple[np.ndarray, np.ndarray]:
-    """History at ``q_to`` reached from ``q_from`` by one straight segment, ordered as asked.
-
-    Periodic rotations turn the short way (as :class:`~ctrplan.planning.JointStateSpace`
-    interpolates); ``q_from`` is taken without earlier history, so a pair that does not rotate
-    on the segment has eta 0.
+def path_history(robot, q) -> HistoryState:
+    """The history state at every waypoint of a joint-space path.
 
     Parameters
     ----------
     robot : Robot
-    q_from, q_to : array-like, shape (n_joints,)
-        [rad or m].
-    final_motion : {"translation-last", "rotation-last"}
-        ``"translation-last"``: rotations, then translations (the order of
-        :func:`~ctrplan.planning.order_path`); ``"rotation-last"``: translations, then rotations.
-    rotation_tol, translation_tol : float, keyword-only
-        As :func:`path_history` [rad], [m].
+        Its file's history effects that act on the robot apply (:func:`ctrplan.effects.history_state`
+        with ``tracker=False``).
+    q : array-like, shape (K, n_joints)
+        Waypoints in path order [rad or m], periodic angles **continuous** (as
+        :class:`~ctrplan.planning.OrderedPath` holds them; see
+        :func:`~ctrplan.planning.unwrap_path`), ordered into pure rotation and translation
+        phases. The robot moves in a straight line between consecutive waypoints. The first
+        waypoint has no history (its drives centred in their dead bands).
 
     Returns
     -------
-    eta : ndarray of int, shape (n - 1,)
-    translation_last : ndarray of bool, shape (n - 1,)
+    HistoryState
+        Per waypoint: configuration the tubes reach (``alpha``, ``beta``) and offsets from the
+        commanded one, eta, release (translation-last) and friction state per pair;
+        ``state.at(k)`` is :func:`ctrplan.mechanics.predict_tip`'s ``state``.
+
+    Raises
+    ------
+    ValueError
+        ``q`` not of shape (K, n_joints) or not finite.
+    """
+    return history_state(robot, _record(robot, q), tracker=False)
+
+
+def approach_rows(robot, q_from, q_to, final_motion: str = DEFAULT_FINAL_MOTION) -> np.ndarray:
+    """The waypoints of one straight segment from ``q_from`` to ``q_to`` ordered as asked: start,
+    end of the first phase, end; shape (3, n_joints) [rad or m], angles continuous from ``q_from``
+    (periodic rotations turn the short way).
 
     Raises
     ------
@@ -177,8 +101,49 @@ def approach_history(robot, q_from, q_to, final_motion: str = DEFAULT_FINAL_MOTI
     d = np.where(periodic, wrap_angle(b - a), b - a)
     end = a + d
     mid = a + np.where(rot, d, 0.0) if final_motion == "translation-last" else a + np.where(rot, 0.0, d)
-    h = path_history(robot, np.array([a, mid, end]), rotation_tol=rotation_tol, translation_tol=translation_tol)
-    return h.at(2)
+    return np.array([a, mid, end])
+
+
+def approach_history(robot, q_from, q_to, final_motion: str = DEFAULT_FINAL_MOTION, *, before=None) -> PairState:
+    """The state at ``q_to`` reached from ``q_from`` by one straight segment, ordered as asked.
+
+    Periodic rotations turn the short way (as :class:`~ctrplan.planning.JointStateSpace`
+    interpolates).
+
+    Parameters
+    ----------
+    robot : Robot
+        Its file's history effects that act on the robot apply.
+    q_from, q_to : array-like, shape (n_joints,)
+        [rad or m].
+    final_motion : {"translation-last", "rotation-last"}
+        ``"translation-last"``: rotations, then translations (the order of
+        :func:`~ctrplan.planning.order_path`); ``"rotation-last"``: translations, then rotations.
+    before : array-like, shape (B, n_joints), optional, keyword-only
+        The motion before ``q_from`` (its last row is ``q_from`` or leads to it in a straight
+        segment), continuous angles; without it ``q_from`` has no history, so a pair that does
+        not rotate on the segment has eta 0 and every drive starts centred in its dead band.
+
+    Returns
+    -------
+    PairState
+        For :func:`ctrplan.mechanics.predict_tip` (``state=``).
+
+    Raises
+    ------
+    ValueError
+        Unknown ``final_motion`` or wrong shapes.
+    """
+    rows = list(approach_rows(robot, q_from, q_to, final_motion))
+    if before is not None:
+        nj = len(robot.joints)
+        periodic = np.array([j.periodic for j in robot.joints])
+        prior = np.asarray(before, dtype=float).reshape(-1, nj)
+        # continue the angles of the motion before (the short way from its end to q_from)
+        a = rows[0]
+        shift = np.where(periodic, prior[-1] + wrap_angle(a - prior[-1]) - a, 0.0)
+        rows = list(prior) + [r + shift for r in rows]
+    return path_history(robot, np.array(rows)).at(len(rows) - 1)
 
 
 def end_with(ordered: OrderedPath, index: int, final_motion: str, motion_check=None) -> tuple[OrderedPath, str]:

@@ -1,0 +1,246 @@
+"""Stage 9 of the discrepancy workflow: the history-aware prediction and the friction envelope on
+held-out data."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..effects import EffectSet, registration_transform
+from .data import MeasuredData
+from .evaluation import HeldOutFn, stats_mm
+from .options import ENVELOPE_NOISE_FACTOR, DiscrepancyOptions
+from .parameters import apply_parameters
+
+__all__ = ["EnvelopeCoverage", "HistoryPrediction", "PREDICTION_DESCRIPTION", "predict_with_history",
+           "envelope_coverage", "hull_distance"]
+
+#: What the prediction comparison reports (``results.json["prediction"]["description"]``).
+PREDICTION_DESCRIPTION = (
+    "Held-out tip position errors. Standard: the calibrated baseline, which ignores the motion history. "
+    "History-aware: the friction model (Section III of Ha et al. 2019) with each sample's recorded history "
+    "(eta of the last relative rotation of each pair; a pair released by a later translation is solved "
+    "frictionless), tube parameters and friction coefficients calibrated on the calibration split only "
+    "(reference coefficients, if any, given).")
+
+
+@dataclass(frozen=True, eq=False)
+class EnvelopeCoverage:
+    """Coverage of the friction envelope at evenly spaced held-out samples.
+
+    Attributes
+    ----------
+    n, inside : int
+        Samples with every bounding solution, and those within the envelope plus the margin.
+    fraction_inside : float
+    margin_m : float
+        :data:`ENVELOPE_NOISE_FACTOR` times the noise rms [m] (0 when unknown).
+    outside_median_m, outside_p95_m, outside_max_m : float or None
+        How far beyond the margin the others lie [m]; None if none.
+    size_median_m : float or None
+        Median largest distance between two bounding tips [m].
+    description : str
+    coefficients : dict of str to float
+        Friction coefficients used [-].
+    label : str
+        ``"fitted"`` or ``"reference ..."``.
+    """
+
+    n: int
+    inside: int
+    fraction_inside: float
+    margin_m: float
+    outside_median_m: float | None
+    outside_p95_m: float | None
+    outside_max_m: float | None
+    size_median_m: float | None
+    description: str
+    coefficients: dict
+    label: str
+
+    def as_dict(self) -> dict:
+        """The report's form (mm)."""
+        mm = (lambda x: None if x is None else x * 1e3)
+        return {"n": self.n, "inside": self.inside, "fraction_inside": self.fraction_inside,
+                "margin_mm": self.margin_m * 1e3, "outside_median_mm": mm(self.outside_median_m),
+                "outside_p95_mm": mm(self.outside_p95_m), "outside_max_mm": mm(self.outside_max_m),
+                "size_median_mm": mm(self.size_median_m), "description": self.description,
+                "coefficients": self.coefficients, "label": self.label}
+
+
+@dataclass(frozen=True, eq=False)
+class HistoryPrediction:
+    """Stage 9: held-out errors of the standard and the history-aware models.
+
+    Attributes
+    ----------
+    rows : tuple of (str, ndarray of shape (K,))
+        Label and held-out position errors [m] of each model compared.
+    envelopes : tuple of EnvelopeCoverage
+        Empty when ``options.envelope_samples`` is 0.
+    """
+
+    rows: tuple
+    envelopes: tuple
+
+    def as_dict(self) -> dict:
+        """``results.json["prediction"]`` (mm)."""
+        out = {"description": PREDICTION_DESCRIPTION,
+               "rows": [{"label": label, **stats_mm(pos)} for label, pos in self.rows]}
+        if self.envelopes:
+            out["envelopes"] = [env.as_dict() for env in self.envelopes]
+            out["envelope"] = out["envelopes"][0]
+        return out
+
+
+def hull_distance(points, x) -> float:
+    """Distance from ``x`` (3,) to the convex hull of ``points`` (m, 3) [same unit]: the nearest
+    convex combination, by non-negative least squares with the weights' sum held at 1 by a
+    heavily weighted row."""
+    from scipy.optimize import nnls
+
+    P = np.asarray(points, float)
+    w_row = 1e3 * max(1.0, float(np.abs(P).max()))
+    A = np.vstack([P.T, np.full((1, P.shape[0]), w_row)])
+    b = np.concatenate([np.asarray(x, float), [w_row]])
+    w, _ = nnls(A, b)
+    return float(np.linalg.norm(P.T @ w - x))
+
+
+def _mm(x):
+    return "-" if x is None else f"{x:.2f} mm"
+
+
+def envelope_coverage(robot, params, sub: MeasuredData, noise, stages, stage, settings, n_jobs, echo, *,
+                      coefficients: dict, label: str) -> EnvelopeCoverage:
+    """Coverage of the friction envelope: the convex hull of the 2^(n-1) bounding friction
+    solutions (fixed eta, no release) at each sample of ``sub``, plus
+    :data:`ENVELOPE_NOISE_FACTOR` times the noise rms; the bounding tips are kept in the stage
+    ``stage``.
+
+    Parameters
+    ----------
+    robot : Robot
+    params : mapping of str to float
+        Calibrated parameters [SI] (tube parameters, friction coefficients, registration).
+    sub : MeasuredData
+        The samples.
+    noise : dict
+        :func:`~ctrplan.discrepancy.decision.estimate_noise`.
+    stages : StageStore
+    stage : str
+    settings : ModelSettings
+    n_jobs : int
+    echo : callable
+    coefficients : dict, keyword-only
+        Friction coefficients used (reported).
+    label : str, keyword-only
+
+    Returns
+    -------
+    EnvelopeCoverage
+    """
+    from ..mechanics import all_eta
+    from .simulate import simulate
+
+    sigma = noise.get("position_rms_m")
+    margin = ENVELOPE_NOISE_FACTOR * sigma if sigma else 0.0
+    cached = stages.load(stage)
+    if cached is None:
+        etas = all_eta(robot.n_tubes)
+        echo(f"  friction envelope: {len(etas)} bounding solutions at {sub.n_samples} held-out samples ...")
+        robot_p = apply_parameters(robot, tuple(params), tuple(params.values()))
+        effects, _ = EffectSet.from_parameters(robot, tuple(params), tuple(params.values()))
+        R, t = registration_transform(effects["registration"] if "registration" in effects else {})
+        tips = []
+        for eta in etas:
+            sim = simulate(robot_p, sub.alpha, sub.beta, model="friction",
+                           eta=np.tile(np.asarray(eta, int), (sub.n_samples, 1)), sequence=sub.sequence,
+                           settings=settings, n_jobs=n_jobs)
+            tips.append(sim.tip @ R.T + t)
+        cached = {"tips": np.stack(tips, axis=1)}
+        stages.save(stage, cached)
+    tips = np.asarray(cached["tips"], float)            # (k, 2^(n-1), 3) in the data's frame
+    dist = np.full(sub.n_samples, np.nan)
+    size = np.full(sub.n_samples, np.nan)
+    for k in range(sub.n_samples):
+        P = tips[k]
+        if np.all(np.isfinite(P)):
+            dist[k] = hull_distance(P, sub.tip[k])
+            size[k] = max(np.linalg.norm(P[a] - P[b]) for a in range(len(P)) for b in range(len(P)))
+    ok = np.isfinite(dist)
+    outside = dist[ok] - margin
+    far = outside[outside > 0]
+    return EnvelopeCoverage(
+        n=int(ok.sum()), inside=int(np.sum(outside <= 0)),
+        fraction_inside=float(np.mean(outside <= 0)) if ok.any() else float("nan"), margin_m=margin,
+        outside_median_m=float(np.median(far)) if far.size else None,
+        outside_p95_m=float(np.percentile(far, 95)) if far.size else None,
+        outside_max_m=float(far.max()) if far.size else None,
+        size_median_m=float(np.nanmedian(size)) if ok.any() else None,
+        description=f"{sub.n_samples} evenly spaced held-out samples; convex hull of the "
+                    f"{tips.shape[1]} bounding friction solutions (all eta, no release); margin "
+                    f"{ENVELOPE_NOISE_FACTOR} x the noise rms ({noise['description']})",
+        coefficients=coefficients, label=label)
+
+
+def predict_with_history(setup, split, baseline, naming, noise, options: DiscrepancyOptions, held_out: HeldOutFn,
+                         echo=print) -> HistoryPrediction | None:
+    """Stage 9: held-out prediction errors of the standard and the history-aware models, and the
+    coverage of the friction envelope.
+
+    The history-aware model is the friction model along the recorded history with the friction
+    candidate's calibrated parameters and, when ``options.reference_friction`` is given, also
+    with those coefficients (e.g. published ones) on the same calibrated tube parameters. With
+    ``options.envelope_samples`` > 0, the envelope (convex hull of the 2^(n-1) bounding friction
+    solutions plus :data:`ENVELOPE_NOISE_FACTOR` times the noise rms) is evaluated at that many
+    evenly spaced held-out samples, for each coefficient set.
+
+    Returns
+    -------
+    HistoryPrediction or None
+        None without a friction candidate.
+    """
+    from ..mechanics import all_eta
+
+    candidates, named, val = naming.candidates, naming.named, split.val
+    if "friction" not in candidates:
+        return None
+    fr = candidates["friction"]
+    rows = [("standard model, calibrated (no history)", baseline.held_out.position),
+            ("history-aware: friction model along the recorded history, fitted "
+             + ", ".join(f"{k} = {v:.3g}" for k, v in fr.shown.items()), fr.held_out.position)]
+    sets = [("fitted", fr.params, f"{len(all_eta(setup.robot.n_tubes))}")]
+    if options.reference_friction is not None:
+        mu = tuple(float(v) for v in options.reference_friction)
+        ref = dict(fr.params)
+        ref.update({f"mu_{k + 1}": v for k, v in enumerate(mu)})
+        tag = "-".join(f"{v:g}" for v in mu)
+        val_ref = held_out(f"reference-friction-{tag}", "friction", ref)
+        rows.append(("history-aware with the reference friction coefficients "
+                     + ", ".join(f"mu_{k + 1} = {v:.3g}" for k, v in enumerate(mu)), val_ref.position))
+        sets.append((f"reference {tag}", ref, f"reference-{tag}"))
+    if named and named != "friction":
+        rows.append((f"named effect: {candidates[named].label}", candidates[named].held_out.position))
+    for label, pos in rows:
+        s = stats_mm(pos)
+        echo(f"  prediction: {label}: mean {s['mean_mm']:.3f}, p95 {s['p95_mm']:.3f}, max {s['max_mm']:.3f} mm")
+    k_env = min(int(options.envelope_samples), val.n_samples)
+    if k_env <= 0:
+        return HistoryPrediction(rows=tuple(rows), envelopes=())
+    rows_env = np.unique(np.linspace(0, val.n_samples - 1, k_env).round().astype(int))
+    sub = val.take(rows_env)
+    envelopes = []
+    for label, params, key in sets:
+        stage = f"envelope-{rows_env.size}" if label == "fitted" else f"envelope-{key}-{rows_env.size}"
+        env = envelope_coverage(setup.robot, params, sub, noise.noise, setup.stages, stage, setup.settings,
+                                options.n_jobs, echo,
+                                coefficients={k: float(v) for k, v in params.items() if k.startswith("mu_")},
+                                label=label)
+        envelopes.append(env)
+        e = env.as_dict()
+        echo(f"  envelope ({label}): {e['inside']} of {e['n']} inside ({100 * e['fraction_inside']:.0f} %), "
+             f"outside by median {_mm(e['outside_median_mm'])}, max {_mm(e['outside_max_mm'])}; size median "
+             f"{_mm(e['size_median_mm'])}")
+    return HistoryPrediction(rows=tuple(rows), envelopes=tuple(envelopes))

@@ -1,0 +1,110 @@
+"""Options of the discrepancy workflow and the constants of its rules."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..mechanics import ModelSettings
+
+__all__ = ["DiscrepancyOptions", "FIT_VERSION", "NOISE_RATIO", "MIN_REST_PAIRS", "ALPHA_STEP", "BIC_MARGIN",
+           "TRAJECTORY_ROTATION_BIN", "TRAJECTORY_TRANSLATION_BIN", "REPRODUCE_SAMPLES", "ENVELOPE_NOISE_FACTOR"]
+
+#: The held-out residual is "consistent with the sensor noise" when its rms position error is at
+#: most this multiple of the noise rms (a calibrated model adds a little parameter error).
+NOISE_RATIO = 1.25
+#: Rests (consecutive samples at identical joints) needed to estimate the noise from the data.
+MIN_REST_PAIRS = 10
+#: Finite-difference step of d tip / d alpha_i in the backlash and gradual-friction signatures [rad].
+ALPHA_STEP = 1e-3
+#: A candidate must lower the BIC by at least this much (Kass & Raftery: > 6 is strong evidence).
+BIC_MARGIN = 6.0
+#: Bins that group nearby configurations of a continuous trajectory for the friction test.
+TRAJECTORY_ROTATION_BIN = float(np.deg2rad(15.0))
+TRAJECTORY_TRANSLATION_BIN = 5e-3
+#: Held-out samples (whole configuration groups) re-evaluated with the written model file to
+#: check it; a continuous trajectory is re-evaluated whole.
+REPRODUCE_SAMPLES = 256
+#: Envelope margin: 95 % of 3-D Gaussian noise vectors are shorter than 2.80 sigma per component,
+#: i.e. 1.62 times their rms length.
+ENVELOPE_NOISE_FACTOR = 1.62
+#: Version of the fitting procedure in the stage key: 2 = two-stage least squares (error components,
+#: then Eq. (49)); 3 = stage 2 with the norms' curvature in its Gauss-Newton model and the BIC
+#: stopping rule; 4 = effects from the registry, the history of every pair from ctrplan.history
+#: along the whole record. Stages written by an earlier version are redone.
+FIT_VERSION = 4
+
+
+@dataclass(frozen=True)
+class DiscrepancyOptions:
+    """Options of :func:`~ctrplan.discrepancy.workflow.run_discrepancy`.
+
+    Attributes
+    ----------
+    fit : tuple of str or None
+        Baseline parameters (default :func:`~ctrplan.discrepancy.setup.default_baseline_parameters`).
+    effects : tuple of str or None
+        Candidate effects to test and try (names of :data:`ctrplan.effects.REGISTRY`); None: every
+        registered effect, in registry order.
+    frame : {"robot", "tracker"} or None
+        Frame of the measurements (default from the file type, see
+        :func:`ctrplan.discrepancy.data.load_measured_data`). "tracker" fits a registration.
+    calibration_fraction : float
+        Share of units (configurations / sequences / time blocks) used for calibration.
+    block_samples : int
+        Length of the time blocks that split one continuous trajectory (every k-th block for
+        calibration, :func:`~ctrplan.discrepancy.data.split_data`).
+    max_calibration_samples : int
+        Calibration samples used by the least-squares fits (whole units, evenly chosen).
+    significance : float
+        Level of the signature and held-out improvement tests.
+    n_permutations : int
+    friction_grid : tuple of float
+        Coarse grid of every friction coefficient.
+    friction_search_samples : int
+        Samples scoring the coarse friction grid.
+    max_evaluations : int
+        Model evaluations allowed per least-squares fit with the standard model (Jacobian
+        columns included; about 6 per step for 5 parameters).
+    max_contact_evaluations : int
+        The same for the clearance-model refit (about 30 times dearer per evaluation).
+    ds : float
+        Arc-length step [m].
+    n_jobs : int
+    seed : int
+    noise_position : float or None
+        rms tip position noise of the sensor [m] as the data's source states it (e.g. 0.2 mm
+        for Ha's trajectory); None: estimated from rests (consecutive samples at identical
+        joints) or repeated configurations, if the data has them.
+    envelope_samples : int
+        Held-out samples (evenly spaced) at which the friction envelope (all 2^(n-1) bounding
+        solutions) is evaluated for the coverage figures; 0 skips it.
+    reference_friction : tuple of float, shape (n - 1,), or None
+        Friction coefficients [-] (e.g. published for the robot) with which the history-aware
+        prediction and the envelope are also evaluated, next to the fitted ones.
+    """
+
+    fit: tuple | None = None
+    effects: tuple | None = None
+    frame: str | None = None
+    calibration_fraction: float = 0.25
+    block_samples: int = 100
+    max_calibration_samples: int = 300
+    significance: float = 0.01
+    n_permutations: int = 999
+    friction_grid: tuple = (0.0, 0.1, 0.2, 0.3, 0.4)
+    friction_search_samples: int = 96
+    max_evaluations: int = 400
+    max_contact_evaluations: int = 150
+    ds: float = 3e-3
+    n_jobs: int = 1
+    seed: int = 0
+    noise_position: float | None = None
+    envelope_samples: int = 0
+    reference_friction: tuple | None = None
+
+    def settings(self) -> ModelSettings:
+        """Model settings of every fit and evaluation (no multistart stability search in
+        calibration: it does not change the solution found)."""
+        return ModelSettings(ds=self.ds, multistart=0)

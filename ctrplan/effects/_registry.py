@@ -1,0 +1,324 @@
+"""The registry of model effects: one entry per effect, everything about it in one place."""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+from typing import Any, Callable, Iterator, Mapping
+
+import numpy as np
+
+__all__ = ["ParameterSpec", "Effect", "REGISTRY", "MODEL_ORDER", "FIT_STRATEGIES", "STORES", "register",
+           "unregister", "registered", "get", "effect_names", "effect_of_parameter", "parameter_spec"]
+
+#: Mechanics models from the least to the most complete; an effect set is evaluated with the
+#: most complete model any of its effects needs.
+MODEL_ORDER = ("standard", "clearance", "friction")
+#: How the discrepancy workflow fits an effect (``Effect.fit``):
+#: ``"nested"``: its parameters refitted with the baseline's, started from the effect switched off
+#: (or from the best point of ``Effect.scan``); ``"grid"``: a grid search of its parameters with the
+#: tube parameters refitted once with the clearance model (the paper's friction calibration);
+#: ``"none"``: nothing to fit, evaluated with the clearance-model tube parameters;
+#: ``"scan"``: a 1-D scan of its parameters on top of the fit of ``Effect.after``.
+FIT_STRATEGIES = ("nested", "grid", "none", "scan")
+#: Where a robot file keeps an effect's values: ``"robot"``: in the tube and pair tables (the effect
+#: changes the robot itself); ``"effects"``: in the ``[effects]`` table; ``"registration"``: in
+#: ``[tracker_registration]``.
+STORES = ("robot", "effects", "registration")
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One parameter of an effect (or of the baseline calibration).
+
+    Attributes
+    ----------
+    name : str
+        E.g. ``"backlash_2"`` (1-based tube or pair index, tube 1 outermost).
+    kind : str
+        The name without its index.
+    index : int
+        0-based tube, pair or axis index.
+    unit : str
+        SI unit (``"rad"``, ``"s"``, ``"m"``, ``"1/m"``, ``"-"``).
+    lower, upper : float
+        Optimizer bounds, in ``unit``.
+    scale : float
+        Typical size of a change (scales the optimizer's steps).
+    plausible : tuple of float or None
+        ``(lower, upper)`` a real robot of this kind can have; strictly inside the optimizer
+        bounds, except a lower end at which the effect vanishes (``vanishes_at_lower``).
+    plausible_note : str
+        Why (source or reasoning).
+    vanishes_at_lower : bool
+        At ``lower`` (a physical limit, e.g. a dead band of 0) the effect is absent: a fit that
+        ends there found no effect.
+    resolution : float or None
+        Spacing of the scan that starts its fit, in ``unit`` (None: no scan).
+
+    Raises
+    ------
+    ValueError
+        Bounds not increasing, or a plausible range that does not lie strictly inside them.
+    """
+
+    name: str
+    kind: str
+    index: int
+    unit: str
+    lower: float
+    upper: float
+    scale: float
+    plausible: tuple | None = None
+    plausible_note: str = ""
+    vanishes_at_lower: bool = False
+    resolution: float | None = None
+
+    def __post_init__(self):
+        if not self.lower < self.upper:
+            raise ValueError(f"parameter {self.name!r}: bounds must increase, got [{self.lower}, {self.upper}]")
+        if self.plausible is not None:
+            lo, hi = self.plausible
+            low_ok = (lo > self.lower) or (self.vanishes_at_lower and lo == self.lower)
+            if not (low_ok and lo < hi < self.upper):
+                raise ValueError(f"parameter {self.name!r}: plausible range [{lo}, {hi}] must lie strictly inside "
+                                 f"the optimizer bounds [{self.lower}, {self.upper}]")
+
+    def is_plausible(self, value: float) -> bool:
+        """Whether ``value`` lies in the plausible range (True when there is none)."""
+        if self.plausible is None:
+            return True
+        span = self.plausible[1] - self.plausible[0]
+        return self.plausible[0] - 1e-9 * span <= value <= self.plausible[1] + 1e-9 * span
+
+    def at_bound(self, value: float, rtol: float = 1e-6) -> str | None:
+        """``"lower"`` or ``"upper"`` when ``value`` sits at an optimizer bound (within ``rtol``
+        of the bound width), else None."""
+        tol = rtol * (self.upper - self.lower)
+        if value <= self.lower + tol:
+            return "lower"
+        if value >= self.upper - tol:
+            return "upper"
+        return None
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One effect a model may miss: what it is, what it changes, how it is tested and fitted.
+
+    Hooks are plain functions of arrays and robots (no files, no printing). ``values`` below is
+    a mapping of the effect's parameter names to values in SI units.
+
+    Attributes
+    ----------
+    name : str
+        Key of the registry (``--effects`` of ``ctrplan discrepancy``).
+    label : str
+        Human-readable name for reports.
+    model : {"standard", "clearance", "friction"}
+        The mechanics model it needs.
+    parameters : callable
+        ``parameters(robot) -> tuple of ParameterSpec``: every parameter the effect can carry on
+        this robot (the order of its ``ctrplan synth`` option's values).
+    description : str
+        What it does, one sentence with its source.
+    store : {"robot", "effects", "registration"}
+        Where a robot file keeps its values (:data:`STORES`).
+    fitted : callable, optional
+        ``fitted(robot, data) -> tuple of str``: the parameters the workflow fits on ``data``
+        (``MeasuredData``: e.g. only the drives that move); default all of ``parameters``.
+    read : callable, optional
+        ``read(robot) -> dict``: the values at which the effect is off on ``robot`` (default 0
+        for every parameter), where its fit starts.
+    apply_robot : callable, optional
+        ``apply_robot(robot, values) -> Robot``: a robot with the effect.
+    operator : callable, optional
+        ``operator(robot, values) -> HistoryOperator``: how it changes the motion
+        (:mod:`ctrplan.history`).
+    friction_angle : callable, optional
+        ``friction_angle(values) -> float``: theta_c [rad] of gradually developing friction.
+    apply_output : callable, optional
+        ``apply_output(tip (K, 3), tangent (K, 3), values) -> (tip, tangent)``: how the
+        measurement shows the tip (e.g. a registration) [m].
+    active : callable, optional
+        ``active(values) -> bool``: the values switch the effect on (default: True).
+    present : callable, optional
+        ``present(robot) -> bool``: the robot itself carries the effect (e.g. positive friction
+        coefficients in its pair tables); default False.
+    signature : callable, optional
+        ``signature(ctx) -> SignatureTest``: the test of its pattern in held-out residuals; ``ctx``
+        is the discrepancy workflow's :class:`~ctrplan.discrepancy.signatures.SignatureContext`
+        (arrays of the held-out data and the tests to run on them).
+    synth_option : str, optional
+        Its option of ``ctrplan synth`` (e.g. ``"--backlash-rad"``): comma-separated values of
+        ``parameters`` in order.
+    synth_help : str
+    needs_motion : bool
+        Only data with motion between samples can show it (``ctrplan synth --protocol
+        trajectory``).
+    scan : tuple of float, optional
+        Start scan of a nested fit or the values of a ``"scan"`` fit (every fitted parameter set
+        to each value in turn), in the parameters' unit.
+    fit : str
+        :data:`FIT_STRATEGIES`.
+    after : str, optional
+        The effect whose fit this one starts from and whose fitted parameters it carries (gradual
+        friction after friction).
+    requires : callable, optional
+        ``requires(robot, data) -> str or None``: why the effect cannot be tried on this robot and
+        data (e.g. "the data has no 'time' column"), None when it can.
+    contains : tuple of str
+        Effects it contains (never tried together with it).
+    plan : str
+        What ``ctrplan plan`` does with it.
+    """
+
+    name: str
+    label: str
+    model: str
+    parameters: Callable[[Any], tuple]
+    description: str
+    store: str = "effects"
+    fitted: Callable | None = None
+    read: Callable | None = None
+    apply_robot: Callable | None = None
+    operator: Callable | None = None
+    friction_angle: Callable | None = None
+    apply_output: Callable | None = None
+    active: Callable | None = None
+    present: Callable | None = None
+    signature: Callable | None = None
+    synth_option: str | None = None
+    synth_help: str = ""
+    needs_motion: bool = False
+    scan: tuple | None = None
+    fit: str = "nested"
+    after: str | None = None
+    requires: Callable | None = None
+    contains: tuple = ()
+    plan: str = ""
+
+    def __post_init__(self):
+        if self.model not in MODEL_ORDER:
+            raise ValueError(f"effect {self.name!r}: model must be one of {MODEL_ORDER}, got {self.model!r}")
+        if self.fit not in FIT_STRATEGIES:
+            raise ValueError(f"effect {self.name!r}: fit must be one of {FIT_STRATEGIES}, got {self.fit!r}")
+        if self.store not in STORES:
+            raise ValueError(f"effect {self.name!r}: store must be one of {STORES}, got {self.store!r}")
+        if self.fit == "scan" and (self.scan is None or self.after is None):
+            raise ValueError(f"effect {self.name!r}: a scan fit needs scan values and the effect it follows")
+
+    @property
+    def needs_solve(self) -> bool:
+        """A change of its values needs the model solved again (it changes the robot or the motion)."""
+        return self.apply_robot is not None or self.operator is not None or self.friction_angle is not None
+
+    def parameter_names(self, robot) -> tuple:
+        """Names of every parameter it can carry on ``robot``."""
+        return tuple(p.name for p in self.parameters(robot))
+
+    def fitted_names(self, robot, data=None) -> tuple:
+        """Names of the parameters the workflow fits on ``data`` (all of them by default)."""
+        if self.fitted is None or data is None:
+            return self.parameter_names(robot) if self.fitted is None else tuple(self.fitted(robot, None))
+        return tuple(self.fitted(robot, data))
+
+    def off_values(self, robot) -> dict:
+        """Values at which the effect is off on ``robot``."""
+        base = {p.name: 0.0 for p in self.parameters(robot)}
+        if self.read is not None:
+            base.update(self.read(robot))
+        return base
+
+    def is_active(self, values: Mapping) -> bool:
+        """The values switch the effect on."""
+        return True if self.active is None else bool(self.active(values))
+
+    def is_present(self, robot) -> bool:
+        """The robot itself carries the effect."""
+        return False if self.present is None else bool(self.present(robot))
+
+    def why_not(self, robot, data=None) -> str | None:
+        """Why the effect cannot be tried on this robot (and data), or None."""
+        return None if self.requires is None else self.requires(robot, data)
+
+
+#: The registered effects, in the order the workflow tries them (an effect with ``after``
+#: comes after that effect).
+REGISTRY: dict[str, Effect] = {}
+
+
+def register(effect: Effect, *, replace: bool = False) -> Effect:
+    """Add an effect to the registry (appended at the end of the order).
+
+    Raises
+    ------
+    ValueError
+        A name that is taken (unless ``replace``), or ``after`` naming an unknown effect.
+    """
+    if effect.name in REGISTRY and not replace:
+        raise ValueError(f"effect {effect.name!r} is already registered")
+    if effect.after is not None and effect.after not in REGISTRY:
+        raise ValueError(f"effect {effect.name!r} follows {effect.after!r}, which is not registered")
+    REGISTRY[effect.name] = effect
+    return effect
+
+
+def unregister(name: str) -> None:
+    """Remove an effect (KeyError if absent)."""
+    del REGISTRY[name]
+
+
+@contextlib.contextmanager
+def registered(effect: Effect) -> Iterator[Effect]:
+    """Register ``effect`` for the duration of a ``with`` block (tests, experiments)."""
+    register(effect)
+    try:
+        yield effect
+    finally:
+        REGISTRY.pop(effect.name, None)
+
+
+def get(name: str) -> Effect:
+    """The registered effect ``name``.
+
+    Raises
+    ------
+    KeyError
+        With the registered names.
+    """
+    try:
+        return REGISTRY[name]
+    except KeyError:
+        raise KeyError(f"unknown effect {name!r}; registered: {', '.join(REGISTRY)}") from None
+
+
+def effect_names() -> tuple:
+    """Registered effect names, in order."""
+    return tuple(REGISTRY)
+
+
+def effect_of_parameter(robot, name: str) -> Effect | None:
+    """The registered effect that carries the parameter ``name`` on ``robot``, or None."""
+    for e in REGISTRY.values():
+        if name in e.parameter_names(robot):
+            return e
+    return None
+
+
+def parameter_spec(robot, name: str) -> ParameterSpec | None:
+    """The spec of an effect parameter ``name`` on ``robot``, or None if no effect carries it."""
+    for e in REGISTRY.values():
+        for p in e.parameters(robot):
+            if p.name == name:
+                return p
+    return None
+
+
+def _plausible_text(p: ParameterSpec) -> str:
+    lo, hi = p.plausible
+    if p.unit == "rad":
+        return f"{np.rad2deg(lo):.3g}..{np.rad2deg(hi):.3g} deg"
+    return f"{lo:.3g}..{hi:.3g}" + ("" if p.unit == "-" else f" {p.unit}")
+
+
