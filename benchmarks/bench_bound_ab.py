@@ -1,4 +1,4 @@
-"""The full bound of this checkout against another commit, side by side (issue 14).
+"""The full bound of this checkout against another commit, side by side.
 
 Absolute times on the shared machines drift by 2-3x between runs, so a speed change of the
 contact solver is measured against the code before it in one run: the other commit is checked
@@ -13,7 +13,8 @@ Newton iterations per contact solve, unconverged solves, the largest tip differe
 two codes [um] (converged solutions) and the load average at the start and the end.
 
 Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_bound_ab.py --base fd0e2f1 [--runs 6] [--grid 4|8]
-Grids: the paper's 4x4x4 grid (Section IV-D, Table II robot) or the 8x8x8 grid of issue 14.
+Grids: the paper's 4x4x4 grid (Section IV-D, Table II robot) or the 8x8x8 grid
+(``paper_section_4d.grid_8x8x8``).
 """
 
 from __future__ import annotations

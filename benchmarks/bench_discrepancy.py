@@ -11,7 +11,7 @@ time goes (each step's wall time, from the workflow's own log lines) and the out
 ``--data`` reuses data written earlier by ``ctrplan synth --robot model/ha2019-table7-calibrated.toml
 --grid 8 --mu 0.22,0.12`` instead of generating it.
 
-Target (issue 3): the whole workflow within 30 minutes on the 2-core machine.
+Target: the whole workflow within 30 minutes on a 2-core machine.
 """
 
 from __future__ import annotations

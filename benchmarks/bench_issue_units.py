@@ -1,33 +1,32 @@
-"""Issue 14's figures in its own unit, the C++ standard solve, by timing the code it measured.
+"""The command line's cost per configuration in units of Ha's C++ standard solve.
 
-Issue 14 sets its targets as multiples of the C++ standard solve of hjhdog1/ConcentricTubes,
-which is not in this project (no licence). It also states what the code of its day cost in that
-unit: ``ctrplan evaluate --model friction --jobs 1`` on the 4x4x4 grid took 1269x the C++
-solve per configuration, and ``ctrplan evaluate --model standard --jobs 1`` on the 1307 rows of
-the measured trajectory 45x. That code is still in the history, so this script times it and
-this checkout side by side, alternately, in separate processes, and converts:
+Measured by timing, beside this checkout, a reference commit whose cost in that unit is known.
+The unit is one standard-model solve of the C++ implementation of hjhdog1/ConcentricTubes,
+which is not in this project (no licence). The cost of commit 10e8828 (the last commit before
+``evaluate`` solved the standard model in batch, 90fc8e6) is known in that unit, measured on
+another machine: ``ctrplan evaluate --model friction --jobs 1`` on the 4x4x4 grid took 1269x the
+C++ solve per configuration, and ``ctrplan evaluate --model standard --jobs 1`` on the 1307 rows
+of the measured trajectory 45x (that commit solves one configuration at a time with the multistart
+stability search and pays joblib and JSON checkpoint overhead per row). This script times that
+commit and this checkout side by side, alternately, in separate processes, and converts:
 
-    this checkout in C++ solves = (issue's figure) x (this checkout's time / issue code's time).
+    this checkout in C++ solves = (reference figure) x (this checkout's time / reference commit's time).
 
 The two conversions (friction, standard) are independent estimates of the C++ solve's time on
 this machine; both are printed, with the project's own single standard solve (determinant test
-only) in the same unit for each (the issue says that was 4-7x at its day: a check of the
-calibration).
-
-The issue code defaults to 10e8828, the last commit before ``evaluate`` ran the standard model
-in batch (90fc8e6): the issue describes a command that "solves one configuration at a time with
-the multistart stability search, and pays joblib and JSON checkpoint overhead per row", which is
-that commit's. The issue's figures were taken on another machine, so the conversion assumes
-both codes slow down alike from one machine to another.
+only) in the same unit for each (stated as 4-7x for the reference commit: a check of the
+calibration). The conversion assumes that both codes slow down alike from one machine to another.
+The printed targets are the project's speed goals in this unit: at most 300x (friction) and 2x
+(standard).
 
 Each command's time per configuration is (T(K rows) - T(1 row)) / (K - 1), both runs of the same
 command and code, wall time: the process start, imports and loading of compiled kernels cancel.
 Each T is the shortest of ``--repeat`` commands. The standard model reads the 1307 trajectory
-rows ``--tile`` (4) times over for the issue's code and ``--this-tile`` (32) times over for this
-checkout: once, they are 0.15 s of work behind about 1.1 s of process start, which alone varies
-by 0.1 s (one such run gave -0.07 ms per row). At 4 times over, this checkout's rows were still
-only about 0.35 s of work: the same code measured 0.063 and 0.076 ms per row in two sessions.
-The issue's code needs no more, with about 8 s of work at 4 times over. The passes after the
+rows ``--tile`` (4) times over for the reference commit and ``--this-tile`` (32) times over for
+this checkout: once, they are 0.15 s of work behind about 1.1 s of process start, which alone
+varies by 0.1 s (one such run gave -0.07 ms per row). At 4 times over, this checkout's rows are
+still only about 0.35 s of work (the same code measured 0.063 and 0.076 ms per row in two runs);
+the reference commit needs no more, with about 8 s of work at 4 times over. The passes after the
 first cost what it did (only each pass's first row follows a distant row, the last one). Figures
 are medians over ``--runs`` runs of each code, alternated (per-run values printed).
 
@@ -53,10 +52,10 @@ from _checkouts import ROOT, child_env, cli_command, worktree  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt"
 ROBOT = ROOT / "model" / "ha2019-table2-nominal.toml"
-# issue 14: the code of its day, in C++ standard solves per configuration
+# the reference commit's cost, in C++ standard solves per configuration (measured on another machine)
 ISSUE_FRICTION_X = 1269.0
 ISSUE_STANDARD_X = 45.0
-# issue 14's targets, in the same unit
+# the project's speed goals, in the same unit
 TARGET_FRICTION_X = 300.0
 TARGET_STANDARD_X = 2.0
 
@@ -117,7 +116,7 @@ def _write_configs(path, alpha, beta):
 
 def _inputs(tmp, tile, this_tile):
     """Config files: the 4x4x4 grid, the trajectory ``tile`` times over (``traj``, for the
-    issue's code) and ``this_tile`` times over (``traj_this``, for this checkout), left out if
+    reference commit) and ``this_tile`` times over (``traj_this``, for this checkout), left out if
     absent, and their first rows."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from paper_section_4d import grid_4x4x4
@@ -164,12 +163,13 @@ def _measure(code, cache, traj, files, tmp, repeat):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--issue-commit", default="10e8828", help="the code issue 14 measured (default 10e8828)")
+    ap.add_argument("--issue-commit", default="10e8828",
+                    help="reference commit whose cost in C++ standard solves is known (default 10e8828)")
     ap.add_argument("--runs", type=int, default=3, help="runs of each code, alternated")
     ap.add_argument("--repeat", type=int, default=3,
                     help="commands per figure in a run (the shortest counts: the process start is noisy)")
     ap.add_argument("--tile", type=int, default=4,
-                    help="the trajectory's rows this many times over in the issue code's standard-model command")
+                    help="the trajectory's rows this many times over in the reference commit's standard-model command")
     ap.add_argument("--this-tile", type=int, default=32,
                     help="the same for this checkout's command, whose rows cost a twentieth")
     args = ap.parse_args(argv)
@@ -180,7 +180,7 @@ def main(argv=None):
         if "traj" not in files:
             print(f"   ({DATA} not found: the standard-model conversion is skipped)")
         with worktree(args.issue_commit, tmp / "issue") as old:
-            codes = {"issue": (old, tmp / "cache-issue", "traj"), "this": (ROOT, tmp / "cache-this", "traj_this")}
+            codes = {"ref": (old, tmp / "cache-issue", "traj"), "this": (ROOT, tmp / "cache-this", "traj_this")}
             for code, cache, _ in codes.values():      # compile or cache every kernel once, untimed
                 _cli_time(code, cache, files["grid1"][0], "friction", tmp / "out.csv")
                 if "traj" in files:
@@ -201,14 +201,14 @@ def main(argv=None):
     if "standard" in med["this"]:
         conversions.append(("standard", ISSUE_STANDARD_X, TARGET_STANDARD_X))
     for model, issue_x, _ in conversions:
-        cpp = med["issue"][model] / issue_x
-        print(f"\nC++ solve estimated from the issue's {model} figure ({issue_x:.0f}x): {cpp * 1e6:.1f} us")
+        cpp = med["ref"][model] / issue_x
+        print(f"\nC++ solve estimated from the reference commit's {model} figure ({issue_x:.0f}x): {cpp * 1e6:.1f} us")
         for m, _, target in conversions:
             x = med["this"][m] / cpp
             print(f"  this checkout, CLI {m:8s} --jobs 1: {x:7.1f}x the C++ solve (target <= {target:.0f}x; "
-                  f"issue code {med['issue'][m] / cpp:.1f}x)")
-        print(f"  own single standard solve: this {med['this']['single'] / cpp:.2f}x, issue code "
-              f"{med['issue']['single'] / cpp:.2f}x (the issue: 4-7x)")
+                  f"reference commit {med['ref'][m] / cpp:.1f}x)")
+        print(f"  own single standard solve: this {med['this']['single'] / cpp:.2f}x, reference commit "
+              f"{med['ref']['single'] / cpp:.2f}x (stated for it: 4-7x)")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Speed of the mechanics, side by side in one run (issue 4).
+"""Speed of the mechanics, side by side in one run.
 
 1. Median and 90th-percentile time per configuration over the 4x4x4 grid of Section IV-D
    (Table II robot, one thread) of: the standard model with and without the multistart
@@ -10,22 +10,22 @@
 3. Discretization convergence: tip-position error [mm] against a step four times finer for the
    standard, clearance and friction models at a few grid configurations, on the default graded
    grid and on the paper's uniform grid.
-4. (issue 14) Every time also as a ratio to the project's own single standard solve
+4. Every time also as a ratio to the project's own single standard solve
    (determinant test only) measured in the same run, with mean, median, p90 and max:
    ``ctrplan evaluate`` through the command line (process start subtracted, measured on a
    one-row file): the friction model (full bound) on the 4x4x4 grid with ``--jobs 1``, the
    standard model on the 1307 rows of the measured trajectory (if ../shared/data is there)
-   with ``--jobs 1`` for the Table II robot (as issue 14 measures it) and the Table VII robot,
+   with ``--jobs 1`` for the Table II robot (the case with multistart searches) and the Table VII robot,
    and with the default jobs for Table II (throughput scaling; also of the batch call itself on
    2 threads). The rows are read ``--tile`` (32) times over, and the runs with one and with the
    default jobs alternate: read once, the rows are about 0.1 s of work behind 1.2 s of process
-   start; one pass, the runs of each jobs setting back to back, gave 1.41-1.51x in two runs,
-   the rows 8 times over, alternated, 1.6-2.0x in the runs after that. At 8 times over, the
-   work (about 0.7 s with ``--jobs 1``) was still half the process start subtracted from it:
-   one run gave 1.39x (1.29-1.52 run by run), and the next, 32 times over, gave 1.76x
-   (1.58-1.86). The batch call itself scaled 1.58x and 2.00x in those two runs, so part of
-   that difference was the machine. Dated figures are in docs/mechanics.md Sec. 10,
-   and the in-process bound on the 8x8x8 grid of issue 14 (slowest over median).
+   start; read once, the runs of each jobs setting back to back gave a scaling of 1.41-1.51x,
+   read 8 times over and alternated 1.6-2.0x. At 8 times over the work (about 0.7 s with
+   ``--jobs 1``) is still half the process start subtracted from it: one run gave 1.39x
+   (1.29-1.52 run by run) where 32 times over gave 1.76x (1.58-1.86); the batch call itself
+   scaled 1.58x and 2.00x in those two runs, so part of that difference was the machine.
+   Also the in-process bound on the 8x8x8 grid (``paper_section_4d.grid_8x8x8``; slowest over
+   median). Figures with their conditions: docs/mechanics.md Sec. 10.
 
 Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py [--ref-every 4] [--conv-configs 8]
       OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py --ratios-only [--repeat 3] [--tile 32]
@@ -284,9 +284,9 @@ def ratio_table(repeat=3, tile=32):
             _write_configs(tmp / "traj.csv", np.tile(TA, (tile, 1)), np.tile(TB, (tile, 1)))
             n_rows = tile * len(TA)
             _write_configs(tmp / "one_row.csv", TA[:1], TB[:1])
-            # The issue's measurement uses the Table II robot (93 % of the rows certified by the
-            # uniqueness screen, measured 2026-11-23; the others get the multistart search); the
-            # Table VII robot (the calibrated tubes, every row certified) is the cheaper case.
+            # The Table II robot: 93 % of the rows certified by the uniqueness screen, the others
+            # get the multistart search; the Table VII robot (the calibrated tubes, every row
+            # certified) is the cheaper case.
             for tag, rf in (("Table II", robot_file), ("Table VII", ROOT / "model" / "ha2019-table7-calibrated.toml")):
                 # Table II also with the default jobs (the threaded kernel, whose compiled code a
                 # one-row run with --jobs 1 does not load: each is measured against a one-row run

@@ -3,17 +3,17 @@
 On ``scenarios/obstacles.toml`` (its robot, obstacles, model settings with ``multistart=0`` and
 the shipped bound map, loaded as ``ctrplan/pipeline.py`` loads it), in one process:
 
-1. states: the same seeded random states (default 600) go, one at a time, through the old
-   :class:`ctrplan.planning.ValidityChecker` and the new
+1. states: the same seeded random states (default 600) go, one at a time, through the per-state
+   :class:`ctrplan.planning.ValidityChecker` and the batched
    :class:`ctrplan.planning.validity.BatchValidityChecker` (``__call__``), alternating which
    goes first; per-state wall times of both (mean, median, 90th percentile, max, and the
    ratios), how many states reached the model, the collision test, and the fcl narrow phase
-   (states whose capsules survived the broad phase), the old checker's time split into
-   ``solve_standard`` and the capsule-manager collision query (first 100 states), and the new
+   (states whose capsules survived the broad phase), the per-state checker's time split into
+   ``solve_standard`` and the capsule-manager collision query (first 100 states), and the batched
    checker's cost per state when all states come in one ``check`` call;
 2. motions: the same seeded random straight motions (default 200, at most 40 mm long in the
-   weighted metric, about RRT*'s default range on this space) checked by the new
-   ``check_motion`` and by the old checker at the same states in the same order with the same
+   weighted metric, about RRT*'s default range on this space) checked by the batched
+   ``check_motion`` and by the per-state checker at the same states in the same order with the same
    early exit (what OMPL's DiscreteMotionValidator does with it), each with fresh caches; cost
    per motion and per evaluated state, and the ratios.
 
@@ -59,12 +59,12 @@ def _stats(label, t_old, t_new, unit="ms"):
     """Print mean, median, p90, max of two arrays of times [s] and their ratios."""
     f = 1e3
     rows = []
-    for name, t in (("old ValidityChecker", t_old), ("new BatchValidityChecker", t_new)):
+    for name, t in (("per-state ValidityChecker", t_old), ("BatchValidityChecker", t_new)):
         rows.append(f"  {name:26s} mean {t.mean() * f:8.3f}  median {np.median(t) * f:8.3f}  "
                     f"p90 {np.percentile(t, 90) * f:8.3f}  max {t.max() * f:8.3f}  [{unit}]")
     print(label)
     print("\n".join(rows))
-    print(f"  ratio old/new              mean {t_old.mean() / t_new.mean():8.1f}  median "
+    print(f"  ratio per-state/batched    mean {t_old.mean() / t_new.mean():8.1f}  median "
           f"{np.median(t_old) / np.median(t_new):8.1f}  p90 {np.percentile(t_old, 90) / np.percentile(t_new, 90):8.1f}"
           f"  max {t_old.max() / t_new.max():8.1f}  [-]")
 
@@ -131,8 +131,8 @@ def main(argv=None) -> int:
                 t_new[i] = clock() - t0
     print(f"\n{len(Q)} random states of {SCENARIO.name} (one call per state, the same states, side by side):")
     _stats("per-state wall time", t_old, t_new)
-    print(f"  valid: old {v_old.sum()}, new {v_new.sum()}, mismatches {np.sum(v_old != v_new)}")
-    print(f"  new checker: {new.n_model} states reached the standard model, {new.n_collision_checked} the "
+    print(f"  valid: per-state {v_old.sum()}, batched {v_new.sum()}, mismatches {np.sum(v_old != v_new)}")
+    print(f"  batched checker: {new.n_model} states reached the standard model, {new.n_collision_checked} the "
           f"collision test, {collision.n_batch_narrow_bodies} the fcl narrow phase "
           f"({collision.n_batch_narrow_calls} fcl.collide calls); time in the model "
           f"{new.seconds_model / len(Q) * 1e3:.3f} ms/state, in collision "
@@ -147,14 +147,14 @@ def main(argv=None) -> int:
         t0 = clock()
         collision.check_body(*sol.body(robot))
         t_body[i] = clock() - t0
-    print(f"  old checker, first {n_split} states: solve_standard {t_solve.mean() * 1e3:.3f} ms/state, body + "
+    print(f"  per-state checker, first {n_split} states: solve_standard {t_solve.mean() * 1e3:.3f} ms/state, body + "
           f"capsule manager + fcl {t_body.mean() * 1e3:.3f} ms/state (means)")
     _, fresh, _ = checkers()
     t0 = clock()
     v_all = fresh.check(Q)
     t_all = clock() - t0
-    print(f"  new checker, all {len(Q)} states in one check() call: {t_all / len(Q) * 1e3:.3f} ms/state "
-          f"(ratio to the old mean {t_old.mean() / (t_all / len(Q)):.1f}); mismatches {np.sum(v_all != v_old)}")
+    print(f"  batched checker, all {len(Q)} states in one check() call: {t_all / len(Q) * 1e3:.3f} ms/state "
+          f"(ratio to the per-state mean {t_old.mean() / (t_all / len(Q)):.1f}); mismatches {np.sum(v_all != v_old)}")
 
     # ------------------------------------------------------------------ motions
     q0 = lo + (hi - lo) * rng.random((args.motions, lo.size))
@@ -194,11 +194,11 @@ def main(argv=None) -> int:
     print(f"\n{args.motions} random straight motions (<= {MAX_MOTION_LENGTH * 1e3:.0f} mm in the weighted metric, "
           f"{n_states.mean():.1f} states on average at {DEFAULT_VALIDITY_RESOLUTION * 1e3:.0f} mm resolution):")
     _stats("per-motion wall time", tm_old, tm_new)
-    print(f"  per evaluated state: old {tm_old.sum() / max(n_old.sum(), 1) * 1e3:.3f} ms ({n_old.sum()} states), "
-          f"new {tm_new.sum() / max(n_new.sum(), 1) * 1e3:.3f} ms ({n_new.sum()} states, batches up to "
-          f"{new.batch_size}); total time ratio old/new {tm_old.sum() / tm_new.sum():.1f}")
-    print(f"  valid motions: old {r_old.sum()}, new {r_new.sum()}, mismatches {np.sum(r_old != r_new)}; "
-          f"states reaching the fcl narrow phase (new) {collision.n_batch_narrow_bodies}")
+    print(f"  per evaluated state: per-state {tm_old.sum() / max(n_old.sum(), 1) * 1e3:.3f} ms ({n_old.sum()} states), "
+          f"batched {tm_new.sum() / max(n_new.sum(), 1) * 1e3:.3f} ms ({n_new.sum()} states, batches up to "
+          f"{new.batch_size}); total time ratio per-state/batched {tm_old.sum() / tm_new.sum():.1f}")
+    print(f"  valid motions: per-state {r_old.sum()}, batched {r_new.sum()}, mismatches {np.sum(r_old != r_new)}; "
+          f"states reaching the fcl narrow phase (batched) {collision.n_batch_narrow_bodies}")
     print(f"\nload average after (1, 5, 15 min): {os.getloadavg()}")
     return 0
 

@@ -1,6 +1,6 @@
 """Is every friction solution of a grid the one friction builds up from the clearance solution?
 
-For each configuration of the paper's 4x4x4 grid or the 8x8x8 grid of issue 14 (Table II robot)
+For each configuration of the paper's 4x4x4 grid or the 8x8x8 grid (Table II robot)
 whose standard solution is stable and whose clearance solve converged, every friction solution
 of ``evaluate_bound`` (all 2^(n-1) directions eta) is compared with the same solution followed in
 mu from the clearance solution (``continue_friction``, docs/mechanics.md Sec. 5):
@@ -45,7 +45,8 @@ ROBOT = ROOT / "model" / "ha2019-table2-nominal.toml"
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--grid", choices=("4", "8"), default="8", help="4x4x4 (paper) or 8x8x8 (issue 14)")
+    ap.add_argument("--grid", choices=("4", "8"), default="8",
+                    help="4x4x4 (paper, Sec. IV-D) or 8x8x8 (paper_section_4d.grid_8x8x8)")
     ap.add_argument("--ds", type=float, default=3e-3, help="largest arc-length step [m]")
     ap.add_argument("--tol-um", type=float, default=10.0,
                     help="largest distance [um] of a directly converged tip from its branch's end")

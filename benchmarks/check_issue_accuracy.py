@@ -1,27 +1,28 @@
-"""Issue 14's accuracy target, checked against the code the issue measured.
+"""Accuracy of this checkout against a reference commit: friction-model tips and stability flags.
 
-Target 3 of issue 14: "tips move by at most 0.01 mm against today's results on the 4x4x4 grid;
-every configuration that today's ``evaluate --model standard`` flags unstable on the 8x8x8 grid
-is still flagged". "Today" is the code the issue measured (10e8828, see bench_issue_units.py),
-which is checked out into a temporary git worktree; both codes run the same commands:
+The check: friction-model tips move by at most 0.01 mm against the reference commit on the 4x4x4
+grid, and every configuration that the reference commit's ``evaluate --model standard`` flags
+unstable on the 8x8x8 grid is still flagged. The reference commit (default 10e8828, the last
+before ``evaluate`` solved the standard model in batch; see bench_issue_units.py) is checked out
+into a temporary git worktree; both codes run the same commands:
 
 - ``ctrplan evaluate --model friction`` on the paper's 4x4x4 grid (Table II robot): every
   friction solution (all four directions eta per configuration), matched by row and eta. Printed:
   the largest tip difference [mm] over the solutions both codes report converged (status ok), its
   99th percentile, and the rows whose status differs (a solution ok before and not now fails);
-- ``ctrplan evaluate --model standard`` on the 8x8x8 grid of issue 14: the rows flagged unstable
-  by the issue's code and not by this one (must be none), and the other way round; the largest
-  tip difference [mm] on the rows both report ok.
+- ``ctrplan evaluate --model standard`` on the 8x8x8 grid (``paper_section_4d.grid_8x8x8``): the
+  rows flagged unstable by the reference commit and not by this checkout (must be none), and the
+  other way round; the largest tip difference [mm] on the rows both report ok.
 
-A tip that moved by more than 0.01 mm can have moved towards the solution: the issue's code
+A tip that moved by more than 0.01 mm can have moved towards the solution: commit 10e8828
 stopped the outer loop of the contact models with an error of up to 11.8 um on this grid (full
 Anderson steps; docs/mechanics.md Sec. 4, "Why beta = 0.5"). Each such solution is therefore
 also solved tightly (this checkout, ``outer_tol`` = ``complementarity_tol`` = 1e-9) and both
 codes' tips are measured against it. The check passes if every moved tip is closer to the tight
 solve now than before and no flag is lost; the literal 0.01 mm is printed either way.
 
-It exits with status 1 if the check fails, so it can be run before resolving. Not a test: it
-checks out and compiles a second copy of the code (a few minutes).
+It exits with status 1 if the check fails, so it can be run before merging a solver change. Not a
+test: it checks out and compiles a second copy of the code (a few minutes).
 
 Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/check_issue_accuracy.py [--issue-commit 10e8828] [--jobs 2] [--keep DIR]
 """
@@ -41,7 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _checkouts import ROOT, child_env, cli_command, worktree  # noqa: E402
 
 ROBOT = ROOT / "model" / "ha2019-table2-nominal.toml"
-TIP_TOL_MM = 0.01   # issue 14, target 3
+TIP_TOL_MM = 0.01   # largest tip move accepted without the tight-solve comparison [mm]
 
 
 def _evaluate(code, cache, configs, model, out, jobs):
@@ -62,7 +63,7 @@ def _evaluate(code, cache, configs, model, out, jobs):
 
 
 def _grids(tmp):
-    """The 4x4x4 grid (Section IV-D) and the 8x8x8 grid of issue 14 as configuration files."""
+    """The 4x4x4 grid (Section IV-D) and the 8x8x8 grid (``grid_8x8x8``) as configuration files."""
     import pandas as pd
     from paper_section_4d import grid_4x4x4, grid_8x8x8
 
@@ -86,7 +87,7 @@ def _tip_mm(frame, suffix=""):
 
 
 def compare_friction(old, new):
-    """Compare the friction tables of the issue's code (``old``) and this checkout (``new``),
+    """Compare the friction tables of the reference commit (``old``) and this checkout (``new``),
     rows matched on ``row`` and the eta columns. Returns the largest and 99th-percentile tip
     difference [mm] over the solutions ok in both, their number, the keys (row, eta...) whose
     status differs (with both statuses), and the merged rows ok in both whose tips moved by more
@@ -110,7 +111,7 @@ def compare_friction(old, new):
 
 def against_tight(moved):
     """For each friction solution in ``moved`` (rows of :func:`compare_friction`'s merge), the
-    distance [mm] of the issue code's and this checkout's tips to a tight solve of this checkout
+    distance [mm] of the reference commit's and this checkout's tips to a tight solve of this checkout
     (``outer_tol`` = ``complementarity_tol`` = 1e-9, up to 2000 outer iterations)."""
     from ctrplan.batch import evaluate_configuration
     from ctrplan.io.robot_file import load_robot
@@ -147,10 +148,11 @@ def compare_standard(old, new):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--issue-commit", default="10e8828", help="the code issue 14 measured (default 10e8828)")
+    ap.add_argument("--issue-commit", default="10e8828", help="reference commit to compare with (default 10e8828)")
     ap.add_argument("--jobs", type=int, default=2, help="--jobs of the evaluate commands")
     ap.add_argument("--keep", type=Path, default=None,
-                    help="folder to copy the four output tables to (issue-/this-friction.csv, -standard.csv)")
+                    help="folder to copy the four output tables to (issue-/this-friction.csv, -standard.csv; "
+                         "issue- is the reference commit)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -180,11 +182,11 @@ def main(argv=None):
     print(f"standard model, 8x8x8 grid: flagged unstable {n_old} ({args.issue_commit}) and {n_new} (this checkout); "
           f"flagged before and not now: {lost or 'none'}; flagged now and not before: {gained or 'none'}; "
           f"tips of rows ok in both differ by at most {dstd * 1e3:.2e} um")
-    # a solution that the issue's code solved and this one does not would escape the tip check
+    # a solution that the reference commit solved and this one does not would escape the tip check
     ok = closer and not lost and not (differ["status_old"] == "ok").any()
-    print(f"tips within {TIP_TOL_MM} mm of the issue's code: {'yes' if dmax <= TIP_TOL_MM else 'no'}; "
+    print(f"tips within {TIP_TOL_MM} mm of the reference commit: {'yes' if dmax <= TIP_TOL_MM else 'no'}; "
           f"every tip that moved more is closer to the tight solve now: {'yes' if closer else 'no'}")
-    print("target 3: " + ("holds" if ok else "FAILS"))
+    print("accuracy check: " + ("holds" if ok else "FAILS"))
     return 0 if ok else 1
 
 

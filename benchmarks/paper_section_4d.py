@@ -43,9 +43,9 @@ def grid_4x4x4(robot):
 
 
 def grid_8x8x8():
-    """The 8x8x8 grid of issue 14 for the same robot: alpha_2 and alpha_3 in steps of 45 deg from
-    0, beta_1 = 0, beta_2 = -17 mm and beta_3 = -120.4 mm plus 8 even steps of tube 3's
-    curved-section exposure from 0 to 86.4 mm. Returns a list of 512 (alpha (3,) [rad],
+    """An 8x8x8 grid for the same robot, denser than Section IV-D's: alpha_2 and alpha_3 in steps
+    of 45 deg from 0, beta_1 = 0, beta_2 = -17 mm and beta_3 = -120.4 mm plus 8 even steps of
+    tube 3's curved-section exposure from 0 to 86.4 mm. Returns a list of 512 (alpha (3,) [rad],
     beta (3,) [m]) pairs, beta_3 varying fastest."""
     out = []
     for a2 in np.radians(np.arange(0, 360, 45)):
