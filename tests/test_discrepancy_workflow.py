@@ -345,7 +345,8 @@ def test_cautions_flag_an_implausible_friction_coefficient_and_a_worse_maximum()
     cand = {"parameters": {"mu_1": 0.975, "mu_2": 0.05},
             "implausible": [{"name": "mu_1", "value": 0.975, "plausible": [0.0, 0.5], "unit": "-", "why": "NiTi"}]}
     notes = cautions("friction", cand, before, worse_max)
-    assert len(notes) == 2 and "mu_1 = 0.975" in notes[0] and "16.80 to 23.20 mm" in notes[1]
+    assert len(notes) == 2 and "mu_1 = 0.975 is outside its plausible range 0..0.5" in notes[0]
+    assert "16.80 to 23.20 mm" in notes[1]
     assert cautions("friction", {"parameters": {"mu_1": 0.22, "mu_2": 0.12}, "implausible": []}, before,
                     {"position_mean_mm": 2.0, "position_max_mm": 8.0}) == []
     assert cautions(None, None, before, before) == []

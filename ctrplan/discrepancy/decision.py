@@ -321,15 +321,8 @@ def cautions(named, candidate, before: dict, after: dict) -> list[str]:
     if named is None:
         return out
     for b in candidate.get("implausible") or []:
-        if b["name"].startswith("mu_"):
-            out.append(f"{b['name']} = {b['value']:.3g} is larger than plausible Coulomb friction between NiTi "
-                       f"tubes (> {b['plausible'][1]:g}; Table VII of Ha et al. 2019 has 0.22 and 0.12): the "
-                       f"direction-dependent error is real, but it may come from another hysteretic effect "
-                       f"(e.g. backlash or lag in that tube's rotation drive) that the friction model "
-                       f"imitates; read the coefficient as a size, not as a material property")
-        else:
-            out.append(f"{display_value(b['name'], b['value'], b['unit'])} is outside its plausible range "
-                       f"{range_text(b)} ({b['why']})")
+        out.append(f"{display_value(b['name'], b['value'], b['unit'])} is outside its plausible range "
+                   f"{range_text(b)} ({b['why']})")
     if after["position_max_mm"] > before["position_max_mm"]:
         out.append(f"the held-out maximum tip error rises from {before['position_max_mm']:.2f} to "
                    f"{after['position_max_mm']:.2f} mm while the mean falls: the added effect makes some "

@@ -164,7 +164,9 @@ def registration_transform(values) -> tuple[np.ndarray, np.ndarray]:
 def _friction_parameters(robot):
     return tuple(ParameterSpec(f"mu_{k + 1}", "mu", k, "-", 0.0, 2.0, 0.05, (0.0, 0.5),
                                "Coulomb friction of NiTi on NiTi: Ha et al. 2019 calibrated 0.22 and 0.12 on "
-                               "the three-tube robot (Table VII)", vanishes_at_lower=True)
+                               "the three-tube robot (Table VII); a larger fitted value measures a "
+                               "direction-dependent error that another hysteretic effect (e.g. backlash or lag "
+                               "in a rotation drive) may cause, not a material property", vanishes_at_lower=True)
                  for k in range(robot.n_tubes - 1))
 
 
