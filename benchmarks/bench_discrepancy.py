@@ -79,8 +79,8 @@ def main(argv=None):
     for (ta, line), (tb, _) in zip(marks, marks[1:] + [(t1 + total, "")]):
         if tb - ta > 1.0:
             print(f"  {tb - ta:7.1f} s  {line[:110]}")
-    b, a = results["baseline"]["held_out"], results["after"]
-    print(f"named: {results['named_label']}; held-out tip error mean {b['position_mean_mm']:.2f} -> "
+    b, a = results["test_split"]["before"], results["test_split"]["after"]
+    print(f"verdict: {results['verdict']}; named: {results['named_label']}; test-split tip error mean {b['position_mean_mm']:.2f} -> "
           f"{a['position_mean_mm']:.2f} mm, max {b['position_max_mm']:.2f} -> {a['position_max_mm']:.2f} mm")
     return 0
 

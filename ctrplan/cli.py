@@ -311,8 +311,8 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
               help="Candidate effects to test and try, comma-separated (default: every registered effect: "
                    "friction, clearance, offplane, poisson, registration, backlash, time_offset, gradual_friction).")
 @click.option("--noise-position-mm", "noise_mm", type=float, default=None,
-              help="rms tip position noise of the sensor [mm] as the data's source states it (default: "
-                   "estimated from rests or repeated configurations in the data).")
+              help="rms tip position noise of the sensor [mm] as the data's source states it (used when the data has "
+                   "too few rests to estimate it from).")
 @click.option("--reference-mu", "reference_mu", default=None,
               help="Friction coefficients per pair (e.g. published for the robot) with which the history-aware "
                    "prediction and the envelope are also evaluated, e.g. 0.22,0.12.")
@@ -322,8 +322,11 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
 @click.option("--frame", type=click.Choice(["robot", "tracker"]), default=None,
               help="Frame of the measured poses (default: tracker for Ha's format, robot for CSV); "
                    "tracker fits a rigid registration.")
-@click.option("--calibration-fraction", type=float, default=0.25, show_default=True,
-              help="Share of configurations / sequences / time blocks used for calibration.")
+@click.option("--test-fraction", type=float, default=0.2, show_default=True,
+              help="Share of the units (time blocks or configuration groups) held back as the untouched test split.")
+@click.option("--folds", type=int, default=4, show_default=True, help="Cross-validation folds of the rest.")
+@click.option("--blocks", type=int, default=20, show_default=True,
+              help="Time blocks a continuous motion is cut into (the units of the split and the tests).")
 @click.option("--max-calibration-samples", type=int, default=300, show_default=True)
 @click.option("--significance", type=float, default=0.01, show_default=True)
 @click.option("--permutations", type=int, default=999, show_default=True)
@@ -332,7 +335,7 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--no-progress", is_flag=True, help="Hide progress bars.")
 def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, reference_mu, envelope_samples, frame,
-                calibration_fraction, max_calibration_samples, significance, permutations, ds, jobs, seed,
+                test_fraction, folds, blocks, max_calibration_samples, significance, permutations, ds, jobs, seed,
                 no_progress):
     """Find where model and measurement disagree, name the missing effect, add it, show the gap shrink.
 
@@ -350,8 +353,10 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
         if bad:
             raise PhysicalParameterError(f"option --effects {effects!r}: unknown effect {bad[0]!r}; "
                                          f"expected some of {', '.join(REGISTRY)}")
-    if not 0.0 < calibration_fraction < 1.0:
-        raise PhysicalParameterError(f"option --calibration-fraction {calibration_fraction!r}: must be in (0, 1)")
+    if not 0.0 < test_fraction <= 0.5:
+        raise PhysicalParameterError(f"option --test-fraction {test_fraction!r}: must be in (0, 0.5]")
+    if folds < 2 or blocks < 2:
+        raise PhysicalParameterError(f"options --folds {folds!r} and --blocks {blocks!r}: must be >= 2")
     if ds is not None and not ds > 0:
         raise PhysicalParameterError(f"option --ds {ds!r}: must be > 0 m")
     if noise_mm is not None and not (noise_mm > 0 and noise_mm < float("inf")):
@@ -368,7 +373,7 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
             raise PhysicalParameterError(f"option --reference-mu {reference_mu!r}: must be >= 0")
     opts = DiscrepancyOptions(
         fit=tuple(x.strip() for x in fit.split(",")) if fit else None, effects=chosen, frame=frame,
-        calibration_fraction=calibration_fraction, max_calibration_samples=max_calibration_samples,
+        test_fraction=test_fraction, n_folds=folds, n_blocks=blocks, max_calibration_samples=max_calibration_samples,
         significance=significance, n_permutations=permutations, ds=ds or 3e-3,
         n_jobs=jobs or os.cpu_count() or 1, seed=seed,
         noise_position=None if noise_mm is None else noise_mm * 1e-3, envelope_samples=envelope_samples,

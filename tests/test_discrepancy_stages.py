@@ -1,6 +1,6 @@
 """Stage functions of :mod:`ctrplan.discrepancy.workflow`: each returns SI values (m, rad, s), the
-split keeps calibration rows out of every held-out statistic, the stage key is stable, and the
-results stage alone converts to mm.
+out-of-fold errors come from fits that never saw their samples and no fit sees the test split,
+the stage key is stable, and the results stage alone converts to mm.
 
 The stages run on the fast case of ``test_discrepancy_fast`` (Table I tube pair, standard model,
 coarse grid, 500 samples of a continuous trajectory at 10 Hz) with a hidden tracker lag of
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from ctrplan.discrepancy import Noise, synthesize, write_synth
-from ctrplan.discrepancy import decision, evaluation, fitting, options, setup as setup_stage, signatures, split as split_stage, stages
+from ctrplan.discrepancy import decision, fitting, options, setup as setup_stage, signatures, split as split_stage, stages
 from ctrplan.discrepancy.calibrate import pose_errors, predict
 from ctrplan.discrepancy.workflow import DiscrepancyOptions
 from ctrplan.io.robot_file import load_robot, robot_to_toml
@@ -45,37 +45,36 @@ def staged(tmp_path_factory):
                                  settings=ModelSettings(ds=6e-3)))
     setup = setup_stage.load_inputs(model, data, tmp / "out", OPTIONS)
     split = split_stage.split_samples(setup, OPTIONS, _quiet)
-
-    def held_out(name, model_name, params):
-        return evaluation.evaluate_held_out(setup, split, name, model_name, params, progress=False, echo=_quiet)
-
-    baseline = fitting.calibrate_baseline(setup, split, OPTIONS, held_out, _quiet)
-    candidates = fitting.fit_candidates(setup, split, baseline, None, OPTIONS, held_out, _quiet)
+    baseline = fitting.calibrate_baseline(setup, split, OPTIONS, _quiet)
+    candidates = fitting.fit_candidates(setup, split, baseline, None, OPTIONS, _quiet)
     return setup, split, baseline, candidates
 
 
-def test_split_keeps_calibration_rows_out_of_the_held_out_statistics(staged):
-    """The held-out samples are exactly the validation rows (none of them calibration rows), the
-    fitted rows are calibration rows, and the baseline's held-out errors are those of the
-    validation rows, recomputed here independently of the stage. Catches a split that lets
-    calibration samples into the held-out error (which would flatter every fit)."""
+def test_out_of_fold_errors_come_from_fits_that_never_saw_their_samples(staged):
+    """No fit uses a test-split sample or a sample of the fold it is validated on; the baseline's
+    out-of-fold error at each development sample is the prediction of the fit made without that
+    sample's fold, recomputed here independently of the stage. Catches a split that lets
+    calibration samples into the validated errors (which would flatter every fit) and out-of-fold
+    errors assembled in the wrong order."""
     setup, split, baseline, _ = staged
-    cal, val_rows, fit = split.calibration_rows, split.validation_rows, split.fit_rows
-    assert cal.any() and val_rows.any()
-    assert not np.any(cal & val_rows)
-    assert not np.any(fit & ~cal)
-    assert split.n_calibration == int(cal.sum()) and split.n_fit == int(fit.sum())
-    k = int(val_rows.sum())
-    assert split.val.n_samples == k and split.units.shape == (k,)
-    np.testing.assert_array_equal(split.val.tip, setup.data.tip[val_rows])
-    # the baseline's held-out errors: its parameters on the validation rows, nothing else
-    params = baseline.params
-    pred = predict(setup.robot, tuple(params), tuple(params.values()), setup.data.take(val_rows), "standard",
-                   setup.settings)
-    pos, ang, _ = pose_errors(pred, setup.data.take(val_rows))
-    assert baseline.held_out.position.shape == (k,)
-    np.testing.assert_allclose(baseline.held_out.position, pos, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(baseline.held_out.angle, ang, rtol=0, atol=1e-12)
+    data = setup.data
+    assert split.n_test > 0 and split.n_dev + split.n_test == data.n_samples
+    for k in range(split.n_folds):
+        fit = split.fit_rows(data, k)
+        assert fit.any() and not np.any(fit & split.test_rows) and not np.any(fit & split.validation_rows(k))
+    assert not np.any(split.fit_rows(data) & split.test_rows)
+    oof = baseline.oof
+    dev = np.flatnonzero(split.dev_rows)
+    np.testing.assert_array_equal(oof.rows, dev)
+    for k in (0, split.n_folds - 1):
+        rows = split.validation_rows(k)
+        params = baseline.cv.fold_params(k)
+        pred = predict(setup.robot, tuple(params), tuple(params.values()), data.take(rows), "standard", setup.settings)
+        pos, ang, _ = pose_errors(pred, data.take(rows))
+        np.testing.assert_allclose(oof.position[rows[dev]], pos, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(oof.angle[rows[dev]], ang, rtol=0, atol=1e-12)
+        # a fold's fit differs from the development fit: it did not see that fold
+        assert params != baseline.params
 
 
 def test_time_offset_candidate_is_fitted_in_seconds_and_its_errors_are_in_metres(staged):
@@ -87,33 +86,37 @@ def test_time_offset_candidate_is_fitted_in_seconds_and_its_errors_are_in_metres
     c = candidates["time_offset"]
     assert c.shown["time_offset"] == pytest.approx(LAG_S, abs=0.02)
     assert c.units == {"time_offset": "s"}
-    base_mean = float(np.nanmean(baseline.held_out.position))
-    cand_mean = float(np.nanmean(c.held_out.position))
+    base_mean = float(np.nanmean(baseline.oof.position))
+    cand_mean = float(np.nanmean(c.oof.position))
     assert 3e-4 < cand_mean < base_mean < 1e-2, (cand_mean, base_mean)       # m
     assert c.improvement_position["mean_difference"] == pytest.approx(base_mean - cand_mean, rel=0.3)
     tests = signatures.diagnose_residuals(setup, split, baseline, OPTIONS, _quiet)
     assert 1e-4 < tests["time_offset"].effect_size_m < 1e-2
-    noise = decision.check_noise(setup, baseline, OPTIONS, _quiet)
+    noise = decision.check_noise(setup, split, baseline, OPTIONS, _quiet)
     naming = decision.name_effect(split, candidates, tests, noise, OPTIONS, _quiet)
     assert naming.named == "time_offset" and naming.candidates["time_offset"].eligible
-    report = fitting.candidate_report(naming.candidates["time_offset"], split.val.n_samples)
+    report = fitting.candidate_report(naming.candidates["time_offset"])
     assert report["parameters"]["time_offset"] == c.shown["time_offset"]                  # s stays s
-    assert report["held_out"]["position_mean_mm"] == pytest.approx(1e3 * cand_mean, rel=1e-12)
+    assert report["out_of_fold"]["position_mean_mm"] == pytest.approx(1e3 * cand_mean, rel=1e-12)
+    se = dict(zip(c.fit.names, c.fit.stderr))["time_offset"]
+    assert 0 < se < 0.02                                                                   # s, not ms
 
 
 def test_noise_check_is_in_metres_and_the_report_form_in_millimetres():
-    """Held-out errors of rms 1 mm against a stated 0.8 mm noise: the check holds rms 1e-3 m and
-    ratio 1.25 (consistent, at the threshold); its report form says 1.0 mm and 0.8 mm. Catches
-    an rms kept in mm in the stage result or converted twice."""
-    pos = np.array([1e-3, -1e-3, 1e-3, np.nan, 1e-3])       # |errors| are what the stage sees
-    noise = {"position_rms_m": 0.8e-3, "source": "stated", "n": 0, "upper_bound": False, "description": "x"}
-    check = decision.noise_check(np.abs(pos), noise)
-    assert check.rms_m == pytest.approx(1e-3, rel=1e-12)
-    assert check.ratio == pytest.approx(1.25, rel=1e-12) and check.consistent is True
+    """An out-of-fold rms of 1 mm against a stated 0.8 mm noise: the check holds rms 1e-3 m and
+    ratio 1.25; its report form says 1.0 mm and 0.8 mm. Catches an rms kept in mm in the stage
+    result or converted twice."""
+    from ctrplan.discrepancy.statistics import noise_test
+
+    noise = {"position_rms_m": 0.8e-3, "source": "stated", "n": 0, "dof": None, "upper_bound": False,
+             "description": "x"}
+    test = noise_test((1e-3) ** 2 / 3, 300, (0.8e-3) ** 2 / 3, None, n_parameters=3, n_fitted=300, alpha=0.01)
+    check = decision.NoiseCheck(noise=noise, rms_m=1e-3, ratio=1.25, test=test)
     d = check.as_dict()
     assert d["rms_mm"] == pytest.approx(1.0, rel=1e-12) and d["noise_rms_mm"] == pytest.approx(0.8, rel=1e-12)
-    assert decision.noise_check(np.abs(pos) * 2, noise).consistent is False
-    assert decision.noise_check(np.abs(pos), {**noise, "position_rms_m": None}).consistent is None
+    assert check.consistent is False                            # 1.25^2 / 1.01 = 1.55 >> chi2 threshold 1.2
+    assert decision.NoiseCheck(noise={**noise, "position_rms_m": None}, rms_m=1e-3, ratio=None,
+                               test=None).consistent is None
 
 
 def test_stage_key_ignores_workers_and_tests_and_follows_fits_inputs_and_procedure(tmp_path, monkeypatch):
@@ -130,7 +133,7 @@ def test_stage_key_ignores_workers_and_tests_and_follows_fits_inputs_and_procedu
     same = DiscrepancyOptions(n_jobs=2, n_permutations=99, significance=0.05, noise_position=2e-4,
                               envelope_samples=10, reference_friction=(0.2,))
     assert stages.stage_key(robot, data, same) == key
-    for changed in (DiscrepancyOptions(ds=6e-3), DiscrepancyOptions(block_samples=50), DiscrepancyOptions(seed=1),
+    for changed in (DiscrepancyOptions(ds=6e-3), DiscrepancyOptions(n_blocks=10), DiscrepancyOptions(test_fraction=0.3), DiscrepancyOptions(seed=1),
                     DiscrepancyOptions(effects=("backlash",))):
         assert stages.stage_key(robot, data, changed) != key
     data.write_bytes(b"data2")

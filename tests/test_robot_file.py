@@ -267,3 +267,29 @@ def test_robot_to_toml_round_trips_every_shipped_model_with_model_and_registrati
         assert back.metadata["tracker_registration"] == reg
     with pytest.raises(ValueError, match="model must be one of"):
         robot_to_toml(robot, model="magic")
+
+
+def test_bound_calibration_and_prediction_validation_round_trip_and_are_checked(tmp_path):
+    """The tables ``ctrplan discrepancy`` writes for planning come back from ``load_robot`` as
+    written; an impossible value (a negative factor, a coverage above 1) is refused naming the
+    file, the key and the value. Catches a calibration that planning silently never sees."""
+    from ctrplan.io.robot_file import robot_to_toml
+
+    robot = load_robot(MODEL_DIR / "ha2019-table1-tube-pair.toml")
+    bound = {"method": "split-conformal", "target_coverage": 0.9, "factor": 1.2849400356625302,
+             "noise_margin_m": 0.0008186517513246324, "test_coverage": 0.95, "test_coverage_low": 0.9,
+             "test_coverage_high": 0.99, "failing": False, "data_file": "d.csv"}
+    pred = {"standard_mean_m": 0.0014, "standard_max_m": 0.0024, "history_mean_m": 0.0012, "history_max_m": 0.0022,
+            "history_beats_standard": True, "test_samples": 100, "data_file": "d.csv"}
+    text = robot_to_toml(robot, bound_calibration=bound, prediction_validation=pred)
+    path = tmp_path / "r.toml"
+    path.write_text(text)
+    back = load_robot(path)
+    assert {k: back.metadata["bound_calibration"][k] for k in bound} == bound
+    assert {k: back.metadata["prediction_validation"][k] for k in pred} == pred
+    path.write_text(text.replace("factor = 1.2849400356625302", "factor = -1.0"))
+    with pytest.raises(ModelFileError, match=r"r\.toml.*bound_calibration\.factor.*-1"):
+        load_robot(path)
+    path.write_text(text.replace("test_coverage = 0.95", "test_coverage = 95.0"))
+    with pytest.raises(ModelFileError, match=r"bound_calibration\.test_coverage.*95"):
+        load_robot(path)

@@ -17,7 +17,8 @@
 from .simulate import Simulation, simulate
 from .synth import Noise, SynthResult, synthesize, truth_path, write_synth
 from .calibrate import CalibrationResult, calibrate, grid_search, pose_errors, predict
-from .data import MeasuredData, load_measured_data, split_data
+from .data import MeasuredData, load_measured_data
+from .split import DataSplit, make_split
 from .parameters import apply_parameters, read_parameters
 from .signatures import SignatureTest, friction_signature, regression_signature, registration_signature
 from .options import DiscrepancyOptions
@@ -28,7 +29,7 @@ __all__ = [
     "Simulation", "simulate",
     "Noise", "SynthResult", "synthesize", "truth_path", "write_synth",
     "CalibrationResult", "calibrate", "grid_search", "pose_errors", "predict",
-    "MeasuredData", "load_measured_data", "split_data", "apply_parameters", "read_parameters",
+    "MeasuredData", "load_measured_data", "DataSplit", "make_split", "apply_parameters", "read_parameters",
     "SignatureTest", "friction_signature", "regression_signature", "registration_signature",
     "DiscrepancyOptions", "run_discrepancy", "write_report",
 ]

@@ -120,8 +120,19 @@ class CalibrationResult:
     seconds : float
     message : str
     converged : bool
-        The optimizer met its stopping rule (:data:`BIC_TOLERANCE`) or tolerance (False: it
-        stopped at its evaluation budget).
+        The optimizer met its stopping rule (:data:`BIC_TOLERANCE`) or tolerance, and no fitted
+        value sits at an optimizer bound or at the edge of a grid or scan (False: it stopped at its
+        evaluation budget, or at a bound or edge: ``at_bound``).
+    stderr : ndarray, shape (m,), or None
+        Standard errors of the fitted values, in their units: ``s^2 (J^T J)^-1`` with the Gauss-Newton
+        matrix of Eq. (49) (the norms' curvature included) at the solution and
+        ``s^2 = cost / (n_samples - m)``; inf where the data do not determine the parameter; None
+        when not computed.
+    correlation : ndarray, shape (m, m), or None
+        Their correlation matrix.
+    at_bound : tuple of str
+        ``"<name> (<where>)"`` for every fitted value at an optimizer bound (``upper``, or ``lower``
+        where the effect does not vanish there) or at the edge of its grid or scan.
     """
 
     model: str
@@ -136,6 +147,9 @@ class CalibrationResult:
     seconds: float = 0.0
     message: str = ""
     converged: bool = True
+    stderr: np.ndarray | None = None
+    correlation: np.ndarray | None = None
+    at_bound: tuple = ()
 
     def all_parameters(self) -> tuple[tuple, np.ndarray]:
         """Fixed and fitted parameters together: ``(names, values)``."""
@@ -149,7 +163,22 @@ class CalibrationResult:
                 "fixed": {k: float(v) for k, v in self.fixed.items()}, "cost": float(self.cost),
                 "n_samples": int(self.n_samples), "n_failed": int(self.n_failed),
                 "evaluations": int(self.evaluations), "seconds": float(self.seconds),
-                "message": self.message, "converged": bool(self.converged)}
+                "message": self.message, "converged": bool(self.converged),
+                "stderr": None if self.stderr is None else dict(zip(self.names, map(float, self.stderr))),
+                "correlation": None if self.correlation is None else np.asarray(self.correlation, float).tolist(),
+                "at_bound": list(self.at_bound)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "CalibrationResult":
+        """Inverse of :meth:`as_dict`."""
+        names = tuple(d["parameters"])
+        stderr = d.get("stderr")
+        return cls(d["model"], names, np.array(list(d["parameters"].values()), float),
+                   np.array(list(d["initial"].values()), float), dict(d["fixed"]), d["cost"], d["n_samples"],
+                   d["n_failed"], d["evaluations"], d["seconds"], d["message"], d.get("converged", True),
+                   None if stderr is None else np.array([stderr[n] for n in names], float),
+                   None if d.get("correlation") is None else np.array(d["correlation"], float),
+                   tuple(d.get("at_bound", ())))
 
 
 def predict(robot, names, values, data: MeasuredData, model: str, settings: ModelSettings | None = None,
@@ -289,6 +318,40 @@ def information_criterion(cost: float, n_samples: int, n_params: int) -> float:
         Lower is better; only differences between fits of the same data mean anything.
     """
     return float(n_samples * np.log(max(cost, 1e-300) / n_samples) + n_params * np.log(n_samples))
+
+
+def bound_flags(specs, values) -> tuple:
+    """``"<name> (upper bound)"`` / ``"(lower bound)"`` for values at an optimizer bound; a value at
+    a lower bound where the effect vanishes (e.g. no dead band on that drive) is not flagged."""
+    out = []
+    for p, v in zip(specs, values):
+        where = p.at_bound(float(v))
+        if where == "upper" or (where == "lower" and not p.vanishes_at_lower):
+            out.append(f"{p.name} ({where} bound {p.upper if where == 'upper' else p.lower:g} {p.unit})")
+    return tuple(out)
+
+
+def covariance(rows: np.ndarray, cost: float, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Standard errors (m,) and correlations (m, m) from Gauss-Newton rows (N_rows, m) of Eq. (49).
+
+    ``cov = s^2 (J^T J)^+`` with ``s^2 = cost / (n_samples - m)``; a direction the rows do not
+    determine (a zero singular value) gives an infinite standard error."""
+    J = np.asarray(rows, float)
+    m = J.shape[1]
+    s2 = cost / max(n_samples - m, 1)
+    H = J.T @ J
+    w, V = np.linalg.eigh(H)
+    tiny = w <= 1e-12 * max(float(w.max()), 1e-300)
+    inv_w = np.where(tiny, 0.0, 1.0 / np.where(tiny, 1.0, w))
+    cov = (V * inv_w) @ V.T * s2
+    var = np.diag(cov).copy()
+    undetermined = np.any(np.abs(V[:, tiny]) > 1e-6, axis=1) if tiny.any() else np.zeros(m, bool)
+    se = np.where(undetermined, np.inf, np.sqrt(np.maximum(var, 0.0)))
+    d = np.sqrt(np.maximum(var, 1e-300))
+    corr = cov / np.outer(d, d)
+    corr[undetermined] = np.nan
+    corr[:, undetermined] = np.nan
+    return se, corr
 
 
 class _Objective:
@@ -467,7 +530,8 @@ class _Eq49Model:
 
 def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | None = None,
               initial=None, settings: ModelSettings | None = None, n_jobs: int = 1,
-              register: bool = False, max_evaluations: int = 40) -> CalibrationResult:
+              register: bool = False, max_evaluations: int = 40, uncertainty: bool = True,
+              warm: bool = False) -> CalibrationResult:
     """Fit parameters by least squares on the Eq. (49) residuals (Section V-C, Eq. (49) of
     Ha, Fagogenis & Dupont 2019).
 
@@ -492,6 +556,12 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     max_evaluations : int
         Budget of model evaluations over the calibration set (Jacobian columns included), shared
         by the two stages: a safety net, not the usual stop (stage 1 gets at most half).
+    uncertainty : bool
+        Compute the standard errors and correlations of the fitted values (from the last
+        Jacobian: no extra evaluation).
+    warm : bool
+        ``initial`` is already close to the minimum (e.g. the fit of most of the same samples):
+        stage 1 is skipped.
 
     Returns
     -------
@@ -559,12 +629,16 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     n_mech = sum(1 for nm in names if needs_solve(robot, nm))
     per_step = n_mech + 1
     kw = dict(bounds=(lower, upper), x_scale=scale, diff_step=DIFF_STEP, method="trf", xtol=XTOL, ftol=FTOL)
-    # stage 1: error components (smooth), at most half the budget
-    first = least_squares(obj.component_residuals, x0, max_nfev=max(2, max_evaluations // (2 * per_step)), **kw)
-    x1 = first.x if np.isfinite(first.cost) else x0
-    r1 = obj.residuals(x1)
-    if not float(r1 @ r1) <= float(r0 @ r0):
-        x1 = x0   # the component fit's optimum is worse for Eq. (49): start stage 2 where we began
+    # stage 1: error components (smooth), at most half the budget; skipped from a warm start
+    if warm and initial is not None:
+        x1, stage1 = x0, "skipped (warm start)"
+    else:
+        first = least_squares(obj.component_residuals, x0, max_nfev=max(2, max_evaluations // (2 * per_step)), **kw)
+        x1 = first.x if np.isfinite(first.cost) else x0
+        stage1 = f"{first.nfev} steps ({'converged' if first.status > 0 else 'budget'})"
+        r1 = obj.residuals(x1)
+        if not float(r1 @ r1) <= float(r0 @ r0):
+            x1 = x0   # the component fit's optimum is worse for Eq. (49): start stage 2 where we began
     # stage 2: Eq. (49) itself, with the rest of the budget, its Gauss-Newton model keeping the
     # curvature of the norms; stopped when the decrease the model still predicts is negligible
     eq49 = _Eq49Model(obj, lower, upper)
@@ -582,18 +656,23 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     left_bic = eq49.bic_left(k)
     how = (f"the predicted further decrease {eq49.remaining:.3g} (mm + deg)^2 changes the BIC by "
            f"{left_bic:.2g} < {BIC_TOLERANCE:g}" if sol.status == -2 else sol.message)
-    msg = (f"least squares: error components {first.nfev} steps ({'converged' if first.status > 0 else 'budget'}), "
+    at_bound = bound_flags(specs, sol.x)
+    msg = (f"least squares: error components {stage1}, "
            f"then Eq. (49): {how} ({sol.nfev} steps, {obj.evaluations} evaluations)"
            + ("" if converged else f"; NOT converged: stopped at the budget of {max_evaluations} evaluations "
                                    f"(predicted further decrease {eq49.remaining:.3g} (mm + deg)^2, "
-                                   f"BIC {left_bic:.2g})"))
+                                   f"BIC {left_bic:.2g})")
+           + (f"; at bound, not converged: {', '.join(at_bound)}" if at_bound else ""))
+    se, corr = covariance(sol.jac, float(r @ r), k) if uncertainty else (None, None)
     return CalibrationResult(model, names, sol.x, x0, fixed, float(r @ r), k, int((r == FAILED_RESIDUAL).sum()),
-                             obj.evaluations, time.perf_counter() - t0, msg, converged)
+                             obj.evaluations, time.perf_counter() - t0, msg, converged and not at_bound, se, corr,
+                             at_bound)
 
 
 def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
                 settings: ModelSettings | None = None, n_jobs: int = 1, coarse=(0.0, 0.1, 0.2, 0.3, 0.4),
-                refinements: int = 2, search_samples: int = 96, seed: int = 0, progress=None) -> CalibrationResult:
+                refinements: int = 2, search_samples: int = 96, seed: int = 0, progress=None, start=None,
+                uncertainty: bool = True) -> CalibrationResult:
     """Parameters by grid search, other parameters ``fixed``: the paper's calibration of the
     friction coefficients (Section V-C: "calibrated during a second pass using a 2-D grid search
     to avoid local minima").
@@ -625,11 +704,18 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
         Choice of the coarse-search subset.
     progress : callable, optional
         ``progress(done, total)`` after each grid point.
+    start : array-like, shape (m,), optional
+        A point found before (e.g. on more data): the coarse grid is skipped and the
+        refinements start there.
+    uncertainty : bool
+        Standard errors and correlations at the best point (from one Jacobian of Eq. (49)).
 
     Returns
     -------
     CalibrationResult
-        With the score of every grid point in ``message``.
+        With the score of every grid point in ``message``; not converged, with ``at_bound``,
+        when the best point lies on the grid's upper edge at its limit (the grid could not grow
+        past it).
     """
     t0 = time.perf_counter()
     names = tuple(names)
@@ -649,6 +735,7 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
     obj_all = _Objective(robot, data, model, names, fixed, settings, n_jobs)
     grid = list(itertools.product(coarse, repeat=m))
     step = float(np.min(np.diff(coarse))) if coarse.size > 1 else 0.05
+    step0 = step
     total = len(grid) + refinements * (3 ** m)
     done = [0]
 
@@ -666,17 +753,25 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
         best = min(costs, key=costs.get)
         return best, costs[best]
 
-    coarse_costs: dict = {}
-    best, cost = scan(obj_sub, grid, coarse_costs)
-    # a best point on the grid's upper edge is no minimum: extend the grid there by whole steps
     axis = list(coarse)
-    while coarse.size > 1 and max(best) >= axis[-1] - 1e-9 and axis[-1] + step <= limit + 1e-9:
-        axis.append(round(axis[-1] + step, 6))
-        new = [q for q in itertools.product(axis, repeat=m) if max(q) >= axis[-1] - 1e-9]
-        total += len(new)
-        best, cost = scan(obj_sub, new, coarse_costs)
-    trail = [f"coarse grid {axis[0]:g}..{axis[-1]:g} on {sub.n_samples} samples: best {names} {best} cost {cost:.4g}"]
-    best_all = np.array(best)
+    if start is None:
+        coarse_costs: dict = {}
+        best, cost = scan(obj_sub, grid, coarse_costs)
+        # a best point on the grid's upper edge is no minimum: extend the grid there by whole steps
+        while coarse.size > 1 and max(best) >= axis[-1] - 1e-9 and axis[-1] + step <= limit + 1e-9:
+            axis.append(round(axis[-1] + step, 6))
+            new = [q for q in itertools.product(axis, repeat=m) if max(q) >= axis[-1] - 1e-9]
+            total += len(new)
+            best, cost = scan(obj_sub, new, coarse_costs)
+        trail = [f"coarse grid {axis[0]:g}..{axis[-1]:g} (step {step:g}) on {sub.n_samples} samples: best {names} "
+                 f"{best} cost {cost:.4g}"]
+        best_all = np.array(best)
+    else:
+        total = refinements * (3 ** m)
+        best_all = np.asarray(start, float).reshape(m)
+        trail = [f"refinements from {tuple(np.round(best_all, 6))}"]
+        while axis[-1] < best_all.max() - 1e-9:
+            axis.append(round(axis[-1] + step, 6))
     for _ in range(refinements):
         step /= 2.0
         best, cost = scan(obj_all, (np.maximum(best_all + step * np.array(d), lowest)
@@ -684,10 +779,20 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
         best_all = np.array(best)
         trail.append(f"refined (step {step:.4g}) on {data.n_samples} samples: best {best} cost {cost:.4g}")
     r = obj_all.residuals(best_all)
+    # the grid could not grow past its limit and the minimum lies at (or past) its last node
+    edge = tuple(f"{n} (edge of the grid at {axis[-1]:g}, its limit {limit:g})" for n, v in zip(names, best_all)
+                 if v >= axis[-1] - 1e-9 and axis[-1] + step0 > limit + 1e-9)
+    if edge:
+        trail.append("at the edge of the grid, not converged: " + ", ".join(edge))
+    se, corr = None, None
+    if uncertainty:
+        lower = np.array([p.lower for p in specs])
+        upper = np.array([p.upper for p in specs])
+        se, corr = covariance(_Eq49Model(obj_all, lower, upper).jac(best_all), float(r @ r), data.n_samples)
     return CalibrationResult(model, names, best_all, np.zeros(m), dict(fixed), float(r @ r),
                              data.n_samples, int((r == FAILED_RESIDUAL).sum()),
                              obj_sub.evaluations + obj_all.evaluations, time.perf_counter() - t0,
-                             "; ".join(trail))
+                             "; ".join(trail), not edge, se, corr, edge)
 
 
 def grid_search_friction(robot, data: MeasuredData, fixed: dict, **kwargs) -> CalibrationResult:

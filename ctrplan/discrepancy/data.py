@@ -1,4 +1,4 @@
-"""Measured data for the discrepancy workflow: loading, motion history, grouping and splitting.
+"""Measured data for the discrepancy workflow: loading, motion history and configuration groups.
 
 Two inputs are accepted:
 
@@ -19,7 +19,7 @@ calibration block) keeps the history of the samples before it.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +29,7 @@ from ..errors import CtrplanError, DataFileError
 from ..history import HistoryState, MotionRecord, motion_state
 from ..io.tables import read_measurements
 
-__all__ = ["MeasuredData", "load_measured_data", "configuration_groups", "split_data"]
+__all__ = ["MeasuredData", "load_measured_data", "configuration_groups"]
 
 #: Joints that differ by less than these are "the same configuration" [rad], [m].
 SAME_ROTATION = 1e-3
@@ -88,6 +88,7 @@ class MeasuredData:
     record: MotionRecord
     rows: np.ndarray
     given_eta: np.ndarray
+    _states: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n_samples(self) -> int:
@@ -125,9 +126,18 @@ class MeasuredData:
         ValueError
             A time offset on data without times.
         """
-        from ..effects import history_state
+        from ..effects import REGISTRY, EffectSet, history_state, robot_effects
 
-        return history_state(robot, self.record, effects, given_eta=self.given_eta).take(self.rows)
+        # the state depends only on the effects that act on the motion: keep one per such set
+        acting = robot_effects(robot).merged(effects or {})
+        key = tuple((n, tuple(sorted(acting[n].items()))) for n in acting
+                    if REGISTRY[n].operator is not None or REGISTRY[n].friction_angle is not None)
+        state = self._states.get(key)
+        if state is None:
+            if len(self._states) > 32:
+                self._states.clear()
+            state = self._states[key] = history_state(robot, self.record, effects, given_eta=self.given_eta)
+        return state.take(self.rows)
 
 
 def _is_whitespace_format(path: Path) -> bool:
@@ -260,60 +270,3 @@ def configuration_groups(alpha, beta, rotation_bin: float | None = None,
     _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(np.argsort(first))
     return order[inverse.ravel()]
-
-
-def split_data(data: MeasuredData, calibration_fraction: float = 0.25, block_samples: int = 100,
-               seed: int = 0) -> tuple[np.ndarray, np.ndarray, str]:
-    """Split rows into calibration and validation, by configuration or by sequence, never by row.
-
-    - the file's ``subset`` column when present;
-    - else, whole *units*: rows linked by sharing a configuration group or a sequence are one
-      unit (for the paper's protocol a unit is one configuration with its approaches; for
-      several trajectories, one trajectory), a seeded choice of units for calibration;
-    - else (one continuous trajectory is one unit), contiguous blocks of ``block_samples``
-      rows, every k-th block for calibration, so both sets span the whole motion.
-
-    Returns
-    -------
-    calibration, validation : ndarray of bool, shape (K,)
-    how : str
-        One line saying how the split was made.
-
-    Raises
-    ------
-    DataFileError
-        Either set ends up empty.
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    if not 0.0 < calibration_fraction < 1.0:
-        raise ValueError(f"calibration_fraction must be in (0, 1), got {calibration_fraction!r}")
-    k = data.n_samples
-    rng = np.random.default_rng(seed)
-    _, g = np.unique(data.config_id, return_inverse=True)
-    _, q = np.unique(data.sequence, return_inverse=True)
-    n_g = g.max() + 1
-    graph = coo_matrix((np.ones(k), (g.ravel(), n_g + q.ravel())), shape=(n_g + q.max() + 1,) * 2)
-    _, labels = connected_components(graph, directed=False)
-    unit = labels[g.ravel()]
-    units = np.unique(unit)
-    if data.subset is not None:
-        cal = data.subset == "calibration"
-        how = "by the file's 'subset' column"
-    elif units.size > 1:
-        chosen = rng.choice(units, size=max(1, int(round(calibration_fraction * units.size))), replace=False)
-        cal = np.isin(unit, chosen)
-        how = (f"by configuration/sequence: {chosen.size} of {units.size} units (rows linked by a shared "
-               f"configuration or sequence) for calibration")
-    else:
-        block = np.arange(k) // block_samples
-        every = max(2, int(round(1.0 / calibration_fraction)))
-        cal = (block % every) == (every // 2)
-        how = (f"by time blocks of {block_samples} samples of the one continuous motion: every "
-               f"{every}th block for calibration ({int(cal.sum())} samples), the rest for validation")
-    val = ~cal
-    if not cal.any() or not val.any():
-        raise DataFileError(f"{data.file}: the split {how} leaves "
-                            f"{'no calibration' if not cal.any() else 'no validation'} samples")
-    return cal, val, how

@@ -1,5 +1,5 @@
 """Stage 9 of the discrepancy workflow: the history-aware prediction and the friction envelope on
-held-out data."""
+the untouched test split."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 
 from ..effects import EffectSet, registration_transform
 from .data import MeasuredData
-from .evaluation import HeldOutFn, stats_mm
+from .evaluation import evaluate_rows, stats_mm
 from .options import ENVELOPE_NOISE_FACTOR, DiscrepancyOptions
 from .parameters import apply_parameters
 
@@ -18,7 +18,8 @@ __all__ = ["EnvelopeCoverage", "HistoryPrediction", "PREDICTION_DESCRIPTION", "p
 
 #: What the prediction comparison reports (``results.json["prediction"]["description"]``).
 PREDICTION_DESCRIPTION = (
-    "Held-out tip position errors. Standard: the calibrated baseline, which ignores the motion history. "
+    "Tip position errors on the untouched test split. Standard: the calibrated baseline, which ignores the motion "
+    "history. "
     "History-aware: the friction model (Section III of Ha et al. 2019) with each sample's recorded history "
     "(eta of the last relative rotation of each pair; a pair released by a later translation is solved "
     "frictionless), tube parameters and friction coefficients calibrated on the calibration split only "
@@ -76,7 +77,7 @@ class HistoryPrediction:
     Attributes
     ----------
     rows : tuple of (str, ndarray of shape (K,))
-        Label and held-out position errors [m] of each model compared.
+        Label and test-split position errors [m] of each model compared.
     envelopes : tuple of EnvelopeCoverage
         Empty when ``options.envelope_samples`` is 0.
     """
@@ -185,17 +186,18 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise, stages, stage, se
         coefficients=coefficients, label=label)
 
 
-def predict_with_history(setup, split, baseline, naming, noise, options: DiscrepancyOptions, held_out: HeldOutFn,
-                         echo=print) -> HistoryPrediction | None:
-    """Stage 9: held-out prediction errors of the standard and the history-aware models, and the
-    coverage of the friction envelope.
+def predict_with_history(setup, split, baseline, naming, noise, options: DiscrepancyOptions, echo=print,
+                         progress: bool = False) -> HistoryPrediction | None:
+    """Stage 9: prediction errors of the standard and the history-aware models on the test split,
+    and the coverage of the friction envelope there (every model fitted on the development
+    samples only).
 
     The history-aware model is the friction model along the recorded history with the friction
     candidate's calibrated parameters and, when ``options.reference_friction`` is given, also
     with those coefficients (e.g. published ones) on the same calibrated tube parameters. With
     ``options.envelope_samples`` > 0, the envelope (convex hull of the 2^(n-1) bounding friction
     solutions plus :data:`ENVELOPE_NOISE_FACTOR` times the noise rms) is evaluated at that many
-    evenly spaced held-out samples, for each coefficient set.
+    evenly spaced test samples, for each coefficient set.
 
     Returns
     -------
@@ -204,25 +206,33 @@ def predict_with_history(setup, split, baseline, naming, noise, options: Discrep
     """
     from ..mechanics import all_eta
 
-    candidates, named, val = naming.candidates, naming.named, split.val
+    candidates, named = naming.candidates, naming.named
     if "friction" not in candidates:
         return None
+    test = split.test_rows
+    val = setup.data.take(test)
+
+    def on_test(name, model, params):
+        return evaluate_rows(setup, test, f"test-{name}", model, params, n_jobs=options.n_jobs, progress=progress,
+                             echo=echo)
+
     fr = candidates["friction"]
-    rows = [("standard model, calibrated (no history)", baseline.held_out.position),
+    rows = [("standard model, calibrated (no history)", on_test("baseline", "standard", baseline.params).position),
             ("history-aware: friction model along the recorded history, fitted "
-             + ", ".join(f"{k} = {v:.3g}" for k, v in fr.shown.items()), fr.held_out.position)]
+             + ", ".join(f"{k} = {v:.3g}" for k, v in fr.shown.items()), on_test("friction", fr.model, fr.params).position)]
     sets = [("fitted", fr.params, f"{len(all_eta(setup.robot.n_tubes))}")]
     if options.reference_friction is not None:
         mu = tuple(float(v) for v in options.reference_friction)
         ref = dict(fr.params)
         ref.update({f"mu_{k + 1}": v for k, v in enumerate(mu)})
         tag = "-".join(f"{v:g}" for v in mu)
-        val_ref = held_out(f"reference-friction-{tag}", "friction", ref)
+        val_ref = on_test(f"reference-friction-{tag}", "friction", ref)
         rows.append(("history-aware with the reference friction coefficients "
                      + ", ".join(f"mu_{k + 1} = {v:.3g}" for k, v in enumerate(mu)), val_ref.position))
         sets.append((f"reference {tag}", ref, f"reference-{tag}"))
     if named and named != "friction":
-        rows.append((f"named effect: {candidates[named].label}", candidates[named].held_out.position))
+        rows.append((f"named effect: {candidates[named].label}",
+                     on_test(named, candidates[named].model, candidates[named].params).position))
     for label, pos in rows:
         s = stats_mm(pos)
         echo(f"  prediction: {label}: mean {s['mean_mm']:.3f}, p95 {s['p95_mm']:.3f}, max {s['max_mm']:.3f} mm")

@@ -1,26 +1,26 @@
-"""A model's errors on the held-out samples, and their summaries (Table VIII's columns)."""
+"""A model's errors on given samples: out of fold on the development data, or on the test split."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Mapping
+from typing import Mapping
 
 import numpy as np
 
 from ..effects import EffectSet, registration_transform
 from .calibrate import pose_errors, predict
-from .setup import DiscrepancySetup
-from .split import SampleSplit
 
-__all__ = ["HeldOut", "HeldOutFn", "evaluate_held_out", "error_summary", "stats_mm"]
+__all__ = ["Errors", "evaluate_rows", "out_of_fold", "error_summary", "stats_mm"]
 
 
 @dataclass(frozen=True, eq=False)
-class HeldOut:
-    """A model's errors on the held-out samples (the Eq. (49) terms).
+class Errors:
+    """A model's errors at K samples (the Eq. (49) terms).
 
     Attributes
     ----------
+    rows : ndarray of int, shape (K,)
+        The samples (indices into the run's data), in order.
     position : ndarray, shape (K,)
         Tip position error [m]; NaN where the model failed.
     angle : ndarray, shape (K,)
@@ -33,6 +33,7 @@ class HeldOut:
         Evaluation time [s].
     """
 
+    rows: np.ndarray
     position: np.ndarray
     angle: np.ndarray
     residual_base: np.ndarray
@@ -41,56 +42,108 @@ class HeldOut:
 
     def as_dict(self) -> dict:
         """The stage file's content (arrays as arrays; SI units)."""
-        return {"position": self.position, "angle": self.angle, "residual_base": self.residual_base,
-                "tip_base": self.tip_base, "seconds": self.seconds}
+        return {"rows": self.rows, "position": self.position, "angle": self.angle,
+                "residual_base": self.residual_base, "tip_base": self.tip_base, "seconds": self.seconds}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Errors":
+        return cls(rows=np.asarray(d["rows"], int), position=np.array(d["position"], float),
+                   angle=np.array(d["angle"], float), residual_base=np.array(d["residual_base"], float).reshape(-1, 3),
+                   tip_base=np.array(d["tip_base"], float).reshape(-1, 3), seconds=float(d["seconds"]))
 
 
-#: ``held_out(name, model, params) -> HeldOut``: :func:`evaluate_held_out` bound to one run.
-HeldOutFn = Callable[[str, str, Mapping], HeldOut]
+def _errors(setup, rows: np.ndarray, model: str, params: Mapping, *, n_jobs: int, progress: bool) -> Errors:
+    sub = setup.data.take(rows)
+    pred = predict(setup.robot, tuple(params), tuple(params.values()), sub, model, setup.settings, n_jobs=n_jobs,
+                   progress=progress)
+    pos, ang, vec = pose_errors(pred, sub)
+    effects, _ = EffectSet.from_parameters(setup.robot, tuple(params), tuple(params.values()))
+    R, _ = registration_transform(effects["registration"] if "registration" in effects else {})
+    return Errors(rows=np.asarray(rows, int), position=pos, angle=ang, residual_base=vec @ R, tip_base=pred.tip_base,
+                  seconds=pred.seconds)
 
 
-def evaluate_held_out(setup: DiscrepancySetup, split: SampleSplit, name: str, model: str, params: Mapping,
-                      *, n_jobs: int = 1, progress: bool = True, echo=print) -> HeldOut:
-    """A model's errors on the held-out samples, read from the stage ``validation-<name>`` if
-    an earlier run finished it, else evaluated and stored there.
+def evaluate_rows(setup, rows, stage: str, model: str, params: Mapping, *, n_jobs: int = 1, progress: bool = False,
+                  echo=print) -> Errors:
+    """A model's errors at the samples ``rows``, read from the stage ``stage`` if an earlier run
+    finished it, else evaluated (along the whole recorded history) and stored there.
 
     Parameters
     ----------
     setup : DiscrepancySetup
-    split : SampleSplit
-    name : str
-        Stage name (e.g. ``"baseline"``, an effect, ``"combination-<a>+<b>"``).
-    model : str
-        ``"standard"``, ``"clearance"`` or ``"friction"``.
+    rows : ndarray of bool, shape (N,), or of int
+        The samples.
+    stage : str
+    model : {"standard", "clearance", "friction"}
     params : mapping of str to float
         Parameters applied (baseline and effect parameters, registration included) [SI].
     n_jobs : int
     progress : bool
-        Progress bar of the evaluation.
     echo : callable
 
     Returns
     -------
-    HeldOut
-        Errors of the K held-out samples [m, rad].
+    Errors
     """
-    cached = setup.stages.load(f"validation-{name}")
+    cached = setup.stages.load(stage)
     if cached is not None:
-        return HeldOut(**{k: np.array(v, float) if isinstance(v, list) else v for k, v in cached.items()})
-    val = split.val
-    echo(f"  evaluating {name} ({model} model) on {val.n_samples} held-out samples ...")
-    pred = predict(setup.robot, tuple(params), tuple(params.values()), val, model, setup.settings,
-                   n_jobs=n_jobs, progress=progress)
-    pos, ang, vec = pose_errors(pred, val)
-    effects, _ = EffectSet.from_parameters(setup.robot, tuple(params), tuple(params.values()))
-    R, _ = registration_transform(effects["registration"] if "registration" in effects else {})
-    res = HeldOut(position=pos, angle=ang, residual_base=vec @ R, tip_base=pred.tip_base, seconds=pred.seconds)
-    setup.stages.save(f"validation-{name}", res.as_dict())
+        return Errors.from_dict(cached)
+    rows = np.flatnonzero(rows) if np.asarray(rows).dtype == bool else np.asarray(rows, int)
+    echo(f"  evaluating {stage} ({model} model) on {rows.size} samples ...")
+    res = _errors(setup, rows, model, params, n_jobs=n_jobs, progress=progress)
+    setup.stages.save(stage, res.as_dict())
     return res
 
 
+def out_of_fold(setup, split, name: str, model: str, fold_params, *, n_jobs: int = 1, progress: bool = False,
+                echo=print) -> Errors:
+    """Out-of-fold errors on the development samples: each fold evaluated with the parameters
+    fitted without it (blocked cross-validation), read from the stage ``oof-<name>`` if an
+    earlier run finished it.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : DataSplit
+    name : str
+        Model name for the stage (``"baseline"``, an effect, ``"pair-a+b"``).
+    model : {"standard", "clearance", "friction"}
+    fold_params : sequence of mappings, length ``split.n_folds``
+        The parameters fitted without each fold [SI].
+    n_jobs : int
+    progress : bool
+    echo : callable
+
+    Returns
+    -------
+    Errors
+        At the development samples in data order.
+    """
+    stage = f"oof-{name}"
+    cached = setup.stages.load(stage)
+    if cached is not None:
+        return Errors.from_dict(cached)
+    dev = np.flatnonzero(split.dev_rows)
+    echo(f"  cross-validating {name} ({model} model): {split.n_folds} folds, {dev.size} samples ...")
+    pos = np.full(dev.size, np.nan)
+    ang = np.full(dev.size, np.nan)
+    res = np.full((dev.size, 3), np.nan)
+    tip = np.full((dev.size, 3), np.nan)
+    seconds = 0.0
+    where = {r: i for i, r in enumerate(dev)}
+    for k in range(split.n_folds):
+        rows = np.flatnonzero(split.validation_rows(k))
+        e = _errors(setup, rows, model, fold_params[k], n_jobs=n_jobs, progress=progress)
+        at = np.array([where[r] for r in rows])
+        pos[at], ang[at], res[at], tip[at] = e.position, e.angle, e.residual_base, e.tip_base
+        seconds += e.seconds
+    out = Errors(rows=dev, position=pos, angle=ang, residual_base=res, tip_base=tip, seconds=seconds)
+    setup.stages.save(stage, out.as_dict())
+    return out
+
+
 def error_summary(pos, ang, seconds, n) -> dict:
-    """Table VIII row: tip position error mean, std, max [mm]; tangent mean, max [deg].
+    """Table VIII row: tip position error mean, std, p95, max [mm]; tangent mean, max [deg].
 
     Parameters
     ----------
@@ -105,6 +158,7 @@ def error_summary(pos, ang, seconds, n) -> dict:
     ang_deg = np.rad2deg(ang[np.isfinite(ang)])
     return {"position_mean_mm": float(pos_mm.mean()) if pos_mm.size else None,
             "position_std_mm": float(pos_mm.std()) if pos_mm.size else None,
+            "position_p95_mm": float(np.percentile(pos_mm, 95)) if pos_mm.size else None,
             "position_max_mm": float(pos_mm.max()) if pos_mm.size else None,
             "tangent_mean_deg": float(ang_deg.mean()) if ang_deg.size else None,
             "tangent_max_deg": float(ang_deg.max()) if ang_deg.size else None,

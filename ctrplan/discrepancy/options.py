@@ -8,14 +8,16 @@ import numpy as np
 
 from ..mechanics import ModelSettings
 
-__all__ = ["DiscrepancyOptions", "FIT_VERSION", "NOISE_RATIO", "MIN_REST_PAIRS", "ALPHA_STEP", "BIC_MARGIN",
-           "TRAJECTORY_ROTATION_BIN", "TRAJECTORY_TRANSLATION_BIN", "REPRODUCE_SAMPLES", "ENVELOPE_NOISE_FACTOR"]
+__all__ = ["DiscrepancyOptions", "FIT_VERSION", "MIN_REST_PAIRS", "ALPHA_STEP", "BIC_MARGIN",
+           "TRAJECTORY_ROTATION_BIN", "TRAJECTORY_TRANSLATION_BIN", "REPRODUCE_SAMPLES", "ENVELOPE_NOISE_FACTOR",
+           "CONFIDENCE", "BOOTSTRAP_RESAMPLES"]
 
-#: The held-out residual is "consistent with the sensor noise" when its rms position error is at
-#: most this multiple of the noise rms (a calibrated model adds a little parameter error).
-NOISE_RATIO = 1.25
 #: Rests (consecutive samples at identical joints) needed to estimate the noise from the data.
 MIN_REST_PAIRS = 10
+#: Level of the reported intervals (improvements, parameters, the test split's figures).
+CONFIDENCE = 0.95
+#: Block-bootstrap resamples of the test split's intervals.
+BOOTSTRAP_RESAMPLES = 2000
 #: Finite-difference step of d tip / d alpha_i in the backlash and gradual-friction signatures [rad].
 ALPHA_STEP = 1e-3
 #: A candidate must lower the BIC by at least this much (Kass & Raftery: > 6 is strong evidence).
@@ -32,8 +34,10 @@ ENVELOPE_NOISE_FACTOR = 1.62
 #: Version of the fitting procedure in the stage key: 2 = two-stage least squares (error components,
 #: then Eq. (49)); 3 = stage 2 with the norms' curvature in its Gauss-Newton model and the BIC
 #: stopping rule; 4 = effects from the registry, the history of every pair from ctrplan.history
-#: along the whole record. Stages written by an earlier version are redone.
-FIT_VERSION = 4
+#: along the whole record; 5 = a test split and cross-validation folds, parameter uncertainties,
+#: baseline parameters bounded about the robot file's values. Stages written by an earlier
+#: version are redone.
+FIT_VERSION = 5
 
 
 @dataclass(frozen=True)
@@ -50,15 +54,18 @@ class DiscrepancyOptions:
     frame : {"robot", "tracker"} or None
         Frame of the measurements (default from the file type, see
         :func:`ctrplan.discrepancy.data.load_measured_data`). "tracker" fits a registration.
-    calibration_fraction : float
-        Share of units (configurations / sequences / time blocks) used for calibration.
-    block_samples : int
-        Length of the time blocks that split one continuous trajectory (every k-th block for
-        calibration, :func:`~ctrplan.discrepancy.data.split_data`).
+    test_fraction : float
+        Share of the units held back as the untouched test split
+        (:func:`~ctrplan.discrepancy.split.make_split`).
+    n_blocks : int
+        Time blocks a continuous motion is cut into (the units of its split and tests).
+    n_folds : int
+        Cross-validation folds of the development data.
     max_calibration_samples : int
-        Calibration samples used by the least-squares fits (whole units, evenly chosen).
+        Calibration samples a least-squares fit uses at most (whole units, evenly chosen).
     significance : float
-        Level of the signature and held-out improvement tests.
+        Family-wise level of the cross-validated improvement tests (Holm over the candidates),
+        the level of the signature tests, and the false-alarm rate of the noise test.
     n_permutations : int
     friction_grid : tuple of float
         Coarse grid of every friction coefficient.
@@ -83,13 +90,20 @@ class DiscrepancyOptions:
     reference_friction : tuple of float, shape (n - 1,), or None
         Friction coefficients [-] (e.g. published for the robot) with which the history-aware
         prediction and the envelope are also evaluated, next to the fitted ones.
+    bound_target : float
+        Share of measured tips the calibrated bound is to cover
+        (:mod:`~ctrplan.discrepancy.coverage`).
+    bound_samples : int
+        Development samples (and, separately, test samples) at which the friction bound is
+        evaluated for its calibration and its check; 0 skips them.
     """
 
     fit: tuple | None = None
     effects: tuple | None = None
     frame: str | None = None
-    calibration_fraction: float = 0.25
-    block_samples: int = 100
+    test_fraction: float = 0.2
+    n_blocks: int = 20
+    n_folds: int = 4
     max_calibration_samples: int = 300
     significance: float = 0.01
     n_permutations: int = 999
@@ -103,6 +117,8 @@ class DiscrepancyOptions:
     noise_position: float | None = None
     envelope_samples: int = 0
     reference_friction: tuple | None = None
+    bound_target: float = 0.9
+    bound_samples: int = 200
 
     def settings(self) -> ModelSettings:
         """Model settings of every fit and evaluation (no multistart stability search in

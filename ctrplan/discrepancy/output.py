@@ -1,4 +1,5 @@
-"""Stages 10-12 of the discrepancy workflow: the updated robot file, its check, and the results."""
+"""Stages 10-12 of the discrepancy workflow: the test split, the updated robot file, its check, and
+the results."""
 
 from __future__ import annotations
 
@@ -11,23 +12,144 @@ import numpy as np
 
 from ..effects import REGISTRY, EffectSet, robot_effects
 from ..io.atomic import atomic_write_text
-from .calibrate import CalibrationResult, pose_errors, predict
+from .calibrate import pose_errors, predict
 from .data import MeasuredData
 from .decision import Naming, NoiseCheck, cautions
-from .evaluation import HeldOut, error_summary
-from .fitting import Baseline, Candidate, Combination, candidate_report, candidate_reports
-from .options import BIC_MARGIN, REPRODUCE_SAMPLES, DiscrepancyOptions
+from .evaluation import Errors, error_summary, evaluate_rows
+from .fitting import Baseline, Candidate, Combination, CrossValidated, candidate_report, candidate_reports
+from .options import BOOTSTRAP_RESAMPLES, CONFIDENCE, DiscrepancyOptions
 from .parameters import REGISTRATION, apply_parameters, parameter
 from .setup import DiscrepancySetup
-from .split import SampleSplit, configurations_repeat, subsample
+from .split import DataSplit
+from .statistics import block_bootstrap
 
-__all__ = ["UpdatedModel", "Reproduction", "write_updated_model", "check_reproduction", "reproduce_errors",
-           "discrepancy_results"]
+__all__ = ["TestSplit", "evaluate_test_split", "UpdatedModel", "Reproduction", "write_updated_model",
+           "check_reproduction", "reproduce_errors", "discrepancy_results", "final_candidate", "final_parameters",
+           "validate_prediction"]
+
+
+def final_candidate(naming: Naming, combination: Combination | None) -> Candidate | None:
+    """The model the run ends with: the named pair, else the named effect (the first of an
+    ambiguous pair), else None (the recalibrated baseline)."""
+    if combination is not None and combination.named:
+        return combination.tried[combination.named]
+    return naming.candidates[naming.named] if naming.named else None
+
+
+def final_parameters(naming: Naming, combination: Combination | None, baseline: Baseline) -> dict:
+    """The parameters of the model the run ends with [SI] (the baseline's when nothing is named)."""
+    final = final_candidate(naming, combination)
+    return dict(final.params if final is not None else baseline.params)
+
+
+def validate_prediction(prediction, split: DataSplit, seed: int = 0) -> dict | None:
+    """The history-aware prediction against the standard model on the test split: mean, p95 and
+    max tip position error of each [mm] with block-bootstrap intervals, and whether the history
+    beats the standard model in both mean and max.
+
+    Parameters
+    ----------
+    prediction : HistoryPrediction or None
+        Its first row is the standard model, its second the history-aware model with the fitted
+        friction coefficients, both on the test split in data order.
+    split : DataSplit
+    seed : int
+
+    Returns
+    -------
+    dict or None
+        ``standard`` and ``history`` ({``mean_mm``, ``p95_mm``, ``max_mm``: {value, ci}}),
+        ``history_label``, ``history_beats_standard``, ``n_samples``; None without a prediction.
+    """
+    if prediction is None or len(prediction.rows) < 2:
+        return None
+    units = split.units[split.test_rows]
+    std, hist = (np.asarray(prediction.rows[i][1], float) for i in (0, 1))
+    ok = np.isfinite(std) & np.isfinite(hist)
+    samples = {"standard": std[ok] * 1e3, "history": hist[ok] * 1e3}
+    stats = {"mean": np.mean, "p95": lambda x: np.percentile(x, 95), "max": np.max}
+    out = {"n_samples": int(ok.sum()), "history_label": prediction.rows[1][0], "confidence": CONFIDENCE}
+    for side in ("standard", "history"):
+        out[side] = {f"{name}_mm": block_bootstrap(samples, units[ok], lambda s, f=f, side=side: f(s[side]),
+                                                   n_resamples=BOOTSTRAP_RESAMPLES, confidence=CONFIDENCE, seed=seed)
+                     for name, f in stats.items()}
+    out["history_beats_standard"] = bool(
+        out["history"]["mean_mm"]["value"] < out["standard"]["mean_mm"]["value"]
+        and out["history"]["max_mm"]["value"] < out["standard"]["max_mm"]["value"])
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class TestSplit:
+    """Stage 10: the baseline and the final model on the untouched test split (used once).
+
+    Attributes
+    ----------
+    baseline, final : Errors
+        Their errors on the test samples [m, rad] (``final`` is the baseline's when nothing is
+        named).
+    label : str
+        The final model.
+    figures : dict
+        ``before`` and ``after``: mean, p95, max of the tip position error [mm] with
+        block-bootstrap intervals; ``shrink``: the relative fall of each (1 - after / before),
+        with paired intervals; ``units``, ``n_samples``, ``confidence``, ``method``.
+    """
+
+    baseline: Errors
+    final: Errors
+    label: str
+    figures: dict
+
+
+def _shrink_figures(before: Errors, after: Errors, units, seed: int) -> dict:
+    ok = np.isfinite(before.position) & np.isfinite(after.position)
+    b, a, u = before.position[ok] * 1e3, after.position[ok] * 1e3, np.asarray(units)[ok]
+    stats = {"mean": np.mean, "p95": lambda x: np.percentile(x, 95), "max": np.max}
+    out = {"before": {}, "after": {}, "shrink": {}, "n_samples": int(ok.sum()), "n_units": int(np.unique(u).size),
+           "confidence": CONFIDENCE,
+           "method": f"scipy.stats.bootstrap (percentile) over the test split's {np.unique(u).size} units, "
+                     f"{BOOTSTRAP_RESAMPLES} resamples, paired for the shrink"}
+    samples = {"before": b, "after": a}
+    for name, f in stats.items():
+        for side in ("before", "after"):
+            out[side][f"{name}_mm"] = block_bootstrap(samples, u, lambda s, f=f, side=side: f(s[side]),
+                                                      n_resamples=BOOTSTRAP_RESAMPLES, confidence=CONFIDENCE, seed=seed)
+        out["shrink"][name] = block_bootstrap(samples, u, lambda s, f=f: 1.0 - f(s["after"]) / f(s["before"]),
+                                              n_resamples=BOOTSTRAP_RESAMPLES, confidence=CONFIDENCE, seed=seed)
+    return out
+
+
+def evaluate_test_split(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline, naming: Naming,
+                        combination: Combination | None, options: DiscrepancyOptions, echo=print,
+                        progress: bool = False) -> TestSplit:
+    """Stage 10: evaluate the baseline and the final model (their development fits) on the test
+    split, once, and the final model's gain there with block-bootstrap intervals.
+
+    Returns
+    -------
+    TestSplit
+    """
+    final = final_candidate(naming, combination)
+    test = split.test_rows
+    before = evaluate_rows(setup, test, "test-baseline", "standard", baseline.params, n_jobs=options.n_jobs,
+                           progress=progress, echo=echo)
+    after = before if final is None else evaluate_rows(setup, test, f"test-{final.cv.name}", final.model, final.params,
+                                                       n_jobs=options.n_jobs, progress=progress, echo=echo)
+    figures = _shrink_figures(before, after, split.units[test], options.seed)
+    label = final.label if final is not None else "baseline (nothing named)"
+    s = figures["shrink"]
+    echo(f"test split ({split.n_test} samples, untouched until now): {label}: mean "
+         f"{figures['before']['mean_mm']['value']:.3f} -> {figures['after']['mean_mm']['value']:.3f} mm (shrink "
+         f"{100 * s['mean']['value']:.0f} %, {CONFIDENCE:.0%} interval {100 * s['mean']['ci'][0]:.0f}.."
+         f"{100 * s['mean']['ci'][1]:.0f} %), max {figures['before']['max_mm']['value']:.2f} -> "
+         f"{figures['after']['max_mm']['value']:.2f} mm")
+    return TestSplit(baseline=before, final=after, label=label, figures=figures)
 
 
 @dataclass(frozen=True, eq=False)
 class UpdatedModel:
-    """Stage 10: the updated robot model file.
+    """Stage 11: the updated robot model file.
 
     Attributes
     ----------
@@ -40,8 +162,6 @@ class UpdatedModel:
     named_effects : tuple of str
     candidate : Candidate or None
         The candidate it comes from (None: the recalibrated baseline).
-    held_out : HeldOut
-        Its held-out errors as the workflow evaluated them [m, rad].
     left_out : tuple of str
         Effect parameters not written because their values are implausible (a robot file holds
         only plausible ones).
@@ -52,42 +172,37 @@ class UpdatedModel:
     params: dict
     named_effects: tuple
     candidate: Candidate | None
-    held_out: HeldOut
     left_out: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
 class Reproduction:
-    """Stage 11: the written model file reloaded and re-evaluated.
+    """Stage 12: the written model file reloaded and re-evaluated on the test split.
 
     Attributes
     ----------
-    rows : ndarray of bool, shape (K,)
-        Held-out samples re-evaluated.
-    position : ndarray, shape (rows.sum(),)
-        Their tip position errors with the reloaded file [m].
+    position : ndarray, shape (K_test,)
+        Tip position errors with the reloaded file [m].
     reproduced : bool
-        Equal to the workflow's errors within 1 nm (NaN where both failed).
+        Equal to the final model's test errors within 1 nm (NaN where both failed).
     """
 
-    rows: np.ndarray
     position: np.ndarray
     reproduced: bool
 
-    @property
-    def n_samples(self) -> int:
-        return int(self.rows.sum())
 
-
-def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Naming,
-                        combination: Combination | None, echo=print) -> UpdatedModel:
-    """Stage 10: write one robot model file with the named effect(s) and their calibrated
-    parameters (the recalibrated baseline when none is named) into ``setup.out_dir``, atomically.
+def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Naming, combination: Combination | None,
+                        test: TestSplit, echo=print, *, bound=None, prediction_check: dict | None = None) -> UpdatedModel:
+    """Stage 11: write one robot model file with the final model's calibrated parameters (the
+    recalibrated baseline when nothing is named) into ``setup.out_dir``, atomically.
 
     Effects that change the robot go into its tube and pair tables, a registration into
     ``[tracker_registration]``, effects on the motion or the measurement (backlash, time offset,
     gradual friction, ...) into ``[effects]`` with ``[effects_source]``: the data file and its
-    SHA-256, the date, the samples fitted and the held-out errors.
+    SHA-256, the date, the samples, the verdict and the test split's errors. With ``bound`` (a
+    :class:`~ctrplan.discrepancy.coverage.BoundCalibration` with a finite factor), the table
+    ``[bound_calibration]``; with ``prediction_check`` (:func:`validate_prediction`),
+    ``[prediction_validation]``: planning reads both.
 
     Returns
     -------
@@ -95,58 +210,70 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
     """
     from ..io.robot_file import file_hash, robot_to_toml
 
-    robot, named = setup.robot, naming.named
-    pair = combination.named if combination else None
-    final = combination.tried[pair] if pair else (naming.candidates[named] if named else None)
-    named_effects = ([named] + ([pair] if pair else [])) if named else []
+    robot = setup.robot
+    final = final_candidate(naming, combination)
+    named_effects = list(final.effects) if final is not None else []
     final_params = dict(final.params if final else baseline.params)
     final_model = final.model if final else "standard"
-    reg_names = [n for n in final_params if n in REGISTRATION]
     registration = None
-    if reg_names:
+    if any(n in final_params for n in REGISTRATION):
         vals = [final_params.get(n, 0.0) for n in REGISTRATION]
         registration = {"rotation_vector_rad": vals[:3], "translation_m": vals[3:]}
     effects, _ = EffectSet.from_parameters(robot, tuple(final_params), tuple(final_params.values()))
-    left_out = []
-    stored = {}
+    left_out, stored = [], {}
     for name in effects:
         if REGISTRY[name].store != "effects":
             continue
         vals = {}
         for p, v in effects[name].items():
-            if parameter(robot, p).is_plausible(v):
-                vals[p] = v
-            else:
-                left_out.append(p)
+            (vals.__setitem__(p, v) if parameter(robot, p).is_plausible(v) else left_out.append(p))
         if vals:
             stored[name] = vals
     data_name = Path(setup.data_path).name
     updated = apply_parameters(robot, tuple(final_params), tuple(final_params.values()))
     merged = robot_effects(robot).merged(stored)
-    updated = updated.replace(name=f"{robot.name}-{'-'.join(named_effects) or 'recalibrated'}",
+    verdict = naming.verdict
+    if verdict == "ambiguous":
+        suffix = f"{naming.named}-or-{naming.decision['ambiguous_with']}"
+    else:
+        suffix = "-".join(named_effects) or "recalibrated"
+    updated = updated.replace(name=f"{robot.name}-{suffix}",
                               source=f"{robot.source}; recalibrated by ctrplan discrepancy on {data_name}",
                               effects=tuple((n, tuple(merged[n].items())) for n in merged))
-    held = final.held_out if final else baseline.held_out
-    pos = held.position[np.isfinite(held.position)]
-    source = {"method": "ctrplan discrepancy (calibration split; errors on the held-out split)",
+    pos = test.final.position[np.isfinite(test.final.position)]
+    note = ("ambiguous: " + naming.candidates[naming.decision["ambiguous_with"]].label + " explains the data equally "
+            "well" if verdict == "ambiguous" else "")
+    if left_out:
+        note = "; ".join(x for x in (note, "not written, implausible: " + ", ".join(left_out)) if x)
+    source = {"method": "ctrplan discrepancy (fitted on the development split; errors on the untouched test split)",
               "data_file": data_name, "data_sha256": file_hash(setup.data_path),
               "date": datetime.date.today().isoformat(), "samples": int(setup.data.n_samples),
               "held_out_position_mean_m": float(pos.mean()) if pos.size else None,
               "held_out_position_p95_m": float(np.percentile(pos, 95)) if pos.size else None,
-              "held_out_position_max_m": float(pos.max()) if pos.size else None,
-              "note": ("not written, implausible: " + ", ".join(left_out)) if left_out else ""}
+              "held_out_position_max_m": float(pos.max()) if pos.size else None, "note": note}
     setup.out_dir.mkdir(parents=True, exist_ok=True)
     model_path = setup.out_dir / f"{updated.name}.toml"
     header = (f"Written by `ctrplan discrepancy` from {Path(setup.robot_path).name} and {data_name}.\n"
-              f"Named effect: {' + '.join(REGISTRY[e].label for e in named_effects) or 'none'}; evaluate with the "
-              f"{final_model} model.\nCalibrated parameters: "
+              f"Verdict: {verdict}; model: {test.label}; evaluate with the {final_model} model.\nCalibrated parameters: "
               + ", ".join(f"{n} = {v:.6g}" for n, v in final_params.items() if n not in REGISTRATION))
+    sha = source["data_sha256"]
+    bound_table = (bound.file_table(data_name, sha) if bound is not None and np.isfinite(bound.factor) else None)
+    pred_table = None
+    if prediction_check is not None:
+        pc = prediction_check
+        pred_table = {"standard_mean_m": pc["standard"]["mean_mm"]["value"] * 1e-3,
+                      "standard_max_m": pc["standard"]["max_mm"]["value"] * 1e-3,
+                      "history_mean_m": pc["history"]["mean_mm"]["value"] * 1e-3,
+                      "history_max_m": pc["history"]["max_mm"]["value"] * 1e-3,
+                      "history_beats_standard": bool(pc["history_beats_standard"]), "test_samples": pc["n_samples"],
+                      "data_file": data_name, "data_sha256": sha, "date": source["date"]}
     atomic_write_text(model_path, robot_to_toml(updated, header=header, model=final_model, registration=registration,
-                                                effects_source=source if updated.effects else None))
+                                                effects_source=source if updated.effects else None,
+                                                bound_calibration=bound_table, prediction_validation=pred_table))
     if left_out:
         echo(f"  not written to the model file (implausible values): {', '.join(left_out)}")
     return UpdatedModel(path=model_path, model=final_model, params=final_params, named_effects=tuple(named_effects),
-                        candidate=final, held_out=held, left_out=tuple(left_out))
+                        candidate=final, left_out=tuple(left_out))
 
 
 def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: int = 1) -> dict:
@@ -156,8 +283,7 @@ def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: i
     ----------
     model_path : path
         Robot model file written by the workflow (its ``model`` key names the mechanics model;
-        ``[tracker_registration]`` maps to the data's frame; its ``[effects]`` apply to the
-        recorded motion).
+        ``[tracker_registration]`` maps to the data's frame; its ``[effects]`` apply).
     data : MeasuredData
     settings : ModelSettings, optional
     n_jobs : int
@@ -186,12 +312,11 @@ def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: i
     return {"position": pos, "angle": ang}
 
 
-def check_reproduction(setup: DiscrepancySetup, split: SampleSplit, updated: UpdatedModel,
+def check_reproduction(setup: DiscrepancySetup, split: DataSplit, updated: UpdatedModel, test: TestSplit,
                        options: DiscrepancyOptions, echo=print) -> Reproduction:
-    """Stage 11: load the written model file back (:func:`reproduce_errors`) and check that it
-    gives the workflow's held-out errors: whole configuration groups of a revisiting protocol
-    (at most :data:`REPRODUCE_SAMPLES`); a trajectory is re-run whole, since a subsample would
-    break its branch following (each sample starts from the previous one).
+    """Stage 12: load the written model file back (:func:`reproduce_errors`) and check that it
+    gives the final model's errors on the test split (the whole split, so that each motion's
+    branch following is the same).
 
     Returns
     -------
@@ -202,68 +327,32 @@ def check_reproduction(setup: DiscrepancySetup, split: SampleSplit, updated: Upd
     ModelFileError, PhysicalParameterError
         The written file does not load.
     """
-    val = split.val
-    check_rows = (subsample(val, np.ones(val.n_samples, bool), REPRODUCE_SAMPLES, options.seed)
-                  if configurations_repeat(val.config_id) else np.ones(val.n_samples, bool))
-    check = reproduce_errors(updated.path, val.take(check_rows), setup.settings, n_jobs=options.n_jobs)
-    reproduced = bool(np.allclose(check["position"], updated.held_out.position[check_rows], atol=1e-9,
-                                  equal_nan=True))
-    echo(f"wrote {updated.path}; reloaded, it reproduces the held-out errors of {int(check_rows.sum())} "
-         f"samples: {reproduced} (mean {np.nanmean(check['position']) * 1e3:.3f} mm)")
-    return Reproduction(rows=check_rows, position=check["position"], reproduced=reproduced)
+    check = reproduce_errors(updated.path, setup.data.take(split.test_rows), setup.settings, n_jobs=options.n_jobs)
+    reproduced = bool(np.allclose(check["position"], test.final.position, atol=1e-9, equal_nan=True))
+    echo(f"wrote {updated.path}; reloaded, it reproduces the test split's errors of {split.n_test} samples: "
+         f"{reproduced} (mean {np.nanmean(check['position']) * 1e3:.3f} mm)")
+    return Reproduction(position=check["position"], reproduced=reproduced)
 
 
-# --------------------------------------------------------------------------- results
-def _pair_report(c: Candidate, n_val: int) -> dict:
-    """A pair as ``results.json["combination"]["tried"][effect]`` stores it (mm in ``held_out``)."""
-    out = {"effects": list(c.effects), "label": c.label, "model": c.model, "fit": c.fit.as_dict(),
-           "parameters": c.shown, "units": c.units, "implausible": c.implausible, "plausible": c.plausible,
-           "n_parameters": c.n_parameters, "bic": c.bic, "delta_bic": c.delta_bic,
-           "held_out": error_summary(c.held_out.position, c.held_out.angle, c.held_out.seconds, n_val),
-           "improvement_eq49": c.improvement_eq49, "improvement_position": c.improvement_position,
-           "converged": bool(c.fit.converged), "improvement_significant": c.improvement_significant,
-           "bic_better": c.bic_better, "significant": c.significant}
-    if c.fit_note:
-        out["note"] = c.fit_note
-    return out
-
-
-def _combination_report(combination: Combination | None, naming: Naming, n_val: int) -> dict | None:
-    """``results.json["combination"]`` (mm)."""
+def _combination_report(combination: Combination | None) -> dict | None:
     if combination is None:
         return None
-    tried = {e: _pair_report(c, n_val) for e, c in combination.tried.items()}
-    steps = []
-    if combination.named:
-        first = candidate_report(naming.candidates[combination.first], n_val)
-        c = tried[combination.named]
-        steps = [
-            {"effect": combination.first, "label": first["label"],
-             "held_out_mean_mm": first["held_out"]["position_mean_mm"],
-             "held_out_max_mm": first["held_out"]["position_max_mm"],
-             "improvement_eq49": first["improvement_eq49"], "over": "baseline"},
-            {"effect": combination.named, "label": naming.candidates[combination.named].label,
-             "held_out_mean_mm": c["held_out"]["position_mean_mm"], "held_out_max_mm": c["held_out"]["position_max_mm"],
-             "improvement_eq49": c["improvement_eq49"], "over": combination.first}]
     return {"first": combination.first, "first_label": combination.first_label, "named": combination.named,
-            "tried": tried, "steps": steps, "notes": list(combination.notes), "rule": combination.rule}
+            "tried": {e: candidate_report(c) for e, c in combination.tried.items()},
+            "not_tried": dict(combination.not_tried), "rule": combination.rule}
 
 
-def discrepancy_results(setup: DiscrepancySetup, split: SampleSplit, baseline: Baseline,
-                        contact: CalibrationResult | None, tests: Mapping, noise: NoiseCheck, naming: Naming,
-                        combination: Combination | None, prediction, updated: UpdatedModel,
-                        reproduction: Reproduction, options: DiscrepancyOptions, echo=print) -> dict:
-    """Stage 12: the run's results as ``results.json`` stores them (report units: keys ending
-    ``_mm`` in mm, ``_deg`` in degrees, others SI), with the cautions a reader must not overlook
-    (echoed).
+def _errors_arrays(e: Errors) -> dict:
+    return {"position": e.position, "angle": e.angle, "residual": e.residual_base, "tip_base": e.tip_base}
 
-    Parameters
-    ----------
-    setup, split, baseline, contact, tests, noise, naming, combination, prediction, updated, reproduction
-        The results of stages 1-11.
-    options : DiscrepancyOptions
-    echo : callable
-        Receives the cautions.
+
+def discrepancy_results(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline, contact: CrossValidated | None,
+                        tests: Mapping, noise: NoiseCheck, naming: Naming, combination: Combination | None,
+                        test: TestSplit, prediction, updated: UpdatedModel, reproduction: Reproduction,
+                        options: DiscrepancyOptions, echo=print, *, bound=None,
+                        prediction_check: dict | None = None) -> dict:
+    """The run's results as ``results.json`` stores them (report units: keys ending ``_mm`` in mm,
+    ``_deg`` in degrees, others SI), with the cautions a reader must not overlook (echoed).
 
     Returns
     -------
@@ -271,45 +360,48 @@ def discrepancy_results(setup: DiscrepancySetup, split: SampleSplit, baseline: B
         JSON-ready results (``seconds`` is None: the caller sets it); arrays for plots under
         ``"_arrays"`` (SI).
     """
-    val, n_val, named = split.val, split.val.n_samples, naming.named
-    base, base_val = baseline.fit, baseline.held_out
-    base_summary = error_summary(base_val.position, base_val.angle, base_val.seconds, n_val)
-    final_val = updated.held_out
-    after = error_summary(final_val.position, final_val.angle, final_val.seconds, n_val)
-    candidates = candidate_reports(naming.candidates, n_val)
-    combination_report = _combination_report(combination, naming, n_val)
-    pair = combination.named if combination else None
-    final = combination_report["tried"][pair] if pair else (candidates[named] if named else None)
-    notes = cautions(named, final, base_summary, after)
+    base_oof = baseline.oof
+    final = final_candidate(naming, combination)
+    before_test = error_summary(test.baseline.position, test.baseline.angle, test.baseline.seconds, split.n_test)
+    after_test = error_summary(test.final.position, test.final.angle, test.final.seconds, split.n_test)
+    candidates = candidate_reports(naming.candidates)
+    notes = cautions(naming.verdict, None if final is None else candidate_report(final), before_test, after_test)
     if updated.left_out:
         notes.append(f"not written to the model file because implausible: {', '.join(updated.left_out)}")
+    bad_base = [r for r in baseline.parameters if not r["in_plausible_range"] or r["at_bound"]]
+    for r in bad_base:
+        change = "" if r.get("relative_change") is None else f", {100 * r['relative_change']:+.0f} % from the robot file"
+        notes.append(f"baseline {r['name']} = {r['value']:.4g} {r['unit']}{change}"
+                     + (": at its bound" if r["at_bound"] else "") + f"; plausible: {r['plausible_note']}")
     for line in notes:
         echo(f"caution: {line}")
     opts = asdict(options)
     opts["effects"] = list(setup.effects) if options.effects is None else list(options.effects)
+    dev = setup.data.take(split.dev_rows)
+    test_data = setup.data.take(split.test_rows)
     return {
         "robot_file": str(setup.robot_path), "data_file": str(setup.data_path), "frame": setup.data.frame,
-        "n_samples": setup.data.n_samples, "split": split.how, "n_calibration": split.n_calibration,
-        "n_fit": split.n_fit, "n_validation": n_val, "baseline_parameters": list(setup.base_names),
-        "baseline": {"fit": base.as_dict(), "bic": baseline.bic, "held_out": base_summary},
-        "contact_baseline": contact.as_dict() if contact is not None else None,
+        "n_samples": setup.data.n_samples, "split": split.as_dict(), "baseline_parameters": list(setup.base_names),
+        "baseline": {"fit": baseline.fit.as_dict(), "folds": [f.as_dict() for f in baseline.cv.folds],
+                     "bic": baseline.bic, "parameter_table": baseline.parameters,
+                     "out_of_fold": error_summary(base_oof.position, base_oof.angle, base_oof.seconds, base_oof.rows.size)},
+        "contact_baseline": None if contact is None else {"fit": contact.fit.as_dict(),
+                                                          "folds": [f.as_dict() for f in contact.folds]},
         "signature_tests": {e: t.as_dict() for e, t in tests.items()},
-        "skipped_effects": dict(setup.skipped), "prediction": None if prediction is None else prediction.as_dict(),
-        "noise": noise.as_dict(), "decision": naming.decision,
-        "candidates": candidates,
-        "named_effect": named, "named_label": REGISTRY[named].label if named else None,
-        "named_effects": list(updated.named_effects), "combination": combination_report,
-        "after": after, "updated_model_file": str(updated.path), "updated_model": updated.model,
-        "reproduced": reproduction.reproduced, "reproduced_samples": reproduction.n_samples,
+        "skipped_effects": dict(setup.skipped), "noise": noise.as_dict(), "decision": naming.decision,
+        "verdict": naming.verdict, "named_effect": naming.named,
+        "named_label": REGISTRY[naming.named].label if naming.named else None,
+        "ambiguous_with": naming.decision.get("ambiguous_with"),
+        "candidates": candidates, "named_effects": list(updated.named_effects),
+        "combination": _combination_report(combination),
+        "test_split": {"label": test.label, "before": before_test, "after": after_test, "figures": test.figures},
+        "prediction": None if prediction is None else prediction.as_dict(),
+        "prediction_check": prediction_check, "bound": None if bound is None else bound.as_dict(),
+        "updated_model_file": str(updated.path), "updated_model": updated.model,
+        "reproduced": reproduction.reproduced, "reproduced_samples": split.n_test,
         "reproduced_position_mean_mm": float(np.nanmean(reproduction.position) * 1e3),
-        "cautions": notes,
-        "significance": options.significance, "bic_margin": BIC_MARGIN, "options": opts,
-        "seconds": None,
-        "_arrays": {"val_eta": val.eta, "val_tip_base": base_val.tip_base,
-                    "before_position": base_val.position, "before_angle": base_val.angle,
-                    "before_residual": base_val.residual_base,
-                    "after_position": final_val.position, "after_angle": final_val.angle,
-                    "after_residual": final_val.residual_base,
-                    "reduction": (1.0 - after["position_mean_mm"] / base_summary["position_mean_mm"])
-                    if base_summary["position_mean_mm"] else None},
+        "cautions": notes, "significance": options.significance, "options": opts, "seconds": None,
+        "_arrays": {"dev_eta": dev.eta, "test_eta": test_data.eta, "oof": _errors_arrays(base_oof),
+                    "oof_final": None if final is None else _errors_arrays(final.oof),
+                    "test_before": _errors_arrays(test.baseline), "test_after": _errors_arrays(test.final)},
     }

@@ -32,7 +32,7 @@ from ..errors import CtrplanError
 from ..robot import Robot, Section
 
 __all__ = ["parameter", "needs_solve", "read_parameters", "apply_parameters", "REGISTRATION", "BASELINE_KINDS",
-           "BASELINE_PLAUSIBLE_CHANGE", "ParameterError"]
+           "BASELINE_PLAUSIBLE_CHANGE", "BASELINE_BOUND_FACTOR", "ParameterError"]
 
 #: Kinds of baseline (tube) parameters.
 BASELINE_KINDS = ("precurvature_y", "k_xy_relative")
@@ -44,6 +44,9 @@ REGISTRATION = ("registration_rx", "registration_ry", "registration_rz",
 #: by 1-30 %; a fit that needs more than +-50 % describes another tube set, or trades one
 #: parameter against a correlated one.
 BASELINE_PLAUSIBLE_CHANGE = 0.5
+#: Optimizer bounds of a baseline parameter: this factor below and above the robot file's value
+#: (strictly wider than the plausible range; a fit that ends there is reported at its bound).
+BASELINE_BOUND_FACTOR = 5.0
 
 
 class ParameterError(CtrplanError, ValueError):
@@ -69,14 +72,17 @@ def _baseline(robot: Robot, name: str) -> ParameterSpec | None:
         if j is None:
             raise ParameterError(f"calibration parameter {name!r}: tube {i + 1} has no curved section")
         v = robot.tubes[i].sections[j].precurvature[1]
+        if v == 0.0:
+            return ParameterSpec(name, kind, i, "1/m", -200.0, 200.0, 0.5)
         lo, hi = sorted((v * (1 - BASELINE_PLAUSIBLE_CHANGE), v * (1 + BASELINE_PLAUSIBLE_CHANGE)))
-        return ParameterSpec(name, kind, i, "1/m", -200.0, 200.0, 0.5, (lo, hi) if v != 0 else None,
+        blo, bhi = sorted((v / BASELINE_BOUND_FACTOR, v * BASELINE_BOUND_FACTOR))
+        return ParameterSpec(name, kind, i, "1/m", blo, bhi, 0.5, (lo, hi),
                              f"within +-{BASELINE_PLAUSIBLE_CHANGE:.0%} of the robot file's {v:.4g} 1/m")
     if i == 0:
         raise ParameterError("calibration parameter 'k_xy_relative_1': tube 1 is the stiffness reference "
                              "(only ratios matter); fit k_xy_relative_2..n")
     v = robot.tubes[i].k_xy / robot.tubes[0].k_xy
-    return ParameterSpec(name, kind, i, "-", 1e-3, 1e3, 0.05,
+    return ParameterSpec(name, kind, i, "-", v / BASELINE_BOUND_FACTOR, v * BASELINE_BOUND_FACTOR, 0.05,
                          (v * (1 - BASELINE_PLAUSIBLE_CHANGE), v * (1 + BASELINE_PLAUSIBLE_CHANGE)),
                          f"within +-{BASELINE_PLAUSIBLE_CHANGE:.0%} of the robot file's {v:.4g}")
 

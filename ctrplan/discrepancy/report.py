@@ -1,7 +1,8 @@
 """Report folder of the discrepancy workflow: ``report.md``, ``results.json`` and PNG plots.
 
-People read millimetres and degrees; the JSON keeps SI values where the key says so (``_m``,
-``_rad``) and millimetres / degrees where the key says ``_mm`` / ``_deg``.
+The report only formats the results (:func:`~ctrplan.discrepancy.output.discrepancy_results`);
+it computes nothing. People read millimetres and degrees; the JSON keeps SI values where the
+key says so (``_m``, ``_rad``) and millimetres / degrees where the key says ``_mm`` / ``_deg``.
 """
 
 from __future__ import annotations
@@ -13,17 +14,40 @@ import numpy as np
 
 from ..io.atomic import atomic_write_text
 
-__all__ = ["write_report"]
+__all__ = ["write_report", "TABLE_VIII"]
+
+#: The paper's gain with its friction model on its own grid data (Table VIII of Ha et al. 2019):
+#: relative fall of the mean and of the maximum tip position error.
+TABLE_VIII = {"mean": 0.46, "max": 0.49}
 
 
 def _fmt(x, nd=2):
     return "-" if x is None or (isinstance(x, float) and not np.isfinite(x)) else f"{x:.{nd}f}"
 
 
-def _row(name, s):
-    return (f"| {name} | {_fmt(s['position_mean_mm'])} +- {_fmt(s['position_std_mm'])} | "
-            f"{_fmt(s['position_max_mm'])} | {_fmt(s['tangent_mean_deg'])} | {_fmt(s['tangent_max_deg'])} | "
-            f"{_fmt(s['evaluation_ms_per_sample'], 1)} |")
+def _ci(d, nd=2, scale=1.0, unit=""):
+    """``value (low..high)`` of a ``{"value", "ci"}`` dict."""
+    lo, hi = d["ci"]
+    return f"{_fmt(d['value'] * scale, nd)}{unit} ({_fmt(lo * scale, nd)}..{_fmt(hi * scale, nd)})"
+
+
+def _value(row) -> str:
+    """A parameter row of a parameter table, with its standard error, in report units."""
+    from .fitting import display_value
+
+    text = display_value(row["name"], row["value"], row["unit"])
+    se = row.get("stderr")
+    if se is not None:
+        if not np.isfinite(se):
+            text += " (not determined by the data)"
+        else:
+            s = np.rad2deg(se) if row["unit"] == "rad" else se * 1e3 if row["unit"] == "m" else se
+            text += f" +- {s:.2g}"
+    if row.get("at_bound"):
+        text += " **at bound**"
+    if not row.get("in_plausible_range", True):
+        text += " **implausible**"
+    return text
 
 
 def _tangential(residual, tip):
@@ -38,47 +62,245 @@ def _plots(results: dict, out: Path) -> list[str]:
 
     a = results["_arrays"]
     files = []
-    # error histograms before / after
     fig = _figure((10, 3.8))
     axes = fig.subplots(1, 2)
-    before, after = a["before_position"] * 1e3, a["after_position"] * 1e3
+    before, after = a["test_before"]["position"] * 1e3, a["test_after"]["position"] * 1e3
     top = np.nanmax(np.concatenate([before, after]))
     bins = np.linspace(0, top if np.isfinite(top) and top > 0 else 1.0, 40)
+    final = results["test_split"]["label"]
     axes[0].hist(before[np.isfinite(before)], bins, alpha=0.6, label="baseline (standard, calibrated)")
-    axes[0].hist(after[np.isfinite(after)], bins, alpha=0.6,
-                 label=f"with {results['named_label']}" if results["named_effect"] else "after (no effect named)")
-    axes[0].set_xlabel("held-out tip position error [mm]")
+    axes[0].hist(after[np.isfinite(after)], bins, alpha=0.6, label=final)
+    axes[0].set_xlabel("test-split tip position error [mm]")
     axes[0].set_ylabel("samples")
     axes[0].legend(fontsize=8)
-    ab, aa = np.rad2deg(a["before_angle"]), np.rad2deg(a["after_angle"])
+    ab, aa = np.rad2deg(a["test_before"]["angle"]), np.rad2deg(a["test_after"]["angle"])
     if np.isfinite(ab).any():
         top = np.nanmax(np.concatenate([ab, aa]))
         bins = np.linspace(0, top, 40)
         axes[1].hist(ab[np.isfinite(ab)], bins, alpha=0.6, label="baseline")
-        axes[1].hist(aa[np.isfinite(aa)], bins, alpha=0.6, label="after")
+        axes[1].hist(aa[np.isfinite(aa)], bins, alpha=0.6, label="final")
         axes[1].legend(fontsize=8)
-    axes[1].set_xlabel("held-out tip tangent error [deg]")
-    fig.suptitle("Error histograms before and after adding the named effect")
+    axes[1].set_xlabel("test-split tip tangent error [deg]")
+    fig.suptitle("Error histograms on the untouched test split, before and after")
     files.append(_save(fig, out / "error_histograms.png").name)
 
-    # residuals by approach direction
-    eta = np.asarray(a["val_eta"], int)
+    eta = np.asarray(a["dev_eta"], int)
     combos = sorted({tuple(e) for e in eta}, reverse=True)
     fig = _figure((10, 3.8))
     axes = fig.subplots(1, 2, sharey=True)
-    for ax, key, title in ((axes[0], "before_residual", "baseline"), (axes[1], "after_residual", "after")):
-        tang = _tangential(a[key], a["val_tip_base"]) * 1e3
+    panels = [(axes[0], a["oof"], "baseline"), (axes[1], a["oof_final"] or a["oof"], "final model")]
+    for ax, arr, title in panels:
+        tang = _tangential(np.asarray(arr["residual"]), np.asarray(arr["tip_base"])) * 1e3
         data = [tang[np.all(eta == np.array(c), axis=1) & np.isfinite(tang)] for c in combos]
         ax.boxplot(data, showfliers=False)
         ax.set_xticks(range(1, len(combos) + 1))
         ax.set_xticklabels([",".join("+" if v > 0 else "-" if v < 0 else "0" for v in c) for c in combos])
         ax.axhline(0.0, color="k", lw=0.5)
-        ax.set_xlabel("approach direction eta (pair 1, pair 2, ...)")
+        ax.set_xlabel("direction of the last relative rotation eta (pair 1, pair 2, ...)")
         ax.set_title(title)
-    axes[0].set_ylabel("residual about the base axis [mm]")
-    fig.suptitle("Held-out residual (tangential component) by approach direction")
+    axes[0].set_ylabel("out-of-fold residual about the base axis [mm]")
+    fig.suptitle("Out-of-fold residual (tangential component) by direction of the last relative rotation")
     files.append(_save(fig, out / "residuals_by_direction.png").name)
     return files
+
+
+def _verdict_lines(results: dict) -> list[str]:
+    from .decision import no_effect_sentence
+
+    d = results["decision"]
+    ts = results["test_split"]
+    f = ts["figures"]
+    gain = (f"On the untouched test split ({f['n_samples']} samples, {f['n_units']} units) it changes the mean tip "
+            f"position error {_ci(f['before']['mean_mm'])} -> {_ci(f['after']['mean_mm'])} mm (shrink "
+            f"{_ci(f['shrink']['mean'], 0, 100, ' %')}), the p95 {_ci(f['before']['p95_mm'])} -> "
+            f"{_ci(f['after']['p95_mm'])} mm (shrink {_ci(f['shrink']['p95'], 0, 100, ' %')}) and the maximum "
+            f"{_ci(f['before']['max_mm'])} -> {_ci(f['after']['max_mm'])} mm (shrink "
+            f"{_ci(f['shrink']['max'], 0, 100, ' %')}); {100 * f['confidence']:.0f} % intervals by {f['method']}. "
+            f"Table VIII of Ha et al. 2019 (friction, grid data): mean -{100 * TABLE_VIII['mean']:.0f} %, max "
+            f"-{100 * TABLE_VIII['max']:.0f} %.")
+    if d["verdict"] == "none":
+        return [f"**No effect named.** {no_effect_sentence(d, results['noise'], results['candidates'])}.", ""]
+    comb = results.get("combination") or {}
+    if d["verdict"] == "ambiguous":
+        a, b = results["candidates"][d["named"]]["label"], results["candidates"][d["ambiguous_with"]]["label"]
+        head = (f"**Ambiguous: {a} or {b}.** Both lower the cross-validated error, and the data cannot tell them apart "
+                f"within their uncertainty. Data that would separate them: {d['separated_by']}. The updated model "
+                f"file carries {ts['label']} (the better of the two on the development data).")
+    else:
+        head = f"**Named missing effect{'s' if comb.get('named') else ''}: {ts['label']}.**"
+    return [head + " " + gain, ""]
+
+
+def _split_lines(results: dict) -> list[str]:
+    s = results["split"]
+    return ["## Samples", "",
+            f"- {results['n_samples']} samples in the {results['frame']} frame; {s['how']}.",
+            f"- Folds: {s['n_folds']} of {', '.join(map(str, s['fold_samples']))} samples ({', '.join(map(str, s['fold_units']))} "
+            f"units); each fold is predicted by models fitted on the others (at most {s['max_fit_samples']} samples a fit).",
+            f"- Test split: {s['n_test']} samples (units {', '.join(map(str, s['test_units']))}), evaluated once, "
+            f"after the verdict.", ""]
+
+
+def _candidate_lines(results: dict) -> list[str]:
+    yes = (lambda b: "yes" if b else "no")
+    lines = ["## Candidate effects (cross-validated on the development samples)", "",
+             "| effect | fitted parameters (+- standard error) | out-of-fold mean / max [mm] | improvement [mm + deg] "
+             "(95 % interval) | p | Holm | plausible, not at bound | eligible |", "|---|---|---|---|---|---|---|---|"]
+    notes = []
+    base = results["baseline"]["out_of_fold"]
+    lines.append(f"| baseline (standard, calibrated) | - | {_fmt(base['position_mean_mm'], 3)} / "
+                 f"{_fmt(base['position_max_mm'], 3)} | - | - | - | - | - |")
+    for e, c in results["candidates"].items():
+        params = "; ".join(_value(r) for r in c["parameter_table"]) or "none (nominal)"
+        imp = c["improvement_eq49"]
+        if c.get("fit_note"):
+            notes.append(f"- {c['label']}: {c['fit_note']}.")
+        lines.append(f"| {c['label']} | {params} | {_fmt(c['out_of_fold']['position_mean_mm'], 3)} / "
+                     f"{_fmt(c['out_of_fold']['position_max_mm'], 3)} | {_fmt(imp['mean_difference'], 3)} "
+                     f"({_fmt(imp['ci'][0], 3)}..{_fmt(imp['ci'][1], 3)}) | {imp['p_value']:.4f} | "
+                     f"{yes(c.get('improvement_significant'))} | {yes(c['plausible'] and not c['at_bound'])} | "
+                     f"{yes(c.get('eligible'))} |")
+    d = results["decision"]
+    lines += ["", f"Rule: {d['rule']}.", ""]
+    lines += [f"- {n}." for n in d["notes"]]
+    if notes:
+        lines += ["", "Fits:", ""] + notes
+    return lines + [""]
+
+
+def _baseline_lines(results: dict) -> list[str]:
+    b = results["baseline"]
+    lines = ["## Baseline parameters", "",
+             f"Fit on the development samples: {b['fit']['message']}" + ("" if b["fit"]["converged"] else
+                                                                        " (**not converged**)") + ".", "",
+             "| parameter | value +- standard error | robot file | change | plausible range |", "|---|---|---|---|---|"]
+    for r in b["parameter_table"]:
+        ref = "-" if r.get("reference") is None else f"{r['reference']:.4g}"
+        change = "-" if r.get("relative_change") is None else f"{100 * r['relative_change']:+.0f} %"
+        rng = "-" if r["plausible"] is None else f"{r['plausible'][0]:.4g}..{r['plausible'][1]:.4g}"
+        lines.append(f"| {r['name']} | {_value(r)} | {ref} | {change} | {rng} |")
+    corr = b["fit"].get("correlation")
+    if corr is not None:
+        names = list(b["fit"]["parameters"])
+        strong = [(names[i], names[j], corr[i][j]) for i in range(len(names)) for j in range(i + 1, len(names))
+                  if corr[i][j] is not None and np.isfinite(corr[i][j]) and abs(corr[i][j]) >= 0.9]
+        if strong:
+            lines += ["", "Strongly correlated (|r| >= 0.9; the data determine their combination better than each): "
+                      + ", ".join(f"{a} and {c} ({r:+.2f})" for a, c, r in strong) + "."]
+    return lines + [""]
+
+
+def _signature_lines(results: dict) -> list[str]:
+    lines = ["## Signature tests (out-of-fold residuals of the baseline)", "",
+             "| effect | effect size [mm] | p-value | statistic | units | test |", "|---|---|---|---|---|---|"]
+    for e, t in results["signature_tests"].items():
+        if not t.get("testable", True):
+            lines.append(f"| {t['label']} | - | - | - | - | {t['description']} |")
+            continue
+        lines.append(f"| {t['label']} | {t['effect_size_mm']:.3f} | {t['p_value']:.4f} | {t['statistic']:.4g} | "
+                     f"{t['n_units']} | {t['description']} |")
+    for e, why in (results.get("skipped_effects") or {}).items():
+        lines.append(f"| {e} | - | - | - | - | not tried, because {why} |")
+    return lines + ["", "The signature tests are evidence for a reader; the verdict rests on the cross-validated "
+                        "improvement.", ""]
+
+
+def _noise_lines(results: dict) -> list[str]:
+    n = results["noise"]
+    t = n.get("test")
+    text = f"Sensor noise: {n['noise']['description']} (source: {n['noise']['source'] or 'none'}); "
+    text += f"out-of-fold baseline rms position error {n['rms_mm']:.3f} mm"
+    if t:
+        text += (f" = {n['ratio']:.2f} x the noise; {'consistent' if t['consistent'] else '**not consistent**'} with noise "
+                 f"(F = {t['statistic']:.3g}, threshold {t['threshold']:.3g} at false-alarm rate "
+                 f"{t['false_alarm_rate']:g}, allowing {100 * (t['inflation'] - 1):.0f} % for the fitted parameters).")
+    return [text, ""]
+
+
+def _combination_lines(results: dict) -> list[str]:
+    comb = results.get("combination")
+    if not comb:
+        return []
+    lines = ["## A second effect on top of the named one", "", f"Rule: {comb['rule']}.", ""]
+    if comb["tried"]:
+        lines += ["| pair | fitted parameters | out-of-fold mean [mm] | improvement over the first (95 % interval) | p | "
+                  "named |", "|---|---|---|---|---|---|"]
+        for e, c in comb["tried"].items():
+            imp = c["improvement_eq49"]
+            lines.append(f"| {c['label']} | {'; '.join(_value(r) for r in c['parameter_table'])} | "
+                         f"{_fmt(c['out_of_fold']['position_mean_mm'], 3)} | {_fmt(imp['mean_difference'], 3)} "
+                         f"({_fmt(imp['ci'][0], 3)}..{_fmt(imp['ci'][1], 3)}) | {imp['p_value']:.4f} | "
+                         f"{'yes' if e == comb['named'] else 'no'} |")
+        lines.append("")
+    lines += [f"- not tried: {results['candidates'][e]['label']}, because {why}." for e, why in comb["not_tried"].items()]
+    return lines + [""]
+
+
+def _prediction_lines(results: dict) -> list[str]:
+    pred = results.get("prediction")
+    if not pred:
+        return []
+    lines = ["## Prediction with the motion history (test split)", "", pred["description"], "",
+             "| model | samples | mean [mm] | p95 [mm] | max [mm] |", "|---|---|---|---|---|"]
+    for row in pred["rows"]:
+        lines.append(f"| {row['label']} | {row['n']} | {_fmt(row['mean_mm'])} | {_fmt(row['p95_mm'])} | "
+                     f"{_fmt(row['max_mm'])} |")
+    for env in pred.get("envelopes") or []:
+        coeff = ", ".join(f"{k} = {v:.3g}" for k, v in env.get("coefficients", {}).items())
+        lines += ["", f"Envelope coverage ({env.get('label', 'fitted')} coefficients {coeff}; {env['description']}): "
+                      f"{env['inside']} of {env['n']} measured tips ({100 * env['fraction_inside']:.0f} %) lie inside "
+                      f"the envelope of the bounding solutions plus {env['margin_mm']:.2f} mm of sensor noise; the "
+                      f"others lie outside by median {_fmt(env['outside_median_mm'])} mm, p95 "
+                      f"{_fmt(env['outside_p95_mm'])} mm, max {_fmt(env['outside_max_mm'])} mm. Median envelope size: "
+                      f"{_fmt(env['size_median_mm'])} mm."]
+    return lines + [""]
+
+
+def _prediction_check_lines(results: dict) -> list[str]:
+    pc = results.get("prediction_check")
+    if not pc:
+        return []
+    lines = [f"Measured prediction error on the test split ({pc['n_samples']} samples; {100 * pc['confidence']:.0f} % "
+             f"block-bootstrap intervals):", "", "| model | mean [mm] | p95 [mm] | max [mm] |", "|---|---|---|---|"]
+    for side, label in (("standard", "standard model, calibrated"), ("history", pc["history_label"])):
+        f = pc[side]
+        lines.append(f"| {label} | {_ci(f['mean_mm'])} | {_ci(f['p95_mm'])} | {_ci(f['max_mm'])} |")
+    lines += ["", ("The history-aware prediction beats the standard model in mean and max: planning may aim with it."
+                   if pc["history_beats_standard"] else
+                   "The history-aware prediction does NOT beat the standard model in both mean and max: planning "
+                   "aims with the standard model with this robot file."), ""]
+    return lines
+
+
+def _bound_lines(results: dict) -> list[str]:
+    b = results.get("bound")
+    if not b:
+        return []
+    raw, cal, tl = b["raw_test"], b["test"], b.get("translation_last")
+
+    def share(d):
+        return "-" if d["covered"] is None else (f"{100 * d['covered']:.0f} % ({100 * d['ci'][0]:.0f}.."
+                                                 f"{100 * d['ci'][1]:.0f} %)")
+
+    def ratio(d):
+        r = d["ratio"]
+        return " / ".join(_fmt(r[k]) for k in ("median", "p90", "max"))
+
+    lines = ["## The friction bound against the measured tips (test split)", "", f"Definition: {b['definition']} "
+             f"(m = {b['margin_mm']:.2f} mm from {b['noise_rms_mm']:.3f} mm rms noise).", "",
+             "| bound | samples | covered (95 % interval) | e / (b + m): median / p90 / max | median size [mm] |",
+             "|---|---|---|---|---|",
+             f"| friction bound b + m | {raw['n']} | {share(raw)} | {ratio(raw)} | "
+             f"{_fmt(None if raw['bound_median_m'] is None else raw['bound_median_m'] * 1e3 + b['margin_mm'])} |",
+             f"| calibrated bound {b['factor']:.3g} x (b + m) | {cal['n']} | {share(cal)} | {ratio(cal)} | "
+             f"{_fmt(cal.get('bound_median_mm'))} |"]
+    if tl:
+        lines.append(f"| translation-last bound + m (after a final translation of every pair) | {tl['n']} | {share(tl)} | "
+                     f"{ratio(tl)} | {_fmt(None if tl['bound_median_m'] is None else tl['bound_median_m'] * 1e3 + b['margin_mm'])} |")
+    lines += ["", f"Calibrated bound: {b['method']}; target {100 * b['target']:.0f} %: "
+                  + ("**FAILING** on the test split (its coverage misses the target)." if b["failing"] else
+                     "met on the test split within its interval or 5 points."), ""]
+    return lines
 
 
 def write_report(results: dict, out_dir) -> dict:
@@ -101,166 +323,27 @@ def write_report(results: dict, out_dir) -> dict:
     public = {k: v for k, v in results.items() if not k.startswith("_")}
     public["plots"] = plots
     atomic_write_text(out / "results.json", json.dumps(public, indent=2, default=_plain))
-
-    base, after = results["baseline"]["held_out"], results["after"]
-    named = results["named_effect"]
     lines = [f"# Discrepancy report: {Path(results['robot_file']).name} on {Path(results['data_file']).name}", ""]
-    if named:
-        red = 1.0 - after["position_mean_mm"] / base["position_mean_mm"]
-        redmax = 1.0 - after["position_max_mm"] / base["position_max_mm"]
-        change = (f"lowers the maximum by {100 * redmax:.0f}%" if redmax >= 0
-                  else f"raises the maximum by {-100 * redmax:.0f}%")
-        comb = results.get("combination") or {}
-        label = (comb["tried"][comb["named"]]["label"] if comb.get("named") else results["named_label"])
-        lines += [f"**Named missing effect{'s' if comb.get('named') else ''}: {label}.** Adding "
-                  f"{'them' if comb.get('named') else 'it'} "
-                  f"{'lowers' if red >= 0 else 'raises'} the held-out mean tip position error by "
-                  f"{100 * abs(red):.0f}% and {change}.", ""]
-    else:
-        lines += [_no_effect_paragraph(results), ""]
-    lines += _combination_lines(results)
-    decision = results.get("decision") or {}
-    if named and decision.get("notes"):
-        lines += ["Decision:", ""] + [f"- {n}." for n in decision["notes"]] + [""]
-    noise = results.get("noise")
-    if noise:
-        ratio = "" if noise["ratio"] is None else f" = {noise['ratio']:.2f} x the noise"
-        lines += [f"Sensor noise: {noise['noise']['description']}; held-out baseline rms position error "
-                  f"{noise['rms_mm']:.3f} mm{ratio} (consistent with noise when <= {noise['threshold_ratio']}).", ""]
+    lines += _verdict_lines(results)
     if results.get("cautions"):
         lines += ["Cautions:", ""] + [f"- {c}." for c in results["cautions"]] + [""]
-    lines += [f"- data: {results['n_samples']} samples in the {results['frame']} frame; split {results['split']};",
-              f"- calibration fit on {results['n_fit']} samples, errors on {results['n_validation']} held-out samples;",
-              f"- baseline parameters: {', '.join(results['baseline_parameters'])};",
-              f"- updated model file: `{Path(results['updated_model_file']).name}` (evaluate with the "
-              f"{results['updated_model']} model); loaded back, it reproduces the held-out errors: "
-              f"{'yes' if results['reproduced'] else 'NO'} on {results['reproduced_samples']} samples (mean {results['reproduced_position_mean_mm']:.3f} mm);",
-              f"- total time {results['seconds']:.0f} s.", "",
-              "## Held-out error (in the form of Table VIII of Ha et al. 2019)", "",
-              "| model | tip position mean +- std [mm] | max [mm] | tangent mean [deg] | max [deg] | "
-              "evaluation [ms/sample] |",
-              "|---|---|---|---|---|---|",
-              _row("baseline: standard, calibrated", base)]
-    for e, c in results["candidates"].items():
-        lines.append(_row(f"+ {c['label']} ({c['model']} model)" + (" **named**" if e == named else ""),
-                          c["held_out"]))
-    lines += ["", "## Signature tests (held-out residuals of the baseline)", "",
-              "| effect | effect size [mm] | p-value | statistic | units | test |", "|---|---|---|---|---|---|"]
-    for e, t in results["signature_tests"].items():
-        if not t.get("testable", True):
-            lines.append(f"| {t['label']} | - | - | - | - | {t['description']} |")
-            continue
-        lines.append(f"| {t['label']} | {t['effect_size_mm']:.3f} | {t['p_value']:.4f} | {t['statistic']:.4g} | "
-                     f"{t['n_units']} | {t['description']} |")
-    for e, why in (results.get("skipped_effects") or {}).items():
-        lines.append(f"| {e} | - | - | - | - | not tried, because {why} |")
-    lines += ["", f"Significance level {results['significance']}; permutation p-values are bounded below by "
-              f"1 / (permutations + 1).", "", "## Candidate effects", "",
-              "| effect | fitted parameters | dBIC | held-out mean change [mm] | improvement p | signature | "
-              "improvement | BIC | eligible |", "|---|---|---|---|---|---|---|---|---|"]
-    notes = []
-    for e, c in results["candidates"].items():
-        params = ", ".join(f"{k} = {v:.4g}" + (" (implausible)" if any(b["name"] == k for b in c.get("implausible", []))
-                                               else "") for k, v in c["parameters"].items()) or "none (nominal)"
-        if c.get("fit_note"):
-            notes.append(f"- {c['label']}: {c['fit_note']}.")
-        dm = c["held_out"]["position_mean_mm"] - base["position_mean_mm"]
-        yes = (lambda b: "yes" if b else "no")
-        lines.append(f"| {c['label']} | {params} | {c['delta_bic']:.1f} | {dm:+.3f} | "
-                     f"{c['improvement_eq49']['p_value']:.4f} | {yes(c['signature_significant'])} | "
-                     f"{yes(c['improvement_significant'])} | {yes(c['bic_better'])} | {yes(c['eligible'])} |")
-    base_fit = results["baseline"]["fit"]
-    lines += ["", f"Baseline fit: {base_fit['message']}" + ("" if base_fit.get("converged", True) else
-                                                            " (**not converged**)") + "."]
-    cfit = results.get("contact_baseline")
-    if cfit:
-        lines += ["", f"Clearance-model refit of the tube parameters (shared by the clearance and friction candidates): "
-                      f"cost {cfit['cost']:.4g}; {cfit['message']}" + ("" if cfit.get("converged", True) else
-                                                                     " (**not converged**)") + "."]
-    if notes:
-        lines += ["", "Fits:", ""] + notes
-    lines += ["", "Rule: an effect is eligible when its signature test is significant, its held-out improvement "
-              "(Eq. (49) residual, paired sign-flip test over held-out configurations or time blocks) is "
-              f"significant, and its BIC is lower than the baseline's by more than {results['bic_margin']}. "
-              "Among the eligible effects whose fitted values are plausible (all eligible ones if none is), the "
-              "largest held-out improvement is named; eligible effects whose held-out residual does not differ "
-              "significantly from the named one's are listed as equally good.", ""]
-    lines += _prediction_section(results)
-    lines += ["## Plots", ""]
+    lines += _noise_lines(results)
+    lines += _split_lines(results)
+    lines += _candidate_lines(results)
+    lines += _combination_lines(results)
+    lines += _baseline_lines(results)
+    lines += _signature_lines(results)
+    lines += _prediction_lines(results)
+    lines += _prediction_check_lines(results)
+    lines += _bound_lines(results)
+    lines += ["## Updated model file", "",
+              f"`{Path(results['updated_model_file']).name}` (evaluate with the {results['updated_model']} model); loaded "
+              f"back, it reproduces the test split's errors: {'yes' if results['reproduced'] else '**NO**'} "
+              f"(mean {results['reproduced_position_mean_mm']:.3f} mm over {results['reproduced_samples']} samples). "
+              f"Total time {results['seconds']:.0f} s.", "", "## Plots", ""]
     lines += [f"![{p}]({p})" for p in plots]
     atomic_write_text(out / "report.md", "\n".join(lines) + "\n")
     return {"markdown": str(out / "report.md"), "json": str(out / "results.json"), "plots": plots}
-
-
-def _combination_lines(results: dict) -> list[str]:
-    """The second effect tried on top of the named one: steps of a named pair, every pair tried,
-    fitted values in deg / mm (SI in the JSON)."""
-    from .fitting import display_value
-
-    comb = results.get("combination")
-    if not comb:
-        return []
-    lines = ["## Combination of effects", "",
-             f"Rule for a second effect: {comb['rule']}.", ""]
-    if comb["named"]:
-        c = comb["tried"][comb["named"]]
-        lines += [f"**Named combination: {c['label']}** ({c['model']} model). Steps (held-out):", ""]
-        for k, st in enumerate(comb["steps"], 1):
-            imp = st["improvement_eq49"]
-            lines.append(f"{k}. {st['label']}: mean {st['held_out_mean_mm']:.3f} mm, max {st['held_out_max_mm']:.3f} mm; "
-                         f"Eq. (49) improvement over {'the baseline' if st['over'] == 'baseline' else 'step 1'} "
-                         f"{imp['mean_difference']:.3f} (mm + deg), p = {imp['p_value']:.4f}")
-        lines.append("")
-    if comb["tried"]:
-        lines += ["| pair | fitted parameters | held-out mean [mm] | max [mm] | improvement over the first p | "
-                  "dBIC over the first | converged | named |", "|---|---|---|---|---|---|---|---|"]
-        for e, c in comb["tried"].items():
-            params = ", ".join(display_value(n, v, c["units"][n]) for n, v in c["parameters"].items())
-            lines.append(f"| {c['label']} | {params} | {_fmt(c['held_out']['position_mean_mm'], 3)} | "
-                         f"{_fmt(c['held_out']['position_max_mm'], 3)} | {c['improvement_eq49']['p_value']:.4f} | "
-                         f"{c['delta_bic']:.1f} | {'yes' if c['converged'] else '**no**'} | "
-                         f"{'yes' if e == comb['named'] else 'no'} |")
-        lines.append("")
-    lines += [f"- {n}." for n in comb["notes"]]
-    return lines + ([""] if comb["notes"] else [])
-
-
-def _no_effect_paragraph(results: dict) -> str:
-    case = (results.get("decision") or {}).get("no_effect_case")
-    noise = results.get("noise") or {}
-    head = ("**No effect named.** No candidate had a significant residual signature, a significant held-out "
-            "improvement and a better BIC together. ")
-    if case == "noise":
-        return head + (f"The held-out residual of the calibrated baseline (rms {noise['rms_mm']:.3f} mm) is "
-                       f"consistent with the sensor noise ({noise['noise']['description']}).")
-    if case == "unexplained":
-        return head + (f"The held-out residual of the calibrated baseline (rms {noise['rms_mm']:.3f} mm, "
-                       f"{noise['ratio']:.1f} times the sensor noise, {noise['noise']['description']}) is **not** "
-                       f"consistent with noise: the model misses something that none of the candidates explains.")
-    return head + ("Whether the residual is noise cannot be said: the sensor noise is unknown (give "
-                   "`--noise-position-mm`).")
-
-
-def _prediction_section(results: dict) -> list[str]:
-    """History-aware prediction and friction-envelope coverage (issue 13, Sec. 3)."""
-    pred = results.get("prediction")
-    if not pred:
-        return []
-    lines = ["## Prediction with the motion history (held-out data)", "",
-             pred["description"], "",
-             "| model | samples | mean [mm] | p95 [mm] | max [mm] |", "|---|---|---|---|---|"]
-    for row in pred["rows"]:
-        lines.append(f"| {row['label']} | {row['n']} | {_fmt(row['mean_mm'])} | {_fmt(row['p95_mm'])} | "
-                     f"{_fmt(row['max_mm'])} |")
-    for env in pred.get("envelopes") or ([pred["envelope"]] if pred.get("envelope") else []):
-        coeff = ", ".join(f"{k} = {v:.3g}" for k, v in env.get("coefficients", {}).items())
-        lines += ["", f"Envelope coverage ({env.get('label', 'fitted')} coefficients {coeff}; {env['description']}): "
-                      f"{env['inside']} of {env['n']} measured tips ({100 * env['fraction_inside']:.0f} %) lie inside "
-                      f"the envelope of the bounding solutions plus {env['margin_mm']:.2f} mm of sensor noise; the "
-                      f"others lie outside by median {_fmt(env['outside_median_mm'])} mm, p95 "
-                      f"{_fmt(env['outside_p95_mm'])} mm, max {_fmt(env['outside_max_mm'])} mm. Median envelope size "
-                      f"(largest distance between two bounding tips): {_fmt(env['size_median_mm'])} mm."]
-    return lines + [""]
 
 
 def _plain(x):
@@ -268,4 +351,6 @@ def _plain(x):
         return x.tolist()
     if isinstance(x, (np.floating, np.integer, np.bool_)):
         return x.item()
+    if isinstance(x, float) and not np.isfinite(x):
+        return None
     return str(x)

@@ -590,18 +590,19 @@ class SignatureContext:
 
 
 def diagnose_residuals(setup, split, baseline, options, echo=print) -> dict:
-    """Stage 4: one signature test per candidate effect on the baseline's held-out residuals.
+    """Stage 4: one signature test per candidate effect on the baseline's out-of-fold residuals
+    at the development samples.
 
-    Each effect's own test (``Effect.signature``) runs on a :class:`SignatureContext` of the
-    held-out samples.
+    Each effect's own test (``Effect.signature``) runs on a :class:`SignatureContext` of those
+    samples.
 
     Parameters
     ----------
     setup : DiscrepancySetup
-    split : SampleSplit
-        Only its held-out samples are read.
+    split : DataSplit
+        Only its development samples are read.
     baseline : Baseline
-        Its held-out residual vectors [m] are tested.
+        Its out-of-fold residual vectors [m] are tested.
     options : DiscrepancyOptions
         ``n_permutations``, ``seed``, ``n_jobs``.
     echo : callable
@@ -616,12 +617,12 @@ def diagnose_residuals(setup, split, baseline, options, echo=print) -> dict:
     from .parameters import apply_parameters
     from .split import configurations_repeat
 
-    val, params = split.val, baseline.params
+    dev, params = setup.data.take(split.dev_rows), baseline.params
     echo("testing residual signatures ...")
-    groups = val.config_id if configurations_repeat(val.config_id) else configuration_groups(
-        val.alpha, val.beta, TRAJECTORY_ROTATION_BIN, TRAJECTORY_TRANSLATION_BIN)
+    groups = dev.config_id if configurations_repeat(dev.config_id) else configuration_groups(
+        dev.alpha, dev.beta, TRAJECTORY_ROTATION_BIN, TRAJECTORY_TRANSLATION_BIN)
     base_robot = apply_parameters(setup.robot, tuple(params), tuple(params.values()))
-    ctx = SignatureContext(setup.robot, base_robot, val, baseline.held_out.residual_base, baseline.held_out.tip_base,
+    ctx = SignatureContext(setup.robot, base_robot, dev, baseline.oof.residual_base, baseline.oof.tip_base,
                            groups, setup.settings, n_jobs=options.n_jobs, n_permutations=options.n_permutations,
                            seed=options.seed, cache=setup.stages, alpha_step=ALPHA_STEP)
     tests = {}

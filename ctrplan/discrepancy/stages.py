@@ -83,7 +83,7 @@ def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
     """
     keyed = {k: v for k, v in asdict(options).items()
              if k not in ("n_jobs", "n_permutations", "significance", "noise_position", "envelope_samples",
-                          "reference_friction", "effects")}
+                          "reference_friction", "effects", "bound_target", "bound_samples")}
     keyed["fit_version"] = FIT_VERSION
     keyed["effects"] = sorted(options.effects if options.effects is not None else REGISTRY)
     return hashlib.sha256(Path(robot_path).read_bytes() + Path(data_path).read_bytes()

@@ -7,23 +7,28 @@ mm + deg of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906):
 1. :func:`~ctrplan.discrepancy.setup.load_inputs`: robot, data, baseline parameters, the
    candidate effects of the registry (:mod:`ctrplan.effects`) the data can show, and the store
    of finished stages (:mod:`ctrplan.discrepancy.stages`);
-2. :func:`~ctrplan.discrepancy.split.split_samples`: calibration and held-out samples;
+2. :func:`~ctrplan.discrepancy.split.split_samples`: an untouched test split held back, the rest
+   (development) in blocked cross-validation folds;
 3. :func:`~ctrplan.discrepancy.fitting.calibrate_baseline`: the standard model by least squares
-   on Eq. (49), evaluated on the held-out samples (:mod:`ctrplan.discrepancy.evaluation`);
-4. :func:`~ctrplan.discrepancy.signatures.diagnose_residuals`: each effect's signature test;
-5. :func:`~ctrplan.discrepancy.decision.check_noise`: the sensor noise against the residual;
+   on Eq. (49), on the development samples and without each fold: out-of-fold errors;
+4. :func:`~ctrplan.discrepancy.signatures.diagnose_residuals`: each effect's signature test on the
+   baseline's out-of-fold residuals;
+5. :func:`~ctrplan.discrepancy.decision.check_noise`: the sensor noise against them;
 6. :func:`~ctrplan.discrepancy.fitting.refit_contact_baseline` and
    :func:`~ctrplan.discrepancy.fitting.fit_candidates`: every candidate fitted by its entry's
-   strategy and scored on the held-out samples;
-7. :func:`~ctrplan.discrepancy.decision.name_effect`: the named effect (significant signature,
-   significant held-out improvement, BIC, plausible values);
+   strategy and cross-validated;
+7. :func:`~ctrplan.discrepancy.decision.name_effect`: the verdict (named, ambiguous or none);
 8. :func:`~ctrplan.discrepancy.fitting.fit_second_effect`: a second effect on top of it;
-9. :func:`~ctrplan.discrepancy.envelope.predict_with_history`: the history-aware prediction and
-   the friction envelope;
-10. :func:`~ctrplan.discrepancy.output.write_updated_model` and
+9. :func:`~ctrplan.discrepancy.output.evaluate_test_split`: the final model's gain on the test
+   split, with intervals (the only use of the test split for a decision's figures);
+10. :func:`~ctrplan.discrepancy.envelope.predict_with_history`: the history-aware prediction and
+    the friction envelope on the test split (:func:`~ctrplan.discrepancy.output.validate_prediction`),
+    and :func:`~ctrplan.discrepancy.coverage.check_bound`: the friction bound's coverage of the
+    measured tips and a bound calibrated to cover a chosen share;
+11. :func:`~ctrplan.discrepancy.output.write_updated_model` and
     :func:`~ctrplan.discrepancy.output.check_reproduction`: one robot file with what was learned,
     reloaded and checked;
-11. :func:`~ctrplan.discrepancy.output.discrepancy_results`: the results dictionary, which
+12. :func:`~ctrplan.discrepancy.output.discrepancy_results`: the results dictionary, which
     :mod:`ctrplan.discrepancy.report` formats.
 
 Every stage that fits or evaluates reads its result from ``out_dir/.stages`` when an earlier run
@@ -36,10 +41,11 @@ import time
 
 from .decision import check_noise, name_effect
 from .envelope import predict_with_history
-from .evaluation import HeldOut, evaluate_held_out
 from .fitting import calibrate_baseline, fit_candidates, fit_second_effect, refit_contact_baseline
 from .options import DiscrepancyOptions
-from .output import check_reproduction, discrepancy_results, write_updated_model
+from .coverage import check_bound
+from .output import (check_reproduction, discrepancy_results, evaluate_test_split, final_parameters,
+                     validate_prediction, write_updated_model)
 from .setup import load_inputs
 from .signatures import diagnose_residuals
 from .split import split_samples
@@ -75,29 +81,29 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     Raises
     ------
     DataFileError
-        Bad data (see :func:`load_measured_data`), or fewer calibration samples than parameters.
+        Bad data (see :func:`load_measured_data`), or too few samples for the split.
     ModelFileError, PhysicalParameterError
         Bad robot file.
     """
     t_start = time.perf_counter()
     setup = load_inputs(robot_path, data_path, out_dir, options)
     split = split_samples(setup, options, echo)
-
-    def held_out(name, model, params) -> HeldOut:
-        return evaluate_held_out(setup, split, name, model, params, n_jobs=options.n_jobs, progress=progress,
-                                 echo=echo)
-
-    baseline = calibrate_baseline(setup, split, options, held_out, echo)
+    baseline = calibrate_baseline(setup, split, options, echo, progress)
     tests = diagnose_residuals(setup, split, baseline, options, echo)
-    noise = check_noise(setup, baseline, options, echo)
+    noise = check_noise(setup, split, baseline, options, echo)
     contact = refit_contact_baseline(setup, split, baseline, options, echo)
-    candidates = fit_candidates(setup, split, baseline, contact, options, held_out, echo)
+    candidates = fit_candidates(setup, split, baseline, contact, options, echo, progress)
     naming = name_effect(split, candidates, tests, noise, options, echo)
-    combination = fit_second_effect(setup, split, baseline, naming, options, held_out, echo)
-    prediction = predict_with_history(setup, split, baseline, naming, noise, options, held_out, echo)
-    updated = write_updated_model(setup, baseline, naming, combination, echo)
-    reproduction = check_reproduction(setup, split, updated, options, echo)
-    results = discrepancy_results(setup, split, baseline, contact, tests, noise, naming, combination, prediction,
-                                  updated, reproduction, options, echo)
+    combination = fit_second_effect(setup, split, baseline, contact, naming, options, echo, progress)
+    test = evaluate_test_split(setup, split, baseline, naming, combination, options, echo, progress)
+    prediction = predict_with_history(setup, split, baseline, naming, noise, options, echo, progress)
+    prediction_check = validate_prediction(prediction, split, options.seed)
+    bound = (check_bound(setup, split, baseline, test, final_parameters(naming, combination, baseline), noise, options,
+                         echo) if options.bound_samples > 0 else None)
+    updated = write_updated_model(setup, baseline, naming, combination, test, echo, bound=bound,
+                                  prediction_check=prediction_check)
+    reproduction = check_reproduction(setup, split, updated, test, options, echo)
+    results = discrepancy_results(setup, split, baseline, contact, tests, noise, naming, combination, test, prediction,
+                                  updated, reproduction, options, echo, bound=bound, prediction_check=prediction_check)
     results["seconds"] = time.perf_counter() - t_start
     return results

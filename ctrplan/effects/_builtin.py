@@ -189,7 +189,9 @@ register(Effect(
     signature=lambda ctx: ctx.direction_test("friction"),
     synth_option="--mu", synth_help="Friction coefficient per tube pair, e.g. 0.22,0.12.",
     fit="grid", requires=_contact_requirement, contains=("clearance",),
-    plan="the friction coefficients of the robot file: the bound, the prediction and compensated targeting"))
+    plan="the friction coefficients of the robot file: the bound, the prediction and compensated targeting",
+    separated_by="a translation after a rotation (it releases friction, not a dead band or a lag) and the same "
+                 "configuration approached from both directions"))
 
 
 # --------------------------------------------------------------------------- clearance
@@ -223,7 +225,8 @@ register(Effect(
     signature=_clearance_signature, synth_option="--clearance-m",
     synth_help="Radial clearance per pair [m] (default: from the tube diameters).",
     fit="none", requires=_contact_requirement,
-    plan="the tube diameters of the robot file: the clearance model of the bound and the prediction"))
+    plan="the tube diameters of the robot file: the clearance model of the bound and the prediction",
+    separated_by="translations that change which curved sections overlap"))
 
 
 # --------------------------------------------------------------------------- off-plane precurvature
@@ -263,7 +266,9 @@ register(Effect(
     signature=lambda ctx: ctx.regression_test("offplane", angle_features(ctx.data.alpha),
                                               "cos/sin of 1x and 2x the absolute angle of every rotating tube"),
     synth_option="--offplane-per-m", synth_help="x precurvature of each curved tube [1/m] (default: the robot's).",
-    plan="the precurvatures of the robot file"))
+    plan="the precurvatures of the robot file",
+    separated_by="the same relative configuration at other absolute tube angles (it depends on the absolute "
+                 "angles)"))
 
 
 # --------------------------------------------------------------------------- Poisson ratio
@@ -298,7 +303,8 @@ register(Effect(
     store="robot", apply_robot=_poisson_apply,
     read=lambda robot: {f"poisson_ratio_{i + 1}": t.poisson_ratio for i, t in enumerate(robot.tubes)},
     signature=_poisson_signature, synth_option="--poisson", synth_help="Poisson ratio per tube.",
-    plan="the Poisson ratios of the robot file"))
+    plan="the Poisson ratios of the robot file",
+    separated_by="configurations of large and small twist of the most strained tube"))
 
 
 # --------------------------------------------------------------------------- registration
@@ -336,7 +342,8 @@ register(Effect(
     synth_help="Robot-to-tracker transform 'rx,ry,rz,tx,ty,tz' (rotation vector [rad], translation [m]).",
     requires=lambda robot, data: ("the baseline fits the registration of tracker-frame data"
                                   if data is not None and data.frame == "tracker" else None),
-    plan="not used: it maps the robot frame to the tracker's"))
+    plan="not used: it maps the robot frame to the tracker's",
+    separated_by="tips far from and near the base (a rigid map grows with the lever arm)"))
 
 
 # --------------------------------------------------------------------------- drive backlash
@@ -380,7 +387,9 @@ register(Effect(
     synth_help="Dead band of each tube's rotation drive [rad], e.g. 0,0.05,0.03.",
     needs_motion=True, scan=BACKLASH_SCAN, requires=_backlash_requirement,
     plan="used: the tube angle a drive reaches depends on the direction it last moved (prediction and "
-         "compensated targeting)"))
+         "compensated targeting)",
+    separated_by="rests after reversals (a dead band leaves the tip displaced at rest; a time offset does not) and "
+                 "slow and fast passes over the same path (its error does not scale with speed)"))
 
 
 # --------------------------------------------------------------------------- time offset
@@ -407,7 +416,9 @@ register(Effect(
                                           "-d tip/dt of the baseline model along the recorded motion"),
     synth_option="--time-offset-s", synth_help="Lag of the tracker readings behind the joint readings [s].",
     needs_motion=True, scan=TIME_OFFSET_SCAN, requires=_time_offset_requirement,
-    plan="not used: it concerns the tracker, not the robot"))
+    plan="not used: it concerns the tracker, not the robot",
+    separated_by="slow and fast passes over the same path (its error scales with speed) and rests (it vanishes "
+                 "at rest)"))
 
 
 # --------------------------------------------------------------------------- gradual friction
@@ -443,4 +454,5 @@ register(Effect(
     requires=lambda robot, data: _contact_requirement(robot) or _motion_requirement(data),
     contains=("friction", "clearance"),
     plan="used: the friction state follows the rotation amounts the plan makes (prediction and compensated "
-         "targeting)"))
+         "targeting)",
+    separated_by="short and long rotations after reversals (its error grows over theta_c after each reversal)"))

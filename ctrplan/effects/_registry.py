@@ -171,6 +171,9 @@ class Effect:
         Effects it contains (never tried together with it).
     plan : str
         What ``ctrplan plan`` does with it.
+    separated_by : str
+        What data would tell it apart from another effect that explains the same data (the
+        report of an ambiguous verdict quotes it).
     """
 
     name: str
@@ -197,6 +200,7 @@ class Effect:
     requires: Callable | None = None
     contains: tuple = ()
     plan: str = ""
+    separated_by: str = ""
 
     def __post_init__(self):
         if self.model not in MODEL_ORDER:

@@ -110,6 +110,44 @@ class EffectsSourceDoc(_Strict):
     note: str = ""
 
 
+class BoundCalibrationDoc(_Strict):
+    """A bound calibrated on measurements (``[bound_calibration]``, written by ``ctrplan
+    discrepancy``; :mod:`ctrplan.discrepancy.coverage`): the calibrated bound of a configuration
+    is ``factor x (bound + noise_margin_m)``."""
+
+    method: str = ""
+    target_coverage: Annotated[float, Field(gt=0.0, lt=1.0)]
+    factor: Annotated[float, Field(gt=0.0)]
+    noise_margin_m: Annotated[float, Field(ge=0.0)] = 0.0
+    noise_multiple: Annotated[float, Field(ge=0.0)] | None = None
+    calibration_samples: Annotated[int, Field(ge=0)] | None = None
+    test_samples: Annotated[int, Field(ge=0)] | None = None
+    test_coverage: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    test_coverage_low: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    test_coverage_high: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    raw_bound_test_coverage: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    failing: bool = False
+    data_file: str = ""
+    data_sha256: str = ""
+    date: str = ""
+
+
+class PredictionValidationDoc(_Strict):
+    """How the history-aware prediction did against the standard model on measurements
+    (``[prediction_validation]``, written by ``ctrplan discrepancy``): tip position errors on its
+    untouched test split [m]."""
+
+    standard_mean_m: Annotated[float, Field(ge=0.0)]
+    standard_max_m: Annotated[float, Field(ge=0.0)]
+    history_mean_m: Annotated[float, Field(ge=0.0)]
+    history_max_m: Annotated[float, Field(ge=0.0)]
+    history_beats_standard: bool
+    test_samples: Annotated[int, Field(ge=0)] | None = None
+    data_file: str = ""
+    data_sha256: str = ""
+    date: str = ""
+
+
 class RobotDocument(_Strict):
     """Schema of a robot model file (see ``docs/file-formats.md``)."""
 
@@ -127,6 +165,8 @@ class RobotDocument(_Strict):
     # the registry of ctrplan.effects once the robot is built
     effects: dict[str, dict[str, typing.Any]] = {}
     effects_source: EffectsSourceDoc | None = None
+    bound_calibration: BoundCalibrationDoc | None = None
+    prediction_validation: PredictionValidationDoc | None = None
 
 
 # --------------------------------------------------------------------------- error reporting
@@ -374,7 +414,11 @@ def robot_from_document(doc: RobotDocument, file: str = MEMORY) -> Robot:
                                    {"rotation_vector_rad": list(doc.tracker_registration.rotation_vector_rad),
                                     "translation_m": list(doc.tracker_registration.translation_m)}),
                                 "effects_source": (None if doc.effects_source is None
-                                                   else doc.effects_source.model_dump())})
+                                                   else doc.effects_source.model_dump()),
+                                "bound_calibration": (None if doc.bound_calibration is None
+                                                      else doc.bound_calibration.model_dump()),
+                                "prediction_validation": (None if doc.prediction_validation is None
+                                                          else doc.prediction_validation.model_dump())})
     except PhysicalParameterError as exc:
         hint = ""
         if clearances is not None:
@@ -435,7 +479,8 @@ def _vec(v) -> str:
 
 
 def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
-                  registration: dict | None = None, effects_source: dict | None = None) -> str:
+                  registration: dict | None = None, effects_source: dict | None = None,
+                  bound_calibration: dict | None = None, prediction_validation: dict | None = None) -> str:
     """Write a robot as the text of a robot model file (the inverse of :func:`robot_from_toml_text`).
 
     Stiffnesses are written as absolute ``k_xy_N_m2``; clearances as ``clearance_m`` only when
@@ -457,6 +502,10 @@ def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
         Where ``robot.effects`` come from (table ``[effects_source]``: ``method``,
         ``data_file``, ``data_sha256``, ``date``, ``samples``, ``held_out_position_mean_m``,
         ``held_out_position_p95_m``, ``held_out_position_max_m``, ``note``).
+    bound_calibration : dict, optional
+        Table ``[bound_calibration]`` (:class:`BoundCalibrationDoc`).
+    prediction_validation : dict, optional
+        Table ``[prediction_validation]`` (:class:`PredictionValidationDoc`).
 
     Returns
     -------
@@ -510,6 +559,19 @@ def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
                 if value is None:
                     continue
                 out.append(f"{key} = {_toml_str(value) if isinstance(value, str) else repr(value)}")
+    for table, values in (("bound_calibration", bound_calibration), ("prediction_validation", prediction_validation)):
+        if values:
+            out += ["", f"[{table}]"]
+            for key, value in values.items():
+                if value is None:
+                    continue
+                if isinstance(value, bool):
+                    text = "true" if value else "false"
+                elif isinstance(value, str):
+                    text = _toml_str(value)
+                else:
+                    text = repr(float(value)) if isinstance(value, float) else repr(value)
+                out.append(f"{key} = {text}")
     return "\n".join(out) + "\n"
 
 

@@ -1,0 +1,144 @@
+"""The tables of docs/discrepancy.md, made from the results files of the benchmarks that measure them.
+
+    python benchmarks/docs_tables.py          # rewrite the tables between their markers
+    python benchmarks/docs_tables.py --check  # exit 1 when the docs differ from the results files
+
+Each table sits between ``<!-- NAME -->`` and ``<!-- /NAME -->`` in docs/discrepancy.md:
+
+- ``sweep-table``: ``benchmarks/results/discrepancy-sweep.json``
+  (``benchmarks/bench_discrepancy_sweep.py``);
+- ``ha-table``: ``benchmarks/results/ha-trajectory-discrepancy.json``
+  (``benchmarks/ha_trajectory_discrepancy.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "discrepancy.md"
+RESULTS = ROOT / "benchmarks" / "results"
+SOURCES = {"sweep-table": RESULTS / "discrepancy-sweep.json", "ha-table": RESULTS / "ha-trajectory-discrepancy.json"}
+OUTCOMES = ("named", "ambiguous with truth", "named wrong", "ambiguous without truth", "nothing")
+
+
+def _value(name: str, value: float, unit: str) -> str:
+    if unit == "rad":
+        return f"{np.rad2deg(value):.3g} deg"
+    if unit == "m":
+        return f"{value * 1e3:.3g} mm"
+    return f"{value:.3g}" + ("" if unit in ("-", "") else f" {unit}")
+
+
+def _pm(value: float, stderr, unit: str) -> str:
+    if stderr is None or not np.isfinite(stderr):
+        return _value("", value, unit) + (" (undetermined)" if stderr is not None else "")
+    scale = np.rad2deg(1.0) if unit == "rad" else 1e3 if unit == "m" else 1.0
+    return _value("", value, unit) + f" +- {1.96 * stderr * scale:.2g}"
+
+
+def sweep_table(res: dict) -> str:
+    """Confusion matrix and per-case sizes of the sweep."""
+    m, s = res["matrix"], res["summary"]
+    lines = ["| truth | " + " | ".join(OUTCOMES) + " |", "|---|" + "---|" * len(OUTCOMES)]
+    for t, row in m.items():
+        lines.append(f"| {t} | " + " | ".join(str(row[o]) for o in OUTCOMES) + " |")
+    lines += ["", f"Truth named or in the ambiguous pair: {s['truth_found']} of {s['cases_with_effect']} cases with an "
+                  f"effect; wrong names (including any name on noise only): {s['wrong_names']}.", "",
+              "| truth | seed | hidden [SI] | verdict | fitted [SI] |", "|---|---|---|---|---|"]
+    for c in res["cases"]:
+        hidden = "; ".join(f"{k} = {v:.4g}" for e in c["hidden"].values() for k, v in e.items()) or "-"
+        fitted = "; ".join(f"{k} = {v:.4g}" for e in c["fitted"].values() for k, v in e.items()) or "-"
+        verdict = c["verdict"] + ("" if c["verdict"] == "none" else f": {c['named']}")
+        if c["ambiguous_with"]:
+            verdict += f" or {c['ambiguous_with']}"
+        lines.append(f"| {c['truth']} | {c['seed']} | {hidden} | {verdict} | {fitted} |")
+    return "\n".join(lines)
+
+
+def ha_table(res: dict) -> str:
+    """Verdict, candidates, test-split shrink next to Table VIII, noise, baseline changes."""
+    verdict = res["verdict"] + ("" if res["verdict"] == "none" else f": {res['named']}")
+    if res["ambiguous_with"]:
+        verdict += f" or {res['ambiguous_with']}"
+    lines = [f"Data: {res['n_samples']} samples ({res['data_file']}, SHA-256 {res['data_sha256'][:12]}...); "
+             f"{res['split']}.", "", f"**Verdict: {verdict}.**"]
+    if res.get("separated_by") and res["ambiguous_with"]:
+        lines.append(f" Data that would separate them: {res['separated_by']}.")
+    n = res["noise"]
+    lines += ["", f"Noise: {n['description']}; out-of-fold baseline rms {n['out_of_fold_rms_mm']:.3f} mm; consistent "
+                  f"with noise: {n['consistent']}" + (f" (F = {n['statistic']:.3g}, threshold {n['threshold']:.3g})"
+                                                      if n["statistic"] is not None else "") + ".", "",
+              "| candidate | fitted (95 % interval) | out-of-fold mean / max [mm] | improvement [mm + deg] (95 % CI) | p | "
+              "eligible |", "|---|---|---|---|---|---|"]
+    for e, c in res["candidates"].items():
+        params = "; ".join(f"{k} = {_pm(p['value'], p['stderr'], p['unit'])}"
+                           + (" (implausible)" if not p["in_plausible_range"] else "")
+                           + (" (at bound)" if p["at_bound"] else "") for k, p in c["parameters"].items()) or "nominal"
+        ci = c["improvement_ci"]
+        lines.append(f"| {c['label']} | {params} | {c['out_of_fold_mean_mm']:.2f} / {c['out_of_fold_max_mm']:.2f} | "
+                     f"{c['improvement_mm_deg']:.3f} ({ci[0]:.3f}..{ci[1]:.3f}) | {c['p_value']:.4f} | "
+                     f"{'yes' if c['eligible'] else 'no'} |")
+    t = res["test_split"]
+    lines += ["", f"Test split ({t['n_samples']} samples in {t['n_units']} units, untouched until the end; "
+                  f"{t['label']}):", "",
+              "| tip position error | before [mm] | after [mm] | shrink (95 % interval) | Ha et al. Table VIII (grid data) |",
+              "|---|---|---|---|---|"]
+    for stat, paper in (("mean", res["table_viii_shrink"]["mean"]), ("p95", None), ("max", res["table_viii_shrink"]["max"])):
+        b, a, s = t["before"][f"{stat}_mm"], t["after"][f"{stat}_mm"], t["shrink"][stat]
+        lines.append(f"| {stat} | {b['value']:.2f} ({b['ci'][0]:.2f}..{b['ci'][1]:.2f}) | {a['value']:.2f} "
+                     f"({a['ci'][0]:.2f}..{a['ci'][1]:.2f}) | {100 * s['value']:.0f} % ({100 * s['ci'][0]:.0f}.."
+                     f"{100 * s['ci'][1]:.0f} %) | {'-' if paper is None else f'{100 * paper:.0f} %'} |")
+    changed = [p for p in res["baseline"]["parameters"] if p.get("relative_change") is not None]
+    if changed:
+        lines += ["", "Baseline parameters (change from the robot file): " + "; ".join(
+            f"{p['name']} = {_pm(p['value'], p['stderr'], p['unit'])} ({100 * p['relative_change']:+.0f} %"
+            + ("" if p["in_plausible_range"] else ", implausible") + ")" for p in changed) + "."]
+    pred = res.get("prediction")
+    if pred and pred.get("rows"):
+        lines += ["", "History-aware prediction on the test split:", "", "| model | mean / p95 / max [mm] |", "|---|---|"]
+        for r in pred["rows"]:
+            lines.append(f"| {r['label']} | {r['mean_mm']:.2f} / {r['p95_mm']:.2f} / {r['max_mm']:.2f} |")
+    if res["cautions"]:
+        lines += [""] + [f"- caution: {c}" for c in res["cautions"]]
+    return "\n".join(lines)
+
+
+MAKERS = {"sweep-table": sweep_table, "ha-table": ha_table}
+
+
+def render(doc: str) -> str:
+    """``doc`` with every table whose results file exists rewritten between its markers."""
+    for name, make in MAKERS.items():
+        if not SOURCES[name].exists():
+            continue
+        table = make(json.loads(SOURCES[name].read_text()))
+        block = f"<!-- {name} -->\n{table}\n<!-- /{name} -->"
+        pattern = re.compile(rf"<!-- {name} -->.*?<!-- /{name} -->|<!-- {name} -->", re.S)
+        doc = pattern.sub(lambda _: block, doc, count=1)
+    return doc
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true")
+    args = ap.parse_args(argv)
+    doc = DOC.read_text()
+    new = render(doc)
+    if args.check:
+        if new != doc:
+            print(f"{DOC} differs from the results files; run python benchmarks/docs_tables.py")
+            return 1
+        return 0
+    DOC.write_text(new)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,383 @@
+"""How often the friction bound covers measured tips, and a bound calibrated to cover a chosen share.
+
+**The bound and the error.** At a sample with joints (alpha, beta), the *bound* ``b`` is the
+per-configuration friction bound of the calibrated robot (:func:`ctrplan.mechanics.evaluate_bound`:
+the largest tip distance of any of the 2^(n-1) bounding friction solutions from the standard
+model's tip; Section III of Ha, Fagogenis & Dupont 2019); after a final translation of every
+pair, the *translation-last bound* (the clearance-only deviation, Section V-B). The *error* ``e``
+is the distance between the measured tip and the calibrated standard model's tip. A measured tip
+is *within the bound* when ``e <= b + m``, with the noise margin ``m`` = :data:`NOISE_MULTIPLE`
+times the sensor's rms position noise (95 % of 3-D Gaussian noise vectors are shorter).
+
+**The calibrated bound** is ``c (b + m)``, with the factor ``c`` the split-conformal quantile of
+the scores ``s = e / (b + m)`` of calibration samples: the ``ceil((n + 1) t)``-th smallest of n
+scores for a target coverage ``t`` (Vovk et al. 2005; Lei et al., JASA 113:1094, 2018). This is
+split-conformal prediction itself; a conformal library (``mapie``) wraps scikit-learn regressors,
+and here the "regressor" is the mechanics, so the plain finite-sample quantile is used. The
+guarantee assumes exchangeable samples: the samples of a motion are serially correlated, so the
+coverage is checked on the untouched test split with a block-bootstrap interval, and a calibrated
+bound whose test coverage misses its target by more than :data:`COVERAGE_TOLERANCE` (and whose
+interval excludes the target) is reported as failing.
+"""
+
+from __future__ import annotations
+
+import datetime
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from .options import BOOTSTRAP_RESAMPLES, CONFIDENCE, ENVELOPE_NOISE_FACTOR
+from .statistics import block_bootstrap
+
+__all__ = ["NOISE_MULTIPLE", "DEFAULT_TARGET", "COVERAGE_TOLERANCE", "BoundValues", "bound_values",
+           "coverage_figures", "conformal_factor", "BoundCalibration", "calibrate_bound", "BOUND_DEFINITION"]
+
+#: Noise margin of the bound in units of the sensor's rms position noise (95 % of 3-D Gaussian
+#: noise vectors are shorter than 1.62 times their rms length).
+NOISE_MULTIPLE = ENVELOPE_NOISE_FACTOR
+#: Default share of measured tips the calibrated bound is to cover.
+DEFAULT_TARGET = 0.9
+#: A calibrated bound fails when its test coverage misses the target by more than this (and the
+#: target is outside the coverage's interval).
+COVERAGE_TOLERANCE = 0.05
+#: The definition printed next to every coverage figure.
+BOUND_DEFINITION = ("bound b: largest tip distance of the 2^(n-1) bounding friction solutions from the standard "
+                    "model's tip (Ha et al. 2019, Sec. III) of the calibrated robot; translation-last bound: the "
+                    "clearance-only deviation after a final translation (Sec. V-B); error e: measured tip to the "
+                    "calibrated standard model's tip; within the bound: e <= b + m, m = "
+                    f"{NOISE_MULTIPLE:.2f} x the sensor's rms position noise")
+
+
+@dataclass(frozen=True, eq=False)
+class BoundValues:
+    """The friction bound at K samples.
+
+    Attributes
+    ----------
+    position : ndarray, shape (K,)
+        Bound on the tip position [m]; NaN where a solve failed.
+    translation_last : ndarray, shape (K,)
+        Translation-last (clearance-only) bound [m].
+    ok : ndarray of bool, shape (K,)
+    """
+
+    position: np.ndarray
+    translation_last: np.ndarray
+    ok: np.ndarray
+
+
+def _bound_chunk(robot, alpha, beta, settings):
+    from ..mechanics import evaluate_bound
+
+    out = []
+    for a, b in zip(alpha, beta):
+        try:
+            r = evaluate_bound(robot, a, b, settings)
+            out.append((r.position, r.translation_last_position, bool(r.diagnostics.converged)))
+        except Exception:                                    # noqa: BLE001 - a failed sample is flagged, not fatal
+            out.append((np.nan, np.nan, False))
+    return out
+
+
+def bound_values(robot, alpha, beta, settings=None, *, n_jobs: int = 1) -> BoundValues:
+    """The friction bound (:func:`ctrplan.mechanics.evaluate_bound`) at K configurations.
+
+    Parameters
+    ----------
+    robot : Robot
+        With its friction coefficients (mu = 0 pairs contribute only clearance).
+    alpha, beta : ndarray, shape (K, n)
+        Base rotations [rad], translations [m].
+    settings : ModelSettings, optional
+    n_jobs : int
+        Worker processes (joblib), chunks of configurations.
+
+    Returns
+    -------
+    BoundValues
+        A configuration whose solve raised or did not converge has ``ok`` False (NaN where it
+        raised).
+    """
+    from joblib import Parallel, delayed
+
+    alpha = np.asarray(alpha, float)
+    beta = np.asarray(beta, float)
+    k = alpha.shape[0]
+    chunks = np.array_split(np.arange(k), max(1, min(k, 4 * n_jobs))) if k else []
+    if n_jobs > 1 and k > 1:
+        parts = Parallel(n_jobs=n_jobs)(delayed(_bound_chunk)(robot, alpha[c], beta[c], settings) for c in chunks)
+    else:
+        parts = [_bound_chunk(robot, alpha[c], beta[c], settings) for c in chunks]
+    rows = [r for p in parts for r in p]
+    arr = np.array([(r[0], r[1]) for r in rows], float).reshape(k, 2)
+    return BoundValues(position=arr[:, 0], translation_last=arr[:, 1], ok=np.array([r[2] for r in rows], bool))
+
+
+def _quantiles(x) -> dict:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if not x.size:
+        return {"median": None, "p90": None, "p95": None, "max": None}
+    return {"median": float(np.median(x)), "p90": float(np.percentile(x, 90)), "p95": float(np.percentile(x, 95)),
+            "max": float(np.max(x))}
+
+
+def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> dict:
+    """Share of samples with ``error <= bound + margin``, with a block-bootstrap interval, and the
+    distribution of ``error / (bound + margin)``.
+
+    Parameters
+    ----------
+    error, bound : array-like, shape (K,)
+        [m]; non-finite samples are left out.
+    margin : float
+        Noise margin [m].
+    units : array-like of int, shape (K,)
+        Units of the bootstrap (time blocks, configuration groups).
+    seed : int
+
+    Returns
+    -------
+    dict
+        ``n``, ``covered`` (share), ``ci`` ([low, high] at
+        :data:`~ctrplan.discrepancy.options.CONFIDENCE`), ``ratio`` (median, p90, p95, max of
+        e / (b + m)), ``bound_median_m``, ``error_median_m``.
+    """
+    e = np.asarray(error, float)
+    b = np.asarray(bound, float)
+    u = np.asarray(units)
+    ok = np.isfinite(e) & np.isfinite(b)
+    e, b, u = e[ok], b[ok], u[ok]
+    if not e.size:
+        return {"n": 0, "covered": None, "ci": [None, None], "ratio": _quantiles([]), "bound_median_m": None,
+                "error_median_m": None}
+    inside = (e <= b + margin).astype(float)
+    boot = block_bootstrap({"x": inside}, u, lambda s: float(np.mean(s["x"])), n_resamples=BOOTSTRAP_RESAMPLES,
+                           confidence=CONFIDENCE, seed=seed)
+    return {"n": int(e.size), "covered": float(inside.mean()), "ci": boot["ci"], "ratio": _quantiles(e / (b + margin)),
+            "bound_median_m": float(np.median(b)), "error_median_m": float(np.median(e))}
+
+
+def conformal_factor(error, bound, margin: float, target: float = DEFAULT_TARGET) -> float:
+    """The split-conformal factor ``c``: the ``ceil((n + 1) target)``-th smallest of the n scores
+    ``error / (bound + margin)`` (inf when that exceeds n).
+
+    Parameters
+    ----------
+    error, bound : array-like, shape (n,)
+        Calibration samples [m] (non-finite ones left out).
+    margin : float
+        [m], > 0 or the bounds > 0.
+    target : float
+        In (0, 1).
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ValueError
+        ``target`` outside (0, 1).
+    """
+    if not 0.0 < target < 1.0:
+        raise ValueError(f"target coverage must be in (0, 1), got {target!r}")
+    e = np.asarray(error, float)
+    b = np.asarray(bound, float)
+    ok = np.isfinite(e) & np.isfinite(b) & (b + margin > 0)
+    s = np.sort(e[ok] / (b[ok] + margin))
+    n = s.size
+    rank = int(np.ceil((n + 1) * target))
+    return float("inf") if rank > n or n == 0 else float(s[rank - 1])
+
+
+@dataclass(frozen=True, eq=False)
+class BoundCalibration:
+    """A calibrated bound ``factor (b + margin)`` and how it did on the test split.
+
+    Attributes
+    ----------
+    method : str
+    target : float
+        Share of measured tips it is to cover.
+    factor : float
+        The conformal factor ``c`` [-].
+    margin_m : float
+        Noise margin [m].
+    noise_multiple : float
+    noise_rms_m : float
+    n_calibration : int
+    test : dict
+        :func:`coverage_figures` of the calibrated bound on the test split.
+    raw_test : dict
+        The same for the raw bound ``b + margin``.
+    translation_last : dict or None
+        The translation-last bound's coverage on the test samples after a final translation of
+        every pair (None without such samples).
+    failing : bool
+        The test coverage misses the target by more than :data:`COVERAGE_TOLERANCE` and its
+        interval excludes it.
+    """
+
+    method: str
+    target: float
+    factor: float
+    margin_m: float
+    noise_multiple: float
+    noise_rms_m: float
+    n_calibration: int
+    test: dict
+    raw_test: dict
+    translation_last: dict | None
+    failing: bool
+
+    def file_table(self, data_file: str, data_sha256: str) -> dict:
+        """The robot file's ``[bound_calibration]`` table (SI; unknown figures left out)."""
+        table = {"method": self.method, "target_coverage": self.target, "factor": self.factor,
+                "noise_margin_m": self.margin_m, "noise_multiple": self.noise_multiple,
+                "calibration_samples": self.n_calibration, "test_samples": self.test["n"],
+                "test_coverage": self.test["covered"], "test_coverage_low": self.test["ci"][0],
+                "test_coverage_high": self.test["ci"][1], "raw_bound_test_coverage": self.raw_test["covered"],
+                "failing": self.failing, "data_file": data_file, "data_sha256": data_sha256,
+                "date": datetime.date.today().isoformat()}
+        return {k: v for k, v in table.items() if not (isinstance(v, float) and not np.isfinite(v))}
+
+    def as_dict(self) -> dict:
+        """``results.json["bound"]`` (mm where the key says so)."""
+        mm = (lambda x: None if x is None else x * 1e3)
+        return {"definition": BOUND_DEFINITION, "method": self.method, "target": self.target, "factor": self.factor,
+                "margin_mm": self.margin_m * 1e3, "noise_multiple": self.noise_multiple,
+                "noise_rms_mm": self.noise_rms_m * 1e3, "n_calibration": self.n_calibration,
+                "test": {**self.test, "bound_median_mm": mm(self.test["bound_median_m"]),
+                         "error_median_mm": mm(self.test["error_median_m"])},
+                "raw_test": {**self.raw_test, "bound_median_mm": mm(self.raw_test["bound_median_m"])},
+                "translation_last": self.translation_last, "failing": self.failing}
+
+
+def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *, noise_rms: float,
+                    target: float = DEFAULT_TARGET, test_translation_last=None, test_released=None,
+                    seed: int = 0) -> BoundCalibration:
+    """Calibrate the bound on calibration samples and check it on test samples.
+
+    Parameters
+    ----------
+    cal_error, cal_bound : array-like, shape (n,)
+        Errors and bounds of calibration samples [m] (out-of-fold errors: the model did not see
+        them).
+    test_error, test_bound : array-like, shape (K,)
+        Of the test samples [m].
+    test_units : array-like, shape (K,)
+    noise_rms : float
+        Sensor rms position noise [m] (0 if unknown).
+    target : float
+    test_translation_last : array-like, shape (K,), optional
+        Translation-last bound at the test samples [m].
+    test_released : array-like of bool, shape (K,), optional
+        Test samples after a final translation of every pair.
+    seed : int
+
+    Returns
+    -------
+    BoundCalibration
+    """
+    margin = NOISE_MULTIPLE * float(noise_rms)
+    factor = conformal_factor(cal_error, cal_bound, margin, target)
+    n_cal = int(np.sum(np.isfinite(np.asarray(cal_error, float)) & np.isfinite(np.asarray(cal_bound, float))))
+    tb = np.asarray(test_bound, float)
+    te = np.asarray(test_error, float)
+    calibrated = factor * (tb + margin) - margin if np.isfinite(factor) else np.full_like(tb, np.inf)
+    test = coverage_figures(te, calibrated, margin, test_units, seed=seed)
+    test["bound_median_m"] = float(np.nanmedian(factor * (tb + margin))) if tb.size else None
+    raw = coverage_figures(te, tb, margin, test_units, seed=seed)
+    tl = None
+    if test_translation_last is not None and test_released is not None and np.any(test_released):
+        rel = np.asarray(test_released, bool)
+        tl = coverage_figures(te[rel], np.asarray(test_translation_last, float)[rel], margin,
+                              np.asarray(test_units)[rel], seed=seed)
+    cov = test["covered"]
+    failing = bool(cov is None or (abs(cov - target) > COVERAGE_TOLERANCE
+                                   and not (test["ci"][0] <= target <= test["ci"][1])))
+    method = (f"split-conformal: factor = the ceil((n + 1) x {target:g})-th smallest of e / (b + m) over {n_cal} "
+              f"out-of-fold calibration samples; calibrated bound = factor x (b + m)")
+    return BoundCalibration(method=method, target=target, factor=factor, margin_m=margin,
+                            noise_multiple=NOISE_MULTIPLE, noise_rms_m=float(noise_rms), n_calibration=n_cal,
+                            test=test, raw_test=raw, translation_last=tl, failing=failing)
+
+
+def _stored_bounds(setup, stage: str, robot, rows: np.ndarray, n_jobs: int, echo) -> BoundValues:
+    cached = setup.stages.load(stage)
+    if cached is not None:
+        echo(f"  {stage}: reused from an earlier run")
+        return BoundValues(position=np.array(cached["position"], float),
+                           translation_last=np.array(cached["translation_last"], float),
+                           ok=np.array(cached["ok"], bool))
+    data = setup.data
+    echo(f"  evaluating the friction bound at {rows.size} samples ({stage}) ...")
+    values = bound_values(robot, data.alpha[rows], data.beta[rows], setup.settings, n_jobs=n_jobs)
+    setup.stages.save(stage, {"position": values.position, "translation_last": values.translation_last,
+                              "ok": values.ok})
+    return values
+
+
+def check_bound(setup, split, baseline, test, final_params: dict, noise, options, echo=print) -> BoundCalibration:
+    """Stage 10b: the friction bound of the calibrated robot against the measured tips, and the
+    calibrated bound (module docstring).
+
+    The robot is the one the workflow writes (``final_params`` applied to the input robot: its
+    tube parameters and friction coefficients); the errors are those of the calibrated standard
+    model (the baseline): out of fold at up to ``options.bound_samples`` development samples
+    (evenly spaced), which calibrate the factor, and at up to as many test samples, which check
+    it. Bounds are stored as stages.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : DataSplit
+    baseline : Baseline
+    test : TestSplit
+    final_params : dict
+        The written model's parameters [SI].
+    noise : NoiseCheck
+    options : DiscrepancyOptions
+        ``bound_target``, ``bound_samples``, ``n_jobs``, ``seed``.
+    echo : callable
+
+    Returns
+    -------
+    BoundCalibration
+    """
+    from .parameters import REGISTRATION, apply_parameters
+
+    names = tuple(n for n in final_params if n not in REGISTRATION)
+    robot = apply_parameters(setup.robot, names, tuple(final_params[n] for n in names))
+    dev = np.flatnonzero(split.dev_rows)
+    tst = np.flatnonzero(split.test_rows)
+    limit = options.bound_samples
+
+    def pick(idx):
+        return idx if idx.size <= limit else idx[np.linspace(0, idx.size - 1, limit).round().astype(int)]
+
+    cal_rows, test_rows = pick(dev), pick(tst)
+    tag = hashlib.sha256(repr((robot.friction_coefficients, [t.sections for t in robot.tubes],
+                               [t.k_xy for t in robot.tubes])).encode()).hexdigest()[:8]
+    cal_b = _stored_bounds(setup, f"bound-development-{limit}-{tag}", robot, cal_rows, options.n_jobs, echo)
+    test_b = _stored_bounds(setup, f"bound-test-{limit}-{tag}", robot, test_rows, options.n_jobs, echo)
+    oof = baseline.oof
+    cal_e = oof.position[np.searchsorted(oof.rows, cal_rows)]
+    te = test.baseline
+    test_e = te.position[np.searchsorted(te.rows, test_rows)]
+    released = np.all(setup.data.translation_last[test_rows], axis=1)
+    sigma = noise.noise.get("position_rms_m") or 0.0
+    cal = calibrate_bound(np.where(cal_b.ok, cal_e, np.nan), cal_b.position,
+                          np.where(test_b.ok, test_e, np.nan), test_b.position, split.units[test_rows],
+                          noise_rms=sigma, target=options.bound_target,
+                          test_translation_last=test_b.translation_last, test_released=released, seed=options.seed)
+    raw, t = cal.raw_test, cal.test
+    echo(f"friction bound (mu = {', '.join(f'{m:g}' for m in robot.friction_coefficients)}) on the test split: "
+         f"{100 * (raw['covered'] or 0):.0f} % of {raw['n']} measured tips within b + {cal.margin_m * 1e3:.2f} mm "
+         f"(median e / (b + m) {raw['ratio']['median'] or float('nan'):.2f}); calibrated bound = {cal.factor:.3g} x "
+         f"(b + m) covers {100 * (t['covered'] or 0):.0f} % ({100 * (t['ci'][0] or 0):.0f}..{100 * (t['ci'][1] or 0):.0f} "
+         f"%, target {100 * cal.target:.0f} %)" + ("; FAILING" if cal.failing else ""))
+    return cal

@@ -1,0 +1,48 @@
+"""docs/discrepancy.md quotes the results files of its benchmarks, and those files come from the data
+they name: catches figures in the docs edited by hand or left behind by a newer run, and a results
+file made from another version of the measured data."""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+HA_DATA = ROOT.parent / "shared" / "data" / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt"
+
+
+def _tables():
+    spec = importlib.util.spec_from_file_location("docs_tables", ROOT / "benchmarks" / "docs_tables.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("name", ["sweep-table", "ha-table"])
+def test_docs_tables_are_the_results_files(name):
+    """The table between the docs' markers is exactly what the results file renders to."""
+    tables = _tables()
+    source = tables.SOURCES[name]
+    if not source.exists():
+        pytest.skip(f"{source.relative_to(ROOT)} not written yet: run its benchmark (benchmarks/docs_tables.py)")
+    doc = tables.DOC.read_text()
+    assert f"<!-- {name} -->" in doc and f"<!-- /{name} -->" in doc, f"no {name} block in {tables.DOC}"
+    table = tables.MAKERS[name](json.loads(source.read_text()))
+    assert f"<!-- {name} -->\n{table}\n<!-- /{name} -->" in doc, (
+        f"{tables.DOC.name} differs from {source.name}: run python benchmarks/docs_tables.py")
+
+
+@pytest.mark.skipif(not HA_DATA.exists(), reason=f"measured data not present at {HA_DATA} (not redistributable; "
+                                                  f"get it from github.com/hjhdog1/ConcentricTubes)")
+def test_ha_results_come_from_the_present_data():
+    """The Ha results file names the SHA-256 of the data file it was computed from."""
+    results = ROOT / "benchmarks" / "results" / "ha-trajectory-discrepancy.json"
+    if not results.exists():
+        pytest.skip("benchmarks/results/ha-trajectory-discrepancy.json not written yet")
+    stored = json.loads(results.read_text())
+    assert stored["data_sha256"] == hashlib.sha256(HA_DATA.read_bytes()).hexdigest()
+    assert stored["n_samples"] == 1307
