@@ -173,6 +173,8 @@ class AimedGoals:
         Goal index -> why it was not compensated (the exception, as text).
     time_s : float
         Compensation time [s].
+    aim : dict
+        :func:`aim_decision`: the model goals are aimed with and why, with its measured error.
     """
 
     final_motion: str
@@ -180,6 +182,7 @@ class AimedGoals:
     compensations: tuple
     errors: Mapping[int, str]
     time_s: float
+    aim: dict = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -468,6 +471,57 @@ def resolve_goals(setup: PlanSetup, field, validity, echo: Echo = print) -> Reso
     return ResolvedGoals(goals=goals, time_s=seconds)
 
 
+def aim_decision(robot, aim_with: str = "auto") -> dict:
+    """Which model task-space goals are aimed with, and why.
+
+    With ``aim_with = "auto"`` the history-aware prediction is used only when the robot file's
+    ``[prediction_validation]`` (written by ``ctrplan discrepancy``) records that it beat the
+    standard model on measurements (test-split tip error, mean and max); otherwise the standard
+    model. ``"history"`` and ``"standard"`` force one.
+
+    Parameters
+    ----------
+    robot : Robot
+    aim_with : {"auto", "history", "standard"}
+
+    Returns
+    -------
+    dict
+        ``model`` ("history-aware prediction" or "standard model"), ``use_history`` (bool),
+        ``reason``, ``measured_mean_mm`` and ``measured_max_mm`` (the measured tip error of the
+        model aimed with; None when not measured), ``validation`` (the file's table or None).
+
+    Raises
+    ------
+    ValueError
+        ``aim_with`` not one of the three.
+    """
+    if aim_with not in ("auto", "history", "standard"):
+        raise ValueError(f"aim_with must be 'auto', 'history' or 'standard', got {aim_with!r}")
+    pv = (robot.metadata or {}).get("prediction_validation")
+    figures = ""
+    if pv is not None:
+        figures = (f"on measurements ({pv.get('data_file') or 'unnamed data'}, {pv.get('test_samples')} test samples) "
+                   f"the history-aware prediction's tip error is mean {pv['history_mean_m'] * 1e3:.2f} / max "
+                   f"{pv['history_max_m'] * 1e3:.2f} mm against the standard model's {pv['standard_mean_m'] * 1e3:.2f}"
+                   f" / {pv['standard_max_m'] * 1e3:.2f} mm")
+    if aim_with == "history":
+        use, reason = True, "[planner] aim_with = \"history\"" + (f"; {figures}" if figures else
+                                                                   "; not validated on measurements")
+    elif aim_with == "standard":
+        use, reason = False, "[planner] aim_with = \"standard\""
+    elif pv is None:
+        use, reason = False, ("the robot file has no [prediction_validation]: the history-aware prediction is not "
+                              "validated on measurements (ctrplan discrepancy writes it)")
+    else:
+        use = bool(pv["history_beats_standard"])
+        reason = figures + ("" if use else ": it does not beat the standard model in both")
+    side = "history" if use else "standard"
+    return {"model": "history-aware prediction" if use else "standard model", "use_history": use, "reason": reason,
+            "measured_mean_mm": None if pv is None else pv[f"{side}_mean_m"] * 1e3,
+            "measured_max_mm": None if pv is None else pv[f"{side}_max_m"] * 1e3, "validation": pv}
+
+
 def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo: Echo = print) -> AimedGoals:
     """Stage 4: aim task-space goals with the tip predicted after the final approach.
 
@@ -476,7 +530,9 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo: Echo = 
     :func:`ctrplan.planning.history.approach_history`); the joint vector whose predicted tip is on
     the target is found by :func:`ctrplan.planning.goals.compensate_goal` (Section V-B of Ha,
     Fagogenis & Dupont 2019). A goal whose compensation raises is planned to its standard-model
-    solution, and the reason is kept. Joint goals are planned as resolved.
+    solution, and the reason is kept. Joint goals are planned as resolved. Where
+    :func:`aim_decision` chooses the standard model (``[planner] aim_with``), task-space goals are
+    planned to their standard-model solutions.
 
     Parameters
     ----------
@@ -497,9 +553,12 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo: Echo = 
     compensations, goal_q = [], []
     motion = [np.asarray(sc.start, dtype=float)]      # the assumed motion so far (approaches to the goals)
     errors = {}
+    aim = aim_decision(robot, getattr(sc.planner, "aim_with", "auto"))
+    if any(isinstance(doc, TaskGoal) for doc in sc.goals):
+        echo(f"aiming task-space goals with the {aim['model']}: {aim['reason']}")
     for k, (doc, g) in enumerate(zip(sc.goals, resolved.goals)):
         c = None
-        if isinstance(doc, TaskGoal):
+        if isinstance(doc, TaskGoal) and aim["use_history"]:
             before = np.array(motion)
 
             def state_at(q, before=before):
@@ -520,7 +579,7 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo: Echo = 
         goal_q.append(c.q if c is not None else g.q)
         motion += list(approach_rows(robot, motion[-1], goal_q[-1], final_motion)[1:])
     return AimedGoals(final_motion=final_motion, q=tuple(goal_q), compensations=tuple(compensations),
-                      errors=MappingProxyType(errors), time_s=time.perf_counter() - t0)
+                      errors=MappingProxyType(errors), time_s=time.perf_counter() - t0, aim=aim)
 
 
 # --------------------------------------------------------------------------- stage 5: plans
@@ -698,7 +757,8 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
     """
     sc = setup.scenario
     iters = iterations or sc.planner.iterations
-    modes = [("bound_aware", sc.planner.bound_weight)] + ([("bound_blind", 0.0)] if compare_blind else [])
+    modes = ([("bound_aware", effective_bound_weight(setup.robot, sc.planner.bound_weight))]
+             + ([("bound_blind", 0.0)] if compare_blind else []))
     jobs = {mode: _PlanJob(robot=setup.robot, field=field, obstacles=list(setup.obstacles),
                            check_settings=setup.check_settings, settings=setup.settings, start=sc.start,
                            goals=list(aimed.q), weight=weight, planner=sc.planner, iterations=iters,
@@ -754,7 +814,54 @@ def time_parameterize(setup: PlanSetup, ordered):
 
 
 # --------------------------------------------------------------------------- stage 7: report
-def path_rows(plan: RoutePlan) -> list[dict]:
+def calibrated_bound(robot, bound) -> np.ndarray:
+    """The calibrated bound ``factor (bound + noise_margin_m)`` of the robot file's
+    ``[bound_calibration]`` (:mod:`ctrplan.discrepancy.coverage`) [m]; NaN without one.
+
+    Parameters
+    ----------
+    robot : Robot
+    bound : array-like
+        The model's bound [m].
+
+    Returns
+    -------
+    ndarray
+        Same shape as ``bound``.
+    """
+    cal = (robot.metadata or {}).get("bound_calibration")
+    b = np.asarray(bound, float)
+    if cal is None:
+        return np.full_like(b, np.nan)
+    return cal["factor"] * (b + cal["noise_margin_m"])
+
+
+def effective_bound_weight(robot, weight: float) -> float:
+    """The bound weight that ranks paths by the calibrated bound.
+
+    Planning minimises ``L + w integral(b) ds``; with the calibrated bound ``c (b + m)`` in place
+    of ``b`` the cost is ``(1 + w c m) L + w c integral(b) ds``, which has the same minimiser as
+    ``L + w' integral(b) ds`` with ``w' = w c / (1 + w c m)``. Without a calibration, ``w``.
+
+    Parameters
+    ----------
+    robot : Robot
+    weight : float
+        ``[planner] bound_weight`` [1/m].
+
+    Returns
+    -------
+    float
+        [1/m].
+    """
+    cal = (robot.metadata or {}).get("bound_calibration")
+    if cal is None or weight == 0.0:
+        return float(weight)
+    c, m = float(cal["factor"]), float(cal["noise_margin_m"])
+    return float(weight * c / (1.0 + weight * c * m))
+
+
+def path_rows(plan: RoutePlan, robot=None) -> list[dict]:
     """Rows of ``path.csv`` for a plan, one per ordered waypoint (SI units, as the file stores them).
 
     Parameters
@@ -766,16 +873,19 @@ def path_rows(plan: RoutePlan) -> list[dict]:
     list of dict
         Keys ``motion``, ``q`` (shape (n_joints,) [rad or m]), ``tip`` (standard model, shape (3,)
         [m]; NaN where the exact bound failed), ``bound_position_m`` and ``planned_bound_m`` [m],
-        ``bound_angle_rad`` [rad], ``bound_kind``, ``predicted_tip`` (shape (3,) [m]),
+        ``calibrated_bound_m`` [m] (:func:`calibrated_bound`; NaN without a calibration in the
+        robot file), ``bound_angle_rad`` [rad], ``bound_kind``, ``predicted_tip`` (shape (3,) [m]),
         ``predicted_offset_m`` [m], ``prediction_eta`` and ``prediction_cases``
         (:func:`ctrplan.report.write_plan_outputs`).
     """
     lm, planned, pred = plan.bounds.exact, plan.bounds.planned, plan.prediction
+    calibrated = calibrated_bound(robot, lm.position) if robot is not None else np.full(len(lm.position), np.nan)
     rows = []
     for k, w in enumerate(plan.ordered.waypoints):
         res = lm.results[k]
         tip = res.standard.tip_position if res is not None else np.full(3, np.nan)
         rows.append({"motion": w.motion, "q": w.q, "tip": tip, "bound_position_m": float(lm.position[k]),
+                     "calibrated_bound_m": float(calibrated[k]),
                      "planned_bound_m": float(planned[k]), "bound_angle_rad": float(lm.angle[k]),
                      "bound_kind": "translation_last" if w.motion == "translation" else "friction",
                      "predicted_tip": pred.tip[k], "predicted_offset_m": float(pred.offset[k]),
@@ -817,16 +927,27 @@ def _route_summary(r: RoutePlan) -> dict:
 
 
 def _goal_prediction(goal_docs, aimed: AimedGoals, plan: RoutePlan, robot) -> dict:
-    """Per goal: the predicted miss of standard-model IK next to the compensated one (task-space
-    goals, with the assumed approach), and the tip predicted at the goal's waypoint of the plan
-    (with the history the ordered plan creates there). Report units (mm)."""
+    """Per goal: the model it was aimed with and that model's measured tip error (from the robot
+    file; None when not measured), the predicted miss of standard-model IK next to the
+    compensated one (task-space goals, with the assumed approach), and the tip predicted at the
+    goal's waypoint of the plan (with the history the ordered plan creates there). Report units
+    (mm)."""
     pred = plan.prediction
+    aim = aimed.aim or aim_decision(robot)
     out = {}
     for k, (doc, c, gi) in enumerate(zip(goal_docs, aimed.compensations, plan.goal_indices)):
         planned_eta, _, planned_cases = pair_friction(pred.state.at(gi), robot.friction_coefficients)
         entry = {"waypoint": int(gi), "final_motion_status": plan.final_motion_status[k],
                  "planned_eta": _eta_text(planned_eta), "planned_cases": ";".join(planned_cases),
                  "predicted_offset_at_goal_mm": float(pred.offset[gi] * 1e3)}
+        if isinstance(doc, TaskGoal):
+            entry.update({"aimed_with": aim["model"], "aim_reason": aim["reason"],
+                          "measured_error_of_aiming_model_mean_mm": aim["measured_mean_mm"],
+                          "measured_error_of_aiming_model_max_mm": aim["measured_max_mm"],
+                          "expected_real_miss_note": (
+                              "the predicted miss is the model's own; the real tip lands about the measured error "
+                              "of the model aimed with away" if aim["measured_mean_mm"] is not None else
+                              "the predicted miss is the model's own; its real error is not measured")})
         if k in aimed.errors:
             entry.update({"compensation_used": False, "compensation_message": aimed.errors[k]})
         if c is not None:
@@ -863,6 +984,25 @@ def _robot_effects(robot) -> dict:
     return out
 
 
+def _bound_calibration(robot, weight: float) -> dict:
+    """What the bound the plan ranks paths by stands for (``summary.json["bound_calibration"]``)."""
+    cal = (robot.metadata or {}).get("bound_calibration")
+    if cal is None:
+        return {"calibrated": False, "note": "the bound is the model's (Ha et al. 2019, Sec. III), not validated on "
+                                             "measurements: the robot file has no [bound_calibration]"}
+    cov = cal.get("test_coverage")
+    return {"calibrated": True, "factor": cal["factor"], "noise_margin_mm": cal["noise_margin_m"] * 1e3,
+            "target_coverage": cal["target_coverage"], "test_coverage": cov,
+            "test_coverage_interval": [cal.get("test_coverage_low"), cal.get("test_coverage_high")],
+            "failing": bool(cal.get("failing", False)), "data_file": cal.get("data_file"),
+            "effective_bound_weight_per_metre": effective_bound_weight(robot, weight),
+            "note": (f"paths ranked by the calibrated bound {cal['factor']:.3g} x (bound + "
+                     f"{cal['noise_margin_m'] * 1e3:.2f} mm), validated at "
+                     + ("-" if cov is None else f"{100 * cov:.0f} %") + f" coverage of measured tips (target "
+                     f"{100 * cal['target_coverage']:.0f} %) on {cal.get('data_file') or 'unnamed data'}"
+                     + ("; FAILING its target on the test split" if cal.get("failing") else ""))}
+
+
 def plan_summary(setup: PlanSetup, bound_map: BoundMapStage, validity, resolved: ResolvedGoals,
                  aimed: AimedGoals, plans: Plans, traj) -> dict:
     """The run's summary as ``summary.json`` stores it (report units: keys ending ``_mm`` in mm,
@@ -897,6 +1037,8 @@ def plan_summary(setup: PlanSetup, bound_map: BoundMapStage, validity, resolved:
                   for g, qp in zip(resolved.goals, aimed.q)],
         "final_motion": aimed.final_motion,
         "robot_effects": _robot_effects(robot),
+        "aiming": {k: v for k, v in (aimed.aim or aim_decision(robot)).items() if k != "validation"},
+        "bound_calibration": _bound_calibration(robot, sc.planner.bound_weight),
         "goal_prediction": _goal_prediction(sc.goals, aimed, aware, robot),
         "bound_map": {"source": bound_map.source, "time_s": bound_map.time_s, "coordinates": field.coordinate_names,
                       "resolution": list(field.shape), "placement": setup.spec.placement, "key": field.key,
@@ -1064,7 +1206,7 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
     plans = plan_routes(setup, bound_map.field, aimed, iterations=iterations, compare_blind=compare_blind,
                         n_jobs=n_jobs, echo=echo)
     traj = time_parameterize(setup, plans.aware.ordered)
-    rows = path_rows(plans.aware)
+    rows = path_rows(plans.aware, setup.robot)
     summary = plan_summary(setup, bound_map, validity, resolved, aimed, plans, traj)
     summary["times_s"]["total"] = time.perf_counter() - t_start
     write_report(setup, plans, traj, rows, summary, echo)

@@ -10,7 +10,9 @@ Column schema (SI units, full float precision):
 ``path.csv``
     ``waypoint`` (0-based index), ``motion`` (``start``, ``rotation``, ``translation``), one column
     per joint (``alpha_i`` [rad], ``beta_i`` [m]), ``tip_x``, ``tip_y``, ``tip_z`` [m],
-    ``bound_position_m`` [m] (the exact bound given the last motion), ``planned_bound_m`` [m] (the same
+    ``bound_position_m`` [m] (the exact bound given the last motion), ``calibrated_bound_m`` [m] (the
+    calibrated bound of the robot file's ``[bound_calibration]``, ``factor (bound + noise margin)``;
+    empty without one), ``planned_bound_m`` [m] (the same
     quantity as the planner's bound map gave it; empty when no map was used), ``bound_angle_rad``
     [rad], ``bound_kind`` (``friction`` or ``translation_last``), ``predicted_tip_x``,
     ``predicted_tip_y``, ``predicted_tip_z`` [m] (the tip predicted for the motion history the
@@ -51,7 +53,7 @@ SUMMARY_FILE = "summary.json"
 BOUND_KINDS = ("friction", "translation_last")
 _MOTIONS = (START, "rotation", "translation")
 _TIP_COLUMNS = ("tip_x", "tip_y", "tip_z")
-_BOUND_COLUMNS = ("bound_position_m", "planned_bound_m", "bound_angle_rad", "bound_kind")
+_BOUND_COLUMNS = ("bound_position_m", "calibrated_bound_m", "planned_bound_m", "bound_angle_rad", "bound_kind")
 _PREDICTION_COLUMNS = ("predicted_tip_x", "predicted_tip_y", "predicted_tip_z", "predicted_offset_m",
                        "prediction_eta", "prediction_cases")
 
@@ -90,7 +92,8 @@ def write_plan_outputs(out_dir, ordered_path_rows: Sequence[Mapping[str, Any]],
         (array-like, shape (n_joints,), [rad or m], in the order of ``joint_names``) or one key per
         joint name; the tip position, either ``tip`` (shape (3,) [m]) or ``tip_x``, ``tip_y``,
         ``tip_z`` [m]; ``bound_position_m`` [m]; ``bound_angle_rad`` [rad]; ``bound_kind``
-        (``"friction"`` or ``"translation_last"``). Optional: ``planned_bound_m`` [m] (the bound
+        (``"friction"`` or ``"translation_last"``). Optional: ``calibrated_bound_m`` [m] (empty when
+        missing or NaN), ``planned_bound_m`` [m] (the bound
         map's value of the same quantity; NaN, written empty, when missing), ``predicted_tip``
         (shape (3,) [m]), ``predicted_offset_m`` [m], ``prediction_eta`` and
         ``prediction_cases`` (str) (empty when missing or NaN), and a ``waypoint`` index
@@ -200,12 +203,13 @@ def _path_csv(rows: Sequence[Mapping[str, Any]], names: list[str]) -> str:
         if kind not in BOUND_KINDS:
             raise ValueError(f"path row {r}: bound_kind must be one of {BOUND_KINDS}, got {kind!r}")
         planned = float(row.get("planned_bound_m", float("nan")))
+        calibrated = float(row.get("calibrated_bound_m", float("nan")))
         ptip = np.asarray(row.get("predicted_tip", np.full(3, np.nan)), dtype=float).reshape(-1)
         if ptip.size != 3:
             raise ValueError(f"path row {r}: predicted_tip needs 3 values [m], got {ptip.size}")
         offset = float(row.get("predicted_offset_m", float("nan")))
         writer.writerow([int(row.get("waypoint", r)), motion, *map(_num, q), *map(_num, tip),
-                         _num(_require(row, "bound_position_m", r)), _opt(planned),
+                         _num(_require(row, "bound_position_m", r)), _opt(calibrated), _opt(planned),
                          _num(_require(row, "bound_angle_rad", r)), kind, *map(_opt, ptip), _opt(offset),
                          str(row.get("prediction_eta", "")), str(row.get("prediction_cases", ""))])
     return buf.getvalue()

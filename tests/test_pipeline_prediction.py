@@ -22,12 +22,15 @@ REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
 
 
-def _task_target(tmp_path, extra_planner_line: str = "") -> Path:
+def _task_target(tmp_path, extra_planner_line: str = "", aim_with: str | None = "history") -> Path:
     """A copy of the shipped task-target scenario with absolute paths, without its ``final_motion``
-    line (the default), optionally with one more line in ``[planner]``."""
+    line (the default), with ``aim_with`` (default "history": the compensation is what these
+    tests check; None keeps the default "auto") and optionally one more line in ``[planner]``."""
     text = (SCENARIOS / "task-target.toml").read_text()
     text = text.replace('robot = "../model/', f'robot = "{(REPO / "model").as_posix()}/')
     text = re.sub(r"(?m)^final_motion = .*$", "", text)     # the shipped file spells out the default
+    if aim_with is not None:
+        extra_planner_line = "\n".join(x for x in (extra_planner_line, f'aim_with = "{aim_with}"') if x)
     if extra_planner_line:
         text = text.replace("[planner]\n", f"[planner]\n{extra_planner_line}\n")
     path = tmp_path / "task-target.toml"
@@ -115,3 +118,79 @@ def test_bad_final_motion_names_file_key_and_value(tmp_path):
     sc = _task_target(tmp_path, 'final_motion = "rotation_last"')
     with pytest.raises(ModelFileError, match=r"task-target\.toml.*planner\.final_motion.*'rotation_last'"):
         load_scenario(sc)
+
+
+def _with_metadata(monkeypatch, **tables):
+    """Make the scenario loader add robot-file tables to the robot's metadata (the robot file's
+    text, and so its shipped bound map, stay the same)."""
+    import ctrplan.io.scenario as scenario_module
+
+    original = scenario_module.load_robot
+
+    def load(path, *args, **kwargs):
+        robot = original(path, *args, **kwargs)
+        return robot.replace(metadata={**robot.metadata, **tables})
+
+    monkeypatch.setattr(scenario_module, "load_robot", load)
+
+
+def test_auto_aims_with_the_standard_model_when_the_prediction_is_not_validated(tmp_path, monkeypatch):
+    """Default ``aim_with = "auto"`` with the shipped robot file (no [prediction_validation]): the
+    goal is the standard-model IK solution, the summary says the standard model was aimed with
+    and why, that its real error is not measured, and that the bound is the model's, not
+    validated; path.csv's calibrated_bound_m is empty. Catches a planner that compensates with an
+    unvalidated prediction and reports 0.002 mm as the expected miss."""
+    sc = _task_target(tmp_path, aim_with=None)
+    summary, rows = _run(tmp_path, monkeypatch, sc)
+    g = summary["goal_prediction"]["goal_1"]
+    assert summary["aiming"]["model"] == "standard model" and not summary["aiming"]["use_history"]
+    assert "[prediction_validation]" in summary["aiming"]["reason"]
+    assert g["aimed_with"] == "standard model" and "compensation_used" not in g
+    assert g["measured_error_of_aiming_model_mean_mm"] is None and "not measured" in g["expected_real_miss_note"]
+    np.testing.assert_allclose(summary["goals"][0]["q_planned"], summary["goals"][0]["q"], atol=0)
+    assert summary["bound_calibration"]["calibrated"] is False
+    assert "not validated on measurements" in summary["bound_calibration"]["note"]
+    assert all(r["calibrated_bound_m"] == "" for r in rows)
+
+
+def test_auto_aims_with_a_validated_prediction_and_ranks_by_the_calibrated_bound(tmp_path, monkeypatch):
+    """The robot file records that the history-aware prediction beat the standard model on
+    measurements and a calibrated bound 1.5 x (bound + 0.3 mm): the goal is compensated, the
+    summary gives the measured error of the prediction next to the predicted miss, path.csv's
+    calibrated_bound_m is 1.5 x (bound_position_m + 0.3 mm) at every waypoint, and the planner's
+    bound weight is the one that ranks paths by the calibrated bound. Catches a calibration that
+    is read but not applied, and a column computed from another bound."""
+    pv = {"standard_mean_m": 4.0e-3, "standard_max_m": 12.0e-3, "history_mean_m": 3.0e-3, "history_max_m": 9.0e-3,
+          "history_beats_standard": True, "test_samples": 250, "data_file": "measured.csv"}
+    bc = {"factor": 1.5, "noise_margin_m": 0.3e-3, "target_coverage": 0.9, "test_coverage": 0.88,
+          "test_coverage_low": 0.8, "test_coverage_high": 0.95, "failing": False, "data_file": "measured.csv"}
+    _with_metadata(monkeypatch, prediction_validation=pv, bound_calibration=bc)
+    sc = _task_target(tmp_path, aim_with=None)
+    summary, rows = _run(tmp_path, monkeypatch, sc)
+    g = summary["goal_prediction"]["goal_1"]
+    assert summary["aiming"]["use_history"] and g["aimed_with"] == "history-aware prediction"
+    assert g["compensation_used"] and g["measured_error_of_aiming_model_mean_mm"] == pytest.approx(3.0)
+    assert g["measured_error_of_aiming_model_max_mm"] == pytest.approx(9.0)
+    for r in rows:
+        assert float(r["calibrated_bound_m"]) == pytest.approx(1.5 * (float(r["bound_position_m"]) + 0.3e-3), rel=1e-12)
+    w = summary["bound_weight_per_metre"]
+    cal = summary["bound_calibration"]
+    assert cal["calibrated"] and cal["effective_bound_weight_per_metre"] == pytest.approx(w * 1.5 / (1 + w * 1.5 * 0.3e-3))
+    assert "88 %" in cal["note"]
+
+
+def test_the_effective_bound_weight_ranks_paths_as_the_calibrated_bound_does():
+    """For any paths (length L, bound integral I), L + w' I is (1 + w c m)^-1 times the cost with the
+    calibrated bound, (1 + w c m) L + w c I: the same order. Catches a wrong effective weight."""
+    from ctrplan.io.robot_file import load_robot
+
+    robot = load_robot(REPO / "model" / "ha2019-table7-calibrated.toml")
+    robot = robot.replace(metadata={**robot.metadata, "bound_calibration": {"factor": 1.7, "noise_margin_m": 0.4e-3}})
+    w, c, m = 1000.0, 1.7, 0.4e-3
+    w_eff = pipeline.effective_bound_weight(robot, w)
+    rng = np.random.default_rng(2718)
+    L, I = rng.uniform(0.1, 2.0, 50), rng.uniform(0.0, 5e-3, 50)
+    np.testing.assert_allclose((1 + w * c * m) * L + w * c * I, (1 + w * c * m) * (L + w_eff * I), rtol=1e-12)
+    assert pipeline.effective_bound_weight(robot, 0.0) == 0.0
+    plain = load_robot(REPO / "model" / "ha2019-table7-calibrated.toml")
+    assert pipeline.effective_bound_weight(plain, w) == w

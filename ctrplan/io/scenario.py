@@ -98,6 +98,7 @@ class _PlannerDoc(_Strict):
     range: Positive | None = None
     rewire_factor: Positive | None = None
     final_motion: Literal["translation-last", "rotation-last"] = "translation-last"
+    aim_with: Literal["auto", "history", "standard"] = "auto"
 
 
 class _BoundFieldDoc(_Strict):
@@ -280,6 +281,12 @@ class PlannerSettings:
         leaves the friction solution of its direction (Section V-B of Ha et al. 2019). Task-space
         goals are aimed for the tip predicted after that motion
         (:func:`ctrplan.planning.goals.compensate_goal`).
+    aim_with : {"auto", "history", "standard"}
+        The model task-space goals are aimed with (default ``"auto"``): ``"history"`` the
+        history-aware prediction (compensated goals), ``"standard"`` the standard model,
+        ``"auto"`` the history-aware prediction only where the robot file's
+        ``[prediction_validation]`` records that it beat the standard model on measurements in
+        mean and max (``ctrplan discrepancy`` writes it), else the standard model.
     """
 
     name: str = "RRTstar"
@@ -290,6 +297,7 @@ class PlannerSettings:
     range: float | None = None
     rewire_factor: float | None = None
     final_motion: str = "translation-last"
+    aim_with: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -514,7 +522,7 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
     p = doc.planner
     planner = PlannerSettings(name=p.name, iterations=p.iterations, time_limit=p.time_limit_s,
                               seed=p.seed, bound_weight=p.bound_weight, range=p.range,
-                              rewire_factor=p.rewire_factor, final_motion=p.final_motion)
+                              rewire_factor=p.rewire_factor, final_motion=p.final_motion, aim_with=p.aim_with)
 
     bf = doc.bound_field
     if bf.resolution is not None:
