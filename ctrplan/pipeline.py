@@ -1000,7 +1000,8 @@ def _bound_calibration(robot, weight: float) -> dict:
                      f"{cal['noise_margin_m'] * 1e3:.2f} mm), validated at "
                      + ("-" if cov is None else f"{100 * cov:.0f} %") + f" coverage of measured tips (target "
                      f"{100 * cal['target_coverage']:.0f} %) on {cal.get('data_file') or 'unnamed data'}"
-                     + ("; FAILING its target on the test split" if cal.get("failing") else ""))}
+                     + ("; FAILING its target on the test split" if cal.get("failing") else
+                        "; conservative on the test split" if cal.get("status") == "conservative" else ""))}
 
 
 def plan_summary(setup: PlanSetup, bound_map: BoundMapStage, validity, resolved: ResolvedGoals,

@@ -15,9 +15,11 @@ scores for a target coverage ``t`` (Vovk et al. 2005; Lei et al., JASA 113:1094,
 split-conformal prediction itself; a conformal library (``mapie``) wraps scikit-learn regressors,
 and here the "regressor" is the mechanics, so the plain finite-sample quantile is used. The
 guarantee assumes exchangeable samples: the samples of a motion are serially correlated, so the
-coverage is checked on the untouched test split with a block-bootstrap interval, and a calibrated
-bound whose test coverage misses its target by more than :data:`COVERAGE_TOLERANCE` (and whose
-interval excludes the target) is reported as failing.
+coverage is checked on the untouched test split with a block-bootstrap interval: a calibrated
+bound whose test coverage falls short of its target by more than :data:`COVERAGE_TOLERANCE` (and
+whose interval excludes the target) is reported as **failing**; one that exceeds it by as much is
+**conservative** (wider than it needs to be, e.g. calibrated on out-of-fold errors of models fitted
+on less data than the final one).
 """
 
 from __future__ import annotations
@@ -217,8 +219,10 @@ class BoundCalibration:
         The translation-last bound's coverage on the test samples after a final translation of
         every pair (None without such samples).
     failing : bool
-        The test coverage misses the target by more than :data:`COVERAGE_TOLERANCE` and its
+        The test coverage falls short of the target by more than :data:`COVERAGE_TOLERANCE` and its
         interval excludes it.
+    status : {"met", "failing", "conservative"}
+        ``"conservative"``: the coverage exceeds the target by as much.
     """
 
     method: str
@@ -232,6 +236,7 @@ class BoundCalibration:
     raw_test: dict
     translation_last: dict | None
     failing: bool
+    status: str = "met"
 
     def file_table(self, data_file: str, data_sha256: str) -> dict:
         """The robot file's ``[bound_calibration]`` table (SI; unknown figures left out)."""
@@ -240,7 +245,7 @@ class BoundCalibration:
                 "calibration_samples": self.n_calibration, "test_samples": self.test["n"],
                 "test_coverage": self.test["covered"], "test_coverage_low": self.test["ci"][0],
                 "test_coverage_high": self.test["ci"][1], "raw_bound_test_coverage": self.raw_test["covered"],
-                "failing": self.failing, "data_file": data_file, "data_sha256": data_sha256,
+                "failing": self.failing, "status": self.status, "data_file": data_file, "data_sha256": data_sha256,
                 "date": datetime.date.today().isoformat()}
         return {k: v for k, v in table.items() if not (isinstance(v, float) and not np.isfinite(v))}
 
@@ -253,7 +258,7 @@ class BoundCalibration:
                 "test": {**self.test, "bound_median_mm": mm(self.test["bound_median_m"]),
                          "error_median_mm": mm(self.test["error_median_m"])},
                 "raw_test": {**self.raw_test, "bound_median_mm": mm(self.raw_test["bound_median_m"])},
-                "translation_last": self.translation_last, "failing": self.failing}
+                "translation_last": self.translation_last, "failing": self.failing, "status": self.status}
 
 
 def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *, noise_rms: float,
@@ -297,13 +302,14 @@ def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *,
         tl = coverage_figures(te[rel], np.asarray(test_translation_last, float)[rel], margin,
                               np.asarray(test_units)[rel], seed=seed)
     cov = test["covered"]
-    failing = bool(cov is None or (abs(cov - target) > COVERAGE_TOLERANCE
-                                   and not (test["ci"][0] <= target <= test["ci"][1])))
+    outside = cov is None or (abs(cov - target) > COVERAGE_TOLERANCE and not (test["ci"][0] <= target <= test["ci"][1]))
+    failing = bool(outside and (cov is None or cov < target))
+    status = "failing" if failing else "conservative" if outside else "met"
     method = (f"split-conformal: factor = the ceil((n + 1) x {target:g})-th smallest of e / (b + m) over {n_cal} "
               f"out-of-fold calibration samples; calibrated bound = factor x (b + m)")
     return BoundCalibration(method=method, target=target, factor=factor, margin_m=margin,
                             noise_multiple=NOISE_MULTIPLE, noise_rms_m=float(noise_rms), n_calibration=n_cal,
-                            test=test, raw_test=raw, translation_last=tl, failing=failing)
+                            test=test, raw_test=raw, translation_last=tl, failing=failing, status=status)
 
 
 def _stored_bounds(setup, stage: str, robot, rows: np.ndarray, n_jobs: int, echo) -> BoundValues:
@@ -379,5 +385,5 @@ def check_bound(setup, split, baseline, test, final_params: dict, noise, options
          f"{100 * (raw['covered'] or 0):.0f} % of {raw['n']} measured tips within b + {cal.margin_m * 1e3:.2f} mm "
          f"(median e / (b + m) {raw['ratio']['median'] or float('nan'):.2f}); calibrated bound = {cal.factor:.3g} x "
          f"(b + m) covers {100 * (t['covered'] or 0):.0f} % ({100 * (t['ci'][0] or 0):.0f}..{100 * (t['ci'][1] or 0):.0f} "
-         f"%, target {100 * cal.target:.0f} %)" + ("; FAILING" if cal.failing else ""))
+         f"%, target {100 * cal.target:.0f} %: {cal.status})")
     return cal

@@ -127,6 +127,7 @@ class BoundCalibrationDoc(_Strict):
     test_coverage_high: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     raw_bound_test_coverage: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     failing: bool = False
+    status: typing.Literal["met", "failing", "conservative"] | None = None
     data_file: str = ""
     data_sha256: str = ""
     date: str = ""
