@@ -8,7 +8,8 @@ Each table sits between ``<!-- NAME -->`` and ``<!-- /NAME -->`` in docs/discrep
 - ``sweep-table``: ``benchmarks/results/discrepancy-sweep.json``
   (``benchmarks/bench_discrepancy_sweep.py``);
 - ``ha-table``: ``benchmarks/results/ha-trajectory-discrepancy.json``
-  (``benchmarks/ha_trajectory_discrepancy.py``).
+  (``benchmarks/ha_trajectory_discrepancy.py``);
+- ``robot-files-table``: ``benchmarks/results/ha-robot-files.json`` (``benchmarks/ha_robot_files.py``).
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "discrepancy.md"
 RESULTS = ROOT / "benchmarks" / "results"
-SOURCES = {"sweep-table": RESULTS / "discrepancy-sweep.json", "ha-table": RESULTS / "ha-trajectory-discrepancy.json"}
+SOURCES = {"sweep-table": RESULTS / "discrepancy-sweep.json", "ha-table": RESULTS / "ha-trajectory-discrepancy.json",
+           "robot-files-table": RESULTS / "ha-robot-files.json"}
 OUTCOMES = ("named", "ambiguous with truth", "named wrong", "ambiguous without truth", "nothing")
 
 
@@ -110,7 +112,34 @@ def ha_table(res: dict) -> str:
     return "\n".join(lines)
 
 
-MAKERS = {"sweep-table": sweep_table, "ha-table": ha_table}
+def robot_files_table(res: dict) -> str:
+    """Standard model, prediction, bound and calibrated bound per robot file; the parameter swaps."""
+    lines = [f"Data: {res['data_file']} (SHA-256 {res['data_sha256'][:12]}...), ds = {res['ds_m'] * 1e3:g} mm; "
+             f"registration fitted on the first {res['files'][0]['rows_registered']} rows, errors on the other "
+             f"{res['files'][0]['rows_evaluated']}.", "",
+             "| robot file (mu) | standard model mean / p95 / max [mm] | history-aware prediction mean / p95 / max [mm] "
+             "| bound mean / max [mm] | error <= bound + 0.6 mm | calibrated bound (target 90 %): factor, median size, "
+             "test coverage (95 % interval) |", "|---|---|---|---|---|---|"]
+    for f in res["files"]:
+        s, p, c = f["standard"], f["prediction"], f["calibrated_bound"]
+        ci = c["test_coverage_ci"]
+        lines.append(f"| `{f['robot_file']}` ({', '.join(f'{m:g}' for m in f['friction_coefficients'])}) | "
+                     f"{s['mean_mm']:.2f} / {s['p95_mm']:.2f} / {s['max_mm']:.2f} | {p['mean_mm']:.2f} / {p['p95_mm']:.2f} "
+                     f"/ {p['max_mm']:.2f} | {f['bound_mean_mm']:.2f} / {f['bound_max_mm']:.2f} | "
+                     f"{100 * f['within_bound_plus_0_6_mm']:.1f} % | {c['factor']:.3g} x (b + {c['margin_mm']:.2f} mm), "
+                     f"{c['median_size_mm']:.2f} mm, {100 * c['test_coverage']:.0f} % ({100 * ci[0]:.0f}..{100 * ci[1]:.0f} %), "
+                     f"{c['status']} |")
+    lines += ["", "Standard-model mean error [mm] with one file's value(s) put into the other:", "",
+              "| parameters | Table II value(s) | Table VII value(s) | Table II file with Table VII values | Table VII file "
+              "with Table II values |", "|---|---|---|---|---|"]
+    for w in res["swaps"]:
+        lines.append(f"| {', '.join(w['parameters'])} | {', '.join(f'{v:.4g}' for v in w['table2'])} | "
+                     f"{', '.join(f'{v:.4g}' for v in w['table7'])} | {w['table2_with_table7_values']['mean_mm']:.2f} | "
+                     f"{w['table7_with_table2_values']['mean_mm']:.2f} |")
+    return "\n".join(lines)
+
+
+MAKERS = {"sweep-table": sweep_table, "ha-table": ha_table, "robot-files-table": robot_files_table}
 
 
 def render(doc: str) -> str:

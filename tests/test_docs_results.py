@@ -22,7 +22,7 @@ def _tables():
     return mod
 
 
-@pytest.mark.parametrize("name", ["sweep-table", "ha-table"])
+@pytest.mark.parametrize("name", ["sweep-table", "ha-table", "robot-files-table"])
 def test_docs_tables_are_the_results_files(name):
     """The table between the docs' markers is exactly what the results file renders to."""
     tables = _tables()
@@ -38,11 +38,11 @@ def test_docs_tables_are_the_results_files(name):
 
 @pytest.mark.skipif(not HA_DATA.exists(), reason=f"measured data not present at {HA_DATA} (not redistributable; "
                                                   f"get it from github.com/hjhdog1/ConcentricTubes)")
-def test_ha_results_come_from_the_present_data():
-    """The Ha results file names the SHA-256 of the data file it was computed from."""
-    results = ROOT / "benchmarks" / "results" / "ha-trajectory-discrepancy.json"
+@pytest.mark.parametrize("name", ["ha-trajectory-discrepancy.json", "ha-robot-files.json"])
+def test_ha_results_come_from_the_present_data(name):
+    """Each Ha results file names the SHA-256 of the data file it was computed from."""
+    results = ROOT / "benchmarks" / "results" / name
     if not results.exists():
-        pytest.skip("benchmarks/results/ha-trajectory-discrepancy.json not written yet")
+        pytest.skip(f"benchmarks/results/{name} not written yet")
     stored = json.loads(results.read_text())
     assert stored["data_sha256"] == hashlib.sha256(HA_DATA.read_bytes()).hexdigest()
-    assert stored["n_samples"] == 1307
