@@ -178,7 +178,7 @@ def _baseline_lines(results: dict) -> list[str]:
         ref = "-" if r.get("reference") is None else f"{r['reference']:.4g}"
         change = "-" if r.get("relative_change") is None else f"{100 * r['relative_change']:+.0f} %"
         rng = "-" if r["plausible"] is None else f"{r['plausible'][0]:.4g}..{r['plausible'][1]:.4g}"
-        lines.append(f"| {r['name']} | {_value(r)} | {ref} | {change} | {rng} |")
+        lines.append(f"| {r['name']} | {_value(r).split(' = ', 1)[-1]} | {ref} | {change} | {rng} |")
     corr = b["fit"].get("correlation")
     if corr is not None:
         names = list(b["fit"]["parameters"])
