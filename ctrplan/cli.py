@@ -328,6 +328,11 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
 @click.option("--blocks", type=int, default=20, show_default=True,
               help="Time blocks a continuous motion is cut into (the units of the split and the tests).")
 @click.option("--max-calibration-samples", type=int, default=300, show_default=True)
+@click.option("--bound-target", type=float, default=0.9, show_default=True,
+              help="Share of measured tips the calibrated bound is to cover (written to the updated robot file).")
+@click.option("--bound-samples", type=int, default=200, show_default=True,
+              help="Development and test samples at which the friction bound is evaluated for its calibration; "
+                   "0 skips it.")
 @click.option("--significance", type=float, default=0.01, show_default=True)
 @click.option("--permutations", type=int, default=999, show_default=True)
 @click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")
@@ -335,8 +340,8 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--no-progress", is_flag=True, help="Hide progress bars.")
 def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, reference_mu, envelope_samples, frame,
-                test_fraction, folds, blocks, max_calibration_samples, significance, permutations, ds, jobs, seed,
-                no_progress):
+                test_fraction, folds, blocks, max_calibration_samples, bound_target, bound_samples, significance,
+                permutations, ds, jobs, seed, no_progress):
     """Find where model and measurement disagree, name the missing effect, add it, show the gap shrink.
 
     Interrupted runs resume from <out>/.stages (finished calibrations and evaluations are kept).
@@ -363,6 +368,10 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
         raise PhysicalParameterError(f"option --noise-position-mm {noise_mm!r}: must be > 0 mm")
     if envelope_samples < 0:
         raise PhysicalParameterError(f"option --envelope-samples {envelope_samples!r}: must be >= 0")
+    if not 0.0 < bound_target < 1.0:
+        raise PhysicalParameterError(f"option --bound-target {bound_target!r}: must be in (0, 1)")
+    if bound_samples < 0:
+        raise PhysicalParameterError(f"option --bound-samples {bound_samples!r}: must be >= 0")
     ref_mu = None
     if reference_mu is not None:
         from .discrepancy.synth import parse_values
@@ -377,7 +386,7 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
         significance=significance, n_permutations=permutations, ds=ds or 3e-3,
         n_jobs=jobs or os.cpu_count() or 1, seed=seed,
         noise_position=None if noise_mm is None else noise_mm * 1e-3, envelope_samples=envelope_samples,
-        reference_friction=ref_mu)
+        reference_friction=ref_mu, bound_target=bound_target, bound_samples=bound_samples)
     results = run_discrepancy(robot_path, data_path, out_dir, opts, echo=click.echo, progress=not no_progress)
     paths = write_report(results, out_dir)
     click.echo(f"report: {paths['markdown']}")
