@@ -29,7 +29,7 @@ from ctrplan.testing import (assert_bound_below, assert_collision_free, assert_r
 
 REPO = Path(__file__).resolve().parents[1]
 
-# Few, coarse points between waypoints: each costs an exact bound (about a second).
+# Few, coarse points between waypoints (each costs an exact-bound evaluation).
 COARSE = (math.radians(30.0), 0.01)
 
 
