@@ -3,9 +3,22 @@
 Mechanics from Ha, Fagogenis & Dupont, "Modeling Tube Clearance and Bounding the Effect of
 Friction in Concentric Tube Robot Kinematics", IEEE T-RO 35(2):353-370, 2019,
 doi:10.1109/TRO.2018.2878906.
+
+``ctrplan.plan_scenario`` and ``ctrplan.PlanResult`` (:mod:`ctrplan.api`) are imported on first
+use, so ``import ctrplan`` stays light.
 """
 
 from .errors import *  # noqa: F401,F403
 from .robot import Joint, Robot, Section, TranslationLink, Tube  # noqa: F401
 
 __version__ = "0.1.0"
+
+_LAZY = {"plan_scenario": "api", "PlanResult": "api"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        from importlib import import_module
+
+        return getattr(import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

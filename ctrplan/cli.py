@@ -113,11 +113,11 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
 @click.option("--no-blind", is_flag=True, help="Skip the bound-blind comparison plan.")
 def plan(scenario_path, out_dir, jobs, iterations, no_blind):
     """Plan a friction-bound-aware motion for a scenario and write the drive trajectory."""
-    from .pipeline import run_plan
+    from .api import plan_scenario
 
-    summary = run_plan(scenario_path, out_dir=out_dir, n_jobs=jobs or os.cpu_count() or 1,
-                       iterations=iterations, compare_blind=not no_blind, echo=click.echo)
-    click.echo(f"outputs in {summary['output_dir']}")
+    result = plan_scenario(scenario_path, out_dir, n_jobs=jobs or os.cpu_count() or 1, iterations=iterations,
+                           compare_blind=not no_blind, echo=click.echo)
+    click.echo(f"outputs in {result.output_dir}")
 
 
 @main.command()

@@ -50,7 +50,7 @@ from .planning.goals import compensate_goal
 from .planning.history import approach_history, approach_rows, end_with, goal_indices, path_history
 from .planning.route import DEFAULT_REWIRE_FACTOR, plan_route, route_checks
 
-__all__ = ["run_plan", "map_spec", "PlanSetup", "BoundMapStage", "ResolvedGoals", "AimedGoals", "PathBounds",
+__all__ = ["run_plan", "plan_stages", "PlanRun", "map_spec", "PlanSetup", "BoundMapStage", "ResolvedGoals", "AimedGoals", "PathBounds",
            "WaypointPredictions", "RoutePlan", "Plans", "load_setup", "load_bound_map", "check_start",
            "resolve_goals", "aim_goals", "plan_routes", "time_parameterize", "path_rows", "plan_summary",
            "write_report"]
@@ -1021,7 +1021,8 @@ def plan_summary(setup: PlanSetup, bound_map: BoundMapStage, validity, resolved:
     Returns
     -------
     dict
-        Scenario and robot, the goals (resolved and planned, with the map's bound there), the goal
+        Scenario (its name and ``scenario_file``, the resolved path it was read from) and robot,
+        the goals (resolved and planned, with the map's bound there), the goal
         predictions, the bound map, the bound-aware plan (and the bound-blind one with a
         ``comparison`` of the headline metrics), the trajectory's duration, model-evaluation
         counts and stage times. ``times_s["total"]`` is None (set by :func:`run_plan` before
@@ -1030,7 +1031,7 @@ def plan_summary(setup: PlanSetup, bound_map: BoundMapStage, validity, resolved:
     sc, robot, field = setup.scenario, setup.robot, bound_map.field
     routes, aware = plans.routes, plans.aware
     summary = {
-        "scenario": sc.name, "robot": robot.name, "robot_source": robot.source,
+        "scenario": sc.name, "scenario_file": str(sc.file), "robot": robot.name, "robot_source": robot.source,
         "joints": robot.joint_names,
         "goals": [{"q": g.q.tolist(), "tip_error_mm": g.tip_error * 1e3, "field_bound_mm": g.bound * 1e3,
                    "n_candidates": int(len(g.candidates)), "q_planned": np.asarray(qp).tolist(),
@@ -1198,6 +1199,49 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
     JointLimitError
         The time-parameterized trajectory violates the drive limits.
     """
+    return plan_stages(scenario_path, out_dir, n_jobs=n_jobs, iterations=iterations,
+                       compare_blind=compare_blind, echo=echo).summary
+
+
+@dataclass(frozen=True, eq=False)
+class PlanRun:
+    """What :func:`plan_stages` computed: every stage's result and the summary it wrote.
+
+    Attributes
+    ----------
+    setup : PlanSetup
+    bound_map : BoundMapStage
+    resolved : ResolvedGoals
+    aimed : AimedGoals
+    plans : Plans
+    trajectory : Trajectory or None
+        Stage 6's drive trajectory (None without a ``[drive]`` table).
+    rows : list of dict
+        :func:`path_rows` of the bound-aware plan (SI units).
+    summary : dict
+        The summary written to ``summary.json`` (report units), plus ``output_dir``.
+    """
+
+    setup: PlanSetup
+    bound_map: BoundMapStage
+    resolved: ResolvedGoals
+    aimed: AimedGoals
+    plans: Plans
+    trajectory: Any
+    rows: list
+    summary: dict
+
+
+def plan_stages(scenario_path, out_dir=None, *, n_jobs: int = 1, iterations: int | None = None,
+                compare_blind: bool = True, echo=print) -> PlanRun:
+    """:func:`run_plan` returning every stage's result as well as the summary.
+
+    Parameters and exceptions as :func:`run_plan`; the same files are written.
+
+    Returns
+    -------
+    PlanRun
+    """
     t_start = time.perf_counter()
     setup = load_setup(scenario_path, out_dir, echo)
     bound_map = load_bound_map(setup, n_jobs, echo)
@@ -1212,4 +1256,5 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
     summary["times_s"]["total"] = time.perf_counter() - t_start
     write_report(setup, plans, traj, rows, summary, echo)
     summary["output_dir"] = str(setup.out_dir)
-    return summary
+    return PlanRun(setup=setup, bound_map=bound_map, resolved=resolved, aimed=aimed, plans=plans, trajectory=traj,
+                   rows=rows, summary=summary)

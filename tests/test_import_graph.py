@@ -26,7 +26,8 @@ LAYERS = (
     ("plots", "report"),
     ("view",),                                 # the interactive view draws with plots' helpers
     ("discrepancy", "pipeline"),
-    ("cli",),
+    ("api",),                                  # plan_scenario: the pipeline's results as arrays
+    ("cli", "testing"),                        # command line; assertions on plans for pytest suites
 )
 
 

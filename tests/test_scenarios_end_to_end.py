@@ -36,6 +36,8 @@ from ctrplan import pipeline
 from ctrplan.io.robot_file import load_robot
 from ctrplan.io.scenario import TaskGoal, load_scenario
 
+from ctrplan.testing import (assert_bound_below, assert_collision_free, assert_rotations_before_translations,
+                             assert_trajectory_within_limits)
 from test_pipeline import _check_outputs, _shipped_scenario
 
 REPO = Path(__file__).resolve().parents[1]
@@ -87,6 +89,13 @@ def _check_goals_and_summary(robot, sc_path, summary, on_disk, rows, plans):
     assert aware["max_bound_at_waypoints_mm"] == pytest.approx(exact.max() * 1e3, rel=1e-12)
     assert aware["max_planned_bound_at_waypoints_mm"] == pytest.approx(planned.max() * 1e3, rel=1e-12)
     assert aware["n_ordered_waypoints"] == len(rows)
+    # the user-facing assertions on the output folder: the bound at the waypoints within the
+    # summary's maximum, phases in order, obstacles clear, drive limits and waypoints met
+    out = sc_path.parent / "out"
+    assert_bound_below(out, aware["max_bound_at_waypoints_mm"] * 1e-3 * (1 + 1e-9), between=False)
+    assert_rotations_before_translations(out)
+    assert_collision_free(out, between=False)
+    assert_trajectory_within_limits(out)
     # every phase passed the final check
     for plan in plans:
         fc = on_disk[plan]["final_check"]
