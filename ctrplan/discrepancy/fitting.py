@@ -624,9 +624,10 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Basel
     effect's fit of the same samples and the second effect's values: with the standard model
     the second effect's parameters alone (the named fit held), then everything together; with a
     contact model (dearer by ~30x) the second effect's parameters only, within
-    ``options.max_contact_evaluations``, with the tube parameters the clearance model was
-    recalibrated to (``contact``: a standard-model fit's tube parameters do not fit with the
-    clearance model). The pair is named by the rule for a single effect with
+    ``options.max_contact_evaluations``, or, for an effect fitted by a grid or a scan (friction,
+    gradual friction), the grid's refinements from its own values or its scan; with the tube
+    parameters the clearance model was recalibrated to (``contact``: a standard-model fit's tube
+    parameters do not fit with the clearance model). The pair is named by the rule for a single effect with
     the named effect in place of the baseline: its out-of-fold improvement over the named effect
     significant (Holm over the pairs tried), every fitted value plausible and none at a bound;
     among such pairs the largest improvement.
@@ -675,9 +676,24 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Basel
             echo(f"second effect: {candidates[e].label} on top of {first.label} ({model} model)"
                  + ("" if k is None else f" without fold {k + 1}") + " ...")
             if start is not None:
-                init2 = np.array([start.values[list(start.names).index(n)] for n in second_names])
+                fitted = dict(zip(*start.all_parameters()))
+                init2 = np.array([fitted.get(n, own[n]) for n in second_names], float)
             else:
                 init2 = np.array([own[n] for n in second_names], float)
+            entry = REGISTRY[e]
+            if model != "standard" and entry.fit in ("grid", "scan"):
+                # a contact-model effect by its own strategy on top of the named fit: the grid's
+                # refinements from its own values, or its scan (a least-squares fit of the
+                # contact model would cost up to max_contact_evaluations)
+                extra = effect_parameters(robot, e, data)
+                values = dict(zip(second_names, init2))
+                fixed = {**p_first, **{n: v for n, v in values.items() if n not in extra}}
+                if entry.fit == "grid":
+                    return grid_search(robot, fit_data, fixed, extra, model, settings=settings, n_jobs=options.n_jobs,
+                                       start=[values.get(n, own.get(n, 0.0)) for n in extra],
+                                       uncertainty=k is None)
+                return scan_fit(robot, fit_data, model, fixed, extra, entry.scan, settings, options.n_jobs,
+                                uncertainty=k is None)
             if model == "standard" and start is not None:
                 # everything together from the pair's fit of all development samples
                 return calibrate(robot, fit_data, "standard", tuple(start.names), initial=start.values,
