@@ -29,7 +29,7 @@ __all__ = ["MODELS", "evaluate_configuration", "evaluate_table", "job_key"]
 # configuration, so a chunk of this many keeps the per-task overhead (one checkpoint line, the
 # start of the compiled threads, and per thread a first row that follows no other) small: on
 # the trajectory four times over with two threads, 32 us per row in chunks of 256, 29 in chunks
-# of 1024 and 28 in one chunk, against 55 on one thread (issue 14); a contact-model
+# of 1024 and 28 in one chunk, against 55 on one thread; a contact-model
 # configuration takes 10-100 ms.
 STANDARD_CHUNK = 2048
 CONTACT_CHUNK = 4
@@ -161,7 +161,7 @@ def _standard_columns(robot, alpha, beta, settings, indices, n_threads=1):
 
     Returns the rows as columns (dict of column name -> array, one entry per configuration):
     built with array operations, not a dict per row, which cost about as much as the compiled
-    solve once the uniqueness screen certified most rows (issue 14)."""
+    solve once the uniqueness screen certified most rows."""
     res = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True,
                                n_threads=n_threads)
     n = robot.n_tubes
@@ -201,7 +201,7 @@ def _columns_record(indices, cols) -> dict:
     """Checkpoint line of a chunk of columns (:func:`_standard_columns`): float and integer
     columns as base64 of their little-endian float64 / int64 bytes (``arrays``, ``integers``;
     exact, and about a tenth of the time of writing the numbers as JSON text, which took 4.4 us
-    per standard-model row, issue 14), text columns as their distinct values and base64 int32
+    per standard-model row), text columns as their distinct values and base64 int32
     codes (``categories``)."""
     arrays, integers, categories = {}, {}, {}
     for name, values in cols.items():
@@ -212,7 +212,7 @@ def _columns_record(indices, cols) -> dict:
             integers[name] = base64.b64encode(values.astype("<i8").tobytes()).decode("ascii")
         else:
             # hashed, not sorted: np.unique of the strings took 0.75 us per row, about a
-            # fifth of what does not run on threads in a command-line run (issue 14)
+            # fifth of what does not run on threads in a command-line run
             codes, uniq = pd.factorize(values, use_na_sentinel=False)
             categories[name] = {"values": [str(v) for v in uniq],
                                 "codes": base64.b64encode(codes.astype("<i4").tobytes()).decode("ascii")}

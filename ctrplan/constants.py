@@ -30,7 +30,7 @@ OUTER_STAGNATION_WINDOW = 15
 # Continuation of a friction solution in mu (mechanics/continuation.py): first and largest step
 # and smallest step, as fractions of the robot's mu, and the growth of the step after a converged
 # solve. 1/256 brackets where a branch ends to within 0.0008 at mu = 0.2; on the four folds of
-# the 8x8x8 grid of issue 14 that took 14-16 solves from a first step of 1/4.
+# the 8x8x8 grid that took 14-16 solves from a first step of 1/4.
 CONTINUATION_INITIAL_STEP = 0.25
 CONTINUATION_MIN_STEP = 1.0 / 256
 CONTINUATION_GROWTH = 1.5
@@ -38,9 +38,9 @@ CONTINUATION_GROWTH = 1.5
 # Inexact outer iterations of the contact models (_contact_fast._inner_tolerance): each
 # complementarity solve stops at INNER_TOL_FACTOR x (last centerline change / outer_tol) x
 # complementarity_tol, at most INNER_TOL_MAX (the first one) and at least complementarity_tol,
-# which the converged iteration uses. On the 4x4x4 grid (issue 14): 85 -> 62 Newton iterations
+# which the converged iteration uses. On the 4x4x4 grid: 85 -> 62 Newton iterations
 # per contact solve, 7.29 -> 7.35 outer iterations, tips within 0.9 um (outer_tol is 1 um).
-# INNER_TOL_MAX 1e-3 -> 3e-2 (issue 14, sixteenth session; it only loosens the first solve of
+# INNER_TOL_MAX 1e-3 -> 3e-2 (it only loosens the first solve of
 # each contact model, whose multipliers the next linearization replaces): 194.3 -> 179.1 Newton
 # iterations per bound, 37.0 -> 37.4 outer; tips as far from solves run to 1e-9 as before
 # (largest 3.09 um against 3.12 um).

@@ -366,7 +366,7 @@ def test_configuration_with_inner_base_in_front_names_the_row(tmp_path, monkeypa
     assert not out.exists()
 
 
-# configuration 97 of issue 14's 8x8x8 grid and its mirror image 481: under maximal friction in
+# configuration 97 of the 8x8x8 grid and its mirror image 481: under maximal friction in
 # directions (-1, -1), resp. (1, 1), the friction branch ends at a fold below mu = 0.2 (0.194 at
 # ds = 4 mm; docs/mechanics.md Sec. 5), so the direct solve does not converge
 FOLD_CONFIGS = [((0.0, np.pi / 4, np.pi), (0.0, -0.017, -0.1204 + 0.0864 / 7)),

@@ -1,4 +1,4 @@
-"""Convergence of the Eq. (49) calibration (issue 13, Sec. 5): on a small synthetic trajectory whose
+"""Convergence of the Eq. (49) calibration: on a small synthetic trajectory whose
 model misses an effect (residuals well above the noise, as on Ha's measured trajectory), the fit
 stops because the decrease its Gauss-Newton model still predicts is negligible in BIC units, not at
 its budget, and a much longer fit finds no better minimum."""

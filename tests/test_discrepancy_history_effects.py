@@ -188,7 +188,7 @@ def _trajectory_case(tmp_path, effects, *, seed, samples=800, candidates=None, t
 def test_hidden_backlash_on_a_trajectory_is_named_not_friction(tmp_path):
     """Hidden 4 deg dead band in the drives of tubes 2 and 3: backlash is named, friction is not
     (a friction model imitates part of the hysteresis, but a translation releases friction and
-    not the play). Catches a workflow that mistakes backlash for friction (issue 13, Sec. 4)."""
+    not the play). Catches a workflow that mistakes backlash for friction."""
     res = _trajectory_case(tmp_path, {"backlash": {"backlash_2": 0.07, "backlash_3": 0.07}}, seed=11)
     assert res["named_effect"] == "backlash", res["decision"]
     assert res["ambiguous_with"] != "friction"

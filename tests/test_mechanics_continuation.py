@@ -1,6 +1,6 @@
 """A friction solution followed in mu (continuation.py): Section III of Ha et al. 2019 at t mu.
 
-The fold configuration is one of the four of the 8x8x8 grid of issue 14 whose bound does not
+The fold configuration is one of the four of the 8x8x8 grid whose bound does not
 converge (Table II robot, tube 3 at beta_3 = -120.4 mm + 86.4 mm / 7, alpha_2 = 45 deg,
 alpha_3 = 180 deg; docs/mechanics.md Sec. 5).
 """

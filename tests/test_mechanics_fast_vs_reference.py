@@ -1,6 +1,6 @@
 """The fast mechanics path (ctrplan.mechanics) against the frozen slow reference (tests/reference).
 
-The reference modules are verbatim copies of the solvers before the speed work of issue 4. On
+The reference modules are verbatim copies of the solvers before the speed work. On
 seeded random configurations of the Table II robot (the paper's Section IV-D set-up, default
 settings, ds = 3 mm) the fast path must reproduce
 

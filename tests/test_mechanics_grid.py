@@ -89,7 +89,7 @@ def test_model_settings_reject_bad_grid_settings(bad):
 
 
 def test_graded_grid_meets_the_accuracy_target_where_the_uniform_grid_fails():
-    """Issue 4's accuracy target, at the hardest configuration of the Sec. IV-D grid found
+    """The accuracy target of the fast solvers, at the hardest configuration of the Sec. IV-D grid found
     (alpha_2 = 0, alpha_3 = -180 deg, beta_3 = -80.7 mm, where friction moves the tip by 23 mm):
     at ds = 3 mm the clearance and friction (1, -1) tips are within 0.05 mm of a run at a step
     four times finer on the default graded grid (measured 0.004 and 0.015 mm); on the paper's

@@ -211,7 +211,7 @@ def test_batch_equals_single_solves():
 @pytest.mark.parametrize("block_min_rows", [128, 4])
 def test_threads_following_blocks_of_a_path_equal_the_serial_follow(monkeypatch, block_min_rows):
     """With ``follow`` and two threads the threads take contiguous blocks of the rows, handed
-    out one at a time, and follow each (issue 14: the default-jobs command line): here two
+    out one at a time, and follow each (the default-jobs command line): here two
     blocks (the default minimum of 128 rows) or ten (a minimum of 4 rows, so that block ends fall
     inside the path). On a seeded path through certified and uncertified rows, with one
     impossible row inside it, every row must get the serial follow's flags and, to the shooting
@@ -356,7 +356,7 @@ def test_shooting_restarts_where_newton_stalls():
         np.testing.assert_allclose(batch.tip_position[k], st.tip_position, atol=1e-10)
 
 
-# The 8x8x8 grid of issue 14 (alpha_2, alpha_3 in steps of 45 deg, beta_3 = -120.4 mm plus
+# The 8x8x8 grid (alpha_2, alpha_3 in steps of 45 deg, beta_3 = -120.4 mm plus
 # tube 3's curved exposure): its five configurations with three equilibria (found by the
 # multistart search of the all-fine-grid reference) and unique neighbours of each.
 _GRID8_MULTISTABLE = [(0, 180, 0.0), (0, 180, 12.343), (0, 180, 24.686), (90, 225, 0.0), (270, 135, 0.0)]
@@ -366,7 +366,7 @@ _GRID8_UNIQUE = [(0, 180, 37.029), (45, 225, 0.0), (0, 135, 0.0), (90, 180, 0.0)
 @pytest.mark.parametrize("a2, a3, e", _GRID8_MULTISTABLE + _GRID8_UNIQUE)
 def test_coarse_grid_multistart_finds_what_the_fine_search_finds(a2, a3, e):
     """The multistart search solves its restarts on the predictor's coarse grid and confirms
-    only distinct candidates on the fine one (issue 14). It must count the same equilibria as
+    only distinct candidates on the fine one. It must count the same equilibria as
     the frozen reference, which solves every restart on the fine grid: a search that misses a
     branch (e.g. compares a coarse solution with the wrong tolerance, or drops the confirmed
     candidates) fails on the multistable rows, one that invents branches on the unique rows.
@@ -394,7 +394,7 @@ def test_multistart_early_stop_keeps_a_nearby_equilibrium():
     """The multistart search abandons a coarse restart once it is converging to an equilibrium
     already found (``standard._RETURN_TWIST`` = 1e-2 rad, halving distance). At this seeded random
     configuration of the Table II robot (alpha_3 - alpha_2 = 143 deg, 132 mm of tube 3 exposed
-    beyond tube 2; the closest case in the 9638 configurations checked for issue 14) the second
+    beyond tube 2; the closest case in the 9638 configurations checked) the second
     restart ends at a stable equilibrium only 0.124 rad (max_i |d sigma_i| L_i) from the first,
     approached slowly (0.63, 0.37, 0.23, 0.16, 0.13 rad): a stop radius above 0.124 rad without the
     contraction test would reject it as the known one and miss the instability. The search must

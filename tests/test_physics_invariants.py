@@ -1,4 +1,4 @@
-"""Independent checks of the physics of the contact, friction and standard models (issue 15, Sec. 2).
+"""Independent checks of the physics of the contact, friction and standard models.
 
 Each test computes its reference outside the solver: from a balance law applied to the returned
 solution (contact forces, curvatures), from a closed form, or from a convergence study.
@@ -232,9 +232,9 @@ def test_small_clearance_is_solved_to_the_outer_tolerance():
     with a solve run to 1e-9 m within a few outer_tol (5 um). The sqrt(c) law above predicts a
     tip difference of about 13 um from the standard model at this clearance.
 
-    This was a known failure until issue 14's eighth session: the outer loop stops on an
-    absolute 1 um change of the centerline (ModelSettings.outer_tol) whatever the clearance, and
-    at c <= ~1.5 um the first linearization moves the centerline by less than that, so one outer
+    The outer loop used to stop on an
+    absolute 1 um change of the centerline (ModelSettings.outer_tol) whatever the clearance, so
+    at c <= ~1.5 um the first linearization moved the centerline by less than that and one outer
     iteration was reported converged (tip 0.62 um from the standard model's instead of 13.5 um).
     Since the outer iterations are inexact, the first one (solved to 1e-3) can never count as
     converged; the default solve now takes 5 outer iterations here and ends 0.15 um from the

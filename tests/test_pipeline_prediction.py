@@ -1,4 +1,4 @@
-"""``ctrplan plan`` with prediction and compensated targeting (issue 13, sections 1 and 2).
+"""``ctrplan plan`` with prediction and compensated targeting.
 
 The shipped task-target scenario with its shipped bound map, planned bound-aware only with 60
 RRT* iterations (the goal and its compensation do not depend on the plan's length; each run

@@ -1,4 +1,4 @@
-"""The shipped task-target and sequence scenarios, end to end, in the default run (issue 15, Sec. 3).
+"""The shipped task-target and sequence scenarios, end to end, in the default run.
 
 ``ctrplan.pipeline.run_plan`` on copies of ``scenarios/task-target.toml`` and
 ``scenarios/sequence.toml`` as shipped (their own planner, iterations, seed and shipped bound map),

@@ -256,7 +256,7 @@ def _write_csv(frame: pd.DataFrame, path) -> None:
 
     The rows are written by Apache Arrow's CSV writer, not ``DataFrame.to_csv``: formatting the
     floats took pandas about 11 us per row of a standard-model result (12 numbers), Arrow about
-    3 us (issue 14, 5228 rows; every number read back bit for bit)."""
+    3 us (5228 rows; every number read back bit for bit)."""
     import csv
     import io
 
@@ -383,7 +383,7 @@ def _read_numeric_csv(path) -> pd.DataFrame | None:
     read by the parser's own number conversion; None otherwise (then :func:`_read_csv` reads
     the cells as text and names the first bad one). The numbers are the same doubles either way
     (both parsers round correctly); this path takes about a fifth of the time (0.4 instead of
-    2.2 us per row of a configuration file, issue 14)."""
+    2.2 us per row of a configuration file)."""
     try:
         frame = pd.read_csv(path, skipinitialspace=True)
     except (OSError, ValueError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError):

@@ -54,7 +54,7 @@ class Anderson:
     least-squares problem min |f - dF gamma| is solved by :func:`_anderson_combination` (a
     compiled QR of the at most ``depth`` difference columns) instead of ``np.linalg.lstsq``
     on stacked columns (cProfile of the 4x4x4 bounds, 1098 unknowns: 162 us per ``lstsq`` call
-    against 32 us per compiled combination; issue 14).
+    against 32 us per compiled combination).
     """
 
     def __init__(self, depth, mixing=1.0):
@@ -483,7 +483,7 @@ def _inner_tolerance(change, opt):
 def _outer_loop(u, lam, arr, scr, work, opt):
     """:func:`run_outer_loop` compiled: the same iteration, stopping rules and Anderson steps,
     without a Python call per outer iteration (about a tenth of the bound's time in cProfile
-    of the 4x4x4 grid, issue 14). ``u`` (S, 3) and ``lam`` (M,) are not modified."""
+    of the 4x4x4 grid). ``u`` (S, 3) and ``lam`` (M,) are not modified."""
     N = arr.node_off[-1]
     S = u.shape[0]
     M = arr.c.shape[0]
@@ -550,7 +550,7 @@ def run_outer_loop(prob, u, lam, settings):
     solves, which do not recover, or when the centerline change has not fallen below its
     smallest value so far for ``OUTER_STAGNATION_WINDOW`` iterations (``constants``): the
     iteration then wanders without approaching a fixed point (measured on the 8x8x8 grid of
-    issue 14: no configuration that converges does so after such a stretch).
+    no configuration that converges does so after such a stretch).
 
     Parameters
     ----------

@@ -733,8 +733,7 @@ def _residual(lam, d, c, kappa, phi, da, db, work, natural):
     with lambda > 0. Both vanish exactly where a >= 0, b >= 0, a b = 0, so the solution is the
     same; they differ in the path. Near a degenerate contact (lambda and gap both near 0) FB
     blends the two conditions and Newton converges linearly; min(a, b) picks one (release the
-    contact, or close its gap), which cut the Newton iterations of a bound by a third (issue
-    14, fifteenth session). At lambda = 0 FB keeps its diagonal term c da in the Newton row of
+    contact, or close its gap), which cut the Newton iterations of a bound by a third. At lambda = 0 FB keeps its diagonal term c da in the Newton row of
     a violated contact; min(a, b) has none there, and for neighbouring violated contacts,
     nearly collinear, the Newton matrix became singular (steps 400 times lambda). |FB| lies
     between 2 - sqrt(2) and 2 + sqrt(2) times |min| (about 2 |min| where a is small and
@@ -1230,7 +1229,7 @@ def _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0,
         if not accepted:
             if natural:
                 # no descent for the natural residual's merit (a kink of min(a, b) or a nearly
-                # singular set of gap rows; 8x8x8 grid of issue 14: 10 more solves failed
+                # singular set of gap rows; on the 8x8x8 grid 10 more solves failed
                 # without a fallback)
                 return ContactResult(lam, d, False, it, err), LU, piv, lu_ok, True
             _complete_displacements(lam, d, work, lu_ok, dfree, geometry, law)

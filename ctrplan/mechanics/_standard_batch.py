@@ -282,7 +282,7 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out, state):
     (n + 4, n), carried along the rows; see there), and if that gives up, from ``follow_from``
     through the coarse-grid predictor (``standard._shoot``: coarse Newton, chord step, fine
     Newton); without ``predict`` by Newton on the fine grid. Starting the fine Newton from the
-    previous row directly, as before issue 14 target 2, took fewer but dearer iterations: 0.67 against
+    previous row directly, as before, took fewer but dearer iterations: 0.67 against
     0.50 ms per row without following on the Table VII trajectory (all rows certified), 0.45
     with the predictor (CPU time, docs/mechanics.md, Sec. 10)."""
     lengths, brk, nbrk, curv = tubes.lengths, tubes.breaks, tubes.n_breaks, tubes.precurvature

@@ -39,7 +39,7 @@ equilibrium, and it is stable (two critical points of a strictly convex function
 cannot exist: along the segment joining them the directional derivative would be strictly
 increasing yet zero at both ends). Where the tubes' precurvatures are not nearly opposed this
 certifies far past the worst-case form: on the 1307 rows of the measured trajectory with the
-Table II robot, 1219 instead of 803 (issue 14; the multistart search found a single equilibrium
+Table II robot, 1219 instead of 803 (the multistart search found a single equilibrium
 at all 1307). The twist bounds are widened by the same margin as the coupling.
 
 The test is made on the model's own grid: linear finite elements for the twist, the coupling
@@ -60,7 +60,7 @@ results on those rows and on 3000 random configurations of the Table II, VII and
 intervals on the Ha trajectory). The discretization error of the smallest eigenvalue there is
 still far below the margin: for linear elements it is about lambda h^2 / 12 relative, 0.3 % for
 the shortest critical length of these robots (0.1 m) at h = 12 mm, against the 10 % margin.
-Measured against the screen on the model's grid (issue 14): on 20000 seeded random
+Measured against the screen on the model's grid: on 20000 seeded random
 configurations each of the Table II, VII, I and six-joint robots and on the 1307 trajectory rows
 of the Table II and VII robots, the coarse screen certified no configuration the fine one did
 not (it certified 12 and 10 fewer of the 20000 Table II and six-joint ones: the coupling bound

@@ -173,7 +173,7 @@ def friction_directions(eta, n_tubes: int) -> np.ndarray:
 
 # The last problem built, with the robot and standard solution it was built from: the clearance
 # and friction solves of one bound share a configuration, and building the flat arrays again cost
-# 4 % of the bound (issue 14). Identity, not equality: both objects are kept alive here, so an
+# 4 % of the bound. Identity, not equality: both objects are kept alive here, so an
 # ``is`` match cannot be a recycled id.
 _LAST_PROBLEM = [None]
 

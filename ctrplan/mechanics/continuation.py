@@ -12,7 +12,7 @@ how fast the tip moved along it. A tip that moves ever faster per unit of mu as 
 the signature of a fold: at a saddle-node fold the tip moves like sqrt(mu_c - mu), so its
 sensitivity grows like 1 / sqrt(mu_c - mu).
 
-Measured on the 8x8x8 grid of issue 14 (Table II robot, mu = 0.2): the four configurations whose
+Measured on the 8x8x8 grid (Table II robot, mu = 0.2): the four configurations whose
 bound does not converge end their branches at mu = 0.179-0.197, within 0.001 of the same at
 ds = 3 and 1.5 mm, and equal between mirror-image configurations (docs/mechanics.md, Sec. 5;
 ``benchmarks/check_friction_branches.py``).

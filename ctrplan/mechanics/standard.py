@@ -38,7 +38,7 @@ _STALL_ITERATIONS = 20
 # :func:`_shoot` takes the sign of the shooting-Jacobian determinant (the elastic-stability test)
 # from the coarse predictor when |det| is at least this (J = d sigma(L) / d sigma0 is
 # dimensionless; det = 1 without coupling); below, from a fine sweep with sensitivities.
-# Measured on 9634 configurations (the Ha trajectory, the 8x8x8 grid of issue 14 and 3000
+# Measured on 9634 configurations (the Ha trajectory, the 8x8x8 grid and 3000
 # random ones, Table II and VII robots): coarse and fine determinants differ by 8e-8 relative
 # (median), 1.3e-5 (p99), 1.9e-3 at most, so above 0.05 the sign cannot differ.
 _COARSE_DET_MIN = 0.05
@@ -543,7 +543,7 @@ def _solve_small(J, r):
     """(det J, J^-1 r) for the small shooting Jacobian J (n, n) and r (n,), by Gaussian
     elimination with partial pivoting (x is NaN where J is singular). Replaces
     ``np.linalg.det`` and ``np.linalg.solve``, whose LAPACK calls with their copies took
-    about 0.5 us for n = 3 against 0.05 us here (issue 14: a followed row of the batch takes
+    about 0.5 us for n = 3 against 0.05 us here (a followed row of the batch takes
     five or six)."""
     n = r.shape[0]
     A = J.copy()
@@ -766,8 +766,7 @@ def _multistart_search(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, sig
     grid (one chord step with the coarse Jacobian, then Newton); only a fine solution that
     converges, is stable-looking (det > 0) and is distinct by the same test counts.
 
-    The guesses are the ones the search has always used; only where they are solved changed
-    (issue 14): a coarse sweep costs about a quarter of a fine one, and a restart that returns
+    The guesses are the ones the search has always used; only where they are solved changed: a coarse sweep costs about a quarter of a fine one, and a restart that returns
     to the known equilibrium, the usual case, needs no fine sweep at all. Measured against
     the all-fine search on the grids and trajectory of docs/mechanics.md, Sec. 2: the same
     configurations flagged.

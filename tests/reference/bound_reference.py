@@ -1,6 +1,6 @@
 """The friction bound (ctrplan/mechanics/bound.py logic) on the FROZEN REFERENCE solvers.
 
-The bound's own logic was not part of the speed work of issue 4, so it is shared; only the
+The bound's own logic was not part of the speed work, so it is shared; only the
 standard and contact solvers are the frozen copies (standard_reference, contact_reference).
 """
 

@@ -1,11 +1,11 @@
 """FROZEN REFERENCE COPY of ctrplan/mechanics/contact.py as of commit d2d3ee6 (before the
-speed work of issue 4). Slow and simple on purpose: tests/test_mechanics_fast_vs_reference.py
+speed work). Slow and simple on purpose: tests/test_mechanics_fast_vs_reference.py
 holds the fast path in ctrplan.mechanics to it. Do not optimise; only imports were changed:
 the discrete chain kinematics (ctrplan.mechanics.discrete, not
 changed by the speed work) is shared, not copied. One later change of the outer loop's iteration
 (not of the equations) is mirrored here, so that both solvers follow the same path: the Anderson
 mixing parameter ``constants.ANDERSON_MIXING`` and the stagnation stop
-``constants.OUTER_STAGNATION_WINDOW`` (issue 14).
+``constants.OUTER_STAGNATION_WINDOW``.
 
 Original module docstring follows.
 

@@ -1,8 +1,8 @@
 """FROZEN REFERENCE COPY of ctrplan/mechanics/standard.py as of commit d2d3ee6 (before the
-speed work of issue 4). Slow and simple on purpose: tests/test_mechanics_fast_vs_reference.py
+speed work). Slow and simple on purpose: tests/test_mechanics_fast_vs_reference.py
 holds the fast path in ctrplan.mechanics to it. Do not optimise; only imports were changed:
-the arc-length grid (ctrplan.mechanics.grid) is shared, not copied, and since the graded grid
-of issue 4 it is built with the settings' refine_ratio and refine_length, like the fast path.
+the arc-length grid (ctrplan.mechanics.grid) is shared, not copied, and since the grid became
+graded it is built with the settings' refine_ratio and refine_length, like the fast path.
 
 Original module docstring follows.
 
