@@ -107,6 +107,21 @@ def ha_table(res: dict) -> str:
         lines += ["", "History-aware prediction on the test split:", "", "| model | mean / p95 / max [mm] |", "|---|---|"]
         for r in pred["rows"]:
             lines.append(f"| {r['label']} | {r['mean_mm']:.2f} / {r['p95_mm']:.2f} / {r['max_mm']:.2f} |")
+    pc = res.get("prediction_check")
+    if pc:
+        lines += ["", "The history-aware prediction " + ("beats" if pc["history_beats_standard"] else "does not beat")
+                  + " the standard model in mean and max on the test split: the written robot file's "
+                  "[prediction_validation] " + ("lets" if pc["history_beats_standard"] else "does not let")
+                  + " `ctrplan plan` aim with it."]
+    b = res.get("bound")
+    if b:
+        raw, cal = b["raw_test"], b["test"]
+        lines += ["", f"Friction bound of the written robot file on the test split ({raw['n']} samples): "
+                      f"{100 * raw['covered']:.0f} % ({100 * raw['ci'][0]:.0f}..{100 * raw['ci'][1]:.0f} %) of the measured "
+                      f"tips within b + {b['margin_mm']:.2f} mm, median e / (b + m) {raw['ratio']['median']:.2f}; calibrated "
+                      f"bound {b['factor']:.3g} x (b + m) (target {100 * b['target']:.0f} %): "
+                      f"{100 * cal['covered']:.0f} % ({100 * cal['ci'][0]:.0f}..{100 * cal['ci'][1]:.0f} %), {b['status']}, "
+                      f"median size {cal['bound_median_m'] * 1e3:.2f} mm."]
     if res["cautions"]:
         lines += [""] + [f"- caution: {c}" for c in res["cautions"]]
     return "\n".join(lines)

@@ -74,8 +74,11 @@ def summarize(res: dict, data_path: Path, robot_path: Path, seconds: float, comm
         "test_split": {"label": res["test_split"]["label"], "before": fig["before"], "after": fig["after"],
                        "shrink": fig["shrink"], "n_samples": fig["n_samples"], "n_units": fig["n_units"],
                        "method": fig["method"]},
-        "prediction": res["prediction"], "table_viii_shrink": TABLE_VIII_SHRINK, "cautions": res["cautions"],
-        "seconds": seconds,
+        "prediction": res["prediction"], "prediction_check": res.get("prediction_check"),
+        "bound": None if not res.get("bound") else {k: res["bound"][k] for k in (
+            "definition", "method", "target", "factor", "margin_mm", "status", "test", "raw_test", "translation_last")},
+        "table_viii_shrink": TABLE_VIII_SHRINK, "cautions": res["cautions"],
+        "seconds_this_invocation": seconds,     # stages of an earlier invocation are reused
     }
 
 

@@ -33,7 +33,7 @@ from .calibrate import (FAILED_RESIDUAL, CalibrationResult, _Eq49Model, _Objecti
 from .data import MeasuredData
 from .evaluation import Errors, error_summary, out_of_fold
 from .options import CONFIDENCE, DiscrepancyOptions
-from .parameters import parameter, read_parameters
+from .parameters import REGISTRATION, parameter, read_parameters
 from .setup import DiscrepancySetup, effect_parameters, reported_parameters
 from .split import DataSplit
 from .statistics import paired_improvement
@@ -426,6 +426,13 @@ def calibrate_baseline(setup: DiscrepancySetup, split: DataSplit, options: Discr
     tube_names = [n for n in setup.base_names if not n.startswith("registration")]
     reference = dict(zip(tube_names, read_parameters(setup.robot, tube_names)))
     table = parameter_table(setup.robot, base, setup.base_names, reference=reference)
+    if setup.data.frame == "tracker":
+        # the registration of a tracker-frame file maps between two unrelated frames: any value
+        # is plausible (its range is the one a robot-frame file must keep)
+        for row in table:
+            if row["name"] in REGISTRATION:
+                row.update(plausible=None, in_plausible_range=True,
+                           plausible_note="tracker frame: any rigid registration")
     for row in table:
         if not row["in_plausible_range"] or row["at_bound"]:
             echo(f"  baseline {display_value(row['name'], row['value'], row['unit'])}: "
