@@ -41,6 +41,9 @@ class PlanResult:
         Exact tip-error bound given the last motion [m]: the friction bound after the start and
         a rotation, the translation-last bound after a translation (Section V-B of Ha, Fagogenis &
         Dupont 2019); NaN where it failed.
+    calibrated_bound_m : ndarray, shape (K,)
+        The robot file's calibrated bound ``factor (bound + noise margin)`` [m]
+        (``[bound_calibration]``, :func:`ctrplan.pipeline.calibrated_bound`); NaN without one.
     bound_kind : ndarray of str, shape (K,)
         ``"friction"`` or ``"translation_last"``.
     predicted_tip : ndarray, shape (K, 3)
@@ -68,6 +71,7 @@ class PlanResult:
     motion: np.ndarray
     tip: np.ndarray
     bound_position_m: np.ndarray
+    calibrated_bound_m: np.ndarray
     bound_kind: np.ndarray
     predicted_tip: np.ndarray
     goal_waypoints: tuple
@@ -123,6 +127,7 @@ def plan_scenario(scenario: str | os.PathLike, out_dir: str | os.PathLike | None
         q=np.array(aware.ordered.q, dtype=float), motion=np.array(aware.ordered.motions),
         tip=np.array([r["tip"] for r in run.rows], dtype=float).reshape(-1, 3),
         bound_position_m=np.array(aware.bounds.exact.position, dtype=float),
+        calibrated_bound_m=np.array([r["calibrated_bound_m"] for r in run.rows], dtype=float),
         bound_kind=np.array([r["bound_kind"] for r in run.rows]),
         predicted_tip=np.array(aware.prediction.tip, dtype=float).reshape(-1, 3),
         goal_waypoints=tuple(int(g) for g in aware.goal_indices), trajectory=run.trajectory,

@@ -94,6 +94,8 @@ def test_plan_result_matches_its_files(plan):
     np.testing.assert_array_equal(result.q, [[float(r[n]) for n in result.joint_names] for r in rows])
     assert list(result.motion) == [r["motion"] for r in rows]
     np.testing.assert_array_equal(result.bound_position_m, [float(r["bound_position_m"]) for r in rows])
+    # the shipped robot file has no [bound_calibration]: no calibrated bound, empty cells
+    assert np.all(np.isnan(result.calibrated_bound_m)) and all(r["calibrated_bound_m"] == "" for r in rows)
     on_disk = json.loads((out / "summary.json").read_text())
     assert result.goal_waypoints == (on_disk["goal_prediction"]["goal_1"]["waypoint"],) == (len(rows) - 1,)
     assert Path(on_disk["scenario_file"]) == result.scenario.file
