@@ -105,19 +105,38 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
 
 
 @main.command()
-@click.argument("scenario_path", type=click.Path(exists=True, dir_okay=False))
+@click.argument("scenario_paths", nargs=-1, required=True, type=click.Path(exists=True))
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="Output folder (default: the scenario's [output] dir or out/<name>).")
-@click.option("--jobs", type=int, default=None, help="Worker processes for a bound map (default: all cores).")
+              help="Output folder (one scenario: default its [output] dir or out/<name>; several: the root of "
+                   "one folder per scenario and the table scenarios.csv, default out/scenarios).")
+@click.option("--jobs", type=int, default=None,
+              help="One scenario: worker processes for a bound map (default: all cores). Several: scenarios "
+                   "planned at once on a local dask cluster (default 1: in this process).")
+@click.option("--scheduler", default=None,
+              help="Several scenarios: address of a running dask.distributed scheduler (e.g. tcp://host:8786); "
+                   "its workers need ctrplan installed.")
 @click.option("--iterations", type=int, default=None, help="Override the planner's iteration budget.")
 @click.option("--no-blind", is_flag=True, help="Skip the bound-blind comparison plan.")
-def plan(scenario_path, out_dir, jobs, iterations, no_blind):
-    """Plan a friction-bound-aware motion for a scenario and write the drive trajectory."""
-    from .api import plan_scenario
+def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind):
+    """Plan a friction-bound-aware motion for a scenario and write the drive trajectory.
 
-    result = plan_scenario(scenario_path, out_dir, n_jobs=jobs or os.cpu_count() or 1, iterations=iterations,
-                           compare_blind=not no_blind, echo=click.echo)
-    click.echo(f"outputs in {result.output_dir}")
+    Several scenario files or folders of them are planned in one process (or spread over dask
+    workers), each into its own folder, with one table across them; a rerun reuses the complete
+    outputs of unchanged scenarios.
+    """
+    if len(scenario_paths) == 1 and Path(scenario_paths[0]).is_file() and scheduler is None:
+        from .api import plan_scenario
+
+        result = plan_scenario(scenario_paths[0], out_dir, n_jobs=jobs or os.cpu_count() or 1, iterations=iterations,
+                               compare_blind=not no_blind, echo=click.echo)
+        click.echo(f"outputs in {result.output_dir}")
+        return
+    from .studies import plan_many
+
+    table = plan_many(scenario_paths, out_dir or "out/scenarios", n_jobs=jobs or 1, scheduler=scheduler,
+                      iterations=iterations, compare_blind=not no_blind, echo=click.echo)
+    if (table["status"] == "failed").any():
+        raise SystemExit(1)
 
 
 @main.command()

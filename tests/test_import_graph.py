@@ -27,7 +27,8 @@ LAYERS = (
     ("view",),                                 # the interactive view draws with plots' helpers
     ("discrepancy", "pipeline"),
     ("api",),                                  # plan_scenario: the pipeline's results as arrays
-    ("cli", "testing"),                        # command line; assertions on plans for pytest suites
+    ("studies", "testing"),                    # many scenarios; assertions on plans for pytest suites
+    ("cli",),                                  # command line
 )
 
 

@@ -1,0 +1,218 @@
+"""Many scenarios in one run: :func:`plan_many` (``ctrplan plan A.toml B.toml DIR/ ...``).
+
+Each scenario is planned by :func:`ctrplan.plan_scenario` into its own folder ``<out>/<scenario
+stem>/`` (the files of ``ctrplan plan``); the compiled kernels and bound maps are loaded once per
+process. One table across scenarios, ``<out>/scenarios.csv`` (and ``scenarios.png``), has a row per
+scenario: its status (``planned``, ``reused``, ``failed``), the reason of a failure, the time,
+cost, joint-path length, largest and final exact bound of the bound-aware plan and the
+bound-blind plan's largest bound, and the final check's repairs and failures. A failing scenario is
+reported and the others go on.
+
+A scenario whose folder holds a complete run (``summary.json``, written last) for the same inputs
+(the scenario and robot files' bytes, the options, the mechanics version) is not planned again:
+its row is read from that summary (``reused``). With ``n_jobs`` > 1 or a ``scheduler`` address the
+scenarios are spread over dask.distributed workers (a local cluster of ``n_jobs`` single-threaded
+processes, or the cluster at that address, whose workers need ctrplan installed).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+__all__ = ["scenario_files", "plan_many", "input_key", "TABLE_FILE", "PLOT_FILE", "COLUMNS"]
+
+TABLE_FILE = "scenarios.csv"
+PLOT_FILE = "scenarios.png"
+#: Columns of the table across scenarios (units in their suffixes).
+COLUMNS = ("scenario", "status", "reason", "time_s", "cost", "joint_path_length_m", "max_bound_mm", "final_bound_mm",
+           "blind_max_bound_mm", "repairs", "failures", "output_dir")
+
+
+def scenario_files(paths: Sequence[str | os.PathLike]) -> list[Path]:
+    """The scenario files named by ``paths``: files as given, folders as their ``*.toml``, sorted.
+
+    Raises
+    ------
+    FileNotFoundError
+        A path that does not exist, or a folder without scenario files.
+    """
+    out = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(p.glob("*.toml"))
+            if not found:
+                raise FileNotFoundError(f"{p}: no scenario files (*.toml) in this folder")
+            out += found
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise FileNotFoundError(f"{p}: no such scenario file or folder")
+    return out
+
+
+def input_key(scenario: Path, iterations: int | None, compare_blind: bool) -> str:
+    """SHA-256 of what a scenario's outputs depend on: the scenario and robot files' bytes, the
+    options and the mechanics version (a malformed scenario gives a key of its bytes alone)."""
+    from .constants import MECHANICS_VERSION
+
+    h = hashlib.sha256(Path(scenario).read_bytes())
+    try:
+        from .io.scenario import load_scenario
+
+        robot_file = load_scenario(scenario).robot.metadata.get("file")
+        if robot_file:
+            h.update(Path(robot_file).read_bytes())
+    except Exception:                                    # noqa: BLE001 - the planning run reports it
+        pass
+    h.update(json.dumps({"iterations": iterations, "compare_blind": compare_blind,
+                         "mechanics": MECHANICS_VERSION}).encode())
+    return h.hexdigest()
+
+
+def _row(scenario: Path, status: str, summary: dict | None, seconds: float, out: Path, reason: str = "") -> dict:
+    row = dict.fromkeys(COLUMNS)
+    row.update(scenario=str(scenario), status=status, reason=reason, time_s=seconds, output_dir=str(out))
+    if summary:
+        a = summary.get("bound_aware") or {}
+        fc = a.get("final_check") or {}
+        row.update(cost=a.get("cost"), joint_path_length_m=a.get("joint_path_length_m"),
+                   max_bound_mm=a.get("max_bound_at_waypoints_mm"), final_bound_mm=a.get("final_bound_mm"),
+                   blind_max_bound_mm=(summary.get("bound_blind") or {}).get("max_bound_at_waypoints_mm"),
+                   repairs=fc.get("repairs"), failures=len(fc.get("failures") or []))
+        if status == "reused":
+            row["time_s"] = (summary.get("times_s") or {}).get("total")
+    return row
+
+
+def _plan_one(scenario: Path, out: Path, key: str, iterations, compare_blind: bool) -> dict:
+    """Plan one scenario (in this process or on a worker); a failure becomes a row."""
+    from .api import plan_scenario
+
+    t0 = time.perf_counter()
+    try:
+        result = plan_scenario(scenario, out, n_jobs=1, iterations=iterations, compare_blind=compare_blind,
+                               echo=lambda *a: None)
+    except Exception as exc:                             # noqa: BLE001 - reported, the others go on
+        reason = (f"{type(exc).__name__}: {exc}".splitlines() or [type(exc).__name__])[0]
+        return _row(scenario, "failed", None, time.perf_counter() - t0, out, reason)
+    (out / "inputs.sha256").write_text(key + "\n")
+    return _row(scenario, "planned", result.summary, time.perf_counter() - t0, out)
+
+
+def _reusable(out: Path, key: str) -> dict | None:
+    summary, stamp = out / "summary.json", out / "inputs.sha256"
+    if summary.exists() and stamp.exists() and stamp.read_text().strip() == key:
+        return json.loads(summary.read_text())
+    return None
+
+
+def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike, *, n_jobs: int = 1,
+              scheduler: str | None = None, iterations: int | None = None, compare_blind: bool = True,
+              echo: Callable[[str], Any] = print):
+    """Plan several scenarios and tabulate them (module docstring).
+
+    Parameters
+    ----------
+    scenarios : sequence of path
+        Scenario files or folders of them (:func:`scenario_files`).
+    out_dir : path
+        Root folder: ``<out_dir>/<scenario stem>/`` per scenario, the table and its plot.
+    n_jobs : int
+        Scenarios planned at once: 1 in this process; more on a local dask.distributed cluster of
+        that many single-threaded worker processes.
+    scheduler : str, optional
+        Address of a running dask.distributed scheduler (``tcp://host:8786``); overrides ``n_jobs``.
+    iterations : int, optional
+        Overrides every scenario's planner iterations.
+    compare_blind : bool
+        Also plan each bound-blind.
+    echo : callable
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per scenario, columns :data:`COLUMNS` (``time_s`` [s], ``joint_path_length_m``
+        [m], bounds [mm]).
+
+    Raises
+    ------
+    FileNotFoundError
+        A scenario path that does not exist.
+    ValueError
+        Two scenarios with the same file stem (their folders would collide).
+    """
+    import pandas as pd
+
+    files = scenario_files(scenarios)
+    stems = [f.stem for f in files]
+    dup = {s for s in stems if stems.count(s) > 1}
+    if dup:
+        raise ValueError(f"scenarios with the same name would share an output folder: {', '.join(sorted(dup))}")
+    root = Path(out_dir)
+    root.mkdir(parents=True, exist_ok=True)
+    rows, todo = {}, []
+    for f in files:
+        out, key = root / f.stem, input_key(f, iterations, compare_blind)
+        done = _reusable(out, key)
+        if done is not None:
+            rows[f] = _row(f, "reused", done, 0.0, out)
+            echo(f"{f}: complete outputs for the same inputs in {out}, reused")
+        else:
+            todo.append((f, out, key))
+    t0 = time.perf_counter()
+    if todo and (scheduler or n_jobs > 1):
+        from dask.distributed import Client, LocalCluster, as_completed
+
+        cluster = None if scheduler else LocalCluster(n_workers=n_jobs, threads_per_worker=1, processes=True,
+                                                      dashboard_address=None)
+        with Client(scheduler or cluster) as client:
+            futures = [client.submit(_plan_one, f, out, key, iterations, compare_blind, pure=False)
+                       for f, out, key in todo]
+            for fut in as_completed(futures):
+                row = fut.result()
+                rows[Path(row["scenario"])] = row
+                echo(f"{row['scenario']}: {row['status']} in {row['time_s']:.1f} s {row['reason']}".rstrip())
+        if cluster is not None:
+            cluster.close()
+    else:
+        for f, out, key in todo:
+            row = _plan_one(f, out, key, iterations, compare_blind)
+            rows[f] = row
+            echo(f"{f}: {row['status']} in {row['time_s']:.1f} s {row['reason']}".rstrip())
+    table = pd.DataFrame([rows[f] for f in files], columns=list(COLUMNS))
+    from .io.atomic import atomic_write_text
+
+    atomic_write_text(root / TABLE_FILE, table.to_csv(index=False))
+    _plot(table, root / PLOT_FILE)
+    ok = int((table["status"] != "failed").sum())
+    echo(f"{len(files)} scenarios: {ok} planned or reused, {len(files) - ok} failed; {time.perf_counter() - t0:.1f} s; "
+         f"table {root / TABLE_FILE}")
+    return table
+
+
+def _plot(table, path: Path) -> None:
+    """Largest exact bound per scenario, bound-aware against bound-blind [mm]."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    names = [Path(s).stem for s in table["scenario"]]
+    x = np.arange(len(names))
+    fig, ax = plt.subplots(figsize=(max(4.0, 0.6 * len(names) + 2), 3.2))
+    aware = table["max_bound_mm"].astype(float).to_numpy()
+    blind = table["blind_max_bound_mm"].astype(float).to_numpy()
+    ax.bar(x - 0.2, aware, 0.4, label="bound-aware")
+    ax.bar(x + 0.2, blind, 0.4, label="bound-blind")
+    ax.set_xticks(x, names, rotation=45, ha="right")
+    ax.set_ylabel("largest exact bound at the waypoints [mm]")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

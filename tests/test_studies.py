@@ -1,0 +1,103 @@
+"""Many scenarios in one run (ctrplan.studies.plan_many, ``ctrplan plan A B ...``): a table across
+scenarios, a failing scenario reported while the others go on, a rerun that reuses complete
+outputs for the same inputs and redoes a changed one, and the same rows from dask workers."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from ctrplan.studies import COLUMNS, TABLE_FILE, plan_many
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _copy(tmp_path, name, seed=1):
+    """A copy of a shipped scenario with absolute robot and mesh paths and its own seed."""
+    text = (REPO / "scenarios" / f"{name}.toml").read_text()
+    text = text.replace('"../model/', f'"{(REPO / "model").as_posix()}/')
+    text = text.replace('"../scenarios/', f'"{(REPO / "scenarios").as_posix()}/')
+    text = re.sub(r"(?m)^seed = .*$", f"seed = {seed}", text)
+    folder = tmp_path / "scenarios"
+    folder.mkdir(exist_ok=True)
+    path = folder / f"{name}-{seed}.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("study")
+    a = _copy(tmp, "task-target", 1)
+    b = _copy(tmp, "task-target", 2)
+    broken = tmp / "scenarios" / "broken.toml"
+    broken.write_text(a.read_text().replace("ha2019-table7-calibrated.toml", "no-such-robot.toml"))
+    return tmp, a, b, broken
+
+
+def test_a_table_across_scenarios_with_a_failure_reported(study, monkeypatch):
+    """Three scenarios in a folder, one naming a robot file that does not exist: two are planned,
+    the third is a row with status "failed" and the reason naming the missing file; the table on
+    disk is the returned one, with every column. Catches a batch that stops at the first failure
+    and a table that loses a scenario."""
+    tmp, a, b, broken = study
+    monkeypatch.chdir(tmp)
+    table = plan_many([tmp / "scenarios"], tmp / "out", iterations=60, compare_blind=True, echo=lambda *x: None)
+    assert list(table.columns) == list(COLUMNS) and len(table) == 3
+    by = {Path(s).stem: r for s, r in zip(table["scenario"], table.to_dict("records"))}
+    assert by["broken"]["status"] == "failed" and "no-such-robot.toml" in by["broken"]["reason"]
+    for name in ("task-target-1", "task-target-2"):
+        r = by[name]
+        assert r["status"] == "planned" and r["max_bound_mm"] > 0 and r["failures"] == 0
+        assert r["blind_max_bound_mm"] > 0 and (tmp / "out" / name / "summary.json").exists()
+    on_disk = pd.read_csv(tmp / "out" / TABLE_FILE)
+    assert list(on_disk["status"]) == list(table["status"])
+    assert (tmp / "out" / "scenarios.png").stat().st_size > 1000
+
+
+def test_a_rerun_reuses_complete_outputs_and_redoes_a_changed_scenario(study, monkeypatch):
+    """Run again after the first test: the unchanged scenario is "reused" with the same figures; the
+    one whose file changed (another seed) is planned again. Catches a rerun that starts from scratch
+    and one that reuses outputs of other inputs."""
+    tmp, a, b, broken = study
+    monkeypatch.chdir(tmp)
+    first = pd.read_csv(tmp / "out" / TABLE_FILE)
+    b.write_text(re.sub(r"(?m)^seed = .*$", "seed = 7", b.read_text()))
+    table = plan_many([a, b], tmp / "out", iterations=60, compare_blind=True, echo=lambda *x: None)
+    status = dict(zip((Path(s).stem for s in table["scenario"]), table["status"]))
+    assert status == {"task-target-1": "reused", "task-target-2": "planned"}
+    reused = table[table["status"] == "reused"].iloc[0]
+    before = first[first["scenario"] == str(a)].iloc[0]
+    assert reused["max_bound_mm"] == pytest.approx(before["max_bound_mm"], rel=1e-12)
+
+
+def test_dask_workers_give_the_same_plans(study, tmp_path, monkeypatch):
+    """The two scenarios on a local dask cluster of two workers: the same costs and bounds as in
+    this process (the plans are seeded). Catches workers that plan with other inputs."""
+    tmp, a, b, _ = study
+    monkeypatch.chdir(tmp)
+    serial = plan_many([a, b], tmp_path / "serial", iterations=60, compare_blind=False, echo=lambda *x: None)
+    spread = plan_many([a, b], tmp_path / "dask", n_jobs=2, iterations=60, compare_blind=False, echo=lambda *x: None)
+    assert list(spread["status"]) == ["planned", "planned"]
+    for col in ("cost", "max_bound_mm", "final_bound_mm", "joint_path_length_m"):
+        assert list(spread[col]) == pytest.approx(list(serial[col]), rel=1e-9), col
+
+
+def test_the_plan_command_takes_several_scenarios_and_fails_when_one_fails(study, tmp_path, monkeypatch):
+    """``ctrplan plan GOOD BROKEN --out DIR``: both get a row in DIR/scenarios.csv, the exit status is
+    1 and the console names the failing scenario. Catches a command that still takes one file."""
+    from click.testing import CliRunner
+
+    from ctrplan.cli import main
+
+    tmp, a, _, broken = study
+    monkeypatch.chdir(tmp)
+    r = CliRunner().invoke(main, ["plan", str(a), str(broken), "--out", str(tmp_path / "cli"), "--iterations", "60",
+                                  "--no-blind"])
+    assert r.exit_code == 1, r.output
+    assert "broken.toml: failed" in r.output
+    table = pd.read_csv(tmp_path / "cli" / TABLE_FILE)
+    assert list(table["status"]) == ["planned", "failed"]
