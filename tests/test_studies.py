@@ -19,7 +19,7 @@ def _copy(tmp_path, name, seed=1):
     """A copy of a shipped scenario with absolute robot and mesh paths and its own seed."""
     text = (REPO / "scenarios" / f"{name}.toml").read_text()
     text = text.replace('"../model/', f'"{(REPO / "model").as_posix()}/')
-    text = text.replace('"../scenarios/', f'"{(REPO / "scenarios").as_posix()}/')
+    text = text.replace('file = "meshes/', f'file = "{(REPO / "scenarios" / "meshes").as_posix()}/')
     text = re.sub(r"(?m)^seed = .*$", f"seed = {seed}", text)
     folder = tmp_path / "scenarios"
     folder.mkdir(exist_ok=True)
