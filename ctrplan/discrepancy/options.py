@@ -8,8 +8,8 @@ import numpy as np
 
 from ..mechanics import ModelSettings
 
-__all__ = ["DiscrepancyOptions", "FIT_VERSION", "MIN_REST_PAIRS", "ALPHA_STEP", "BIC_MARGIN",
-           "TRAJECTORY_ROTATION_BIN", "TRAJECTORY_TRANSLATION_BIN", "REPRODUCE_SAMPLES", "ENVELOPE_NOISE_FACTOR",
+__all__ = ["DiscrepancyOptions", "FIT_VERSION", "MIN_REST_PAIRS", "ALPHA_STEP",
+           "TRAJECTORY_ROTATION_BIN", "TRAJECTORY_TRANSLATION_BIN", "ENVELOPE_NOISE_FACTOR",
            "CONFIDENCE", "BOOTSTRAP_RESAMPLES"]
 
 #: Rests (consecutive samples at identical joints) needed to estimate the noise from the data.
@@ -20,14 +20,9 @@ CONFIDENCE = 0.95
 BOOTSTRAP_RESAMPLES = 2000
 #: Finite-difference step of d tip / d alpha_i in the backlash and gradual-friction signatures [rad].
 ALPHA_STEP = 1e-3
-#: A candidate must lower the BIC by at least this much (Kass & Raftery: > 6 is strong evidence).
-BIC_MARGIN = 6.0
 #: Bins that group nearby configurations of a continuous trajectory for the friction test.
 TRAJECTORY_ROTATION_BIN = float(np.deg2rad(15.0))
 TRAJECTORY_TRANSLATION_BIN = 5e-3
-#: Held-out samples (whole configuration groups) re-evaluated with the written model file to
-#: check it; a continuous trajectory is re-evaluated whole.
-REPRODUCE_SAMPLES = 256
 #: Envelope margin: 95 % of 3-D Gaussian noise vectors are shorter than 2.80 sigma per component,
 #: i.e. 1.62 times their rms length.
 ENVELOPE_NOISE_FACTOR = 1.62
