@@ -499,7 +499,7 @@ def _outer_loop(u, lam, arr, scr, work, opt):
     depth = max(opt.depth, 0)
     Fh = np.empty((depth + 1, 3 * S))
     Gh = np.empty((depth + 1, 3 * S))
-    count = 0
+    count = int(0)   # a run-time int64 from the start: numba types _anderson_step once
     last = np.inf
     best = np.inf
     best_at = 0

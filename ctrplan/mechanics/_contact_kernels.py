@@ -926,7 +926,7 @@ def solve_contacts(lam0, dfree, geometry, law, cw, tol, maxit):
     fill_columns(act, cw, geometry, law)
     fok, LU, piv = _displacements(lam, act, dfree, Mblk, cw.Wt, cw.Zt, friction, d, act)
     if fok:
-        _complete_displacements(lam, d, work, True, dfree, geometry, law)
+        _complete_displacements(lam, d, work, bool(True), dfree, geometry, law)
         _grow_working_set(d, c, pair, tol, work)
     else:
         work[:] = True
@@ -1019,12 +1019,12 @@ def _complementarity_from(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0,
     tests/test_mechanics_fast_vs_reference.py: its iterates had wandered to a merit of the same
     size but 10 times the largest residual, where FB's line search stalled.)"""
     res, LU, piv, lu_ok, gave_up = _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0,
-                                           lu_ok0, True, tight)
+                                           lu_ok0, bool(True), tight)
     if not gave_up:
         return res, LU, piv, lu_ok
     used = res.iterations
     res, LU, piv, lu_ok, _ = _newton(lam0, dfree, geometry, law, cw, tol, maxit, work, LU0, piv0, lu_ok0,
-                                     False, tight)
+                                     bool(False), tight)
     return ContactResult(res.lam, res.d, res.ok, used + res.iterations, res.err), LU, piv, lu_ok
 
 
@@ -1279,7 +1279,7 @@ def generalized_curvature(lam, d, geometry, law, uhat, out):
     out : ndarray, shape (S, 3)
         Output: the curvatures of the map [1/m].
     """
-    _curvature_change(lam, d, geometry, law, True, out)
+    _curvature_change(lam, d, geometry, law, bool(True), out)
     for k in range(out.shape[0]):
         for q in range(3):
             out[k, q] += uhat[k, q]

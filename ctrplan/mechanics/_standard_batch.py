@@ -315,7 +315,7 @@ def _solve_one(k, alpha, beta, sig_init, tubes, opts, follow_from, out, state):
                                                                 a, lengths, tol, state)
             if not ok:
                 sig0, _, it2, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a,
-                                                          follow_from.copy(), lengths, tol, maxit, True)
+                                                          follow_from.copy(), lengths, tol, maxit, bool(True))
                 it += it2
                 _restart_state(state, sig0, ok)
         else:

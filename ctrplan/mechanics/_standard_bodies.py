@@ -169,7 +169,7 @@ def _bodies(alpha, beta, valid, tubes, opts, r_out, out):
                                           refine_ratio, refine_length)
         a = alpha[k].copy()
         _, _, it, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, np.zeros(n),
-                                              lengths, tol, maxit, True)
+                                              lengths, tol, maxit, bool(True))
         iters[k] = it
         conv[k] = ok
         unst[k] = ok and not detJ > 0.0

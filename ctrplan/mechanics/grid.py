@@ -178,7 +178,7 @@ def _grid(beta, lengths, brk, nbrk, curv, ds, tol, ratio, length):
             cap += int(np.ceil((br[a + 1] - br[a]) / ds)) + 2
     buf = np.empty(cap)
     buf[0] = br[0]
-    q = 1
+    q = int(1)   # a run-time int64 from the start: numba types the call below once, not per literal
     for a in range(nb - 1):
         q = _interval_nodes(br[a], br[a + 1], ds, graded and multi[a], ratio, length, buf, q)
     s = buf[:q].copy()

@@ -50,7 +50,6 @@ _COARSE_DET_MIN = 0.05
 # 1e-2 rad one sweep before converging (quadratic convergence: ~0.09, 2e-4, 2e-10 rad)
 _RETURN_TWIST = 1e-2
 _RETURN_CONTRACTION = 0.5
-_NO_KNOWN = np.empty((0, 0))   # no known equilibria: :func:`_newton` never stops near one
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -428,11 +427,13 @@ def _integrate(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens):
     """Classical RK4 over the grid intervals, one step per interval: the three-tube kernels
     (:func:`_integrate3`, :func:`_integrate3_sens`) for three tubes, else the general loop
     (:func:`_integrate_general`). Returns what :func:`_integrate_general` returns."""
+    # bool(...) passes the flags as run-time values, not literals: numba compiles one
+    # specialization of each kernel instead of one per literal combination (compile time)
     if psi0.shape[0] == 3:
         if with_sens:
-            return _integrate3_sens(s, present, uh, kxy, ratio, psi0, sig0, record)
-        return _integrate3(s, present, uh, kxy, ratio, psi0, sig0, record)
-    return _integrate_general(s, present, uh, kxy, ratio, psi0, sig0, record, with_sens)
+            return _integrate3_sens(s, present, uh, kxy, ratio, psi0, sig0, bool(record))
+        return _integrate3(s, present, uh, kxy, ratio, psi0, sig0, bool(record))
+    return _integrate_general(s, present, uh, kxy, ratio, psi0, sig0, bool(record), bool(with_sens))
 
 
 @njit(cache=True, error_model="numpy")
@@ -594,7 +595,7 @@ def _damping(step, lengths):
     return scale
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit, J_out):
     """Damped Newton shooting on the base torsions, compiled (:func:`_newton_core` with no
     known equilibria: the same iteration, arithmetic and results).
@@ -603,8 +604,10 @@ def _newton(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit, J_out)
     (G, n) of the evaluation at the returned sig0; on convergence the shooting Jacobian there is
     copied into ``J_out`` (n, n).
     """
+    # an empty writable array and int(0), the types _multistart_search passes: one compiled
+    # specialization of _newton_core serves both
     x, res, it, ok, detJ, rp, rs, _ = _newton_core(s, present, uh, kxy, ratio, alpha, sig0, lengths, tol, maxit,
-                                                   J_out, _NO_KNOWN, 0)
+                                                   J_out, np.empty((0, sig0.shape[0])), int(0))
     return x, res, it, ok, detJ, rp, rs
 
 
@@ -783,7 +786,7 @@ def _multistart_search(s, present, uh, cs, cpresent, cuh, kxy, ratio, alpha, sig
     n = sig0.shape[0]
     found = np.empty((1 + count, n))
     found[0] = sig0
-    n_found = 1
+    n_found = int(1)   # int(...): a run-time int64 from the start, so numba types the call below once
     its = 0
     Jc = np.empty((n, n))
     Jf = np.empty((n, n))
