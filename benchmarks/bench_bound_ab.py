@@ -3,8 +3,8 @@
 Absolute times on the shared machines drift by 2-3x between runs, so a speed change of the
 contact solver is measured against the code before it in one run: the other commit is checked
 out into a temporary git worktree, and the two codes run alternately in separate processes
-(``--runs`` each, one after the other), each timing ``evaluate_bound`` at every configuration
-of the grid in CPU time (``time.process_time``). Each code's figure is the per-configuration
+(``--runs`` each, one after the other), each timing ``evaluate_bound`` and ``solve_standard``
+(with its multistart stability search) at every configuration of the grid in CPU time (``time.process_time``). Each code's figure is the per-configuration
 minimum over its runs, which removes most of the load that other processes put on the machine.
 
 Printed: mean, median, p90 and max of those minima for both codes, the ratio of their medians
@@ -55,13 +55,17 @@ def child(out, grid):
     if root not in Path(ctrplan.__file__).resolve().parents:
         raise RuntimeError(f"ctrplan imported from {ctrplan.__file__}, not from {root}")
     from ctrplan.io.robot_file import load_robot
-    from ctrplan.mechanics import ModelSettings, evaluate_bound
+    from ctrplan.mechanics import ModelSettings, evaluate_bound, solve_standard
     robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")
     settings = ModelSettings()
     configs = _configurations(robot, grid)
     evaluate_bound(robot, *configs[0], settings)     # compile or load the kernels first
-    T, tips, iters = [], [], []
+    solve_standard(robot, *configs[0], settings)
+    T, tips, iters, T_std = [], [], [], []
     for a, b in configs:
+        t0 = time.process_time()
+        solve_standard(robot, a, b, settings)        # with the multistart stability search
+        T_std.append(time.process_time() - t0)
         t0 = time.process_time()
         r = evaluate_bound(robot, a, b, settings)
         T.append(time.process_time() - t0)
@@ -69,7 +73,7 @@ def child(out, grid):
         tips.append(np.array([s.tip_position for s in solves]))
         iters.append([(s.diagnostics.iterations, s.diagnostics.inner_iterations, s.diagnostics.converged)
                       for s in solves])
-    np.savez(out, T=np.array(T) * 1e3, tips=np.array(tips), iters=np.array(iters, dtype=float))
+    np.savez(out, T=np.array(T) * 1e3, T_std=np.array(T_std) * 1e3, tips=np.array(tips), iters=np.array(iters, dtype=float))
 
 
 def _run(code_root, out, grid, cache_dir):
@@ -78,8 +82,9 @@ def _run(code_root, out, grid, cache_dir):
     return np.load(out)
 
 
-def _stats(x):
-    return f"mean {x.mean():7.1f}  median {np.median(x):7.1f}  p90 {np.percentile(x, 90):7.1f}  max {x.max():7.1f}"
+def _stats(x, digits=1):
+    return "  ".join(f"{name} {v:7.{digits}f}" for name, v in
+                     (("mean", x.mean()), ("median", np.median(x)), ("p90", np.percentile(x, 90)), ("max", x.max())))
 
 
 def main(argv=None):
@@ -115,6 +120,15 @@ def main(argv=None):
         print(f"        run medians {np.round(np.median(T[n], axis=1), 1).tolist()}")
     print(f"  this / base: ratio of medians {np.median(best['this']) / np.median(best['base']):.3f}, "
           f"median per-configuration ratio {np.median(best['this'] / best['base']):.3f}")
+    if all("T_std" in r for v in runs.values() for r in v):
+        S = {n: np.array([r["T_std"] for r in v]).min(axis=0) for n, v in runs.items()}
+        print(f"\nstandard model (multistart stability search) per configuration, CPU time [ms], "
+              f"per-configuration minimum over {args.runs} runs:")
+        for n in ("base", "this"):
+            print(f"  {n:5s} {_stats(S[n], 3)}")
+        print(f"  this / base: ratio of medians {np.median(S['this']) / np.median(S['base']):.3f}, "
+              f"median per-configuration ratio {np.median(S['this'] / S['base']):.3f}")
+        print(f"  full bound / own standard solve (this): median {np.median(best['this'] / S['this']):.1f}")
     ok = (runs["base"][0]["iters"][:, :, 2] == 1) & (runs["this"][0]["iters"][:, :, 2] == 1)
     diff = np.linalg.norm(runs["this"][0]["tips"] - runs["base"][0]["tips"], axis=2) * 1e6
     print(f"  tips, this against base, solves converged in both: max {diff[ok].max():.3f} um, "
