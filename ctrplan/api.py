@@ -117,8 +117,10 @@ def plan_scenario(scenario: str | os.PathLike, out_dir: str | os.PathLike | None
     JointLimitError
         The time-parameterized trajectory violates the drive limits.
     """
+    from .mechanics import warmup
     from .pipeline import plan_stages
 
+    warmup.start()   # the final check's contact kernels compile beside planning on a cold start
     run = plan_stages(Path(scenario), out_dir, n_jobs=n_jobs, iterations=iterations,
                       compare_blind=compare_blind, echo=echo)
     aware, robot = run.plans.aware, run.setup.robot

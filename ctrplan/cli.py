@@ -77,6 +77,9 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
     if explain_failures and model != "friction":
         raise click.UsageError(f"--explain-failures applies to --model friction only, not {model!r}")
     robot = load_robot(robot_path)
+    if model != "standard":
+        from .mechanics import warmup
+        warmup.start()   # on a cold start, the contact kernels compile beside the standard model's
     alpha, beta, eta, _ = read_configurations(configs_path, robot.n_tubes)
     import numpy as np
 

@@ -46,6 +46,7 @@ from ..constants import OUTER_STAGNATION_WINDOW
 from ..errors import ConvergenceError
 from ._contact_fast import FlatProblem, run_outer_loop
 from .results import ContactSolution, Diagnostics, ModelSettings
+from . import warmup
 from .standard import solve_standard
 
 __all__ = ["solve_clearance", "solve_friction", "solve_contact"]
@@ -100,6 +101,8 @@ def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, 
     for the differences from the paper's gradient ascent.
     """
     settings = settings or ModelSettings()
+    if standard is None:
+        warmup.start()   # on a cold start, the contact kernels compile beside the standard model's
     n = robot.n_tubes
     if eta is not None:
         eta = friction_directions(eta, n)
@@ -108,6 +111,7 @@ def solve_contact(robot, alpha, beta, settings: ModelSettings | None = None, *, 
         mu = np.zeros(n - 1) if mu is None else np.asarray(mu, dtype=float)
     if standard is None:
         standard = solve_standard(robot, alpha, beta, settings, check_stability=False)
+    warmup.wait()   # a cold start's contact kernels, compiled in another process (warmup.start)
     prob = _flat_problem(robot, standard, eta, mu)
     if warm_start is not None and len(warm_start.curvatures) == n and all(
             w.shape == u.shape for w, u in zip(warm_start.curvatures, prob.split_segments(prob.u0))):

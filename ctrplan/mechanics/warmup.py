@@ -1,0 +1,173 @@
+"""Compiling the contact-model kernels in a second process on a cold start.
+
+On a fresh checkout numba compiles every kernel on its first call and caches it on disk
+(``__pycache__``, or ``NUMBA_CACHE_DIR``). A command that needs both model families (``ctrplan
+plan``'s final check, ``ctrplan evaluate --model clearance|friction``) would compile them one
+after the other: the standard-model kernels (Newton shooting, the robot bodies) and then the
+contact-model kernels (the outer loop of :func:`ctrplan.mechanics.solve_contact` with its
+complementarity solver), about as long again. The two families share no large kernel, so
+:func:`start` compiles the contact kernels in a child process on another core while the caller
+compiles the standard ones (or plans), and :func:`wait`, called by ``solve_contact`` before its
+first compiled call, waits for the child; the caller then loads the contact kernels from the
+cache instead of compiling them. A lock file beside the cache files keeps other processes
+sharing the cache (bound-map workers, parallel test runs) from compiling them a third time.
+
+The child needs a linearization point for the contact solver but must not compile the
+standard-model kernels itself (that is the caller's work): it gives the solver a straight-tube
+state (psi = alpha, no bending, no torsion) on the common grid of a small three-tube robot.
+Kernel types depend on array ranks and dtypes only, not on the robot or the values, so this
+compiles exactly the specializations the real solves use. Nothing depends on the child for
+correctness: if it fails or is not started, the caller compiles the kernels itself.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from types import SimpleNamespace
+
+__all__ = ["contact_kernels_cached", "start", "wait"]
+
+# Set once this process knows the contact kernels need no waiting: they were cached, it has
+# waited for a compiling process, or it is that process.
+_READY = [False]
+_LOCK_NAME = "ctrplan-contact-compile.lock"
+
+
+def _outer_loop():
+    from ._contact_fast import _outer_loop as kernel
+    return kernel
+
+
+def contact_kernels_cached() -> bool:
+    """Whether the contact solver's compiled outer loop is in numba's on-disk cache for the
+    present source (so a first call loads it instead of compiling).
+
+    Returns True also when it cannot be told (a numba without the cache layout read here), so
+    that no second process is started on a guess.
+    """
+    try:
+        index = _outer_loop()._cache._cache_file._load_index()
+    except Exception:   # pragma: no cover - numba internals of another version
+        return True
+    return bool(index)
+
+
+def _lock_path() -> str:
+    """The lock file held by the compiling process: beside numba's cache files of the contact
+    kernels, so that every process sharing that cache sees it."""
+    try:
+        folder = _outer_loop()._cache._cache_path
+    except Exception:   # pragma: no cover - numba internals of another version
+        folder = tempfile.gettempdir()
+    return os.path.join(folder, _LOCK_NAME)
+
+
+def start() -> bool:
+    """Start compiling the contact kernels in a child process unless they are cached or
+    another process is compiling them.
+
+    The child holds an exclusive lock on a file beside numba's cache files while it runs
+    (taken here and passed on, so there is no moment without it); :func:`wait` in this or any
+    other process sharing the cache waits for that lock. Returns whether a child was started.
+    """
+    if _READY[0] or os.environ.get("NUMBA_DISABLE_JIT") == "1":
+        return False
+    if contact_kernels_cached():
+        _READY[0] = True
+        return False
+    try:
+        fd = os.open(_lock_path(), os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError:   # a read-only cache folder: numba cannot cache there either
+        _READY[0] = True
+        return False
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:   # another process is compiling them: wait() waits for it
+            return False
+        env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+        subprocess.Popen([sys.executable, "-c", "from ctrplan.mechanics.warmup import _child_main; _child_main()"],
+                         env=env,
+                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         pass_fds=(fd,), start_new_session=False)
+        return True
+    finally:
+        os.close(fd)   # the child's copy keeps the lock until it exits
+
+
+def wait(timeout: float = 600.0) -> float:
+    """Wait until no process is compiling the contact kernels (:func:`start`); returns the
+    seconds waited. After ``timeout`` [s] it returns and the caller compiles what it needs."""
+    if _READY[0]:
+        return 0.0
+    t0 = time.perf_counter()
+    try:
+        fd = os.open(_lock_path(), os.O_RDWR)
+    except OSError:   # no lock file: nobody started compiling
+        _READY[0] = True
+        return 0.0
+    try:
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.flock(fd, fcntl.LOCK_UN)
+                break
+            except OSError:
+                if time.perf_counter() - t0 > timeout:   # pragma: no cover - a stuck compiler
+                    break
+                time.sleep(0.1)
+    finally:
+        os.close(fd)
+    _READY[0] = True
+    return time.perf_counter() - t0
+
+
+def _straight_state(robot, alpha, beta, settings):
+    """A linearization point for the contact solver that needs no standard-model kernel: the
+    common grid of ``robot`` at ``beta``, psi = alpha, no bending and no torsion, with the
+    fields of :class:`~ctrplan.mechanics.results.StandardSolution` that the solver reads."""
+    import numpy as np
+
+    from .grid import build_grid
+
+    g = build_grid(robot, beta, settings.ds, settings.refine_ratio, settings.refine_length)
+    k = g.s.size - 1
+    n = robot.n_tubes
+    return SimpleNamespace(
+        grid=g, alpha=np.asarray(alpha, dtype=float), beta=np.asarray(beta, dtype=float),
+        psi_mid=np.tile(np.asarray(alpha, dtype=float), (k, 1)), torsion_mid=np.zeros((k, n)),
+        bending_mid=np.zeros((k, 2)),
+        diagnostics=SimpleNamespace(unstable=False, n_equilibria=1))
+
+
+def compile_contact_kernels() -> None:
+    """Compile (and cache) the contact-model kernels: a clearance solve and a friction solve of a
+    small three-tube robot from the straight-tube state of :func:`_straight_state`."""
+    from ..robot import Robot, Section, Tube
+    from .contact import solve_contact
+    from .results import ModelSettings
+
+    tubes = (Tube("tube 1", (Section(0.10, (0.0, 5.0)),), k_xy=0.05, poisson_ratio=0.3,
+                  outer_diameter=2.6e-3, inner_diameter=2.4e-3),
+             Tube("tube 2", (Section(0.05), Section(0.08, (0.0, 8.0))), k_xy=0.04, poisson_ratio=0.3,
+                  outer_diameter=2.3e-3, inner_diameter=1.9e-3),
+             Tube("tube 3", (Section(0.10), Section(0.06, (0.0, 15.0))), k_xy=0.01, poisson_ratio=0.3,
+                  outer_diameter=1.8e-3, inner_diameter=None))
+    robot = Robot("compile", tubes, friction_coefficients=(0.2, 0.1))
+    settings = ModelSettings()
+    alpha, beta = (0.0, 1.0, 2.0), (0.0, -0.02, -0.04)
+    state = _straight_state(robot, alpha, beta, settings)
+    solve_contact(robot, alpha, beta, settings, standard=state, raise_on_failure=False)
+    solve_contact(robot, alpha, beta, settings, eta=(1, -1), standard=state, raise_on_failure=False)
+
+
+def _child_main() -> None:
+    """The child process of :func:`start`: it holds the lock (an inherited file descriptor)
+    while it compiles, so its own solves must not wait for it."""
+    _READY[0] = True
+    compile_contact_kernels()
