@@ -251,6 +251,18 @@ def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1, 
     return indices, rows
 
 
+def _run_tasks(tasks, n_local, runner):
+    """Results of the delayed ``tasks`` in order of completion: all in this process without a
+    ``runner``, else the first ``n_local`` here and the rest by ``runner`` (joblib.Parallel),
+    started only after those (a generator: the workers start when it gets there)."""
+    if runner is None:
+        n_local = len(tasks)
+    for fn, args, kwargs in tasks[:n_local]:
+        yield fn(*args, **kwargs)
+    if n_local < len(tasks):
+        yield from runner(tasks[n_local:])
+
+
 def _chunks(todo, model, n_jobs):
     """Split the 0-based rows ``todo`` into tasks: at most the model's chunk size, and (contact
     models in worker processes) at least four tasks per worker so that they stay busy to the end."""
@@ -352,6 +364,8 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
     from joblib import Parallel, delayed
     from tqdm.auto import tqdm
 
+    from .mechanics import warmup
+
     if model not in MODELS:
         raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
     settings = settings or ModelSettings()
@@ -369,15 +383,20 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
             fh.write(json.dumps({"job_key": job_key}) + "\n")
             fh.flush()
     try:
-        chunks = _chunks(todo, model, n_jobs)
+        in_process = n_jobs == 1 or model == "standard"
+        # worker processes on a cold start: the first row runs here first, so that the compiled
+        # kernels are on disk before the workers start (else each worker compiles them again);
+        # warm, the workers start at once (loading the kernels here too would cost about 0.5 s)
+        cold = not in_process and todo and not warmup.contact_kernels_cached()
+        first = [todo[:1]] if cold else []
+        chunks = first + _chunks(todo[len(first):], model, n_jobs)
         threads = n_jobs if model == "standard" else 1
-        tasks = (delayed(_chunk_task)(robot, alpha[c], beta[c], model, settings,
+        tasks = [delayed(_chunk_task)(robot, alpha[c], beta[c], model, settings,
                                       None if eta is None else eta[c], [k + 1 for k in c], threads,
                                       explain_failures)
-                 for c in chunks)
-        in_process = n_jobs == 1 or model == "standard"
+                 for c in chunks]
         runner = None if in_process else Parallel(n_jobs=n_jobs, return_as="generator_unordered")
-        results = runner(tasks) if runner is not None else (t[0](*t[1], **t[2]) for t in tasks)
+        results = _run_tasks(tasks, len(first), runner)
         with tqdm(total=K, initial=K - len(todo), disable=not progress, unit="config",
                   desc=f"{model} model") as bar:
             for indices, rows in results:

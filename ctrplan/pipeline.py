@@ -695,6 +695,18 @@ def _plan_mode(job: _PlanJob) -> RoutePlan:
                      final_motion_status=final_status)
 
 
+def _compile_before_fork(job) -> None:
+    """The standard-model kernels both plans need (the robot bodies of the validity checks, the
+    shooting with its multistart search of the exact checks), compiled or loaded here before the
+    fork: the forked process inherits them, where on a cold start each process would compile
+    them again side by side. Milliseconds when they are cached: two solves at the start."""
+    from .mechanics import solve_standard, solve_standard_bodies
+
+    alpha, beta = job.robot.configuration(job.start)
+    solve_standard_bodies(job.robot, np.atleast_2d(alpha), np.atleast_2d(beta), job.check_settings)
+    solve_standard(job.robot, alpha, beta, job.settings)
+
+
 def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:
     """Run the plans of ``jobs`` ({mode: _PlanJob}); with ``n_jobs`` >= 2 and more than one plan,
     the bound-blind plan runs in a forked process while this one plans bound-aware (the plans are
@@ -708,6 +720,7 @@ def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:
     parallel = n_jobs >= 2 and len(modes) > 1 and "fork" in multiprocessing.get_all_start_methods()
     if not parallel:
         return {m: _plan_mode(jobs[m]) for m in modes}, False
+    _compile_before_fork(jobs[modes[0]])
     out = {}
     with ProcessPoolExecutor(max_workers=len(modes) - 1, mp_context=multiprocessing.get_context("fork")) as ex:
         futures = {m: ex.submit(_plan_mode, jobs[m]) for m in modes[1:]}
