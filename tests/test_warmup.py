@@ -1,5 +1,5 @@
-"""Compiling the contact kernels in a second process (ctrplan.mechanics.warmup) and the first
-row of a parallel evaluation run in the calling process (ctrplan.batch)."""
+"""Compiling the contact kernels in a second process (ctrplan.mechanics.warmup, _warmup_child)
+and the first row of a parallel evaluation run in the calling process (ctrplan.batch)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ctrplan.batch import evaluate_table
-from ctrplan.mechanics import ModelSettings, solve_contact, warmup
+from ctrplan.mechanics import ModelSettings, _warmup_child, solve_contact, warmup
 from ctrplan.mechanics._contact_fast import _outer_loop
 
 from _robots import table2_robot
@@ -39,7 +39,7 @@ def test_the_straight_state_compiles_the_specialization_the_real_solves_use(comp
     child compile a specialization nobody uses, and the real solve compile its own after all."""
     before = list(_outer_loop.signatures)
     assert len(before) == 1
-    warmup.compile_contact_kernels()
+    _warmup_child.compile_contact_kernels()
     assert _outer_loop.signatures == before
 
 

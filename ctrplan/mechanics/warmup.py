@@ -12,12 +12,13 @@ first compiled call, waits for the child; the caller then loads the contact kern
 cache instead of compiling them. A lock file beside the cache files keeps other processes
 sharing the cache (bound-map workers, parallel test runs) from compiling them a third time.
 
-The child needs a linearization point for the contact solver but must not compile the
-standard-model kernels itself (that is the caller's work): it gives the solver a straight-tube
-state (psi = alpha, no bending, no torsion) on the common grid of a small three-tube robot.
-Kernel types depend on array ranks and dtypes only, not on the robot or the values, so this
-compiles exactly the specializations the real solves use. Nothing depends on the child for
-correctness: if it fails or is not started, the caller compiles the kernels itself.
+The child (``_warmup_child``) needs a linearization point for the contact solver but must not
+compile the standard-model kernels itself (that is the caller's work): it gives the solver a
+straight-tube state (psi = alpha, no bending, no torsion) on the common grid of a small
+three-tube robot. Kernel types depend on array ranks and dtypes only, not on the robot or the
+values, so this compiles exactly the specializations the real solves use. Nothing depends on
+the child for correctness: if it fails or is not started, the caller compiles the kernels
+itself.
 """
 
 from __future__ import annotations
@@ -28,7 +29,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from types import SimpleNamespace
 
 __all__ = ["contact_kernels_cached", "start", "wait"]
 
@@ -91,7 +91,7 @@ def start() -> bool:
         except OSError:   # another process is compiling them: wait() waits for it
             return False
         env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-        subprocess.Popen([sys.executable, "-c", "from ctrplan.mechanics.warmup import _child_main; _child_main()"],
+        subprocess.Popen([sys.executable, "-c", "from ctrplan.mechanics._warmup_child import main; main()"],
                          env=env,
                          stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                          pass_fds=(fd,), start_new_session=False)
@@ -125,49 +125,3 @@ def wait(timeout: float = 600.0) -> float:
         os.close(fd)
     _READY[0] = True
     return time.perf_counter() - t0
-
-
-def _straight_state(robot, alpha, beta, settings):
-    """A linearization point for the contact solver that needs no standard-model kernel: the
-    common grid of ``robot`` at ``beta``, psi = alpha, no bending and no torsion, with the
-    fields of :class:`~ctrplan.mechanics.results.StandardSolution` that the solver reads."""
-    import numpy as np
-
-    from .grid import build_grid
-
-    g = build_grid(robot, beta, settings.ds, settings.refine_ratio, settings.refine_length)
-    k = g.s.size - 1
-    n = robot.n_tubes
-    return SimpleNamespace(
-        grid=g, alpha=np.asarray(alpha, dtype=float), beta=np.asarray(beta, dtype=float),
-        psi_mid=np.tile(np.asarray(alpha, dtype=float), (k, 1)), torsion_mid=np.zeros((k, n)),
-        bending_mid=np.zeros((k, 2)),
-        diagnostics=SimpleNamespace(unstable=False, n_equilibria=1))
-
-
-def compile_contact_kernels() -> None:
-    """Compile (and cache) the contact-model kernels: a clearance solve and a friction solve of a
-    small three-tube robot from the straight-tube state of :func:`_straight_state`."""
-    from ..robot import Robot, Section, Tube
-    from .contact import solve_contact
-    from .results import ModelSettings
-
-    tubes = (Tube("tube 1", (Section(0.10, (0.0, 5.0)),), k_xy=0.05, poisson_ratio=0.3,
-                  outer_diameter=2.6e-3, inner_diameter=2.4e-3),
-             Tube("tube 2", (Section(0.05), Section(0.08, (0.0, 8.0))), k_xy=0.04, poisson_ratio=0.3,
-                  outer_diameter=2.3e-3, inner_diameter=1.9e-3),
-             Tube("tube 3", (Section(0.10), Section(0.06, (0.0, 15.0))), k_xy=0.01, poisson_ratio=0.3,
-                  outer_diameter=1.8e-3, inner_diameter=None))
-    robot = Robot("compile", tubes, friction_coefficients=(0.2, 0.1))
-    settings = ModelSettings()
-    alpha, beta = (0.0, 1.0, 2.0), (0.0, -0.02, -0.04)
-    state = _straight_state(robot, alpha, beta, settings)
-    solve_contact(robot, alpha, beta, settings, standard=state, raise_on_failure=False)
-    solve_contact(robot, alpha, beta, settings, eta=(1, -1), standard=state, raise_on_failure=False)
-
-
-def _child_main() -> None:
-    """The child process of :func:`start`: it holds the lock (an inherited file descriptor)
-    while it compiles, so its own solves must not wait for it."""
-    _READY[0] = True
-    compile_contact_kernels()
