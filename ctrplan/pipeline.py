@@ -702,9 +702,12 @@ def _compile_before_fork(job) -> None:
     them again side by side. Milliseconds when they are cached: two solves at the start."""
     from .mechanics import solve_standard, solve_standard_bodies
 
-    alpha, beta = job.robot.configuration(job.start)
-    solve_standard_bodies(job.robot, np.atleast_2d(alpha), np.atleast_2d(beta), job.check_settings)
-    solve_standard(job.robot, alpha, beta, job.settings)
+    try:
+        alpha, beta = job.robot.configuration(job.start)
+        solve_standard_bodies(job.robot, np.atleast_2d(alpha), np.atleast_2d(beta), job.check_settings)
+        solve_standard(job.robot, alpha, beta, job.settings)
+    except (CtrplanError, ValueError):   # only a warm-up: the plans report a bad start themselves
+        pass
 
 
 def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:

@@ -92,9 +92,8 @@ def start() -> bool:
             return False
         env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
         subprocess.Popen([sys.executable, "-c", "from ctrplan.mechanics._warmup_child import main; main()"],
-                         env=env,
-                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                         pass_fds=(fd,), start_new_session=False)
+                         env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL, pass_fds=(fd,))
         return True
     finally:
         os.close(fd)   # the child's copy keeps the lock until it exits
