@@ -4,6 +4,7 @@ and the first row of a parallel evaluation run in the calling process (ctrplan.b
 from __future__ import annotations
 
 import fcntl
+import os
 import subprocess
 import sys
 import time
@@ -77,11 +78,11 @@ def test_the_child_compiles_without_waiting_for_its_own_lock(compiled, not_ready
     t0 = time.perf_counter()
     warmup.wait(timeout=240.0)
     assert time.perf_counter() - t0 < 200.0
-    fd = warmup.os.open(warmup._lock_path(), warmup.os.O_RDWR)
+    fd = os.open(warmup._lock_path(), os.O_RDWR)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)   # raises if the child still held it
     finally:
-        warmup.os.close(fd)
+        os.close(fd)
 
 
 def test_start_does_nothing_where_the_kernels_are_cached(compiled, not_ready):

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import numpy as np
+
 from . import warmup
 
 __all__ = ["compile_contact_kernels", "main"]
@@ -15,8 +17,6 @@ def _straight_state(robot, alpha, beta, settings):
     """A linearization point for the contact solver that needs no standard-model kernel: the
     common grid of ``robot`` at ``beta``, psi = alpha, no bending and no torsion, with the
     fields of :class:`~ctrplan.mechanics.results.StandardSolution` that the solver reads."""
-    import numpy as np
-
     from .grid import build_grid
 
     g = build_grid(robot, beta, settings.ds, settings.refine_ratio, settings.refine_length)
