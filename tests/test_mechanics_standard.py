@@ -199,7 +199,7 @@ def test_batch_equals_single_solves():
         assert res.converged[k] == st.diagnostics.converged
         assert res.unstable[k] == st.diagnostics.unstable
     # threads share the configurations without changing any result
-    par = solve_standard_batch(robot, alpha, beta, settings, n_threads=2)
+    par = solve_standard_batch(robot, alpha, beta, settings, n_threads=2, compile_threads=True)
     np.testing.assert_array_equal(par.tip_position, res.tip_position)
     np.testing.assert_array_equal(par.iterations, res.iterations)
     with pytest.raises(ValueError, match="shape"):
@@ -233,7 +233,8 @@ def test_threads_following_blocks_of_a_path_equal_the_serial_follow(monkeypatch,
     beta[17, 2] = 0.01   # impossible row inside a block
     settings = ModelSettings(ds=3e-3)
     serial = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True)
-    par = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True, n_threads=2)
+    par = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True, n_threads=2,
+                               compile_threads=True)
     assert serial.certified.any() and not serial.certified[serial.valid].all()
     assert not par.valid[17] and np.all(np.isnan(par.tip_position[17]))
     ok = serial.valid

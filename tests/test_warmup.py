@@ -107,3 +107,75 @@ def test_a_parallel_evaluation_gives_the_rows_of_a_serial_one(compiled, cold, mo
     assert list(parallel["row"]) == list(serial["row"]) == [1, 2, 3, 4]
     np.testing.assert_allclose(parallel[["tip_x", "tip_y", "tip_z"]].to_numpy(),
                                serial[["tip_x", "tip_y", "tip_z"]].to_numpy(), rtol=0, atol=1e-12)
+
+
+@pytest.fixture
+def threaded_not_ready(monkeypatch):
+    """This process as on a cold start for the threaded batch kernel."""
+    monkeypatch.setattr(warmup, "_THREADED_READY", [False])
+
+
+def _batch_input(robot, k, seed):
+    rng = np.random.default_rng(seed)
+    alpha = np.column_stack([np.zeros(k), rng.uniform(-np.pi, np.pi, (k, 2))])
+    beta = np.tile(np.asarray(robot.home_beta, dtype=float), (k, 1))
+    return alpha, beta
+
+
+def test_an_uncompiled_threaded_batch_runs_serially_and_compiles_in_the_background(threaded_not_ready,
+                                                                                   monkeypatch):
+    """Cold, a threaded batch call must not compile the threaded kernel (about a minute) in the
+    caller: it runs the serial kernel, gets the serial results, and starts one child for the
+    threaded kernel under the threaded kernel's own lock file."""
+    from ctrplan.mechanics import _standard_batch, solve_standard_batch
+
+    class NotCompiled:
+        signatures = []
+
+        def __call__(self, *args):
+            raise AssertionError("the threaded kernel ran on a cold start")
+
+    spawned = []
+    monkeypatch.setattr(warmup, "_cached", lambda kernel: False)
+    monkeypatch.setattr(warmup, "_batch_parallel", lambda: NotCompiled())
+    monkeypatch.setattr(_standard_batch, "_batch_parallel", NotCompiled())
+    monkeypatch.setattr(warmup, "_lock_path", lambda kernel=None, name=warmup._LOCK_NAME: name)
+    monkeypatch.setattr(warmup, "_spawn_holding_lock", lambda path, call: spawned.append((path, call)) or True)
+    robot = table2_robot()
+    alpha, beta = _batch_input(robot, 6, 4417)
+    settings = ModelSettings(ds=DS)
+    serial = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True)
+    cold = solve_standard_batch(robot, alpha, beta, settings, check_stability=True, follow=True, n_threads=2)
+    np.testing.assert_array_equal(cold.tip_position, serial.tip_position)
+    assert spawned == [(warmup._THREADED_LOCK_NAME,
+                        "from ctrplan.mechanics._warmup_child import main_threaded_batch; main_threaded_batch()")]
+
+
+def test_the_threaded_batch_child_compiles_the_specialization_the_command_line_uses(threaded_not_ready):
+    """The child must compile the threaded kernel with the argument types of a real call (the
+    evaluate command's stability check and following), or later calls compile their own."""
+    from ctrplan.mechanics._standard_batch import _batch_parallel, solve_standard_batch
+
+    robot = table2_robot()
+    alpha, beta = _batch_input(robot, 4, 9031)
+    solve_standard_batch(robot, alpha, beta, ModelSettings(ds=DS), check_stability=True, follow=True,
+                         n_threads=2, compile_threads=True)
+    before = list(_batch_parallel.signatures)
+    assert len(before) == 1
+    _warmup_child.compile_threaded_batch()
+    assert _batch_parallel.signatures == before
+
+
+def test_a_compiled_threaded_kernel_is_used_without_a_child(threaded_not_ready, monkeypatch):
+    """Once the threaded kernel is compiled in this process, threaded calls use it and start no
+    child."""
+    from ctrplan.mechanics._standard_batch import _batch_parallel, solve_standard_batch
+
+    robot = table2_robot()
+    alpha, beta = _batch_input(robot, 3, 5120)
+    solve_standard_batch(robot, alpha, beta, ModelSettings(ds=DS), n_threads=2, compile_threads=True)
+    assert _batch_parallel.signatures
+    monkeypatch.setattr(warmup, "_THREADED_READY", [False])
+    monkeypatch.setattr(warmup, "_spawn_holding_lock",
+                        lambda path, call: pytest.fail("a child was started for a compiled kernel"))
+    assert warmup.threaded_batch_usable() is True

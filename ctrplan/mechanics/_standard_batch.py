@@ -21,6 +21,7 @@ from ..constants import (GRID_MERGE_TOL, PREDICTOR_STEP_FACTOR,
 from .grid import _grid
 from .packed import pack_robot
 from .results import ModelSettings
+from . import warmup
 from ._uniqueness import unique_equilibrium_certified_at
 from .standard import _damping, _integrate, _multistart_search, _newton, _shoot, _solve_small, _tip_frame
 
@@ -423,7 +424,7 @@ def configuration_arrays(robot, alpha, beta):
 
 def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = None, *,
                          initial_guess=None, n_threads: int = 1, check_stability: bool = False,
-                         follow: bool = False) -> StandardBatch:
+                         follow: bool = False, compile_threads: bool = False) -> StandardBatch:
     """Solve the standard zero-clearance model at many configurations in one compiled call.
 
     Parameters
@@ -442,7 +443,13 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
         as in :func:`solve_standard`, a failed given start is retried from zero twist.
     n_threads : int
         Threads sharing the configurations (numba ``prange``, at most ``NUMBA_NUM_THREADS``); 1 (default) runs serially, as
-        fits a call from inside a worker process. Results do not depend on it.
+        fits a call from inside a worker process. Results do not depend on it. The threaded
+        kernel costs about a minute of compilation more than the serial one, which threads
+        pay back only over millions of rows: until it is compiled or cached, a call runs
+        serially and compiles it in a background process for later calls
+        (:func:`ctrplan.mechanics.warmup.threaded_batch_usable`).
+    compile_threads : bool
+        With ``n_threads`` > 1, use the threaded kernel even if it has to be compiled first.
     check_stability : bool
         Flag configurations with more than one equilibrium as :func:`solve_standard` does
         (``settings.multistart`` restarts), but run that search only where the uniqueness
@@ -500,7 +507,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
                         multistart=multistart, predict=initial_guess is None, follow=bool(follow))
     out = BatchOutput(tips, tans, sig_out, conv, unst, iters, n_eq, certified)
     args = (alpha, beta, valid, sig_init, tubes, opts, out)
-    if int(n_threads) == 1:
+    if int(n_threads) == 1 or not warmup.threaded_batch_usable(compile_threads):
         _batch(*args)
     else:
         before = get_num_threads()
