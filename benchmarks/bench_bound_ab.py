@@ -10,7 +10,11 @@ minimum over its runs, which removes most of the load that other processes put o
 Printed: mean, median, p90 and max of those minima for both codes, the ratio of their medians
 and the median of the per-configuration ratios, the run medians (to show the noise), outer and
 Newton iterations per contact solve, unconverged solves, the largest tip difference between the
-two codes [um] (converged solutions) and the load average at the start and the end.
+two codes [um] (converged solutions) and the load average at the start and the end. Accuracy:
+every tip of both codes against a tight solve of this checkout (outer and complementarity
+tolerances 1e-9, ``TIGHT``) [um], and whether the two codes leave the same configurations
+unconverged and flag the same ones as folds (more than one standard-model equilibrium,
+``diagnostics.unstable``).
 
 Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_bound_ab.py --base fd0e2f1 [--runs 6] [--grid 4|8]
 Grids: the paper's 4x4x4 grid (Section IV-D, Table II robot) or the 8x8x8 grid
@@ -43,7 +47,12 @@ def _configurations(robot, grid):
     return grid_8x8x8()
 
 
-def child(out, grid):
+# The reference of the accuracy check: the same bound solved to 1e-9 [m] centerline change and
+# 1e-9 scaled complementarity residual (the defaults are 1e-6).
+TIGHT = dict(outer_tol=1e-9, complementarity_tol=1e-9, max_outer_iterations=200)
+
+
+def child(out, grid, tight=False):
     """Time the bound at every configuration with the ``ctrplan`` on ``PYTHONPATH``; save to ``out``.
 
     Raises
@@ -57,11 +66,11 @@ def child(out, grid):
     from ctrplan.io.robot_file import load_robot
     from ctrplan.mechanics import ModelSettings, evaluate_bound, solve_standard
     robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")
-    settings = ModelSettings()
+    settings = ModelSettings(**TIGHT) if tight else ModelSettings()
     configs = _configurations(robot, grid)
     evaluate_bound(robot, *configs[0], settings)     # compile or load the kernels first
     solve_standard(robot, *configs[0], settings)
-    T, tips, iters, T_std = [], [], [], []
+    T, tips, iters, T_std, unstable = [], [], [], [], []
     for a, b in configs:
         t0 = time.process_time()
         solve_standard(robot, a, b, settings)        # with the multistart stability search
@@ -73,11 +82,14 @@ def child(out, grid):
         tips.append(np.array([s.tip_position for s in solves]))
         iters.append([(s.diagnostics.iterations, s.diagnostics.inner_iterations, s.diagnostics.converged)
                       for s in solves])
-    np.savez(out, T=np.array(T) * 1e3, T_std=np.array(T_std) * 1e3, tips=np.array(tips), iters=np.array(iters, dtype=float))
+        unstable.append(bool(r.diagnostics.unstable))
+    np.savez(out, T=np.array(T) * 1e3, T_std=np.array(T_std) * 1e3, tips=np.array(tips), iters=np.array(iters, dtype=float),
+             unstable=np.array(unstable))
 
 
-def _run(code_root, out, grid, cache_dir):
-    subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", str(out), "--grid", grid],
+def _run(code_root, out, grid, cache_dir, tight=False):
+    subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", str(out), "--grid", grid]
+                   + (["--tight"] if tight else []),
                    check=True, env=child_env(code_root, cache_dir), cwd=str(code_root))
     return np.load(out)
 
@@ -93,9 +105,10 @@ def main(argv=None):
     ap.add_argument("--runs", type=int, default=6, help="runs of each code, alternated")
     ap.add_argument("--grid", choices=("4", "8"), default="4")
     ap.add_argument("--child", help=argparse.SUPPRESS)
+    ap.add_argument("--tight", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
-        child(args.child, args.grid)
+        child(args.child, args.grid, args.tight)
         return
     if not args.base:
         ap.error("--base is required (the git revision to compare against)")
@@ -108,7 +121,8 @@ def main(argv=None):
                 for name, code, cache in (("base", base, tmp / "cache-base"), ("this", ROOT, tmp / "cache-this")):
                     runs[name].append(_run(code, tmp / f"{name}{k}.npz", args.grid, cache))
                     print(f"  run {k + 1} {name}: median {np.median(runs[name][-1]['T']):.1f} ms", flush=True)
-    print(f"load average at the end: {os.getloadavg()}")
+            print(f"load average at the end of the timed runs: {os.getloadavg()}")
+            ref = _run(ROOT, tmp / "tight.npz", args.grid, tmp / "cache-this", tight=True)
     T = {n: np.array([r["T"] for r in v]) for n, v in runs.items()}
     best = {n: t.min(axis=0) for n, t in T.items()}
     print(f"\nfull bound per configuration, {args.grid}x{args.grid}x{args.grid} grid, CPU time [ms], "
@@ -133,6 +147,23 @@ def main(argv=None):
     diff = np.linalg.norm(runs["this"][0]["tips"] - runs["base"][0]["tips"], axis=2) * 1e6
     print(f"  tips, this against base, solves converged in both: max {diff[ok].max():.3f} um, "
           f"99th percentile {np.percentile(diff[ok], 99):.3f} um")
+    ref_ok = ref["iters"][:, :, 2] == 1
+    print(f"\naccuracy against a tight solve of this checkout ({TIGHT}; "
+          f"{int((~ref_ok).sum())} solves of {ref_ok.size} without a tight reference):")
+    for n in ("base", "this"):
+        conv = runs[n][0]["iters"][:, :, 2] == 1
+        both = conv & ref_ok
+        err = np.linalg.norm(runs[n][0]["tips"] - ref["tips"], axis=2) * 1e6
+        print(f"  {n:5s} tips of converged solves: max {err[both].max():.3f} um, "
+              f"99th percentile {np.percentile(err[both], 99):.3f} um")
+    bad = {n: set(np.nonzero(~np.all(runs[n][0]["iters"][:, :, 2] == 1, axis=1))[0].tolist()) for n in runs}
+    fold = {n: set(np.nonzero(runs[n][0]["unstable"])[0].tolist()) if "unstable" in runs[n][0] else None
+            for n in runs}
+    print(f"  unconverged configurations: base {sorted(bad['base'])}, this {sorted(bad['this'])} "
+          f"({'same' if bad['base'] == bad['this'] else 'DIFFERENT'})")
+    if fold["base"] is not None:
+        print(f"  folds (more than one standard equilibrium): base {len(fold['base'])}, this {len(fold['this'])} "
+              f"({'same' if fold['base'] == fold['this'] else 'DIFFERENT'})")
 
 
 if __name__ == "__main__":
