@@ -137,7 +137,6 @@ def test_an_uncompiled_threaded_batch_runs_serially_and_compiles_in_the_backgrou
 
     spawned = []
     monkeypatch.setattr(warmup, "_cached", lambda kernel: False)
-    monkeypatch.setattr(warmup, "_batch_parallel", lambda: NotCompiled())
     monkeypatch.setattr(_standard_batch, "_batch_parallel", NotCompiled())
     monkeypatch.setattr(warmup, "_lock_path", lambda kernel=None, name=warmup._LOCK_NAME: name)
     monkeypatch.setattr(warmup, "_spawn_holding_lock", lambda path, call: spawned.append((path, call)) or True)
@@ -178,4 +177,4 @@ def test_a_compiled_threaded_kernel_is_used_without_a_child(threaded_not_ready, 
     monkeypatch.setattr(warmup, "_THREADED_READY", [False])
     monkeypatch.setattr(warmup, "_spawn_holding_lock",
                         lambda path, call: pytest.fail("a child was started for a compiled kernel"))
-    assert warmup.threaded_batch_usable() is True
+    assert warmup.threaded_batch_usable(_batch_parallel) is True

@@ -507,7 +507,7 @@ def solve_standard_batch(robot, alpha, beta, settings: ModelSettings | None = No
                         multistart=multistart, predict=initial_guess is None, follow=bool(follow))
     out = BatchOutput(tips, tans, sig_out, conv, unst, iters, n_eq, certified)
     args = (alpha, beta, valid, sig_init, tubes, opts, out)
-    if int(n_threads) == 1 or not warmup.threaded_batch_usable(compile_threads):
+    if int(n_threads) == 1 or not warmup.threaded_batch_usable(_batch_parallel, compile_threads):
         _batch(*args)
     else:
         before = get_num_threads()

@@ -53,11 +53,6 @@ def _outer_loop():
     return kernel
 
 
-def _batch_parallel():
-    from ._standard_batch import _batch_parallel as kernel
-    return kernel
-
-
 def _cached(kernel) -> bool:
     """Whether ``kernel`` (a numba dispatcher) is in numba's on-disk cache for the present source
     (so a first call loads it instead of compiling). True also when it cannot be told (a numba
@@ -161,35 +156,32 @@ def wait(timeout: float = 600.0) -> float:
     return waited
 
 
-def _threaded_lock_path() -> str:
-    return _lock_path(_batch_parallel(), _THREADED_LOCK_NAME)
-
-
-def start_threaded_batch() -> bool:
-    """Start compiling the threaded standard-model batch kernel in a child process, unless it is
-    cached or another process is compiling it. Returns whether a child was started."""
-    if _THREADED_READY[0] or os.environ.get("NUMBA_DISABLE_JIT") == "1" or _cached(_batch_parallel()):
+def start_threaded_batch(kernel) -> bool:
+    """Start compiling the threaded standard-model batch kernel ``kernel``
+    (``_standard_batch._batch_parallel``) in a child process, unless it is cached or another
+    process is compiling it. Returns whether a child was started."""
+    if _THREADED_READY[0] or os.environ.get("NUMBA_DISABLE_JIT") == "1" or _cached(kernel):
         return False
-    return _spawn_holding_lock(_threaded_lock_path(),
+    return _spawn_holding_lock(_lock_path(kernel, _THREADED_LOCK_NAME),
                                "from ctrplan.mechanics._warmup_child import main_threaded_batch; "
                                "main_threaded_batch()")
 
 
-def threaded_batch_usable(compile_now: bool = False, timeout: float = 600.0) -> bool:
-    """Whether a batch call should run the threaded kernel: True once it is compiled in this
-    process or cached on disk. Otherwise, with ``compile_now`` False, it starts the background
-    compile (:func:`start_threaded_batch`) and returns False (run serially: the results are the
-    same); with ``compile_now`` True it waits for a compiling process (at most ``timeout`` [s])
-    and returns True (the caller loads the kernel, or compiles it)."""
+def threaded_batch_usable(kernel, compile_now: bool = False, timeout: float = 600.0) -> bool:
+    """Whether a batch call should run the threaded kernel ``kernel``
+    (``_standard_batch._batch_parallel``): True once it is compiled in this process or cached on
+    disk. Otherwise, with ``compile_now`` False, it starts the background compile
+    (:func:`start_threaded_batch`) and returns False (run serially: the results are the same);
+    with ``compile_now`` True it waits for a compiling process (at most ``timeout`` [s]) and
+    returns True (the caller loads the kernel, or compiles it)."""
     if _THREADED_READY[0] or os.environ.get("NUMBA_DISABLE_JIT") == "1":
         return True
-    kernel = _batch_parallel()
     if kernel.signatures or _cached(kernel):
         _THREADED_READY[0] = True
         return True
     if compile_now:
-        _wait_for_lock(_threaded_lock_path(), timeout)
+        _wait_for_lock(_lock_path(kernel, _THREADED_LOCK_NAME), timeout)
         _THREADED_READY[0] = True
         return True
-    start_threaded_batch()
+    start_threaded_batch(kernel)
     return False
