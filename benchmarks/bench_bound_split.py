@@ -1,6 +1,6 @@
 """Where the full bound's time goes: solves, outer iterations, kernels, Python.
 
-Four parts, all in CPU time of this process (``time.process_time``; run it alone, the load
+Three parts, all in CPU time of this process (``time.process_time``; run it alone, the load
 average is printed at the start and the end):
 
 1. **Per solve** on the 4x4x4 grid of the paper's Section IV-D (Table II robot): the clearance
@@ -275,7 +275,6 @@ def main(argv=None):
     ap.add_argument("--budget", type=float, default=235.0,
                     help="wall seconds of exact bounds for the projection of part 3")
     args = ap.parse_args(argv)
-    sys.path.insert(0, str(ROOT / "benchmarks"))
     from paper_section_4d import grid_4x4x4
     print(f"load average at the start: {os.getloadavg()}")
     settings = ModelSettings()
