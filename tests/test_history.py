@@ -180,6 +180,31 @@ def test_a_positive_time_offset_reads_the_joints_earlier():
         time_shift(MotionRecord(alpha, beta), 0.1)
 
 
+def test_time_offset_reads_a_smooth_interpolant_with_no_kink_at_the_sample_period():
+    """A joint moving with changing speed, sampled at 10 Hz: the value read at ``t - tau`` has
+    equal one-sided derivatives in tau at tau = 1, 2 sample periods (a C1 interpolant), where
+    linear interpolation jumps by the change of slope between samples; a rest between equal
+    samples stays at rest (no overshoot); the samples themselves are read back exactly. Catches
+    an interpolant that puts a kink in the time-offset cost at every sample period (a fit that
+    lands on a multiple of it) or that moves a joint at rest."""
+    from ctrplan.history import joints_at
+
+    t = np.arange(40) * 0.1
+    a2 = np.where(t < 2.0, np.sin(1.3 * t) + 0.3 * t ** 2, np.sin(2.6) + 1.2)   # a move, then a rest
+    rec = MotionRecord(np.column_stack([np.zeros(40), a2]), np.zeros((40, 2)), t)
+    k, h = 15, 1e-6
+    for tau in (0.1, 0.2):
+        left = (time_shift(rec, tau).alpha[k, 1] - time_shift(rec, tau - h).alpha[k, 1]) / h
+        right = (time_shift(rec, tau + h).alpha[k, 1] - time_shift(rec, tau).alpha[k, 1]) / h
+        assert abs(left - right) < 1e-3 * max(1.0, abs(left)), (tau, left, right)
+        lin = [np.interp(t[k] - x, t, a2) for x in (tau - h, tau, tau + h)]
+        assert abs((lin[1] - lin[0]) - (lin[2] - lin[1])) / h > 0.05          # linear interpolation kinks here
+    rest = t >= 2.05
+    shifted = time_shift(rec, 0.05).alpha[:, 1]
+    np.testing.assert_allclose(shifted[np.flatnonzero(rest)[1:]], a2[-1], atol=1e-12)
+    np.testing.assert_allclose(joints_at(rec, t)[0][:, 1], a2, atol=1e-12)
+
+
 def test_operators_run_along_each_motion_not_across_motions():
     """Two motions in one record: the second starts centred in the dead band, and the
     interpolation of a time offset never reads the other motion."""

@@ -11,7 +11,8 @@ history-aware prediction (:func:`ctrplan.mechanics.predict_tip`) and planning
   release by a translation, and the (gradually developing) friction state; :class:`PairState`
   for one configuration and :func:`pair_friction`, the friction it applies;
 - operators that change a record into what the tubes did or what the tracker saw:
-  :func:`play` (drive backlash), :func:`time_shift` (tracker time offset), and
+  :func:`play` (drive backlash), :func:`time_shift` (tracker time offset; :func:`joints_at`, the
+  smooth interpolant it reads the record with), and
   :func:`apply_history`, which applies a set of them and reads the state along the result;
 - :func:`rotation_directions`, :func:`drive_directions`, :func:`rotation_since_reversal`.
 
@@ -19,11 +20,11 @@ Pure numerics: arrays and frozen dataclasses, SI units (rad, m, s).
 """
 
 from ._apply import STAGES, HistoryOperator, apply_history
-from ._operators import play, play_side, time_shift
+from ._operators import joints_at, play, play_side, time_shift
 from ._record import MotionRecord, sequence_segments
 from ._state import (PAIR_CASES, HistoryState, PairState, drive_directions, motion_state, pair_friction,
                      rotation_directions, rotation_since_reversal)
 
 __all__ = ["MotionRecord", "sequence_segments", "HistoryState", "PairState", "PAIR_CASES", "motion_state",
            "pair_friction", "rotation_directions", "drive_directions", "rotation_since_reversal", "play",
-           "play_side", "time_shift", "HistoryOperator", "STAGES", "apply_history"]
+           "play_side", "time_shift", "joints_at", "HistoryOperator", "STAGES", "apply_history"]

@@ -3,7 +3,8 @@
 - :func:`play`: a dead band (backlash) in each rotation drive, the play operator of hysteresis
   theory (Brokate & Sprekels, *Hysteresis and Phase Transitions*, Springer 1996, Sec. 2.3);
 - :func:`time_shift`: the joint record read at ``t - tau``, for a tracker whose readings lag the
-  joint readings by ``tau``.
+  joint readings by ``tau``, through :func:`joints_at`, a shape-preserving C1 interpolant of
+  each continuous motion.
 
 Both run along each continuous motion of the whole record: a state (the play's position in the
 band) or an interpolation never crosses from one motion into another, and a caller that needs
@@ -16,7 +17,7 @@ import numpy as np
 
 from ._record import MotionRecord
 
-__all__ = ["play", "play_side", "time_shift"]
+__all__ = ["play", "play_side", "time_shift", "joints_at"]
 
 
 def _widths(record: MotionRecord, widths) -> np.ndarray:
@@ -89,6 +90,56 @@ def play_side(record: MotionRecord, seen: MotionRecord, widths) -> np.ndarray:
     return np.clip(side, -1.0, 1.0)
 
 
+def joints_at(record: MotionRecord, times) -> tuple[np.ndarray, np.ndarray]:
+    """The joint values of each continuous motion read at other times, with a smooth interpolant.
+
+    Within each motion the joints are interpolated by the piecewise-cubic Hermite interpolant
+    that preserves monotonicity (PCHIP: Fritsch & Carlson, SIAM J. Numer. Anal. 17(2):238, 1980;
+    ``scipy.interpolate.PchipInterpolator``). It has a continuous first derivative, so a cost
+    read along ``time - tau`` has no kink at multiples of the sample period (linear
+    interpolation puts one at every sample); it does not overshoot, so a joint at rest between
+    two equal samples stays at rest, and it passes through every sample. Outside a motion's
+    time span a joint is held at the motion's first or last sample.
+
+    Parameters
+    ----------
+    record : MotionRecord
+        Needs ``time`` [s].
+    times : array-like, shape (K,)
+        Time [s] at which each sample's joints are read, within the sample's own motion.
+
+    Returns
+    -------
+    alpha : ndarray, shape (K, n)
+        [rad].
+    beta : ndarray, shape (K, n)
+        [m].
+
+    Raises
+    ------
+    ValueError
+        A record without times, or ``times`` not finite or not of shape (K,).
+    """
+    from scipy.interpolate import PchipInterpolator
+
+    if record.time is None:
+        raise ValueError("reading joints at other times needs sample times (a 'time' column)")
+    q = np.asarray(times, dtype=float)
+    if q.shape != (record.n_samples,) or not np.all(np.isfinite(q)):
+        raise ValueError(f"times must hold {record.n_samples} finite values [s], got shape {q.shape}")
+    joints = np.concatenate([record.alpha, record.beta], axis=1)
+    out = joints.copy()
+    t = record.time
+    for idx in record.segments():
+        if idx.size < 2:
+            continue
+        ts = t[idx]
+        at = np.clip(q[idx], ts[0], ts[-1])
+        out[idx] = PchipInterpolator(ts, joints[idx], axis=0)(at)
+    n = record.n_tubes
+    return out[:, :n], out[:, n:]
+
+
 def time_shift(record: MotionRecord, tau: float) -> MotionRecord:
     """The joint record read at ``time - tau``: the configuration a tracker reading lagging by
     ``tau`` shows.
@@ -103,8 +154,9 @@ def time_shift(record: MotionRecord, tau: float) -> MotionRecord:
     Returns
     -------
     MotionRecord
-        Joints linearly interpolated within each continuous motion at ``time - tau``, held at the
-        motion's first / last sample outside it.
+        Joints read at ``time - tau`` within each continuous motion by :func:`joints_at` (a C1,
+        shape-preserving interpolant of the samples), held at the motion's first / last sample
+        outside it.
 
     Raises
     ------
@@ -117,14 +169,5 @@ def time_shift(record: MotionRecord, tau: float) -> MotionRecord:
         raise ValueError(f"time offset must be finite, got {tau!r} s")
     if tau == 0.0:
         return record
-    alpha, beta = record.alpha.copy(), record.beta.copy()
-    t = record.time
-    for idx in record.segments():
-        if idx.size < 2:
-            continue
-        ts = t[idx]
-        q = ts - tau
-        for src, dst in ((record.alpha, alpha), (record.beta, beta)):
-            for j in range(src.shape[1]):
-                dst[idx, j] = np.interp(q, ts, src[idx, j])
+    alpha, beta = joints_at(record, record.time - tau)
     return record.replace(alpha=alpha, beta=beta)
