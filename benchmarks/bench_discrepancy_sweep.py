@@ -4,7 +4,7 @@ For each seed and each truth (drive backlash, tracker time offset, torsional fri
 developing friction, off-plane precurvature, noise only), synthesizes a continuous trajectory of
 the Table I tube pair (500 samples at 10 Hz, 0.5 mm / 0.3 deg noise, standard model at ds = 6 mm
 or the friction model for the friction truths) with the effect's size drawn uniformly from 30 to
-100 % of its plausible range (random sign where the range is two-sided), runs the workflow with
+100 % of its typical range (random sign where the range is two-sided), runs the workflow with
 every registered candidate from the base file without the effect, and prints the confusion
 matrix: truth x {named (right), ambiguous with the truth, named wrong, ambiguous without the
 truth, nothing}.
@@ -41,11 +41,11 @@ SAMPLES = 500
 
 def draw_effects(truth: str, robot, rng) -> dict:
     """The hidden effects of a case: ``{effect: {parameter: value}}`` [SI], sizes drawn from 30 to
-    100 % of each parameter's plausible range."""
+    100 % of each parameter's typical range."""
     from ctrplan.effects import REGISTRY
 
     def size(spec):
-        lo, hi = spec.plausible
+        lo, hi = spec.typical
         if lo < 0 < hi:
             return float(rng.choice((-1.0, 1.0)) * rng.uniform(0.3, 1.0) * min(-lo, hi))
         return float(lo + rng.uniform(0.3, 1.0) * (hi - lo))

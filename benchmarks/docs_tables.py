@@ -81,7 +81,7 @@ def ha_table(res: dict) -> str:
               "eligible |", "|---|---|---|---|---|---|"]
     for e, c in res["candidates"].items():
         params = "; ".join(f"{k} = {_pm(p['value'], p['stderr'], p['unit'])}"
-                           + (" (implausible)" if not p["in_plausible_range"] else "")
+                           + (" (atypical)" if not p["in_typical_range"] else "")
                            + (" (at bound)" if p["at_bound"] else "") for k, p in c["parameters"].items()) or "nominal"
         ci = c["improvement_ci"]
         lines.append(f"| {c['label']} | {params} | {c['out_of_fold_mean_mm']:.2f} / {c['out_of_fold_max_mm']:.2f} | "
@@ -101,7 +101,7 @@ def ha_table(res: dict) -> str:
     if changed:
         lines += ["", "Baseline parameters (change from the robot file): " + "; ".join(
             f"{p['name']} = {_pm(p['value'], p['stderr'], p['unit'])} ({100 * p['relative_change']:+.0f} %"
-            + ("" if p["in_plausible_range"] else ", implausible") + ")" for p in changed) + "."]
+            + ("" if p["in_typical_range"] else ", atypical") + ")" for p in changed) + "."]
     pred = res.get("prediction")
     if pred and pred.get("rows"):
         lines += ["", "History-aware prediction on the test split:", "", "| model | mean / p95 / max [mm] |", "|---|---|"]

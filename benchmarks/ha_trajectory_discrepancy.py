@@ -44,14 +44,14 @@ def summarize(res: dict, data_path: Path, robot_path: Path, seconds: float, comm
 
     def cand(c):
         table = {r["name"]: {"value": r["value"], "stderr": r.get("stderr"), "unit": r["unit"],
-                             "in_plausible_range": r["in_plausible_range"], "at_bound": r["at_bound"]}
+                             "in_typical_range": r["in_typical_range"], "at_bound": r["at_bound"]}
                  for r in c["parameter_table"]}
         imp = c["improvement_eq49"]
         return {"label": c["label"], "model": c["model"], "parameters": table,
                 "out_of_fold_mean_mm": c["out_of_fold"]["position_mean_mm"],
                 "out_of_fold_max_mm": c["out_of_fold"]["position_max_mm"],
                 "improvement_mm_deg": imp["mean_difference"], "improvement_ci": imp["ci"],
-                "p_value": imp["p_value"], "eligible": c.get("eligible"), "plausible": c["plausible"],
+                "p_value": imp["p_value"], "eligible": c.get("eligible"), "typical": c["typical"],
                 "at_bound": c["at_bound"]}
 
     fig = res["test_split"]["figures"]
@@ -68,7 +68,7 @@ def summarize(res: dict, data_path: Path, robot_path: Path, seconds: float, comm
                   "threshold": (res["noise"]["test"] or {}).get("threshold")},
         "baseline": {"out_of_fold_mean_mm": res["baseline"]["out_of_fold"]["position_mean_mm"],
                      "parameters": [{k: r.get(k) for k in ("name", "value", "stderr", "unit", "relative_change",
-                                                           "in_plausible_range", "at_bound")}
+                                                           "in_typical_range", "at_bound")}
                                     for r in res["baseline"]["parameter_table"]]},
         "candidates": {e: cand(c) for e, c in res["candidates"].items()},
         "test_split": {"label": res["test_split"]["label"], "before": fig["before"], "after": fig["after"],

@@ -28,15 +28,15 @@ COARSE = ModelSettings(ds=6e-3)
 
 
 # --------------------------------------------------------------------------- parameters, synth
-def test_history_parameters_have_units_bounds_and_plausible_ranges():
-    """Catches a history parameter that changes the robot, has no unit or plausible range, or
+def test_history_parameters_have_units_bounds_and_typical_ranges():
+    """Catches a history parameter that changes the robot, has no unit or typical range, or
     accepts values outside its bounds."""
     robot = load_robot(TABLE7)
     for name, unit in (("backlash_2", "rad"), ("time_offset", "s"), ("friction_angle", "rad")):
         p = parameter(robot, name)
-        assert needs_solve(robot, name) and p.unit == unit and p.plausible is not None
+        assert needs_solve(robot, name) and p.unit == unit and p.typical is not None
     assert not needs_solve(robot, "registration_tx")
-    assert parameter(robot, "mu_1").is_plausible(0.22) and not parameter(robot, "mu_1").is_plausible(1.075)
+    assert parameter(robot, "mu_1").is_typical(0.22) and not parameter(robot, "mu_1").is_typical(1.075)
     assert apply_parameters(robot, ("backlash_2", "time_offset"), (0.05, 0.1)) == robot
     es, rest = EffectSet.from_parameters(robot, ("backlash_3", "time_offset", "precurvature_y_3"), (0.05, 0.1, 15.0))
     assert es.to_dict() == {"backlash": {"backlash_3": 0.05}, "time_offset": {"time_offset": 0.1}}
@@ -104,7 +104,7 @@ def test_vector_signature_finds_a_planted_lag_and_not_noise():
     assert not vector_signature("x", noise, np.zeros((600, 3, 1)), np.arange(600)).testable
 
 
-def _candidate(effect, improvement, r, units, *, implausible=(), at_bound=()):
+def _candidate(effect, improvement, r, units, *, atypical=(), at_bound=()):
     """A fitted candidate as the naming rule sees it: its out-of-fold Eq. (49) residuals ``r`` and
     their paired improvement over a baseline whose residuals are ``r + improvement``."""
     from ctrplan.discrepancy.fitting import Candidate, CrossValidated
@@ -114,7 +114,7 @@ def _candidate(effect, improvement, r, units, *, implausible=(), at_bound=()):
     cv = CrossValidated(name=effect, model="standard", fit=None, folds=(), params={}, oof=None, r=r)
     imp = paired_improvement(r + improvement, r, units)
     return Candidate(effects=(effect,), label=REGISTRY[effect].label, cv=cv, shown={}, units={}, parameters=[],
-                     implausible=list(implausible), at_bound=tuple(at_bound), n_parameters=1, bic=0.0, delta_bic=0.0,
+                     atypical=list(atypical), at_bound=tuple(at_bound), n_parameters=1, bic=0.0, delta_bic=0.0,
                      improvement=imp, improvement_position=imp)
 
 
@@ -126,8 +126,8 @@ def _split(units):
                      fold=units % 4, n_folds=4, max_fit_samples=k, seed=0)
 
 
-def test_naming_rule_passes_over_implausible_and_at_bound_fits_and_says_ambiguous():
-    """Friction with mu_1 = 1.075 (implausible) and an off-plane fit at its bound improve most
+def test_naming_rule_passes_over_atypical_and_at_bound_fits_and_says_ambiguous():
+    """Friction with mu_1 = 1.075 (atypical) and an off-plane fit at its bound improve most
     and are not named, each with the reason; backlash and a time offset that explain the data
     equally well (out-of-fold residuals within noise of each other) give the verdict
     "ambiguous" with both listed and what data would separate them; a clearly worse time offset
@@ -138,8 +138,8 @@ def test_naming_rule_passes_over_implausible_and_at_bound_fits_and_says_ambiguou
     rng = np.random.default_rng(20261)
     units = np.repeat(np.arange(20), 10)
     r = rng.normal(1.0, 0.1, 200)
-    mu = {"name": "mu_1", "value": 1.075, "unit": "-", "plausible": [0, 0.5], "why": "NiTi"}
-    cands = {"friction": _candidate("friction", 2.0, r, units, implausible=[mu]),
+    mu = {"name": "mu_1", "value": 1.075, "unit": "-", "typical": [0, 0.5], "why": "NiTi"}
+    cands = {"friction": _candidate("friction", 2.0, r, units, atypical=[mu]),
              "offplane": _candidate("offplane", 2.1, r, units, at_bound=["precurvature_x_2 (upper bound 200 1/m)"]),
              "backlash": _candidate("backlash", 1.9, r + rng.normal(0, 0.01, 200), units),
              "time_offset": _candidate("time_offset", 1.9, r + rng.normal(0, 0.01, 200), units)}
@@ -151,7 +151,7 @@ def test_naming_rule_passes_over_implausible_and_at_bound_fits_and_says_ambiguou
     assert {d["named"], d["ambiguous_with"]} == {"backlash", "time_offset"}
     assert "rests after reversals" in d["separated_by"] or "speed" in d["separated_by"], d["separated_by"]
     assert not naming.candidates["friction"].eligible and not naming.candidates["offplane"].eligible
-    assert any("mu_1 = 1.075" in n and "implausible" in n for n in d["notes"])
+    assert any("mu_1 = 1.075" in n and "atypical" in n for n in d["notes"])
     assert any("at bound, not converged" in n for n in d["notes"])
     cands["time_offset"] = _candidate("time_offset", 1.0, r + 0.9, units)       # clearly worse out of fold
     d = name_effect(_split(units), cands, {}, noise, opts, echo=lambda s: None).decision

@@ -325,10 +325,10 @@ def test_real_trajectory_runs_end_to_end(tmp_path):
     # the README states 0.2 mm sensor noise; a residual of ~5 mm is not noise (the old report
     # said it was for such data)
     assert res["noise"]["consistent"] is False and res["noise"]["ratio"] > 10
-    # a named effect is plausible unless no plausible candidate explained the data
+    # a named effect is typical unless no typical candidate explained the data
     if res["named_effect"]:
         named = res["candidates"][res["named_effect"]]
-        assert named["plausible"] and not named["at_bound"]
+        assert named["typical"] and not named["at_bound"]
     # the history-aware model's figures are reported next to the standard model's
     rows = res["prediction"]["rows"]
     assert rows[1]["n"] > 0.95 * before["n_samples"]
@@ -350,15 +350,15 @@ def test_friction_grid_search_extends_past_the_coarse_grid_edge(tmp_path):
     assert "coarse grid 0..0.6" in fit.message
 
 
-def test_cautions_flag_an_implausible_friction_coefficient_and_a_worse_maximum():
+def test_cautions_flag_an_atypical_friction_coefficient_and_a_worse_maximum():
     before = {"position_mean_mm": 5.2, "position_max_mm": 16.8}
     worse_max = {"position_mean_mm": 4.3, "position_max_mm": 23.2}
     cand = {"parameters": {"mu_1": 0.975, "mu_2": 0.05},
-            "implausible": [{"name": "mu_1", "value": 0.975, "plausible": [0.0, 0.5], "unit": "-", "why": "NiTi"}]}
+            "atypical": [{"name": "mu_1", "value": 0.975, "typical": [0.0, 0.5], "unit": "-", "why": "NiTi"}]}
     notes = cautions("named", cand, before, worse_max)
-    assert len(notes) == 2 and "mu_1 = 0.975 is outside its plausible range 0..0.5" in notes[0]
+    assert len(notes) == 2 and "mu_1 = 0.975 is outside its typical range 0..0.5" in notes[0]
     assert "16.80 to 23.20 mm" in notes[1]
-    assert cautions("named", {"parameters": {"mu_1": 0.22, "mu_2": 0.12}, "implausible": []}, before,
+    assert cautions("named", {"parameters": {"mu_1": 0.22, "mu_2": 0.12}, "atypical": []}, before,
                     {"position_mean_mm": 2.0, "position_max_mm": 8.0}) == []
     assert cautions("none", None, before, before) == []
 
@@ -376,7 +376,7 @@ def test_friction_grid_search_that_cannot_bracket_the_minimum_says_at_bound(tmp_
     data = tmp_path / "pair.csv"
     _synth(pair, {"friction": {"mu_1": 0.55}}, data, grid=3, noise=Noise(position_rms=0.0, angle_rms=0.0))
     off = pair.replace(friction_coefficients=(0.0,))
-    monkeypatch.setattr(calibration, "GRID_LIMIT_FACTOR", 0.6)          # 0.6 x plausible upper 0.5
+    monkeypatch.setattr(calibration, "GRID_LIMIT_FACTOR", 0.6)          # 0.6 x typical upper 0.5
     fit = grid_search_friction(off, load_measured_data(data, off), {}, settings=COARSE, coarse=(0.0, 0.1, 0.2),
                                uncertainty=False)
     assert not fit.converged and fit.at_bound and "mu_1 (edge of the grid at 0.3" in fit.at_bound[0]

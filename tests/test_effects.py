@@ -1,7 +1,7 @@
 """ctrplan.effects: the registry of effects, their values, and the robot file's ``[effects]`` table.
 
 Each built-in entry changes what it says it changes (robot, motion or measurement) and nothing
-else; a robot file carries history effects with their source and refuses implausible or unknown
+else; a robot file carries history effects with their source and refuses atypical or unknown
 ones naming the file, the key and the value; and a new effect is added in one place: a toy
 effect registered here, hidden in synthetic data, is named by the unchanged workflow.
 """
@@ -27,19 +27,19 @@ PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
 
 
 # --------------------------------------------------------------------------- entries
-def test_every_entry_is_complete_and_its_plausible_range_lies_inside_its_bounds():
-    """Every registered effect has a label, a model, parameters with units and plausible ranges
+def test_every_entry_is_complete_and_its_typical_range_lies_inside_its_bounds():
+    """Every registered effect has a label, a model, parameters with units and typical ranges
     strictly inside the optimizer bounds (a lower end only where the effect vanishes), a
     signature test, a synth option and a word on planning. Catches an entry added half-way, and
-    a plausible range equal to the bounds (a fit at the bound would then count as plausible)."""
+    a typical range equal to the bounds (a fit at the bound would then count as typical)."""
     robot = load_robot(TABLE7)
     for e in REGISTRY.values():
         assert e.label and e.model in ("standard", "clearance", "friction") and e.plan, e.name
         assert e.signature is not None and e.synth_option and e.synth_option.startswith("--"), e.name
         for p in e.parameters(robot):
             assert p.unit in ("rad", "s", "m", "1/m", "-"), p
-            assert p.plausible is not None, p
-            lo, hi = p.plausible
+            assert p.typical is not None, p
+            lo, hi = p.typical
             assert p.lower <= lo < hi < p.upper, p
             assert lo > p.lower or p.vanishes_at_lower, p
     with pytest.raises(ValueError, match="strictly inside"):
@@ -119,8 +119,8 @@ def test_robot_file_effects_round_trip_with_their_source(tmp_path):
 
 
 @pytest.mark.parametrize("edit, key, match", [
-    (lambda t: t.replace("backlash_2_rad = 0.05", "backlash_2_rad = 0.2"), "effects.backlash.backlash_2_rad",
-     r"0.2 \(11.46 deg\) is outside the plausible range 0..5 deg"),
+    (lambda t: t.replace("backlash_2_rad = 0.05", "backlash_2_rad = 4.0"), "effects.backlash.backlash_2_rad",
+     r"4.0 \(229.2 deg\) is outside the values this parameter can take, 0..180 deg"),
     (lambda t: t.replace("backlash_2_rad", "backlash_9_rad"), "effects.backlash.backlash_9_rad", "unknown key"),
     (lambda t: t.replace("[effects.time_offset]", "[effects.lag]"), "effects.lag", "unknown effect"),
     (lambda t: t + "[effects.friction]\nmu_1 = 0.2\n", "effects.friction", r"belongs in \[\[tubes\]\] and \[\[pairs\]\]"),
@@ -133,6 +133,18 @@ def test_a_bad_effects_table_names_the_file_the_key_and_the_value(edit, key, mat
     with pytest.raises(ModelFileError, match=match) as err:
         robot_from_toml_text(edit(text), "f.toml")
     assert err.value.file == "f.toml" and err.value.key == key
+
+
+def test_an_atypical_effect_loads_with_the_cautions_that_explain_it():
+    """A dead band of 11.5 deg (beyond a geared stage's 0-5 deg, within what a drive can have)
+    is written by the discrepancy workflow when the data show it, with a caution in
+    [effects_source]; the file loads and keeps both. Catches a loader that refuses what the
+    workflow writes, or drops the caution."""
+    text = _with_effects(TABLE7.read_text()).replace("backlash_2_rad = 0.05", "backlash_2_rad = 0.2")
+    text += '\n[effects_source]\ncautions = ["drive backlash 11.46 deg: check the couplings"]\n'
+    robot = robot_from_toml_text(text, "f.toml")
+    assert dict(robot.effects)["backlash"] == (("backlash_2", 0.2),)
+    assert robot.metadata["effects_source"]["cautions"] == ["drive backlash 11.46 deg: check the couplings"]
 
 
 def test_an_effects_source_without_effects_is_refused():

@@ -61,7 +61,7 @@ NORM_FLOOR = 1e-3
 #: Smallest cosine of the tangent error in the model's ``d angle / d sin(angle)`` (errors near
 #: 90 deg are failures of the fit, not its working range).
 COS_FLOOR = 0.1
-#: The grid search extends its coarse grid up to this multiple of the parameters' plausible
+#: The grid search extends its coarse grid up to this multiple of the parameters' typical
 #: upper limit (friction coefficients: 2 x 0.5 = 1.0, where NiTi on NiTi is far below; the paper's
 #: calibrated values are 0.22 and 0.12, Table VII), or to their optimizer bound.
 GRID_LIMIT_FACTOR = 2.0
@@ -680,7 +680,7 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
     The coarse grid (``coarse`` per parameter) is scored on at most ``search_samples``
     calibration samples made of whole configuration groups; while its best point lies on the
     grid's upper edge, the grid grows by one step (up to :data:`GRID_LIMIT_FACTOR` times the
-    parameters' plausible upper limit, or their optimizer bound). Then ``refinements`` rounds of
+    parameters' typical upper limit, or their optimizer bound). Then ``refinements`` rounds of
     a 3^m grid with half the previous step around the best point are scored on the whole
     calibration set.
 
@@ -722,7 +722,7 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
     m = len(names)
     specs = [parameter(robot, n) for n in names]
     limit = min(min(p.upper for p in specs),
-                min(GRID_LIMIT_FACTOR * p.plausible[1] if p.plausible else p.upper for p in specs))
+                min(GRID_LIMIT_FACTOR * p.typical[1] if p.typical else p.upper for p in specs))
     lowest = max(p.lower for p in specs)
     coarse = np.asarray(sorted(coarse), float)
     groups = np.unique(data.config_id)

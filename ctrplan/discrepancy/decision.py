@@ -3,9 +3,9 @@
 **Naming rule.** A candidate is *eligible* when its cross-validated improvement over the
 baseline (out-of-fold Eq. (49) residuals, compared unit by unit:
 :func:`~ctrplan.discrepancy.statistics.paired_improvement`) is significant at the family-wise
-level ``options.significance`` (Holm over the candidates), its fitted values are plausible, and
+level ``options.significance`` (Holm over the candidates), its fitted values are typical, and
 none of its fits ends at an optimizer bound, a grid's edge or a scan's end. The eligible
-candidate with the largest improvement is named, unless the next best candidate (plausible, not
+candidate with the largest improvement is named, unless the next best candidate (typical, not
 at a bound, improving on average) is within its uncertainty: the interval of the difference of
 their out-of-fold errors over units covers 0. Then the verdict is **ambiguous**: both are
 listed, best first, with what data would separate them (``Effect.separated_by``).
@@ -196,8 +196,8 @@ def check_noise(setup, split: DataSplit, baseline, options: DiscrepancyOptions, 
 
 
 def range_text(b: dict) -> str:
-    """A plausible range ``{"plausible": [lo, hi], "unit": ...}`` for a report (rad as deg)."""
-    lo, hi = b["plausible"]
+    """A typical range ``{"typical": [lo, hi], "unit": ...}`` for a report (rad as deg)."""
+    lo, hi = b["typical"]
     if b["unit"] == "rad":
         return f"{np.rad2deg(lo):.3g}..{np.rad2deg(hi):.3g} deg"
     return f"{lo:.3g}..{hi:.3g}" + ("" if b["unit"] == "-" else f" {b['unit']}")
@@ -261,21 +261,21 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
         judged[e] = replace(c, signature_significant=bool(sig is not None and sig.testable
                                                           and sig.p_value < options.significance),
                             improvement_significant=bool(significant.get(e, False)),
-                            eligible=bool(significant.get(e, False) and c.plausible and not c.at_bound))
+                            eligible=bool(significant.get(e, False) and c.typical and not c.at_bound))
     eligible = sorted((e for e, c in judged.items() if c.eligible),
                       key=lambda e: -judged[e].improvement["mean_difference"])
     decision = {"verdict": "none", "named": None, "ambiguous_with": None, "eligible": eligible,
                 "holm": {e: bool(v) for e, v in significant.items()}, "separated_by": None, "notes": [],
                 "rule": (f"cross-validated improvement significant at {options.significance} (Holm over the "
-                         f"candidates, sign-flip test over {np.unique(units).size} units), fitted values plausible and "
+                         f"candidates, sign-flip test over {np.unique(units).size} units), fitted values typical and "
                          f"none at a bound; ambiguous when the next best candidate's out-of-fold error is within the "
                          f"{CONFIDENCE:.0%} interval")}
     for e, c in judged.items():
         if c.improvement_significant and not c.eligible:
             why = []
-            if not c.plausible:
-                why.append("implausible " + ", ".join(f"{display_value(b['name'], b['value'], b['unit'])} (plausible "
-                                                      f"{range_text(b)})" for b in c.implausible))
+            if not c.typical:
+                why.append("atypical " + ", ".join(f"{display_value(b['name'], b['value'], b['unit'])} (typical "
+                                                      f"{range_text(b)})" for b in c.atypical))
             if c.at_bound:
                 why.append("at bound, not converged: " + "; ".join(c.at_bound))
             decision["notes"].append(f"{c.label} improves the cross-validated error significantly but is not named: "
@@ -283,7 +283,7 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     if eligible:
         best = eligible[0]
         decision.update(verdict="named", named=best)
-        others = [e for e, c in judged.items() if e != best and c.plausible and not c.at_bound
+        others = [e for e, c in judged.items() if e != best and c.typical and not c.at_bound
                   and c.improvement["mean_difference"] > 0 and not _nested_in(e, best)]
         if others:
             second = max(others, key=lambda e: judged[e].improvement["mean_difference"])
@@ -323,7 +323,7 @@ def cautions(verdict: str, candidate, before: dict, after: dict) -> list[str]:
     verdict : str
         :data:`VERDICTS`.
     candidate : dict or None
-        The named candidate's report (``implausible`` list).
+        The named candidate's report (``atypical`` list).
     before, after : dict
         Error summaries on the test split (``position_max_mm``).
 
@@ -334,8 +334,8 @@ def cautions(verdict: str, candidate, before: dict, after: dict) -> list[str]:
     out = []
     if verdict == "none" or candidate is None:
         return out
-    for b in candidate.get("implausible") or []:
-        out.append(f"{display_value(b['name'], b['value'], b['unit'])} is outside its plausible range "
+    for b in candidate.get("atypical") or []:
+        out.append(f"{display_value(b['name'], b['value'], b['unit'])} is outside its typical range "
                    f"{range_text(b)} ({b['why']})")
     if after["position_max_mm"] is not None and after["position_max_mm"] > before["position_max_mm"]:
         out.append(f"the test split's maximum tip error rises from {before['position_max_mm']:.2f} to "

@@ -40,7 +40,7 @@ from .statistics import paired_improvement
 
 __all__ = ["CrossValidated", "Baseline", "Candidate", "Combination", "FITTERS", "cross_validate",
            "calibrate_baseline", "refit_contact_baseline", "fit_candidates", "fit_second_effect", "scan_fit",
-           "implausible_values", "parameter_table", "display_value", "combined_model", "needs_contact_baseline",
+           "atypical_values", "parameter_table", "display_value", "combined_model", "needs_contact_baseline",
            "candidate_report", "candidate_reports", "contained"]
 
 
@@ -136,8 +136,8 @@ class Candidate:
     units : dict of str to str
     parameters : list of dict
         :func:`parameter_table` of the shown parameters.
-    implausible : list of dict
-        Shown values outside their plausible range (:func:`implausible_values`).
+    atypical : list of dict
+        Shown values outside their typical range (:func:`atypical_values`).
     at_bound : tuple of str
         Fitted values at an optimizer bound or a grid's or scan's edge (the development fit's or a
         fold's).
@@ -165,7 +165,7 @@ class Candidate:
     shown: dict
     units: dict
     parameters: list
-    implausible: list
+    atypical: list
     at_bound: tuple
     n_parameters: int
     bic: float
@@ -199,9 +199,9 @@ class Candidate:
         return self.cv.r
 
     @property
-    def plausible(self) -> bool:
-        """Every shown value within its plausible range."""
-        return not self.implausible
+    def typical(self) -> bool:
+        """Every shown value within its typical range."""
+        return not self.atypical
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,14 +240,14 @@ def display_value(name: str, value: float, unit: str) -> str:
     return f"{name} = {value:.4g}" + ("" if unit == "-" else f" {unit}")
 
 
-def implausible_values(robot, params: Mapping) -> list:
-    """Fitted values outside their plausible range: ``[{name, value, plausible, unit, why}]``."""
+def atypical_values(robot, params: Mapping) -> list:
+    """Fitted values outside their typical range: ``[{name, value, typical, unit, why}]``."""
     out = []
     for name, value in params.items():
         p = parameter(robot, name)
-        if not p.is_plausible(value):
-            out.append({"name": name, "value": float(value), "plausible": list(p.plausible), "unit": p.unit,
-                        "why": p.plausible_note})
+        if not p.is_typical(value):
+            out.append({"name": name, "value": float(value), "typical": list(p.typical), "unit": p.unit,
+                        "why": p.typical_source})
     return out
 
 
@@ -259,7 +259,7 @@ def parameter_table(robot, fit: CalibrationResult, names, *, reference: Mapping 
     list of dict
         Per parameter: ``name``, ``unit``, ``value``, ``stderr`` and the ``ci`` at
         :data:`~ctrplan.discrepancy.options.CONFIDENCE` (normal approximation; None without a
-        standard error), ``plausible`` range and whether the value lies in it, ``at_bound``
+        standard error), ``typical`` range and whether the value lies in it, ``at_bound``
         (flag of the fit), ``resolution`` of a scan or grid that set it, and, with ``reference``
         (e.g. the robot file's values), ``reference`` and ``relative_change``.
     """
@@ -276,8 +276,8 @@ def parameter_table(robot, fit: CalibrationResult, names, *, reference: Mapping 
         se = errors.get(n)
         row = {"name": n, "unit": p.unit, "value": v, "stderr": None if se is None else float(se),
                "ci": None if se is None or not np.isfinite(se) else [v - z * se, v + z * se],
-               "plausible": None if p.plausible is None else list(p.plausible), "in_plausible_range": p.is_plausible(v),
-               "plausible_note": p.plausible_note, "at_bound": n in flagged, "resolution": p.resolution,
+               "typical": None if p.typical is None else list(p.typical), "in_typical_range": p.is_typical(v),
+               "typical_source": p.typical_source, "at_bound": n in flagged, "resolution": p.resolution,
                "fitted": n in values}
         if reference is not None and n in reference:
             ref = float(reference[n])
@@ -428,15 +428,15 @@ def calibrate_baseline(setup: DiscrepancySetup, split: DataSplit, options: Discr
     table = parameter_table(setup.robot, base, setup.base_names, reference=reference)
     if setup.data.frame == "tracker":
         # the registration of a tracker-frame file maps between two unrelated frames: any value
-        # is plausible (its range is the one a robot-frame file must keep)
+        # is typical (its range is the one a robot-frame file must keep)
         for row in table:
             if row["name"] in REGISTRATION:
-                row.update(plausible=None, in_plausible_range=True,
-                           plausible_note="tracker frame: any rigid registration")
+                row.update(typical=None, in_typical_range=True,
+                           typical_source="tracker frame: any rigid registration")
     for row in table:
-        if not row["in_plausible_range"] or row["at_bound"]:
+        if not row["in_typical_range"] or row["at_bound"]:
             echo(f"  baseline {display_value(row['name'], row['value'], row['unit'])}: "
-                 + ("at a bound; " if row["at_bound"] else "") + f"outside its plausible range ({row['plausible_note']})")
+                 + ("at a bound; " if row["at_bound"] else "") + f"outside its typical range ({row['typical_source']})")
     return Baseline(cv=cv, bic=information_criterion(base.cost, base.n_samples, len(base.names)), parameters=table)
 
 
@@ -567,7 +567,7 @@ def _candidate(setup, split, baseline, effects, label, cv, shown_names, referenc
     at_bound = tuple(sorted(set(cv.fit.at_bound) | {b for f in cv.folds for b in f.at_bound}))
     return Candidate(
         effects=tuple(effects), label=label, cv=cv, shown=shown, units={n: parameter(robot, n).unit for n in shown},
-        parameters=parameter_table(robot, cv.fit, shown_names), implausible=implausible_values(robot, shown),
+        parameters=parameter_table(robot, cv.fit, shown_names), atypical=atypical_values(robot, shown),
         at_bound=at_bound, n_parameters=k_total, bic=bic, delta_bic=bic - reference_bic,
         improvement=paired_improvement(reference_r, cv.r, units, seed=options.seed, confidence=CONFIDENCE),
         improvement_position=paired_improvement(reference_pos, cv.oof.position, units, seed=options.seed,
@@ -636,7 +636,7 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Basel
     parameters the clearance model was recalibrated to (``contact``: a standard-model fit's tube
     parameters do not fit with the clearance model). The pair is named by the rule for a single effect with
     the named effect in place of the baseline: its out-of-fold improvement over the named effect
-    significant (Holm over the pairs tried), every fitted value plausible and none at a bound;
+    significant (Holm over the pairs tried), every fitted value typical and none at a bound;
     among such pairs the largest improvement.
 
     Returns
@@ -654,7 +654,7 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Basel
     first = candidates[named]
     first_names = reported_parameters(robot, named, data)
     rule = (f"out-of-fold Eq. (49) improvement over {first.label} alone significant at {options.significance} "
-            f"(sign-flip test over units, Holm over the pairs tried), fitted values plausible and none at a bound")
+            f"(sign-flip test over units, Holm over the pairs tried), fitted values typical and none at a bound")
     not_tried, pool = {}, []
     for e, c in candidates.items():
         if e == named:
@@ -729,7 +729,7 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Basel
     out = {}
     for e, c in tried.items():
         ok = bool(verdict[e] and c.improvement["mean_difference"] > 0)
-        out[e] = replace(c, improvement_significant=ok, significant=ok and c.plausible and not c.at_bound)
+        out[e] = replace(c, improvement_significant=ok, significant=ok and c.typical and not c.at_bound)
         imp = out[e].improvement
         echo(f"  {out[e].label}: " + ", ".join(display_value(n, v, out[e].units[n]) for n, v in out[e].shown.items())
              + f"; improvement over {first.label} {imp['mean_difference']:.3f} (+- {imp['se']:.3f}), "
@@ -748,7 +748,7 @@ def candidate_report(c: Candidate) -> dict:
     oof = c.oof
     out = {"effects": list(c.effects), "label": c.label, "model": c.model, "fit": c.fit.as_dict(),
            "folds": [f.as_dict() for f in c.cv.folds], "parameters": c.shown, "units": c.units,
-           "parameter_table": c.parameters, "implausible": c.implausible, "plausible": c.plausible,
+           "parameter_table": c.parameters, "atypical": c.atypical, "typical": c.typical,
            "at_bound": list(c.at_bound), "converged": c.cv.converged, "n_parameters": c.n_parameters, "bic": c.bic,
            "delta_bic": c.delta_bic,
            "out_of_fold": error_summary(oof.position, oof.angle, oof.seconds, oof.rows.size),

@@ -163,8 +163,8 @@ class UpdatedModel:
     candidate : Candidate or None
         The candidate it comes from (None: the recalibrated baseline).
     left_out : tuple of str
-        Effect parameters not written because their values are implausible (a robot file holds
-        only plausible ones).
+        Effect parameters not written because their values are atypical (a robot file holds
+        only typical ones).
     """
 
     path: Path
@@ -226,7 +226,7 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
             continue
         vals = {}
         for p, v in effects[name].items():
-            (vals.__setitem__(p, v) if parameter(robot, p).is_plausible(v) else left_out.append(p))
+            (vals.__setitem__(p, v) if parameter(robot, p).is_typical(v) else left_out.append(p))
         if vals:
             stored[name] = vals
     data_name = Path(setup.data_path).name
@@ -244,7 +244,7 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
     note = ("ambiguous: " + naming.candidates[naming.decision["ambiguous_with"]].label + " explains the data equally "
             "well" if verdict == "ambiguous" else "")
     if left_out:
-        note = "; ".join(x for x in (note, "not written, implausible: " + ", ".join(left_out)) if x)
+        note = "; ".join(x for x in (note, "not written, atypical: " + ", ".join(left_out)) if x)
     source = {"method": "ctrplan discrepancy (fitted on the development split; errors on the untouched test split)",
               "data_file": data_name, "data_sha256": file_hash(setup.data_path),
               "date": datetime.date.today().isoformat(), "samples": int(setup.data.n_samples),
@@ -271,7 +271,7 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
                                                 effects_source=source if updated.effects else None,
                                                 bound_calibration=bound_table, prediction_validation=pred_table))
     if left_out:
-        echo(f"  not written to the model file (implausible values): {', '.join(left_out)}")
+        echo(f"  not written to the model file (atypical values): {', '.join(left_out)}")
     return UpdatedModel(path=model_path, model=final_model, params=final_params, named_effects=tuple(named_effects),
                         candidate=final, left_out=tuple(left_out))
 
@@ -367,12 +367,12 @@ def discrepancy_results(setup: DiscrepancySetup, split: DataSplit, baseline: Bas
     candidates = candidate_reports(naming.candidates)
     notes = cautions(naming.verdict, None if final is None else candidate_report(final), before_test, after_test)
     if updated.left_out:
-        notes.append(f"not written to the model file because implausible: {', '.join(updated.left_out)}")
-    bad_base = [r for r in baseline.parameters if not r["in_plausible_range"] or r["at_bound"]]
+        notes.append(f"not written to the model file because atypical: {', '.join(updated.left_out)}")
+    bad_base = [r for r in baseline.parameters if not r["in_typical_range"] or r["at_bound"]]
     for r in bad_base:
         change = "" if r.get("relative_change") is None else f", {100 * r['relative_change']:+.0f} % from the robot file"
         notes.append(f"baseline {r['name']} = {r['value']:.4g} {r['unit']}{change}"
-                     + (": at its bound" if r["at_bound"] else "") + f"; plausible: {r['plausible_note']}")
+                     + (": at its bound" if r["at_bound"] else "") + f"; typical: {r['typical_source']}")
     for line in notes:
         echo(f"caution: {line}")
     opts = asdict(options)

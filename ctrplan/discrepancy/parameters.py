@@ -17,8 +17,8 @@ name                       unit      meaning
 Every other parameter belongs to an effect of the registry (:mod:`ctrplan.effects`: friction
 ``mu_k``, ``clearance_k``, ``precurvature_x_i``, ``poisson_ratio_i``, ``registration_*``,
 ``backlash_i``, ``time_offset``, ``friction_angle``, and any registered later), whose entry
-gives its unit, optimizer bounds and plausible range. A baseline parameter's plausible range
-is a stated relative change from the robot file's value (:data:`BASELINE_PLAUSIBLE_CHANGE`).
+gives its unit, optimizer bounds and typical range. A baseline parameter's typical range
+is a stated relative change from the robot file's value (:data:`BASELINE_TYPICAL_CHANGE`).
 """
 
 from __future__ import annotations
@@ -32,20 +32,20 @@ from ..errors import CtrplanError
 from ..robot import Robot, Section
 
 __all__ = ["parameter", "needs_solve", "read_parameters", "apply_parameters", "REGISTRATION", "BASELINE_KINDS",
-           "BASELINE_PLAUSIBLE_CHANGE", "BASELINE_BOUND_FACTOR", "ParameterError"]
+           "BASELINE_TYPICAL_CHANGE", "BASELINE_BOUND_FACTOR", "ParameterError"]
 
 #: Kinds of baseline (tube) parameters.
 BASELINE_KINDS = ("precurvature_y", "k_xy_relative")
 #: Names of the registration parameters (rotation vector [rad], translation [m]).
 REGISTRATION = ("registration_rx", "registration_ry", "registration_rz",
                 "registration_tx", "registration_ty", "registration_tz")
-#: Plausible relative change of a baseline parameter from the robot file's value: the paper's
+#: Typical relative change of a baseline parameter from the robot file's value: the paper's
 #: calibration (Table VII against Table II) moved precurvatures by 6-25 % and relative stiffnesses
 #: by 1-30 %; a fit that needs more than +-50 % describes another tube set, or trades one
 #: parameter against a correlated one.
-BASELINE_PLAUSIBLE_CHANGE = 0.5
+BASELINE_TYPICAL_CHANGE = 0.5
 #: Optimizer bounds of a baseline parameter: this factor below and above the robot file's value
-#: (strictly wider than the plausible range; a fit that ends there is reported at its bound).
+#: (strictly wider than the typical range; a fit that ends there is reported at its bound).
 BASELINE_BOUND_FACTOR = 5.0
 
 
@@ -74,17 +74,17 @@ def _baseline(robot: Robot, name: str) -> ParameterSpec | None:
         v = robot.tubes[i].sections[j].precurvature[1]
         if v == 0.0:
             return ParameterSpec(name, kind, i, "1/m", -200.0, 200.0, 0.5)
-        lo, hi = sorted((v * (1 - BASELINE_PLAUSIBLE_CHANGE), v * (1 + BASELINE_PLAUSIBLE_CHANGE)))
+        lo, hi = sorted((v * (1 - BASELINE_TYPICAL_CHANGE), v * (1 + BASELINE_TYPICAL_CHANGE)))
         blo, bhi = sorted((v / BASELINE_BOUND_FACTOR, v * BASELINE_BOUND_FACTOR))
         return ParameterSpec(name, kind, i, "1/m", blo, bhi, 0.5, (lo, hi),
-                             f"within +-{BASELINE_PLAUSIBLE_CHANGE:.0%} of the robot file's {v:.4g} 1/m")
+                             f"within +-{BASELINE_TYPICAL_CHANGE:.0%} of the robot file's {v:.4g} 1/m")
     if i == 0:
         raise ParameterError("calibration parameter 'k_xy_relative_1': tube 1 is the stiffness reference "
                              "(only ratios matter); fit k_xy_relative_2..n")
     v = robot.tubes[i].k_xy / robot.tubes[0].k_xy
     return ParameterSpec(name, kind, i, "-", v / BASELINE_BOUND_FACTOR, v * BASELINE_BOUND_FACTOR, 0.05,
-                         (v * (1 - BASELINE_PLAUSIBLE_CHANGE), v * (1 + BASELINE_PLAUSIBLE_CHANGE)),
-                         f"within +-{BASELINE_PLAUSIBLE_CHANGE:.0%} of the robot file's {v:.4g}")
+                         (v * (1 - BASELINE_TYPICAL_CHANGE), v * (1 + BASELINE_TYPICAL_CHANGE)),
+                         f"within +-{BASELINE_TYPICAL_CHANGE:.0%} of the robot file's {v:.4g}")
 
 
 def parameter(robot: Robot, name: str) -> ParameterSpec:
@@ -93,7 +93,7 @@ def parameter(robot: Robot, name: str) -> ParameterSpec:
     Returns
     -------
     ParameterSpec
-        Unit, optimizer bounds, typical step, plausible range (for a baseline parameter, about
+        Unit, optimizer bounds, typical step, typical range (for a baseline parameter, about
         the robot file's value).
 
     Raises

@@ -45,8 +45,8 @@ def _value(row) -> str:
             text += f" +- {s:.2g}"
     if row.get("at_bound"):
         text += " **at bound**"
-    if not row.get("in_plausible_range", True):
-        text += " **implausible**"
+    if not row.get("in_typical_range", True):
+        text += " **atypical**"
     return text
 
 
@@ -145,7 +145,7 @@ def _candidate_lines(results: dict) -> list[str]:
     yes = (lambda b: "yes" if b else "no")
     lines = ["## Candidate effects (cross-validated on the development samples)", "",
              "| effect | fitted parameters (+- standard error) | out-of-fold mean / max [mm] | improvement [mm + deg] "
-             "(95 % interval) | p | Holm | plausible, not at bound | eligible |", "|---|---|---|---|---|---|---|---|"]
+             "(95 % interval) | p | Holm | typical, not at bound | eligible |", "|---|---|---|---|---|---|---|---|"]
     notes = []
     base = results["baseline"]["out_of_fold"]
     lines.append(f"| baseline (standard, calibrated) | - | {_fmt(base['position_mean_mm'], 3)} / "
@@ -158,7 +158,7 @@ def _candidate_lines(results: dict) -> list[str]:
         lines.append(f"| {c['label']} | {params} | {_fmt(c['out_of_fold']['position_mean_mm'], 3)} / "
                      f"{_fmt(c['out_of_fold']['position_max_mm'], 3)} | {_fmt(imp['mean_difference'], 3)} "
                      f"({_fmt(imp['ci'][0], 3)}..{_fmt(imp['ci'][1], 3)}) | {imp['p_value']:.4f} | "
-                     f"{yes(c.get('improvement_significant'))} | {yes(c['plausible'] and not c['at_bound'])} | "
+                     f"{yes(c.get('improvement_significant'))} | {yes(c['typical'] and not c['at_bound'])} | "
                      f"{yes(c.get('eligible'))} |")
     d = results["decision"]
     lines += ["", f"Rule: {d['rule']}.", ""]
@@ -173,11 +173,11 @@ def _baseline_lines(results: dict) -> list[str]:
     lines = ["## Baseline parameters", "",
              f"Fit on the development samples: {b['fit']['message']}" + ("" if b["fit"]["converged"] else
                                                                         " (**not converged**)") + ".", "",
-             "| parameter | value +- standard error | robot file | change | plausible range |", "|---|---|---|---|---|"]
+             "| parameter | value +- standard error | robot file | change | typical range |", "|---|---|---|---|---|"]
     for r in b["parameter_table"]:
         ref = "-" if r.get("reference") is None else f"{r['reference']:.4g}"
         change = "-" if r.get("relative_change") is None else f"{100 * r['relative_change']:+.0f} %"
-        rng = "-" if r["plausible"] is None else f"{r['plausible'][0]:.4g}..{r['plausible'][1]:.4g}"
+        rng = "-" if r["typical"] is None else f"{r['typical'][0]:.4g}..{r['typical'][1]:.4g}"
         lines.append(f"| {r['name']} | {_value(r).split(' = ', 1)[-1]} | {ref} | {change} | {rng} |")
     corr = b["fit"].get("correlation")
     if corr is not None:

@@ -1,7 +1,7 @@
 """Effects a robot model may miss, in one registry.
 
 Each :class:`Effect` entry carries everything about one effect: its parameters with units,
-plausible ranges and optimizer bounds (:class:`ParameterSpec`), the mechanics model it needs,
+typical ranges and optimizer bounds (:class:`ParameterSpec`), the mechanics model it needs,
 how it changes the robot, the motion (:mod:`ctrplan.history`) or the measurement, its
 signature test, its ``ctrplan synth`` option, how the discrepancy workflow fits it, and what
 planning does with it. The CLI, ``synth``, the parameter tables, the workflow and the report

@@ -1,7 +1,7 @@
 """The built-in effects (Ha, Fagogenis & Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906,
 and the history effects of a real drive and tracker).
 
-Each entry is complete: parameters with units, plausible ranges and optimizer bounds, what it
+Each entry is complete: parameters with units, typical ranges and optimizer bounds, what it
 changes (robot, motion or measurement), its signature test, its ``ctrplan synth`` option, its
 fitting strategy and what planning does with it.
 """
@@ -23,11 +23,14 @@ __all__ = ["BACKLASH_SCAN", "TIME_OFFSET_SCAN", "FRICTION_ANGLE_SCAN", "FRICTION
 #: Start scans of the history candidates (every fitted parameter alike): backlash [rad], time
 #: offset [s], friction angle theta_c [rad] (0 = the abrupt friction model).
 BACKLASH_SCAN = tuple(np.deg2rad([0.0, 1.0, 2.0, 4.0, 8.0]))
-TIME_OFFSET_SCAN = (-0.4, -0.2, -0.1, 0.0, 0.1, 0.2, 0.4)
+#: The time offset is profiled on a fine grid (10 ms) before its least-squares refinement: the cost
+#: of a lag has a minimum per multiple of the motion's period of reversal, and a coarse scan can
+#: start the refinement in the wrong one.
+TIME_OFFSET_SCAN = tuple(np.round(np.arange(-0.4, 0.4001, 0.01), 3))
 FRICTION_ANGLE_SCAN = tuple(np.deg2rad([0.0, 5.0, 10.0, 20.0, 40.0]))
 #: Reference theta_c of the gradual-friction signature [rad].
 FRICTION_ANGLE_REFERENCE = float(np.deg2rad(15.0))
-#: Plausible off-plane precurvature: this fraction of the tube's in-plane precurvature (a
+#: Typical off-plane precurvature: this fraction of the tube's in-plane precurvature (a
 #: shape-setting error that tilts the bending plane by up to atan(0.25) = 14 deg), at least
 #: :data:`OFFPLANE_FLOOR` [1/m].
 OFFPLANE_FRACTION = 0.25
@@ -166,7 +169,10 @@ def _friction_parameters(robot):
                                "Coulomb friction of NiTi on NiTi: Ha et al. 2019 calibrated 0.22 and 0.12 on "
                                "the three-tube robot (Table VII); a larger fitted value measures a "
                                "direction-dependent error that another hysteretic effect (e.g. backlash or lag "
-                               "in a rotation drive) may cause, not a material property", vanishes_at_lower=True)
+                               "in a rotation drive) may cause, not a material property",
+                               check="the tube surfaces (wear, lubrication) and whether another hysteretic effect, "
+                                     "such as backlash or lag in a rotation drive, is present",
+                               vanishes_at_lower=True, limit=(0.0, 5.0))
                  for k in range(robot.n_tubes - 1))
 
 
@@ -240,7 +246,10 @@ def _offplane_parameters(robot):
                                  f"off-plane precurvature of a shape-set tube: at most {OFFPLANE_FRACTION:g} of its "
                                  f"in-plane precurvature ({ky:.3g} 1/m; a bending plane tilted by up to 14 deg), "
                                  f"at least {OFFPLANE_FLOOR:g} 1/m; Table VII of Ha et al. 2019 has 0.3 1/m on "
-                                 f"16 1/m"))
+                                 f"16 1/m",
+                                 check="the shape setting of the tube (the plane of its curved section) and "
+                                       "whether the robot file's in-plane precurvature is right",
+                                 limit=(-1000.0, 1000.0)))
     return tuple(out)
 
 
@@ -276,7 +285,10 @@ def _poisson_parameters(robot):
     return tuple(ParameterSpec(f"poisson_ratio_{i + 1}", "poisson_ratio", i, "-", -0.99, 0.5, 0.05, (-0.5, 0.45),
                                "NiTi: about 0.33; the paper's calibrated effective values reach -0.23 (Tables "
                                "V-VII); below -0.5 the torsional stiffness k_z = k_xy / (1 + nu) would exceed "
-                               "twice the bending stiffness")
+                               "twice the bending stiffness",
+                               check="the tubes' torsional stiffness (wall thickness, material) and whether "
+                                     "an unmodelled torsion (friction, a tube's nonlinear strain) is what it "
+                                     "stands for")
                  for i in range(robot.n_tubes))
 
 
@@ -318,12 +330,15 @@ def _registration_parameters(robot):
             out.append(ParameterSpec(f"registration_{ax}", "registration_r", a, "rad", -np.pi, np.pi, 0.01,
                                      (-np.deg2rad(10.0), np.deg2rad(10.0)),
                                      "a robot-frame data file whose frame is off by more than 10 deg is a "
-                                     "tracker-frame file: fit its registration in the baseline (--frame tracker)"))
+                                     "tracker-frame file: fit its registration in the baseline (--frame tracker)",
+                                     check="the frame of the data file (--frame tracker fits a registration)"))
         else:
             out.append(ParameterSpec(f"registration_{ax}", "registration_t", a - 3, "m", -1.0, 1.0, 1e-3,
                                      (-0.02, 0.02),
                                      "a robot-frame data file whose origin is off by more than 20 mm is a "
-                                     "tracker-frame file: fit its registration in the baseline (--frame tracker)"))
+                                     "tracker-frame file: fit its registration in the baseline (--frame tracker)",
+                                     check="the frame of the data file (--frame tracker fits a registration)",
+                                     limit=(-10.0, 10.0)))
     return tuple(out)
 
 
@@ -350,8 +365,11 @@ register(Effect(
 def _backlash_parameters(robot):
     return tuple(ParameterSpec(f"backlash_{i + 1}", "backlash", i, "rad", 0.0, float(np.deg2rad(30.0)), 0.005,
                                (0.0, float(np.deg2rad(5.0))), "dead band of a geared rotation stage: up to a few "
-                               "degrees (0-5 deg)", vanishes_at_lower=True,
-                               resolution=float(BACKLASH_SCAN[1] - BACKLASH_SCAN[0]))
+                               "degrees (0-5 deg)",
+                               check="the couplings and gears of the tube's rotation drive (a set screw or "
+                                     "coupling that slips adds a dead band)",
+                               vanishes_at_lower=True, resolution=float(BACKLASH_SCAN[1] - BACKLASH_SCAN[0]),
+                               limit=(0.0, float(np.pi)))
                  for i in range(robot.n_tubes))
 
 
@@ -406,7 +424,10 @@ register(Effect(
     parameters=lambda robot: (ParameterSpec("time_offset", "time_offset", 0, "s", -2.0, 2.0, 0.02, (-0.3, 0.3),
                                             "latency between joint encoders and an EM/optical tracker: tens to a "
                                             "few hundred ms (|tau| <= 0.3 s)",
-                                            resolution=float(np.min(np.diff(TIME_OFFSET_SCAN)))),),
+                                            check="the time stamps of the tracker and the joint encoders (clock "
+                                                  "synchronisation, filtering or buffering delay of the tracker)",
+                                            resolution=float(np.min(np.diff(TIME_OFFSET_SCAN))),
+                                            limit=(-10.0, 10.0)),),
     description="the tracker's readings lag the joint readings by tau: the tip measured at t belongs to the "
                 "joints at t - tau (ctrplan.history.time_shift)",
     operator=lambda robot, v: HistoryOperator("time_offset", "tracker",
@@ -443,7 +464,10 @@ register(Effect(
     parameters=lambda robot: (ParameterSpec("friction_angle", "friction_angle", 0, "rad", 0.0, float(np.pi), 0.05,
                                             (0.0, float(np.deg2rad(30.0))),
                                             "the paper assumes friction develops within its 90 deg approach rotations "
-                                            "(Sec. V-B): 95 % after 3 theta_c <= 90 deg", vanishes_at_lower=True,
+                                            "(Sec. V-B): 95 % after 3 theta_c <= 90 deg",
+                                            check="whether the friction really builds up slowly after a reversal, or "
+                                                  "a dead band or lag in the rotation drive is what it stands for",
+                                            vanishes_at_lower=True,
                                             resolution=float(FRICTION_ANGLE_SCAN[1] - FRICTION_ANGLE_SCAN[0])),),
     description="friction that develops over a relative rotation theta_c after a reversal (Dahl-type state, "
                 "ctrplan.history.motion_state)",

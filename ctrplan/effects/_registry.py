@@ -45,21 +45,30 @@ class ParameterSpec:
         Optimizer bounds, in ``unit``.
     scale : float
         Typical size of a change (scales the optimizer's steps).
-    plausible : tuple of float or None
-        ``(lower, upper)`` a real robot of this kind can have; strictly inside the optimizer
-        bounds, except a lower end at which the effect vanishes (``vanishes_at_lower``).
-    plausible_note : str
-        Why (source or reasoning).
+    typical : tuple of float or None
+        ``(lower, upper)`` that robots of this kind usually have: strictly inside the optimizer
+        bounds, except a lower end at which the effect vanishes (``vanishes_at_lower``). A fitted
+        value outside it is reported with a caution (``check``), not refused.
+    typical_source : str
+        Where the typical range comes from (source or reasoning).
+    check : str
+        What to check on a robot whose fitted value lies outside the typical range (e.g. "the
+        couplings of the rotation drives").
     vanishes_at_lower : bool
         At ``lower`` (a physical limit, e.g. a dead band of 0) the effect is absent: a fit that
         ends there found no effect.
     resolution : float or None
         Spacing of the scan that starts its fit, in ``unit`` (None: no scan).
+    limit : tuple of float or None
+        ``(lower, upper)``: how far a fit that ends at an optimizer bound may have that bound
+        widened (:meth:`widened`); the values a robot file may hold. None: the optimizer bounds
+        are the limit.
 
     Raises
     ------
     ValueError
-        Bounds not increasing, or a plausible range that does not lie strictly inside them.
+        Bounds not increasing, a typical range that does not lie strictly inside them, or a limit
+        that does not contain them.
     """
 
     name: str
@@ -69,27 +78,60 @@ class ParameterSpec:
     lower: float
     upper: float
     scale: float
-    plausible: tuple | None = None
-    plausible_note: str = ""
+    typical: tuple | None = None
+    typical_source: str = ""
+    check: str = ""
     vanishes_at_lower: bool = False
     resolution: float | None = None
+    limit: tuple | None = None
 
     def __post_init__(self):
         if not self.lower < self.upper:
             raise ValueError(f"parameter {self.name!r}: bounds must increase, got [{self.lower}, {self.upper}]")
-        if self.plausible is not None:
-            lo, hi = self.plausible
+        if self.typical is not None:
+            lo, hi = self.typical
             low_ok = (lo > self.lower) or (self.vanishes_at_lower and lo == self.lower)
             if not (low_ok and lo < hi < self.upper):
-                raise ValueError(f"parameter {self.name!r}: plausible range [{lo}, {hi}] must lie strictly inside "
+                raise ValueError(f"parameter {self.name!r}: typical range [{lo}, {hi}] must lie strictly inside "
                                  f"the optimizer bounds [{self.lower}, {self.upper}]")
+        if self.limit is not None and not (self.limit[0] <= self.lower and self.upper <= self.limit[1]):
+            raise ValueError(f"parameter {self.name!r}: limit {list(self.limit)} must contain the optimizer bounds "
+                             f"[{self.lower}, {self.upper}]")
 
-    def is_plausible(self, value: float) -> bool:
-        """Whether ``value`` lies in the plausible range (True when there is none)."""
-        if self.plausible is None:
+    @property
+    def hard(self) -> tuple:
+        """``(lower, upper)``: the widest the optimizer bounds may become (:attr:`limit`)."""
+        return (self.lower, self.upper) if self.limit is None else tuple(self.limit)
+
+    def within_limit(self, value: float) -> bool:
+        """Whether ``value`` lies within :attr:`hard` (what a robot file may hold)."""
+        lo, hi = self.hard
+        return bool(np.isfinite(value) and lo <= value <= hi)
+
+    def widened(self, side: str) -> "ParameterSpec | None":
+        """The spec with the optimizer bound on ``side`` (``"lower"`` or ``"upper"``) moved out by
+        the bounds' width, at most to :attr:`hard`; None when it is there already (or the lower
+        bound is where the effect vanishes)."""
+        import dataclasses
+
+        width = self.upper - self.lower
+        lo, hi = self.hard
+        if side == "upper" and self.upper < hi:
+            return dataclasses.replace(self, upper=min(hi, self.upper + width))
+        if side == "lower" and self.lower > lo and not self.vanishes_at_lower:
+            return dataclasses.replace(self, lower=max(lo, self.lower - width))
+        return None
+
+    def typical_text(self) -> str:
+        """The typical range for a report (rad as deg), e.g. ``"0..5 deg"``; ``"-"`` without one."""
+        return "-" if self.typical is None else _typical_text(self)
+
+    def is_typical(self, value: float) -> bool:
+        """Whether ``value`` lies in the typical range (True when there is none)."""
+        if self.typical is None:
             return True
-        span = self.plausible[1] - self.plausible[0]
-        return self.plausible[0] - 1e-9 * span <= value <= self.plausible[1] + 1e-9 * span
+        span = self.typical[1] - self.typical[0]
+        return self.typical[0] - 1e-9 * span <= value <= self.typical[1] + 1e-9 * span
 
     def at_bound(self, value: float, rtol: float = 1e-6) -> str | None:
         """``"lower"`` or ``"upper"`` when ``value`` sits at an optimizer bound (within ``rtol``
@@ -319,8 +361,8 @@ def parameter_spec(robot, name: str) -> ParameterSpec | None:
     return None
 
 
-def _plausible_text(p: ParameterSpec) -> str:
-    lo, hi = p.plausible
+def _typical_text(p: ParameterSpec) -> str:
+    lo, hi = p.typical
     if p.unit == "rad":
         return f"{np.rad2deg(lo):.3g}..{np.rad2deg(hi):.3g} deg"
     return f"{lo:.3g}..{hi:.3g}" + ("" if p.unit == "-" else f" {p.unit}")

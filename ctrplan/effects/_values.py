@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import ModelFileError, PhysicalParameterError
 from ..history import HistoryState, MotionRecord, apply_history
-from ._registry import MODEL_ORDER, REGISTRY, _plausible_text, effect_of_parameter, get
+from ._registry import MODEL_ORDER, REGISTRY, effect_of_parameter, get
 
 __all__ = ["EffectSet", "robot_effects", "apply_robot_effects", "history_operators", "history_state",
            "apply_output_effects", "model_of", "file_key", "effects_from_file", "effects_to_file"]
@@ -25,13 +25,13 @@ class EffectSet(Mapping):
     values : mapping, optional
         Effect name -> mapping of its parameter names to values.
     robot : Robot, optional
-        Checks every parameter against the effect's parameters on this robot and its optimizer
-        bounds.
+        Checks every parameter against the effect's parameters on this robot and their limits
+        (``ParameterSpec.hard``: the optimizer bounds as far as a fit may widen them).
 
     Raises
     ------
     PhysicalParameterError
-        Unknown effect or parameter, a value that is not finite or outside the optimizer bounds,
+        Unknown effect or parameter, a value that is not finite or outside its limits,
         or an effect that needs another one (``Effect.after``) without it; the message names the
         effect, the parameter and the value.
     """
@@ -63,9 +63,10 @@ class EffectSet(Mapping):
                         f"effect {name!r}: robot {robot.name!r} has no parameter {p!r}; expected some of "
                         f"{', '.join(specs) or 'none'}")
                 s = specs[p]
-                if not s.lower <= v <= s.upper:
+                if not s.within_limit(v):
+                    lo, hi = s.hard
                     raise PhysicalParameterError(f"effect {name!r}: {p} = {v:.6g} {s.unit} is outside "
-                                                 f"[{s.lower:.6g}, {s.upper:.6g}] {s.unit}")
+                                                 f"[{lo:.6g}, {hi:.6g}] {s.unit}")
             after = REGISTRY.get(effect.after) if effect.after else None
             if after is not None and effect.is_active(vals) and not (
                     (effect.after in self._items and after.is_active(self._items[effect.after]))
@@ -277,7 +278,9 @@ def effects_from_file(robot, table: Mapping, file: str) -> tuple:
     ------
     ModelFileError
         Unknown effect, an effect the file keeps elsewhere, unknown key, a value that is not a
-        number, outside its plausible range, or an effect that needs another; the key is
+        number, outside the parameter's limits (a value outside its typical range is accepted:
+        the ``[effects_source]`` table's ``cautions`` say why it was written), or an effect that
+        needs another; the key is
         ``effects.<effect>.<key>``.
     """
     out = {}
@@ -300,10 +303,13 @@ def effects_from_file(robot, table: Mapping, file: str) -> tuple:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
                 raise ModelFileError(file, f"{where}.{key}", f"expected a finite number, got {value!r}")
             s = specs[key]
-            if not s.is_plausible(value):
+            if not s.within_limit(value):
                 shown = f"{np.rad2deg(value):.4g} deg" if s.unit == "rad" else f"{value:.6g} {s.unit}"
-                raise ModelFileError(file, f"{where}.{key}", f"{value!r} ({shown}) is outside the plausible range "
-                                     f"{_plausible_text(s)} ({s.plausible_note})")
+                lo, hi = s.hard
+                span = (f"{np.rad2deg(lo):.4g}..{np.rad2deg(hi):.4g} deg" if s.unit == "rad"
+                        else f"{lo:.6g}..{hi:.6g} {s.unit}")
+                raise ModelFileError(file, f"{where}.{key}", f"{value!r} ({shown}) is outside the values this "
+                                     f"parameter can take, {span}")
             vals[s.name] = float(value)
         out[name] = vals
     try:

@@ -108,6 +108,8 @@ class EffectsSourceDoc(_Strict):
     held_out_position_p95_m: Annotated[float, Field(ge=0.0)] | None = None
     held_out_position_max_m: Annotated[float, Field(ge=0.0)] | None = None
     note: str = ""
+    # values written outside their typical range, each with what to check
+    cautions: list[str] = []
 
 
 class BoundCalibrationDoc(_Strict):
@@ -502,7 +504,8 @@ def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
     effects_source : dict, optional
         Where ``robot.effects`` come from (table ``[effects_source]``: ``method``,
         ``data_file``, ``data_sha256``, ``date``, ``samples``, ``held_out_position_mean_m``,
-        ``held_out_position_p95_m``, ``held_out_position_max_m``, ``note``).
+        ``held_out_position_p95_m``, ``held_out_position_max_m``, ``note``, ``cautions``: a list of
+        strings).
     bound_calibration : dict, optional
         Table ``[bound_calibration]`` (:class:`BoundCalibrationDoc`).
     prediction_validation : dict, optional
@@ -559,7 +562,13 @@ def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
             for key, value in effects_source.items():
                 if value is None:
                     continue
-                out.append(f"{key} = {_toml_str(value) if isinstance(value, str) else repr(value)}")
+                if isinstance(value, str):
+                    text = _toml_str(value)
+                elif isinstance(value, (list, tuple)):
+                    text = "[" + ", ".join(_toml_str(v) if isinstance(v, str) else repr(v) for v in value) + "]"
+                else:
+                    text = repr(value)
+                out.append(f"{key} = {text}")
     for table, values in (("bound_calibration", bound_calibration), ("prediction_validation", prediction_validation)):
         if values:
             out += ["", f"[{table}]"]
