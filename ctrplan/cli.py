@@ -345,10 +345,17 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
               help="Frame of the measured poses (default: tracker for Ha's format, robot for CSV); "
                    "tracker fits a rigid registration.")
 @click.option("--test-fraction", type=float, default=0.2, show_default=True,
-              help="Share of the units (time blocks or configuration groups) held back as the untouched test split.")
-@click.option("--folds", type=int, default=4, show_default=True, help="Cross-validation folds of the rest.")
-@click.option("--blocks", type=int, default=20, show_default=True,
-              help="Time blocks a continuous motion is cut into (the units of the split and the tests).")
+              help="Share of the units (time blocks or configuration groups) held back as the untouched test split "
+                   "(at least 8 units).")
+@click.option("--folds", type=int, default=None,
+              help="Cross-validation folds of the rest (default: 10, fewer for fewer than 2 units a fold).")
+@click.option("--blocks", type=int, default=None,
+              help="Time blocks a continuous motion is cut into (the units of the split and the tests; default: 50, "
+                   "fewer for blocks shorter than 10 samples).")
+@click.option("--prior-strengths", default=None,
+              help="Strengths tau of the prior toward the robot file's tube parameters that the out-of-fold error "
+                   "chooses among, comma-separated ('inf': no prior; 0, the robot file's parameters with only a "
+                   "registration, is always tried; default 0.003,0.01,0.03,0.1,inf).")
 @click.option("--max-calibration-samples", type=int, default=300, show_default=True)
 @click.option("--bound-target", type=float, default=0.9, show_default=True,
               help="Share of measured tips the calibrated bound is to cover (written to the updated robot file).")
@@ -362,8 +369,8 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--no-progress", is_flag=True, help="Hide progress bars.")
 def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, reference_mu, envelope_samples, frame,
-                test_fraction, folds, blocks, max_calibration_samples, bound_target, bound_samples, significance,
-                permutations, ds, jobs, seed, no_progress):
+                test_fraction, folds, blocks, prior_strengths, max_calibration_samples, bound_target, bound_samples,
+                significance, permutations, ds, jobs, seed, no_progress):
     """Find where model and measurement disagree, name the missing effect, add it, show the gap shrink.
 
     Interrupted runs resume from <out>/.stages (finished calibrations and evaluations are kept).
@@ -382,8 +389,17 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
                                          f"expected some of {', '.join(REGISTRY)}")
     if not 0.0 < test_fraction <= 0.5:
         raise PhysicalParameterError(f"option --test-fraction {test_fraction!r}: must be in (0, 0.5]")
-    if folds < 2 or blocks < 2:
+    if (folds is not None and folds < 2) or (blocks is not None and blocks < 2):
         raise PhysicalParameterError(f"options --folds {folds!r} and --blocks {blocks!r}: must be >= 2")
+    strengths = None
+    if prior_strengths is not None:
+        try:
+            strengths = tuple(float(x) for x in prior_strengths.split(",") if x.strip())
+        except ValueError:
+            strengths = ()
+        if not strengths or any(not (t >= 0) for t in strengths):
+            raise PhysicalParameterError(f"option --prior-strengths {prior_strengths!r}: expected comma-separated "
+                                         f"numbers >= 0 or 'inf'")
     if ds is not None and not ds > 0:
         raise PhysicalParameterError(f"option --ds {ds!r}: must be > 0 m")
     if noise_mm is not None and not (noise_mm > 0 and noise_mm < float("inf")):
@@ -408,7 +424,8 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
         significance=significance, n_permutations=permutations, ds=ds or 3e-3,
         n_jobs=jobs or os.cpu_count() or 1, seed=seed,
         noise_position=None if noise_mm is None else noise_mm * 1e-3, envelope_samples=envelope_samples,
-        reference_friction=ref_mu, bound_target=bound_target, bound_samples=bound_samples)
+        reference_friction=ref_mu, bound_target=bound_target, bound_samples=bound_samples,
+        **({} if strengths is None else {"prior_strengths": strengths}))
     results = run_discrepancy(robot_path, data_path, out_dir, opts, echo=click.echo, progress=not no_progress)
     paths = write_report(results, out_dir)
     click.echo(f"report: {paths['markdown']}")

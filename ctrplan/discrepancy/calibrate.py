@@ -30,8 +30,8 @@ from .data import MeasuredData
 from ..effects import EffectSet, apply_output_effects, robot_effects
 from .parameters import REGISTRATION, apply_parameters, needs_solve, parameter
 
-__all__ = ["Prediction", "CalibrationResult", "predict", "pose_errors", "eq49_residuals", "calibrate",
-           "grid_search", "grid_search_friction", "kabsch_registration", "information_criterion"]
+__all__ = ["Prediction", "CalibrationResult", "Prior", "predict", "pose_errors", "eq49_residuals", "calibrate",
+           "grid_search", "grid_search_friction", "kabsch_registration", "information_criterion", "covariance"]
 
 #: Eq. (49) weighting: this many metres of position error weigh as ...
 POSITION_UNIT = 1e-3
@@ -61,10 +61,9 @@ NORM_FLOOR = 1e-3
 #: Smallest cosine of the tangent error in the model's ``d angle / d sin(angle)`` (errors near
 #: 90 deg are failures of the fit, not its working range).
 COS_FLOOR = 0.1
-#: The grid search extends its coarse grid up to this multiple of the parameters' typical
-#: upper limit (friction coefficients: 2 x 0.5 = 1.0, where NiTi on NiTi is far below; the paper's
-#: calibrated values are 0.22 and 0.12, Table VII), or to their optimizer bound.
-GRID_LIMIT_FACTOR = 2.0
+#: A fit that ends at an optimizer bound has the bound widened (``ParameterSpec.widened``, up to
+#: the parameter's limit) and is continued, at most this many times.
+MAX_WIDENINGS = 6
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,7 +131,13 @@ class CalibrationResult:
         Their correlation matrix.
     at_bound : tuple of str
         ``"<name> (<where>)"`` for every fitted value at an optimizer bound (``upper``, or ``lower``
-        where the effect does not vanish there) or at the edge of its grid or scan.
+        where the effect does not vanish there) or at the edge of its grid or scan that could not
+        be widened further (it is at the parameter's limit).
+    widened : tuple of str
+        Bounds, grids or scans widened because the fit ended at them (``"<name> upper to 1.2"``).
+    prior_cost : float
+        The prior's part of the minimized objective (0 without a prior) [(mm + deg)^2]; ``cost``
+        is the data's part alone.
     """
 
     model: str
@@ -150,6 +155,8 @@ class CalibrationResult:
     stderr: np.ndarray | None = None
     correlation: np.ndarray | None = None
     at_bound: tuple = ()
+    widened: tuple = ()
+    prior_cost: float = 0.0
 
     def all_parameters(self) -> tuple[tuple, np.ndarray]:
         """Fixed and fitted parameters together: ``(names, values)``."""
@@ -166,7 +173,7 @@ class CalibrationResult:
                 "message": self.message, "converged": bool(self.converged),
                 "stderr": None if self.stderr is None else dict(zip(self.names, map(float, self.stderr))),
                 "correlation": None if self.correlation is None else np.asarray(self.correlation, float).tolist(),
-                "at_bound": list(self.at_bound)}
+                "at_bound": list(self.at_bound), "widened": list(self.widened), "prior_cost": float(self.prior_cost)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "CalibrationResult":
@@ -178,7 +185,7 @@ class CalibrationResult:
                    d["n_failed"], d["evaluations"], d["seconds"], d["message"], d.get("converged", True),
                    None if stderr is None else np.array([stderr[n] for n in names], float),
                    None if d.get("correlation") is None else np.array(d["correlation"], float),
-                   tuple(d.get("at_bound", ())))
+                   tuple(d.get("at_bound", ())), tuple(d.get("widened", ())), float(d.get("prior_cost", 0.0)))
 
 
 def predict(robot, names, values, data: MeasuredData, model: str, settings: ModelSettings | None = None,
@@ -321,29 +328,67 @@ def information_criterion(cost: float, n_samples: int, n_params: int) -> float:
 
 
 def bound_flags(specs, values) -> tuple:
-    """``"<name> (upper bound)"`` / ``"(lower bound)"`` for values at an optimizer bound; a value at
-    a lower bound where the effect vanishes (e.g. no dead band on that drive) is not flagged."""
+    """``"<name> (upper bound ...)"`` / ``"(lower bound ...)"`` for values at an optimizer bound,
+    saying whether that is the parameter's limit (``ParameterSpec.widened`` is None); a value at a
+    lower bound where the effect vanishes (e.g. no dead band on that drive) is not flagged."""
     out = []
     for p, v in zip(specs, values):
         where = p.at_bound(float(v))
         if where == "upper" or (where == "lower" and not p.vanishes_at_lower):
-            out.append(f"{p.name} ({where} bound {p.upper if where == 'upper' else p.lower:g} {p.unit})")
+            limit = ", its limit" if p.widened(where) is None else ""
+            out.append(f"{p.name} ({where} bound {p.upper if where == 'upper' else p.lower:g} {p.unit}{limit})")
     return tuple(out)
 
 
-def covariance(rows: np.ndarray, cost: float, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
-    """Standard errors (m,) and correlations (m, m) from Gauss-Newton rows (N_rows, m) of Eq. (49).
+def covariance(rows: np.ndarray, residual: np.ndarray, n_samples: int, *, clusters=None,
+               width: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Standard errors (m,) and correlations (m, m) of a least-squares fit from its Gauss-Newton rows.
 
-    ``cov = s^2 (J^T J)^+`` with ``s^2 = cost / (n_samples - m)``; a direction the rows do not
-    determine (a zero singular value) gives an infinite standard error."""
+    Without ``clusters``: ``cov = s^2 (J^T J)^+``, ``s^2 = RSS / (n_samples - m)`` (independent,
+    equal-variance residuals). With ``clusters`` (the unit of each sample): the cluster-robust
+    sandwich ``cov = (J^T J)^+ M (J^T J)^+``, ``M = G / (G - 1) sum_g S_g S_g^T`` with ``S_g`` the
+    sum of ``J_i^T f_i`` over the samples of unit g (Liang & Zeger, Biometrika 73:13, 1986;
+    Cameron & Miller, J. Human Resources 50:317, 2015): samples of a motion are serially
+    correlated, so the errors of one unit are not independent. A direction the rows do not
+    determine (a zero singular value of ``J``) gives an infinite standard error.
+
+    Parameters
+    ----------
+    rows : ndarray, shape (n_samples * width + P, m)
+        Gauss-Newton rows: ``width`` per sample in sample order, then P rows of a prior (which
+        enter ``J^T J`` but not ``M`` or ``RSS``).
+    residual : ndarray, shape (n_samples * width + P,)
+        The residual vector the rows belong to.
+    n_samples : int
+    clusters : array-like, shape (n_samples,), optional
+    width : int
+        Rows per sample.
+
+    Returns
+    -------
+    stderr : ndarray, shape (m,)
+    correlation : ndarray, shape (m, m)
+    """
     J = np.asarray(rows, float)
+    f = np.asarray(residual, float)
     m = J.shape[1]
-    s2 = cost / max(n_samples - m, 1)
+    n_data = n_samples * width
     H = J.T @ J
     w, V = np.linalg.eigh(H)
     tiny = w <= 1e-12 * max(float(w.max()), 1e-300)
     inv_w = np.where(tiny, 0.0, 1.0 / np.where(tiny, 1.0, w))
-    cov = (V * inv_w) @ V.T * s2
+    Hinv = (V * inv_w) @ V.T
+    if clusters is None:
+        s2 = float(f[:n_data] @ f[:n_data]) / max(n_samples - m, 1)
+        cov = Hinv * s2
+    else:
+        score = np.einsum("kwm,kw->km", J[:n_data].reshape(n_samples, width, m), f[:n_data].reshape(n_samples, width))
+        _, g = np.unique(np.asarray(clusters), return_inverse=True)
+        n_g = int(g.max()) + 1
+        S = np.zeros((n_g, m))
+        np.add.at(S, g.ravel(), score)
+        M = S.T @ S * (n_g / max(n_g - 1, 1))
+        cov = Hinv @ M @ Hinv
     var = np.diag(cov).copy()
     undetermined = np.any(np.abs(V[:, tiny]) > 1e-6, axis=1) if tiny.any() else np.zeros(m, bool)
     se = np.where(undetermined, np.inf, np.sqrt(np.maximum(var, 0.0)))
@@ -436,6 +481,48 @@ class _Objective:
         return comp.ravel()
 
 
+@dataclass(frozen=True)
+class Prior:
+    """A Gaussian prior on fitted parameters as least-squares rows ``(x_j - center_j) / scale_j``.
+
+    Attributes
+    ----------
+    index : ndarray of int, shape (P,)
+        Positions of the parameters in the fitted vector.
+    center : ndarray, shape (P,)
+        Prior means (e.g. the robot file's values), in the parameters' units.
+    scale : ndarray, shape (P,)
+        A deviation of ``scale`` costs as much as one squared Eq. (49) residual of 1 (mm + deg);
+        in the parameters' units, > 0.
+    """
+
+    index: np.ndarray
+    center: np.ndarray
+    scale: np.ndarray
+
+    @classmethod
+    def of(cls, names, prior: dict | None) -> "Prior | None":
+        """The rows for the parameters ``names`` that ``prior`` (``{name: (center, scale)}``) covers;
+        None when it covers none."""
+        if not prior:
+            return None
+        idx = [j for j, n in enumerate(names) if n in prior and np.isfinite(prior[n][1])]
+        if not idx:
+            return None
+        return cls(np.array(idx), np.array([prior[names[j]][0] for j in idx], float),
+                   np.array([prior[names[j]][1] for j in idx], float))
+
+    def rows(self, x) -> np.ndarray:
+        """Residual rows, shape (P,)."""
+        return (np.asarray(x, float)[self.index] - self.center) / self.scale
+
+    def jacobian(self, m: int) -> np.ndarray:
+        """Their Jacobian, shape (P, m)."""
+        J = np.zeros((self.index.size, m))
+        J[np.arange(self.index.size), self.index] = 1.0 / self.scale
+        return J
+
+
 class _Eq49Model:
     """Eq. (49) as a least-squares problem whose Gauss-Newton model keeps the curvature of its norms.
 
@@ -454,12 +541,13 @@ class _Eq49Model:
     Their sum of squares is the Eq. (49) cost, their ``J^T f`` its half gradient and their
     ``J^T J`` half the Hessian of the cost up to the components' own curvature. ``J_c`` is a
     forward difference (:data:`DIFF_STEP`) of the components; a failed sample has value
-    :data:`FAILED_RESIDUAL` and zero rows.
+    :data:`FAILED_RESIDUAL` and zero rows. A :class:`Prior` appends its rows after the samples'.
     """
 
-    def __init__(self, obj: _Objective, lower, upper):
+    def __init__(self, obj: _Objective, lower, upper, prior: "Prior | None" = None):
         self.obj, self.lower, self.upper = obj, np.asarray(lower, float), np.asarray(upper, float)
         self.width = 4 if obj.data.tangent is None else 7
+        self.prior = prior
         #: Decrease of the cost to the minimum of the model at the last Jacobian [(mm + deg)^2],
         #: and the cost there.
         self.remaining, self.cost = np.inf, np.nan
@@ -477,7 +565,7 @@ class _Eq49Model:
         h = self.obj.residuals(x)
         rows = np.zeros((h.size, self.width))
         rows[:, 0] = h
-        return rows.ravel()
+        return rows.ravel() if self.prior is None else np.concatenate([rows.ravel(), self.prior.rows(x)])
 
     def _components(self, x):
         dp, t, c, ok = self.obj.pose_components(x)
@@ -519,6 +607,9 @@ class _Eq49Model:
         f = np.zeros((k, self.width))
         f[:, 0] = h
         f = f.ravel()
+        if self.prior is not None:
+            rows = np.concatenate([rows, self.prior.jacobian(m)])
+            f = np.concatenate([f, self.prior.rows(x)])
         # the model's minimum (no bounds: an active bound only makes this larger, i.e. safer)
         col = np.linalg.norm(rows, axis=0)
         col[col == 0] = 1.0
@@ -531,7 +622,7 @@ class _Eq49Model:
 def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | None = None,
               initial=None, settings: ModelSettings | None = None, n_jobs: int = 1,
               register: bool = False, max_evaluations: int = 40, uncertainty: bool = True,
-              warm: bool = False) -> CalibrationResult:
+              warm: bool = False, prior: dict | None = None, clusters=None) -> CalibrationResult:
     """Fit parameters by least squares on the Eq. (49) residuals (Section V-C, Eq. (49) of
     Ha, Fagogenis & Dupont 2019).
 
@@ -560,16 +651,24 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
         Compute the standard errors and correlations of the fitted values (from the last
         Jacobian: no extra evaluation).
     warm : bool
-        ``initial`` is already close to the minimum (e.g. the fit of most of the same samples):
-        stage 1 is skipped.
+        ``initial`` is already close to the minimum (a continuation of a fit of the same samples,
+        e.g. with another prior): stage 1 is skipped.
+    prior : dict, optional
+        ``{name: (center, scale)}``: a Gaussian prior on fitted parameters (:class:`Prior`), e.g.
+        toward the robot file's tube parameters; names not fitted are ignored.
+    clusters : array-like, shape (K,), optional
+        Unit of each sample: the standard errors are clustered over units (:func:`covariance`).
 
     Returns
     -------
     CalibrationResult
         ``converged`` is True when the second stage stopped by the rule of
         :data:`BIC_TOLERANCE` or met :data:`FTOL`, :data:`XTOL` (or the gradient tolerance)
-        before the budget; False when the budget stopped it. The message gives both stages'
-        steps and, for stage 2, the further decrease its model still predicts.
+        before the budget and no value ended at a bound it could not widen; False otherwise.
+        A value that ends at an optimizer bound has the bound widened (``ParameterSpec.widened``,
+        up to the parameter's limit, at most :data:`MAX_WIDENINGS` times) and stage 2 continues
+        (``widened``). The message gives both stages' steps and, for stage 2, the further decrease
+        its model still predicts.
 
     Notes
     -----
@@ -624,33 +723,58 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
         return CalibrationResult(model, names, x0, x0.copy(), fixed, float(r0 @ r0), k,
                                  int((r0 == FAILED_RESIDUAL).sum()), obj.evaluations,
                                  time.perf_counter() - t0, "nothing to fit: evaluated only")
+    pr = Prior.of(names, prior)
     scale = np.array([p.scale for p in specs])
     # registration columns of the finite-difference Jacobian re-use the cached mechanics
     n_mech = sum(1 for nm in names if needs_solve(robot, nm))
     per_step = n_mech + 1
-    kw = dict(bounds=(lower, upper), x_scale=scale, diff_step=DIFF_STEP, method="trf", xtol=XTOL, ftol=FTOL)
+
+    def objective(x):
+        r = obj.residuals(x)
+        return float(r @ r) + (0.0 if pr is None else float(np.sum(pr.rows(x) ** 2)))
+
     # stage 1: error components (smooth), at most half the budget; skipped from a warm start
     if warm and initial is not None:
         x1, stage1 = x0, "skipped (warm start)"
     else:
-        first = least_squares(obj.component_residuals, x0, max_nfev=max(2, max_evaluations // (2 * per_step)), **kw)
+        comp = obj.component_residuals if pr is None else (
+            lambda x: np.concatenate([obj.component_residuals(x), pr.rows(x)]))
+        first = least_squares(comp, x0, max_nfev=max(2, max_evaluations // (2 * per_step)), bounds=(lower, upper),
+                              x_scale=scale, diff_step=DIFF_STEP, method="trf", xtol=XTOL, ftol=FTOL)
         x1 = first.x if np.isfinite(first.cost) else x0
         stage1 = f"{first.nfev} steps ({'converged' if first.status > 0 else 'budget'})"
-        r1 = obj.residuals(x1)
-        if not float(r1 @ r1) <= float(r0 @ r0):
+        if not objective(x1) <= objective(x0):
             x1 = x0   # the component fit's optimum is worse for Eq. (49): start stage 2 where we began
     # stage 2: Eq. (49) itself, with the rest of the budget, its Gauss-Newton model keeping the
-    # curvature of the norms; stopped when the decrease the model still predicts is negligible
-    eq49 = _Eq49Model(obj, lower, upper)
+    # curvature of the norms; stopped when the decrease the model still predicts is negligible.
+    # A value that ends at an optimizer bound has the bound widened and stage 2 goes on from there.
+    widened, steps = [], 0
+    for _ in range(MAX_WIDENINGS + 1):
+        eq49 = _Eq49Model(obj, lower, upper, pr)
 
-    def settled(intermediate_result):
-        """Stop (``StopIteration``: status -2) when the predicted further decrease is negligible."""
-        if eq49.bic_left(k) < BIC_TOLERANCE:
-            raise StopIteration
+        def settled(intermediate_result, eq49=eq49):
+            """Stop (``StopIteration``: status -2) when the predicted further decrease is negligible."""
+            if eq49.bic_left(k) < BIC_TOLERANCE:
+                raise StopIteration
 
-    left = max(2, (max_evaluations - obj.evaluations) // per_step)
-    kw.pop("diff_step")
-    sol = least_squares(eq49.fun, x1, jac=eq49.jac, max_nfev=left, callback=settled, **kw)
+        left = max(2, (max_evaluations - obj.evaluations) // per_step)
+        sol = least_squares(eq49.fun, np.clip(x1, lower, upper), jac=eq49.jac, max_nfev=left, callback=settled,
+                            bounds=(lower, upper), x_scale=scale, method="trf", xtol=XTOL, ftol=FTOL)
+        steps += sol.nfev
+        x1 = sol.x
+        grown = False
+        for j, nm in enumerate(names):
+            side = specs[j].at_bound(float(sol.x[j]))
+            if side == "upper" or (side == "lower" and not specs[j].vanishes_at_lower):
+                wider = specs[j].widened(side)
+                if wider is not None:
+                    specs[j] = wider
+                    lower[j], upper[j] = wider.lower, wider.upper
+                    widened.append(f"{nm} {side} bound to {wider.upper if side == 'upper' else wider.lower:.4g} "
+                                   f"{wider.unit}")
+                    grown = True
+        if not grown or obj.evaluations >= max_evaluations:
+            break
     r = obj.residuals(sol.x)
     converged = bool(sol.status > 0 or sol.status == -2)
     left_bic = eq49.bic_left(k)
@@ -658,31 +782,35 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
            f"{left_bic:.2g} < {BIC_TOLERANCE:g}" if sol.status == -2 else sol.message)
     at_bound = bound_flags(specs, sol.x)
     msg = (f"least squares: error components {stage1}, "
-           f"then Eq. (49): {how} ({sol.nfev} steps, {obj.evaluations} evaluations)"
+           f"then Eq. (49): {how} ({steps} steps, {obj.evaluations} evaluations)"
+           + ("" if not widened else f"; widened: {', '.join(widened)}")
            + ("" if converged else f"; NOT converged: stopped at the budget of {max_evaluations} evaluations "
                                    f"(predicted further decrease {eq49.remaining:.3g} (mm + deg)^2, "
                                    f"BIC {left_bic:.2g})")
-           + (f"; at bound, not converged: {', '.join(at_bound)}" if at_bound else ""))
-    se, corr = covariance(sol.jac, float(r @ r), k) if uncertainty else (None, None)
+           + (f"; at a bound, not converged: {', '.join(at_bound)}" if at_bound else ""))
+    se, corr = (covariance(sol.jac, sol.fun, k, clusters=clusters, width=eq49.width) if uncertainty
+                else (None, None))
+    prior_cost = 0.0 if pr is None else float(np.sum(pr.rows(sol.x) ** 2))
     return CalibrationResult(model, names, sol.x, x0, fixed, float(r @ r), k, int((r == FAILED_RESIDUAL).sum()),
                              obj.evaluations, time.perf_counter() - t0, msg, converged and not at_bound, se, corr,
-                             at_bound)
+                             at_bound, tuple(widened), prior_cost)
 
 
 def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
                 settings: ModelSettings | None = None, n_jobs: int = 1, coarse=(0.0, 0.1, 0.2, 0.3, 0.4),
                 refinements: int = 2, search_samples: int = 96, seed: int = 0, progress=None, start=None,
-                uncertainty: bool = True) -> CalibrationResult:
+                uncertainty: bool = True, clusters=None) -> CalibrationResult:
     """Parameters by grid search, other parameters ``fixed``: the paper's calibration of the
     friction coefficients (Section V-C: "calibrated during a second pass using a 2-D grid search
     to avoid local minima").
 
     The coarse grid (``coarse`` per parameter) is scored on at most ``search_samples``
     calibration samples made of whole configuration groups; while its best point lies on the
-    grid's upper edge, the grid grows by one step (up to :data:`GRID_LIMIT_FACTOR` times the
-    parameters' typical upper limit, or their optimizer bound). Then ``refinements`` rounds of
-    a 3^m grid with half the previous step around the best point are scored on the whole
-    calibration set.
+    grid's upper edge, the grid grows there by a step that doubles each time, up to the
+    parameters' limit (``ParameterSpec.hard``). Then rounds of a 3^m grid with half the previous
+    step around the best point are scored on the whole calibration set: ``refinements`` rounds
+    below the coarse step, and one more for every doubling of the grid's spacing at the best
+    point.
 
     Parameters
     ----------
@@ -705,24 +833,24 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
     progress : callable, optional
         ``progress(done, total)`` after each grid point.
     start : array-like, shape (m,), optional
-        A point found before (e.g. on more data): the coarse grid is skipped and the
-        refinements start there.
+        A point found before: the coarse grid is skipped and the refinements start there.
     uncertainty : bool
         Standard errors and correlations at the best point (from one Jacobian of Eq. (49)).
+    clusters : array-like, shape (K,), optional
+        Unit of each sample: standard errors clustered over units (:func:`covariance`).
 
     Returns
     -------
     CalibrationResult
-        With the score of every grid point in ``message``; not converged, with ``at_bound``,
-        when the best point lies on the grid's upper edge at its limit (the grid could not grow
-        past it).
+        With the score of every grid point in ``message``, the grid's growth in ``widened``; not
+        converged, with ``at_bound``, when the best point lies on the grid's upper edge at the
+        parameters' limit.
     """
     t0 = time.perf_counter()
     names = tuple(names)
     m = len(names)
     specs = [parameter(robot, n) for n in names]
-    limit = min(min(p.upper for p in specs),
-                min(GRID_LIMIT_FACTOR * p.typical[1] if p.typical else p.upper for p in specs))
+    limit = min(p.hard[1] for p in specs)
     lowest = max(p.lower for p in specs)
     coarse = np.asarray(sorted(coarse), float)
     groups = np.unique(data.config_id)
@@ -734,8 +862,7 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
     obj_sub = _Objective(robot, sub, model, names, fixed, settings, n_jobs)
     obj_all = _Objective(robot, data, model, names, fixed, settings, n_jobs)
     grid = list(itertools.product(coarse, repeat=m))
-    step = float(np.min(np.diff(coarse))) if coarse.size > 1 else 0.05
-    step0 = step
+    step0 = float(np.min(np.diff(coarse))) if coarse.size > 1 else 0.05
     total = len(grid) + refinements * (3 ** m)
     done = [0]
 
@@ -754,45 +881,60 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
         return best, costs[best]
 
     axis = list(coarse)
+    widened = []
     if start is None:
         coarse_costs: dict = {}
         best, cost = scan(obj_sub, grid, coarse_costs)
-        # a best point on the grid's upper edge is no minimum: extend the grid there by whole steps
-        while coarse.size > 1 and max(best) >= axis[-1] - 1e-9 and axis[-1] + step <= limit + 1e-9:
-            axis.append(round(axis[-1] + step, 6))
+        # a best point on the grid's upper edge is no minimum: grow the grid there, by a step that
+        # doubles each time, up to the parameters' limit
+        grow = step0
+        while coarse.size > 1 and max(best) >= axis[-1] - 1e-9 and axis[-1] < limit - 1e-9:
+            axis.append(round(min(limit, axis[-1] + grow), 6))
+            grow *= 2.0
             new = [q for q in itertools.product(axis, repeat=m) if max(q) >= axis[-1] - 1e-9]
             total += len(new)
             best, cost = scan(obj_sub, new, coarse_costs)
-        trail = [f"coarse grid {axis[0]:g}..{axis[-1]:g} (step {step:g}) on {sub.n_samples} samples: best {names} "
-                 f"{best} cost {cost:.4g}"]
+        if axis[-1] > coarse[-1]:
+            widened.append(f"grid of {', '.join(names)} grown to {axis[-1]:g}")
+        trail = [f"coarse grid {axis[0]:g}..{axis[-1]:g} (step {step0:g}" + (", growing" if widened else "")
+                 + f") on {sub.n_samples} samples: best {names} {best} cost {cost:.4g}"]
         best_all = np.array(best)
     else:
-        total = refinements * (3 ** m)
         best_all = np.asarray(start, float).reshape(m)
         trail = [f"refinements from {tuple(np.round(best_all, 6))}"]
         while axis[-1] < best_all.max() - 1e-9:
-            axis.append(round(axis[-1] + step, 6))
-    for _ in range(refinements):
+            axis.append(round(axis[-1] + step0, 6))
+    # refine from half the grid's spacing at the best point down to a quarter of the coarse step
+    ax = np.asarray(axis)
+    at = int(np.argmin(np.abs(ax - best_all.max())))
+    spacing = max(step0, float(np.max(np.diff(ax)[max(at - 1, 0):at + 1])) if ax.size > 1 else step0)
+    rounds = refinements + int(round(np.log2(spacing / step0)))
+    total = done[0] + rounds * (3 ** m)
+    step = spacing
+    for _ in range(rounds):
         step /= 2.0
-        best, cost = scan(obj_all, (np.maximum(best_all + step * np.array(d), lowest)
+        best, cost = scan(obj_all, (np.clip(best_all + step * np.array(d), lowest, limit)
                                     for d in itertools.product((-1, 0, 1), repeat=m)), {})
         best_all = np.array(best)
         trail.append(f"refined (step {step:.4g}) on {data.n_samples} samples: best {best} cost {cost:.4g}")
     r = obj_all.residuals(best_all)
-    # the grid could not grow past its limit and the minimum lies at (or past) its last node
-    edge = tuple(f"{n} (edge of the grid at {axis[-1]:g}, its limit {limit:g})" for n, v in zip(names, best_all)
-                 if v >= axis[-1] - 1e-9 and axis[-1] + step0 > limit + 1e-9)
+    # the grid could not grow past the parameters' limit and the minimum lies at (or past) it
+    edge = tuple(f"{n} (edge of the grid at its limit {limit:g})" for n, v in zip(names, best_all)
+                 if v >= limit - 1e-9)
     if edge:
         trail.append("at the edge of the grid, not converged: " + ", ".join(edge))
-    se, corr = None, None
-    if uncertainty:
-        lower = np.array([p.lower for p in specs])
-        upper = np.array([p.upper for p in specs])
-        se, corr = covariance(_Eq49Model(obj_all, lower, upper).jac(best_all), float(r @ r), data.n_samples)
+    se, corr = _uncertainty(obj_all, specs, best_all, clusters) if uncertainty else (None, None)
     return CalibrationResult(model, names, best_all, np.zeros(m), dict(fixed), float(r @ r),
                              data.n_samples, int((r == FAILED_RESIDUAL).sum()),
                              obj_sub.evaluations + obj_all.evaluations, time.perf_counter() - t0,
-                             "; ".join(trail), not edge, se, corr, edge)
+                             "; ".join(trail), not edge, se, corr, edge, tuple(widened))
+
+
+def _uncertainty(obj: _Objective, specs, x, clusters=None) -> tuple[np.ndarray, np.ndarray]:
+    """Standard errors and correlations (:func:`covariance`) at ``x`` from one Jacobian of Eq. (49)."""
+    model = _Eq49Model(obj, [p.hard[0] for p in specs], [p.hard[1] for p in specs])
+    rows = model.jac(x)
+    return covariance(rows, model.fun(x), obj.data.n_samples, clusters=clusters, width=model.width)
 
 
 def grid_search_friction(robot, data: MeasuredData, fixed: dict, **kwargs) -> CalibrationResult:

@@ -5,17 +5,21 @@ per-configuration friction bound of the calibrated robot (:func:`ctrplan.mechani
 the largest tip distance of any of the 2^(n-1) bounding friction solutions from the standard
 model's tip; Section III of Ha, Fagogenis & Dupont 2019); after a final translation of every
 pair, the *translation-last bound* (the clearance-only deviation, Section V-B). The *error* ``e``
-is the distance between the measured tip and the calibrated standard model's tip. A measured tip
+is the distance between the measured tip and the tip of the model the workflow writes (the final
+model: the calibrated baseline with the named effects); the bound is that model's robot's, at the
+configuration that model puts the tubes in (history effects applied). A measured tip
 is *within the bound* when ``e <= b + m``, with the noise margin ``m`` = :data:`NOISE_MULTIPLE`
 times the sensor's rms position noise (95 % of 3-D Gaussian noise vectors are shorter).
 
 **The calibrated bound** is ``c (b + m)``, with the factor ``c`` the split-conformal quantile of
-the scores ``s = e / (b + m)`` of calibration samples: the ``ceil((n + 1) t)``-th smallest of n
+the scores ``s = e / (b + m)`` of calibration samples (the final model's out-of-fold errors on the
+development samples; ``m`` from the development samples' noise): the ``ceil((n + 1) t)``-th smallest of n
 scores for a target coverage ``t`` (Vovk et al. 2005; Lei et al., JASA 113:1094, 2018). This is
 split-conformal prediction itself; a conformal library (``mapie``) wraps scikit-learn regressors,
 and here the "regressor" is the mechanics, so the plain finite-sample quantile is used. The
 guarantee assumes exchangeable samples: the samples of a motion are serially correlated, so the
-coverage is checked on the untouched test split with a block-bootstrap interval: a calibrated
+coverage is checked on the untouched test split with a t-interval over its units
+(:func:`~ctrplan.discrepancy.statistics.ratio_interval` of the per-unit counts): a calibrated
 bound whose test coverage falls short of its target by more than :data:`COVERAGE_TOLERANCE` (and
 whose interval excludes the target) is reported as **failing**; one that exceeds it by as much is
 **conservative** (wider than it needs to be, e.g. calibrated on out-of-fold errors of models fitted
@@ -30,8 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .options import BOOTSTRAP_RESAMPLES, CONFIDENCE, ENVELOPE_NOISE_FACTOR
-from .statistics import block_bootstrap
+from .options import CONFIDENCE, ENVELOPE_NOISE_FACTOR
+from .statistics import mean_interval
 
 __all__ = ["NOISE_MULTIPLE", "DEFAULT_TARGET", "COVERAGE_TOLERANCE", "BoundValues", "bound_values",
            "coverage_figures", "conformal_factor", "BoundCalibration", "calibrate_bound", "BOUND_DEFINITION"]
@@ -127,7 +131,7 @@ def _quantiles(x) -> dict:
 
 
 def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> dict:
-    """Share of samples with ``error <= bound + margin``, with a block-bootstrap interval, and the
+    """Share of samples with ``error <= bound + margin``, with a t-interval over units, and the
     distribution of ``error / (bound + margin)``.
 
     Parameters
@@ -137,15 +141,16 @@ def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> di
     margin : float
         Noise margin [m].
     units : array-like of int, shape (K,)
-        Units of the bootstrap (time blocks, configuration groups).
+        Units of the interval (time blocks, configuration groups).
     seed : int
+        Unused (kept for callers).
 
     Returns
     -------
     dict
         ``n``, ``covered`` (share), ``ci`` ([low, high] at
-        :data:`~ctrplan.discrepancy.options.CONFIDENCE`), ``ratio`` (median, p90, p95, max of
-        e / (b + m)), ``bound_median_m``, ``error_median_m``.
+        :data:`~ctrplan.discrepancy.options.CONFIDENCE`, clipped to [0, 1]), ``n_units``, ``ratio``
+        (median, p90, p95, max of e / (b + m)), ``bound_median_m``, ``error_median_m``.
     """
     e = np.asarray(error, float)
     b = np.asarray(bound, float)
@@ -153,13 +158,14 @@ def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> di
     ok = np.isfinite(e) & np.isfinite(b)
     e, b, u = e[ok], b[ok], u[ok]
     if not e.size:
-        return {"n": 0, "covered": None, "ci": [None, None], "ratio": _quantiles([]), "bound_median_m": None,
-                "error_median_m": None}
+        return {"n": 0, "covered": None, "ci": [None, None], "n_units": 0, "ratio": _quantiles([]),
+                "bound_median_m": None, "error_median_m": None}
     inside = (e <= b + margin).astype(float)
-    boot = block_bootstrap({"x": inside}, u, lambda s: float(np.mean(s["x"])), n_resamples=BOOTSTRAP_RESAMPLES,
-                           confidence=CONFIDENCE, seed=seed)
-    return {"n": int(e.size), "covered": float(inside.mean()), "ci": boot["ci"], "ratio": _quantiles(e / (b + margin)),
-            "bound_median_m": float(np.median(b)), "error_median_m": float(np.median(e))}
+    share = mean_interval(inside, u, confidence=CONFIDENCE)
+    ci = [None if not np.isfinite(x) else float(np.clip(x, 0.0, 1.0)) for x in share["ci"]]
+    return {"n": int(e.size), "covered": float(inside.mean()), "ci": ci, "n_units": share["n_units"],
+            "ratio": _quantiles(e / (b + margin)), "bound_median_m": float(np.median(b)),
+            "error_median_m": float(np.median(e))}
 
 
 def conformal_factor(error, bound, margin: float, target: float = DEFAULT_TARGET) -> float:
@@ -312,40 +318,44 @@ def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *,
                             test=test, raw_test=raw, translation_last=tl, failing=failing, status=status)
 
 
-def _stored_bounds(setup, stage: str, robot, rows: np.ndarray, n_jobs: int, echo) -> BoundValues:
+def _stored_bounds(setup, stage: str, robot, alpha, beta, n_jobs: int, echo) -> BoundValues:
     cached = setup.stages.load(stage)
     if cached is not None:
         echo(f"  {stage}: reused from an earlier run")
         return BoundValues(position=np.array(cached["position"], float),
                            translation_last=np.array(cached["translation_last"], float),
                            ok=np.array(cached["ok"], bool))
-    data = setup.data
-    echo(f"  evaluating the friction bound at {rows.size} samples ({stage}) ...")
-    values = bound_values(robot, data.alpha[rows], data.beta[rows], setup.settings, n_jobs=n_jobs)
+    echo(f"  evaluating the friction bound at {len(alpha)} samples ({stage}) ...")
+    values = bound_values(robot, alpha, beta, setup.settings, n_jobs=n_jobs)
     setup.stages.save(stage, {"position": values.position, "translation_last": values.translation_last,
                               "ok": values.ok})
     return values
 
 
-def check_bound(setup, split, baseline, test, final_params: dict, noise, options, echo=print) -> BoundCalibration:
-    """Stage 10b: the friction bound of the calibrated robot against the measured tips, and the
+def check_bound(setup, split, final, test_errors, final_params: dict, noise, options, echo=print) -> BoundCalibration:
+    """Stage 10b: the friction bound of the written robot against the measured tips, and the
     calibrated bound (module docstring).
 
     The robot is the one the workflow writes (``final_params`` applied to the input robot: its
-    tube parameters and friction coefficients); the errors are those of the calibrated standard
-    model (the baseline): out of fold at up to ``options.bound_samples`` development samples
-    (evenly spaced), which calibrate the factor, and at up to as many test samples, which check
-    it. Bounds are stored as stages.
+    tube parameters and friction coefficients), its bound evaluated at the configuration the final
+    model puts the tubes in (its history effects applied to the recorded motion); the errors are
+    the final model's: out of fold at up to ``options.bound_samples`` development samples (evenly
+    spaced), which calibrate the factor, and on the test split at up to as many samples, which
+    check it. The noise margin comes from the development samples' noise. Bounds are stored as
+    stages.
 
     Parameters
     ----------
     setup : DiscrepancySetup
     split : DataSplit
-    baseline : Baseline
-    test : TestSplit
+    final : CrossValidated
+        The final model (the calibrated baseline when nothing is named): its out-of-fold errors.
+    test_errors : Errors
+        The final model's errors on the test split.
     final_params : dict
         The written model's parameters [SI].
     noise : NoiseCheck
+        Estimated on the development samples.
     options : DiscrepancyOptions
         ``bound_target``, ``bound_samples``, ``n_jobs``, ``seed``.
     echo : callable
@@ -354,10 +364,13 @@ def check_bound(setup, split, baseline, test, final_params: dict, noise, options
     -------
     BoundCalibration
     """
+    from ..effects import EffectSet
     from .parameters import REGISTRATION, apply_parameters
 
     names = tuple(n for n in final_params if n not in REGISTRATION)
     robot = apply_parameters(setup.robot, names, tuple(final_params[n] for n in names))
+    effects, _ = EffectSet.from_parameters(setup.robot, names, tuple(final_params[n] for n in names))
+    state = setup.data.state(robot, effects)
     dev = np.flatnonzero(split.dev_rows)
     tst = np.flatnonzero(split.test_rows)
     limit = options.bound_samples
@@ -367,15 +380,16 @@ def check_bound(setup, split, baseline, test, final_params: dict, noise, options
 
     cal_rows, test_rows = pick(dev), pick(tst)
     tag = hashlib.sha256(repr((robot.friction_coefficients, [t.sections for t in robot.tubes],
-                               [t.k_xy for t in robot.tubes])).encode()).hexdigest()[:8]
-    cal_b = _stored_bounds(setup, f"bound-development-{limit}-{tag}", robot, cal_rows, options.n_jobs, echo)
-    test_b = _stored_bounds(setup, f"bound-test-{limit}-{tag}", robot, test_rows, options.n_jobs, echo)
-    oof = baseline.oof
+                               [t.k_xy for t in robot.tubes], effects.to_dict())).encode()).hexdigest()[:8]
+    cal_b = _stored_bounds(setup, f"bound-development-{limit}-{tag}", robot, state.alpha[cal_rows],
+                           state.beta[cal_rows], options.n_jobs, echo)
+    test_b = _stored_bounds(setup, f"bound-test-{limit}-{tag}", robot, state.alpha[test_rows], state.beta[test_rows],
+                            options.n_jobs, echo)
+    oof = final.oof
     cal_e = oof.position[np.searchsorted(oof.rows, cal_rows)]
-    te = test.baseline
-    test_e = te.position[np.searchsorted(te.rows, test_rows)]
+    test_e = test_errors.position[np.searchsorted(test_errors.rows, test_rows)]
     released = np.all(setup.data.translation_last[test_rows], axis=1)
-    sigma = noise.noise.get("position_rms_m") or 0.0
+    sigma = noise.rms or 0.0
     cal = calibrate_bound(np.where(cal_b.ok, cal_e, np.nan), cal_b.position,
                           np.where(test_b.ok, test_e, np.nan), test_b.position, split.units[test_rows],
                           noise_rms=sigma, target=options.bound_target,

@@ -30,9 +30,11 @@ ENVELOPE_NOISE_FACTOR = 1.62
 #: then Eq. (49)); 3 = stage 2 with the norms' curvature in its Gauss-Newton model and the BIC
 #: stopping rule; 4 = effects from the registry, the history of every pair from ctrplan.history
 #: along the whole record; 5 = a test split and cross-validation folds, parameter uncertainties,
-#: baseline parameters bounded about the robot file's values. Stages written by an earlier
-#: version are redone.
-FIT_VERSION = 5
+#: baseline parameters bounded about the robot file's values; 6 = every fold fit from the same cold
+#: start as the development fit, buffers, a prior toward the robot file's tube parameters, bounds
+#: widened where a fit ends at them, pairs fitted jointly, a smooth time-shift interpolant. Stages
+#: written by an earlier version are redone.
+FIT_VERSION = 6
 
 
 @dataclass(frozen=True)
@@ -50,17 +52,25 @@ class DiscrepancyOptions:
         Frame of the measurements (default from the file type, see
         :func:`ctrplan.discrepancy.data.load_measured_data`). "tracker" fits a registration.
     test_fraction : float
-        Share of the units held back as the untouched test split
+        Share of the units held back as the untouched test split, at least
+        :data:`~ctrplan.discrepancy.split.MIN_TEST_UNITS` units
         (:func:`~ctrplan.discrepancy.split.make_split`).
-    n_blocks : int
-        Time blocks a continuous motion is cut into (the units of its split and tests).
-    n_folds : int
-        Cross-validation folds of the development data.
+    n_blocks : int or None
+        Time blocks a continuous motion is cut into (the units of its split and tests); None: from
+        the record's length.
+    n_folds : int or None
+        Cross-validation folds of the development data; None: from the number of units.
     max_calibration_samples : int
         Calibration samples a least-squares fit uses at most (whole units, evenly chosen).
     significance : float
-        Family-wise level of the cross-validated improvement tests (Holm over the candidates),
-        the level of the signature tests, and the false-alarm rate of the noise test.
+        Family-wise level of the cross-validated improvement tests (Holm over the candidates
+        tried alone, and over the pairs), the level of the comparisons between candidates and of
+        the signature tests, and the false-alarm rate of the noise test.
+    prior_strengths : tuple of float
+        Strengths tau of the prior toward the robot file's tube parameters among which the
+        baseline's out-of-fold error chooses (:func:`~ctrplan.discrepancy.fitting.calibrate_baseline`;
+        a relative change tau costs one residual of the pilot fit's rms); 0 (the robot file's
+        parameters, only a registration fitted) is always among them, ``inf`` is no prior.
     n_permutations : int
     friction_grid : tuple of float
         Coarse grid of every friction coefficient.
@@ -97,10 +107,11 @@ class DiscrepancyOptions:
     effects: tuple | None = None
     frame: str | None = None
     test_fraction: float = 0.2
-    n_blocks: int = 20
-    n_folds: int = 4
+    n_blocks: int | None = None
+    n_folds: int | None = None
     max_calibration_samples: int = 300
     significance: float = 0.01
+    prior_strengths: tuple = (0.003, 0.01, 0.03, 0.1, float("inf"))
     n_permutations: int = 999
     friction_grid: tuple = (0.0, 0.1, 0.2, 0.3, 0.4)
     friction_search_samples: int = 96

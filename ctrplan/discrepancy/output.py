@@ -14,14 +14,14 @@ from ..effects import REGISTRY, EffectSet, robot_effects
 from ..io.atomic import atomic_write_text
 from .calibrate import pose_errors, predict
 from .data import MeasuredData
-from .decision import Naming, NoiseCheck, cautions
+from .decision import Naming, NoiseCheck, atypical_caution, cautions
 from .evaluation import Errors, error_summary, evaluate_rows
 from .fitting import Baseline, Candidate, Combination, CrossValidated, candidate_report, candidate_reports
-from .options import BOOTSTRAP_RESAMPLES, CONFIDENCE, DiscrepancyOptions
+from .options import CONFIDENCE, DiscrepancyOptions
 from .parameters import REGISTRATION, apply_parameters, parameter
 from .setup import DiscrepancySetup
 from .split import DataSplit
-from .statistics import block_bootstrap
+from .statistics import mean_interval, shrink_interval
 
 __all__ = ["TestSplit", "evaluate_test_split", "UpdatedModel", "Reproduction", "write_updated_model",
            "check_reproduction", "reproduce_errors", "discrepancy_results", "final_candidate", "final_parameters",
@@ -29,10 +29,13 @@ __all__ = ["TestSplit", "evaluate_test_split", "UpdatedModel", "Reproduction", "
 
 
 def final_candidate(naming: Naming, combination: Combination | None) -> Candidate | None:
-    """The model the run ends with: the named pair, else the named effect (the first of an
-    ambiguous pair), else None (the recalibrated baseline)."""
+    """The model the run ends with: the named pair; else the second effect alone when the named
+    effect went to zero with it; else the named effect (the first of an ambiguous pair); else None
+    (the recalibrated baseline)."""
     if combination is not None and combination.named:
         return combination.tried[combination.named]
+    if combination is not None and combination.replaced_by:
+        return naming.candidates[combination.replaced_by]
     return naming.candidates[naming.named] if naming.named else None
 
 
@@ -42,10 +45,26 @@ def final_parameters(naming: Naming, combination: Combination | None, baseline: 
     return dict(final.params if final is not None else baseline.params)
 
 
+def _figures(errors: dict, units) -> dict:
+    """Mean (with a t-interval over units), p95 and max of each model's tip errors [m] -> mm, on the
+    samples where every model is finite."""
+    ok = np.all([np.isfinite(v) for v in errors.values()], axis=0)
+    u = np.asarray(units)[ok]
+    out = {}
+    for name, e in errors.items():
+        x = np.asarray(e, float)[ok] * 1e3
+        m = mean_interval(x, u, confidence=CONFIDENCE)
+        out[name] = {"mean_mm": m, "p95_mm": float(np.percentile(x, 95)) if x.size else None,
+                     "max_mm": float(x.max()) if x.size else None}
+    return out
+
+
 def validate_prediction(prediction, split: DataSplit, seed: int = 0) -> dict | None:
-    """The history-aware prediction against the standard model on the test split: mean, p95 and
-    max tip position error of each [mm] with block-bootstrap intervals, and whether the history
-    beats the standard model in both mean and max.
+    """The history-aware prediction against the standard model on the test split: mean (with a
+    t-interval over units), p95 and max tip position error of each [mm], and the per-unit paired
+    difference of their means with its t-interval; the history "beats" the standard model when
+    that interval lies below zero (:func:`~ctrplan.discrepancy.statistics.mean_interval` of the
+    paired differences). Planning aims with the history-aware prediction only then.
 
     Parameters
     ----------
@@ -54,77 +73,77 @@ def validate_prediction(prediction, split: DataSplit, seed: int = 0) -> dict | N
         friction coefficients, both on the test split in data order.
     split : DataSplit
     seed : int
+        Unused (kept for callers).
 
     Returns
     -------
     dict or None
-        ``standard`` and ``history`` ({``mean_mm``, ``p95_mm``, ``max_mm``: {value, ci}}),
-        ``history_label``, ``history_beats_standard``, ``n_samples``; None without a prediction.
+        ``standard`` and ``history`` ({``mean_mm``: {value, ci, ...}, ``p95_mm``, ``max_mm``}),
+        ``difference_mm`` (history - standard, per-unit paired, {value, ci}), ``history_label``,
+        ``history_beats_standard``, ``n_samples``, ``n_units``; None without a prediction.
     """
     if prediction is None or len(prediction.rows) < 2:
         return None
     units = split.units[split.test_rows]
     std, hist = (np.asarray(prediction.rows[i][1], float) for i in (0, 1))
     ok = np.isfinite(std) & np.isfinite(hist)
-    samples = {"standard": std[ok] * 1e3, "history": hist[ok] * 1e3}
-    stats = {"mean": np.mean, "p95": lambda x: np.percentile(x, 95), "max": np.max}
-    out = {"n_samples": int(ok.sum()), "history_label": prediction.rows[1][0], "confidence": CONFIDENCE}
-    for side in ("standard", "history"):
-        out[side] = {f"{name}_mm": block_bootstrap(samples, units[ok], lambda s, f=f, side=side: f(s[side]),
-                                                   n_resamples=BOOTSTRAP_RESAMPLES, confidence=CONFIDENCE, seed=seed)
-                     for name, f in stats.items()}
-    out["history_beats_standard"] = bool(
-        out["history"]["mean_mm"]["value"] < out["standard"]["mean_mm"]["value"]
-        and out["history"]["max_mm"]["value"] < out["standard"]["max_mm"]["value"])
-    return out
+    figs = _figures({"standard": std, "history": hist}, units)
+    diff = mean_interval((hist[ok] - std[ok]) * 1e3, units[ok], confidence=CONFIDENCE)
+    return {"n_samples": int(ok.sum()), "n_units": int(np.unique(units[ok]).size),
+            "history_label": prediction.rows[1][0], "confidence": CONFIDENCE, **figs, "difference_mm": diff,
+            "history_beats_standard": bool(np.isfinite(diff["ci"][1]) and diff["ci"][1] < 0.0),
+            "method": "t-interval over the test split's units of the per-unit paired difference of the mean errors"}
 
 
 @dataclass(frozen=True, eq=False)
 class TestSplit:
-    """Stage 10: the baseline and the final model on the untouched test split (used once).
+    """Stage 10: the robot file (with only a registration), the calibrated baseline and the final
+    model on the untouched test split (used once).
 
     Attributes
     ----------
+    file : Errors
+        The robot file's tube parameters with only a registration fitted on the development
+        samples [m, rad].
     baseline, final : Errors
-        Their errors on the test samples [m, rad] (``final`` is the baseline's when nothing is
-        named).
+        The calibrated baseline's and the final model's errors on the test samples (``final`` is
+        the baseline's when nothing is named).
     label : str
         The final model.
     figures : dict
-        ``before`` and ``after``: mean, p95, max of the tip position error [mm] with
-        block-bootstrap intervals; ``shrink``: the relative fall of each (1 - after / before),
-        with paired intervals; ``units``, ``n_samples``, ``confidence``, ``method``.
+        ``file``, ``before`` (the calibrated baseline) and ``after`` (the final model): mean
+        (with a t-interval over units), p95 and max of the tip position error [mm]; ``shrink``:
+        the relative fall of the mean from before to after (and ``calibration_shrink``, from
+        the file to the calibrated baseline), with t-intervals from the per-unit paired sums;
+        ``units``, ``n_samples``, ``confidence``, ``method``.
     """
 
+    file: Errors
     baseline: Errors
     final: Errors
     label: str
     figures: dict
 
 
-def _shrink_figures(before: Errors, after: Errors, units, seed: int) -> dict:
-    ok = np.isfinite(before.position) & np.isfinite(after.position)
-    b, a, u = before.position[ok] * 1e3, after.position[ok] * 1e3, np.asarray(units)[ok]
-    stats = {"mean": np.mean, "p95": lambda x: np.percentile(x, 95), "max": np.max}
-    out = {"before": {}, "after": {}, "shrink": {}, "n_samples": int(ok.sum()), "n_units": int(np.unique(u).size),
-           "confidence": CONFIDENCE,
-           "method": f"scipy.stats.bootstrap (percentile) over the test split's {np.unique(u).size} units, "
-                     f"{BOOTSTRAP_RESAMPLES} resamples, paired for the shrink"}
-    samples = {"before": b, "after": a}
-    for name, f in stats.items():
-        for side in ("before", "after"):
-            out[side][f"{name}_mm"] = block_bootstrap(samples, u, lambda s, f=f, side=side: f(s[side]),
-                                                      n_resamples=BOOTSTRAP_RESAMPLES, confidence=CONFIDENCE, seed=seed)
-        out["shrink"][name] = block_bootstrap(samples, u, lambda s, f=f: 1.0 - f(s["after"]) / f(s["before"]),
-                                              n_resamples=BOOTSTRAP_RESAMPLES, confidence=CONFIDENCE, seed=seed)
-    return out
+def _shrink_figures(file: Errors, before: Errors, after: Errors, units) -> dict:
+    ok = np.isfinite(before.position) & np.isfinite(after.position) & np.isfinite(file.position)
+    u = np.asarray(units)[ok]
+    figs = _figures({"file": file.position[ok], "before": before.position[ok], "after": after.position[ok]}, u)
+    return {**figs,
+            "shrink": {"mean": shrink_interval(before.position[ok], after.position[ok], u, confidence=CONFIDENCE)},
+            "calibration_shrink": {"mean": shrink_interval(file.position[ok], before.position[ok], u,
+                                                           confidence=CONFIDENCE)},
+            "n_samples": int(ok.sum()), "n_units": int(np.unique(u).size), "confidence": CONFIDENCE,
+            "method": f"t-intervals over the test split's {np.unique(u).size} units (means and the shrink of the "
+                      f"mean from per-unit sums, paired; Cochran 1977, Sec. 6.4); p95 and max without an interval"}
 
 
 def evaluate_test_split(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline, naming: Naming,
                         combination: Combination | None, options: DiscrepancyOptions, echo=print,
                         progress: bool = False) -> TestSplit:
-    """Stage 10: evaluate the baseline and the final model (their development fits) on the test
-    split, once, and the final model's gain there with block-bootstrap intervals.
+    """Stage 10: evaluate the robot file with only a registration, the calibrated baseline and the
+    final model (their development fits) on the test split, once, and the gains there with
+    t-intervals over units.
 
     Returns
     -------
@@ -132,19 +151,22 @@ def evaluate_test_split(setup: DiscrepancySetup, split: DataSplit, baseline: Bas
     """
     final = final_candidate(naming, combination)
     test = split.test_rows
+    file = evaluate_rows(setup, test, "test-file", "standard", baseline.file_cv.params, n_jobs=options.n_jobs,
+                         progress=progress, echo=echo)
     before = evaluate_rows(setup, test, "test-baseline", "standard", baseline.params, n_jobs=options.n_jobs,
                            progress=progress, echo=echo)
     after = before if final is None else evaluate_rows(setup, test, f"test-{final.cv.name}", final.model, final.params,
                                                        n_jobs=options.n_jobs, progress=progress, echo=echo)
-    figures = _shrink_figures(before, after, split.units[test], options.seed)
+    figures = _shrink_figures(file, before, after, split.units[test])
     label = final.label if final is not None else "baseline (nothing named)"
-    s = figures["shrink"]
-    echo(f"test split ({split.n_test} samples, untouched until now): {label}: mean "
-         f"{figures['before']['mean_mm']['value']:.3f} -> {figures['after']['mean_mm']['value']:.3f} mm (shrink "
-         f"{100 * s['mean']['value']:.0f} %, {CONFIDENCE:.0%} interval {100 * s['mean']['ci'][0]:.0f}.."
-         f"{100 * s['mean']['ci'][1]:.0f} %), max {figures['before']['max_mm']['value']:.2f} -> "
-         f"{figures['after']['max_mm']['value']:.2f} mm")
-    return TestSplit(baseline=before, final=after, label=label, figures=figures)
+    s, c = figures["shrink"]["mean"], figures["calibration_shrink"]["mean"]
+    echo(f"test split ({split.n_test} samples in {figures['n_units']} units, untouched until now): robot file with a "
+         f"registration {figures['file']['mean_mm']['value']:.3f} mm, calibrated baseline "
+         f"{figures['before']['mean_mm']['value']:.3f} mm (shrink {100 * c['value']:.0f} %, {100 * c['ci'][0]:.0f}.."
+         f"{100 * c['ci'][1]:.0f} %), {label} {figures['after']['mean_mm']['value']:.3f} mm (shrink "
+         f"{100 * s['value']:.0f} %, {CONFIDENCE:.0%} interval {100 * s['ci'][0]:.0f}..{100 * s['ci'][1]:.0f} %); max "
+         f"{figures['before']['max_mm']:.2f} -> {figures['after']['max_mm']:.2f} mm")
+    return TestSplit(file=file, baseline=before, final=after, label=label, figures=figures)
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,9 +184,9 @@ class UpdatedModel:
     named_effects : tuple of str
     candidate : Candidate or None
         The candidate it comes from (None: the recalibrated baseline).
-    left_out : tuple of str
-        Effect parameters not written because their values are atypical (a robot file holds
-        only typical ones).
+    cautions : tuple of str
+        Written values outside their typical range, each with the range's source and what to
+        check (also in the file's ``[effects_source]``).
     """
 
     path: Path
@@ -172,7 +194,7 @@ class UpdatedModel:
     params: dict
     named_effects: tuple
     candidate: Candidate | None
-    left_out: tuple = ()
+    cautions: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,7 +221,9 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
     Effects that change the robot go into its tube and pair tables, a registration into
     ``[tracker_registration]``, effects on the motion or the measurement (backlash, time offset,
     gradual friction, ...) into ``[effects]`` with ``[effects_source]``: the data file and its
-    SHA-256, the date, the samples, the verdict and the test split's errors. With ``bound`` (a
+    SHA-256, the date, the samples, the verdict, the test split's errors and a caution for every
+    value outside its typical range (the value is written: the data chose it over every other
+    explanation). The values are those of the final model's joint fit. With ``bound`` (a
     :class:`~ctrplan.discrepancy.coverage.BoundCalibration` with a finite factor), the table
     ``[bound_calibration]``; with ``prediction_check`` (:func:`validate_prediction`),
     ``[prediction_validation]``: planning reads both.
@@ -220,15 +244,8 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
         vals = [final_params.get(n, 0.0) for n in REGISTRATION]
         registration = {"rotation_vector_rad": vals[:3], "translation_m": vals[3:]}
     effects, _ = EffectSet.from_parameters(robot, tuple(final_params), tuple(final_params.values()))
-    left_out, stored = [], {}
-    for name in effects:
-        if REGISTRY[name].store != "effects":
-            continue
-        vals = {}
-        for p, v in effects[name].items():
-            (vals.__setitem__(p, v) if parameter(robot, p).is_typical(v) else left_out.append(p))
-        if vals:
-            stored[name] = vals
+    stored = {name: dict(effects[name]) for name in effects if REGISTRY[name].store == "effects"}
+    notes = tuple(atypical_caution(final.label, b) for b in final.atypical) if final is not None else ()
     data_name = Path(setup.data_path).name
     updated = apply_parameters(robot, tuple(final_params), tuple(final_params.values()))
     merged = robot_effects(robot).merged(stored)
@@ -238,42 +255,43 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
     else:
         suffix = "-".join(named_effects) or "recalibrated"
     updated = updated.replace(name=f"{robot.name}-{suffix}",
-                              source=f"{robot.source}; recalibrated by ctrplan discrepancy on {data_name}",
+                              source=f"{robot.source}; recalibrated by ctrplan discrepancy on {data_name}"
+                                     + "".join(f"; caution: {c}" for c in notes),
                               effects=tuple((n, tuple(merged[n].items())) for n in merged))
     pos = test.final.position[np.isfinite(test.final.position)]
     note = ("ambiguous: " + naming.candidates[naming.decision["ambiguous_with"]].label + " explains the data equally "
             "well" if verdict == "ambiguous" else "")
-    if left_out:
-        note = "; ".join(x for x in (note, "not written, atypical: " + ", ".join(left_out)) if x)
     source = {"method": "ctrplan discrepancy (fitted on the development split; errors on the untouched test split)",
               "data_file": data_name, "data_sha256": file_hash(setup.data_path),
               "date": datetime.date.today().isoformat(), "samples": int(setup.data.n_samples),
               "held_out_position_mean_m": float(pos.mean()) if pos.size else None,
               "held_out_position_p95_m": float(np.percentile(pos, 95)) if pos.size else None,
-              "held_out_position_max_m": float(pos.max()) if pos.size else None, "note": note}
+              "held_out_position_max_m": float(pos.max()) if pos.size else None, "note": note,
+              "cautions": list(notes)}
     setup.out_dir.mkdir(parents=True, exist_ok=True)
     model_path = setup.out_dir / f"{updated.name}.toml"
     header = (f"Written by `ctrplan discrepancy` from {Path(setup.robot_path).name} and {data_name}.\n"
               f"Verdict: {verdict}; model: {test.label}; evaluate with the {final_model} model.\nCalibrated parameters: "
-              + ", ".join(f"{n} = {v:.6g}" for n, v in final_params.items() if n not in REGISTRATION))
+              + ", ".join(f"{n} = {v:.6g}" for n, v in final_params.items() if n not in REGISTRATION)
+              + "".join(f"\nCaution: {c}" for c in notes))
     sha = source["data_sha256"]
     bound_table = (bound.file_table(data_name, sha) if bound is not None and np.isfinite(bound.factor) else None)
     pred_table = None
     if prediction_check is not None:
         pc = prediction_check
         pred_table = {"standard_mean_m": pc["standard"]["mean_mm"]["value"] * 1e-3,
-                      "standard_max_m": pc["standard"]["max_mm"]["value"] * 1e-3,
+                      "standard_max_m": pc["standard"]["max_mm"] * 1e-3,
                       "history_mean_m": pc["history"]["mean_mm"]["value"] * 1e-3,
-                      "history_max_m": pc["history"]["max_mm"]["value"] * 1e-3,
+                      "history_max_m": pc["history"]["max_mm"] * 1e-3,
                       "history_beats_standard": bool(pc["history_beats_standard"]), "test_samples": pc["n_samples"],
                       "data_file": data_name, "data_sha256": sha, "date": source["date"]}
     atomic_write_text(model_path, robot_to_toml(updated, header=header, model=final_model, registration=registration,
                                                 effects_source=source if updated.effects else None,
                                                 bound_calibration=bound_table, prediction_validation=pred_table))
-    if left_out:
-        echo(f"  not written to the model file (atypical values): {', '.join(left_out)}")
+    for c in notes:
+        echo(f"  written with a caution: {c}")
     return UpdatedModel(path=model_path, model=final_model, params=final_params, named_effects=tuple(named_effects),
-                        candidate=final, left_out=tuple(left_out))
+                        candidate=final, cautions=notes)
 
 
 def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: int = 1) -> dict:
@@ -339,7 +357,8 @@ def _combination_report(combination: Combination | None) -> dict | None:
         return None
     return {"first": combination.first, "first_label": combination.first_label, "named": combination.named,
             "tried": {e: candidate_report(c) for e, c in combination.tried.items()},
-            "not_tried": dict(combination.not_tried), "rule": combination.rule}
+            "not_tried": dict(combination.not_tried), "family": list(combination.family), "rule": combination.rule,
+            "dropped": combination.dropped, "replaced_by": combination.replaced_by}
 
 
 def _errors_arrays(e: Errors) -> dict:
@@ -365,9 +384,8 @@ def discrepancy_results(setup: DiscrepancySetup, split: DataSplit, baseline: Bas
     before_test = error_summary(test.baseline.position, test.baseline.angle, test.baseline.seconds, split.n_test)
     after_test = error_summary(test.final.position, test.final.angle, test.final.seconds, split.n_test)
     candidates = candidate_reports(naming.candidates)
+    file_test = error_summary(test.file.position, test.file.angle, test.file.seconds, split.n_test)
     notes = cautions(naming.verdict, None if final is None else candidate_report(final), before_test, after_test)
-    if updated.left_out:
-        notes.append(f"not written to the model file because atypical: {', '.join(updated.left_out)}")
     bad_base = [r for r in baseline.parameters if not r["in_typical_range"] or r["at_bound"]]
     for r in bad_base:
         change = "" if r.get("relative_change") is None else f", {100 * r['relative_change']:+.0f} % from the robot file"
@@ -384,7 +402,10 @@ def discrepancy_results(setup: DiscrepancySetup, split: DataSplit, baseline: Bas
         "n_samples": setup.data.n_samples, "split": split.as_dict(), "baseline_parameters": list(setup.base_names),
         "baseline": {"fit": baseline.fit.as_dict(), "folds": [f.as_dict() for f in baseline.cv.folds],
                      "bic": baseline.bic, "parameter_table": baseline.parameters,
-                     "out_of_fold": error_summary(base_oof.position, base_oof.angle, base_oof.seconds, base_oof.rows.size)},
+                     "out_of_fold": error_summary(base_oof.position, base_oof.angle, base_oof.seconds, base_oof.rows.size),
+                     "prior_strength": baseline.strength, "prior_choices": baseline.choices,
+                     "residual_scale": baseline.residual_scale,
+                     "file_fit": baseline.file_cv.fit.as_dict()},
         "contact_baseline": None if contact is None else {"fit": contact.fit.as_dict(),
                                                           "folds": [f.as_dict() for f in contact.folds]},
         "signature_tests": {e: t.as_dict() for e, t in tests.items()},
@@ -394,7 +415,8 @@ def discrepancy_results(setup: DiscrepancySetup, split: DataSplit, baseline: Bas
         "ambiguous_with": naming.decision.get("ambiguous_with"),
         "candidates": candidates, "named_effects": list(updated.named_effects),
         "combination": _combination_report(combination),
-        "test_split": {"label": test.label, "before": before_test, "after": after_test, "figures": test.figures},
+        "test_split": {"label": test.label, "file": file_test, "before": before_test, "after": after_test,
+                       "figures": test.figures},
         "prediction": None if prediction is None else prediction.as_dict(),
         "prediction_check": prediction_check, "bound": None if bound is None else bound.as_dict(),
         "updated_model_file": str(updated.path), "updated_model": updated.model,
@@ -403,5 +425,6 @@ def discrepancy_results(setup: DiscrepancySetup, split: DataSplit, baseline: Bas
         "cautions": notes, "significance": options.significance, "options": opts, "seconds": None,
         "_arrays": {"dev_eta": dev.eta, "test_eta": test_data.eta, "oof": _errors_arrays(base_oof),
                     "oof_final": None if final is None else _errors_arrays(final.oof),
-                    "test_before": _errors_arrays(test.baseline), "test_after": _errors_arrays(test.final)},
+                    "test_before": _errors_arrays(test.baseline), "test_after": _errors_arrays(test.final),
+                    "test_file": _errors_arrays(test.file)},
     }

@@ -77,14 +77,18 @@ def _baseline(robot: Robot, name: str) -> ParameterSpec | None:
         lo, hi = sorted((v * (1 - BASELINE_TYPICAL_CHANGE), v * (1 + BASELINE_TYPICAL_CHANGE)))
         blo, bhi = sorted((v / BASELINE_BOUND_FACTOR, v * BASELINE_BOUND_FACTOR))
         return ParameterSpec(name, kind, i, "1/m", blo, bhi, 0.5, (lo, hi),
-                             f"within +-{BASELINE_TYPICAL_CHANGE:.0%} of the robot file's {v:.4g} 1/m")
+                             f"within +-{BASELINE_TYPICAL_CHANGE:.0%} of the robot file's {v:.4g} 1/m",
+                             check=f"tube {i + 1}'s precurvature in the robot file, and the parameters it trades "
+                                   f"off against (its correlations)")
     if i == 0:
         raise ParameterError("calibration parameter 'k_xy_relative_1': tube 1 is the stiffness reference "
                              "(only ratios matter); fit k_xy_relative_2..n")
     v = robot.tubes[i].k_xy / robot.tubes[0].k_xy
     return ParameterSpec(name, kind, i, "-", v / BASELINE_BOUND_FACTOR, v * BASELINE_BOUND_FACTOR, 0.05,
                          (v * (1 - BASELINE_TYPICAL_CHANGE), v * (1 + BASELINE_TYPICAL_CHANGE)),
-                         f"within +-{BASELINE_TYPICAL_CHANGE:.0%} of the robot file's {v:.4g}")
+                         f"within +-{BASELINE_TYPICAL_CHANGE:.0%} of the robot file's {v:.4g}",
+                         check=f"tube {i + 1}'s bending stiffness in the robot file, and the parameters it trades "
+                               f"off against (its correlations)")
 
 
 def parameter(robot: Robot, name: str) -> ParameterSpec:
@@ -172,7 +176,7 @@ def apply_parameters(robot: Robot, names, values) -> Robot:
     Raises
     ------
     ParameterError
-        Unknown name or a value outside the parameter's optimizer bounds.
+        Unknown name or a value outside the parameter's limits (``ParameterSpec.hard``).
     PhysicalParameterError
         A resulting tube is physically impossible.
     """
@@ -182,9 +186,9 @@ def apply_parameters(robot: Robot, names, values) -> Robot:
     effect_names, effect_values = [], []
     for name, v in zip(names, values):
         p = parameter(robot, name)
-        if not (p.lower <= v <= p.upper) or not np.isfinite(v):
+        if not p.within_limit(v):
             raise ParameterError(f"calibration parameter {name!r} = {v!r} {p.unit} is outside "
-                                 f"[{p.lower}, {p.upper}]")
+                                 f"[{p.hard[0]}, {p.hard[1]}]")
         i = p.index
         if p.kind == "precurvature_y":
             tube = tubes[i]

@@ -110,24 +110,28 @@ def _verdict_lines(results: dict) -> list[str]:
     d = results["decision"]
     ts = results["test_split"]
     f = ts["figures"]
-    gain = (f"On the untouched test split ({f['n_samples']} samples, {f['n_units']} units) it changes the mean tip "
-            f"position error {_ci(f['before']['mean_mm'])} -> {_ci(f['after']['mean_mm'])} mm (shrink "
-            f"{_ci(f['shrink']['mean'], 0, 100, ' %')}), the p95 {_ci(f['before']['p95_mm'])} -> "
-            f"{_ci(f['after']['p95_mm'])} mm (shrink {_ci(f['shrink']['p95'], 0, 100, ' %')}) and the maximum "
-            f"{_ci(f['before']['max_mm'])} -> {_ci(f['after']['max_mm'])} mm (shrink "
-            f"{_ci(f['shrink']['max'], 0, 100, ' %')}); {100 * f['confidence']:.0f} % intervals by {f['method']}. "
-            f"Table VIII of Ha et al. 2019 (friction, grid data): mean -{100 * TABLE_VIII['mean']:.0f} %, max "
-            f"-{100 * TABLE_VIII['max']:.0f} %.")
+    cal = f["calibration_shrink"]["mean"]
+    gain = (f"On the untouched test split ({f['n_samples']} samples, {f['n_units']} units) the mean tip position error "
+            f"is {_ci(f['file']['mean_mm'])} mm with the robot file and a registration, {_ci(f['before']['mean_mm'])} mm "
+            f"with the calibrated baseline (shrink {_ci(cal, 0, 100, ' %')}) and {_ci(f['after']['mean_mm'])} mm with "
+            f"{ts['label']} (shrink {_ci(f['shrink']['mean'], 0, 100, ' %')}); the p95 {_fmt(f['before']['p95_mm'])} -> "
+            f"{_fmt(f['after']['p95_mm'])} mm and the maximum {_fmt(f['before']['max_mm'])} -> {_fmt(f['after']['max_mm'])} "
+            f"mm; {100 * f['confidence']:.0f} % intervals: {f['method']}. Table VIII of Ha et al. 2019 (friction, grid "
+            f"data): mean -{100 * TABLE_VIII['mean']:.0f} %, max -{100 * TABLE_VIII['max']:.0f} %.")
     if d["verdict"] == "none":
-        return [f"**No effect named.** {no_effect_sentence(d, results['noise'], results['candidates'])}.", ""]
+        return [f"**No effect named.** {no_effect_sentence(d, results['noise'], results['candidates'])}.", "", gain, ""]
     comb = results.get("combination") or {}
+    caution = "".join(f" **Caution:** {c}." for c in d.get("cautions") or [])
     if d["verdict"] == "ambiguous":
         a, b = results["candidates"][d["named"]]["label"], results["candidates"][d["ambiguous_with"]]["label"]
         head = (f"**Ambiguous: {a} or {b}.** Both lower the cross-validated error, and the data cannot tell them apart "
                 f"within their uncertainty. Data that would separate them: {d['separated_by']}. The updated model "
-                f"file carries {ts['label']} (the better of the two on the development data).")
+                f"file carries {ts['label']} (the lower out-of-fold error of the two).{caution}")
+    elif comb.get("replaced_by"):
+        head = (f"**Named missing effect: {ts['label']}** ({comb['first_label']} was the best alone, but adds nothing "
+                f"once {ts['label']} is fitted with it).{caution}")
     else:
-        head = f"**Named missing effect{'s' if comb.get('named') else ''}: {ts['label']}.**"
+        head = f"**Named missing effect{'s' if comb.get('named') else ''}: {ts['label']}.**{caution}"
     return [head + " " + gain, ""]
 
 
@@ -136,31 +140,36 @@ def _split_lines(results: dict) -> list[str]:
     return ["## Samples", "",
             f"- {results['n_samples']} samples in the {results['frame']} frame; {s['how']}.",
             f"- Folds: {s['n_folds']} of {', '.join(map(str, s['fold_samples']))} samples ({', '.join(map(str, s['fold_units']))} "
-            f"units); each fold is predicted by models fitted on the others (at most {s['max_fit_samples']} samples a fit).",
-            f"- Test split: {s['n_test']} samples (units {', '.join(map(str, s['test_units']))}), evaluated once, "
-            f"after the verdict.", ""]
+            f"units); each fold is predicted by models fitted on the others, from the same cold start as the fit on "
+            f"all development samples (fits use {', '.join(map(str, s['fit_samples']))} samples, at most "
+            f"{s['max_fit_samples']}).",
+            f"- Buffer: {s['buffer_note']}; left out of every fit on each side of the blocks it is judged on "
+            f"(validation and test).",
+            f"- Test split: {s['n_test']} samples in {s['n_test_units']} units (units "
+            f"{', '.join(map(str, s['test_units']))}), evaluated once, after the verdict.", ""]
 
 
 def _candidate_lines(results: dict) -> list[str]:
     yes = (lambda b: "yes" if b else "no")
+    d = results["decision"]
     lines = ["## Candidate effects (cross-validated on the development samples)", "",
              "| effect | fitted parameters (+- standard error) | out-of-fold mean / max [mm] | improvement [mm + deg] "
-             "(95 % interval) | p | Holm | typical, not at bound | eligible |", "|---|---|---|---|---|---|---|---|"]
+             "(95 % interval) | p | Holm | eligible |", "|---|---|---|---|---|---|---|"]
     notes = []
     base = results["baseline"]["out_of_fold"]
     lines.append(f"| baseline (standard, calibrated) | - | {_fmt(base['position_mean_mm'], 3)} / "
-                 f"{_fmt(base['position_max_mm'], 3)} | - | - | - | - | - |")
+                 f"{_fmt(base['position_max_mm'], 3)} | - | - | - | - |")
     for e, c in results["candidates"].items():
         params = "; ".join(_value(r) for r in c["parameter_table"]) or "none (nominal)"
         imp = c["improvement_eq49"]
         if c.get("fit_note"):
             notes.append(f"- {c['label']}: {c['fit_note']}.")
+        if c.get("widened"):
+            notes.append(f"- {c['label']}: widened because a fit ended at them: {'; '.join(c['widened'])}.")
         lines.append(f"| {c['label']} | {params} | {_fmt(c['out_of_fold']['position_mean_mm'], 3)} / "
                      f"{_fmt(c['out_of_fold']['position_max_mm'], 3)} | {_fmt(imp['mean_difference'], 3)} "
-                     f"({_fmt(imp['ci'][0], 3)}..{_fmt(imp['ci'][1], 3)}) | {imp['p_value']:.4f} | "
-                     f"{yes(c.get('improvement_significant'))} | {yes(c['typical'] and not c['at_bound'])} | "
-                     f"{yes(c.get('eligible'))} |")
-    d = results["decision"]
+                     f"({_fmt(imp['ci'][0], 3)}..{_fmt(imp['ci'][1], 3)}) | {imp['p_value']:.2g} | "
+                     f"{yes(c.get('improvement_significant'))} | {yes(c.get('eligible'))} |")
     lines += ["", f"Rule: {d['rule']}.", ""]
     lines += [f"- {n}." for n in d["notes"]]
     if notes:
@@ -168,11 +177,27 @@ def _candidate_lines(results: dict) -> list[str]:
     return lines + [""]
 
 
+def _strength(t) -> str:
+    if t == 0:
+        return "0 (the robot file's tube parameters, a registration only)"
+    return "inf (no prior)" if t is None or not np.isfinite(t) else f"{t:g}"
+
+
 def _baseline_lines(results: dict) -> list[str]:
     b = results["baseline"]
     lines = ["## Baseline parameters", "",
-             f"Fit on the development samples: {b['fit']['message']}" + ("" if b["fit"]["converged"] else
-                                                                        " (**not converged**)") + ".", "",
+             "Prior toward the robot file's tube parameters, strength tau chosen by the out-of-fold error (a relative "
+             f"change tau costs one squared residual of {b['residual_scale']:.3g} mm + deg, the pilot fit's rms):", "",
+             "| tau | out-of-fold mean tip error [mm] | out-of-fold Eq. (49) [mm + deg] | better than the robot file by "
+             "[mm + deg] (95 % interval) |", "|---|---|---|---|"]
+    for c in b["prior_choices"]:
+        cmp = c["against_file"]
+        lines.append(f"| {_strength(c['strength'])}{' (chosen)' if c['strength'] == b['prior_strength'] else ''} | "
+                     f"{1e3 * c['mean_position_m']:.3f} | {c['mean_eq49']:.3f} | "
+                     + ("-" if c["strength"] == 0 else f"{_fmt(cmp['mean_difference'], 3)} ({_fmt(cmp['ci'][0], 3)}.."
+                                                       f"{_fmt(cmp['ci'][1], 3)})") + " |")
+    lines += ["", f"Fit on the development samples: {b['fit']['message']}" + ("" if b["fit"]["converged"] else
+                                                                             " (**not converged**)") + ".", "",
              "| parameter | value +- standard error | robot file | change | typical range |", "|---|---|---|---|---|"]
     for r in b["parameter_table"]:
         ref = "-" if r.get("reference") is None else f"{r['reference']:.4g}"
@@ -208,12 +233,15 @@ def _signature_lines(results: dict) -> list[str]:
 def _noise_lines(results: dict) -> list[str]:
     n = results["noise"]
     t = n.get("test")
-    text = f"Sensor noise: {n['noise']['description']} (source: {n['noise']['source'] or 'none'}); "
-    text += f"out-of-fold baseline rms position error {n['rms_mm']:.3f} mm"
+    text = (f"Sensor noise (development samples): {n['noise']['description']} (source: {n['noise']['source'] or 'none'}); "
+            f"out-of-fold baseline rms position error {n['rms_mm']:.3f} mm")
     if t:
+        dof = "" if t.get("dof_residual") is None else (f", {t['dof_residual']:.0f} and "
+                                                        + ("inf" if t.get("dof_noise") is None else f"{t['dof_noise']:.0f}")
+                                                        + " effective degrees of freedom")
         text += (f" = {n['ratio']:.2f} x the noise; {'consistent' if t['consistent'] else '**not consistent**'} with noise "
                  f"(F = {t['statistic']:.3g}, threshold {t['threshold']:.3g} at false-alarm rate "
-                 f"{t['false_alarm_rate']:g}, allowing {100 * (t['inflation'] - 1):.0f} % for the fitted parameters).")
+                 f"{t['false_alarm_rate']:g}, allowing {100 * (t['inflation'] - 1):.0f} % for the fitted parameters{dof}).")
     return [text, ""]
 
 
@@ -221,17 +249,23 @@ def _combination_lines(results: dict) -> list[str]:
     comb = results.get("combination")
     if not comb:
         return []
-    lines = ["## A second effect on top of the named one", "", f"Rule: {comb['rule']}.", ""]
+    lines = ["## A second effect fitted with the named one", "", f"Rule: {comb['rule']}.", ""]
     if comb["tried"]:
-        lines += ["| pair | fitted parameters | out-of-fold mean [mm] | improvement over the first (95 % interval) | p | "
-                  "named |", "|---|---|---|---|---|---|"]
+        lines += ["| pair (fitted jointly) | fitted parameters | out-of-fold mean [mm] | against the named effect alone "
+                  "[mm + deg] (95 % interval), p | against the second effect alone, p | named |",
+                  "|---|---|---|---|---|---|"]
         for e, c in comb["tried"].items():
-            imp = c["improvement_eq49"]
+            imp, rev = c["improvement_eq49"], c.get("reverse") or {}
             lines.append(f"| {c['label']} | {'; '.join(_value(r) for r in c['parameter_table'])} | "
                          f"{_fmt(c['out_of_fold']['position_mean_mm'], 3)} | {_fmt(imp['mean_difference'], 3)} "
-                         f"({_fmt(imp['ci'][0], 3)}..{_fmt(imp['ci'][1], 3)}) | {imp['p_value']:.4f} | "
+                         f"({_fmt(imp['ci'][0], 3)}..{_fmt(imp['ci'][1], 3)}), {imp['p_value']:.2g} | "
+                         f"{_fmt(rev.get('mean_difference'), 3)}, {rev.get('p_value', float('nan')):.2g} | "
                          f"{'yes' if e == comb['named'] else 'no'} |")
         lines.append("")
+    if comb.get("dropped"):
+        lines += [f"{comb['first_label']} goes to zero when fitted with "
+                  f"{results['candidates'][comb['replaced_by']]['label']}: the pair is no better than the latter alone, "
+                  f"which is the final model.", ""]
     lines += [f"- not tried: {results['candidates'][e]['label']}, because {why}." for e, why in comb["not_tried"].items()]
     return lines + [""]
 
@@ -260,15 +294,17 @@ def _prediction_check_lines(results: dict) -> list[str]:
     pc = results.get("prediction_check")
     if not pc:
         return []
-    lines = [f"Measured prediction error on the test split ({pc['n_samples']} samples; {100 * pc['confidence']:.0f} % "
-             f"block-bootstrap intervals):", "", "| model | mean [mm] | p95 [mm] | max [mm] |", "|---|---|---|---|"]
+    lines = [f"Measured prediction error on the test split ({pc['n_samples']} samples in {pc['n_units']} units; "
+             f"{100 * pc['confidence']:.0f} % intervals: {pc['method']}):", "",
+             "| model | mean [mm] | p95 [mm] | max [mm] |", "|---|---|---|---|"]
     for side, label in (("standard", "standard model, calibrated"), ("history", pc["history_label"])):
         f = pc[side]
-        lines.append(f"| {label} | {_ci(f['mean_mm'])} | {_ci(f['p95_mm'])} | {_ci(f['max_mm'])} |")
-    lines += ["", ("The history-aware prediction beats the standard model in mean and max: planning may aim with it."
-                   if pc["history_beats_standard"] else
-                   "The history-aware prediction does NOT beat the standard model in both mean and max: planning "
-                   "aims with the standard model with this robot file."), ""]
+        lines.append(f"| {label} | {_ci(f['mean_mm'])} | {_fmt(f['p95_mm'])} | {_fmt(f['max_mm'])} |")
+    lines += ["", f"History-aware minus standard, mean: {_ci(pc['difference_mm'])} mm. "
+              + ("Its interval lies below zero: planning may aim with the history-aware prediction."
+                 if pc["history_beats_standard"] else
+                 "Its interval does not lie below zero: planning aims with the standard model with this robot file."),
+              ""]
     return lines
 
 

@@ -14,7 +14,7 @@ from ..io.atomic import atomic_write_text
 from .calibrate import CalibrationResult
 from .options import FIT_VERSION, DiscrepancyOptions
 
-__all__ = ["StageStore", "stage_key", "result_from_dict"]
+__all__ = ["StageStore", "stage_key"]
 
 
 class StageStore:
@@ -52,14 +52,6 @@ def _jsonable(x):
     if isinstance(x, (np.floating, np.integer, np.bool_)):
         return x.item()
     raise TypeError(type(x))
-
-
-def result_from_dict(d: dict) -> CalibrationResult:
-    """A :class:`CalibrationResult` from its :meth:`~CalibrationResult.as_dict` form."""
-    return CalibrationResult(d["model"], tuple(d["parameters"]), np.array(list(d["parameters"].values()), float),
-                             np.array(list(d["initial"].values()), float), dict(d["fixed"]), d["cost"],
-                             d["n_samples"], d["n_failed"], d["evaluations"], d["seconds"], d["message"],
-                             d.get("converged", True))
 
 
 def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:

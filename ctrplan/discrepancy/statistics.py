@@ -1,15 +1,20 @@
-"""Statistics of the discrepancy workflow's decisions: tests and intervals over exchangeable units.
+"""Statistics of the discrepancy workflow's decisions: comparisons of cross-validated models and
+intervals over units.
 
-Samples of a continuous motion are serially correlated, so every test and interval here treats
-a **unit** (a time block, or a configuration group of a grid protocol) as one observation:
+Samples of a continuous motion are serially correlated, and the out-of-fold errors of one fold
+all come from the same fitted model, so neither a sample nor a unit (a time block, or a
+configuration group of a grid protocol) is an independent observation of how two models compare:
 
-- :func:`paired_improvement`: the mean per-unit difference of two models' errors, its standard
-  error and t-interval over units, and a one-sided sign-flip (randomisation) p-value;
-- :func:`holm`: Holm's step-down correction of several p-values (family-wise level);
-- :func:`block_bootstrap`: percentile intervals of statistics of the pooled samples, resampling
-  whole units (``scipy.stats.bootstrap``);
-- :func:`noise_test`: whether a residual's mean square is consistent with the sensor noise,
-  accounting for the fitted parameters and for the noise estimate's own uncertainty (an F test).
+- :func:`cv_comparison`: two models' out-of-fold errors compared over the cross-validation
+  folds by the corrected resampled t test of Nadeau & Bengio (Machine Learning 52:239-281, 2003),
+  in its k-fold form (Bouckaert & Frank, PAKDD 2004, LNCS 3056:3-12): the variance of the mean
+  per-fold difference is inflated by ``n_validation / n_training`` for the training data the
+  folds' fits share, and the t distribution has ``folds - 1`` degrees of freedom;
+- :func:`holm`: Holm's step-down correction of a family of p-values (family-wise level);
+- :func:`ratio_interval`: a ratio of sums over units (a mean error, a relative shrink, a share
+  covered) with a t-interval from the per-unit linearization of the ratio (the ratio estimator of
+  survey sampling with units as clusters; Cochran, *Sampling Techniques*, 3rd ed., Wiley 1977,
+  Sec. 6.4), ``units - 1`` degrees of freedom: the test split's figures.
 """
 
 from __future__ import annotations
@@ -17,72 +22,85 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-__all__ = ["unit_means", "paired_improvement", "holm", "block_bootstrap", "noise_test"]
+__all__ = ["cv_comparison", "holm", "unit_sums", "ratio_interval", "mean_interval", "shrink_interval"]
 
 
-def unit_means(values, units) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of ``values`` (K,) per unit, NaN samples dropped: (means (U,), unit ids (U,))."""
-    values = np.asarray(values, float)
-    units = np.asarray(units)
-    ok = np.isfinite(values)
-    ids, u = np.unique(units[ok], return_inverse=True)
-    u = u.ravel()
-    if not ids.size:
-        return np.zeros(0), ids
-    return np.bincount(u, values[ok], ids.size) / np.bincount(u, minlength=ids.size), ids
+def cv_comparison(err_a, err_b, fold, *, n_train: float, confidence: float = 0.95) -> dict:
+    """Is model b's out-of-fold error lower than model a's? The corrected resampled t test.
 
-
-def paired_improvement(err_base, err_cand, units, *, n_permutations: int = 9999, seed: int = 0,
-                       confidence: float = 0.95) -> dict:
-    """How much a model lowers another's errors, over units.
-
-    Per unit, the mean of ``err_base - err_cand`` (samples where both are finite); the
-    improvement is their mean. Its standard error is their standard deviation over sqrt(U); the
-    interval is the t-interval with U - 1 degrees of freedom; the p-value is one-sided, of the
-    null "no systematic improvement": every unit's difference has a random sign (exact
-    enumeration up to 2^15 units' signs, else ``n_permutations`` random flips).
+    Per fold f the mean ``d_f`` of ``err_a - err_b`` over its validation samples (both finite);
+    the estimate is the mean of the ``F`` fold means, its variance ``(1 / F + n_val / n_train) s^2``
+    with ``s^2`` their sample variance, ``n_val`` the mean number of validation samples of a fold
+    and ``n_train`` the mean number of samples a fold's fit used (Nadeau & Bengio 2003, Eq. (5);
+    the ``1 / F`` term alone would treat folds that share most of their training data as
+    independent, and a test over samples or units would also treat the samples validated by one
+    fitted model as independent). ``t = mean / se`` with ``F - 1`` degrees of freedom.
 
     Parameters
     ----------
-    err_base, err_cand : array-like, shape (K,)
-        Per-sample errors (Eq. (49) residuals, or tip distances).
-    units : array-like of int, shape (K,)
-    n_permutations, seed : int
+    err_a, err_b : array-like, shape (K,)
+        Per-sample out-of-fold errors of the two models (e.g. Eq. (49) residuals [mm + deg], or tip
+        distances [m]); non-finite samples are left out of both.
+    fold : array-like of int, shape (K,)
+        Cross-validation fold of each sample.
+    n_train : float
+        Mean number of samples the folds' fits used.
     confidence : float
+        Level of the two-sided interval.
 
     Returns
     -------
     dict
-        ``mean_difference``, ``se``, ``ci`` ([low, high]), ``p_value``, ``n_units``, ``positive_units``
-        (units where the candidate is better).
+        ``mean_difference`` (a - b: positive when b is better, in the errors' unit), ``se``,
+        ``ci`` ([low, high]), ``t``, ``dof``, ``p_value`` (one-sided: b better than a),
+        ``p_worse`` (one-sided: b worse than a), ``n_folds``, ``positive_folds``,
+        ``fold_differences``, ``correction`` (the variance factor ``1 / F + n_val / n_train``),
+        ``n_samples``, ``method``.
+
+    Raises
+    ------
+    ValueError
+        Arrays of different lengths, or ``n_train`` not positive.
     """
-    a = np.asarray(err_base, float)
-    b = np.asarray(err_cand, float)
+    a = np.asarray(err_a, float)
+    b = np.asarray(err_b, float)
+    f = np.asarray(fold)
+    if not (a.shape == b.shape == f.shape) or a.ndim != 1:
+        raise ValueError(f"err_a, err_b and fold must be 1-D of one length, got {a.shape}, {b.shape}, {f.shape}")
+    if not n_train > 0:
+        raise ValueError(f"n_train must be > 0, got {n_train!r}")
     ok = np.isfinite(a) & np.isfinite(b)
-    d, _ = unit_means((a - b)[ok], np.asarray(units)[ok])
-    n = d.size
-    if n < 2:
-        return {"mean_difference": float(d.mean()) if n else float("nan"), "se": float("nan"),
-                "ci": [float("nan"), float("nan")], "p_value": 1.0, "n_units": int(n),
-                "positive_units": int(np.sum(d > 0))}
-    obs = float(d.mean())
-    se = float(d.std(ddof=1) / np.sqrt(n))
-    half = float(stats.t.ppf(0.5 + confidence / 2, n - 1) * se)
-    if n <= 15:
-        signs = 1.0 - 2.0 * ((np.arange(2 ** n)[:, None] >> np.arange(n)) & 1)
-        null = (signs * d).mean(axis=1)
-        p = float(np.mean(null >= obs - 1e-15 * max(1.0, abs(obs))))
-    else:
-        rng = np.random.default_rng(seed)
-        null = (rng.choice((-1.0, 1.0), size=(n_permutations, n)) * d).mean(axis=1)
-        p = float((1 + np.count_nonzero(null >= obs)) / (1 + n_permutations))
-    return {"mean_difference": obs, "se": se, "ci": [obs - half, obs + half], "p_value": p, "n_units": int(n),
-            "positive_units": int(np.sum(d > 0))}
+    d = (a - b)[ok]
+    ids, inv = np.unique(f[ok], return_inverse=True)
+    counts = np.bincount(inv, minlength=ids.size)
+    means = np.bincount(inv, d, ids.size) / np.maximum(counts, 1)
+    n_folds = int(ids.size)
+    out = {"n_folds": n_folds, "n_samples": int(ok.sum()), "fold_differences": means.tolist(),
+           "positive_folds": int(np.sum(means > 0)),
+           "method": "corrected resampled t test over the cross-validation folds (Nadeau & Bengio 2003)"}
+    if n_folds < 2:
+        return {**out, "mean_difference": float(means.mean()) if n_folds else float("nan"), "se": float("nan"),
+                "ci": [float("nan"), float("nan")], "t": float("nan"), "dof": 0, "p_value": 1.0, "p_worse": 1.0,
+                "correction": float("nan")}
+    mean = float(means.mean())
+    correction = 1.0 / n_folds + float(counts.mean()) / float(n_train)
+    se = float(np.sqrt(correction * means.var(ddof=1)))
+    dof = n_folds - 1
+    if se > 0:
+        t = mean / se
+        p, p_worse = float(stats.t.sf(t, dof)), float(stats.t.cdf(t, dof))
+    else:                                    # every fold the same difference
+        t = float(np.sign(mean)) * np.inf if mean else 0.0
+        p, p_worse = (0.0, 1.0) if mean > 0 else (1.0, 0.0) if mean < 0 else (1.0, 1.0)
+    half = float(stats.t.ppf(0.5 + confidence / 2, dof) * se)
+    return {**out, "mean_difference": mean, "se": se, "ci": [mean - half, mean + half], "t": float(t), "dof": dof,
+            "p_value": p, "p_worse": p_worse, "correction": correction}
 
 
 def holm(p_values: dict, alpha: float) -> dict:
     """Holm's step-down test: which of the hypotheses ``{name: p}`` are rejected at family-wise
-    level ``alpha`` (Holm, Scand. J. Stat. 6:65, 1979)."""
+    level ``alpha`` (Holm, Scand. J. Stat. 6:65, 1979). The family is every key given: a
+    hypothesis that was not tested belongs in it with p = 1."""
     order = sorted(p_values, key=p_values.get)
     m = len(order)
     out, still = {}, True
@@ -92,84 +110,78 @@ def holm(p_values: dict, alpha: float) -> dict:
     return out
 
 
-def block_bootstrap(samples: dict, units, statistic, *, n_resamples: int = 2000, confidence: float = 0.95,
-                    seed: int = 0) -> dict:
-    """Percentile intervals of statistics of pooled samples, resampling whole units.
-
-    Parameters
-    ----------
-    samples : dict of str to ndarray, shape (K,)
-        Per-sample values of each model on the same K samples (resampled together: paired).
-    units : array-like of int, shape (K,)
-    statistic : callable
-        ``statistic({name: values}) -> float``, e.g. the relative fall of the mean error.
-    n_resamples : int
-    confidence : float
-    seed : int
-
-    Returns
-    -------
-    dict
-        ``value`` (on the data), ``ci`` ([low, high]) by ``scipy.stats.bootstrap`` (percentile
-        method) over units, ``n_units``.
-    """
+def unit_sums(values, units) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per unit, the sum of the finite ``values`` (K,) and their count: (sums (U,), counts (U,),
+    unit ids (U,)); units without a finite value are left out."""
+    values = np.asarray(values, float)
     units = np.asarray(units)
-    ids = np.unique(units)
-    members = [np.flatnonzero(units == u) for u in ids]
-    value = float(statistic(samples))
-
-    def stat(picked):
-        rows = np.concatenate([members[int(i)] for i in picked])
-        return float(statistic({k: v[rows] for k, v in samples.items()}))
-
-    if ids.size < 2:
-        return {"value": value, "ci": [float("nan"), float("nan")], "n_units": int(ids.size)}
-    res = stats.bootstrap((np.arange(ids.size),), stat, vectorized=False, n_resamples=n_resamples,
-                          confidence_level=confidence, method="percentile", random_state=np.random.default_rng(seed))
-    return {"value": value, "ci": [float(res.confidence_interval.low), float(res.confidence_interval.high)],
-            "n_units": int(ids.size)}
+    ok = np.isfinite(values)
+    ids, u = np.unique(units[ok], return_inverse=True)
+    u = u.ravel()
+    return np.bincount(u, values[ok], ids.size), np.bincount(u, minlength=ids.size).astype(float), ids
 
 
-def noise_test(mean_square: float, n_values: int, sigma2: float, sigma2_dof: float | None, *, n_parameters: int,
-               n_fitted: int, alpha: float) -> dict:
-    """Is a residual's mean square consistent with sensor noise of variance ``sigma2``?
+def ratio_interval(numerator, denominator, *, confidence: float = 0.95) -> dict:
+    """``R = sum(numerator) / sum(denominator)`` over units, with a t-interval.
 
-    Under the null (the model is right, the residual is noise plus the error of ``n_parameters``
-    values fitted on ``n_fitted`` other samples), an out-of-sample residual component has
-    variance about ``sigma2 (1 + n_parameters / n_fitted)`` (the prediction error of a fitted
-    linear model). The statistic ``F = mean_square / (sigma2 (1 + p / n))`` is then
-    F(``n_values``, ``sigma2_dof``)-distributed, or chi-square / ``n_values`` when the noise is
-    stated (``sigma2_dof`` None); the residual is *not* consistent with noise when F exceeds
-    its ``1 - alpha`` quantile (false-alarm rate ``alpha``).
+    The variance comes from the linearization ``z_u = N_u - R D_u`` of the ratio over the U units:
+    ``se = sqrt(U s_z^2) / sum(D)`` with ``s_z^2`` the sample variance of ``z``, ``U - 1`` degrees
+    of freedom (the ratio estimator with units as clusters; Cochran 1977, Sec. 6.4).
 
     Parameters
     ----------
-    mean_square : float
-        Mean of the squared residual components [m^2].
-    n_values : int
-        Residual components (3 per sample).
-    sigma2 : float
-        Noise variance per component [m^2].
-    sigma2_dof : float or None
-        Degrees of freedom of its estimate (None: stated, exact).
-    n_parameters, n_fitted : int
-    alpha : float
+    numerator, denominator : array-like, shape (U,)
+        Per-unit sums (e.g. of errors [m], and sample counts).
+    confidence : float
 
     Returns
     -------
     dict
-        ``statistic``, ``threshold`` (the 1 - alpha quantile), ``p_value``, ``inflation``
-        (1 + p / n), ``consistent`` (bool), ``false_alarm_rate``.
+        ``value``, ``se``, ``ci`` ([low, high]), ``dof``, ``n_units``; NaN interval with fewer than
+        two units.
     """
-    inflation = 1.0 + n_parameters / max(n_fitted, 1)
-    f = mean_square / (sigma2 * inflation)
-    if sigma2_dof is None:
-        dist = stats.chi2(n_values)
-        threshold = float(dist.ppf(1 - alpha) / n_values)
-        p = float(dist.sf(f * n_values))
-    else:
-        dist = stats.f(n_values, sigma2_dof)
-        threshold = float(dist.ppf(1 - alpha))
-        p = float(dist.sf(f))
-    return {"statistic": float(f), "threshold": threshold, "p_value": p, "inflation": float(inflation),
-            "consistent": bool(f <= threshold), "false_alarm_rate": float(alpha)}
+    num = np.asarray(numerator, float)
+    den = np.asarray(denominator, float)
+    n = num.size
+    if n == 0 or not np.sum(den) > 0:
+        return {"value": float("nan"), "se": float("nan"), "ci": [float("nan"), float("nan")], "dof": 0, "n_units": n}
+    r = float(num.sum() / den.sum())
+    if n < 2:
+        return {"value": r, "se": float("nan"), "ci": [float("nan"), float("nan")], "dof": 0, "n_units": n}
+    z = num - r * den
+    se = float(np.sqrt(n * z.var(ddof=1)) / den.sum())
+    half = float(stats.t.ppf(0.5 + confidence / 2, n - 1) * se)
+    return {"value": r, "se": se, "ci": [r - half, r + half], "dof": n - 1, "n_units": n}
+
+
+def mean_interval(values, units, *, confidence: float = 0.95) -> dict:
+    """The mean of the finite ``values`` (K,) with a t-interval over ``units`` (K,)
+    (:func:`ratio_interval` of per-unit sums and counts)."""
+    s, c, _ = unit_sums(values, units)
+    return ratio_interval(s, c, confidence=confidence)
+
+
+def shrink_interval(before, after, units, *, confidence: float = 0.95) -> dict:
+    """The relative fall of the mean error, ``1 - mean(after) / mean(before)`` over the samples where
+    both are finite, with a t-interval from the per-unit paired sums (:func:`ratio_interval`).
+
+    Parameters
+    ----------
+    before, after : array-like, shape (K,)
+        Per-sample errors of the two models on the same samples [m].
+    units : array-like, shape (K,)
+    confidence : float
+
+    Returns
+    -------
+    dict
+        ``value``, ``se``, ``ci`` ([low, high]), ``dof``, ``n_units``.
+    """
+    b = np.asarray(before, float)
+    a = np.asarray(after, float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    sa, _, ida = unit_sums(a[ok], np.asarray(units)[ok])
+    sb, _, _ = unit_sums(b[ok], np.asarray(units)[ok])
+    r = ratio_interval(sa, sb, confidence=confidence)
+    lo, hi = r["ci"]
+    return {**r, "value": 1.0 - r["value"], "ci": [1.0 - hi, 1.0 - lo]}

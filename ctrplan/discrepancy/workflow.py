@@ -9,8 +9,11 @@ mm + deg of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906):
    of finished stages (:mod:`ctrplan.discrepancy.stages`);
 2. :func:`~ctrplan.discrepancy.split.split_samples`: an untouched test split held back, the rest
    (development) in blocked cross-validation folds;
-3. :func:`~ctrplan.discrepancy.fitting.calibrate_baseline`: the standard model by least squares
-   on Eq. (49), on the development samples and without each fold: out-of-fold errors;
+3. :func:`~ctrplan.discrepancy.fitting.pilot_fit` and
+   :func:`~ctrplan.discrepancy.fitting.calibrate_baseline`: a pilot fit on the development samples
+   chooses the buffer around validation and test blocks and the prior's scale; then the standard
+   model by least squares on Eq. (49) with a prior toward the robot file's tube parameters whose
+   strength the out-of-fold error chooses, on the development samples and without each fold;
 4. :func:`~ctrplan.discrepancy.signatures.diagnose_residuals`: each effect's signature test on the
    baseline's out-of-fold residuals;
 5. :func:`~ctrplan.discrepancy.decision.check_noise`: the sensor noise against them;
@@ -18,7 +21,8 @@ mm + deg of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906):
    :func:`~ctrplan.discrepancy.fitting.fit_candidates`: every candidate fitted by its entry's
    strategy and cross-validated;
 7. :func:`~ctrplan.discrepancy.decision.name_effect`: the verdict (named, ambiguous or none);
-8. :func:`~ctrplan.discrepancy.fitting.fit_second_effect`: a second effect on top of it;
+8. :func:`~ctrplan.discrepancy.fitting.fit_second_effect`: a second effect fitted together with
+   it, compared in both directions;
 9. :func:`~ctrplan.discrepancy.output.evaluate_test_split`: the final model's gain on the test
    split, with intervals (the only use of the test split for a decision's figures);
 10. :func:`~ctrplan.discrepancy.envelope.predict_with_history`: the history-aware prediction and
@@ -41,10 +45,10 @@ import time
 
 from .decision import check_noise, name_effect
 from .envelope import predict_with_history
-from .fitting import calibrate_baseline, fit_candidates, fit_second_effect, refit_contact_baseline
+from .fitting import calibrate_baseline, fit_candidates, fit_second_effect, pilot_fit, refit_contact_baseline
 from .options import DiscrepancyOptions
 from .coverage import check_bound
-from .output import (check_reproduction, discrepancy_results, evaluate_test_split, final_parameters,
+from .output import (check_reproduction, discrepancy_results, evaluate_test_split, final_candidate, final_parameters,
                      validate_prediction, write_updated_model)
 from .setup import load_inputs
 from .signatures import diagnose_residuals
@@ -88,7 +92,8 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     t_start = time.perf_counter()
     setup = load_inputs(robot_path, data_path, out_dir, options)
     split = split_samples(setup, options, echo)
-    baseline = calibrate_baseline(setup, split, options, echo, progress)
+    split, scale, _ = pilot_fit(setup, split, options, echo)
+    baseline = calibrate_baseline(setup, split, options, echo, progress, residual_scale=scale)
     tests = diagnose_residuals(setup, split, baseline, options, echo)
     noise = check_noise(setup, split, baseline, options, echo)
     contact = refit_contact_baseline(setup, split, baseline, options, echo)
@@ -98,8 +103,10 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     test = evaluate_test_split(setup, split, baseline, naming, combination, options, echo, progress)
     prediction = predict_with_history(setup, split, baseline, naming, noise, options, echo, progress)
     prediction_check = validate_prediction(prediction, split, options.seed)
-    bound = (check_bound(setup, split, baseline, test, final_parameters(naming, combination, baseline), noise, options,
-                         echo) if options.bound_samples > 0 else None)
+    final = final_candidate(naming, combination)
+    bound = (check_bound(setup, split, baseline.cv if final is None else final.cv, test.final,
+                         final_parameters(naming, combination, baseline), noise, options, echo)
+             if options.bound_samples > 0 else None)
     updated = write_updated_model(setup, baseline, naming, combination, test, echo, bound=bound,
                                   prediction_check=prediction_check)
     reproduction = check_reproduction(setup, split, updated, test, options, echo)
