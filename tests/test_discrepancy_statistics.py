@@ -1,7 +1,8 @@
 """Statistics of the discrepancy workflow's decisions (ctrplan.discrepancy.statistics and .split),
-checked against what each claims, by simulation independent of the mechanics: the noise test's
-false-alarm rate with fitted parameters, the sign-flip test's size and power, Holm's rule, the
-block bootstrap's coverage on serially correlated data, and the split's bookkeeping."""
+checked against what each claims, by simulation independent of the mechanics: the corrected
+comparison of cross-validated models (size where folds share a fitted model, power, the
+statistic itself), Holm's rule, intervals over units on serially correlated data, and the
+split's bookkeeping and buffers. The noise estimate and test are in test_discrepancy_noise.py."""
 
 from __future__ import annotations
 
@@ -10,8 +11,8 @@ import pytest
 from scipy import stats
 
 from ctrplan.discrepancy.data import MeasuredData
-from ctrplan.discrepancy.split import make_split
-from ctrplan.discrepancy.statistics import block_bootstrap, holm, noise_test, paired_improvement
+from ctrplan.discrepancy.split import choose_buffer, make_split, near_rows, residual_autocorrelation
+from ctrplan.discrepancy.statistics import cv_comparison, holm, mean_interval, ratio_interval, shrink_interval
 from ctrplan.errors import DataFileError
 from ctrplan.history import MotionRecord
 
@@ -22,94 +23,76 @@ def _binomial_upper(rate: float, n: int, z: float = 4.0) -> float:
     return rate + z * np.sqrt(rate * (1 - rate) / n)
 
 
-# --------------------------------------------------------------------------- noise test
-def _noise_only_statistic(rng, n_fit, n_out, p, sigma, n_rest):
-    """One noise-only case: a linear model with ``p`` parameters fitted on ``n_fit`` 3-D samples,
-    its out-of-sample residual over ``n_out`` others, the noise estimated from ``n_rest`` rest
-    pairs like :func:`~ctrplan.discrepancy.decision.estimate_noise` (median of |d|)."""
-    X = rng.normal(size=(3 * n_fit, p))
-    b = rng.normal(size=p)
-    y = X @ b + rng.normal(0, sigma, 3 * n_fit)
-    b_hat = np.linalg.lstsq(X, y, rcond=None)[0]
-    Xo = rng.normal(size=(3 * n_out, p))
-    r = Xo @ b - Xo @ b_hat + rng.normal(0, sigma, 3 * n_out)
-    d = np.linalg.norm(rng.normal(0, sigma, (n_rest, 3)) - rng.normal(0, sigma, (n_rest, 3)), axis=1)
-    rms = np.median(d) / (1.5382 * np.sqrt(2.0)) * np.sqrt(3.0)
-    return float(np.mean(r * r)), (rms ** 2) / 3.0
+# --------------------------------------------------------------------------- cross-validated comparison
+def _fold_errors(rng, n_folds=10, units_per_fold=4, per_unit=10, fit_scatter=0.6, shift=0.0, phi=0.8):
+    """Out-of-fold errors of two models with equal expected error (plus ``shift`` in favour of
+    b) on a motion of ``n_folds x units_per_fold`` blocks: serially correlated noise shared by
+    both, and per fold one fitted offset per model (the fit of a fold errs the same way at
+    every sample it validates). Returns (err_a, err_b, fold, units)."""
+    n_units = n_folds * units_per_fold
+    k = n_units * per_unit
+    eps = np.zeros(k)
+    w = rng.normal(0, np.sqrt(1 - phi ** 2), k)
+    for i in range(1, k):
+        eps[i] = phi * eps[i - 1] + w[i]
+    units = np.repeat(np.arange(n_units), per_unit)
+    fold = units % n_folds                              # blocks dealt round-robin, as GroupKFold does
+    off_a = rng.normal(0, fit_scatter, n_folds)[fold]
+    off_b = rng.normal(0, fit_scatter, n_folds)[fold]
+    err_a = np.abs(eps + off_a + 1.5)
+    err_b = np.abs(eps + off_b + 1.5) - shift
+    return err_a, err_b, fold, units
 
 
-@pytest.mark.parametrize("p, n_fit", [(5, 30), (8, 200)])
-def test_noise_test_false_alarm_rate_holds_with_fitted_parameters(p, n_fit):
-    """Noise only, parameters fitted on few samples (p / n up to 1/6 of the 3 n_fit components):
-    the test calls the residual NOT consistent with noise in at most its stated 5 % of 600 seeds
-    (plus binomial slack). Catches a test that ignores the fitted parameters (rate far above
-    5 % when p / n is large) or the noise estimate's own scatter."""
-    rng = np.random.default_rng(90817)
-    alpha, reps = 0.05, 600
-    rejected = 0
+def test_corrected_cv_comparison_holds_its_size_where_a_test_over_units_does_not():
+    """Two models with the same expected error, each fold validated by one fitted model whose
+    error is shared by all its samples: the corrected resampled t test over folds rejects "b is
+    better" in at most its stated 5 % of 500 seeds (plus binomial slack), where a t test over
+    units (treating the units of one fold as independent) rejects far more often. Catches a
+    comparison that treats samples or units validated by one fit as independent observations."""
+    rng = np.random.default_rng(20031)
+    reps, alpha = 500, 0.05
+    corrected = naive = 0
     for _ in range(reps):
-        ms, s2 = _noise_only_statistic(rng, n_fit, 120, p, 0.5e-3, 60)
-        t = noise_test(ms, 360, s2, 0.6 * 3 * 60, n_parameters=p, n_fitted=3 * n_fit, alpha=alpha)
-        rejected += not t["consistent"]
-    assert rejected / reps <= _binomial_upper(alpha, reps), rejected
+        a, b, fold, units = _fold_errors(rng)
+        out = cv_comparison(a, b, fold, n_train=9 * 40)
+        corrected += out["p_value"] < alpha
+        d = np.array([np.mean((a - b)[units == u]) for u in np.unique(units)])
+        naive += stats.t.sf(d.mean() / (d.std(ddof=1) / np.sqrt(d.size)), d.size - 1) < alpha
+    assert corrected / reps <= _binomial_upper(alpha, reps), corrected
+    assert naive / reps > 2 * alpha, naive
 
 
-def test_noise_test_sees_a_residual_30_percent_above_the_noise():
-    """A residual whose rms is 1.3 times the noise (a missed effect of 0.8 noise rms), 300
-    samples, noise from 200 rest pairs: the test rejects in at least 90 % of seeds. Catches a
-    test made safe by never rejecting."""
-    rng = np.random.default_rng(4471)
-    hits = 0
-    for _ in range(200):
-        r = rng.normal(0, 0.5e-3, 900) + rng.normal(0, 0.5e-3 * np.sqrt(1.3 ** 2 - 1), 900)
-        d = np.linalg.norm(rng.normal(0, 0.5e-3, (200, 3)) - rng.normal(0, 0.5e-3, (200, 3)), axis=1)
-        s2 = (np.median(d) / (1.5382 * np.sqrt(2.0)) * np.sqrt(3.0)) ** 2 / 3.0
-        hits += not noise_test(float(np.mean(r * r)), 900, s2, 0.6 * 600, n_parameters=5, n_fitted=600,
-                               alpha=0.01)["consistent"]
-    assert hits >= 180, hits
-
-
-def test_noise_test_with_a_stated_noise_is_a_chi_square_test():
-    """Stated noise (no estimate): the threshold is chi2(n).ppf(1 - alpha) / n times the inflation."""
-    t = noise_test(1.0, 300, 1.0, None, n_parameters=6, n_fitted=200, alpha=0.01)
-    assert t["inflation"] == pytest.approx(1.03)
-    assert t["threshold"] == pytest.approx(stats.chi2(300).ppf(0.99) / 300)
-    assert t["statistic"] == pytest.approx(1 / 1.03)
-
-
-# --------------------------------------------------------------------------- paired improvement, Holm
-def test_sign_flip_test_has_its_size_and_power_and_its_interval_covers_the_truth():
-    """Differences with no systematic sign (heavy-tailed, unequal unit sizes): p < 0.05 in about 5 %
-    of 400 seeds. A true improvement of 0.3 per unit (noise 1 per sample, 40 samples per unit,
-    20 units) is found in nearly every seed, and the 95 % t-interval covers 0.3 in about 95 %.
-    Catches a p-value computed over samples (serially correlated in real data) instead of units,
-    a one-sided test pointing the wrong way, and an interval of the wrong width."""
-    rng = np.random.default_rng(70321)
-    size_hits, power_hits, covered, reps = 0, 0, 0, 400
+def test_corrected_cv_comparison_finds_a_real_improvement_and_its_interval_covers_it():
+    """b better by 0.4 everywhere (the noise as above, fitted offsets scattering by 0.1 between
+    folds): p < 0.01 in nearly every seed, and the 95 % interval covers the true difference in at
+    least 90 % of seeds.
+    Catches a test made safe by never rejecting, a one-sided test pointing the wrong way, and an
+    interval of the wrong width."""
+    rng = np.random.default_rng(777)
+    hits = covered = 0
+    reps = 300
     for _ in range(reps):
-        units = np.repeat(np.arange(20), rng.integers(20, 60, 20))
-        k = units.size
-        base = rng.standard_t(3, k) + 5.0
-        null = paired_improvement(base, base + rng.standard_t(3, k), units, n_permutations=999,
-                                  seed=int(rng.integers(1 << 30)))
-        size_hits += null["p_value"] < 0.05
-        shift = 0.3 + rng.normal(0, 0.2, 20)[units]              # unit-level scatter of the improvement
-        cand = base - shift + rng.normal(0, 1.0, k)
-        hit = paired_improvement(base, cand, units, n_permutations=999, seed=1)
-        power_hits += hit["p_value"] < 0.05
-        lo, hi = hit["ci"]
-        covered += lo <= 0.3 <= hi
-    assert size_hits / reps <= _binomial_upper(0.05, reps), size_hits
-    assert power_hits / reps >= 0.9, power_hits
-    assert 0.88 <= covered / reps <= 0.99, covered
+        a, b, fold, _ = _fold_errors(rng, shift=0.4, fit_scatter=0.1)
+        out = cv_comparison(a, b, fold, n_train=9 * 40)
+        hits += out["p_value"] < 0.01 and out["p_worse"] > 0.99
+        lo, hi = out["ci"]
+        covered += lo <= 0.4 <= hi
+    assert hits / reps >= 0.95, hits
+    assert covered / reps >= 0.9, covered
 
 
-def test_sign_flip_test_is_exact_for_few_units():
-    """Five units all improving by the same amount: the exact one-sided p-value is 1 / 2^5."""
-    units = np.repeat(np.arange(5), 3)
-    out = paired_improvement(np.full(15, 2.0), np.full(15, 1.0), units)
-    assert out["p_value"] == pytest.approx(1 / 32)
-    assert out["mean_difference"] == pytest.approx(1.0) and out["positive_units"] == 5
+def test_corrected_cv_comparison_is_the_nadeau_bengio_statistic():
+    """Four folds of 10 samples with known per-fold differences 1, 2, 3, 6 and 30 training samples
+    per fit: mean 3, variance (1/4 + 10/30) x var(1, 2, 3, 6), t with 3 degrees of freedom."""
+    d = np.repeat([1.0, 2.0, 3.0, 6.0], 10)
+    fold = np.repeat(np.arange(4), 10)
+    out = cv_comparison(d, np.zeros(40), fold, n_train=30)
+    se = np.sqrt((1 / 4 + 10 / 30) * np.var([1, 2, 3, 6], ddof=1))
+    assert out["mean_difference"] == pytest.approx(3.0)
+    assert out["se"] == pytest.approx(se)
+    assert out["p_value"] == pytest.approx(stats.t.sf(3.0 / se, 3))
+    assert out["dof"] == 3 and out["positive_folds"] == 4
 
 
 def test_holm_steps_down_and_stops_at_the_first_failure():
@@ -122,28 +105,42 @@ def test_holm_steps_down_and_stops_at_the_first_failure():
     assert holm(p, 0.03) == {"a": True, "b": False, "c": False, "d": False}
 
 
-# --------------------------------------------------------------------------- block bootstrap
-def test_block_bootstrap_covers_the_mean_of_serially_correlated_errors():
-    """AR(1) errors (phi = 0.9) in 20 blocks of 50: the interval of the mean over blocks covers the
-    true mean in at least 85 % of 150 seeds, where one that resamples samples would cover far
-    less (its interval is about 4 times too narrow). Catches a bootstrap over samples."""
+# --------------------------------------------------------------------------- intervals over units
+def test_mean_and_shrink_intervals_over_units_cover_on_serially_correlated_errors():
+    """AR(1) errors (phi = 0.9) in 10 test blocks of 30 samples: the t-interval of the mean over
+    units covers the true mean in about 95 % of 400 seeds (at least 88 %), where one over samples
+    would cover far less; the paired interval of the shrink 1 - mean(after) / mean(before) covers
+    the true 30 % as often. Catches intervals over samples and a shrink interval that ignores the
+    pairing."""
     rng = np.random.default_rng(55102)
-    units = np.repeat(np.arange(20), 50)
-    covered = 0
-    naive = 0
-    for _ in range(150):
-        e = np.zeros(1000)
-        w = rng.normal(0, 1, 1000)
-        for i in range(1, 1000):
+    units = np.repeat(np.arange(10), 30)
+    covered = shrunk = naive = 0
+    reps = 400
+    for _ in range(reps):
+        e = np.zeros(300)
+        w = rng.normal(0, 1, 300)
+        for i in range(1, 300):
             e[i] = 0.9 * e[i - 1] + w[i]
-        x = 3.0 + e
-        out = block_bootstrap({"x": x}, units, lambda s: float(np.mean(s["x"])), n_resamples=400,
-                              seed=int(rng.integers(1 << 30)))
-        covered += out["ci"][0] <= 3.0 <= out["ci"][1]
-        half = 1.96 * x.std() / np.sqrt(x.size)
-        naive += abs(x.mean() - 3.0) <= half
-    assert covered / 150 >= 0.85, covered
-    assert naive / 150 < 0.7           # the data really is serially correlated
+        before = 5.0 + e
+        after = 0.7 * before + 0.3 * rng.normal(0, 1, 300)
+        m = mean_interval(before, units)
+        covered += m["ci"][0] <= 5.0 <= m["ci"][1]
+        s = shrink_interval(before, after, units)
+        shrunk += s["ci"][0] <= 0.3 <= s["ci"][1]
+        half = 1.96 * before.std() / np.sqrt(before.size)
+        naive += abs(before.mean() - 5.0) <= half
+    assert 0.88 <= covered / reps <= 0.99, covered
+    assert 0.88 <= shrunk / reps <= 0.99, shrunk
+    assert naive / reps < 0.7           # the data really is serially correlated
+
+
+def test_ratio_interval_of_known_unit_sums():
+    """Three units: sums (2, 4, 9), counts (1, 2, 3): R = 15 / 6 = 2.5; z = (-0.5, -1, 1.5),
+    se = sqrt(3 var(z)) / 6, t with 2 degrees of freedom."""
+    out = ratio_interval(np.array([2.0, 4.0, 9.0]), np.array([1.0, 2.0, 3.0]))
+    se = np.sqrt(3 * np.var([-0.5, -1.0, 1.5], ddof=1)) / 6
+    assert out["value"] == pytest.approx(2.5) and out["se"] == pytest.approx(se)
+    assert out["ci"][1] - out["value"] == pytest.approx(stats.t.ppf(0.975, 2) * se)
 
 
 # --------------------------------------------------------------------------- split
@@ -159,29 +156,73 @@ def _data(k, config_id=None, sequence=None):
                         given_eta=np.zeros((k, 1), int))
 
 
-@pytest.mark.parametrize("k", [300, 1307, 2000])
-def test_time_block_split_never_cuts_a_block_and_uses_each_development_block_once(k):
-    """A continuous motion of k samples: 20 contiguous blocks; the test split is 4 of them spread
-    over the motion (not one end); every development block is validated in exactly one fold and
-    no test sample is in a fold."""
-    s = make_split(_data(k), test_fraction=0.2, n_blocks=20, n_folds=4, seed=31)
-    assert s.unit_kind == "time block" and np.unique(s.units).size == 20
+@pytest.mark.parametrize("k, blocks, block_len", [(300, 30, 10), (500, 50, 10), (1307, 49, 27), (5000, 50, 100)])
+def test_time_block_split_follows_the_record_length_and_never_cuts_a_block(k, blocks, block_len):
+    """A continuous motion of k samples: blocks of at least 10 samples, 50 at most (the last one
+    shorter); at least 8 test
+    units spread over the motion (not one end); 10 folds at most, each with at least 2 development
+    units; every development block validated in exactly one fold, no test sample in a fold.
+    Catches a test split too small for intervals over units and a split that cuts a block."""
+    s = make_split(_data(k), test_fraction=0.2, seed=31)
+    assert s.unit_kind == "time block" and np.unique(s.units).size == blocks and s.block_samples == block_len
     assert np.all(np.diff(s.units) >= 0)                      # contiguous, in time order
     assert np.all(s.fold[s.test_rows] == -1) and np.all(s.fold[~s.test_rows] >= 0)
     for u in np.unique(s.units):
         assert np.unique(s.fold[s.units == u]).size == 1      # a block is never cut
     test_units = np.unique(s.units[s.test_rows])
-    assert test_units.size == 4 and np.ptp(test_units) >= 10  # spread over the motion
-    for kf in range(4):
+    assert test_units.size >= 8 and np.ptp(test_units) >= 0.7 * blocks  # spread over the motion
+    assert s.n_folds == min(10, (blocks - test_units.size) // 2)
+    assert min(np.unique(s.units[s.fold == kf]).size for kf in range(s.n_folds)) >= 2
+    for kf in range(s.n_folds):
         assert not np.any(s.calibration_rows(kf) & s.validation_rows(kf))
         assert np.all(s.calibration_rows(kf) | s.validation_rows(kf) | s.test_rows)
+
+
+def test_buffer_keeps_fits_away_from_the_blocks_they_are_judged_on():
+    """With a buffer of 3 samples, no calibration row of fold k lies within 3 samples of a row
+    validated in fold k or of a test row, and every development row further away is kept.
+    Catches buffers on one side only, across motions, or around the wrong blocks."""
+    s = make_split(_data(500), seed=3).with_buffer(3, "test")
+    data = s.data
+    idx = np.arange(500)
+    for kf in range(s.n_folds):
+        cal = s.calibration_rows(kf)
+        judged = np.flatnonzero(s.validation_rows(kf) | s.test_rows)
+        dist = np.min(np.abs(idx[:, None] - judged[None, :]), axis=1)
+        assert not np.any(cal & (dist <= 3))
+        assert np.all(cal[(dist > 3) & s.dev_rows & (s.fold != kf)])
+    # two motions: a buffer never reaches into the other motion
+    two = _data(40, sequence=np.repeat([0, 1], 20))
+    mask = np.zeros(40, bool)
+    mask[19] = True
+    np.testing.assert_array_equal(np.flatnonzero(near_rows(two, mask, 2)), [17, 18, 19])
+
+
+@pytest.mark.parametrize("phi, expected", [(0.0, 0), (0.5, 3), (0.8, 10)])
+def test_buffer_follows_the_residuals_autocorrelation(phi, expected):
+    """AR(1) residuals: the buffer is the last lag before the autocorrelation falls to 0.1
+    (phi^h <= 0.1 at h = 1, 4, 11 for phi = 0, 0.5, 0.8), within one sample; half a block at
+    most. Catches a buffer that ignores the serial correlation or is not capped."""
+    rng = np.random.default_rng(4)
+    k = 20000
+    r = np.zeros((k, 3))
+    w = rng.normal(size=(k, 3))
+    for i in range(1, k):
+        r[i] = phi * r[i - 1] + np.sqrt(1 - phi ** 2) * w[i]
+    acf = residual_autocorrelation(r, _data(k), 12)
+    assert acf[1] == pytest.approx(phi, abs=0.03)
+    h, _ = choose_buffer(r, _data(k), 40)
+    assert abs(h - expected) <= 1
+    capped, why = choose_buffer(r, _data(k), 12)
+    assert capped == min(h, 6) and (capped < h) == ("half a block" in why)
+    assert choose_buffer(r, _data(k), None)[0] == 0
 
 
 def test_grid_protocol_split_keeps_each_configuration_group_whole():
     """The paper's protocol: four approaches per configuration. A configuration's rows share a
     unit, so none is split between the test split and a fold, or between folds."""
     config = np.repeat(np.arange(60), 4)
-    s = make_split(_data(240, config_id=config, sequence=np.arange(240)), n_blocks=20, seed=5)
+    s = make_split(_data(240, config_id=config, sequence=np.arange(240)), seed=5)
     assert s.unit_kind == "configuration group"
     for c in range(60):
         rows = config == c
@@ -190,4 +231,4 @@ def test_grid_protocol_split_keeps_each_configuration_group_whole():
 
 def test_too_few_units_for_the_split_is_refused_naming_the_file():
     with pytest.raises(DataFileError, match="toy.csv.*too few"):
-        make_split(_data(40), n_blocks=4, n_folds=4)
+        make_split(_data(100))

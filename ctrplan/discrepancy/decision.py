@@ -129,7 +129,7 @@ def check_noise(setup, split: DataSplit, baseline, options: DiscrepancyOptions, 
     """Stage 5: the sensor noise (:func:`~ctrplan.discrepancy.noise.estimate_noise` of the
     development samples, never the test split) against the baseline's out-of-fold residual on the
     development samples (:func:`~ctrplan.discrepancy.noise.noise_test` with the baseline's fitted
-    parameters and the samples each fold's fit used).
+    parameters and the position components, 3 per sample, each fold's fit used).
 
     Returns
     -------
@@ -147,7 +147,7 @@ def check_noise(setup, split: DataSplit, baseline, options: DiscrepancyOptions, 
     if sigma and fin.size:
         n_fit = min(f.n_samples for f in baseline.cv.folds)
         test = noise_test(res, data.rows[oof.rows], data.sequence[oof.rows], estimate,
-                          n_parameters=len(baseline.fit.names), n_fitted=n_fit, alpha=options.significance)
+                          n_parameters=len(baseline.fit.names), n_fitted=3 * n_fit, alpha=options.significance)
     check = NoiseCheck(noise=noise, rms_m=rms, ratio=rms / sigma if sigma else None, test=test)
     echo(f"  sensor noise: {noise['description']}; out-of-fold baseline rms {rms * 1e3:.3f} mm"
          + (f" = {check.ratio:.2f} x noise; consistent with noise: {check.consistent} (F = {test['statistic']:.3g}, "
