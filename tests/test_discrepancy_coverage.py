@@ -9,12 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import Noise, synthesize, write_synth
 from ctrplan.discrepancy.coverage import calibrate_bound, conformal_factor, coverage_figures
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.io.robot_file import load_robot, robot_to_toml
-from ctrplan.mechanics import ModelSettings
 from ctrplan.pipeline import aim_decision
+from reference.synth_reference import synthesize_reference
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
@@ -57,29 +56,32 @@ def test_calibrated_bound_that_misses_its_target_is_failing():
 
 
 # --------------------------------------------------------------------------- through the workflow
-def _run(tmp_path, effects, seed, candidates, file_mu):
-    """Synthesize the Table I pair's trajectory with ``effects``, run the workflow from the pair
-    with friction coefficient ``file_mu`` in its file."""
+def _run(tmp_path, hidden, seed, candidates, file_mu):
+    """Synthesize the Table I pair's trajectory with the ``hidden`` effects (keywords of the
+    independent reference synthesizer), run the workflow from the pair with friction coefficient
+    ``file_mu`` in its file."""
     base = load_robot(PAIR).replace(friction_coefficients=(file_mu,))
     model = tmp_path / "pair.toml"
     model.write_text(robot_to_toml(base, header="Table I tube pair"))
     data = tmp_path / "d.csv"
-    write_synth(data, synthesize(base.replace(friction_coefficients=(0.0,)), effects, protocol="trajectory",
-                                 samples=500, noise=Noise(position_rms=0.5e-3, angle_rms=float(np.deg2rad(0.3))),
-                                 seed=seed, settings=ModelSettings(ds=6e-3)))
-    opts = DiscrepancyOptions(effects=candidates, ds=6e-3, n_permutations=199, max_evaluations=200,
-                              max_calibration_samples=200, friction_search_samples=48, bound_samples=100, n_jobs=1)
+    frame, _ = synthesize_reference(base.replace(friction_coefficients=(0.0,)), samples=500, seed=seed, ds=6e-3,
+                                    noise_position_rms=0.5e-3, **hidden)
+    frame.to_csv(data, index=False)
+    opts = DiscrepancyOptions(effects=candidates, ds=6e-3, n_permutations=199, max_evaluations=200, n_folds=5,
+                              prior_strengths=(0.03, float("inf")), max_calibration_samples=200,
+                              friction_search_samples=48, bound_samples=100, n_jobs=1)
     return run_discrepancy(model, data, tmp_path / "out", opts, echo=lambda s: None, progress=False)
 
 
 def test_friction_measurements_give_a_bound_that_covers_and_a_prediction_planning_uses(tmp_path):
     """Measurements from the friction model (mu = 0.3) plus 0.5 mm noise: friction is named, the
     calibrated bound is not failing on the test split (coverage not short of 90 % by more than
-    its interval or 5 points), the history-aware prediction beats the standard model there in mean and max, and
-    the written robot file makes ``ctrplan plan`` aim with it. Catches a coverage computed on the
+    its interval or 5 points), the history-aware prediction beats the standard model there (the
+    interval of their paired difference lies below zero), and the written robot file makes
+    ``ctrplan plan`` aim with it. Catches a coverage computed on the
     calibration samples, a prediction check that is not written, and a planner gate that refuses
     a validated prediction."""
-    res = _run(tmp_path, {"friction": {"mu_1": 0.3}}, 5021, ("friction",), file_mu=0.0)
+    res = _run(tmp_path, {"mu": (0.3,)}, 5021, ("friction",), file_mu=0.0)
     assert res["named_effect"] == "friction", res["decision"]
     bound = res["bound"]
     assert not bound["failing"] and bound["status"] in ("met", "conservative"), bound["test"]
@@ -100,7 +102,7 @@ def test_measurements_of_another_effect_refuse_the_prediction_and_widen_the_boun
     model; the calibrated bound is wider than the raw one (factor > 1: the friction bound does
     not account for the lag). Catches a gate that trusts any fitted friction model, and a bound
     calibration that can only shrink the bound."""
-    res = _run(tmp_path, {"time_offset": {"time_offset": 0.2}}, 5022, ("friction",), file_mu=0.3)
+    res = _run(tmp_path, {"time_offset": 0.2}, 5022, ("friction",), file_mu=0.3)
     pc = res["prediction_check"]
     robot = load_robot(res["updated_model_file"])
     assert not pc["history_beats_standard"], pc

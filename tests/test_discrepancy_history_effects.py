@@ -104,58 +104,100 @@ def test_vector_signature_finds_a_planted_lag_and_not_noise():
     assert not vector_signature("x", noise, np.zeros((600, 3, 1)), np.arange(600)).testable
 
 
-def _candidate(effect, improvement, r, units, *, atypical=(), at_bound=()):
-    """A fitted candidate as the naming rule sees it: its out-of-fold Eq. (49) residuals ``r`` and
-    their paired improvement over a baseline whose residuals are ``r + improvement``."""
-    from ctrplan.discrepancy.fitting import Candidate, CrossValidated
-    from ctrplan.discrepancy.statistics import paired_improvement
-    from ctrplan.effects import REGISTRY
-
-    cv = CrossValidated(name=effect, model="standard", fit=None, folds=(), params={}, oof=None, r=r)
-    imp = paired_improvement(r + improvement, r, units)
-    return Candidate(effects=(effect,), label=REGISTRY[effect].label, cv=cv, shown={}, units={}, parameters=[],
-                     atypical=list(atypical), at_bound=tuple(at_bound), n_parameters=1, bic=0.0, delta_bic=0.0,
-                     improvement=imp, improvement_position=imp)
-
-
-def _split(units):
+def _split(units, n_folds=10):
+    """A split of development samples only: units dealt round-robin into folds, as GroupKFold does."""
+    from ctrplan.discrepancy.data import MeasuredData
     from ctrplan.discrepancy.split import DataSplit
+    from ctrplan.history import MotionRecord
 
     k = units.size
+    z = np.zeros((k, 2))
+    data = MeasuredData(alpha=z, beta=z, tip=np.zeros((k, 3)), tangent=None, eta=np.zeros((k, 1), int),
+                        translation_last=np.zeros((k, 1), bool), sequence=np.zeros(k, int), config_id=np.arange(k),
+                        subset=None, time=None, file="toy.csv", frame="robot", record=MotionRecord(z, z),
+                        rows=np.arange(k), given_eta=np.zeros((k, 1), int))
     return DataSplit(how="toy", units=units, unit_kind="time block", block_samples=10, test_rows=np.zeros(k, bool),
-                     fold=units % 4, n_folds=4, max_fit_samples=k, seed=0)
+                     fold=units % n_folds, n_folds=n_folds, max_fit_samples=k, seed=0, data=data)
 
 
-def test_naming_rule_passes_over_atypical_and_at_bound_fits_and_says_ambiguous():
-    """Friction with mu_1 = 1.075 (atypical) and an off-plane fit at its bound improve most
-    and are not named, each with the reason; backlash and a time offset that explain the data
-    equally well (out-of-fold residuals within noise of each other) give the verdict
-    "ambiguous" with both listed and what data would separate them; a clearly worse time offset
-    leaves backlash named alone. Catches the old rule (largest improvement wins, silently), a
-    rule that names a fit stopped at a bound, and one that hides a tie."""
+def _candidate(effect, split, r_base, r, *, atypical=(), at_bound=()):
+    """A fitted candidate as the naming rule sees it: its out-of-fold Eq. (49) residuals ``r`` and
+    their comparison with the baseline's ``r_base``."""
+    from ctrplan.discrepancy.evaluation import Errors
+    from ctrplan.discrepancy.fitting import Candidate, CrossValidated, compare
+    from ctrplan.effects import REGISTRY
+
+    oof = Errors(rows=np.arange(r.size), position=r * 1e-3, angle=np.zeros(r.size), residual_base=np.zeros((r.size, 3)),
+                 tip_base=np.zeros((r.size, 3)), seconds=0.0)
+    cv = CrossValidated(name=effect, model="standard", fit=None, folds=(), params={}, oof=oof, r=r, fold=split.fold)
+    imp = compare(split, r_base, r)
+    return Candidate(effects=(effect,), label=REGISTRY[effect].label, cv=cv, shown={}, units={}, parameters=[],
+                     atypical=list(atypical), at_bound=tuple(at_bound), widened=(), n_parameters=1, bic=0.0,
+                     delta_bic=0.0, improvement=imp, improvement_position=imp)
+
+
+def _naming(cands, split):
     from ctrplan.discrepancy.decision import NoiseCheck, name_effect
 
+    noise = NoiseCheck(noise={"position_rms_m": 0.5e-3, "description": "0.5 mm"}, rms_m=2e-3, ratio=4.0, test=None)
+    return name_effect(split, cands, {}, noise, DiscrepancyOptions(), echo=lambda s: None)
+
+
+def test_the_best_explanation_wins_whatever_its_typical_range():
+    """A dead band fitted at 5.9 deg (beyond a geared stage's 0-5 deg) with out-of-fold errors at
+    the noise, and a time offset that also improves on the baseline but is significantly worse
+    than the backlash: backlash is named, with a caution that gives the value, the typical range
+    with its source and what to check; the time offset is never named, and the note says it is
+    significantly worse. Catches a typical range used as a gate (the backlash refused and a time
+    offset named in its place) and a rule that compares candidates only with the baseline."""
     rng = np.random.default_rng(20261)
-    units = np.repeat(np.arange(20), 10)
-    r = rng.normal(1.0, 0.1, 200)
-    mu = {"name": "mu_1", "value": 1.075, "unit": "-", "typical": [0, 0.5], "why": "NiTi"}
-    cands = {"friction": _candidate("friction", 2.0, r, units, atypical=[mu]),
-             "offplane": _candidate("offplane", 2.1, r, units, at_bound=["precurvature_x_2 (upper bound 200 1/m)"]),
-             "backlash": _candidate("backlash", 1.9, r + rng.normal(0, 0.01, 200), units),
-             "time_offset": _candidate("time_offset", 1.9, r + rng.normal(0, 0.01, 200), units)}
-    noise = NoiseCheck(noise={"position_rms_m": 0.5e-3}, rms_m=2e-3, ratio=4.0, test=None)
-    opts = DiscrepancyOptions()
-    naming = name_effect(_split(units), cands, {}, noise, opts, echo=lambda s: None)
+    units = np.repeat(np.arange(40), 10)
+    split = _split(units)
+    scale = 1.0 + 0.5 * rng.random(40)[units]                  # motion-dependent error sizes
+    base = 5.0 * scale + rng.normal(0, 0.2, 400)
+    band = {"name": "backlash_2", "value": float(np.deg2rad(5.9)), "unit": "rad", "typical": [0.0, float(np.deg2rad(5))],
+            "why": "dead band of a geared rotation stage", "check": "the couplings of the drive"}
+    cands = {"backlash": _candidate("backlash", split, base, np.abs(rng.normal(0.5, 0.1, 400)), atypical=[band]),
+             "time_offset": _candidate("time_offset", split, base, 2.2 * scale + rng.normal(0, 0.2, 400))}
+    naming = _naming(cands, split)
     d = naming.decision
+    assert d["verdict"] == "named" and d["named"] == "backlash", d
+    assert naming.candidates["backlash"].eligible and not naming.candidates["time_offset"].eligible
+    assert naming.candidates["time_offset"].improvement_significant
+    assert d["worse_than"]["time_offset"] == ["backlash"]
+    assert len(d["cautions"]) == 1 and "5.9 deg" in d["cautions"][0] and "0..5 deg" in d["cautions"][0]
+    assert "check the couplings of the drive" in d["cautions"][0]
+    assert any("time offset" in n and "significantly higher than drive backlash" in n for n in d["notes"])
+
+
+def test_naming_rule_says_ambiguous_for_a_tie_and_leaves_a_best_fit_at_its_limit_unnamed():
+    """Backlash and a time offset with out-of-fold errors within noise of each other give the
+    verdict "ambiguous" with both listed and what data would separate them; an off-plane fit
+    whose value sits at its limit is not named, and the note says it has the lowest error and
+    why it is not named; a candidate whose improvement is not significant (Holm) is not named.
+    When the fit at its limit explains the data significantly better than the others, nothing
+    is named and the report says it is the best explanation. Catches a rule that hides a tie, one
+    that names a value stopped at a limit, and one that names a rival the best explanation beats."""
+    rng = np.random.default_rng(7)
+    units = np.repeat(np.arange(40), 10)
+    split = _split(units)
+    base = 3.0 + rng.normal(0, 0.3, 400)
+    r = np.abs(rng.normal(1.0, 0.1, 400))
+    limit = ["precurvature_x_2 (upper bound 1000 1/m, its limit)"]
+    cands = {"offplane": _candidate("offplane", split, base, r - 0.003 + rng.normal(0, 0.05, 400), at_bound=limit),
+             "backlash": _candidate("backlash", split, base, r + rng.normal(0, 0.01, 400)),
+             "time_offset": _candidate("time_offset", split, base, r + rng.normal(0, 0.01, 400)),
+             "poisson": _candidate("poisson", split, base, base - 0.01 + rng.normal(0, 0.3, 400))}
+    d = _naming(cands, split).decision
     assert d["verdict"] == "ambiguous", d
     assert {d["named"], d["ambiguous_with"]} == {"backlash", "time_offset"}
     assert "rests after reversals" in d["separated_by"] or "speed" in d["separated_by"], d["separated_by"]
-    assert not naming.candidates["friction"].eligible and not naming.candidates["offplane"].eligible
-    assert any("mu_1 = 1.075" in n and "atypical" in n for n in d["notes"])
-    assert any("at bound, not converged" in n for n in d["notes"])
-    cands["time_offset"] = _candidate("time_offset", 1.0, r + 0.9, units)       # clearly worse out of fold
-    d = name_effect(_split(units), cands, {}, noise, opts, echo=lambda s: None).decision
-    assert d["verdict"] == "named" and d["named"] == "backlash" and d["ambiguous_with"] is None
+    assert d["best"] == "offplane" and any("off-plane" in n and "at its limit" in n for n in d["notes"])
+    assert not d["holm"]["poisson"]
+    cands["offplane"] = _candidate("offplane", split, base, 0.5 * r, at_bound=limit)
+    d = _naming(cands, split).decision
+    assert d["verdict"] == "none" and d["best"] == "offplane", d
+    assert set(d["worse_than"]["backlash"]) == {"offplane"}
 
 
 def test_hull_distance():

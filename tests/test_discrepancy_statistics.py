@@ -44,18 +44,18 @@ def _fold_errors(rng, n_folds=10, units_per_fold=4, per_unit=10, fit_scatter=0.6
     return err_a, err_b, fold, units
 
 
-def test_corrected_cv_comparison_holds_its_size_where_a_test_over_units_does_not():
+def test_fold_comparison_holds_its_size_where_a_test_over_units_does_not():
     """Two models with the same expected error, each fold validated by one fitted model whose
-    error is shared by all its samples: the corrected resampled t test over folds rejects "b is
-    better" in at most its stated 5 % of 500 seeds (plus binomial slack), where a t test over
-    units (treating the units of one fold as independent) rejects far more often. Catches a
-    comparison that treats samples or units validated by one fit as independent observations."""
+    error is shared by all its samples: the t test clustered by fold rejects "b is better" in at
+    most its stated 5 % of 500 seeds (plus binomial slack), where a t test over units (treating
+    the units of one fold as independent) rejects far more often. Catches a comparison that
+    treats samples or units validated by one fit as independent observations."""
     rng = np.random.default_rng(20031)
     reps, alpha = 500, 0.05
     corrected = naive = 0
     for _ in range(reps):
         a, b, fold, units = _fold_errors(rng)
-        out = cv_comparison(a, b, fold, n_train=9 * 40)
+        out = cv_comparison(a, b, fold)
         corrected += out["p_value"] < alpha
         d = np.array([np.mean((a - b)[units == u]) for u in np.unique(units)])
         naive += stats.t.sf(d.mean() / (d.std(ddof=1) / np.sqrt(d.size)), d.size - 1) < alpha
@@ -63,10 +63,10 @@ def test_corrected_cv_comparison_holds_its_size_where_a_test_over_units_does_not
     assert naive / reps > 2 * alpha, naive
 
 
-def test_corrected_cv_comparison_finds_a_real_improvement_and_its_interval_covers_it():
+def test_fold_comparison_finds_a_real_improvement_and_its_interval_covers_it():
     """b better by 0.4 everywhere (the noise as above, fitted offsets scattering by 0.1 between
-    folds): p < 0.01 in nearly every seed, and the 95 % interval covers the true difference in at
-    least 90 % of seeds.
+    folds): p < 0.01 in nearly every seed, and the 95 % interval of the difference covers the
+    true 0.4 in at least 90 % of seeds.
     Catches a test made safe by never rejecting, a one-sided test pointing the wrong way, and an
     interval of the wrong width."""
     rng = np.random.default_rng(777)
@@ -74,7 +74,7 @@ def test_corrected_cv_comparison_finds_a_real_improvement_and_its_interval_cover
     reps = 300
     for _ in range(reps):
         a, b, fold, _ = _fold_errors(rng, shift=0.4, fit_scatter=0.1)
-        out = cv_comparison(a, b, fold, n_train=9 * 40)
+        out = cv_comparison(a, b, fold)
         hits += out["p_value"] < 0.01 and out["p_worse"] > 0.99
         lo, hi = out["ci"]
         covered += lo <= 0.4 <= hi
@@ -82,17 +82,61 @@ def test_corrected_cv_comparison_finds_a_real_improvement_and_its_interval_cover
     assert covered / reps >= 0.9, covered
 
 
-def test_corrected_cv_comparison_is_the_nadeau_bengio_statistic():
-    """Four folds of 10 samples with known per-fold differences 1, 2, 3, 6 and 30 training samples
-    per fit: mean 3, variance (1/4 + 10/30) x var(1, 2, 3, 6), t with 3 degrees of freedom."""
-    d = np.repeat([1.0, 2.0, 3.0, 6.0], 10)
+def test_fold_comparison_is_the_clustered_t_statistic_of_log_ratios():
+    """Four folds of 10 samples, model a's fold means 2, 4, 6, 12 against b's 1: log ratios ln 2,
+    ln 4, ln 6, ln 12, their mean over their standard error, t with 3 degrees of freedom; the
+    mean difference 5 with its t-interval over the folds."""
+    a = np.repeat([2.0, 4.0, 6.0, 12.0], 10)
     fold = np.repeat(np.arange(4), 10)
-    out = cv_comparison(d, np.zeros(40), fold, n_train=30)
-    se = np.sqrt((1 / 4 + 10 / 30) * np.var([1, 2, 3, 6], ddof=1))
-    assert out["mean_difference"] == pytest.approx(3.0)
+    out = cv_comparison(a, np.ones(40), fold)
+    logs = np.log([2.0, 4.0, 6.0, 12.0])
+    se = np.std(logs, ddof=1) / 2.0
+    assert out["ratio"] == pytest.approx(np.exp(logs.mean()))
+    assert out["reduction"] == pytest.approx(1 - np.exp(-logs.mean()))
     assert out["se"] == pytest.approx(se)
-    assert out["p_value"] == pytest.approx(stats.t.sf(3.0 / se, 3))
+    assert out["p_value"] == pytest.approx(stats.t.sf(logs.mean() / se, 3))
+    assert out["mean_difference"] == pytest.approx(5.0)
+    assert out["ci"][1] - 5.0 == pytest.approx(stats.t.ppf(0.975, 3) * np.std([1, 3, 5, 11], ddof=1) / 2.0)
     assert out["dof"] == 3 and out["positive_folds"] == 4
+
+
+def test_fold_comparison_holds_its_size_when_the_folds_share_their_training_data():
+    """Two least-squares models as good as each other (each misses one of two equally strong,
+    slowly varying regressors of the truth), fitted without each of 10 folds of a serially
+    correlated record, so that the folds' fitted coefficients are correlated through the
+    training data they share: "b is better" is rejected at 5 % in at most 5 % of 300 seeds (plus
+    binomial slack), and so is "a is better". Catches a comparison whose level depends on folds
+    being fitted on independent data."""
+    from sklearn.model_selection import GroupKFold
+
+    rng = np.random.default_rng(4242)
+    reps, alpha = 300, 0.05
+    hits = {"b": 0, "a": 0}
+    n, blocks = 1000, 40
+    units = np.arange(n) // (n // blocks)
+    for _ in range(reps):
+        x = np.cumsum(rng.normal(size=(n, 2)), axis=0)
+        x = (x - x.mean(axis=0)) / x.std(axis=0)
+        e = np.zeros(n)
+        w = rng.normal(0, 0.6, n)
+        for i in range(1, n):
+            e[i] = 0.8 * e[i - 1] + w[i]
+        y = x[:, 0] + x[:, 1] + e
+        fold = np.zeros(n, int)
+        for k, (_, val) in enumerate(GroupKFold(10).split(x, groups=units)):
+            fold[val] = k
+        err = np.zeros((2, n))
+        for k in range(10):
+            train, val = fold != k, fold == k
+            for m in (0, 1):
+                X = np.column_stack([np.ones(n), x[:, m]])
+                coef = np.linalg.lstsq(X[train], y[train], rcond=None)[0]
+                err[m, val] = np.abs(y[val] - X[val] @ coef)
+        out = cv_comparison(err[0], err[1], fold)
+        hits["b"] += out["p_value"] < alpha
+        hits["a"] += out["p_worse"] < alpha
+    for side, count in hits.items():
+        assert count / reps <= _binomial_upper(alpha, reps), (side, count)
 
 
 def test_holm_steps_down_and_stops_at_the_first_failure():

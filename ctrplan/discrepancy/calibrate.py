@@ -806,11 +806,11 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
 
     The coarse grid (``coarse`` per parameter) is scored on at most ``search_samples``
     calibration samples made of whole configuration groups; while its best point lies on the
-    grid's upper edge, the grid grows there by a step that doubles each time, up to the
-    parameters' limit (``ParameterSpec.hard``). Then rounds of a 3^m grid with half the previous
-    step around the best point are scored on the whole calibration set: ``refinements`` rounds
-    below the coarse step, and one more for every doubling of the grid's spacing at the best
-    point.
+    upper edge of a parameter's axis, that axis grows by a step that doubles each time, up to the
+    parameter's limit (``ParameterSpec.hard``), and the new points are scored with every value of
+    the other axes. Then rounds of a 3^m grid with half the previous step around the best point
+    are scored on the whole calibration set: ``refinements`` rounds below the coarse step, and
+    one more for every doubling of the grid's spacing at the best point.
 
     Parameters
     ----------
@@ -850,8 +850,7 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
     names = tuple(names)
     m = len(names)
     specs = [parameter(robot, n) for n in names]
-    limit = min(p.hard[1] for p in specs)
-    lowest = max(p.lower for p in specs)
+    lowest = np.array([p.lower for p in specs])
     coarse = np.asarray(sorted(coarse), float)
     groups = np.unique(data.config_id)
     rng = np.random.default_rng(seed)
@@ -880,47 +879,54 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
         best = min(costs, key=costs.get)
         return best, costs[best]
 
-    axis = list(coarse)
+    axes = [list(coarse) for _ in range(m)]
+    limits = [p.hard[1] for p in specs]
     widened = []
     if start is None:
         coarse_costs: dict = {}
         best, cost = scan(obj_sub, grid, coarse_costs)
-        # a best point on the grid's upper edge is no minimum: grow the grid there, by a step that
-        # doubles each time, up to the parameters' limit
-        grow = step0
-        while coarse.size > 1 and max(best) >= axis[-1] - 1e-9 and axis[-1] < limit - 1e-9:
-            axis.append(round(min(limit, axis[-1] + grow), 6))
-            grow *= 2.0
-            new = [q for q in itertools.product(axis, repeat=m) if max(q) >= axis[-1] - 1e-9]
+        # a best point on an axis' upper edge is no minimum: grow that axis by a step that
+        # doubles each time, up to the parameter's limit
+        grow = [step0] * m
+        while coarse.size > 1:
+            edge = [j for j in range(m) if best[j] >= axes[j][-1] - 1e-9 and axes[j][-1] < limits[j] - 1e-9]
+            if not edge:
+                break
+            new = []
+            for j in edge:
+                axes[j].append(round(min(limits[j], axes[j][-1] + grow[j]), 6))
+                grow[j] *= 2.0
+                new += [q for q in itertools.product(*axes) if q[j] >= axes[j][-1] - 1e-9]
             total += len(new)
             best, cost = scan(obj_sub, new, coarse_costs)
-        if axis[-1] > coarse[-1]:
-            widened.append(f"grid of {', '.join(names)} grown to {axis[-1]:g}")
-        trail = [f"coarse grid {axis[0]:g}..{axis[-1]:g} (step {step0:g}" + (", growing" if widened else "")
-                 + f") on {sub.n_samples} samples: best {names} {best} cost {cost:.4g}"]
+        widened = [f"grid of {n} grown to {ax[-1]:g}" for n, ax in zip(names, axes) if ax[-1] > coarse[-1]]
+        trail = [f"coarse grid {coarse[0]:g}..{coarse[-1]:g} (step {step0:g})"
+                 + (f", grown to {', '.join(f'{ax[-1]:g}' for ax in axes)}" if widened else "")
+                 + f" on {sub.n_samples} samples: best {names} {best} cost {cost:.4g}"]
         best_all = np.array(best)
     else:
         best_all = np.asarray(start, float).reshape(m)
         trail = [f"refinements from {tuple(np.round(best_all, 6))}"]
-        while axis[-1] < best_all.max() - 1e-9:
-            axis.append(round(axis[-1] + step0, 6))
     # refine from half the grid's spacing at the best point down to a quarter of the coarse step
-    ax = np.asarray(axis)
-    at = int(np.argmin(np.abs(ax - best_all.max())))
-    spacing = max(step0, float(np.max(np.diff(ax)[max(at - 1, 0):at + 1])) if ax.size > 1 else step0)
+    spacing = step0
+    for j in range(m):
+        ax = np.asarray(axes[j])
+        at = int(np.argmin(np.abs(ax - best_all[j])))
+        if ax.size > 1:
+            spacing = max(spacing, float(np.max(np.diff(ax)[max(at - 1, 0):at + 1])))
     rounds = refinements + int(round(np.log2(spacing / step0)))
     total = done[0] + rounds * (3 ** m)
     step = spacing
     for _ in range(rounds):
         step /= 2.0
-        best, cost = scan(obj_all, (np.clip(best_all + step * np.array(d), lowest, limit)
+        best, cost = scan(obj_all, (np.clip(best_all + step * np.array(d), lowest, limits)
                                     for d in itertools.product((-1, 0, 1), repeat=m)), {})
         best_all = np.array(best)
         trail.append(f"refined (step {step:.4g}) on {data.n_samples} samples: best {best} cost {cost:.4g}")
     r = obj_all.residuals(best_all)
     # the grid could not grow past the parameters' limit and the minimum lies at (or past) it
-    edge = tuple(f"{n} (edge of the grid at its limit {limit:g})" for n, v in zip(names, best_all)
-                 if v >= limit - 1e-9)
+    edge = tuple(f"{n} (edge of the grid at its limit {lim:g})" for n, v, lim in zip(names, best_all, limits)
+                 if v >= lim - 1e-9)
     if edge:
         trail.append("at the edge of the grid, not converged: " + ", ".join(edge))
     se, corr = _uncertainty(obj_all, specs, best_all, clusters) if uncertainty else (None, None)

@@ -39,7 +39,7 @@ from typing import Mapping
 import numpy as np
 
 from ..effects import REGISTRY
-from .fitting import Candidate, candidate_reports, compare, display_value
+from .fitting import Candidate, compare, display_value
 from .noise import estimate_noise, noise_test
 from .options import DiscrepancyOptions
 from .split import DataSplit
@@ -170,7 +170,7 @@ def atypical_caution(label: str, b: dict) -> str:
     side = "more" if b["value"] > hi else "less"
     shown = display_value(b["name"], b["value"], b["unit"])
     check = f": check {b['check']}" if b.get("check") else ""
-    return f"{label} {shown}, {side} than its typical {range_text(b)} ({b['why']}){check}"
+    return f"{label}: {shown}, {side} than its typical {range_text(b)} ({b['why']}){check}"
 
 
 def _separated_by(a: str, b: str) -> str:
@@ -281,8 +281,9 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
                             runner_up={"effect": second, "label": judged[second].label, "difference": diff})
             decision["notes"].append(
                 f"ambiguous: {judged[named].label} and {judged[second].label} explain the data equally well within "
-                f"their uncertainty (out-of-fold Eq. (49) difference {diff['mean_difference']:.3f}, {diff['ci'][0]:.3f}.."
-                f"{diff['ci'][1]:.3f} mm + deg, p = {diff['p_value']:.2g} over {diff['n_folds']} folds); data that "
+                f"their uncertainty (out-of-fold Eq. (49) error of the first lower by {100 * diff['reduction']:.0f} %, "
+                f"{100 * diff['reduction_ci'][0]:.0f}..{100 * diff['reduction_ci'][1]:.0f} %, p = {diff['p_value']:.2g} "
+                f"over {diff['n_folds']} folds); data that "
                 f"would separate them: {decision['separated_by']}")
         decision["cautions"] = [atypical_caution(judged[named].label, b) for b in judged[named].atypical]
         if best != named:
@@ -295,7 +296,9 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     else:
         decision["no_effect_case"] = ("noise" if noise.consistent else
                                       "unexplained" if noise.consistent is False else "unknown")
-        echo("no effect named: " + no_effect_sentence(decision, noise.as_dict(), candidate_reports(judged)))
+        brief = {n: {"label": c.label, "out_of_fold": {"position_mean_mm": 1e3 * float(np.nanmean(c.oof.position))}}
+                 for n, c in judged.items()}
+        echo("no effect named: " + no_effect_sentence(decision, noise.as_dict(), brief))
     for line in decision["notes"]:
         echo(f"  {line}")
     return Naming(candidates=MappingProxyType(judged), decision=decision)

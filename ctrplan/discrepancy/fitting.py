@@ -368,7 +368,7 @@ def contained(a: str, b: str) -> bool:
 def compare(split: DataSplit, err_a, err_b) -> dict:
     """:func:`~ctrplan.discrepancy.statistics.cv_comparison` of two models' out-of-fold errors at
     the development samples (positive: b is better)."""
-    return cv_comparison(err_a, err_b, split.fold[split.dev_rows], n_train=split.n_train(), confidence=CONFIDENCE)
+    return cv_comparison(err_a, err_b, split.fold[split.dev_rows], confidence=CONFIDENCE)
 
 
 def _extend_scan(values: tuple, spec, end: str) -> tuple:
@@ -433,14 +433,17 @@ def scan_fit(robot, data: MeasuredData, model: str, fixed: dict, names, values, 
 
 
 # --------------------------------------------------------------------------- cross-validation
-def _run_fits(jobs: list, n_jobs: int) -> list:
+def _run_fits(jobs: list, n_jobs: int):
     """Run independent fits ``[(callable, args)]``: in joblib (loky) worker processes when there
-    are several and ``n_jobs`` > 1, else here."""
+    are several and ``n_jobs`` > 1, else here; yields the results in order as they finish (so
+    that each is stored before the next ends: an interrupted run loses at most the fits under way)."""
     if n_jobs > 1 and len(jobs) > 1:
         from joblib import Parallel, delayed
 
-        return list(Parallel(n_jobs=min(n_jobs, len(jobs)))(delayed(f)(*a) for f, a in jobs))
-    return [f(*a) for f, a in jobs]
+        yield from Parallel(n_jobs=min(n_jobs, len(jobs)), return_as="generator")(delayed(f)(*a) for f, a in jobs)
+    else:
+        for f, a in jobs:
+            yield f(*a)
 
 
 def _fit_rows(setup, split: DataSplit, k: int | None) -> tuple[MeasuredData, np.ndarray]:
@@ -533,6 +536,7 @@ def pilot_fit(setup: DiscrepancySetup, split: DataSplit, options: DiscrepancyOpt
     stage = setup.stages.load("pilot")
     if stage is not None:
         pilot = CalibrationResult.from_dict(stage)
+        echo("  pilot: reused from an earlier run")
     else:
         echo("calibrating the baseline once on the development samples (pilot: buffer and prior scale) ...")
         pilot = calibrate(setup.robot, data.take(split.fit_rows(data)), "standard", setup.base_names, settings=setup.settings,
@@ -847,7 +851,8 @@ def fit_candidates(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline
         held = error_summary(c.oof.position, c.oof.angle, c.oof.seconds, c.oof.rows.size)
         echo(f"  {entry.label}: " + (", ".join(display_value(n, v, c.units[n]) for n, v in c.shown.items()) or "nominal")
              + f"; out-of-fold mean {held['position_mean_mm']:.3f} mm, max {held['position_max_mm']:.3f} mm; "
-               f"improvement {imp['mean_difference']:.3f} (+- {imp['se']:.3f}) mm + deg, p = {imp['p_value']:.4g}"
+               f"error lower by {100 * imp['reduction']:.0f} % ({100 * imp['reduction_ci'][0]:.0f}.."
+               f"{100 * imp['reduction_ci'][1]:.0f} %; {imp['mean_difference']:.3f} mm + deg), p = {imp['p_value']:.3g}"
              + (f"; {c.fit_note}" if c.fit_note else ""))
     return candidates
 
@@ -995,8 +1000,8 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Basel
         out[e] = replace(c, improvement_significant=ok, significant=ok and not c.at_bound)
         imp, rev = out[e].improvement, out[e].reverse
         echo(f"  {out[e].label}: " + ", ".join(display_value(n, v, out[e].units[n]) for n, v in out[e].shown.items())
-             + f"; against {first.label} alone {imp['mean_difference']:.3f} (+- {imp['se']:.3f}), p = {imp['p_value']:.4g}; "
-               f"against {candidates[e].label} alone {rev['mean_difference']:.3f}, p = {rev['p_value']:.4g}"
+             + f"; error lower than {first.label} alone by {100 * imp['reduction']:.0f} %, p = {imp['p_value']:.3g}; "
+               f"than {candidates[e].label} alone by {100 * rev['reduction']:.0f} %, p = {rev['p_value']:.3g}"
              + ("" if out[e].cv.converged else "; a fit NOT converged"))
     passing = [e for e, c in out.items() if c.significant]
     best = min(passing, key=lambda e: out[e].mean_error) if passing else None

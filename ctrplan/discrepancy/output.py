@@ -19,6 +19,7 @@ from .evaluation import Errors, error_summary, evaluate_rows
 from .fitting import Baseline, Candidate, Combination, CrossValidated, candidate_report, candidate_reports
 from .options import CONFIDENCE, DiscrepancyOptions
 from .parameters import REGISTRATION, apply_parameters, parameter
+from .provenance import provenance
 from .setup import DiscrepancySetup
 from .split import DataSplit
 from .statistics import mean_interval, shrink_interval
@@ -423,6 +424,7 @@ def discrepancy_results(setup: DiscrepancySetup, split: DataSplit, baseline: Bas
         "reproduced": reproduction.reproduced, "reproduced_samples": split.n_test,
         "reproduced_position_mean_mm": float(np.nanmean(reproduction.position) * 1e3),
         "cautions": notes, "significance": options.significance, "options": opts, "seconds": None,
+        "provenance": provenance(options),
         "_arrays": {"dev_eta": dev.eta, "test_eta": test_data.eta, "oof": _errors_arrays(base_oof),
                     "oof_final": None if final is None else _errors_arrays(final.oof),
                     "test_before": _errors_arrays(test.baseline), "test_after": _errors_arrays(test.final),

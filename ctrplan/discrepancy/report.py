@@ -31,6 +31,12 @@ def _ci(d, nd=2, scale=1.0, unit=""):
     return f"{_fmt(d['value'] * scale, nd)}{unit} ({_fmt(lo * scale, nd)}..{_fmt(hi * scale, nd)})"
 
 
+def _pct(cmp: dict) -> str:
+    """The reduction of a :func:`~ctrplan.discrepancy.statistics.cv_comparison` in % with its interval."""
+    lo, hi = cmp["reduction_ci"]
+    return f"{_fmt(100 * cmp['reduction'], 0)} % ({_fmt(100 * lo, 0)}..{_fmt(100 * hi, 0)} %)"
+
+
 def _value(row) -> str:
     """A parameter row of a parameter table, with its standard error, in report units."""
     from .fitting import display_value
@@ -153,8 +159,8 @@ def _candidate_lines(results: dict) -> list[str]:
     yes = (lambda b: "yes" if b else "no")
     d = results["decision"]
     lines = ["## Candidate effects (cross-validated on the development samples)", "",
-             "| effect | fitted parameters (+- standard error) | out-of-fold mean / max [mm] | improvement [mm + deg] "
-             "(95 % interval) | p | Holm | eligible |", "|---|---|---|---|---|---|---|"]
+             "| effect | fitted parameters (+- standard error) | out-of-fold mean / max [mm] | error lower than the "
+             "baseline's by (95 % interval) | p | Holm | eligible |", "|---|---|---|---|---|---|---|"]
     notes = []
     base = results["baseline"]["out_of_fold"]
     lines.append(f"| baseline (standard, calibrated) | - | {_fmt(base['position_mean_mm'], 3)} / "
@@ -167,8 +173,7 @@ def _candidate_lines(results: dict) -> list[str]:
         if c.get("widened"):
             notes.append(f"- {c['label']}: widened because a fit ended at them: {'; '.join(c['widened'])}.")
         lines.append(f"| {c['label']} | {params} | {_fmt(c['out_of_fold']['position_mean_mm'], 3)} / "
-                     f"{_fmt(c['out_of_fold']['position_max_mm'], 3)} | {_fmt(imp['mean_difference'], 3)} "
-                     f"({_fmt(imp['ci'][0], 3)}..{_fmt(imp['ci'][1], 3)}) | {imp['p_value']:.2g} | "
+                     f"{_fmt(c['out_of_fold']['position_max_mm'], 3)} | {_pct(imp)} | {imp['p_value']:.2g} | "
                      f"{yes(c.get('improvement_significant'))} | {yes(c.get('eligible'))} |")
     lines += ["", f"Rule: {d['rule']}.", ""]
     lines += [f"- {n}." for n in d["notes"]]
@@ -188,14 +193,13 @@ def _baseline_lines(results: dict) -> list[str]:
     lines = ["## Baseline parameters", "",
              "Prior toward the robot file's tube parameters, strength tau chosen by the out-of-fold error (a relative "
              f"change tau costs one squared residual of {b['residual_scale']:.3g} mm + deg, the pilot fit's rms):", "",
-             "| tau | out-of-fold mean tip error [mm] | out-of-fold Eq. (49) [mm + deg] | better than the robot file by "
-             "[mm + deg] (95 % interval) |", "|---|---|---|---|"]
+             "| tau | out-of-fold mean tip error [mm] | out-of-fold Eq. (49) [mm + deg] | error lower than the robot "
+             "file's by (95 % interval), p |", "|---|---|---|---|"]
     for c in b["prior_choices"]:
         cmp = c["against_file"]
         lines.append(f"| {_strength(c['strength'])}{' (chosen)' if c['strength'] == b['prior_strength'] else ''} | "
                      f"{1e3 * c['mean_position_m']:.3f} | {c['mean_eq49']:.3f} | "
-                     + ("-" if c["strength"] == 0 else f"{_fmt(cmp['mean_difference'], 3)} ({_fmt(cmp['ci'][0], 3)}.."
-                                                       f"{_fmt(cmp['ci'][1], 3)})") + " |")
+                     + ("-" if c["strength"] == 0 else f"{_pct(cmp)}, {cmp['p_value']:.2g}") + " |")
     lines += ["", f"Fit on the development samples: {b['fit']['message']}" + ("" if b["fit"]["converged"] else
                                                                              " (**not converged**)") + ".", "",
              "| parameter | value +- standard error | robot file | change | typical range |", "|---|---|---|---|---|"]
@@ -251,15 +255,14 @@ def _combination_lines(results: dict) -> list[str]:
         return []
     lines = ["## A second effect fitted with the named one", "", f"Rule: {comb['rule']}.", ""]
     if comb["tried"]:
-        lines += ["| pair (fitted jointly) | fitted parameters | out-of-fold mean [mm] | against the named effect alone "
-                  "[mm + deg] (95 % interval), p | against the second effect alone, p | named |",
+        lines += ["| pair (fitted jointly) | fitted parameters | out-of-fold mean [mm] | error lower than the named "
+                  "effect's alone by (95 % interval), p | than the second effect's alone by, p | named |",
                   "|---|---|---|---|---|---|"]
         for e, c in comb["tried"].items():
             imp, rev = c["improvement_eq49"], c.get("reverse") or {}
             lines.append(f"| {c['label']} | {'; '.join(_value(r) for r in c['parameter_table'])} | "
-                         f"{_fmt(c['out_of_fold']['position_mean_mm'], 3)} | {_fmt(imp['mean_difference'], 3)} "
-                         f"({_fmt(imp['ci'][0], 3)}..{_fmt(imp['ci'][1], 3)}), {imp['p_value']:.2g} | "
-                         f"{_fmt(rev.get('mean_difference'), 3)}, {rev.get('p_value', float('nan')):.2g} | "
+                         f"{_fmt(c['out_of_fold']['position_mean_mm'], 3)} | {_pct(imp)}, {imp['p_value']:.2g} | "
+                         f"{_pct(rev) if rev else '-'}, {rev.get('p_value', float('nan')):.2g} | "
                          f"{'yes' if e == comb['named'] else 'no'} |")
         lines.append("")
     if comb.get("dropped"):

@@ -325,10 +325,6 @@ class DataSplit:
         """The calibration rows a fit uses (at most ``max_fit_samples``), shape (K,) bool."""
         return subsample(data, self.calibration_rows(k), self.max_fit_samples, self.seed)
 
-    def n_train(self) -> float:
-        """Mean number of samples the fold fits use (:func:`~ctrplan.discrepancy.statistics.cv_comparison`)."""
-        return float(np.mean([self.fit_rows(self.data, k).sum() for k in range(self.n_folds)]))
-
     def as_dict(self) -> dict:
         """The report's account of the samples: units, sizes, folds, buffer and the test split."""
         dev = self.dev_rows

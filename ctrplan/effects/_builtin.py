@@ -172,7 +172,7 @@ def _friction_parameters(robot):
                                "in a rotation drive) may cause, not a material property",
                                check="the tube surfaces (wear, lubrication) and whether another hysteretic effect, "
                                      "such as backlash or lag in a rotation drive, is present",
-                               vanishes_at_lower=True, limit=(0.0, 5.0))
+                               vanishes_at_lower=True)
                  for k in range(robot.n_tubes - 1))
 
 
