@@ -27,7 +27,8 @@ DOC = ROOT / "docs" / "discrepancy.md"
 RESULTS = ROOT / "benchmarks" / "results"
 SOURCES = {"sweep-table": RESULTS / "discrepancy-sweep.json", "ha-table": RESULTS / "ha-trajectory-discrepancy.json",
            "robot-files-table": RESULTS / "ha-robot-files.json"}
-OUTCOMES = ("named", "ambiguous with truth", "named wrong", "ambiguous without truth", "nothing")
+OUTCOMES = ("right", "partly right", "ambiguous with truth", "wrong", "nothing")
+KIND_LABELS = {"control": "controls (no effect)", "one": "one effect", "two": "two effects"}
 
 
 def _value(name: str, value: float, unit: str) -> str:
@@ -45,58 +46,114 @@ def _pm(value: float, stderr, unit: str) -> str:
     return _value("", value, unit) + f" +- {1.96 * stderr * scale:.2g}"
 
 
+def _ci90(ci) -> str:
+    return "-" if ci[0] is None else f"{100 * ci[0]:.0f}..{100 * ci[1]:.0f} %"
+
+
 def sweep_table(res: dict) -> str:
-    """Confusion matrix and per-case sizes of the sweep."""
-    m, s = res["matrix"], res["summary"]
-    lines = ["| truth | " + " | ".join(OUTCOMES) + " |", "|---|" + "---|" * len(OUTCOMES)]
-    for t, row in m.items():
-        lines.append(f"| {t} | " + " | ".join(str(row[o]) for o in OUTCOMES) + " |")
-    lines += ["", f"Truth named or in the ambiguous pair: {s['truth_found']} of {s['cases_with_effect']} cases with an "
-                  f"effect; wrong names (including any name on noise only): {s['wrong_names']}.", "",
-              "| truth | seed | hidden [SI] | verdict | fitted [SI] |", "|---|---|---|---|---|"]
+    """Outcome rates with Clopper-Pearson intervals, by robot, kind and truth; the cases."""
+    s = res["summary"]
+    n = s["cases"]
+    lines = [f"{n} cases ({', '.join(f'{k}: {sum(c[k2] for k2 in OUTCOMES)}' for k, c in s['by_robot'].items())}); "
+             f"cost {res['case_seconds']['total'] / 3600:.1f} h of cases (median {res['case_seconds']['median']:.0f} s "
+             f"a case).", "",
+             "| cases | " + " | ".join(OUTCOMES) + " |", "|---|" + "---|" * len(OUTCOMES)]
+    lines.append("| all | " + " | ".join(str(s["by_outcome"][o]) for o in OUTCOMES) + " |")
+    for k, row in s["by_kind"].items():
+        lines.append(f"| {KIND_LABELS[k]} | " + " | ".join(str(row[o]) for o in OUTCOMES) + " |")
+    for r, row in s["by_robot"].items():
+        lines.append(f"| {r} | " + " | ".join(str(row[o]) for o in OUTCOMES) + " |")
+    for t, row in s["by_truth"].items():
+        if sum(row.values()):
+            lines.append(f"| one effect: {t} |" if t != "none" else "| control |")
+            lines[-1] += " " + " | ".join(str(row[o]) for o in OUTCOMES) + " |"
+    lines += ["", f"Wrong names (a named effect not in the truth, an ambiguous pair without it, any name on a "
+                  f"control): {s['wrong']} of {n} ({100 * s['wrong_rate']:.1f} %, 90 % Clopper-Pearson interval "
+                  f"{_ci90(s['wrong_ci90'])}; target below 5 %, upper end below 15 %). Truth named or in the "
+                  f"ambiguous pair where every hidden effect is above 30 % of its typical range: {s['clear_found']} of "
+                  f"{s['clear_cases']} ({100 * (s['clear_found_rate'] or 0):.0f} %, {_ci90(s['clear_found_ci90'])}; "
+                  f"target at least 85 %).", "",
+              "| seed | robot | truth (size, share of the typical range) | noise | verdict | fitted |",
+              "|---|---|---|---|---|---|"]
     for c in res["cases"]:
-        hidden = "; ".join(f"{k} = {v:.4g}" for e in c["hidden"].values() for k, v in e.items()) or "-"
-        fitted = "; ".join(f"{k} = {v:.4g}" for e in c["fitted"].values() for k, v in e.items()) or "-"
-        verdict = c["verdict"] + ("" if c["verdict"] == "none" else f": {c['named']}")
-        if c["ambiguous_with"]:
-            verdict += f" or {c['ambiguous_with']}"
-        lines.append(f"| {c['truth']} | {c['seed']} | {hidden} | {verdict} | {fitted} |")
+        hidden = "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["hidden"].values() for k, v in e.items()) or "-"
+        shares = ", ".join(f"{e} {100 * v:.0f} %" for e, v in c["size_shares"].items())
+        noise = "white" if not c["ar1"] else f"AR(1) {c['ar1']:g}"
+        verdict = c["outcome"] + ": " + (c["verdict"] if c["verdict"] == "none" else
+                                         ", ".join(c["named_effects"]) + (f" or {c['ambiguous_with']}"
+                                                                          if c["ambiguous_with"] else ""))
+        if c.get("cautions"):
+            verdict += " (caution)"
+        fitted = "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["fitted"].values() for k, v in e.items()) or "-"
+        lines.append(f"| {c['seed']} | {c['robot']} | {hidden}" + (f" ({shares})" if shares else "")
+                     + f" | {noise} | {verdict} | {fitted} |")
     return "\n".join(lines)
 
 
+def _unit(name: str) -> str:
+    if name.startswith(("backlash", "friction_angle", "registration_r")):
+        return "rad"
+    if name == "time_offset":
+        return "s"
+    if name.startswith("precurvature"):
+        return "1/m"
+    return "-"
+
+
 def ha_table(res: dict) -> str:
-    """Verdict, candidates, test-split shrink next to Table VIII, noise, baseline changes."""
-    verdict = res["verdict"] + ("" if res["verdict"] == "none" else f": {res['named']}")
+    """Verdict, candidates, baseline prior, test-split figures next to Table VIII, noise, bound."""
+    verdict = res["verdict"] + ("" if res["verdict"] == "none" else f": {', '.join(res['named_effects'])}")
     if res["ambiguous_with"]:
         verdict += f" or {res['ambiguous_with']}"
     lines = [f"Data: {res['n_samples']} samples ({res['data_file']}, SHA-256 {res['data_sha256'][:12]}...); "
-             f"{res['split']}.", "", f"**Verdict: {verdict}.**"]
+             f"{res['split']}; buffer {res['buffer']}.", "", f"**Verdict: {verdict}.**"]
     if res.get("separated_by") and res["ambiguous_with"]:
         lines.append(f" Data that would separate them: {res['separated_by']}.")
+    lines += [f"- caution: {c}" for c in res.get("decision_cautions") or []]
     n = res["noise"]
-    lines += ["", f"Noise: {n['description']}; out-of-fold baseline rms {n['out_of_fold_rms_mm']:.3f} mm; consistent "
-                  f"with noise: {n['consistent']}" + (f" (F = {n['statistic']:.3g}, threshold {n['threshold']:.3g})"
-                                                      if n["statistic"] is not None else "") + ".", "",
-              "| candidate | fitted (95 % interval) | out-of-fold mean / max [mm] | improvement [mm + deg] (95 % CI) | p | "
-              "eligible |", "|---|---|---|---|---|---|"]
+    lines += ["", f"Noise (development samples): {n['description']}; out-of-fold baseline rms "
+                  f"{n['out_of_fold_rms_mm']:.3f} mm; consistent with noise: {n['consistent']}"
+              + (f" (F = {n['statistic']:.3g}, threshold {n['threshold']:.3g})" if n["statistic"] is not None else "")
+              + ".", ""]
+    b = res["baseline"]
+    lines += ["Baseline prior strength tau (out-of-fold mean tip error): " + ", ".join(
+        f"{_tau(c['strength'])} {1e3 * c['mean_position_m']:.2f} mm" for c in b["prior_choices"])
+              + f"; chosen: {_strength(b['prior_strength'])}.",
+              "", "| candidate | fitted (95 % interval) | out-of-fold mean / max [mm] | error lower than the baseline's by "
+                  "(95 % interval) | p | Holm | eligible |", "|---|---|---|---|---|---|---|"]
     for e, c in res["candidates"].items():
         params = "; ".join(f"{k} = {_pm(p['value'], p['stderr'], p['unit'])}"
                            + (" (atypical)" if not p["in_typical_range"] else "")
-                           + (" (at bound)" if p["at_bound"] else "") for k, p in c["parameters"].items()) or "nominal"
-        ci = c["improvement_ci"]
+                           + (" (at its limit)" if p["at_bound"] else "") for k, p in c["parameters"].items()) or "nominal"
+        lo, hi = c["reduction_ci"]
         lines.append(f"| {c['label']} | {params} | {c['out_of_fold_mean_mm']:.2f} / {c['out_of_fold_max_mm']:.2f} | "
-                     f"{c['improvement_mm_deg']:.3f} ({ci[0]:.3f}..{ci[1]:.3f}) | {c['p_value']:.4f} | "
-                     f"{'yes' if c['eligible'] else 'no'} |")
+                     f"{100 * c['reduction']:.0f} % ({100 * lo:.0f}..{100 * hi:.0f} %) | {c['p_value']:.2g} | "
+                     f"{'yes' if c['holm'] else 'no'} | {'yes' if c['eligible'] else 'no'} |")
+    if res.get("pairs"):
+        lines += ["", "| pair (fitted jointly) | out-of-fold mean [mm] | error lower than the named effect's by, p | "
+                      "the named effect still adds (p) | named |", "|---|---|---|---|---|"]
+        for e, p in res["pairs"].items():
+            lines.append(f"| {p['label']} | {p['out_of_fold_mean_mm']:.2f} | {100 * p['reduction']:.0f} %, "
+                         f"{p['p_value']:.2g} | {p['reverse_p_value']:.2g} | {'yes' if e in res['named_effects'] else 'no'} |")
     t = res["test_split"]
     lines += ["", f"Test split ({t['n_samples']} samples in {t['n_units']} units, untouched until the end; "
-                  f"{t['label']}):", "",
-              "| tip position error | before [mm] | after [mm] | shrink (95 % interval) | Ha et al. Table VIII (grid data) |",
-              "|---|---|---|---|---|"]
-    for stat, paper in (("mean", res["table_viii_shrink"]["mean"]), ("p95", None), ("max", res["table_viii_shrink"]["max"])):
-        b, a, s = t["before"][f"{stat}_mm"], t["after"][f"{stat}_mm"], t["shrink"][stat]
-        lines.append(f"| {stat} | {b['value']:.2f} ({b['ci'][0]:.2f}..{b['ci'][1]:.2f}) | {a['value']:.2f} "
-                     f"({a['ci'][0]:.2f}..{a['ci'][1]:.2f}) | {100 * s['value']:.0f} % ({100 * s['ci'][0]:.0f}.."
-                     f"{100 * s['ci'][1]:.0f} %) | {'-' if paper is None else f'{100 * paper:.0f} %'} |")
+                  f"{t['label']}; {t['method']}):", "",
+              "| tip position error | robot file with a registration [mm] | calibrated baseline [mm] | final model [mm] "
+              "| shrink of the final model (95 % interval) | Ha et al. Table VIII (grid data) |",
+              "|---|---|---|---|---|---|"]
+    m = lambda d: f"{d['value']:.2f} ({d['ci'][0]:.2f}..{d['ci'][1]:.2f})"
+    s = t["shrink"]["mean"]
+    lines.append(f"| mean | {m(t['file']['mean_mm'])} | {m(t['before']['mean_mm'])} | {m(t['after']['mean_mm'])} | "
+                 f"{100 * s['value']:.0f} % ({100 * s['ci'][0]:.0f}..{100 * s['ci'][1]:.0f} %) | "
+                 f"{100 * res['table_viii_shrink']['mean']:.0f} % |")
+    for stat in ("p95", "max"):
+        paper = res["table_viii_shrink"].get(stat)
+        lines.append(f"| {stat} | {t['file'][f'{stat}_mm']:.2f} | {t['before'][f'{stat}_mm']:.2f} | "
+                     f"{t['after'][f'{stat}_mm']:.2f} | {100 * (1 - t['after'][f'{stat}_mm'] / t['before'][f'{stat}_mm']):.0f} % | "
+                     f"{'-' if paper is None else f'{100 * paper:.0f} %'} |")
+    c = t["calibration_shrink"]["mean"]
+    lines += ["", f"The calibrated baseline against the robot file with only a registration: mean lower by "
+                  f"{100 * c['value']:.0f} % ({100 * c['ci'][0]:.0f}..{100 * c['ci'][1]:.0f} %)."]
     changed = [p for p in res["baseline"]["parameters"] if p.get("relative_change") is not None]
     if changed:
         lines += ["", "Baseline parameters (change from the robot file): " + "; ".join(
@@ -109,22 +166,33 @@ def ha_table(res: dict) -> str:
             lines.append(f"| {r['label']} | {r['mean_mm']:.2f} / {r['p95_mm']:.2f} / {r['max_mm']:.2f} |")
     pc = res.get("prediction_check")
     if pc:
-        lines += ["", "The history-aware prediction " + ("beats" if pc["history_beats_standard"] else "does not beat")
-                  + " the standard model in mean and max on the test split: the written robot file's "
-                  "[prediction_validation] " + ("lets" if pc["history_beats_standard"] else "does not let")
-                  + " `ctrplan plan` aim with it."]
+        d = pc["difference_mm"]
+        lines += ["", f"History-aware minus standard, mean: {d['value']:+.2f} mm ({d['ci'][0]:+.2f}..{d['ci'][1]:+.2f} "
+                      f"mm over {pc['n_units']} units): it " + ("beats" if pc["history_beats_standard"] else
+                                                               "does not beat")
+                  + " the standard model; the written robot file's [prediction_validation] "
+                  + ("lets" if pc["history_beats_standard"] else "does not let") + " `ctrplan plan` aim with it."]
     b = res.get("bound")
     if b:
         raw, cal = b["raw_test"], b["test"]
         lines += ["", f"Friction bound of the written robot file on the test split ({raw['n']} samples): "
-                      f"{100 * raw['covered']:.0f} % ({100 * raw['ci'][0]:.0f}..{100 * raw['ci'][1]:.0f} %) of the measured "
-                      f"tips within b + {b['margin_mm']:.2f} mm, median e / (b + m) {raw['ratio']['median']:.2f}; calibrated "
-                      f"bound {b['factor']:.3g} x (b + m) (target {100 * b['target']:.0f} %): "
-                      f"{100 * cal['covered']:.0f} % ({100 * cal['ci'][0]:.0f}..{100 * cal['ci'][1]:.0f} %), {b['status']}, "
-                      f"median size {cal['bound_median_m'] * 1e3:.2f} mm."]
+                      f"{100 * raw['covered']:.0f} % ({_ci90(raw['ci'])}) of the measured tips within b + "
+                      f"{b['margin_mm']:.2f} mm, median e / (b + m) {raw['ratio']['median']:.2f}; calibrated bound "
+                      f"{b['factor']:.3g} x (b + m) (target {100 * b['target']:.0f} %): {100 * cal['covered']:.0f} % "
+                      f"({_ci90(cal['ci'])}), {b['status']}, median size {cal['bound_median_m'] * 1e3:.2f} mm."]
     if res["cautions"]:
         lines += [""] + [f"- caution: {c}" for c in res["cautions"]]
     return "\n".join(lines)
+
+
+def _tau(t) -> str:
+    return "file" if t == 0 else "none" if t is None or t == float("inf") else f"{t:g}"
+
+
+def _strength(t) -> str:
+    if t == 0:
+        return "the robot file's tube parameters with only a registration"
+    return "no prior" if t is None or t == float("inf") else f"tau = {t:g}"
 
 
 def robot_files_table(res: dict) -> str:

@@ -14,7 +14,9 @@ registration); the friction bound of every row (:func:`ctrplan.mechanics.evaluat
 are reported on the other 1007 rows: mean / p95 / max of the standard model and of the prediction,
 the bound's mean / max, the share of rows with error <= bound + 0.6 mm (the margin of the
 original comparison), and a split-conformal calibrated bound (target 90 %, noise margin 1.62 x
-the noise rms from the data's rests) calibrated on the first 300 rows and checked on the rest.
+the noise rms from the rests of the first 300 rows) calibrated on the first 300 rows and checked on
+the rest. The results file records the digest of the code that made it
+(:mod:`ctrplan.discrepancy.provenance`).
 Then, one parameter (or group) at a time, the Table VII value put into the Table II file and the
 Table II value into the Table VII file (standard model only): which differences cause the gap.
 
@@ -67,7 +69,7 @@ def evaluate_file(path: Path, data_path: Path, ds: float, n_jobs: int) -> dict:
     from ctrplan.discrepancy.calibrate import predict
     from ctrplan.discrepancy.coverage import NOISE_MULTIPLE, bound_values, calibrate_bound
     from ctrplan.discrepancy.data import load_measured_data
-    from ctrplan.discrepancy.decision import estimate_noise
+    from ctrplan.discrepancy.noise import estimate_noise
     from ctrplan.io.robot_file import load_robot
     from ctrplan.mechanics import ModelSettings
 
@@ -86,10 +88,12 @@ def evaluate_file(path: Path, data_path: Path, ds: float, n_jobs: int) -> dict:
     bounds = bound_values(robot, data.alpha, data.beta, settings, n_jobs=n_jobs)
     b = np.where(bounds.ok, bounds.position, np.nan)
     e_std = e_std_all[rest]
-    noise = estimate_noise(data)
+    calibration = np.zeros(k, bool)
+    calibration[:REGISTRATION_ROWS] = True
+    noise = estimate_noise(data, rows=calibration)
     units = np.arange(k) // 50
     cal = calibrate_bound(e_std_all[:REGISTRATION_ROWS], b[:REGISTRATION_ROWS], e_std, b[rest], units[rest],
-                          noise_rms=noise["position_rms_m"] or 0.0)
+                          noise_rms=noise.position_rms_m or 0.0)
     ok = np.isfinite(e_std) & np.isfinite(b[rest])
     return {"robot_file": f"model/{path.name}", "friction_coefficients": list(robot.friction_coefficients),
             "rows_registered": REGISTRATION_ROWS, "rows_evaluated": int(rest.size),
@@ -98,7 +102,7 @@ def evaluate_file(path: Path, data_path: Path, ds: float, n_jobs: int) -> dict:
             "bound_failed": int(np.sum(~bounds.ok[rest])),
             "within_bound_plus_0_6_mm": float(np.mean(e_std[ok] <= b[rest][ok] + ORIGINAL_MARGIN)),
             "median_error_over_bound": float(np.median(e_std[ok] / b[rest][ok])),
-            "noise": noise["description"], "noise_multiple": NOISE_MULTIPLE,
+            "noise": noise.description, "noise_multiple": NOISE_MULTIPLE,
             "calibrated_bound": {"factor": cal.factor, "margin_mm": cal.margin_m * 1e3, "status": cal.status,
                                  "test_coverage": cal.test["covered"], "test_coverage_ci": cal.test["ci"],
                                  "median_size_mm": cal.test["bound_median_m"] * 1e3,
@@ -165,8 +169,11 @@ def main(argv=None):
               f"{s['table7_with_table2_values']['mean_mm']:.2f} mm mean")
     out = Path(args.results)
     out.parent.mkdir(parents=True, exist_ok=True)
+    from ctrplan.discrepancy.provenance import provenance
+
     out.write_text(json.dumps({"command": "python benchmarks/ha_robot_files.py", "data_file": data.name,
                                "data_sha256": file_hash(data), "ds_m": args.ds, "files": files, "swaps": sw,
+                               "provenance": provenance({"ds": args.ds, "registration_rows": REGISTRATION_ROWS}),
                                "seconds": time.perf_counter() - t0}, indent=1) + "\n")
     print(f"wrote {out} ({time.perf_counter() - t0:.0f} s; load average {os.getloadavg()[0]:.2f})")
     return 0

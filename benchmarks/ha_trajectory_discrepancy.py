@@ -10,11 +10,14 @@ It runs ``run_discrepancy`` with the default options (every registered candidate
 split, the noise estimated from the data's rests) plus the paper's friction coefficients
 (0.22, 0.12, Table VII) as a reference for the history-aware prediction, writes the report to
 ``--out`` (its stages are reused when run again), and writes to ``--results``: the verdict, every
-candidate's parameters with standard errors, out-of-fold figures and improvement test, the
-baseline's parameters with their change from the robot file, the noise test, the test split's
-shrink with block-bootstrap intervals next to the paper's Table VIII (46 % mean, 49 % max, on
-grid data), and the SHA-256 of the data file it came from. ``docs/discrepancy.md`` quotes this
-file; ``tests/test_docs_results.py`` checks that they agree.
+candidate's parameters with standard errors, out-of-fold figures and comparison with the
+baseline, the baseline's prior and parameters with their change from the robot file, the noise
+test, the test split's figures (the robot file with only a registration, the calibrated
+baseline, the final model) with their t-intervals next to the paper's Table VIII (46 % mean,
+49 % max, on grid data), the calibrated bound, the SHA-256 of the data file it came from and the
+digest of the code that made it (:mod:`ctrplan.discrepancy.provenance`). ``docs/discrepancy.md``
+quotes this file; ``tests/test_docs_results.py`` checks that they agree and that the code has not
+changed since.
 
 The data has no licence and is not in the repository: get it from github.com/hjhdog1/ConcentricTubes
 (``jointTipTrajectory_measured_short.txt``).
@@ -50,34 +53,48 @@ def summarize(res: dict, data_path: Path, robot_path: Path, seconds: float, comm
         return {"label": c["label"], "model": c["model"], "parameters": table,
                 "out_of_fold_mean_mm": c["out_of_fold"]["position_mean_mm"],
                 "out_of_fold_max_mm": c["out_of_fold"]["position_max_mm"],
-                "improvement_mm_deg": imp["mean_difference"], "improvement_ci": imp["ci"],
-                "p_value": imp["p_value"], "eligible": c.get("eligible"), "typical": c["typical"],
-                "at_bound": c["at_bound"]}
+                "reduction": imp["reduction"], "reduction_ci": imp["reduction_ci"],
+                "improvement_mm_deg": imp["mean_difference"], "p_value": imp["p_value"],
+                "holm": c.get("improvement_significant"), "eligible": c.get("eligible"), "typical": c["typical"],
+                "at_bound": c["at_bound"], "widened": c.get("widened", [])}
 
     fig = res["test_split"]["figures"]
+    b = res["baseline"]
+    comb = res.get("combination") or {}
     return {
         "command": command, "data_file": data_path.name, "data_sha256": file_hash(data_path),
         "robot_file": str(robot_path.relative_to(ROOT)) if robot_path.is_relative_to(ROOT) else str(robot_path),
-        "n_samples": res["n_samples"], "split": res["split"]["how"], "verdict": res["verdict"],
-        "named": res["named_effect"], "ambiguous_with": res["ambiguous_with"], "named_effects": res["named_effects"],
+        "n_samples": res["n_samples"], "split": res["split"]["how"], "buffer": res["split"]["buffer_note"],
+        "n_folds": res["split"]["n_folds"], "verdict": res["verdict"], "named": res["named_effect"],
+        "ambiguous_with": res["ambiguous_with"], "named_effects": res["named_effects"],
         "separated_by": res["decision"].get("separated_by"), "notes": res["decision"]["notes"],
+        "decision_cautions": res["decision"].get("cautions", []), "rule": res["decision"]["rule"],
+        "best": res["decision"].get("best"),
         "noise": {"description": res["noise"]["noise"]["description"], "source": res["noise"]["noise"]["source"],
                   "noise_rms_mm": res["noise"]["noise_rms_mm"], "out_of_fold_rms_mm": res["noise"]["rms_mm"],
                   "consistent": res["noise"]["consistent"],
                   "statistic": (res["noise"]["test"] or {}).get("statistic"),
                   "threshold": (res["noise"]["test"] or {}).get("threshold")},
-        "baseline": {"out_of_fold_mean_mm": res["baseline"]["out_of_fold"]["position_mean_mm"],
+        "baseline": {"out_of_fold_mean_mm": b["out_of_fold"]["position_mean_mm"],
+                     "prior_strength": b["prior_strength"], "prior_choices": b["prior_choices"],
                      "parameters": [{k: r.get(k) for k in ("name", "value", "stderr", "unit", "relative_change",
-                                                           "in_typical_range", "at_bound")}
-                                    for r in res["baseline"]["parameter_table"]]},
+                                                           "in_typical_range", "at_bound", "fitted")}
+                                    for r in b["parameter_table"]]},
         "candidates": {e: cand(c) for e, c in res["candidates"].items()},
-        "test_split": {"label": res["test_split"]["label"], "before": fig["before"], "after": fig["after"],
-                       "shrink": fig["shrink"], "n_samples": fig["n_samples"], "n_units": fig["n_units"],
-                       "method": fig["method"]},
+        "pairs": {e: {"label": c["label"], "out_of_fold_mean_mm": c["out_of_fold"]["position_mean_mm"],
+                      "reduction": c["improvement_eq49"]["reduction"], "p_value": c["improvement_eq49"]["p_value"],
+                      "reverse_p_value": (c.get("reverse") or {}).get("p_value"), "significant": c.get("significant"),
+                      "parameters": c["parameters"]}
+                  for e, c in (comb.get("tried") or {}).items()},
+        "dropped": comb.get("dropped"), "replaced_by": comb.get("replaced_by"),
+        "test_split": {"label": res["test_split"]["label"], "file": fig["file"], "before": fig["before"],
+                       "after": fig["after"], "shrink": fig["shrink"], "calibration_shrink": fig["calibration_shrink"],
+                       "n_samples": fig["n_samples"], "n_units": fig["n_units"], "method": fig["method"]},
         "prediction": res["prediction"], "prediction_check": res.get("prediction_check"),
         "bound": None if not res.get("bound") else {k: res["bound"][k] for k in (
             "definition", "method", "target", "factor", "margin_mm", "status", "test", "raw_test", "translation_last")},
         "table_viii_shrink": TABLE_VIII_SHRINK, "cautions": res["cautions"],
+        "provenance": res["provenance"],
         "seconds_this_invocation": seconds,     # stages of an earlier invocation are reused
     }
 
@@ -111,10 +128,10 @@ def main(argv=None):
     s = summary["test_split"]
     print(f"\nverdict: {summary['verdict']} ({summary['named']}"
           + (f" or {summary['ambiguous_with']}" if summary["ambiguous_with"] else "") + ")")
-    print(f"test split: mean {s['before']['mean_mm']['value']:.2f} -> {s['after']['mean_mm']['value']:.2f} mm, "
-          f"max {s['before']['max_mm']['value']:.2f} -> {s['after']['max_mm']['value']:.2f} mm; shrink mean "
-          f"{100 * s['shrink']['mean']['value']:.0f} % (paper Table VIII: 46 %), max {100 * s['shrink']['max']['value']:.0f} "
-          f"% (49 %); {seconds:.0f} s; load average {os.getloadavg()[0]:.2f}")
+    print(f"test split: robot file with a registration {s['file']['mean_mm']['value']:.2f} mm, calibrated baseline "
+          f"{s['before']['mean_mm']['value']:.2f} mm, {s['label']} {s['after']['mean_mm']['value']:.2f} mm (shrink "
+          f"{100 * s['shrink']['mean']['value']:.0f} %, paper Table VIII: 46 %); max {s['before']['max_mm']:.2f} -> "
+          f"{s['after']['max_mm']:.2f} mm; {seconds:.0f} s; load average {os.getloadavg()[0]:.2f}")
     print(f"wrote {out}")
     return 0
 

@@ -476,8 +476,9 @@ def aim_decision(robot, aim_with: str = "auto") -> dict:
 
     With ``aim_with = "auto"`` the history-aware prediction is used only when the robot file's
     ``[prediction_validation]`` (written by ``ctrplan discrepancy``) records that it beat the
-    standard model on measurements (test-split tip error, mean and max); otherwise the standard
-    model. ``"history"`` and ``"standard"`` force one.
+    standard model on measurements (the interval of the per-unit paired difference of their mean
+    test-split tip errors lies below zero); otherwise the standard model. ``"history"`` and
+    ``"standard"`` force one.
 
     Parameters
     ----------
@@ -505,6 +506,9 @@ def aim_decision(robot, aim_with: str = "auto") -> dict:
                    f"the history-aware prediction's tip error is mean {pv['history_mean_m'] * 1e3:.2f} / max "
                    f"{pv['history_max_m'] * 1e3:.2f} mm against the standard model's {pv['standard_mean_m'] * 1e3:.2f}"
                    f" / {pv['standard_max_m'] * 1e3:.2f} mm")
+        if pv.get("difference_low_m") is not None:
+            figures += (f" (mean difference {pv['difference_mean_m'] * 1e3:+.2f} mm, 95 % interval "
+                        f"{pv['difference_low_m'] * 1e3:+.2f}..{pv['difference_high_m'] * 1e3:+.2f} mm)")
     if aim_with == "history":
         use, reason = True, "[planner] aim_with = \"history\"" + (f"; {figures}" if figures else
                                                                    "; not validated on measurements")
@@ -515,7 +519,7 @@ def aim_decision(robot, aim_with: str = "auto") -> dict:
                               "validated on measurements (ctrplan discrepancy writes it)")
     else:
         use = bool(pv["history_beats_standard"])
-        reason = figures + ("" if use else ": it does not beat the standard model in both")
+        reason = figures + ("" if use else ": it does not beat the standard model")
     side = "history" if use else "standard"
     return {"model": "history-aware prediction" if use else "standard model", "use_history": use, "reason": reason,
             "measured_mean_mm": None if pv is None else pv[f"{side}_mean_m"] * 1e3,

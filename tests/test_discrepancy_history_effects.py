@@ -209,17 +209,18 @@ def test_hull_distance():
 
 
 # --------------------------------------------------------------------------- hidden effects (slow)
-def _trajectory_case(tmp_path, effects, *, seed, samples=800, candidates=None, truth_robot=None, jobs=2):
-    """Table VII robot, continuous trajectory of 80 s, 0.5 mm / 0.3 deg noise; the workflow
-    starts from the model with friction off, with the default split (20 blocks of 40 samples,
-    4 held back as the test split, the rest in 4 cross-validation folds)."""
+def _trajectory_case(tmp_path, *, seed, samples=800, candidates=None, jobs=2, **hidden):
+    """Table VII robot, continuous trajectory of 80 s made by the independent reference
+    synthesizer (``tests/reference``) with the ``hidden`` effects (its keywords), 0.5 mm / 0.3 deg
+    noise; the workflow starts from the model with friction off, with the default split."""
+    from reference.synth_reference import synthesize_reference
+
     robot = load_robot(TABLE7).replace(friction_coefficients=(0.0, 0.0))
     model = tmp_path / "model.toml"
     model.write_text(robot_to_toml(robot, header="Table VII, friction off"))
     data = tmp_path / "d.csv"
-    write_synth(data, synthesize(truth_robot or robot, effects, protocol="trajectory", samples=samples,
-                                 noise=Noise(position_rms=0.5e-3, angle_rms=float(np.deg2rad(0.3))), seed=seed,
-                                 settings=COARSE, n_jobs=jobs))
+    frame, _ = synthesize_reference(robot, samples=samples, seed=seed, ds=6e-3, **hidden)
+    frame.to_csv(data, index=False)
     opts = DiscrepancyOptions(effects=candidates or ("friction", "backlash", "time_offset", "gradual_friction"),
                               ds=6e-3, n_permutations=199, n_jobs=jobs, friction_grid=(0.0, 0.15, 0.3),
                               friction_search_samples=60, max_evaluations=400)
@@ -231,7 +232,7 @@ def test_hidden_backlash_on_a_trajectory_is_named_not_friction(tmp_path):
     """Hidden 4 deg dead band in the drives of tubes 2 and 3: backlash is named, friction is not
     (a friction model imitates part of the hysteresis, but a translation releases friction and
     not the play). Catches a workflow that mistakes backlash for friction."""
-    res = _trajectory_case(tmp_path, {"backlash": {"backlash_2": 0.07, "backlash_3": 0.07}}, seed=11)
+    res = _trajectory_case(tmp_path, backlash=(0.0, 0.07, 0.07), seed=11)
     assert res["named_effect"] == "backlash", res["decision"]
     assert res["ambiguous_with"] != "friction"
     assert res["noise"]["consistent"] is False
@@ -241,8 +242,7 @@ def test_hidden_backlash_on_a_trajectory_is_named_not_friction(tmp_path):
 def test_hidden_friction_on_a_trajectory_is_named_not_backlash(tmp_path):
     """Hidden friction (0.22, 0.12) along a continuous trajectory: friction (abrupt or
     gradual) is named, backlash is not. Catches a backlash candidate that absorbs friction."""
-    res = _trajectory_case(tmp_path, {"friction": {"mu_1": 0.22, "mu_2": 0.12}}, seed=12,
-                           truth_robot=load_robot(TABLE7))
+    res = _trajectory_case(tmp_path, mu=(0.22, 0.12), seed=12)
     assert res["named_effect"] in ("friction", "gradual_friction"), res["decision"]
     assert res["ambiguous_with"] != "backlash"
 
@@ -251,7 +251,7 @@ def test_hidden_friction_on_a_trajectory_is_named_not_backlash(tmp_path):
 def test_hidden_time_offset_on_a_trajectory_is_named(tmp_path):
     """Hidden 0.2 s tracker lag: the time offset is named with tau within 0.05 s. Catches
     the old report, which called this trajectory's residual consistent with noise."""
-    res = _trajectory_case(tmp_path, {"time_offset": {"time_offset": 0.2}}, seed=13)
+    res = _trajectory_case(tmp_path, time_offset=0.2, seed=13)
     assert res["named_effect"] == "time_offset", res["decision"]
     assert res["candidates"]["time_offset"]["parameters"]["time_offset"] == pytest.approx(0.2, abs=0.05)
     assert res["noise"]["consistent"] is False
@@ -265,10 +265,8 @@ def test_hidden_gradual_friction_on_a_trajectory_is_named_not_backlash(tmp_path)
     node). Catches a friction-angle fit that cannot see the ramp and a backlash candidate that
     absorbs it."""
     theta = float(np.deg2rad(13.0))
-    res = _trajectory_case(tmp_path, {"friction": {"mu_1": 0.22, "mu_2": 0.12},
-                                      "gradual_friction": {"friction_angle": theta}}, seed=14,
-                           truth_robot=load_robot(TABLE7), candidates=("friction", "backlash", "gradual_friction"),
-                           jobs=1)
+    res = _trajectory_case(tmp_path, mu=(0.22, 0.12), friction_angle=theta, seed=14,
+                           candidates=("friction", "backlash", "gradual_friction"), jobs=1)
     assert res["named_effect"] == "gradual_friction", (res["decision"], {e: c["out_of_fold"] for e, c in
                                                                          res["candidates"].items()})
     assert res["candidates"]["gradual_friction"]["parameters"]["friction_angle"] == pytest.approx(theta, abs=np.deg2rad(5))

@@ -1,6 +1,7 @@
 """docs/discrepancy.md quotes the results files of its benchmarks, and those files come from the data
-they name: catches figures in the docs edited by hand or left behind by a newer run, and a results
-file made from another version of the measured data."""
+they name and from the code at hand: catches figures in the docs edited by hand or left behind by
+a newer run, a results file made from another version of the measured data, and one made by code
+that has changed since (its digest of the discrepancy, effects, history and mechanics sources)."""
 
 from __future__ import annotations
 
@@ -34,6 +35,23 @@ def test_docs_tables_are_the_results_files(name):
     table = tables.MAKERS[name](json.loads(source.read_text()))
     assert f"<!-- {name} -->\n{table}\n<!-- /{name} -->" in doc, (
         f"{tables.DOC.name} differs from {source.name}: run python benchmarks/docs_tables.py")
+
+
+@pytest.mark.parametrize("name", ["discrepancy-sweep.json", "ha-trajectory-discrepancy.json", "ha-robot-files.json"])
+def test_quoted_results_come_from_the_present_code(name):
+    """Each results file the docs quote records the digest of the code that can move its figures
+    (ctrplan.discrepancy.provenance), and it is the present code's: a change to that code
+    without running the benchmark again fails here. The sweep's cases all come from that code."""
+    from ctrplan.discrepancy.provenance import source_digest
+
+    results = ROOT / "benchmarks" / "results" / name
+    assert results.exists(), f"benchmarks/results/{name} is quoted by the docs and missing"
+    stored = json.loads(results.read_text())
+    digest = source_digest()
+    assert stored.get("provenance", {}).get("source_sha256") == digest, (
+        f"{name} was made by other code than the present (run its benchmark again, then benchmarks/docs_tables.py)")
+    if "cases" in stored:
+        assert {c["source_sha256"] for c in stored["cases"]} == {digest}
 
 
 @pytest.mark.skipif(not HA_DATA.exists(), reason=f"measured data not present at {HA_DATA} (not redistributable; "

@@ -90,6 +90,9 @@ SAME_JOINTS = 1e-12
 MIN_LAG_PAIRS = 3
 #: Lags needed to fit the three-parameter correlation model; with fewer the correlation is not seen.
 MIN_FIT_LAGS = 4
+#: Level of the test that leaves out the first samples of the rests while the tip still moves there
+#: (:func:`_settled`).
+SETTLING_LEVEL = 0.01
 #: Correlation left at the longest fitted lag above which the sill is an extrapolation beyond the
 #: rests (the semivariogram has not levelled off there).
 SEEN_CORRELATION = 0.2
@@ -177,6 +180,8 @@ class NoiseEstimate:
         unbiased estimator).
     seed : int
         Seed of the simulations.
+    settled_samples : int
+        Samples left out at the start of every rest, where the tip still moved (:func:`_settled`).
     description : str
         One line for a report, in mm.
     """
@@ -200,6 +205,7 @@ class NoiseEstimate:
     rest_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     simulated_ratio: float | None = None
     seed: int = 0
+    settled_samples: int = 0
     description: str = ""
 
     @property
@@ -241,6 +247,7 @@ class NoiseEstimate:
                 "dof": self.dof, "upper_bound": self.upper_bound, "lower_bound": self.lower_bound,
                 "stated_m": self.stated_m, "n_rest_samples": int(self.rest_rows.size),
                 "simulated_ratio": self.simulated_ratio, "seed": self.seed,
+                "settled_samples": self.settled_samples,
                 "description": self.description}
 
 
@@ -261,6 +268,38 @@ def _rest_runs(data: MeasuredData, rows) -> list[np.ndarray]:
     edges = np.diff(np.concatenate([[0], link.astype(np.int8), [0]]))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     return [np.arange(a, b + 1) for a, b in zip(starts, ends)]
+
+
+def _settled(data: MeasuredData, runs: list) -> tuple[list, int]:
+    """The rests without their first samples while the tip still moves there.
+
+    At the start of a rest (identical recorded joints) the tip may still move: the tubes settle,
+    or the tracker lags the joint readings. The squared tip differences of consecutive samples at
+    the first position of the rests are compared with those in the second half of the rests
+    (one-sided Mann-Whitney U test at :data:`SETTLING_LEVEL`, ``scipy.stats.mannwhitneyu``); while
+    they are larger, the first sample of every rest is left out.
+
+    Returns
+    -------
+    runs : list of ndarray of int
+        The rests from their first settled sample (those left with at least 2 samples).
+    settle : int
+        Samples left out at the start of every rest.
+    """
+    settle = 0
+    while True:
+        firsts, later = [], []
+        for r in runs:
+            if r.size - settle >= 3:
+                d = np.sum(np.diff(data.tip[r], axis=0) ** 2, axis=1)
+                firsts.append(d[settle])
+                later.extend(d[max(settle + 1, d.size // 2):])
+        if len(firsts) < MIN_REST_PAIRS or len(later) < MIN_REST_PAIRS:
+            break
+        if stats.mannwhitneyu(firsts, later, alternative="greater").pvalue >= SETTLING_LEVEL:
+            break
+        settle += 1
+    return [r[settle:] for r in runs if r.size - settle >= 2], settle
 
 
 def _lag_pairs(lengths) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -570,8 +609,9 @@ def estimate_noise(data: MeasuredData, rows=None, stated: float | None = None, *
     stated, else from repeated configurations (an upper bound), else unknown.
 
     **Rests.** Maximal runs of samples adjacent in the record (``data.rows`` differ by 1), of one
-    motion (``data.sequence``), at identical joints, all in ``rows``: their tip differences are
-    noise alone. The empirical semivariogram (Cressie 1993, Eq. (2.2.8)) is read at every lag
+    motion (``data.sequence``), at identical joints, all in ``rows``, without their first samples
+    while the tip still moves there (:func:`_settled`: a tube settling, a tracker lagging the
+    joints): their tip differences are noise alone. The empirical semivariogram (Cressie 1993, Eq. (2.2.8)) is read at every lag
     within the runs, robustly (:func:`_semivariogram`: median of the squared 3-D differences
     over the expected median of chi-square(3), exact for small pair counts), on the lags with at
     least :data:`MIN_LAG_PAIRS` pairs. The white model (their pair-weighted mean) is kept unless
@@ -629,12 +669,12 @@ def estimate_noise(data: MeasuredData, rows=None, stated: float | None = None, *
     if n_simulations < 20:
         raise ValueError(f"n_simulations must be at least 20, got {n_simulations}")
     stated = None if stated is None else float(stated)
-    runs = _rest_runs(data, rows)
+    runs, settle = _settled(data, _rest_runs(data, rows))
     lengths = np.array([r.size for r in runs], int)
     n_lag1 = int(np.sum(lengths - 1))
     why = f"{n_lag1} pairs of consecutive samples at rest, fewer than {MIN_REST_PAIRS}"
     if n_lag1 >= MIN_REST_PAIRS:
-        est = _from_rests(data, runs, lengths, n_simulations, seed, stated)
+        est = _from_rests(data, runs, lengths, n_simulations, seed, stated, settle)
         if est is not None:
             return est
         why = f"{n_lag1} pairs of consecutive samples at rest that show no variation (tracker resolution)"
@@ -645,7 +685,7 @@ def estimate_noise(data: MeasuredData, rows=None, stated: float | None = None, *
     return _from_repeats(data, rows, n_lag1)
 
 
-def _from_rests(data, runs, lengths, n_simulations, seed, stated) -> NoiseEstimate | None:
+def _from_rests(data, runs, lengths, n_simulations, seed, stated, settle=0) -> NoiseEstimate | None:
     """:func:`estimate_noise` from the rests (None when they show no variation at all)."""
     rests = _Rests(tuple(int(m) for m in lengths))
     counts, lags, fitted = rests.counts, rests.lags, rests.fitted
@@ -670,6 +710,9 @@ def _from_rests(data, runs, lengths, n_simulations, seed, stated) -> NoiseEstima
     rms = float(np.sqrt(3.0 * var))
     h_fit = int(lags[fitted - 1])
     stated_text = "" if stated is None else f"; the data's source states {stated * 1e3:.3f} mm"
+    if settle:
+        stated_text = (f"; the first {settle} sample{'s' if settle > 1 else ''} of every rest left out (the tip "
+                       f"still moved there)") + stated_text
     span = "lag 1" if h_fit == 1 else f"lags 1-{h_fit}"
     where = f"{len(runs)} rests ({int(counts[0])} pairs of consecutive samples, {span})"
     if seen:
@@ -689,7 +732,7 @@ def _from_rests(data, runs, lengths, n_simulations, seed, stated) -> NoiseEstima
                          correlation_length=None if tau is None else float(tau), correlation_seen=seen, dof=dof,
                          upper_bound=False, lower_bound=not seen, stated_m=stated,
                          rest_rows=np.sort(np.asarray(data.rows)[np.concatenate(runs)]), simulated_ratio=mean / truth,
-                         seed=seed, description=text + stated_text)
+                         seed=seed, settled_samples=settle, description=text + stated_text)
 
 
 def _from_repeats(data: MeasuredData, rows, n_lag1: int) -> NoiseEstimate:

@@ -284,7 +284,11 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
                       "standard_max_m": pc["standard"]["max_mm"] * 1e-3,
                       "history_mean_m": pc["history"]["mean_mm"]["value"] * 1e-3,
                       "history_max_m": pc["history"]["max_mm"] * 1e-3,
-                      "history_beats_standard": bool(pc["history_beats_standard"]), "test_samples": pc["n_samples"],
+                      "history_beats_standard": bool(pc["history_beats_standard"]),
+                      "difference_mean_m": pc["difference_mm"]["value"] * 1e-3,
+                      "difference_low_m": pc["difference_mm"]["ci"][0] * 1e-3,
+                      "difference_high_m": pc["difference_mm"]["ci"][1] * 1e-3, "test_units": pc["n_units"],
+                      "test_samples": pc["n_samples"],
                       "data_file": data_name, "data_sha256": sha, "date": source["date"]}
     atomic_write_text(model_path, robot_to_toml(updated, header=header, model=final_model, registration=registration,
                                                 effects_source=source if updated.effects else None,

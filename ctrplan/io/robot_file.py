@@ -138,13 +138,18 @@ class BoundCalibrationDoc(_Strict):
 class PredictionValidationDoc(_Strict):
     """How the history-aware prediction did against the standard model on measurements
     (``[prediction_validation]``, written by ``ctrplan discrepancy``): tip position errors on its
-    untouched test split [m]."""
+    untouched test split [m]; ``history_beats_standard`` when the interval of the per-unit paired
+    difference of their means (``difference_*``, history minus standard) lies below zero."""
 
     standard_mean_m: Annotated[float, Field(ge=0.0)]
     standard_max_m: Annotated[float, Field(ge=0.0)]
     history_mean_m: Annotated[float, Field(ge=0.0)]
     history_max_m: Annotated[float, Field(ge=0.0)]
     history_beats_standard: bool
+    difference_mean_m: float | None = None
+    difference_low_m: float | None = None
+    difference_high_m: float | None = None
+    test_units: Annotated[int, Field(ge=0)] | None = None
     test_samples: Annotated[int, Field(ge=0)] | None = None
     data_file: str = ""
     data_sha256: str = ""

@@ -33,7 +33,7 @@ from ctrplan.mechanics.results import ModelSettings
 from . import contact_reference, standard_reference
 from .history_reference import applied_friction, pair_history, play_band, tracker_times
 
-__all__ = ["ReferenceMotion", "reference_motion", "synthesize_reference", "ROTATION_STEP_DEG",
+__all__ = ["ReferenceMotion", "reference_motion", "synthesize_reference", "synthesize_reference_grid", "ROTATION_STEP_DEG",
            "TRANSLATION_STEP_MIN", "REST_S"]
 
 #: Rotation of one move [deg]: uniform in this range (docs/discrepancy.md, trajectory protocol).
@@ -555,3 +555,106 @@ def synthesize_reference(robot, *, samples: int = 500, rate_hz: float = 10.0, ba
         translation_last_samples=int(np.sum(np.any(hist.released & (hist.eta != 0), axis=1))),
         counts=counts, seconds=_time.perf_counter() - t_start)
     return frame, truth
+
+
+def synthesize_reference_grid(robot, *, grid: int = 5, mu=None, registration=None,
+                              noise_position_rms: float = 1.4e-3, noise_angle_rms: float = float(np.deg2rad(0.5)),
+                              seed: int = 0, ds: float = 3e-3) -> tuple[pd.DataFrame, dict]:
+    """Measured-like data of the paper's protocol (Section V-C of Ha, Fagogenis & Dupont 2019),
+    made independently of ``ctrplan.discrepancy.synth``.
+
+    Every node of a ``grid`` per joint grid over ``robot.joints`` (a periodic rotation without its
+    upper end, which is its lower end again), approached from every combination of relative
+    rotation directions eta in {+1, -1} per pair; only the target is measured. The truth is the
+    frozen reference friction model with the approach's eta (``mu`` given), else the standard
+    model (the approach does not matter: one solve per node, from zero twist). Noise as
+    :func:`synthesize_reference` (white), registration as there.
+
+    Parameters
+    ----------
+    robot : ctrplan.robot.Robot
+    grid : int
+        Nodes per joint, >= 2.
+    mu : array-like, shape (n - 1,), optional
+        Friction coefficients [-] of the truth.
+    registration : array-like, shape (6,), optional
+        ``(rx, ry, rz, tx, ty, tz)`` [rad, m] of ``p_tracker = exp([r]x) p + t``.
+    noise_position_rms, noise_angle_rms : float
+        [m], [rad].
+    seed : int
+    ds : float
+        [m].
+
+    Returns
+    -------
+    frame : pandas.DataFrame
+        ``sequence`` (one per approach), ``config_id`` (one per node), ``alpha_1..n`` [rad],
+        ``beta_1..n`` [m], ``eta_1..n-1``, ``tip_x..z`` [m], ``tangent_x..z``; nodes whose truth
+        solve failed are dropped with all their approaches.
+    truth : dict
+        ``dropped`` (node indices and messages), ``eta``, ``tip``, ``tangent`` (noise free),
+        ``counts``, ``seconds``.
+    """
+    import itertools
+
+    t_start = _time.perf_counter()
+    n, m = robot.n_tubes, robot.n_tubes - 1
+    if grid < 2:
+        raise ValueError(f"grid must be >= 2, got {grid!r}")
+    axes = []
+    for j in robot.joints:
+        if j.periodic:
+            axes.append(j.lower + (j.upper - j.lower) * np.arange(grid) / grid)
+        else:
+            axes.append(np.linspace(j.lower, j.upper, grid))
+    nodes = np.array(list(itertools.product(*axes)), float).reshape(-1, len(robot.joints))
+    etas = np.array(list(itertools.product((1, -1), repeat=m)), int).reshape(-1, m)
+    settings = ModelSettings(ds=ds, multistart=0)
+    rng = np.random.default_rng(seed)
+    rows, dropped = [], []
+    counts = dict(standard=0, friction=0)
+    with _one_blas_thread():
+        for c, q in enumerate(nodes):
+            alpha, beta = robot.configuration(q)
+            try:
+                std = standard_reference.solve_standard(robot, alpha, beta, settings, check_stability=False)
+                counts["standard"] += 1
+                if not std.diagnostics.ok:
+                    raise RuntimeError(f"standard model: {std.diagnostics.message}")
+                sols = []
+                for e in etas:
+                    if mu is None:
+                        sols.append(std)
+                        continue
+                    sol = contact_reference.solve_friction(robot, alpha, beta, e, settings, mu=np.asarray(mu, float),
+                                                           standard=std)
+                    counts["friction"] += 1
+                    if not sol.diagnostics.converged:
+                        raise RuntimeError(sol.diagnostics.message)
+                    sols.append(sol)
+            except Exception as exc:  # noqa: BLE001 - a failing node is dropped, as documented
+                dropped.append({"node": int(c), "message": f"{type(exc).__name__}: {exc}"})
+                continue
+            for e, sol in zip(etas, sols):
+                rows.append((c, alpha, beta, e, sol.tip_position, sol.tip_tangent))
+    K = len(rows)
+    tip = np.array([r[4] for r in rows]).reshape(K, 3)
+    tangent = np.array([r[5] for r in rows]).reshape(K, 3)
+    tip_m, tangent_m = tip.copy(), tangent.copy()
+    reg = None if registration is None else np.asarray(registration, float).reshape(6)
+    if reg is not None:
+        R = Rotation.from_rotvec(reg[:3]).as_matrix()
+        tip_m = tip_m @ R.T + reg[3:]
+        tangent_m = tangent_m @ R.T
+    tip_m = tip_m + _position_noise(K, noise_position_rms, 0.0, rng)
+    if noise_angle_rms > 0:
+        tangent_m = _tangent_noise(tangent_m, noise_angle_rms / np.sqrt(2.0), rng)
+    cols = {"sequence": np.arange(K), "config_id": np.array([r[0] for r in rows], int)}
+    cols.update({f"alpha_{i + 1}": np.array([r[1][i] for r in rows]) for i in range(n)})
+    cols.update({f"beta_{i + 1}": np.array([r[2][i] for r in rows]) for i in range(n)})
+    cols.update({f"eta_{i + 1}": np.array([r[3][i] for r in rows], int) for i in range(m)})
+    cols.update({f"tip_{c}": tip_m[:, a] for a, c in enumerate("xyz")})
+    cols.update({f"tangent_{c}": tangent_m[:, a] for a, c in enumerate("xyz")})
+    truth = dict(dropped=dropped, eta=np.array([r[3] for r in rows], int).reshape(K, m), tip=tip, tangent=tangent,
+                 counts=counts, seconds=_time.perf_counter() - t_start)
+    return pd.DataFrame(cols), truth
