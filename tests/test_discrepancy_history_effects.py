@@ -200,6 +200,47 @@ def test_naming_rule_says_ambiguous_for_a_tie_and_leaves_a_best_fit_at_its_limit
     assert set(d["worse_than"]["backlash"]) == {"offplane"}
 
 
+def test_a_named_effect_that_goes_to_zero_with_another_is_dropped_and_a_real_pair_is_named():
+    """Pairs compared both ways. A time offset named alone, backlash fitted with it: the pair is
+    far better than the time offset alone but no better than backlash alone (the lag went to
+    zero), so the time offset is dropped and backlash alone is the final model. When the named
+    effect still adds to the second one significantly, the pair is named. A second effect that
+    the Holm family over every possible pair does not pass is not named, though its own p is
+    below the level. Catches a pair rule that only looks one way (the issue's "time offset +
+    friction" written though the lag went to zero) and a family that shrinks to the pairs tried."""
+    from dataclasses import replace as dc_replace
+
+    from ctrplan.discrepancy.fitting import compare, pair_decision
+
+    rng = np.random.default_rng(3)
+    units = np.repeat(np.arange(40), 10)
+    split = _split(units)
+    scale = 1.0 + 0.5 * rng.random(40)[units]
+    lag = 2.0 * scale + rng.normal(0, 0.05, 400)             # the time offset alone
+    play = np.abs(rng.normal(0.5, 0.05, 400))                # backlash alone: the truth
+    pair = play + rng.normal(0, 0.005, 400)                  # the pair: the lag adds nothing
+
+    def fitted(r, against, reverse_of):
+        c = _candidate("backlash", split, against, r)
+        return dc_replace(c, effects=("time_offset", "backlash"), reverse=compare(split, reverse_of, r))
+
+    tried = {"backlash": fitted(pair, lag, play)}
+    out, second, dropped, replaced, notes = pair_decision("time_offset", tried, ["backlash"], {}, 0.01)
+    assert out["backlash"].significant and second is None
+    assert (dropped, replaced) == ("time_offset", "backlash"), notes
+    both = 0.8 * play                                        # now the lag does add to the backlash
+    tried = {"backlash": fitted(both, lag, play)}
+    out, second, dropped, replaced, _ = pair_decision("time_offset", tried, ["backlash"], {}, 0.01)
+    assert second == "backlash" and dropped is None
+    c = fitted(both, lag, play)
+    weak = dc_replace(c, improvement={**c.improvement, "p_value": 0.004})   # below 0.01, above 0.01 / 6
+    family = ["backlash", "offplane", "poisson", "friction", "clearance", "gradual_friction"]
+    out, second, dropped, _, _ = pair_decision("time_offset", {"backlash": weak}, family, {}, 0.01)
+    assert not out["backlash"].improvement_significant and second is None and dropped is None
+    out, second, _, _, _ = pair_decision("time_offset", {"backlash": weak}, ["backlash"], {}, 0.01)
+    assert out["backlash"].improvement_significant and second == "backlash"
+
+
 def test_hull_distance():
     """Distance to the convex hull of the bounding tips: 0 inside, the gap outside."""
     P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)

@@ -52,7 +52,7 @@ from .statistics import cv_comparison, holm
 __all__ = ["CrossValidated", "Baseline", "Candidate", "Combination", "FITTERS", "cross_validate", "pilot_fit",
            "calibrate_baseline", "refit_contact_baseline", "fit_candidates", "fit_second_effect", "scan_fit",
            "atypical_values", "parameter_table", "display_value", "combined_model", "needs_contact_baseline",
-           "candidate_report", "candidate_reports", "contained", "compare"]
+           "candidate_report", "candidate_reports", "contained", "compare", "pair_decision"]
 
 
 # --------------------------------------------------------------------------- results
@@ -890,7 +890,8 @@ def _fit_pair(ctx) -> CalibrationResult:
                          max_evaluations=options.max_evaluations, uncertainty=k is None, warm=True,
                          prior=ctx["prior"], clusters=units)
     budget = options.max_contact_evaluations
-    base_names = tuple(n for n in setup.base_names if n in p1)
+    # the baseline parameters the named fit fitted (the robot file's, held by a prior of strength 0, stay held)
+    base_names = tuple(n for n in setup.base_names if n in f1.names)
     first_extra = tuple(n for n in f1.names if n not in base_names)
     held = {n: v for n, v in p1.items() if n not in base_names}
     tube = calibrate(robot, fit_data, "clearance", base_names, fixed=held, initial=[p1[n] for n in base_names],
@@ -992,32 +993,71 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Basel
         c = _candidate(setup, split, baseline, (named, e), f"{first.label} + {candidates[e].label}", cv, shown_names,
                        first, note)
         tried[e] = replace(c, reverse=compare(split, candidates[e].r, cv.r))
-    verdict = holm({e: (tried[e].improvement["p_value"] if e in tried else 1.0) for e in family},
-                   options.significance) if family else {}
+    out, second, dropped, replaced, notes = pair_decision(named, tried, family, naming.decision.get("worse_than", {}),
+                                                          options.significance)
+    for e, c in out.items():
+        imp, rev = c.improvement, c.reverse
+        echo(f"  {c.label}: " + ", ".join(display_value(n, v, c.units[n]) for n, v in c.shown.items())
+             + f"; error lower than {first.label} alone by {100 * imp['reduction']:.0f} %, p = {imp['p_value']:.3g}; "
+               f"than {candidates[e].label} alone by {100 * rev['reduction']:.0f} %, p = {rev['p_value']:.3g}"
+             + ("" if c.cv.converged else "; a fit NOT converged"))
+    for line in notes:
+        echo(line)
+    return Combination(first=named, first_label=first.label, named=second, tried=MappingProxyType(out),
+                       not_tried=MappingProxyType(not_tried), family=tuple(family), rule=rule, dropped=dropped,
+                       replaced_by=replaced)
+
+
+def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha: float) -> tuple:
+    """Which pair, if any, replaces the named effect (the rule of :func:`fit_second_effect`).
+
+    Parameters
+    ----------
+    named : str
+        The named effect A.
+    tried : mapping of str to Candidate
+        Second effect B -> the pair fitted jointly, with ``improvement`` (against A alone) and
+        ``reverse`` (against B alone) comparisons.
+    family : sequence of str
+        Every B that could be paired with A (a B not in ``tried`` counts with p = 1).
+    worse_than : mapping of str to list of str
+        Stage 7's ``{candidate: [candidates significantly better]}``.
+    alpha : float
+
+    Returns
+    -------
+    pairs : dict of str to Candidate
+        ``tried`` with ``improvement_significant`` (Holm over ``family``) and ``significant``
+        (also no value at its limit).
+    second : str or None
+        B of the named pair: it improves on A significantly and A still improves on B alone.
+    dropped, replaced_by : str or None
+        A and B when the best significant pair is no better than B alone (A goes to zero with B)
+        and B alone is not significantly worse than A: B alone is the final model.
+    notes : list of str
+    """
+    verdict = holm({e: (tried[e].improvement["p_value"] if e in tried else 1.0) for e in family}, alpha) if family else {}
     out = {}
     for e, c in tried.items():
         ok = bool(verdict.get(e) and c.improvement["mean_difference"] > 0)
         out[e] = replace(c, improvement_significant=ok, significant=ok and not c.at_bound)
-        imp, rev = out[e].improvement, out[e].reverse
-        echo(f"  {out[e].label}: " + ", ".join(display_value(n, v, out[e].units[n]) for n, v in out[e].shown.items())
-             + f"; error lower than {first.label} alone by {100 * imp['reduction']:.0f} %, p = {imp['p_value']:.3g}; "
-               f"than {candidates[e].label} alone by {100 * rev['reduction']:.0f} %, p = {rev['p_value']:.3g}"
-             + ("" if out[e].cv.converged else "; a fit NOT converged"))
     passing = [e for e, c in out.items() if c.significant]
     best = min(passing, key=lambda e: out[e].mean_error) if passing else None
     second = dropped = replaced = None
+    notes = []
     if best is not None:
-        if out[best].reverse["p_value"] < options.significance and out[best].reverse["mean_difference"] > 0:
+        rev = out[best].reverse
+        if rev["p_value"] < alpha and rev["mean_difference"] > 0:
             second = best
-            echo(f"named combination: {out[best].label}")
-        else:
+            notes.append(f"named combination: {out[best].label}")
+        elif named not in worse_than.get(best, ()):
             dropped, replaced = named, best
-            echo(f"{first.label} adds nothing once {candidates[best].label} is fitted with it (the pair against "
-                 f"{candidates[best].label} alone: p = {out[best].reverse['p_value']:.3g}): {first.label} is dropped, "
-                 f"{candidates[best].label} alone is the final model")
-    return Combination(first=named, first_label=first.label, named=second, tried=MappingProxyType(out),
-                       not_tried=MappingProxyType(not_tried), family=tuple(family), rule=rule, dropped=dropped,
-                       replaced_by=replaced)
+            notes.append(f"{named} adds nothing once {best} is fitted with it (the pair against {best} alone: "
+                         f"p = {rev['p_value']:.3g}): {named} is dropped, {best} alone is the final model")
+        else:
+            notes.append(f"the pair {out[best].label} improves on {named} alone but not on {best} alone, which is "
+                         f"itself significantly worse than {named}: {named} alone stays the final model")
+    return out, second, dropped, replaced, notes
 
 
 # --------------------------------------------------------------------------- report form
