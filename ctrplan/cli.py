@@ -356,7 +356,10 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
               help="Strengths tau of the prior toward the robot file's tube parameters that the out-of-fold error "
                    "chooses among, comma-separated ('inf': no prior; 0, the robot file's parameters with only a "
                    "registration, is always tried; default 0.003,0.01,0.03,0.1,inf).")
-@click.option("--max-calibration-samples", type=int, default=300, show_default=True)
+@click.option("--max-calibration-samples", type=int, default=300, show_default=True,
+              help="Samples a fit uses at most.")
+@click.option("--max-contact-samples", type=int, default=150, show_default=True,
+              help="Of those, the samples a fit of the clearance or friction model uses at most.")
 @click.option("--bound-target", type=float, default=0.9, show_default=True,
               help="Share of measured tips the calibrated bound is to cover (written to the updated robot file).")
 @click.option("--bound-samples", type=int, default=200, show_default=True,
@@ -369,8 +372,8 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--no-progress", is_flag=True, help="Hide progress bars.")
 def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, reference_mu, envelope_samples, frame,
-                test_fraction, folds, blocks, prior_strengths, max_calibration_samples, bound_target, bound_samples,
-                significance, permutations, ds, jobs, seed, no_progress):
+                test_fraction, folds, blocks, prior_strengths, max_calibration_samples, max_contact_samples, bound_target,
+                bound_samples, significance, permutations, ds, jobs, seed, no_progress):
     """Find where model and measurement disagree, name the missing effect, add it, show the gap shrink.
 
     Interrupted runs resume from <out>/.stages (finished calibrations and evaluations are kept).
@@ -421,6 +424,7 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
     opts = DiscrepancyOptions(
         fit=tuple(x.strip() for x in fit.split(",")) if fit else None, effects=chosen, frame=frame,
         test_fraction=test_fraction, n_folds=folds, n_blocks=blocks, max_calibration_samples=max_calibration_samples,
+        max_contact_samples=max_contact_samples,
         significance=significance, n_permutations=permutations, ds=ds or 3e-3,
         n_jobs=jobs or os.cpu_count() or 1, seed=seed,
         noise_position=None if noise_mm is None else noise_mm * 1e-3, envelope_samples=envelope_samples,

@@ -46,7 +46,7 @@ from .evaluation import Errors, error_summary, out_of_fold
 from .options import CONFIDENCE, DiscrepancyOptions
 from .parameters import REGISTRATION, parameter, read_parameters
 from .setup import DiscrepancySetup, effect_parameters, reported_parameters
-from .split import DataSplit, choose_buffer
+from .split import DataSplit, choose_buffer, subsample
 from .statistics import cv_comparison, holm
 
 __all__ = ["CrossValidated", "Baseline", "Candidate", "Combination", "FITTERS", "cross_validate", "pilot_fit",
@@ -446,9 +446,12 @@ def _run_fits(jobs: list, n_jobs: int):
             yield f(*a)
 
 
-def _fit_rows(setup, split: DataSplit, k: int | None) -> tuple[MeasuredData, np.ndarray]:
-    """The samples fold ``k``'s fit uses (all development samples for None) and their units."""
+def _fit_rows(setup, split: DataSplit, k: int | None, limit: int | None = None) -> tuple[MeasuredData, np.ndarray]:
+    """The samples fold ``k``'s fit uses (all development samples for None; at most ``limit`` of
+    them, evenly chosen) and their units."""
     rows = split.fit_rows(setup.data, k)
+    if limit is not None:
+        rows = subsample(setup.data, rows, limit, split.seed)
     return setup.data.take(rows), split.units[rows]
 
 
@@ -691,7 +694,9 @@ def refit_contact_baseline(setup: DiscrepancySetup, split: DataSplit, baseline: 
     """Stage 6a: the baseline's tube parameters refitted with the clearance model (with the same
     prior), on the development samples and without each fold, each started from the baseline's
     fit of the same samples; shared by the candidates fitted on it (friction, clearance; Section
-    V-C and Table VII of Ha et al. 2019), within ``options.max_contact_evaluations``.
+    V-C and Table VII of Ha et al. 2019), within ``options.max_contact_evaluations``, on at most
+    ``options.max_contact_samples`` of the fit's samples (a contact solve costs some 30 standard
+    ones).
 
     Returns
     -------
@@ -703,7 +708,7 @@ def refit_contact_baseline(setup: DiscrepancySetup, split: DataSplit, baseline: 
 
     def fit_one(k, n_jobs):
         base = baseline.cv.fold_fit(k)
-        fit_data, units = _fit_rows(setup, split, k)
+        fit_data, units = _fit_rows(setup, split, k, options.max_contact_samples)
         return calibrate(setup.robot, fit_data, "clearance", base.names, fixed=base.fixed, initial=base.values,
                          settings=setup.settings, n_jobs=n_jobs, max_evaluations=options.max_contact_evaluations,
                          uncertainty=False, warm=True, prior=baseline.prior, clusters=units)
@@ -813,7 +818,7 @@ def _candidate(setup, split, baseline, effects, label, cv, shown_names, referenc
 
 
 def _context(setup, split, baseline, contact, candidates, entry, extra, options, k, n_jobs) -> dict:
-    fit_data, units = _fit_rows(setup, split, k)
+    fit_data, units = _fit_rows(setup, split, k, None if entry.model == "standard" else options.max_contact_samples)
     return {"setup": setup, "entry": entry, "k": k, "extra": extra, "options": options, "n_jobs": n_jobs,
             "fit_data": fit_data, "units": units, "base": baseline.cv.fold_fit(k), "prior": baseline.prior,
             "contact": None if contact is None else contact.fold_params(k),
@@ -845,8 +850,12 @@ def fit_candidates(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline
                                                n_jobs))
 
         cv = cross_validate(setup, split, options, e, entry.model, fit_one, echo=echo, progress=progress)
-        c = candidates[e] = _candidate(setup, split, baseline, (e,), entry.label, cv, reported_parameters(robot, e, data),
-                                       baseline, _fit_note(e, cv, baseline, contact, options))
+        c = _candidate(setup, split, baseline, (e,), entry.label, cv, reported_parameters(robot, e, data), baseline,
+                       _fit_note(e, cv, baseline, contact, options))
+        if entry.after is not None and candidates[entry.after].at_bound:
+            # it carries the values of the fit it starts from: a value at its limit there is one here
+            c = replace(c, at_bound=tuple(sorted(set(c.at_bound) | set(candidates[entry.after].at_bound))))
+        candidates[e] = c
         imp = c.improvement
         held = error_summary(c.oof.position, c.oof.angle, c.oof.seconds, c.oof.rows.size)
         echo(f"  {entry.label}: " + (", ".join(display_value(n, v, c.units[n]) for n, v in c.shown.items()) or "nominal")
@@ -982,7 +991,7 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Basel
         echo(f"second effect: {candidates[e].label} with {first.label} ({model} model) ...")
 
         def fit_one(k, n_jobs, e=e, model=model, extra=extra):
-            fit_data, units = _fit_rows(setup, split, k)
+            fit_data, units = _fit_rows(setup, split, k, None if model == "standard" else options.max_contact_samples)
             return _fit_pair({"setup": setup, "options": options, "k": k, "n_jobs": n_jobs, "fit_data": fit_data,
                               "units": units, "first": first, "second": candidates[e], "model": model, "extra": extra,
                               "prior": baseline.prior})

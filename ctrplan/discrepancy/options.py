@@ -62,6 +62,10 @@ class DiscrepancyOptions:
         Cross-validation folds of the development data; None: from the number of units.
     max_calibration_samples : int
         Calibration samples a least-squares fit uses at most (whole units, evenly chosen).
+    max_contact_samples : int
+        Of those, the samples a fit of the clearance or friction model uses at most (evenly
+        chosen; a contact solve costs about 30 standard ones); the coarse friction grid uses
+        ``friction_search_samples``.
     significance : float
         Family-wise level of the cross-validated improvement tests (Holm over the candidates
         tried alone, and over the pairs), the level of the comparisons between candidates and of
@@ -110,6 +114,7 @@ class DiscrepancyOptions:
     n_blocks: int | None = None
     n_folds: int | None = None
     max_calibration_samples: int = 300
+    max_contact_samples: int = 150
     significance: float = 0.01
     prior_strengths: tuple = (0.003, 0.01, 0.03, 0.1, float("inf"))
     n_permutations: int = 999
