@@ -14,7 +14,7 @@ torsional friction, gradually developing friction and off-plane precurvature, ea
 from 10 to 150 % of its typical range (:data:`SIZE_RANGE`). The workflow runs with its default
 options (every registered candidate) from the base file without the effects.
 
-    python benchmarks/bench_discrepancy_sweep.py [--cases 48] [--first-seed 2000] [--jobs 2]
+    python benchmarks/bench_discrepancy_sweep.py [--cases 50] [--first-seed 2000] [--jobs 2]
                                                  [--scheduler tcp://host:8786]
                                                  [--out out/bench-discrepancy-sweep]
                                                  [--results benchmarks/results/discrepancy-sweep.json]
@@ -37,6 +37,7 @@ typical range.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import sys
@@ -49,9 +50,13 @@ ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = {"pair": ROOT / "model" / "ha2019-table1-tube-pair.toml",
           "three-tube": ROOT / "model" / "ha2019-table7-calibrated.toml",
           "table5-pair": ROOT / "model" / "ha2019-table5-path-history-pair.toml"}
-#: Share of the cases per robot, and of the cases per kind of truth.
-ROBOT_SHARES = {"pair": 0.6, "three-tube": 0.2, "table5-pair": 0.2}
-KIND_SHARES = {"control": 0.2, "one": 0.6, "two": 0.2}
+#: The robot of case i is ROBOT_CYCLE[i % 5] and its kind KIND_CYCLE[(i // 5) % 5]: 60 % of the
+#: cases on the tube pair, 20 % on each of the others; 60 % with one effect, 20 % with two, 20 %
+#: controls, every robot with every kind; the first 15 cases hold five of each of one effect,
+#: control and one effect again, so that a shorter run still sees controls.
+ROBOT_CYCLE = ("pair", "pair", "pair", "three-tube", "table5-pair")
+KIND_CYCLE = ("one", "control", "one", "two", "one")
+KINDS = ("control", "one", "two")
 EFFECTS = ("backlash", "time_offset", "friction", "gradual_friction", "offplane")
 #: Size of a hidden effect: uniform in this share of its typical range (of the half-width for a
 #: range symmetric about zero, with a random sign).
@@ -74,9 +79,9 @@ def _draw_size(spec, share, rng) -> float:
     return float(lo + share * (hi - lo))
 
 
-def plan_case(seed: int) -> dict:
-    """The truth of case ``seed``: robot, hidden effects with their sizes (SI and as a share of the
-    typical range), tube-parameter errors, noise."""
+def plan_case(seed: int, index: int) -> dict:
+    """The truth of case ``index`` (seeded by ``seed``): robot, hidden effects with their sizes (SI
+    and as a share of the typical range), tube-parameter errors, noise."""
     import numpy as np
 
     from ctrplan.discrepancy.parameters import parameter
@@ -84,13 +89,17 @@ def plan_case(seed: int) -> dict:
     from ctrplan.io.robot_file import load_robot
 
     rng = np.random.default_rng(seed)
-    robot_key = rng.choice(list(ROBOT_SHARES), p=list(ROBOT_SHARES.values()))
+    robot_key = ROBOT_CYCLE[index % len(ROBOT_CYCLE)]
     robot = load_robot(ROBOTS[robot_key])
-    kind = rng.choice(list(KIND_SHARES), p=list(KIND_SHARES.values()))
+    kind = KIND_CYCLE[(index // len(ROBOT_CYCLE)) % len(KIND_CYCLE)]
     n = {"control": 0, "one": 1, "two": 2}[kind]
-    chosen = list(rng.choice(EFFECTS, size=n, replace=False)) if n else []
-    if "gradual_friction" in chosen and "friction" in chosen:
-        chosen.remove("friction")          # gradual friction carries its friction coefficients
+    if n == 1:        # every effect on every robot in turn
+        chosen = [EFFECTS[(index // len(ROBOT_CYCLE) + index) % len(EFFECTS)]]
+    elif n == 2:      # gradual friction carries its friction coefficients: never with friction
+        pairs = [p for p in itertools.combinations(EFFECTS, 2) if set(p) != {"friction", "gradual_friction"}]
+        chosen = list(pairs[int(rng.integers(len(pairs)))])
+    else:
+        chosen = []
     hidden, shares = {}, {}
     rotating = sorted({j.tube for j in robot.joints if j.kind == "rotation"})
     for e in chosen:
@@ -116,7 +125,7 @@ def plan_case(seed: int) -> dict:
     errors = {nm: float(rng.choice((-1.0, 1.0)) * rng.uniform(*MISSPECIFICATION)) for nm in names}
     for nm in names:
         parameter(robot, nm)               # validates
-    return {"seed": int(seed), "robot": robot_key, "kind": str(kind), "truth": sorted(chosen), "hidden": hidden,
+    return {"seed": int(seed), "index": int(index), "robot": robot_key, "kind": kind, "truth": sorted(chosen), "hidden": hidden,
             "size_shares": shares, "tube_errors": errors, "ar1": float(rng.choice(AR1)), "noise_m": NOISE_M}
 
 
@@ -153,9 +162,9 @@ def outcome(truth: list, res: dict) -> str:
     return "right" if named == set(truth) else "partly right"
 
 
-def run_case(seed: int, out: str, jobs: int) -> dict:
-    """Synthesize case ``seed`` (reference synthesizer) and run the workflow on it; the case's
-    line of ``cases.jsonl``."""
+def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
+    """Synthesize case ``index`` (seeded by ``seed``; reference synthesizer) and run the workflow
+    on it; the case's line of ``cases.jsonl``."""
     sys.path.insert(0, str(ROOT / "tests"))
     import numpy as np
 
@@ -164,7 +173,7 @@ def run_case(seed: int, out: str, jobs: int) -> dict:
     from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
     from ctrplan.io.robot_file import robot_to_toml
 
-    plan = plan_case(seed)
+    plan = plan_case(seed, index)
     folder = Path(out) / f"case-{seed}"
     folder.mkdir(parents=True, exist_ok=True)
     base, truth = _truth_robot(plan)
@@ -222,7 +231,7 @@ def summarize(cases: list) -> dict:
     wrong = sum(c["outcome"] == "wrong" for c in cases)
     return {"cases": len(cases), "by_outcome": counts(cases),
             "by_robot": {r: counts([c for c in cases if c["robot"] == r]) for r in ROBOTS},
-            "by_kind": {k: counts([c for c in cases if c["kind"] == k]) for k in KIND_SHARES},
+            "by_kind": {k: counts([c for c in cases if c["kind"] == k]) for k in KINDS},
             "by_truth": {e: counts([c for c in cases if c["truth"] == [e]]) for e in ("none",) + EFFECTS},
             "wrong": wrong, "wrong_rate": wrong / len(cases) if cases else None,
             "wrong_ci90": clopper_pearson(wrong, len(cases)),
@@ -234,7 +243,7 @@ def summarize(cases: list) -> dict:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", type=int, default=48)
+    ap.add_argument("--cases", type=int, default=50)
     ap.add_argument("--first-seed", type=int, default=2000)
     ap.add_argument("--jobs", type=int, default=2, help="worker processes within a case")
     ap.add_argument("--scheduler", default=None, help="address of a Dask scheduler to run the cases on")
@@ -271,12 +280,13 @@ def main(argv=None):
         from dask.distributed import Client, as_completed
 
         with Client(args.scheduler) as client:
-            futures = client.map(run_case, todo, out=str(out), jobs=args.jobs, pure=False)
+            futures = client.map(run_case, todo, [s - args.first_seed for s in todo], out=str(out), jobs=args.jobs,
+                                 pure=False)
             for fut in as_completed(futures):
                 record(fut.result())
     else:
         for s in todo:
-            record(run_case(s, str(out), args.jobs))
+            record(run_case(s, s - args.first_seed, str(out), args.jobs))
     cases = [done[s] for s in seeds]
     summary = summarize(cases)
     wall = time.perf_counter() - t0
