@@ -20,7 +20,9 @@ options (every registered candidate) from the base file without the effects.
                                                  [--results benchmarks/results/discrepancy-sweep.json]
 
 Each case is a folder under ``--out`` (its workflow stages are reused when the sweep is run again
-after an interruption) and a line of ``cases.jsonl`` there; finished cases are not run again.
+after an interruption) and a line of ``cases.jsonl`` there; finished cases are not run again. The
+results file is rewritten after every case with the cases finished so far (``cases`` of
+``cases_planned``).
 With ``--scheduler`` the cases run on the Dask workers of that cluster (each with ``--jobs``
 processes), else one after the other here.
 
@@ -266,11 +268,29 @@ def main(argv=None):
     print(f"{len(seeds) - len(todo)} of {len(seeds)} cases finished earlier, {len(todo)} to run; load average "
           f"{os.getloadavg()[0]:.2f}", flush=True)
     t0 = time.perf_counter()
+    results = Path(args.results)
+
+    def write_results():
+        """The results file of the cases finished so far (rewritten after every case)."""
+        cases = [done[s] for s in seeds if s in done]
+        if not cases:
+            return cases
+        results.parent.mkdir(parents=True, exist_ok=True)
+        results.write_text(json.dumps({
+            "command": f"python benchmarks/bench_discrepancy_sweep.py --cases {args.cases} --first-seed {args.first_seed}",
+            "cases_planned": len(seeds), "samples": SAMPLES, "robots": {k: v.name for k, v in ROBOTS.items()},
+            "summary": summarize(cases),
+            "case_seconds": {"total": sum(c["seconds"] for c in cases),
+                             "median": sorted(c["seconds"] for c in cases)[len(cases) // 2]},
+            "provenance": {**provenance(), "cases_source_sha256": sorted({c["source_sha256"] for c in cases})},
+            "cases": cases}, indent=1) + "\n")
+        return cases
 
     def record(case):
         done[case["seed"]] = case
         with log.open("a") as fh:
             fh.write(json.dumps(case) + "\n")
+        write_results()
         print(f"  {case['seed']} {case['robot']:11s} truth {','.join(case['truth']) or 'none':28s} -> "
               f"{case['outcome']:20s} ({case['verdict']}: {','.join(case['named_effects']) or '-'}"
               + (f" or {case['ambiguous_with']}" if case["ambiguous_with"] else "") + f"); {case['seconds']:.0f} s",
@@ -287,23 +307,13 @@ def main(argv=None):
     else:
         for s in todo:
             record(run_case(s, s - args.first_seed, str(out), args.jobs))
-    cases = [done[s] for s in seeds]
+    cases = write_results()
     summary = summarize(cases)
     wall = time.perf_counter() - t0
     print(json.dumps({k: summary[k] for k in ("by_outcome", "wrong", "wrong_ci90", "clear_cases", "clear_found",
                                               "clear_found_ci90")}, indent=1))
     print(f"{wall:.0f} s this run, {sum(c['seconds'] for c in cases):.0f} s of cases in all; load average "
           f"{os.getloadavg()[0]:.2f}")
-    digests = {c["source_sha256"] for c in cases}
-    results = Path(args.results)
-    results.parent.mkdir(parents=True, exist_ok=True)
-    results.write_text(json.dumps({
-        "command": f"python benchmarks/bench_discrepancy_sweep.py --cases {args.cases} --first-seed {args.first_seed}",
-        "samples": SAMPLES, "robots": {k: v.name for k, v in ROBOTS.items()}, "summary": summary,
-        "case_seconds": {"total": sum(c["seconds"] for c in cases),
-                         "median": sorted(c["seconds"] for c in cases)[len(cases) // 2]},
-        "provenance": {**provenance(), "cases_source_sha256": sorted(digests)},
-        "cases": cases}, indent=1) + "\n")
     print(f"wrote {results}")
     return 0
 

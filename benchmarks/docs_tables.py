@@ -54,7 +54,9 @@ def sweep_table(res: dict) -> str:
     """Outcome rates with Clopper-Pearson intervals, by robot, kind and truth; the cases."""
     s = res["summary"]
     n = s["cases"]
-    lines = [f"{n} cases ({', '.join(f'{k}: {sum(c[k2] for k2 in OUTCOMES)}' for k, c in s['by_robot'].items())}); "
+    planned = res.get("cases_planned", n)
+    per_robot = ", ".join(f"{k}: {sum(c[o] for o in OUTCOMES)}" for k, c in s["by_robot"].items())
+    lines = [f"{n} cases" + (f" of the {planned} planned" if planned != n else "") + f" ({per_robot}); "
              f"cost {res['case_seconds']['total'] / 3600:.1f} h of cases (median {res['case_seconds']['median']:.0f} s "
              f"a case).", "",
              "| cases | " + " | ".join(OUTCOMES) + " |", "|---|" + "---|" * len(OUTCOMES)]
