@@ -19,7 +19,7 @@ options (every registered candidate) from the base file without the effects.
                                                  [--out out/bench-discrepancy-sweep]
                                                  [--results benchmarks/results/discrepancy-sweep.json]
 
-Each case is a folder under ``--out`` (its workflow stages are reused when the sweep is run again
+Each case is a folder under ``--out`` (the workflow's log in ``workflow.log``; its stages are reused when the sweep is run again
 after an interruption) and a line of ``cases.jsonl`` there; finished cases are not run again. The
 results file is rewritten after every case with the cases finished so far (``cases`` of
 ``cases_planned``).
@@ -201,7 +201,12 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
         tmp.replace(data)
     synth_s = time.perf_counter() - t0
     opts = DiscrepancyOptions(n_jobs=jobs, seed=seed)
-    res = run_discrepancy(model, data, folder / "report", opts, echo=lambda s: None, progress=False)
+    with (folder / "workflow.log").open("a") as log:
+        def echo(line):
+            log.write(f"{time.strftime('%H:%M:%S')} {line}\n")
+            log.flush()
+
+        res = run_discrepancy(model, data, folder / "report", opts, echo=echo, progress=False)
     final = res["named_effects"]
     fitted = {e: res["candidates"][e]["parameters"] for e in final if e in res["candidates"]}
     return {**plan, "verdict": res["verdict"], "named": res["named_effect"], "ambiguous_with": res["ambiguous_with"],

@@ -18,12 +18,14 @@ __all__ = ["EnvelopeCoverage", "HistoryPrediction", "PREDICTION_DESCRIPTION", "p
 
 #: What the prediction comparison reports (``results.json["prediction"]["description"]``).
 PREDICTION_DESCRIPTION = (
-    "Tip position errors on the untouched test split. Standard: the calibrated baseline, which ignores the motion "
-    "history. "
-    "History-aware: the friction model (Section III of Ha et al. 2019) with each sample's recorded history "
-    "(eta of the last relative rotation of each pair; a pair released by a later translation is solved "
-    "frictionless), tube parameters and friction coefficients calibrated on the calibration split only "
-    "(reference coefficients, if any, given).")
+    "Tip position errors on the untouched test split. The first two rows are the written robot file (the final "
+    "model's parameters, fitted on the development split only; its friction coefficients, the robot file's where "
+    "friction was not fitted into it) evaluated two ways, which [prediction_validation] compares: standard, the "
+    "standard model, which ignores the motion history; history-aware, the friction model (Section III of Ha et al. "
+    "2019) with each sample's recorded history (eta of the last relative rotation of each pair; a pair released by "
+    "a later translation is solved frictionless). Effects on the motion or the measurement in the file (a time "
+    "offset, backlash) apply to both. Then the friction candidate fitted alone, the reference coefficients (if "
+    "given) on its tube parameters, and the named effect alone.")
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,14 +189,18 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise, stages, stage, se
 
 
 def predict_with_history(setup, split, baseline, naming, noise, options: DiscrepancyOptions, echo=print,
-                         progress: bool = False) -> HistoryPrediction | None:
+                         progress: bool = False, *, final_params: dict | None = None) -> HistoryPrediction | None:
     """Stage 9: prediction errors of the standard and the history-aware models on the test split,
     and the coverage of the friction envelope there (every model fitted on the development
     samples only).
 
-    The history-aware model is the friction model along the recorded history with the friction
-    candidate's calibrated parameters and, when ``options.reference_friction`` is given, also
-    with those coefficients (e.g. published ones) on the same calibrated tube parameters. With
+    The first two rows compare what planning chooses between (``[prediction_validation]``): the
+    robot file the run writes, with ``final_params`` (the final model's parameters [SI]; the
+    baseline's when None), evaluated with the standard model and with the friction model along
+    the recorded history (its friction coefficients: ``mu_k`` of ``final_params``, else the robot
+    file's). Then the friction model with the friction candidate's own fit and, when
+    ``options.reference_friction`` is given, with those coefficients (e.g. published ones) on the
+    friction candidate's tube parameters; and the named effect alone. With
     ``options.envelope_samples`` > 0, the envelope (convex hull of the 2^(n-1) bounding friction
     solutions plus :data:`ENVELOPE_NOISE_FACTOR` times the noise rms) is evaluated at that many
     evenly spaced test samples, for each coefficient set.
@@ -217,8 +223,14 @@ def predict_with_history(setup, split, baseline, naming, noise, options: Discrep
                              echo=echo)
 
     fr = candidates["friction"]
-    rows = [("standard model, calibrated (no history)", on_test("baseline", "standard", baseline.params).position),
-            ("history-aware: friction model along the recorded history, fitted "
+    written = dict(baseline.params if final_params is None else final_params)
+    mu = [written.get(f"mu_{k + 1}", m) for k, m in enumerate(setup.robot.friction_coefficients)]
+    mu_text = ", ".join(f"mu_{k + 1} = {m:.3g}" for k, m in enumerate(mu))
+    rows = [("standard model, the written robot file (no history)",
+             on_test("written-standard", "standard", written).position),
+            (f"history-aware: friction model along the recorded history, the written robot file ({mu_text})",
+             on_test("written-friction", "friction", written).position),
+            ("history-aware, the friction candidate fitted alone: "
              + ", ".join(f"{k} = {v:.3g}" for k, v in fr.shown.items()), on_test("friction", fr.model, fr.params).position)]
     sets = [("fitted", fr.params, f"{len(all_eta(setup.robot.n_tubes))}")]
     if options.reference_friction is not None:

@@ -101,7 +101,8 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     naming = name_effect(split, candidates, tests, noise, options, echo)
     combination = fit_second_effect(setup, split, baseline, contact, naming, options, echo, progress)
     test = evaluate_test_split(setup, split, baseline, naming, combination, options, echo, progress)
-    prediction = predict_with_history(setup, split, baseline, naming, noise, options, echo, progress)
+    prediction = predict_with_history(setup, split, baseline, naming, noise, options, echo, progress,
+                                      final_params=final_parameters(naming, combination, baseline))
     prediction_check = validate_prediction(prediction, split, options.seed)
     final = final_candidate(naming, combination)
     bound = (check_bound(setup, split, baseline.cv if final is None else final.cv, test.final,
