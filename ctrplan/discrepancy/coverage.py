@@ -51,8 +51,9 @@ COVERAGE_TOLERANCE = 0.05
 #: The definition printed next to every coverage figure.
 BOUND_DEFINITION = ("bound b: largest tip distance of the 2^(n-1) bounding friction solutions from the standard "
                     "model's tip (Ha et al. 2019, Sec. III) of the calibrated robot; translation-last bound: the "
-                    "clearance-only deviation after a final translation (Sec. V-B); error e: measured tip to the "
-                    "calibrated standard model's tip; within the bound: e <= b + m, m = "
+                    "clearance-only deviation after a final translation (Sec. V-B); error e: measured tip to the tip "
+                    "of the model the robot file is written from (the final model, its named effects included); "
+                    "within the bound: e <= b + m, m = "
                     f"{NOISE_MULTIPLE:.2f} x the sensor's rms position noise")
 
 

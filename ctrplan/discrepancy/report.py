@@ -303,7 +303,7 @@ def _prediction_check_lines(results: dict) -> list[str]:
     lines = [f"Measured prediction error on the test split ({pc['n_samples']} samples in {pc['n_units']} units; "
              f"{100 * pc['confidence']:.0f} % intervals: {pc['method']}):", "",
              "| model | mean [mm] | p95 [mm] | max [mm] |", "|---|---|---|---|"]
-    for side, label in (("standard", "standard model, calibrated"), ("history", pc["history_label"])):
+    for side, label in (("standard", "standard model, the written robot file"), ("history", pc["history_label"])):
         f = pc[side]
         lines.append(f"| {label} | {_ci(f['mean_mm'])} | {_fmt(f['p95_mm'])} | {_fmt(f['max_mm'])} |")
     lines += ["", f"History-aware minus standard, mean: {_ci(pc['difference_mm'])} mm. "
