@@ -101,10 +101,15 @@ def test_hidden_friction_is_named_with_its_coefficient(tmp_path):
     friction history), none in the base file; rivals: backlash, time offset. Friction is named
     (or ambiguous with it) with mu within 0.05 (the grid's refined step is 0.025). Catches
     friction directions taken from the wrong history and a grid search that cannot find an
-    interior minimum."""
+    interior minimum. The prediction check that planning reads validates the written file: with
+    the friction model written, its history-aware row is the final model's test-split error
+    (catches a check of another fit than the one written)."""
     res, _ = _case(tmp_path, 3103, ("friction", "backlash", "time_offset"), mu=(0.25,))
     assert _verdict_has(res, "friction"), res["decision"]
     assert _fitted(res, "friction")["mu_1"] == pytest.approx(0.25, abs=0.05)
+    assert res["updated_model"] == "friction"
+    assert res["prediction_check"]["history"]["mean_mm"]["value"] == pytest.approx(
+        res["test_split"]["figures"]["after"]["mean_mm"]["value"], rel=1e-9)
     # friction acts only where a pair's last motion was a rotation: 8 test blocks of 10 samples
     # see it unevenly, so the shrink's interval is wide; its point value is not
     assert res["test_split"]["figures"]["shrink"]["mean"]["value"] > 0.3, res["test_split"]["figures"]
