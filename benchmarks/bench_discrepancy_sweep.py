@@ -211,11 +211,31 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
     fitted = {e: res["candidates"][e]["parameters"] for e in final if e in res["candidates"]}
     return {**plan, "verdict": res["verdict"], "named": res["named_effect"], "ambiguous_with": res["ambiguous_with"],
             "named_effects": final, "outcome": outcome(plan["truth"], res), "fitted": fitted,
+            "written": written_values(res["updated_model_file"], final, fitted),
             "cautions": res["decision"].get("cautions", []), "noise_consistent": res["noise"]["consistent"],
             "noise_mm": res["noise"]["noise_rms_mm"],
             "test_mean_mm": {k: res["test_split"]["figures"][k]["mean_mm"]["value"] for k in ("file", "before", "after")},
             "prior_strength": res["baseline"]["prior_strength"], "synth_seconds": synth_s,
             "seconds": time.perf_counter() - t0, "source_sha256": res["provenance"]["source_sha256"]}
+
+
+def written_values(model_file, named, fitted) -> dict:
+    """``{effect: {parameter: value}}`` of the named effects as the written robot file holds them
+    (fitted jointly where two are named); the registration, which a robot file does not hold, as
+    ``fitted`` gives it (each named effect fitted alone)."""
+    from ctrplan.discrepancy.parameters import read_parameters
+    from ctrplan.discrepancy.setup import reported_parameters
+    from ctrplan.io.robot_file import load_robot
+
+    robot = load_robot(model_file)
+    out = {}
+    for e in named:
+        if e == "registration":
+            out[e] = dict(fitted.get(e, {}))
+            continue
+        names = reported_parameters(robot, e)
+        out[e] = {n: float(v) for n, v in zip(names, read_parameters(robot, names))}
+    return out
 
 
 def clopper_pearson(k: int, n: int, level: float = 0.90) -> list:
@@ -256,6 +276,8 @@ def main(argv=None):
     ap.add_argument("--scheduler", default=None, help="address of a Dask scheduler to run the cases on")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench-discrepancy-sweep"))
     ap.add_argument("--results", default=str(ROOT / "benchmarks" / "results" / "discrepancy-sweep.json"))
+    ap.add_argument("--results-only", action="store_true",
+                    help="rewrite the results file from the finished cases without running any")
     args = ap.parse_args(argv)
     from ctrplan.discrepancy.provenance import provenance
 
@@ -267,6 +289,9 @@ def main(argv=None):
         for line in log.read_text().splitlines():
             if line.strip():
                 c = json.loads(line)
+                if "written" not in c:   # a case recorded before the written values were: read its file
+                    files = sorted((out / f"case-{c['seed']}" / "report").glob("*.toml"))
+                    c["written"] = written_values(files[-1], c["named_effects"], c["fitted"]) if files else c["fitted"]
                 done[c["seed"]] = c
     seeds = [args.first_seed + k for k in range(args.cases)]
     todo = [s for s in seeds if s not in done]
@@ -301,6 +326,8 @@ def main(argv=None):
               + (f" or {case['ambiguous_with']}" if case["ambiguous_with"] else "") + f"); {case['seconds']:.0f} s",
               flush=True)
 
+    if args.results_only:
+        todo = []
     if args.scheduler and todo:
         from dask.distributed import Client, as_completed
 

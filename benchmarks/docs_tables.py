@@ -75,7 +75,7 @@ def sweep_table(res: dict) -> str:
                   f"ambiguous pair where every hidden effect is above 30 % of its typical range: {s['clear_found']} of "
                   f"{s['clear_cases']} ({100 * (s['clear_found_rate'] or 0):.0f} %, {_ci90(s['clear_found_ci90'])}; "
                   f"target at least 85 %).", "",
-              "| seed | robot | truth (size, share of the typical range) | noise | verdict | fitted |",
+              "| seed | robot | truth (size, share of the typical range) | noise | verdict | written to the robot file |",
               "|---|---|---|---|---|---|"]
     for c in res["cases"]:
         hidden = "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["hidden"].values() for k, v in e.items()) or "-"
@@ -86,7 +86,7 @@ def sweep_table(res: dict) -> str:
                                                                           if c["ambiguous_with"] else ""))
         if c.get("cautions"):
             verdict += " (caution)"
-        fitted = "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["fitted"].values() for k, v in e.items()) or "-"
+        fitted = "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["written"].values() for k, v in e.items()) or "-"
         lines.append(f"| {c['seed']} | {c['robot']} | {hidden}" + (f" ({shares})" if shares else "")
                      + f" | {noise} | {verdict} | {fitted} |")
     return "\n".join(lines)
