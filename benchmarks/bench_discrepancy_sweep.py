@@ -291,7 +291,7 @@ def main(argv=None):
                 c = json.loads(line)
                 if "written" not in c:   # a case recorded before the written values were: read its file
                     files = sorted((out / f"case-{c['seed']}" / "report").glob("*.toml"))
-                    c["written"] = written_values(files[-1], c["named_effects"], c["fitted"]) if files else c["fitted"]
+                    c["written"] = written_values(files[-1], c["named_effects"], c["fitted"]) if files else None
                 done[c["seed"]] = c
     seeds = [args.first_seed + k for k in range(args.cases)]
     todo = [s for s in seeds if s not in done]

@@ -86,9 +86,11 @@ def sweep_table(res: dict) -> str:
                                                                           if c["ambiguous_with"] else ""))
         if c.get("cautions"):
             verdict += " (caution)"
-        fitted = "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["written"].values() for k, v in e.items()) or "-"
+        written = ("(its robot file is missing)" if c["written"] is None else
+                   "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["written"].values() for k, v in e.items())
+                   or "-")
         lines.append(f"| {c['seed']} | {c['robot']} | {hidden}" + (f" ({shares})" if shares else "")
-                     + f" | {noise} | {verdict} | {fitted} |")
+                     + f" | {noise} | {verdict} | {written} |")
     return "\n".join(lines)
 
 
