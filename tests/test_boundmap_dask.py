@@ -125,7 +125,8 @@ def test_interrupted_cluster_run_resumes_only_missing_chunks(robot_file, serial,
 
 def test_cli_killed_run_resumes(tmp_path):
     """SIGKILL of `ctrplan boundmap --jobs 2` (client and workers) mid-run, then resume."""
-    psutil = pytest.importorskip("psutil")
+    import psutil
+
     robot_file = pair_with_translation(tmp_path / "pair.toml")
     store = tmp_path / "pair.zarr"
     res = (24, 4)  # 24 chunks of 4 nodes: a few seconds on 2 workers

@@ -94,7 +94,8 @@ def test_robot_shapes_with_every_obstacle_type(tmp_path, figures):
 
 
 def test_robot_shapes_accepts_obstacle_dataclasses(tmp_path):
-    collision = pytest.importorskip("ctrplan.planning.collision")
+    from ctrplan.planning import collision
+
     obstacles = [collision.obstacle_from_dict({"type": "sphere", "center_m": [0.0, 0.0, 0.05],
                                                "radius_m": 0.004}),
                  collision.obstacle_from_dict({"type": "box", "center_m": [0.01, 0.0, 0.05],
@@ -103,7 +104,8 @@ def test_robot_shapes_accepts_obstacle_dataclasses(tmp_path):
 
 
 def test_robot_shapes_with_a_mesh_file(tmp_path):
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
+
     trimesh.creation.box(extents=(10.0, 10.0, 10.0)).export(tmp_path / "cube.stl")
     obstacle = {"type": "mesh", "path": str(tmp_path / "cube.stl"), "scale": 1e-3,
                 "translation_m": [0.0, 0.0, 0.05], "rpy_rad": [0.0, 0.0, 0.5]}

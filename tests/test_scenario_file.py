@@ -191,7 +191,8 @@ def test_obstacles_and_drive_feed_the_planning_and_trajectory_modules(tmp_path):
     kw = s.drive.as_kwargs()
     assert kw["max_velocity"] == {"alpha_2": 1.0, "alpha_3": 2.0, "beta_3": 0.01}
     assert kw["control_rate_hz"] == 100.0
-    collision = pytest.importorskip("ctrplan.planning.collision")
+    from ctrplan.planning import collision
+
     built = [collision.obstacle_from_dict(dict(d)) for d in dicts]
     assert len(built) == 4
 

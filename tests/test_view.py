@@ -135,7 +135,7 @@ def _chromium_driver():
                     "chromium-driver to run the browser test")
     if not CHROMEDRIVER.is_file():
         pytest.skip(f"chromedriver not found at {CHROMEDRIVER}: install the Debian package chromium-driver")
-    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e '.[test]')")
+    from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
     opts = webdriver.ChromeOptions()
