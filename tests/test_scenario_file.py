@@ -166,6 +166,7 @@ def test_joint_array_helpers(tmp_path):
     ("max_velocity = {alpha_2 = 1.0,", "max_velocity = {alpha_2 = 0.0,", "drive.max_velocity.alpha_2"),
     ('dir = "out"', "dir = 3", "output.dir"),
     ('name = "demo"\n', "", "name"),
+    ("iterations = 500", 'iterations = 500\nname = "RRTstr"', "planner.name"),
 ])
 def test_bad_scenarios(tmp_path, old, new, key):
     assert old in GOOD
@@ -181,6 +182,19 @@ def test_missing_robot_file(tmp_path):
 def test_value_in_message(tmp_path):
     err = _error(tmp_path, GOOD.replace("radius_m = 0.01", "radius_m = -0.01"))
     assert "-0.01" in str(err) and str(tmp_path) in str(err)
+
+
+def test_unknown_planner_is_refused_when_the_scenario_loads(tmp_path):
+    """A misspelt planner fails at load (before any planning) naming the value and the planners
+    the package has; every registered planner loads. Catches a name checked only by the planner
+    after the goals were solved, or a registry out of step with the one the planners are built from."""
+    from ctrplan.planning import PLANNERS
+
+    err = _error(tmp_path, GOOD.replace("iterations = 500", 'iterations = 500\nname = "RRTstr"'))
+    assert "'RRTstr'" in str(err) and "RRTstar" in err.detail and "Value error" not in str(err)
+    assert "\n" not in str(err)
+    for name in PLANNERS:
+        assert load_scenario(_write(tmp_path, GOOD.replace("iterations = 500", f'iterations = 500\nname = "{name}"'))).planner.name == name
 
 
 def test_obstacles_and_drive_feed_the_planning_and_trajectory_modules(tmp_path):

@@ -247,6 +247,8 @@ def _describe(err: dict, root: type[BaseModel]) -> str:
         parent = _model_at(root, tuple(err["loc"][:-1]))
         allowed = f"; allowed keys here: {', '.join(parent.model_fields)}" if parent else ""
         return f"unknown key (value {value!r}){allowed}"
+    if kind == "value_error":   # a validator's own message, which names the value
+        return str(err["ctx"]["error"]) if "ctx" in err else err["msg"].removeprefix("Value error, ")
     return f"{err['msg']}; got {value!r} ({type(value).__name__})"
 
 

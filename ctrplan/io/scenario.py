@@ -14,10 +14,11 @@ from pathlib import Path
 from typing import Annotated, Literal, Mapping, Union
 
 import numpy as np
-from pydantic import Field
+from pydantic import AfterValidator, Field
 
 from ..coordinates import map_coordinates
 from ..errors import JointLimitError, ModelFileError
+from ..planner_info import check_planner
 from ..robot import Robot
 from .robot_file import MAX_METRES, _Strict, load_robot, parse_toml, read_text, validate_document
 
@@ -90,7 +91,7 @@ DEFAULT_BOUND_WEIGHT = 1000.0
 
 
 class _PlannerDoc(_Strict):
-    name: Annotated[str, Field(min_length=1)] = "RRTstar"
+    name: Annotated[str, AfterValidator(check_planner)] = "RRTstar"
     iterations: Annotated[int, Field(ge=1)] = 3000
     time_limit_s: Positive | None = None
     seed: int = 1

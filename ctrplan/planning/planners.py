@@ -19,21 +19,17 @@ import numpy as np
 from ompl import base as ob, geometric as og, util as ou
 
 from ..errors import CtrplanError, UnreachableGoalError
+from ..planner_info import PLANNER_INFO, check_planner
 from .space import JointStateSpace
 from .validity import DEFAULT_VALIDITY_RESOLUTION, use_motion_validator
 
 __all__ = ["PLANNERS", "PlanResult", "ValidityChecker", "plan", "DEFAULT_ITERATIONS",
            "DEFAULT_VALIDITY_RESOLUTION"]
 
-# Planner registry: name -> constructor taking an ob.SpaceInformation.
-# BITstar segfaulted with a *time-based* termination condition in a probe (OMPL 2.0.1 wheels);
-# plan() always terminates it on an iteration count, which ran fine.
-PLANNERS = {
-    "RRTstar": og.RRTstar,
-    "InformedRRTstar": og.InformedRRTstar,
-    "SORRTstar": og.SORRTstar,
-    "BITstar": og.BITstar,
-}
+# Planner registry (names and descriptions in ctrplan.planner_info): name -> constructor taking an
+# ob.SpaceInformation. BITstar segfaulted with a *time-based* termination condition in a probe
+# (OMPL 2.0.1 wheels); plan() always terminates it on an iteration count, which ran fine.
+PLANNERS = {name: getattr(og, info.ompl_class) for name, info in PLANNER_INFO.items()}
 
 # Default planner iterations (RRT* finds a first solution on the paper's 3-joint space within a
 # few hundred iterations; more iterations only improve the cost).
@@ -244,8 +240,7 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
     UnreachableGoalError
         Start or goal invalid, or no exact solution within the iterations.
     """
-    if planner not in PLANNERS:
-        raise ValueError(f"unknown planner {planner!r}; available: {', '.join(PLANNERS)}")
+    check_planner(planner)
     if int(iterations) < 1:
         raise ValueError(f"iterations must be >= 1, got {iterations!r}")
     if int(seed) <= 0:
