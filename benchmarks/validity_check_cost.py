@@ -1,4 +1,5 @@
-"""Per-state cost of the pipeline's ValidityChecker against the batched checker, side by side.
+"""Cost of the planner's validity checks per state and per motion: the batched checker against
+the per-state reference checker, side by side, with their decisions compared.
 
 On ``scenarios/obstacles.toml`` (its robot, obstacles, model settings with ``multistart=0`` and
 the shipped bound map, loaded as ``ctrplan/pipeline.py`` loads it), in one process:
