@@ -19,11 +19,8 @@
    and with the default jobs for Table II (throughput scaling; also of the batch call itself on
    2 threads). The rows are read ``--tile`` (32) times over, and the runs with one and with the
    default jobs alternate: read once, the rows are about 0.1 s of work behind 1.2 s of process
-   start; read once, the runs of each jobs setting back to back gave a scaling of 1.41-1.51x,
-   read 8 times over and alternated 1.6-2.0x. At 8 times over the work (about 0.7 s with
-   ``--jobs 1``) is still half the process start subtracted from it: one run gave 1.39x
-   (1.29-1.52 run by run) where 32 times over gave 1.76x (1.58-1.86); the batch call itself
-   scaled 1.58x and 2.00x in those two runs, so part of that difference was the machine.
+   start, and at 8 times over the work (about 0.7 s with ``--jobs 1``) is still only half the
+   process start subtracted from it, which understates the scaling.
    Also the in-process bound on the 8x8x8 grid (``paper_section_4d.grid_8x8x8``; slowest over
    median). Figures with their conditions: docs/mechanics.md Sec. 10.
 

@@ -1,4 +1,5 @@
-"""Per-state cost of the pipeline's ValidityChecker against the batched checker, side by side.
+"""Cost of the planner's validity checks per state and per motion: the batched checker against
+the per-state reference checker, side by side, with their decisions compared.
 
 On ``scenarios/obstacles.toml`` (its robot, obstacles, model settings with ``multistart=0`` and
 the shipped bound map, loaded as ``ctrplan/pipeline.py`` loads it), in one process:
@@ -23,8 +24,8 @@ the absolute times. The first calls (numba cache loading) are run before timing.
 
 Usage::
 
-    python benchmarks/bench_validity.py                   # 600 states, 200 motions
-    python benchmarks/bench_validity.py --states 200 --motions 50 --seed 3
+    python benchmarks/validity_check_cost.py      # 600 states, 200 motions
+    python benchmarks/validity_check_cost.py --states 200 --motions 50 --seed 3
 """
 
 from __future__ import annotations
@@ -55,18 +56,19 @@ def _load_field(sc, settings):
     return load_or_compute_bound_map(sc.robot_file, sc.robot, map_spec(sc), settings, n_jobs=1, echo=print)
 
 
-def _stats(label, t_old, t_new, unit="ms"):
+def _stats(label, t_single, t_batch, unit="ms"):
     """Print mean, median, p90, max of two arrays of times [s] and their ratios."""
     f = 1e3
     rows = []
-    for name, t in (("per-state ValidityChecker", t_old), ("BatchValidityChecker", t_new)):
+    for name, t in (("per-state ValidityChecker", t_single), ("BatchValidityChecker", t_batch)):
         rows.append(f"  {name:26s} mean {t.mean() * f:8.3f}  median {np.median(t) * f:8.3f}  "
                     f"p90 {np.percentile(t, 90) * f:8.3f}  max {t.max() * f:8.3f}  [{unit}]")
     print(label)
     print("\n".join(rows))
-    print(f"  ratio per-state/batched    mean {t_old.mean() / t_new.mean():8.1f}  median "
-          f"{np.median(t_old) / np.median(t_new):8.1f}  p90 {np.percentile(t_old, 90) / np.percentile(t_new, 90):8.1f}"
-          f"  max {t_old.max() / t_new.max():8.1f}  [-]")
+    print(f"  ratio per-state/batched    mean {t_single.mean() / t_batch.mean():8.1f}  median "
+          f"{np.median(t_single) / np.median(t_batch):8.1f}  "
+          f"p90 {np.percentile(t_single, 90) / np.percentile(t_batch, 90):8.1f}"
+          f"  max {t_single.max() / t_batch.max():8.1f}  [-]")
 
 
 def main(argv=None) -> int:
@@ -98,48 +100,48 @@ def main(argv=None) -> int:
 
     def checkers():
         collision = CollisionChecker(obstacles, segment_length=COLLISION_SEGMENT)
-        old = ValidityChecker(robot, collision=collision, field=field, settings=check_settings)
-        new = BatchValidityChecker(robot, collision=collision, field=field, settings=check_settings,
+        single = ValidityChecker(robot, collision=collision, field=field, settings=check_settings)
+        batch = BatchValidityChecker(robot, collision=collision, field=field, settings=check_settings,
                                    joint_space=js, resolution=DEFAULT_VALIDITY_RESOLUTION)
-        return old, new, collision
+        return single, batch, collision
 
     rng = np.random.default_rng(args.seed)
     lo, hi = robot.joint_lower, robot.joint_upper
     warm = lo + (hi - lo) * rng.random((4, lo.size))
-    old, new, _ = checkers()
+    single, batch, _ = checkers()
     for q in warm:                       # numba cache loading, imports, first fcl objects
-        old(q), new(q)
-    new.check(warm + 1e-3)
+        single(q), batch(q)
+    batch.check(warm + 1e-3)
 
     # ------------------------------------------------------------------ states
     Q = lo + (hi - lo) * rng.random((args.states, lo.size))
-    old, new, collision = checkers()
-    t_old = np.empty(len(Q))
-    t_new = np.empty(len(Q))
-    v_old = np.empty(len(Q), dtype=bool)
-    v_new = np.empty(len(Q), dtype=bool)
+    single, batch, collision = checkers()
+    t_single = np.empty(len(Q))
+    t_batch = np.empty(len(Q))
+    v_single = np.empty(len(Q), dtype=bool)
+    v_batch = np.empty(len(Q), dtype=bool)
     clock = time.perf_counter
     for i, q in enumerate(Q):
-        first_old = i % 2 == 0
-        for which in ((0, 1) if first_old else (1, 0)):
+        single_first = i % 2 == 0
+        for which in ((0, 1) if single_first else (1, 0)):
             t0 = clock()
             if which == 0:
-                v_old[i] = old(q)
-                t_old[i] = clock() - t0
+                v_single[i] = single(q)
+                t_single[i] = clock() - t0
             else:
-                v_new[i] = new(q)
-                t_new[i] = clock() - t0
+                v_batch[i] = batch(q)
+                t_batch[i] = clock() - t0
     print(f"\n{len(Q)} random states of {SCENARIO.name} (one call per state, the same states, side by side):")
-    _stats("per-state wall time", t_old, t_new)
-    print(f"  valid: per-state {v_old.sum()}, batched {v_new.sum()}, mismatches {np.sum(v_old != v_new)}")
-    print(f"  batched checker: {new.n_model} states reached the standard model, {new.n_collision_checked} the "
+    _stats("per-state wall time", t_single, t_batch)
+    print(f"  valid: per-state {v_single.sum()}, batched {v_batch.sum()}, mismatches {np.sum(v_single != v_batch)}")
+    print(f"  batched checker: {batch.n_model} states reached the standard model, {batch.n_collision_checked} the "
           f"collision test, {collision.n_batch_narrow_bodies} the fcl narrow phase "
           f"({collision.n_batch_narrow_calls} fcl.collide calls); time in the model "
-          f"{new.seconds_model / len(Q) * 1e3:.3f} ms/state, in collision "
-          f"{new.seconds_collision / len(Q) * 1e3:.3f} ms/state")
+          f"{batch.seconds_model / len(Q) * 1e3:.3f} ms/state, in collision "
+          f"{batch.seconds_collision / len(Q) * 1e3:.3f} ms/state")
     n_split = min(100, len(Q))
     t_solve, t_body = np.empty(n_split), np.empty(n_split)
-    for i, q in enumerate(Q[:n_split]):     # where the old checker's time goes
+    for i, q in enumerate(Q[:n_split]):     # where the per-state checker's time goes
         alpha, beta = robot.configuration(q)
         t0 = clock()
         sol = solve_standard(robot, alpha, beta, check_settings)
@@ -154,7 +156,8 @@ def main(argv=None) -> int:
     v_all = fresh.check(Q)
     t_all = clock() - t0
     print(f"  batched checker, all {len(Q)} states in one check() call: {t_all / len(Q) * 1e3:.3f} ms/state "
-          f"(ratio to the per-state mean {t_old.mean() / (t_all / len(Q)):.1f}); mismatches {np.sum(v_all != v_old)}")
+          f"(ratio to the per-state mean {t_single.mean() / (t_all / len(Q)):.1f}); "
+          f"mismatches {np.sum(v_all != v_single)}")
 
     # ------------------------------------------------------------------ motions
     q0 = lo + (hi - lo) * rng.random((args.motions, lo.size))
@@ -163,41 +166,43 @@ def main(argv=None) -> int:
     d = js.difference(q0, q1)
     scale = np.minimum(1.0, lengths / js.distance(q0, q1))
     q1 = q0 + d * scale[:, None]
-    old, new, collision = checkers()
-    tm_old = np.empty(args.motions)
-    tm_new = np.empty(args.motions)
-    n_old = np.zeros(args.motions, dtype=np.int64)
-    n_new = np.zeros(args.motions, dtype=np.int64)
-    r_old = np.empty(args.motions, dtype=bool)
-    r_new = np.empty(args.motions, dtype=bool)
+    single, batch, collision = checkers()
+    tm_single = np.empty(args.motions)
+    tm_batch = np.empty(args.motions)
+    n_single = np.zeros(args.motions, dtype=np.int64)
+    n_batch = np.zeros(args.motions, dtype=np.int64)
+    r_single = np.empty(args.motions, dtype=bool)
+    r_batch = np.empty(args.motions, dtype=bool)
     n_states = np.empty(args.motions, dtype=np.int64)
     for i in range(args.motions):
-        states = new.motion_states(q0[i], q1[i])
+        states = batch.motion_states(q0[i], q1[i])
         n_states[i] = len(states)
         for which in ((0, 1) if i % 2 == 0 else (1, 0)):
             if which == 0:
-                before = old.n_evaluations
+                before = single.n_evaluations
                 t0 = clock()
                 ok = True
-                for q in states:          # OMPL's DiscreteMotionValidator with the old checker
-                    if not old(q):
+                for q in states:          # OMPL's DiscreteMotionValidator with the per-state checker
+                    if not single(q):
                         ok = False
                         break
-                tm_old[i] = clock() - t0
-                r_old[i], n_old[i] = ok, old.n_evaluations - before
+                tm_single[i] = clock() - t0
+                r_single[i], n_single[i] = ok, single.n_evaluations - before
             else:
-                before = new.n_evaluations
+                before = batch.n_evaluations
                 t0 = clock()
-                r_new[i] = new.check_motion(q0[i], q1[i])
-                tm_new[i] = clock() - t0
-                n_new[i] = new.n_evaluations - before
+                r_batch[i] = batch.check_motion(q0[i], q1[i])
+                tm_batch[i] = clock() - t0
+                n_batch[i] = batch.n_evaluations - before
     print(f"\n{args.motions} random straight motions (<= {MAX_MOTION_LENGTH * 1e3:.0f} mm in the weighted metric, "
           f"{n_states.mean():.1f} states on average at {DEFAULT_VALIDITY_RESOLUTION * 1e3:.0f} mm resolution):")
-    _stats("per-motion wall time", tm_old, tm_new)
-    print(f"  per evaluated state: per-state {tm_old.sum() / max(n_old.sum(), 1) * 1e3:.3f} ms ({n_old.sum()} states), "
-          f"batched {tm_new.sum() / max(n_new.sum(), 1) * 1e3:.3f} ms ({n_new.sum()} states, batches up to "
-          f"{new.batch_size}); total time ratio per-state/batched {tm_old.sum() / tm_new.sum():.1f}")
-    print(f"  valid motions: per-state {r_old.sum()}, batched {r_new.sum()}, mismatches {np.sum(r_old != r_new)}; "
+    _stats("per-motion wall time", tm_single, tm_batch)
+    print(f"  per evaluated state: per-state {tm_single.sum() / max(n_single.sum(), 1) * 1e3:.3f} ms "
+          f"({n_single.sum()} states), "
+          f"batched {tm_batch.sum() / max(n_batch.sum(), 1) * 1e3:.3f} ms ({n_batch.sum()} states, batches up to "
+          f"{batch.batch_size}); total time ratio per-state/batched {tm_single.sum() / tm_batch.sum():.1f}")
+    print(f"  valid motions: per-state {r_single.sum()}, batched {r_batch.sum()}, "
+          f"mismatches {np.sum(r_single != r_batch)}; "
           f"states reaching the fcl narrow phase (batched) {collision.n_batch_narrow_bodies}")
     print(f"\nload average after (1, 5, 15 min): {os.getloadavg()}")
     return 0

@@ -18,7 +18,7 @@ average is printed at the start and the end):
    valid configurations of ``model/ha2019-table2-six-joint.toml`` (seeded), and how many exact
    bounds two cores compute in a given wall time (``--budget``, seconds) at that rate.
 
-Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_bound_split.py [--repeat 2000] [--six-joint 40]
+Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bound_time_split.py [--repeat 2000] [--six-joint 40]
 """
 
 from __future__ import annotations

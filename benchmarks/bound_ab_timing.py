@@ -16,7 +16,7 @@ tolerances 1e-9, ``TIGHT``) [um], and whether the two codes leave the same confi
 unconverged and flag the same ones as folds (more than one standard-model equilibrium,
 ``diagnostics.unstable``).
 
-Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_bound_ab.py --base fd0e2f1 [--runs 6] [--grid 4|8]
+Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bound_ab_timing.py --base REV [--runs 6] [--grid 4|8]
 Grids: the paper's 4x4x4 grid (Section IV-D, Table II robot) or the 8x8x8 grid
 (``paper_section_4d.grid_8x8x8``).
 """

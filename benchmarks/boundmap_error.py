@@ -17,7 +17,7 @@ Part 2 tells which coordinate's spacing the largest errors come from: a coordina
 error is as large as the map's error at that configuration needs more nodes (or the bound has a
 kink or an edge of validity there, which no interpolation order follows).
 
-Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_map_error.py [--n 260] [--worst 6] [--seed 0]
+Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/boundmap_error.py [--n 260] [--worst 6] [--seed 0]
 """
 
 from __future__ import annotations

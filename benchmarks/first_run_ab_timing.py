@@ -14,7 +14,7 @@ Printed: wall times [s] per command, code and round, their mean, median, p90 and
 this / base of the cold medians, and the load average at the start and the end. The machines
 are shared: the ratio is the figure to trust, the absolute times drift 2-3x between runs.
 
-Run:  python benchmarks/bench_cold_start.py --base ba18f64 [--rounds 2]
+Run:  python benchmarks/first_run_ab_timing.py --base REV [--rounds 2]
 """
 
 from __future__ import annotations
