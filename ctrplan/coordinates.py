@@ -34,7 +34,9 @@ import numpy as np
 
 __all__ = ["MapCoordinates", "map_coordinates", "ROTATION_COORDINATE", "TRANSLATION_COORDINATE"]
 
+#: Kind of a map coordinate that is a relative base rotation [rad] (``MapCoordinates.kinds``).
 ROTATION_COORDINATE = "rotation"
+#: Kind of a map coordinate that is a relative base translation [m] (``MapCoordinates.kinds``).
 TRANSLATION_COORDINATE = "translation"
 
 # Coefficients of the affine joint -> configuration map smaller than this are zero (they are

@@ -47,9 +47,14 @@ from .trajectory import START, Trajectory
 __all__ = ["PATH_FILE", "TRAJECTORY_FILE", "SUMMARY_FILE", "BOUND_KINDS", "path_columns",
            "write_plan_outputs", "format_summary"]
 
+#: File name of the ordered waypoints.
 PATH_FILE = "path.csv"
+#: File name of the time-parameterized trajectory.
 TRAJECTORY_FILE = "trajectory.csv"
+#: File name of the summary, written last.
 SUMMARY_FILE = "summary.json"
+#: Values of the ``bound_kind`` column of ``path.csv``: the friction bound, or the
+#: translation-last bound (the waypoint is reached by a translation).
 BOUND_KINDS = ("friction", "translation_last")
 _MOTIONS = (START, "rotation", "translation")
 _TIP_COLUMNS = ("tip_x", "tip_y", "tip_z")

@@ -26,7 +26,9 @@ from typing import Any, Callable, Sequence
 
 __all__ = ["scenario_files", "plan_many", "input_key", "TABLE_FILE", "PLOT_FILE", "COLUMNS"]
 
+#: File name of the table across scenarios, in the output folder.
 TABLE_FILE = "scenarios.csv"
+#: File name of its figure.
 PLOT_FILE = "scenarios.png"
 #: Columns of the table across scenarios (units in their suffixes).
 COLUMNS = ("scenario", "status", "reason", "time_s", "cost", "joint_path_length_m", "max_bound_mm", "final_bound_mm",

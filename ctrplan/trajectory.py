@@ -43,8 +43,11 @@ __all__ = [
     "check_trajectory",
 ]
 
+#: Motion of a phase that changes rotations only (the ``motion`` column of ``path.csv``).
 ROTATION = "rotation"
+#: Motion of a phase that changes translations only.
 TRANSLATION = "translation"
+#: Motion of the start waypoint, reached by no phase.
 START = "start"
 _UNITS = {ROTATION: "rad", TRANSLATION: "m"}
 

@@ -23,6 +23,7 @@ from .io.atomic import atomic_path
 
 __all__ = ["PLAN_VIEW_FILE", "plan_view_figure", "write_plan_view", "obstacle_triangles"]
 
+#: File name of the interactive view in a plan's output folder.
 PLAN_VIEW_FILE = "plan.html"
 M_TO_MM = 1e3
 # Coordinates are written in mm rounded to this many decimals (0.1 um): far below any bound the

@@ -31,6 +31,7 @@ import numpy as np
 __all__ = ["MapSpec", "PLACEMENTS", "uniform_axis", "place_nodes", "pilot_design", "DEFAULT_PILOT_LINES",
            "DEFAULT_PILOT_STEP_M", "DEFAULT_PILOT_STEP_RAD"]
 
+#: Node placements along a bounded coordinate (``MapSpec.placement``).
 PLACEMENTS = ("uniform", "adaptive")
 
 # Pilot lines per adaptive coordinate: enough different positions of the other coordinates for

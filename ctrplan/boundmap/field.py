@@ -31,6 +31,7 @@ __all__ = ["QUANTITIES", "UNITS", "BoundField"]
 
 # Stored per-node quantities, in this order, with units.
 QUANTITIES = ("position", "angle", "translation_last_position", "translation_last_angle")
+#: Unit of each stored quantity.
 UNITS = {"position": "m", "angle": "rad", "translation_last_position": "m", "translation_last_angle": "rad"}
 
 # Interpolation weights at or below this do not count when deciding whether an invalid node

@@ -35,6 +35,7 @@ __all__ = ["path_history", "approach_history", "approach_rows", "end_with", "goa
 
 # Final motions a scenario may ask for ([planner] final_motion) and the motion kind each ends with.
 FINAL_MOTIONS = {"translation-last": "translation", "rotation-last": "rotation"}
+#: Final motion of a scenario that does not name one.
 DEFAULT_FINAL_MOTION = "translation-last"
 
 
