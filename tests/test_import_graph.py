@@ -19,6 +19,8 @@ LAYERS = (
     ("history",),                              # pure numerics of motion history
     ("robot",),
     ("coordinates", "effects"),                # robot-level quantities and the registry of effects
+    ("obstacles",),                            # obstacle types and their registry: the scenario loader (io),
+                                               # the collision checker (planning) and the plots use them
     ("io",),                                   # files -> robots, scenarios, tables
     ("mechanics",),                            # the models and the bound
     ("batch", "boundmap", "trajectory"),
