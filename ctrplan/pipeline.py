@@ -100,8 +100,8 @@ class PlanSetup:
         the settings of every validity check and of the inverse kinematics.
     spec : MapSpec
         The bound map's resolution and placement (:func:`map_spec`).
-    obstacles : tuple of dict
-        The scenario's obstacles as dicts (``Obstacle.as_dict``) [m, rad].
+    obstacles : tuple of Obstacle
+        The scenario's obstacles (:mod:`ctrplan.obstacles`) [m, rad].
     out_dir : pathlib.Path
         Output folder.
     """
@@ -371,7 +371,7 @@ def load_setup(scenario_path, out_dir=None, echo: Echo = print) -> PlanSetup:
     out = Path(out_dir) if out_dir else (sc.output_dir or Path("out") / sc.name)
     echo(f"scenario {sc.name}: robot {sc.robot.name} ({', '.join(sc.robot.joint_names)})")
     return PlanSetup(scenario=sc, settings=settings, check_settings=settings.replace(multistart=0), spec=spec,
-                     obstacles=tuple(o.as_dict() for o in sc.obstacles), out_dir=out)
+                     obstacles=tuple(sc.obstacles), out_dir=out)
 
 
 def load_bound_map(setup: PlanSetup, n_jobs: int = 1, echo: Echo = print) -> BoundMapStage:
@@ -1133,7 +1133,7 @@ def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo
             continue
         shapes.append(res.standard.centerline)
         tips.append(np.array([f.tip_position for f in res.friction.values()]))
-    obstacles = [o.as_dict() for o in sc.obstacles]
+    obstacles = list(sc.obstacles)
     routes = plans.routes
     labels = [m.replace("_", "-") + " plan" for m in routes]
     bounds = [routes[m].bounds for m in routes]

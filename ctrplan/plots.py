@@ -21,6 +21,7 @@ from matplotlib.patches import Patch
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from .io.atomic import atomic_path
+from .obstacles import as_obstacle
 from .trajectory import ROTATION, TRANSLATION, Trajectory
 
 __all__ = ["plot_robot_shapes", "plot_bound_along_path", "plot_joint_trajectories", "plot_xy"]
@@ -30,8 +31,11 @@ DPI = 120
 # Background colour of each motion phase in time and path plots.
 PHASE_COLORS = {ROTATION: "tab:blue", TRANSLATION: "tab:orange"}
 PHASE_ALPHA = 0.12
-# Resolution of spheres and capsule caps (points per great circle).
+# Resolution of curved obstacle surfaces (points per great circle; Obstacle.triangles).
 SPHERE_RESOLUTION = 16
+# Obstacle faces: grey, shaded by their orientation, see-through.
+OBSTACLE_COLOR = "0.55"
+OBSTACLE_ALPHA = 0.35
 
 
 # ---------------------------------------------------------------------------------- robot shapes
@@ -45,12 +49,10 @@ def plot_robot_shapes(path, shapes: Sequence, obstacles: Sequence = (), friction
         Output PNG.
     shapes : sequence of array-like, shape (K_j, 3)
         Centerline of the robot at each waypoint [m]; drawn in mm, coloured from first to last.
-    obstacles : sequence of obstacles
-        Dataclasses of :mod:`ctrplan.planning.collision` or dicts with a ``type`` key:
-        ``sphere`` (``center_m``, ``radius_m``), ``capsule`` (``a_m``, ``b_m``, ``radius_m``),
-        ``box`` (``center_m``, ``size_m``, ``rpy_rad``), ``mesh`` (either ``vertices`` shape (V, 3)
-        [m] and ``faces`` shape (F, 3) of int, or a mesh file as in
-        :class:`ctrplan.planning.collision.MeshObstacle`).
+    obstacles : sequence of Obstacle or dict
+        :class:`ctrplan.obstacles.Obstacle` instances (any registered type) or dicts with a
+        registered ``type`` (:func:`ctrplan.obstacles.obstacle_from_dict`); each is drawn as its
+        :meth:`~ctrplan.obstacles.Obstacle.triangles` [m], shown in mm.
     friction_tips : sequence of array-like, shape (m_j, 3)
         Tip positions of the friction-model solutions at waypoint j [m]; drawn as markers.
     title : str
@@ -65,7 +67,8 @@ def plot_robot_shapes(path, shapes: Sequence, obstacles: Sequence = (), friction
     Raises
     ------
     ValueError
-        A shape or tip array with the wrong shape, or an unknown obstacle type.
+        A shape or tip array with the wrong shape, or an obstacle of an unknown type or with a bad
+        key (the message starts with ``obstacle k``, k 0-based).
     """
     fig = _figure((7.5, 6.5))
     ax = fig.add_subplot(projection="3d")
@@ -108,125 +111,27 @@ def _points(values, label: str) -> np.ndarray:
     return arr
 
 
-def _field(obj, *names):
-    """First present field among ``names`` of a dict or a dataclass (None if none)."""
-    for name in names:
-        if isinstance(obj, dict):
-            if name in obj:
-                return obj[name]
-        elif hasattr(obj, name):
-            return getattr(obj, name)
-    return None
-
-
-def _obstacle_type(obj) -> str:
-    kind = _field(obj, "type", "kind")
-    if kind is None:
-        name = type(obj).__name__.lower()
-        kind = next((k for k in _OBSTACLE_DRAWERS if k in name), name)
-    return str(kind).lower()
-
-
 def _draw_obstacle(ax, obstacle, k: int) -> np.ndarray:
-    """Draw one obstacle; return points of its extent [m], shape (N, 3)."""
-    kind = _obstacle_type(obstacle)
-    if kind not in _OBSTACLE_DRAWERS:
-        raise ValueError(f"obstacle {k}: unknown type {kind!r} (known: {', '.join(_OBSTACLE_DRAWERS)})")
-    return _OBSTACLE_DRAWERS[kind](ax, obstacle)
-
-
-def _surface(ax, x, y, z):
-    ax.plot_surface(x * M_TO_MM, y * M_TO_MM, z * M_TO_MM, color="0.55", alpha=0.35, linewidth=0)
-    return np.column_stack([x.ravel(), y.ravel(), z.ravel()])
-
-
-def _draw_sphere(ax, obs) -> np.ndarray:
-    c = np.asarray(_field(obs, "center_m"), dtype=float)
-    r = float(_field(obs, "radius_m"))
-    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, SPHERE_RESOLUTION),
-                       np.linspace(0, np.pi, SPHERE_RESOLUTION // 2 + 1))
-    return _surface(ax, c[0] + r * np.cos(u) * np.sin(v), c[1] + r * np.sin(u) * np.sin(v),
-                    c[2] + r * np.cos(v))
-
-
-def _draw_capsule(ax, obs) -> np.ndarray:
-    a = np.asarray(_field(obs, "a_m"), dtype=float)
-    b = np.asarray(_field(obs, "b_m"), dtype=float)
-    r = float(_field(obs, "radius_m"))
-    length = float(np.linalg.norm(b - a))
-    rot = _frame_along(b - a)
-    # Profile of the capsule in its own frame (axis z from 0 to length): cap, cylinder, cap.
-    th = np.linspace(0.0, np.pi / 2, SPHERE_RESOLUTION // 4 + 1)
-    z_prof = np.concatenate([-r * np.cos(th), length + r * np.sin(th)])
-    rho = np.concatenate([r * np.sin(th), r * np.cos(th)])
-    u = np.linspace(0, 2 * np.pi, SPHERE_RESOLUTION)
-    local = np.stack([rho[:, None] * np.cos(u), rho[:, None] * np.sin(u),
-                      np.broadcast_to(z_prof[:, None], (z_prof.size, u.size))], axis=-1)
-    world = local @ rot.T + a
-    return _surface(ax, world[..., 0], world[..., 1], world[..., 2])
-
-
-def _frame_along(axis) -> np.ndarray:
-    """Rotation matrix, shape (3, 3), whose third column is the unit vector along ``axis``
-    (identity for a zero axis)."""
-    norm = float(np.linalg.norm(axis))
-    if norm == 0.0:
-        return np.eye(3)
-    z = np.asarray(axis, dtype=float) / norm
-    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, np.cross(z, x), z])
-
-
-def _draw_box(ax, obs) -> np.ndarray:
-    from .planning.collision import rotation_from_rpy
-
-    c = np.asarray(_field(obs, "center_m"), dtype=float)
-    size = np.asarray(_field(obs, "size_m"), dtype=float)
-    rpy = _field(obs, "rpy_rad")
-    rot = rotation_from_rpy((0.0, 0.0, 0.0) if rpy is None else rpy)
-    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
-    verts = (corners * size) @ rot.T + c
-    faces = [[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4], [1, 3, 7, 5]]
-    _polys(ax, verts, faces)
+    """Draw one obstacle (its triangles, in mm); return its vertices [m], shape (V, 3)."""
+    verts, faces = _obstacle_triangles(obstacle, k, SPHERE_RESOLUTION)
+    ax.add_collection3d(Poly3DCollection(verts[faces] * M_TO_MM, facecolors=OBSTACLE_COLOR, linewidths=0.0,
+                                         alpha=OBSTACLE_ALPHA, shade=True))
     return verts
 
 
-def _draw_mesh(ax, obs) -> np.ndarray:
-    verts = _field(obs, "vertices", "vertices_m")
-    if verts is not None:
-        verts = np.asarray(verts, dtype=float)
-        faces = np.asarray(_field(obs, "faces"), dtype=int)
-    else:
-        import trimesh
-
-        from .planning.collision import rotation_from_rpy
-
-        mesh = trimesh.load(str(_field(obs, "path")), force="mesh")
-        scale = _field(obs, "scale")
-        rpy = _field(obs, "rpy_rad")
-        shift = _field(obs, "translation_m")
-        # Same placement as MeshObstacle: R(rpy) @ (scale * p_file) + translation.
-        verts = (1.0 if scale is None else float(scale)) * np.asarray(mesh.vertices, dtype=float)
-        verts = verts @ rotation_from_rpy((0.0, 0.0, 0.0) if rpy is None else rpy).T
-        verts = verts + (np.zeros(3) if shift is None else np.asarray(shift, dtype=float))
-        faces = np.asarray(mesh.faces, dtype=int)
+def _obstacle_triangles(obstacle, k: int, resolution: int) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`~ctrplan.obstacles.Obstacle.triangles` of an obstacle or obstacle dict: vertices
+    (V, 3) [m] and faces (F, 3); any problem is a ValueError starting with ``obstacle k``."""
+    try:
+        verts, faces = as_obstacle(obstacle).triangles(resolution)
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise ValueError(f"obstacle {k}: {exc}") from None
+    verts = np.asarray(verts, dtype=float)
+    faces = np.asarray(faces, dtype=np.int64)
     if verts.ndim != 2 or verts.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
-        raise ValueError(f"mesh obstacle needs vertices (V, 3) and faces (F, 3), got {verts.shape} "
+        raise ValueError(f"obstacle {k}: triangles need vertices (V, 3) and faces (F, 3), got {verts.shape} "
                          f"and {faces.shape}")
-    _polys(ax, verts, faces)
-    return verts
-
-
-def _polys(ax, verts, faces):
-    polys = [verts[list(f)] * M_TO_MM for f in faces]
-    ax.add_collection3d(Poly3DCollection(polys, facecolor="0.55", edgecolor="0.35", alpha=0.3,
-                                         linewidths=0.3))
-
-
-_OBSTACLE_DRAWERS = {"sphere": _draw_sphere, "capsule": _draw_capsule, "box": _draw_box,
-                     "mesh": _draw_mesh}
+    return verts, faces
 
 
 def _equal_3d(ax, pts_mm):

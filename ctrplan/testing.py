@@ -297,7 +297,7 @@ def assert_collision_free(result_or_dir, clearance_m: float = 0.0, *, between: b
     if not clearance_m >= 0.0:
         raise ValueError(f"clearance_m must be >= 0 m, got {clearance_m!r}")
     p = _plan(result_or_dir)
-    obstacles = [o.as_dict() for o in p.scenario.obstacles]
+    obstacles = list(p.scenario.obstacles)
     if not obstacles:
         return
     padded = CollisionChecker(obstacles, padding=clearance_m)

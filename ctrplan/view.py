@@ -5,8 +5,8 @@ a slider along the trajectory: the standard-model centerline, the shape predicte
 history the plan creates (:func:`ctrplan.mechanics.predict_tip`, Section V-B of Ha, Fagogenis &
 Dupont 2019, doi:10.1109/TRO.2018.2878906), and the friction envelope, i.e. the centerlines and
 tips of the 2^(n-1) bounding friction solutions (Section III, Eqs. (37)-(47)). The obstacles
-(spheres, capsules, boxes, triangle meshes) and the targets are drawn at every step, with the
-standard-model tip path over all waypoints for orientation.
+(each as the triangles it gives, :mod:`ctrplan.obstacles`) and the targets are drawn at every
+step, with the standard-model tip path over all waypoints for orientation.
 
 Inputs are in SI units (m); the view shows mm. The file embeds plotly.js (about 4.8 MB), so it
 opens offline. Building the view does no mechanics solves: it draws what the plan already has.
@@ -156,12 +156,11 @@ def write_plan_view(path, standard: Sequence, *, friction_tips: Sequence | None 
         Tip predicted for the plan's motion history [m]; NaN rows are not drawn.
     predicted_shapes : sequence of (array-like, shape (N_k, 3)) or None, length K, optional
         Predicted centerline [m]; None where it is unknown.
-    obstacles : sequence
-        Obstacle dicts as ``Obstacle.as_dict()`` of :mod:`ctrplan.io.scenario` writes them
-        (``sphere``, ``capsule``, ``box``, ``mesh`` with a file ``path``, ``scale``,
-        ``translation_m``, ``rpy_rad``) or a ``mesh`` with explicit ``vertices`` shape (V, 3)
-        [m] and ``faces`` shape (F, 3); or obstacle dataclasses of
-        :mod:`ctrplan.planning.collision`.
+    obstacles : sequence of Obstacle or dict
+        :class:`ctrplan.obstacles.Obstacle` instances (any registered type, e.g. a scenario's
+        ``obstacles``) or dicts with a registered ``type``
+        (:func:`ctrplan.obstacles.obstacle_from_dict`); each is drawn as its
+        :meth:`~ctrplan.obstacles.Obstacle.triangles` (:func:`obstacle_triangles`).
     targets : array-like, shape (G, 3), optional
         Goal tip positions [m].
     step_labels : sequence of str, length K, optional
@@ -178,10 +177,10 @@ def write_plan_view(path, standard: Sequence, *, friction_tips: Sequence | None 
     Raises
     ------
     ValueError
-        An array of the wrong shape, a per-waypoint sequence whose length is not K, or an unknown
-        obstacle type.
+        An array of the wrong shape, a per-waypoint sequence whose length is not K, or an
+        obstacle of an unknown type, with a bad key or a missing mesh file.
     FileNotFoundError
-        A mesh file is missing, or the output folder does not exist.
+        The output folder does not exist.
     """
     fig = plan_view_figure(standard, friction_tips=friction_tips, friction_shapes=friction_shapes,
                            predicted_tips=predicted_tips, predicted_shapes=predicted_shapes,
@@ -196,16 +195,12 @@ def write_plan_view(path, standard: Sequence, *, friction_tips: Sequence | None 
 
 # ---------------------------------------------------------------------------------- obstacles
 def obstacle_triangles(obstacle, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Triangulated surface of one obstacle.
-
-    Spheres and capsules are sampled (``SPHERE_RESOLUTION`` points per great circle) and boxes
-    given by their 8 corners, then closed by their convex hull (all three are convex); meshes are
-    read by :meth:`ctrplan.planning.collision.MeshObstacle.world_triangles` (same placement as the
-    collision checker).
+    """Triangulated surface of one obstacle: its :meth:`~ctrplan.obstacles.Obstacle.triangles`
+    at ``SPHERE_RESOLUTION`` points per great circle (the placement the collision checker uses).
 
     Parameters
     ----------
-    obstacle : dict or obstacle dataclass
+    obstacle : Obstacle or dict
         See :func:`write_plan_view`.
     k : int
         Index, for error messages.
@@ -219,56 +214,19 @@ def obstacle_triangles(obstacle, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
     Raises
     ------
     ValueError
-        Unknown obstacle type or malformed fields.
+        Unknown obstacle type, a bad key, a missing mesh file, or triangles of the wrong shape;
+        the message starts with ``obstacle k``.
     """
-    from scipy.spatial import ConvexHull
+    from .plots import _obstacle_triangles
 
-    from .planning.collision import (BoxObstacle, CapsuleObstacle, MeshObstacle, SphereObstacle,
-                                     obstacle_from_dict, rotation_from_rpy)
-    from .plots import _frame_along
-
-    if isinstance(obstacle, dict):
-        if obstacle.get("type") == "mesh" and "vertices" in obstacle:
-            verts = np.asarray(obstacle["vertices"], dtype=float)
-            faces = np.asarray(obstacle["faces"], dtype=np.int64)
-            if verts.ndim != 2 or verts.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
-                raise ValueError(f"obstacle {k}: mesh needs vertices (V, 3) and faces (F, 3), got "
-                                 f"{verts.shape} and {faces.shape}")
-            return verts, faces
-        try:
-            obstacle = obstacle_from_dict(obstacle)
-        except ValueError as exc:
-            raise ValueError(f"obstacle {k}: {exc}") from None
-    if isinstance(obstacle, MeshObstacle):
-        return obstacle.world_triangles()
-    u = np.linspace(0.0, 2 * np.pi, SPHERE_RESOLUTION, endpoint=False)
-    v = np.linspace(0.0, np.pi, SPHERE_RESOLUTION // 2 + 1)
-    ball = np.stack([np.outer(np.sin(v), np.cos(u)), np.outer(np.sin(v), np.sin(u)),
-                     np.outer(np.cos(v), np.ones_like(u))], axis=-1).reshape(-1, 3)
-    ball = np.unique(np.round(ball, 12), axis=0)          # the poles repeat along u
-    if isinstance(obstacle, SphereObstacle):
-        pts = np.asarray(obstacle.center_m, dtype=float) + float(obstacle.radius_m) * ball
-    elif isinstance(obstacle, CapsuleObstacle):
-        a, b = np.asarray(obstacle.a_m, dtype=float), np.asarray(obstacle.b_m, dtype=float)
-        rot = _frame_along(b - a)
-        r = float(obstacle.radius_m)
-        length = float(np.linalg.norm(b - a))
-        # Hemisphere caps at either end of the axis (z from 0 to length in the capsule's frame).
-        local = np.concatenate([r * ball[ball[:, 2] <= 0], r * ball[ball[:, 2] >= 0] + [0.0, 0.0, length]])
-        pts = local @ rot.T + a
-    elif isinstance(obstacle, BoxObstacle):
-        corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
-        rot = rotation_from_rpy(np.asarray(obstacle.rpy_rad, dtype=float))
-        pts = (corners * np.asarray(obstacle.size_m, dtype=float)) @ rot.T + np.asarray(obstacle.center_m, dtype=float)
-    else:
-        raise ValueError(f"obstacle {k}: unknown type {type(obstacle).__name__}")
-    return pts, ConvexHull(pts).simplices.astype(np.int64)
+    return _obstacle_triangles(obstacle, k, SPHERE_RESOLUTION)
 
 
 def _obstacle_kind(obstacle) -> str:
+    """The ``type`` of an obstacle or an obstacle dict (the class name for a duck-typed one)."""
     if isinstance(obstacle, dict):
         return str(obstacle.get("type", "?"))
-    return type(obstacle).__name__.replace("Obstacle", "").lower()
+    return str(getattr(obstacle, "type", type(obstacle).__name__))
 
 
 # ---------------------------------------------------------------------------------- helpers

@@ -87,7 +87,7 @@ def test_obstacle_boxes_contain_the_obstacles(scenario):
     checker = CollisionChecker(obstacles)
     lo, hi = checker.obstacle_aabbs()
     assert lo.shape == hi.shape == (len(obstacles), 3)
-    verts = checker.obstacles[0].world_vertices()          # the mesh
+    verts = checker.obstacles[0].triangles()[0]            # the mesh
     assert np.all(verts >= lo[0]) and np.all(verts <= hi[0])
     np.testing.assert_allclose(lo[1], np.array(obstacles[1]["center_m"]) - 0.006 - 1e-5)
     np.testing.assert_allclose(hi[2] - lo[2], np.array([0.2, 0.2, 0.01]) + 2e-5)

@@ -94,12 +94,10 @@ def test_robot_shapes_with_every_obstacle_type(tmp_path, figures):
 
 
 def test_robot_shapes_accepts_obstacle_dataclasses(tmp_path):
-    from ctrplan.planning import collision
+    from ctrplan.obstacles import obstacle_from_dict
 
-    obstacles = [collision.obstacle_from_dict({"type": "sphere", "center_m": [0.0, 0.0, 0.05],
-                                               "radius_m": 0.004}),
-                 collision.obstacle_from_dict({"type": "box", "center_m": [0.01, 0.0, 0.05],
-                                               "size_m": [0.01, 0.01, 0.01]})]
+    obstacles = [obstacle_from_dict({"type": "sphere", "center_m": [0.0, 0.0, 0.05], "radius_m": 0.004}),
+                 obstacle_from_dict({"type": "box", "center_m": [0.01, 0.0, 0.05], "size_m": [0.01, 0.01, 0.01]})]
     assert _is_png(plot_robot_shapes(tmp_path / "s.png", _shapes(), obstacles))
 
 

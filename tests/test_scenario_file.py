@@ -109,7 +109,7 @@ def test_good_scenario(tmp_path):
     assert kinds == [Sphere, Capsule, Box, Mesh]
     assert s.obstacles[3].file == (tmp_path / "meshes" / "tri.stl").resolve()
     assert s.obstacles[3].scale == 0.001
-    np.testing.assert_array_equal(s.obstacles[2].rpy, [0.0, 0.0, 0.3])
+    np.testing.assert_array_equal(s.obstacles[2].rpy_rad, [0.0, 0.0, 0.3])
     assert s.planner.name == "RRTstar" and s.planner.iterations == 500 and s.planner.seed == 1
     assert s.planner.time_limit == 10.0 and s.planner.bound_weight == 2.5 and s.planner.range is None
     assert s.bound_field.resolution == (9, 9, 5) and s.bound_field.ds == 0.002
@@ -201,14 +201,14 @@ def test_obstacles_and_drive_feed_the_planning_and_trajectory_modules(tmp_path):
     s = load_scenario(_write(tmp_path, GOOD))
     dicts = [o.as_dict() for o in s.obstacles]
     assert [d["type"] for d in dicts] == ["sphere", "capsule", "box", "mesh"]
-    assert dicts[3]["path"] == str((tmp_path / "meshes" / "tri.stl").resolve())
+    assert dicts[3]["file"] == str((tmp_path / "meshes" / "tri.stl").resolve())
     kw = s.drive.as_kwargs()
     assert kw["max_velocity"] == {"alpha_2": 1.0, "alpha_3": 2.0, "beta_3": 0.01}
     assert kw["control_rate_hz"] == 100.0
-    from ctrplan.planning import collision
+    from ctrplan.obstacles import obstacle_from_dict
 
-    built = [collision.obstacle_from_dict(dict(d)) for d in dicts]
-    assert len(built) == 4
+    built = [obstacle_from_dict(dict(d)) for d in dicts]
+    assert built == list(s.obstacles)
 
 
 def test_default_bound_weight_matches_the_planning_objective():

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.planning.collision import MeshObstacle
+from ctrplan.obstacles import obstacle_from_dict
 from ctrplan.view import obstacle_triangles, plan_view_figure, write_plan_view
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -102,7 +102,7 @@ def test_obstacles_are_triangulated_where_the_collision_checker_places_them(tmp_
     mesh = _mesh(tmp_path)
     fig = plan_view_figure([None], obstacles=[SPHERE, BOX, mesh])
     tri = _trace(fig, "obstacle 3 (mesh)")
-    verts, faces = MeshObstacle(**{k: v for k, v in mesh.items() if k != "type"}).world_triangles()
+    verts, faces = obstacle_from_dict(mesh).triangles()
     np.testing.assert_allclose(np.column_stack([tri.x, tri.y, tri.z]), 1e3 * verts, atol=1e-4)
     assert len(tri.i) == 4 and max(tri.z) == pytest.approx(60.0)     # 10 mm tall, 50 mm up
     sph = _trace(fig, "obstacle 1 (sphere)")

@@ -253,8 +253,11 @@ def _describe(err: dict, root: type[BaseModel]) -> str:
 
 
 def validate_document(model: type[BaseModel], data: dict, file: str,
-                      drop_tags: frozenset[str] = frozenset()):
+                      drop_tags: frozenset[str] = frozenset(), context: dict | None = None):
     """Validate parsed TOML against a schema, turning the first pydantic error into ModelFileError.
+
+    ``context`` is pydantic's validation context (the scenario loader passes ``base_dir``, the
+    folder that relative file names in the document are resolved against).
 
     Raises
     ------
@@ -262,7 +265,7 @@ def validate_document(model: type[BaseModel], data: dict, file: str,
         Naming the file, the dotted key and the offending value.
     """
     try:
-        return model.model_validate(data)
+        return model.model_validate(data, context=context)
     except pydantic.ValidationError as exc:
         errors = exc.errors(include_url=False)
         first = errors[0]

@@ -2,12 +2,15 @@
 
 Parsed with pydantic (unknown keys, missing keys and wrong types are errors naming the file and
 the dotted key, list indices 1-based), then checked against the robot named in the file (joint
-names, joint limits) and turned into frozen dataclasses. The format is documented in
+names, joint limits) and turned into frozen dataclasses. Each ``[[obstacles]]`` table is validated
+straight into the class its ``type`` names in :data:`ctrplan.obstacles.OBSTACLE_TYPES` (a mesh
+file is resolved against the scenario file's folder). The format is documented in
 ``docs/file-formats.md``.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +21,7 @@ from pydantic import AfterValidator, Field
 
 from ..coordinates import map_coordinates
 from ..errors import JointLimitError, ModelFileError
+from ..obstacles import OBSTACLE_TYPES, Box, Capsule, Mesh, Sphere  # noqa: F401 (the built-in types, also here)
 from ..planner_info import check_planner
 from ..robot import Robot
 from .robot_file import MAX_METRES, _Strict, load_robot, parse_toml, read_text, validate_document
@@ -28,10 +32,6 @@ __all__ = [
     "Scenario",
     "JointGoal",
     "TaskGoal",
-    "Sphere",
-    "Capsule",
-    "Box",
-    "Mesh",
     "PlannerSettings",
     "BoundFieldSettings",
     "DriveLimits",
@@ -55,34 +55,6 @@ class _TaskGoalDoc(_Strict):
     type: Literal["task"]
     tip_position_m: Vec3
     tolerance_m: Positive
-
-
-class _SphereDoc(_Strict):
-    type: Literal["sphere"]
-    center_m: Vec3
-    radius_m: Positive
-
-
-class _CapsuleDoc(_Strict):
-    type: Literal["capsule"]
-    a_m: Vec3
-    b_m: Vec3
-    radius_m: Positive
-
-
-class _BoxDoc(_Strict):
-    type: Literal["box"]
-    center_m: Vec3
-    size_m: Annotated[list[Positive], Field(min_length=3, max_length=3)]
-    rpy_rad: Vec3 = [0.0, 0.0, 0.0]
-
-
-class _MeshDoc(_Strict):
-    type: Literal["mesh"]
-    file: Annotated[str, Field(min_length=1)]
-    scale: Positive
-    translation_m: Vec3 = [0.0, 0.0, 0.0]
-    rpy_rad: Vec3 = [0.0, 0.0, 0.0]
 
 
 # Default weight of the bound in the planning cost [1/m]; equal to
@@ -120,22 +92,44 @@ class _OutputDoc(_Strict):
 
 
 _Goal = Annotated[Union[_JointGoalDoc, _TaskGoalDoc], Field(discriminator="type")]
-_Obstacle = Annotated[Union[_SphereDoc, _CapsuleDoc, _BoxDoc, _MeshDoc], Field(discriminator="type")]
-_TAGS = frozenset({"joint", "task", "sphere", "capsule", "box", "mesh"})
+_GOAL_TAGS = frozenset({"joint", "task"})
 
 
-class ScenarioDocument(_Strict):
-    """Schema of a scenario file (see ``docs/file-formats.md``)."""
+@functools.lru_cache(maxsize=16)
+def _scenario_document(obstacle_types: tuple) -> type[_Strict]:
+    """Schema of a scenario file (see ``docs/file-formats.md``) whose ``[[obstacles]]`` tables
+    are validated by ``obstacle_types`` (tagged by their ``type``); one class per tuple.
 
-    name: Annotated[str, Field(min_length=1)]
-    robot: Annotated[str, Field(min_length=1)]
-    start: _QDoc
-    goals: Annotated[list[_Goal], Field(min_length=1)]
-    obstacles: list[_Obstacle] = []
-    planner: _PlannerDoc = _PlannerDoc()
-    bound_field: _BoundFieldDoc = _BoundFieldDoc()
-    drive: _DriveDoc | None = None
-    output: _OutputDoc = _OutputDoc()
+    Parameters
+    ----------
+    obstacle_types : tuple of type
+        :class:`ctrplan.obstacles.Obstacle` subclasses, e.g.
+        ``tuple(ctrplan.obstacles.OBSTACLE_TYPES.values())``.
+
+    Returns
+    -------
+    type
+        A pydantic model of the whole file.
+    """
+    if len(obstacle_types) > 1:
+        obstacle_list = list[Annotated[Union[obstacle_types], Field(discriminator="type")]]
+    elif obstacle_types:   # a tagged union needs two members; one type still checks its tag
+        obstacle_list = list[obstacle_types[0]]
+    else:
+        obstacle_list = Annotated[list, Field(max_length=0)]
+
+    class ScenarioDocument(_Strict):
+        name: Annotated[str, Field(min_length=1)]
+        robot: Annotated[str, Field(min_length=1)]
+        start: _QDoc
+        goals: Annotated[list[_Goal], Field(min_length=1)]
+        obstacles: obstacle_list = []
+        planner: _PlannerDoc = _PlannerDoc()
+        bound_field: _BoundFieldDoc = _BoundFieldDoc()
+        drive: _DriveDoc | None = None
+        output: _OutputDoc = _OutputDoc()
+
+    return ScenarioDocument
 
 
 # --------------------------------------------------------------------------- result types
@@ -172,84 +166,6 @@ class TaskGoal:
 
     tip_position: np.ndarray
     tolerance: float
-
-
-@dataclass(frozen=True, eq=False)
-class Sphere:
-    """Sphere obstacle: ``center`` shape (3,) [m], ``radius`` [m]."""
-
-    center: np.ndarray
-    radius: float
-
-    def as_dict(self) -> dict:
-        """Plain dict in the scenario-file keys (``ctrplan.planning.obstacle_from_dict`` input)."""
-        return {"type": "sphere", "center_m": tuple(self.center.tolist()), "radius_m": self.radius}
-
-
-@dataclass(frozen=True, eq=False)
-class Capsule:
-    """Capsule obstacle: segment ``a``-``b`` (each shape (3,) [m]) swept by a ball of ``radius`` [m]."""
-
-    a: np.ndarray
-    b: np.ndarray
-    radius: float
-
-    def as_dict(self) -> dict:
-        """Plain dict in the scenario-file keys (``ctrplan.planning.obstacle_from_dict`` input)."""
-        return {"type": "capsule", "a_m": tuple(self.a.tolist()), "b_m": tuple(self.b.tolist()),
-                "radius_m": self.radius}
-
-
-@dataclass(frozen=True, eq=False)
-class Box:
-    """Box obstacle.
-
-    Attributes
-    ----------
-    center : ndarray, shape (3,)
-        [m].
-    size : ndarray, shape (3,)
-        Edge lengths along the box's own x, y, z axes [m].
-    rpy : ndarray, shape (3,)
-        Roll, pitch, yaw [rad]: box-to-base rotation ``Rz(yaw) Ry(pitch) Rx(roll)``.
-    """
-
-    center: np.ndarray
-    size: np.ndarray
-    rpy: np.ndarray
-
-    def as_dict(self) -> dict:
-        """Plain dict in the scenario-file keys (``ctrplan.planning.obstacle_from_dict`` input)."""
-        return {"type": "box", "center_m": tuple(self.center.tolist()), "size_m": tuple(self.size.tolist()),
-                "rpy_rad": tuple(self.rpy.tolist())}
-
-
-@dataclass(frozen=True, eq=False)
-class Mesh:
-    """Triangle-mesh obstacle (STL), placed by ``p_base = R(rpy) (scale * p_file) + translation``.
-
-    Attributes
-    ----------
-    file : pathlib.Path
-        Resolved path of the mesh file (exists at load time).
-    scale : float
-        Factor from the file's length unit to metres (0.001 for a file in millimetres).
-    translation : ndarray, shape (3,)
-        [m].
-    rpy : ndarray, shape (3,)
-        Roll, pitch, yaw [rad], ``Rz(yaw) Ry(pitch) Rx(roll)``.
-    """
-
-    file: Path
-    scale: float
-    translation: np.ndarray
-    rpy: np.ndarray
-
-    def as_dict(self) -> dict:
-        """Plain dict for ``ctrplan.planning.obstacle_from_dict`` (the file is under ``path``,
-        resolved)."""
-        return {"type": "mesh", "path": str(self.file), "scale": self.scale,
-                "translation_m": tuple(self.translation.tolist()), "rpy_rad": tuple(self.rpy.tolist())}
 
 
 @dataclass(frozen=True)
@@ -367,7 +283,8 @@ class Scenario:
         Start configuration in robot joint order [rad or m].
     goals : tuple of JointGoal or TaskGoal
         Visited in order.
-    obstacles : tuple of Sphere, Capsule, Box or Mesh
+    obstacles : tuple of Obstacle
+        Instances of the registered obstacle types (:mod:`ctrplan.obstacles`), in file order.
     planner : PlannerSettings
     bound_field : BoundFieldSettings
     drive : DriveLimits or None
@@ -457,8 +374,9 @@ def load_scenario(path: str | os.PathLike) -> Scenario:
     Raises
     ------
     ModelFileError
-        Malformed scenario (unknown/missing key, wrong type, bad value, unknown or missing joint
-        name, start or goal outside the joint limits, missing mesh file). Errors in the robot
+        Malformed scenario (unknown/missing key, wrong type, bad value, an obstacle ``type`` that
+        is not registered, unknown or missing joint name, start or goal outside the joint
+        limits, missing mesh file). Errors in the robot
         file are raised by :func:`~ctrplan.io.robot_file.load_robot` and name that file.
     PhysicalParameterError
         Physically impossible robot.
@@ -485,7 +403,9 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
         As :func:`load_scenario`.
     """
     base = Path(base_dir) if base_dir is not None else Path.cwd()
-    doc = validate_document(ScenarioDocument, parse_toml(text, file), file, drop_tags=_TAGS)
+    types = tuple(OBSTACLE_TYPES.values())
+    doc = validate_document(_scenario_document(types), parse_toml(text, file), file,
+                            drop_tags=_GOAL_TAGS | frozenset(OBSTACLE_TYPES), context={"base_dir": base})
 
     robot_file = (base / doc.robot).resolve()
     if not robot_file.is_file():
@@ -502,23 +422,6 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
             _check_metres(g.tip_position_m, file, f"goals[{k}].tip_position_m")
             _check_metres([g.tolerance_m], file, f"goals[{k}].tolerance_m")
             goals.append(TaskGoal(tip_position=_frozen_array(g.tip_position_m), tolerance=g.tolerance_m))
-
-    obstacles = []
-    for k, o in enumerate(doc.obstacles, start=1):
-        key = f"obstacles[{k}]"
-        if isinstance(o, _SphereDoc):
-            obstacles.append(Sphere(center=_frozen_array(o.center_m), radius=o.radius_m))
-        elif isinstance(o, _CapsuleDoc):
-            obstacles.append(Capsule(a=_frozen_array(o.a_m), b=_frozen_array(o.b_m), radius=o.radius_m))
-        elif isinstance(o, _BoxDoc):
-            obstacles.append(Box(center=_frozen_array(o.center_m), size=_frozen_array(o.size_m),
-                                 rpy=_frozen_array(o.rpy_rad)))
-        else:
-            mesh_file = (base / o.file).resolve()
-            if not mesh_file.is_file():
-                raise ModelFileError(file, f"{key}.file", f"mesh file {o.file!r} not found (looked for {mesh_file})")
-            obstacles.append(Mesh(file=mesh_file, scale=o.scale, translation=_frozen_array(o.translation_m),
-                                  rpy=_frozen_array(o.rpy_rad)))
 
     p = doc.planner
     planner = PlannerSettings(name=p.name, iterations=p.iterations, time_limit=p.time_limit_s,
@@ -548,7 +451,7 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
     output_dir = None if doc.output.dir is None else (base / doc.output.dir).resolve()
     scenario_path = Path(file) if file == "<memory>" else Path(file).resolve()
     return Scenario(name=doc.name, file=scenario_path, robot_file=robot_file, robot=robot,
-                    start=_frozen_array(start), goals=tuple(goals), obstacles=tuple(obstacles),
+                    start=_frozen_array(start), goals=tuple(goals), obstacles=tuple(doc.obstacles),
                     planner=planner, bound_field=bound_field, drive=drive, output_dir=output_dir)
 
 

@@ -4,8 +4,9 @@ Building blocks (each usable on its own in an OMPL setup, see ``docs/planning.md
 
 - :class:`JointStateSpace`: OMPL compound space (SO2 per periodic rotation, bounded reals for
   translations) with numpy conversions; :func:`unwrap_path`.
-- :class:`CollisionChecker`: robot body (capsule chain) versus spheres, capsules, boxes, meshes
-  with python-fcl.
+- :class:`CollisionChecker`: robot body (capsule chain) versus the obstacles of
+  :mod:`ctrplan.obstacles` (spheres, capsules, boxes, meshes and any registered type) with
+  python-fcl.
 - :class:`BoundField` (from :mod:`ctrplan.boundmap`): the friction bound of Ha, Fagogenis &
   Dupont 2019 (doi:10.1109/TRO.2018.2878906) precomputed on a grid and interpolated.
 - :class:`BoundCostObjective`: ``ob.OptimizationObjective`` = length + weight x integral of bound.
@@ -23,8 +24,7 @@ Building blocks (each usable on its own in an OMPL setup, see ``docs/planning.md
 
 from ..boundmap import (QUANTITIES, BoundField, BoundFieldKeyError, InterpolationError, field_key,
                         interpolation_error)
-from .collision import (BoxObstacle, CapsuleObstacle, CollisionChecker, CollisionReport, MeshObstacle,
-                        SphereObstacle, obstacle_from_dict)
+from .collision import CollisionChecker, CollisionReport
 from .goals import CompensatedGoal, GoalSolution, JointGoal, TaskSpaceGoal, compensate_goal, resolve_goal
 from .history import DEFAULT_FINAL_MOTION, FINAL_MOTIONS, approach_history, end_with, goal_indices, path_history
 from .objective import DEFAULT_BOUND_WEIGHT, BoundCostObjective
@@ -37,8 +37,7 @@ from .verify import MotionCheck, MotionVerifier
 
 __all__ = [
     "JointStateSpace", "DEFAULT_METERS_PER_RADIAN", "unwrap_path", "wrap_angle",
-    "CollisionChecker", "CollisionReport", "SphereObstacle", "CapsuleObstacle", "BoxObstacle",
-    "MeshObstacle", "obstacle_from_dict",
+    "CollisionChecker", "CollisionReport",
     "BoundField", "BoundFieldKeyError", "InterpolationError", "QUANTITIES", "field_key", "interpolation_error",
     "BoundCostObjective", "DEFAULT_BOUND_WEIGHT",
     "PLANNERS", "PlanResult", "ValidityChecker", "plan",

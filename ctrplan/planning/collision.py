@@ -3,8 +3,9 @@
 The robot body is the shared centerline of the standard model distal to the most distal tube
 base (:meth:`ctrplan.mechanics.results.StandardSolution.body`), swept as a chain of capsules:
 one capsule per centerline segment, with the larger of the two endpoint radii (the outer radius
-of the outermost tube present), so the swept volume contains the tubes. Obstacles are spheres,
-capsules, boxes and triangle meshes (STL, OBJ, PLY via trimesh). Geometry queries are FCL's
+of the outermost tube present), so the swept volume contains the tubes. Obstacles are the types
+of :mod:`ctrplan.obstacles` (each gives its python-fcl object and its axis-aligned box), or dicts
+naming a registered type. Geometry queries are FCL's
 (Pan, Chitta & Manocha, "FCL: A general purpose library for collision and proximity queries",
 ICRA 2012, doi:10.1109/ICRA.2012.6225337); nothing is hand-rolled here.
 
@@ -16,16 +17,14 @@ axis-aligned boxes overlap, and FCL's narrow phase (``fcl.collide``) decides eac
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import fcl
 import numpy as np
 from numba import njit
 
-__all__ = [
-    "SphereObstacle", "CapsuleObstacle", "BoxObstacle", "MeshObstacle", "obstacle_from_dict",
-    "CollisionChecker", "CollisionReport", "rotation_from_rpy", "AABB_MARGIN",
-]
+from ..obstacles import as_obstacle, rotation_z_to
+
+__all__ = ["CollisionChecker", "CollisionReport", "AABB_MARGIN"]
 
 # Centerline points closer than this along the body are merged into one capsule [m]: the
 # standard model's grid is ~1 mm, and 2 mm capsules keep a query near 1 ms while the sagitta
@@ -39,245 +38,33 @@ DEFAULT_SEGMENT_LENGTH = 2e-3
 AABB_MARGIN = 1e-5
 
 # A capsule axis within this of +-z (cosine distance) gets the identity or the half-turn about
-# x as its pose in _capsule_poses: the literal of _z_to, so both paths build the same poses.
+# x as its pose in _capsule_poses: the literal of ctrplan.obstacles.rotation_z_to, so both paths
+# build the same poses.
 _AXIS_PARALLEL_TOL = 1e-12
-
-
-def rotation_from_rpy(rpy) -> np.ndarray:
-    """Rotation matrix from roll, pitch, yaw (fixed x, then y, then z axes: ``Rz @ Ry @ Rx``).
-
-    Parameters
-    ----------
-    rpy : array-like, shape (3,)
-        Roll, pitch, yaw [rad].
-
-    Returns
-    -------
-    ndarray, shape (3, 3)
-    """
-    r, p, y = np.asarray(rpy, dtype=float).reshape(3)
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-    return rz @ ry @ rx
-
-
-def _vec3(v, label):
-    a = np.asarray(v, dtype=float).reshape(-1)
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{label} must be 3 finite numbers, got {v!r}")
-    return a
-
-
-def _positive(v, label):
-    if not np.isfinite(v) or v <= 0.0:
-        raise ValueError(f"{label} must be > 0, got {v!r}")
-    return float(v)
-
-
-def _z_to(direction) -> np.ndarray:
-    """Rotation taking +z onto the unit vector ``direction`` (shape (3,))."""
-    z = np.array([0.0, 0.0, 1.0])
-    d = direction / np.linalg.norm(direction)
-    c = float(np.dot(z, d))
-    if c > 1.0 - 1e-12:
-        return np.eye(3)
-    if c < -1.0 + 1e-12:
-        return np.diag([1.0, -1.0, -1.0])
-    v = np.cross(z, d)
-    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + vx + vx @ vx / (1.0 + c)
 
 
 def _capsule_object(a, b, radius) -> fcl.CollisionObject:
     d = b - a
     length = float(np.linalg.norm(d))
-    rot = _z_to(d) if length > 0.0 else np.eye(3)
+    rot = rotation_z_to(d) if length > 0.0 else np.eye(3)
     return fcl.CollisionObject(fcl.Capsule(float(radius), length),
                                fcl.Transform(rot, 0.5 * (a + b)))
 
 
-@dataclass(frozen=True)
-class SphereObstacle:
-    """Sphere of radius ``radius_m`` [m] centred at ``center_m`` (shape (3,)) [m]."""
-
-    center_m: tuple
-    radius_m: float
-    name: str = "sphere"
-
-    def collision_object(self) -> fcl.CollisionObject:
-        c = _vec3(self.center_m, f"{self.name}: center_m")
-        return fcl.CollisionObject(fcl.Sphere(_positive(self.radius_m, f"{self.name}: radius_m")),
-                                   fcl.Transform(np.eye(3), c))
-
-
-@dataclass(frozen=True)
-class CapsuleObstacle:
-    """Capsule: segment from ``a_m`` to ``b_m`` (shapes (3,)) [m] swept by radius ``radius_m`` [m]."""
-
-    a_m: tuple
-    b_m: tuple
-    radius_m: float
-    name: str = "capsule"
-
-    def collision_object(self) -> fcl.CollisionObject:
-        return _capsule_object(_vec3(self.a_m, f"{self.name}: a_m"), _vec3(self.b_m, f"{self.name}: b_m"),
-                               _positive(self.radius_m, f"{self.name}: radius_m"))
-
-
-@dataclass(frozen=True)
-class BoxObstacle:
-    """Box with edge lengths ``size_m`` (shape (3,)) [m], centred at ``center_m`` [m], rotated by
-    roll-pitch-yaw ``rpy_rad`` (shape (3,)) [rad] (see :func:`rotation_from_rpy`)."""
-
-    center_m: tuple
-    size_m: tuple
-    rpy_rad: tuple = (0.0, 0.0, 0.0)
-    name: str = "box"
-
-    def collision_object(self) -> fcl.CollisionObject:
-        size = _vec3(self.size_m, f"{self.name}: size_m")
-        if np.any(size <= 0.0):
-            raise ValueError(f"{self.name}: size_m must be > 0, got {self.size_m!r}")
-        return fcl.CollisionObject(fcl.Box(*map(float, size)),
-                                   fcl.Transform(rotation_from_rpy(_vec3(self.rpy_rad, f"{self.name}: rpy_rad")),
-                                                 _vec3(self.center_m, f"{self.name}: center_m")))
-
-
-@dataclass(frozen=True)
-class MeshObstacle:
-    """Triangle mesh read by trimesh (STL, OBJ, PLY, ...).
-
-    Vertices are transformed as ``p_world = R(rpy_rad) @ (scale * p_file) + translation_m``.
-
-    Parameters
-    ----------
-    path : str
-        Mesh file.
-    scale : float
-        File units to metres (0.001 for a mesh in millimetres) [m / file unit].
-    translation_m : tuple, shape (3,)
-        [m]
-    rpy_rad : tuple, shape (3,)
-        [rad]
-    """
-
-    path: str
-    scale: float = 1.0
-    translation_m: tuple = (0.0, 0.0, 0.0)
-    rpy_rad: tuple = (0.0, 0.0, 0.0)
-    name: str = "mesh"
-
-    def collision_object(self) -> fcl.CollisionObject:
-        import trimesh
-
-        p = Path(self.path)
-        if not p.is_file():
-            raise FileNotFoundError(f"{self.name}: mesh file {p} not found")
-        mesh = trimesh.load(str(p), force="mesh")
-        if len(mesh.faces) == 0:
-            raise ValueError(f"{self.name}: mesh file {p} has no triangles")
-        verts = _positive(self.scale, f"{self.name}: scale") * np.asarray(mesh.vertices, dtype=float)
-        verts = verts @ rotation_from_rpy(_vec3(self.rpy_rad, f"{self.name}: rpy_rad")).T
-        verts = verts + _vec3(self.translation_m, f"{self.name}: translation_m")
-        model = fcl.BVHModel()
-        model.beginModel(len(verts), len(mesh.faces))
-        model.addSubModel(verts, np.asarray(mesh.faces, dtype=np.int64))
-        model.endModel()
-        return fcl.CollisionObject(model, fcl.Transform())
-
-    def world_vertices(self) -> np.ndarray:
-        """Mesh vertices in the world frame, shape (V, 3) [m], transformed exactly as in
-        :meth:`collision_object` (used for the obstacle's axis-aligned box)."""
-        return self.world_triangles()[0]
-
-    def world_triangles(self) -> tuple[np.ndarray, np.ndarray]:
-        """The mesh in the world frame, transformed exactly as in :meth:`collision_object`.
-
-        Returns
-        -------
-        vertices : ndarray, shape (V, 3)
-            [m].
-        faces : ndarray of int, shape (F, 3)
-            Vertex indices of each triangle.
-        """
-        import trimesh
-
-        mesh = trimesh.load(str(Path(self.path)), force="mesh")
-        verts = _positive(self.scale, f"{self.name}: scale") * np.asarray(mesh.vertices, dtype=float)
-        verts = verts @ rotation_from_rpy(_vec3(self.rpy_rad, f"{self.name}: rpy_rad")).T
-        return (verts + _vec3(self.translation_m, f"{self.name}: translation_m"),
-                np.asarray(mesh.faces, dtype=np.int64))
-
-
-_OBSTACLE_TYPES = {"sphere": SphereObstacle, "capsule": CapsuleObstacle, "box": BoxObstacle,
-                   "mesh": MeshObstacle}
-
-
-def obstacle_from_dict(d: dict):
-    """Build an obstacle from a plain dict with a ``type`` key.
-
-    Parameters
-    ----------
-    d : dict
-        ``{"type": "sphere", "center_m": [...], "radius_m": ...}``,
-        ``{"type": "capsule", "a_m": [...], "b_m": [...], "radius_m": ...}``,
-        ``{"type": "box", "center_m": [...], "size_m": [...], "rpy_rad": [...]}`` or
-        ``{"type": "mesh", "path": ..., "scale": ..., "translation_m": [...], "rpy_rad": [...]}``;
-        optional ``name``.
-
-    Returns
-    -------
-    SphereObstacle, CapsuleObstacle, BoxObstacle or MeshObstacle
-
-    Raises
-    ------
-    ValueError
-        Unknown type or unknown / missing keys.
-    """
-    d = dict(d)
-    kind = d.pop("type", None)
-    if kind not in _OBSTACLE_TYPES:
-        raise ValueError(f"obstacle type must be one of {sorted(_OBSTACLE_TYPES)}, got {kind!r}")
-    try:
-        return _OBSTACLE_TYPES[kind](**d)
-    except TypeError as exc:
-        raise ValueError(f"{kind} obstacle {d}: {exc}") from None
-
-
-def _obstacle_aabb(obstacle, obj, margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """World axis-aligned box of one obstacle, inflated by ``margin`` [m].
-
-    python-fcl 0.7 does not expose FCL's own AABB of a ``CollisionObject``, so the box comes
-    from the obstacle's geometry placed by the object's transform: sphere center +- radius,
-    capsule segment box +- radius, box center +- |R| half-sizes, mesh: the transformed
-    vertices. An obstacle of another type gets an unbounded box (never culled).
+def _obstacle_aabb(obstacle, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """World axis-aligned box of one obstacle (:meth:`ctrplan.obstacles.Obstacle.aabb`), inflated
+    by ``margin`` [m]; unbounded (never culled) for a duck-typed obstacle without ``aabb``.
 
     Returns
     -------
     lo, hi : ndarray, shape (3,)
         Box corners [m].
     """
-    if isinstance(obstacle, SphereObstacle):
-        c = np.asarray(obj.getTranslation(), dtype=float)
-        r = float(obstacle.radius_m)
-        lo, hi = c - r, c + r
-    elif isinstance(obstacle, CapsuleObstacle):
-        a = np.asarray(obstacle.a_m, dtype=float)
-        b = np.asarray(obstacle.b_m, dtype=float)
-        r = float(obstacle.radius_m)
-        lo, hi = np.minimum(a, b) - r, np.maximum(a, b) + r
-    elif isinstance(obstacle, BoxObstacle):
-        c = np.asarray(obj.getTranslation(), dtype=float)
-        half = np.abs(np.asarray(obj.getRotation(), dtype=float)) @ (0.5 * np.asarray(obstacle.size_m, dtype=float))
-        lo, hi = c - half, c + half
-    elif isinstance(obstacle, MeshObstacle):
-        v = obstacle.world_vertices()
-        lo, hi = v.min(axis=0), v.max(axis=0)
-    else:
+    aabb = getattr(obstacle, "aabb", None)
+    if aabb is None:
         return np.full(3, -np.inf), np.full(3, np.inf)
-    return lo - margin, hi + margin
+    lo, hi = aabb()
+    return np.asarray(lo, dtype=float).reshape(3) - margin, np.asarray(hi, dtype=float).reshape(3) + margin
 
 
 @njit(cache=True)
@@ -352,7 +139,7 @@ def _candidate_pairs(cap_a, cap_b, cap_r, ncap, lo, hi):
 def _capsule_poses(cap_a, cap_b, ncap, length, rot, center):
     """FCL poses of the capsules from ``cap_a`` to ``cap_b`` (K, C, 3) [m], as
     ``_capsule_object`` builds them: ``length`` (K, C) = |b - a| [m], ``rot`` (K, C, 3, 3)
-    taking +z onto d = (b - a) / |b - a| with the operations of ``_z_to``
+    taking +z onto d = (b - a) / |b - a| with the operations of ``rotation_z_to``
     (I + [v]x + [v]x^2 / (1 + c), v = z x d, c = z . d; identity for a zero length) and
     ``center`` (K, C, 3) = (a + b) / 2 [m]; filled in place for the first ``ncap[k]`` capsules."""
     for k in range(cap_a.shape[0]):
@@ -412,8 +199,9 @@ class CollisionChecker:
 
     Parameters
     ----------
-    obstacles : sequence of obstacle dataclasses or dicts
-        See :func:`obstacle_from_dict`.
+    obstacles : sequence of Obstacle or dict
+        :class:`ctrplan.obstacles.Obstacle` instances, or dicts with a registered ``type``
+        (:func:`ctrplan.obstacles.obstacle_from_dict`).
     segment_length : float, keyword-only
         Centerline points are decimated to about this spacing before building capsules [m]
         (the last point is always kept).
@@ -425,10 +213,20 @@ class CollisionChecker:
     n_batch_bodies, n_batch_narrow_bodies, n_batch_narrow_calls : int
         Work of :meth:`collides_batch` since construction: bodies checked, bodies with at
         least one capsule-obstacle pair left by the broad phase, and ``fcl.collide`` calls.
+    obstacles : list of Obstacle
+        The obstacles, dicts converted.
+
+    Raises
+    ------
+    ValueError
+        A dict of an unknown type or with a bad key (:func:`ctrplan.obstacles.obstacle_from_dict`),
+        or a mesh file without triangles.
+    TypeError
+        An obstacle that is neither an :class:`~ctrplan.obstacles.Obstacle` nor a dict.
     """
 
     def __init__(self, obstacles=(), *, segment_length: float = DEFAULT_SEGMENT_LENGTH, padding: float = 0.0):
-        self.obstacles = [o if not isinstance(o, dict) else obstacle_from_dict(o) for o in obstacles]
+        self.obstacles = [as_obstacle(o) for o in obstacles]
         self.segment_length = float(segment_length)
         self.padding = float(padding)
         self._objects = [o.collision_object() for o in self.obstacles]
@@ -513,11 +311,11 @@ class CollisionChecker:
         Returns
         -------
         lo, hi : ndarray, shape (O, 3)
-            Box corners [m], in the order of :attr:`obstacles`; +-inf for an obstacle type
-            without a known box.
+            Box corners [m], in the order of :attr:`obstacles`; +-inf for a duck-typed obstacle
+            without ``aabb()``.
         """
         if self._aabb is None:
-            boxes = [_obstacle_aabb(o, obj, AABB_MARGIN) for o, obj in zip(self.obstacles, self._objects)]
+            boxes = [_obstacle_aabb(o, AABB_MARGIN) for o in self.obstacles]
             lo = np.array([b[0] for b in boxes], dtype=float).reshape(-1, 3)
             hi = np.array([b[1] for b in boxes], dtype=float).reshape(-1, 3)
             self._aabb = (lo, hi)

@@ -106,7 +106,7 @@ def route_checks(robot, obstacles=(), field=None, settings=None, *, joint_space=
     Parameters
     ----------
     robot : Robot
-    obstacles : sequence of obstacle dicts or dataclasses
+    obstacles : sequence of Obstacle or dict
         As for :class:`~ctrplan.planning.CollisionChecker`.
     field : BoundField, optional
         Its validity flags reject states near unstable or failed map nodes.

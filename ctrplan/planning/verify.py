@@ -118,7 +118,7 @@ class MotionVerifier:
     Parameters
     ----------
     robot : Robot
-    obstacles : sequence of obstacle dicts or dataclasses
+    obstacles : sequence of Obstacle or dict
         As for :class:`~ctrplan.planning.CollisionChecker` (empty: no collision test).
     field : object, optional
         ``is_valid(q (m, n_joints)) -> bool (m,)``, e.g. the planner's ``BoundField``.
