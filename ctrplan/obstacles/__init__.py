@@ -7,8 +7,10 @@ loader validates each table straight into the class its ``type`` names; the coll
 (:class:`ctrplan.planning.CollisionChecker`) takes :meth:`Obstacle.collision_object` (python-fcl)
 and :meth:`Obstacle.aabb` (its broad phase); the matplotlib figure
 (:func:`ctrplan.plots.plot_robot_shapes`) and the plotly view (:mod:`ctrplan.view`) draw
-:meth:`Obstacle.triangles`. All of them find the class in :data:`OBSTACLE_TYPES`, so a new type is
-one class and one :func:`register_obstacle_type` call, in any module::
+:meth:`Obstacle.triangles`. A ``type`` name is looked up in :data:`OBSTACLE_TYPES` (scenario files,
+dicts, :func:`obstacle_from_dict`); nothing else looks at an obstacle's type, so a new type is one
+class and one :func:`register_obstacle_type` call, in any module (``docs/planning.md`` has this
+example with a check of the axis):
 
     from typing import Literal
 
