@@ -6,12 +6,22 @@ doi:10.1109/TRO.2018.2878906.
 
 ``ctrplan.plan_scenario`` and ``ctrplan.PlanResult`` (:mod:`ctrplan.api`) are imported on first
 use, so ``import ctrplan`` stays light.
+
+Messages go through the standard :mod:`logging` module, under the ``ctrplan`` logger (progress
+and summaries INFO, details DEBUG, cautions WARNING), which has only a ``logging.NullHandler``: the
+library prints nothing until the caller configures logging, e.g.
+``logging.basicConfig(level=logging.INFO)``. (The functions of :mod:`ctrplan.discrepancy` still
+take an ``echo`` callable, default ``print``.)
 """
+
+import logging as _logging
 
 from .errors import *  # noqa: F401,F403
 from .robot import Joint, Robot, Section, TranslationLink, Tube  # noqa: F401
 
 __version__ = "0.1.0"
+
+_logging.getLogger(__name__).addHandler(_logging.NullHandler())
 
 _LAZY = {"plan_scenario": "api", "PlanResult": "api"}
 

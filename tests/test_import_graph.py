@@ -15,7 +15,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "ctrplan"
 #: Layers of the package's components, lowest first. A module may import from its own component
 #: and from components of lower layers only (never from another component of its own layer).
 LAYERS = (
-    ("errors", "constants", "models", "planner_info"),  # planner_info: names only, no OMPL
+    ("errors", "constants", "models", "planner_info",  # planner_info: names only, no OMPL
+     "_log"),                                  # logging helpers (levels, the deprecated echo)
     ("history",),                              # pure numerics of motion history
     ("robot",),
     ("coordinates", "effects"),                # robot-level quantities and the registry of effects
