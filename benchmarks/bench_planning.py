@@ -79,8 +79,7 @@ def accuracy(scenarios, n, jobs):
     for path in scenarios:
         sc = load_scenario(path)
         settings = ModelSettings(ds=sc.bound_field.ds) if sc.bound_field.ds else ModelSettings()
-        field, source, _ = load_or_compute_bound_map(sc.robot_file, sc.robot, map_spec(sc), settings,
-                                                     echo=lambda *a: None)
+        field, source, _ = load_or_compute_bound_map(sc.robot_file, sc.robot, map_spec(sc), settings)
         if field.key in seen:
             continue
         t = time.perf_counter()

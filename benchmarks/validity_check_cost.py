@@ -31,6 +31,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import time
 from pathlib import Path
@@ -53,7 +54,8 @@ def _load_field(sc, settings):
     from ctrplan.boundmap import load_or_compute_bound_map
     from ctrplan.pipeline import map_spec
 
-    return load_or_compute_bound_map(sc.robot_file, sc.robot, map_spec(sc), settings, n_jobs=1, echo=print)
+    return load_or_compute_bound_map(sc.robot_file, sc.robot, map_spec(sc), settings, n_jobs=1,
+                                     progress=True)
 
 
 def _stats(label, t_single, t_batch, unit="ms"):
@@ -72,6 +74,8 @@ def _stats(label, t_single, t_batch, unit="ms"):
 
 
 def main(argv=None) -> int:
+    logging.basicConfig(format="%(message)s")       # ctrplan's messages (INFO and up) as plain lines
+    logging.getLogger("ctrplan").setLevel(logging.INFO)
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--states", type=int, default=600, help="random states (default 600)")
     ap.add_argument("--motions", type=int, default=200, help="random motions (default 200)")

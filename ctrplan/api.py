@@ -2,7 +2,9 @@
 
 A thin layer over :func:`ctrplan.pipeline.plan_stages` (the same stages and output files as
 ``ctrplan plan``); the result is a frozen :class:`PlanResult` in SI units (m, rad, s), for scripts
-and for the assertions of :mod:`ctrplan.testing`.
+and for the assertions of :mod:`ctrplan.testing`. It prints nothing: the lines ``ctrplan plan``
+shows are logged at INFO under the ``ctrplan`` logger (``logging.basicConfig(level=logging.INFO)``
+shows them).
 """
 
 from __future__ import annotations
@@ -13,6 +15,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+
+from ._log import deprecated_echo
 
 __all__ = ["PlanResult", "plan_scenario"]
 
@@ -81,9 +85,10 @@ class PlanResult:
     timings_s: dict
 
 
+@deprecated_echo
 def plan_scenario(scenario: str | os.PathLike, out_dir: str | os.PathLike | None = None, *, n_jobs: int = 1,
                   iterations: int | None = None, compare_blind: bool = True,
-                  echo: Callable[[str], Any] = print) -> PlanResult:
+                  echo: Callable[[str], Any] | None = None, progress: bool = False) -> PlanResult:
     """Plan, order, time-parameterize and report one scenario, as ``ctrplan plan`` does.
 
     Parameters
@@ -99,9 +104,11 @@ def plan_scenario(scenario: str | os.PathLike, out_dir: str | os.PathLike | None
         Overrides the scenario's planner iterations.
     compare_blind : bool, keyword-only
         Also plan bound-blind (length only, same planner and seed) and compare in the summary.
-    echo : callable, keyword-only
-        Receives progress messages and the human-readable summary (``lambda *a: None`` for
-        silence).
+    echo : callable, optional, keyword-only
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher (the progress lines and the summary); configure :mod:`logging` instead.
+    progress : bool, keyword-only
+        tqdm bars while a bound map is computed (default none; ``ctrplan plan`` shows them).
 
     Returns
     -------
@@ -122,7 +129,7 @@ def plan_scenario(scenario: str | os.PathLike, out_dir: str | os.PathLike | None
 
     warmup.start()   # the final check's contact kernels compile beside planning on a cold start
     run = plan_stages(Path(scenario), out_dir, n_jobs=n_jobs, iterations=iterations,
-                      compare_blind=compare_blind, echo=echo)
+                      compare_blind=compare_blind, progress=progress)
     aware, robot = run.plans.aware, run.setup.robot
     return PlanResult(
         scenario=run.setup.scenario, robot=robot, joint_names=tuple(robot.joint_names),

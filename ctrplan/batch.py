@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import json
+import logging
 import os
 from pathlib import Path
 
@@ -24,6 +25,8 @@ from .mechanics._lie import angle_between
 from .models import MODELS  # the one registry of models
 
 __all__ = ["MODELS", "evaluate_configuration", "evaluate_table", "job_key"]
+
+logger = logging.getLogger(__name__)
 
 # Configurations per task: the standard model's compiled batch takes about 0.05-0.4 ms per
 # configuration, so a chunk of this many keeps the per-task overhead (one checkpoint line, the
@@ -326,7 +329,7 @@ def _assemble(done: dict, columns: list[dict], K: int) -> pd.DataFrame:
 
 def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | None = None, eta=None,
                    *, n_jobs: int = 1, checkpoint: str | os.PathLike | None = None,
-                   progress: bool = True, job_key: str = "", explain_failures: bool = False) -> pd.DataFrame:
+                   progress: bool = False, job_key: str = "", explain_failures: bool = False) -> pd.DataFrame:
     """Evaluate K configurations in chunks, in parallel, resuming from a checkpoint.
 
     Parameters
@@ -346,7 +349,7 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
     checkpoint : path, optional
         JSON-lines file of finished chunks; rows already in it (same ``job_key``) are skipped.
     progress : bool
-        Show a tqdm progress bar.
+        Show a tqdm progress bar (default none).
     job_key : str
         Identifies the job (robot file, inputs, model, settings); a checkpoint with another key
         is not reused.
@@ -375,6 +378,8 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
     ck = Path(checkpoint) if checkpoint is not None else None
     done, columns = _read_checkpoint(ck, job_key) if ck is not None and ck.exists() else ({}, [])
     todo = [k for k in range(K) if k not in done]
+    if done:
+        logger.debug(f"{model} model: {K - len(todo)} of {K} rows read from the checkpoint {ck}")
     fh = None
     if ck is not None:
         new = not ck.exists()

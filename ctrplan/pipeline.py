@@ -26,18 +26,25 @@ s), and millimetres and degrees appear only in the report stage and in progress 
    phases), its samples checked;
 7. :func:`path_rows`, :func:`plan_summary` and :func:`write_report`: path.csv, trajectory.csv,
    figures and summary.json, written atomically (mm and degrees only here).
+
+The stages print nothing: they log to ``ctrplan.pipeline`` (:mod:`logging`) the lines ``ctrplan
+plan`` shows (scenario, bound map, goals, plans, then the summary) at INFO, the files written at
+DEBUG, and a goal planned without its compensation at WARNING. Their ``echo`` parameters are
+deprecated.
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, Callable, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
+from ._log import deprecated_echo, progress_level
 from .boundmap import MapSpec, default_spec, load_or_compute_bound_map
 from .errors import JointLimitError, UnreachableGoalError
 from .errors import CtrplanError
@@ -59,7 +66,7 @@ __all__ = ["run_plan", "plan_stages", "PlanRun", "map_spec", "PlanSetup", "Bound
 # max-bound comparison [m of the weighted joint metric].
 PATH_SAMPLE_SPACING = 2e-3
 
-Echo = Callable[[str], Any]
+logger = logging.getLogger(__name__)
 
 
 def map_spec(scenario) -> MapSpec:
@@ -344,7 +351,8 @@ class _PlanJob:
 
 
 # --------------------------------------------------------------------------- stages 1-4
-def load_setup(scenario_path, out_dir=None, echo: Echo = print) -> PlanSetup:
+@deprecated_echo
+def load_setup(scenario_path, out_dir=None, echo=None) -> PlanSetup:
     """Stage 1: read a scenario and its robot, and derive the model settings and map spec.
 
     Parameters
@@ -353,8 +361,9 @@ def load_setup(scenario_path, out_dir=None, echo: Echo = print) -> PlanSetup:
         Scenario TOML file (``docs/file-formats.md``; SI units).
     out_dir : str or path-like, optional
         Output folder; default the scenario's ``[output] dir``, else ``out/<scenario name>``.
-    echo : callable
-        Progress messages.
+    echo : callable, optional
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher; configure :mod:`logging` instead (logger ``ctrplan``).
 
     Returns
     -------
@@ -369,12 +378,13 @@ def load_setup(scenario_path, out_dir=None, echo: Echo = print) -> PlanSetup:
     settings = ModelSettings(ds=sc.bound_field.ds) if sc.bound_field.ds else ModelSettings()
     spec = map_spec(sc)
     out = Path(out_dir) if out_dir else (sc.output_dir or Path("out") / sc.name)
-    echo(f"scenario {sc.name}: robot {sc.robot.name} ({', '.join(sc.robot.joint_names)})")
+    logger.log(progress_level(), f"scenario {sc.name}: robot {sc.robot.name} ({', '.join(sc.robot.joint_names)})")
     return PlanSetup(scenario=sc, settings=settings, check_settings=settings.replace(multistart=0), spec=spec,
                      obstacles=tuple(sc.obstacles), out_dir=out)
 
 
-def load_bound_map(setup: PlanSetup, n_jobs: int = 1, echo: Echo = print) -> BoundMapStage:
+@deprecated_echo
+def load_bound_map(setup: PlanSetup, n_jobs: int = 1, echo=None, *, progress: bool = False) -> BoundMapStage:
     """Stage 2: the robot's bound map for the scenario's spec and model settings.
 
     A shipped or cached map with the same key is read; otherwise the map is computed into a
@@ -386,8 +396,11 @@ def load_bound_map(setup: PlanSetup, n_jobs: int = 1, echo: Echo = print) -> Bou
     setup : PlanSetup
     n_jobs : int
         Worker processes for a map that must be computed.
-    echo : callable
-        Progress messages.
+    echo : callable, optional
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher; configure :mod:`logging` instead (logger ``ctrplan``).
+    progress : bool, keyword-only
+        tqdm bars while a map is computed (default none; ``ctrplan plan`` shows them).
 
     Returns
     -------
@@ -399,8 +412,8 @@ def load_bound_map(setup: PlanSetup, n_jobs: int = 1, echo: Echo = print) -> Bou
         A store to resume was made for another robot, spec or mechanics version.
     """
     field, source, seconds = load_or_compute_bound_map(setup.scenario.robot_file, setup.robot, setup.spec,
-                                                       setup.settings, n_jobs=n_jobs, echo=echo)
-    echo(f"bound map: {source} in {seconds:.1f} s")
+                                                       setup.settings, n_jobs=n_jobs, progress=progress)
+    logger.log(progress_level(), f"bound map: {source} in {seconds:.1f} s")
     return BoundMapStage(field=field, source=source, time_s=seconds)
 
 
@@ -434,7 +447,8 @@ def check_start(setup: PlanSetup, field):
     return validity
 
 
-def resolve_goals(setup: PlanSetup, field, validity, echo: Echo = print) -> ResolvedGoals:
+@deprecated_echo
+def resolve_goals(setup: PlanSetup, field, validity, echo=None) -> ResolvedGoals:
     """Stage 3b: each scenario goal as one joint vector.
 
     Joint goals are checked; task-space goals are solved by inverse kinematics with the standard
@@ -448,8 +462,9 @@ def resolve_goals(setup: PlanSetup, field, validity, echo: Echo = print) -> Reso
     field : BoundField
     validity : callable
         State validity (:func:`check_start`'s checker).
-    echo : callable
-        Progress messages.
+    echo : callable, optional
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher; configure :mod:`logging` instead (logger ``ctrplan``).
 
     Returns
     -------
@@ -466,8 +481,8 @@ def resolve_goals(setup: PlanSetup, field, validity, echo: Echo = print) -> Reso
                   for k, g in enumerate(setup.scenario.goals))
     seconds = time.perf_counter() - t0
     for k, g in enumerate(goals):
-        echo(f"goal {k + 1}: q = {np.round(g.q, 4).tolist()}, tip error {g.tip_error * 1e3:.3f} mm, "
-             f"field bound {g.bound * 1e3:.2f} mm ({len(g.candidates)} candidates)")
+        logger.log(progress_level(), f"goal {k + 1}: q = {np.round(g.q, 4).tolist()}, tip error "
+                   f"{g.tip_error * 1e3:.3f} mm, field bound {g.bound * 1e3:.2f} mm ({len(g.candidates)} candidates)")
     return ResolvedGoals(goals=goals, time_s=seconds)
 
 
@@ -526,7 +541,8 @@ def aim_decision(robot, aim_with: str = "auto") -> dict:
             "measured_max_mm": None if pv is None else pv[f"{side}_max_m"] * 1e3, "validation": pv}
 
 
-def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo: Echo = print) -> AimedGoals:
+@deprecated_echo
+def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo=None) -> AimedGoals:
     """Stage 4: aim task-space goals with the tip predicted after the final approach.
 
     The approach to goal k is assumed to be one straight segment from the previous planned goal
@@ -544,8 +560,9 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo: Echo = 
     resolved : ResolvedGoals
     validity : callable
         State validity (:func:`check_start`'s checker).
-    echo : callable
-        Progress messages.
+    echo : callable, optional
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher; configure :mod:`logging` instead (logger ``ctrplan``).
 
     Returns
     -------
@@ -559,7 +576,7 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo: Echo = 
     errors = {}
     aim = aim_decision(robot, getattr(sc.planner, "aim_with", "auto"))
     if any(isinstance(doc, TaskGoal) for doc in sc.goals):
-        echo(f"aiming task-space goals with the {aim['model']}: {aim['reason']}")
+        logger.log(progress_level(), f"aiming task-space goals with the {aim['model']}: {aim['reason']}")
     for k, (doc, g) in enumerate(zip(sc.goals, resolved.goals)):
         c = None
         if isinstance(doc, TaskGoal) and aim["use_history"]:
@@ -573,12 +590,13 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo: Echo = 
                                     validity_fn=validity)
             except CtrplanError as exc:   # no prediction at the standard solution: plan to it, say why
                 errors[k] = f"{type(exc).__name__}: {exc}"
-                echo(f"goal {k + 1}: no compensation ({errors[k]}); planning to the standard-model goal")
+                logger.warning(f"goal {k + 1}: no compensation ({errors[k]}); planning to the standard-model goal")
         if c is not None:
-            echo(f"goal {k + 1} ({final_motion}, {c.model} model, eta {_eta_text(c.eta)}): predicted miss of "
-                 f"standard-model IK {c.predicted_miss_standard * 1e3:.3f} mm, compensated "
-                 f"{c.predicted_miss * 1e3:.3f} mm ({'used' if c.accepted else 'not used: ' + c.message}); "
-                 f"q = {np.round(c.q, 4).tolist()}")
+            logger.log(progress_level(),
+                       f"goal {k + 1} ({final_motion}, {c.model} model, eta {_eta_text(c.eta)}): predicted miss of "
+                       f"standard-model IK {c.predicted_miss_standard * 1e3:.3f} mm, compensated "
+                       f"{c.predicted_miss * 1e3:.3f} mm ({'used' if c.accepted else 'not used: ' + c.message}); "
+                       f"q = {np.round(c.q, 4).tolist()}")
         compensations.append(c)
         goal_q.append(c.q if c is not None else g.q)
         motion += list(approach_rows(robot, motion[-1], goal_q[-1], final_motion)[1:])
@@ -740,8 +758,9 @@ def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:
     return {m: out[m] for m in modes}, True
 
 
+@deprecated_echo
 def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int | None = None,
-                compare_blind: bool = True, n_jobs: int = 1, echo: Echo = print) -> Plans:
+                compare_blind: bool = True, n_jobs: int = 1, echo=None) -> Plans:
     """Stage 5: plan start -> goals bound-aware (and bound-blind), order, check and evaluate.
 
     Each plan runs the scenario's planner and seed on every leg with the cost length + weight x
@@ -763,8 +782,9 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
     n_jobs : int, keyword-only
         With 2 or more, the bound-blind plan runs in a forked process beside the bound-aware one
         (same result as in series).
-    echo : callable, keyword-only
-        Progress messages.
+    echo : callable, optional, keyword-only
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher; configure :mod:`logging` instead (logger ``ctrplan``).
 
     Returns
     -------
@@ -790,11 +810,12 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
     for mode, r in routes.items():
         lm = r.bounds.exact
         ordered = r.ordered
-        echo(f"{mode}: {len(ordered)} ordered waypoints, planning {r.plan_time_s:.1f} s "
-             f"({r.checks['search_states_evaluated']} states checked, final check "
-             f"{r.checks['final_check_states']} states, "
-             f"{ordered.n_subdivisions} bisections, {ordered.n_repairs} repairs); exact bound at waypoints: "
-             f"max {np.nanmax(lm.position) * 1e3:.2f} mm, final {lm.position[-1] * 1e3:.2f} mm")
+        logger.log(progress_level(),
+                   f"{mode}: {len(ordered)} ordered waypoints, planning {r.plan_time_s:.1f} s "
+                   f"({r.checks['search_states_evaluated']} states checked, final check "
+                   f"{r.checks['final_check_states']} states, "
+                   f"{ordered.n_subdivisions} bisections, {ordered.n_repairs} repairs); exact bound at waypoints: "
+                   f"max {np.nanmax(lm.position) * 1e3:.2f} mm, final {lm.position[-1] * 1e3:.2f} mm")
     return Plans(routes=MappingProxyType(routes), in_parallel=in_parallel, time_s=seconds)
 
 
@@ -1095,7 +1116,8 @@ def plan_summary(setup: PlanSetup, bound_map: BoundMapStage, validity, resolved:
     return summary
 
 
-def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo: Echo = print) -> dict:
+@deprecated_echo
+def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo=None) -> dict:
     """Write path.csv, trajectory.csv, the figures, the interactive view ``plan.html`` and
     summary.json (last) into ``setup.out_dir``.
 
@@ -1114,8 +1136,9 @@ def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo
         :func:`path_rows` of the bound-aware plan.
     summary : dict
         :func:`plan_summary`, with ``times_s["total"]`` set.
-    echo : callable
-        Receives the human-readable summary.
+    echo : callable, optional
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher; configure :mod:`logging` instead (logger ``ctrplan``).
 
     Returns
     -------
@@ -1180,13 +1203,15 @@ def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo
             path, traj, robot.joint_names, [j.kind for j in robot.joints], title=f"{sc.name}: drive trajectory")
     written = write_plan_outputs(setup.out_dir, rows, traj, summary, joint_names=robot.joint_names,
                                  figures=figures)
-    echo(format_summary(summary))
+    logger.debug(f"wrote {', '.join(written)} into {setup.out_dir}")
+    logger.log(progress_level(), format_summary(summary))
     return written
 
 
 # --------------------------------------------------------------------------- the job
+@deprecated_echo
 def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | None = None,
-             compare_blind: bool = True, echo=print) -> dict:
+             compare_blind: bool = True, echo=None, *, progress: bool = False) -> dict:
     """Plan, order, time-parameterize and report one scenario (``ctrplan plan``).
 
     Parameters
@@ -1202,8 +1227,11 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
         Overrides the scenario's planner iterations.
     compare_blind : bool
         Also plan bound-blind (length only, same planner and seed) and compare.
-    echo : callable
-        Progress messages.
+    echo : callable, optional
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher; configure :mod:`logging` instead (logger ``ctrplan``).
+    progress : bool, keyword-only
+        tqdm bars while a bound map is computed (default none).
 
     Returns
     -------
@@ -1220,7 +1248,7 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
         The time-parameterized trajectory violates the drive limits.
     """
     return plan_stages(scenario_path, out_dir, n_jobs=n_jobs, iterations=iterations,
-                       compare_blind=compare_blind, echo=echo).summary
+                       compare_blind=compare_blind, progress=progress).summary
 
 
 @dataclass(frozen=True, eq=False)
@@ -1252,8 +1280,9 @@ class PlanRun:
     summary: dict
 
 
+@deprecated_echo
 def plan_stages(scenario_path, out_dir=None, *, n_jobs: int = 1, iterations: int | None = None,
-                compare_blind: bool = True, echo=print) -> PlanRun:
+                compare_blind: bool = True, echo=None, progress: bool = False) -> PlanRun:
     """:func:`run_plan` returning every stage's result as well as the summary.
 
     Parameters and exceptions as :func:`run_plan`; the same files are written.
@@ -1263,18 +1292,18 @@ def plan_stages(scenario_path, out_dir=None, *, n_jobs: int = 1, iterations: int
     PlanRun
     """
     t_start = time.perf_counter()
-    setup = load_setup(scenario_path, out_dir, echo)
-    bound_map = load_bound_map(setup, n_jobs, echo)
+    setup = load_setup(scenario_path, out_dir)
+    bound_map = load_bound_map(setup, n_jobs, progress=progress)
     validity = check_start(setup, bound_map.field)
-    resolved = resolve_goals(setup, bound_map.field, validity, echo)
-    aimed = aim_goals(setup, resolved, validity, echo)
+    resolved = resolve_goals(setup, bound_map.field, validity)
+    aimed = aim_goals(setup, resolved, validity)
     plans = plan_routes(setup, bound_map.field, aimed, iterations=iterations, compare_blind=compare_blind,
-                        n_jobs=n_jobs, echo=echo)
+                        n_jobs=n_jobs)
     traj = time_parameterize(setup, plans.aware.ordered)
     rows = path_rows(plans.aware, setup.robot)
     summary = plan_summary(setup, bound_map, validity, resolved, aimed, plans, traj)
     summary["times_s"]["total"] = time.perf_counter() - t_start
-    write_report(setup, plans, traj, rows, summary, echo)
+    write_report(setup, plans, traj, rows, summary)
     summary["output_dir"] = str(setup.out_dir)
     return PlanRun(setup=setup, bound_map=bound_map, resolved=resolved, aimed=aimed, plans=plans, trajectory=traj,
                    rows=rows, summary=summary)

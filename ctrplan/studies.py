@@ -13,16 +13,23 @@ A scenario whose folder holds a complete run (``summary.json``, written last) fo
 its row is read from that summary (``reused``). With ``n_jobs`` > 1 or a ``scheduler`` address the
 scenarios are spread over dask.distributed workers (a local cluster of ``n_jobs`` single-threaded
 processes, or the cluster at that address, whose workers need ctrplan installed).
+
+Messages go to the ``ctrplan.studies`` logger (:mod:`logging`): one line per scenario (WARNING for
+a failed one) and the closing summary at INFO. Each scenario's own progress lines (:mod:`ctrplan.pipeline`) are DEBUG
+records here; its cautions stay WARNING.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 import time
 from pathlib import Path
 from typing import Any, Callable, Sequence
+
+from ._log import deprecated_echo, details
 
 __all__ = ["scenario_files", "plan_many", "input_key", "TABLE_FILE", "PLOT_FILE", "COLUMNS"]
 
@@ -33,6 +40,8 @@ PLOT_FILE = "scenarios.png"
 #: Columns of the table across scenarios (units in their suffixes).
 COLUMNS = ("scenario", "status", "reason", "time_s", "cost", "joint_path_length_m", "max_bound_mm", "final_bound_mm",
            "blind_max_bound_mm", "repairs", "failures", "output_dir")
+
+logger = logging.getLogger(__name__)
 
 
 def scenario_files(paths: Sequence[str | os.PathLike]) -> list[Path]:
@@ -91,19 +100,28 @@ def _row(scenario: Path, status: str, summary: dict | None, seconds: float, out:
     return row
 
 
-def _plan_one(scenario: Path, out: Path, key: str, iterations, compare_blind: bool) -> dict:
-    """Plan one scenario (in this process or on a worker); a failure becomes a row."""
+def _plan_one(scenario: Path, out: Path, key: str, iterations, compare_blind: bool, progress: bool = False) -> dict:
+    """Plan one scenario (in this process or on a worker), its progress lines as DEBUG records; a
+    failure becomes a row."""
     from .api import plan_scenario
 
     t0 = time.perf_counter()
+    logger.debug(f"{scenario}: planning into {out}")
     try:
-        result = plan_scenario(scenario, out, n_jobs=1, iterations=iterations, compare_blind=compare_blind,
-                               echo=lambda *a: None)
+        with details():
+            result = plan_scenario(scenario, out, n_jobs=1, iterations=iterations, compare_blind=compare_blind,
+                                   progress=progress)
     except Exception as exc:                             # noqa: BLE001 - reported, the others go on
         reason = (f"{type(exc).__name__}: {exc}".splitlines() or [type(exc).__name__])[0]
         return _row(scenario, "failed", None, time.perf_counter() - t0, out, reason)
     (out / "inputs.sha256").write_text(key + "\n")
     return _row(scenario, "planned", result.summary, time.perf_counter() - t0, out)
+
+
+def _log_row(scenario, row: dict) -> None:
+    """One line per planned scenario: INFO, WARNING if it failed."""
+    level = logging.WARNING if row["status"] == "failed" else logging.INFO
+    logger.log(level, f"{scenario}: {row['status']} in {row['time_s']:.1f} s {row['reason']}".rstrip())
 
 
 def _reusable(out: Path, key: str) -> dict | None:
@@ -113,9 +131,10 @@ def _reusable(out: Path, key: str) -> dict | None:
     return None
 
 
+@deprecated_echo
 def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike, *, n_jobs: int = 1,
               scheduler: str | None = None, iterations: int | None = None, compare_blind: bool = True,
-              echo: Callable[[str], Any] = print):
+              echo: Callable[[str], Any] | None = None, progress: bool = False):
     """Plan several scenarios and tabulate them (module docstring).
 
     Parameters
@@ -133,7 +152,11 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
         Overrides every scenario's planner iterations.
     compare_blind : bool
         Also plan each bound-blind.
-    echo : callable
+    echo : callable, optional
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher (a line per scenario and the summary); configure :mod:`logging` instead.
+    progress : bool
+        tqdm bars while a bound map is computed (default none).
 
     Returns
     -------
@@ -163,7 +186,7 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
         done = _reusable(out, key)
         if done is not None:
             rows[f] = _row(f, "reused", done, 0.0, out)
-            echo(f"{f}: complete outputs for the same inputs in {out}, reused")
+            logger.info(f"{f}: complete outputs for the same inputs in {out}, reused")
         else:
             todo.append((f, out, key))
     t0 = time.perf_counter()
@@ -173,27 +196,27 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
         cluster = None if scheduler else LocalCluster(n_workers=n_jobs, threads_per_worker=1, processes=True,
                                                       dashboard_address=None)
         with Client(scheduler or cluster) as client:
-            futures = [client.submit(_plan_one, f, out, key, iterations, compare_blind, pure=False)
+            futures = [client.submit(_plan_one, f, out, key, iterations, compare_blind, progress, pure=False)
                        for f, out, key in todo]
             for fut in as_completed(futures):
                 row = fut.result()
                 rows[Path(row["scenario"])] = row
-                echo(f"{row['scenario']}: {row['status']} in {row['time_s']:.1f} s {row['reason']}".rstrip())
+                _log_row(row["scenario"], row)
         if cluster is not None:
             cluster.close()
     else:
         for f, out, key in todo:
-            row = _plan_one(f, out, key, iterations, compare_blind)
+            row = _plan_one(f, out, key, iterations, compare_blind, progress)
             rows[f] = row
-            echo(f"{f}: {row['status']} in {row['time_s']:.1f} s {row['reason']}".rstrip())
+            _log_row(f, row)
     table = pd.DataFrame([rows[f] for f in files], columns=list(COLUMNS))
     from .io.atomic import atomic_write_text
 
     atomic_write_text(root / TABLE_FILE, table.to_csv(index=False))
     _plot(table, root / PLOT_FILE)
     ok = int((table["status"] != "failed").sum())
-    echo(f"{len(files)} scenarios: {ok} planned or reused, {len(files) - ok} failed; {time.perf_counter() - t0:.1f} s; "
-         f"table {root / TABLE_FILE}")
+    logger.info(f"{len(files)} scenarios: {ok} planned or reused, {len(files) - ok} failed; "
+                f"{time.perf_counter() - t0:.1f} s; table {root / TABLE_FILE}")
     return table
 
 

@@ -4,6 +4,7 @@ reads, and the ``ctrplan boundmap`` command. Serial and fast (fake bound or a co
 from __future__ import annotations
 
 import hashlib
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -116,7 +117,7 @@ def test_incomplete_store_is_not_a_map(tmp_path):
         load_bound_map(tmp_path / "missing.zarr")
 
 
-def test_npz_output_and_planner_lookup(tmp_path, monkeypatch):
+def test_npz_output_and_planner_lookup(tmp_path, monkeypatch, caplog):
     """An .npz output goes through its store; the planner finds cached stores and resumes them."""
     robot_file = pair_file(tmp_path)
     robot = load_robot(robot_file)
@@ -129,26 +130,29 @@ def test_npz_output_and_planner_lookup(tmp_path, monkeypatch):
     key = run.field.key
     cache = Path(".cache") / "boundmaps" / f"pair-{key[:12]}.zarr"
     compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=cache, progress=False, max_chunks=1, chunk_size=3)
-    msgs = []
-    field, source, _ = load_or_compute_bound_map(robot_file, robot, (4, 3), SETTINGS, echo=msgs.append)
-    assert source == "computed" and ".cache/boundmaps" in msgs[-1]
+    caplog.set_level(logging.INFO, logger="ctrplan")
+    field, source, _ = load_or_compute_bound_map(robot_file, robot, (4, 3), SETTINGS)
+    assert source == "computed" and ".cache/boundmaps" in caplog.messages[-1]
     st = BoundMapStore.open(cache)  # resumed with its own chunks (4 of 3 nodes), not restarted
     assert st.n_chunks == 4 and list(st.chunk_run()) == [1, 2, 2, 2]
     np.testing.assert_array_equal(field.values, run.field.values)
-    field, source, _ = load_or_compute_bound_map(robot_file, robot, (4, 3), SETTINGS, echo=msgs.append)
+    field, source, _ = load_or_compute_bound_map(robot_file, robot, (4, 3), SETTINGS)
     assert source == "cache"
 
 
 @pytest.mark.parametrize("scenario", sorted((REPO / "scenarios").glob("*.toml")), ids=lambda p: p.stem)
-def test_shipped_scenarios_find_their_map_without_computing(scenario):
-    """Every shipped scenario's bound map is shipped: the main job computes no map."""
+def test_shipped_scenarios_find_their_map_without_computing(scenario, caplog):
+    """Every shipped scenario's bound map is shipped: the main job computes no map (and says
+    nothing about stale maps)."""
     from ctrplan.io.scenario import load_scenario
     from ctrplan.pipeline import map_spec
 
     sc = load_scenario(scenario)
     settings = ModelSettings(ds=sc.bound_field.ds) if sc.bound_field.ds else ModelSettings()
-    field, source, _ = load_or_compute_bound_map(sc.robot_file, sc.robot, map_spec(sc), settings, echo=pytest.fail)
+    caplog.set_level(logging.INFO, logger="ctrplan")
+    field, source, _ = load_or_compute_bound_map(sc.robot_file, sc.robot, map_spec(sc), settings)
     assert source == "shipped" and field.shape == tuple(sc.bound_field.resolution)
+    assert not caplog.records, caplog.messages
 
 
 def test_cli_boundmap(tmp_path):
@@ -202,7 +206,7 @@ def test_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
     assert "tcp://127.0.0.1:9" in str(res.exception)
 
 
-def test_maps_of_other_mechanics_are_stale_and_named(tmp_path, monkeypatch):
+def test_maps_of_other_mechanics_are_stale_and_named(tmp_path, monkeypatch, caplog):
     """The key holds the mechanics version: a map computed by other mechanics is not used, and
     the planner's lookup says which map it skipped and why."""
     from ctrplan import constants
@@ -225,12 +229,13 @@ def test_maps_of_other_mechanics_are_stale_and_named(tmp_path, monkeypatch):
                                                                        MECHANICS_VERSION)
     # the lookup skips the old shipped map, says why, and computes a new one
     monkeypatch.chdir(tmp_path)
-    msgs = []
+    caplog.set_level(logging.INFO, logger="ctrplan")
     field, source, _ = load_or_compute_bound_map(robot_file, load_robot(robot_file), (4, 3), SETTINGS,
-                                                 echo=msgs.append, evaluator=fake_pair_bound)
+                                                 evaluator=fake_pair_bound)
     assert source == "computed" and field.key != old_run.field.key
-    assert any("mechanics_version" in m and "1999.01.01" in m and f"pair-{old_run.field.key[:12]}" in m
-               for m in msgs), msgs
+    stale = [r for r in caplog.records if "mechanics_version" in r.getMessage() and "1999.01.01" in r.getMessage()
+             and f"pair-{old_run.field.key[:12]}" in r.getMessage()]
+    assert stale and all(r.levelno == logging.WARNING for r in stale), caplog.messages
 
 
 def fake_pair_bound(robot, alpha, beta, settings=None):

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import sys
 from pathlib import Path
 
@@ -72,7 +73,7 @@ def synthetic_map(monkeypatch):
     the calls: no map is computed or read."""
     calls = []
 
-    def fake(robot_path, robot, spec, settings, n_jobs=1, echo=print):
+    def fake(robot_path, robot, spec, settings, n_jobs=1, **kwargs):
         calls.append(spec.resolution)
         coords = map_coordinates(robot)
         axes = [uniform_axis(lo, hi, n, per) for lo, hi, n, per in zip(coords.lower, coords.upper, spec.resolution,
@@ -185,7 +186,7 @@ def test_shipped_scenario_bound_aware_beats_bound_blind(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # a computed map would be cached under ./.cache
     sc = _shipped_scenario(tmp_path, "obstacles")
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, compare_blind=True, echo=lambda *a: None)
+    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, compare_blind=True)
     assert summary["bound_map"]["source"] == "shipped"
 
     comp = summary["comparison"]
@@ -214,7 +215,7 @@ def test_six_joint_scenario_plans_bound_aware_below_bound_blind(tmp_path, monkey
     monkeypatch.chdir(tmp_path)
     sc = _shipped_scenario(tmp_path, "six-joint")
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, compare_blind=True, echo=lambda *a: None)
+    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, compare_blind=True)
     assert summary["bound_map"]["source"] == "shipped" and len(summary["bound_map"]["coordinates"]) == 4
     comp = summary["comparison"]["max_bound_at_waypoints_mm"]
     assert comp["bound_aware"] < comp["bound_blind"], comp
@@ -293,8 +294,7 @@ def test_short_plan_outputs_are_ordered_at_rest_and_complete(tmp_path, monkeypat
     monkeypatch.chdir(tmp_path)
     sc = _scenario(tmp_path, "{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}")
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, iterations=20, compare_blind=True,
-                                echo=lambda *a: None)
+    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, iterations=20, compare_blind=True)
     on_disk = json.loads((out / "summary.json").read_text())
     for key in ("max_bound_at_waypoints_mm", "max_interpolated_friction_bound_along_path_mm", "final_bound_mm",
                 "joint_path_length_m"):
@@ -316,7 +316,7 @@ def test_plans_in_parallel_equal_plans_in_series(tmp_path, monkeypatch, syntheti
     runs = {}
     for jobs in (1, 2):
         out = tmp_path / f"out{jobs}"
-        s = pipeline.run_plan(sc, out_dir=out, n_jobs=jobs, iterations=30, compare_blind=True, echo=lambda *a: None)
+        s = pipeline.run_plan(sc, out_dir=out, n_jobs=jobs, iterations=30, compare_blind=True)
         assert s["times_s"]["plans_in_parallel"] == (jobs == 2)
         runs[jobs] = ((out / "path.csv").read_text(), s["bound_blind"]["joint_path_length_m"],
                       s["bound_blind"]["max_bound_at_waypoints_mm"], s["bound_aware"]["cost"])

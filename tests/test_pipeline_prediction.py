@@ -46,7 +46,7 @@ def _rows(out: Path) -> list[dict]:
 def _run(tmp_path, monkeypatch, sc):
     monkeypatch.chdir(tmp_path)      # a computed map would be cached under ./.cache
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, iterations=60, compare_blind=False, echo=lambda *a: None)
+    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, iterations=60, compare_blind=False)
     assert summary["bound_map"]["source"] == "shipped"
     return summary, _rows(out)
 
@@ -76,7 +76,7 @@ def _check_goal_prediction(robot, sc, rows, final_motion):
     last = rows[-1]
     q = [float(last[n]) for n in robot.joint_names]
     alpha, beta = robot.configuration(q)
-    settings = pipeline.load_setup(sc, sc.parent / "setup-check", echo=lambda *a: None).settings
+    settings = pipeline.load_setup(sc, sc.parent / "setup-check").settings
     if final_motion == "translation-last":
         sol = solve_contact(robot, alpha, beta, settings)
     else:

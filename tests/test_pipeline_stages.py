@@ -74,13 +74,13 @@ q = {alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}
 
 def test_load_setup_keeps_the_step_in_metres_and_the_default_output_folder(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL), echo=lambda *a: None)
+    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL))
     assert setup.settings.ds == pytest.approx(0.004, rel=1e-12)       # ds_m = 0.004, not 4
     assert setup.check_settings.ds == setup.settings.ds and setup.check_settings.multistart == 0
     assert setup.spec.resolution == (4, 4, 3)
     np.testing.assert_allclose(setup.scenario.start, [0.0, 0.0, -0.07], atol=0)
     assert setup.out_dir == Path("out") / "stages"
-    assert pipeline.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "o", echo=lambda *a: None).out_dir \
+    assert pipeline.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "o").out_dir \
         == tmp_path / "o"
 
 
@@ -91,7 +91,7 @@ def test_a_task_goal_given_in_metres_is_resolved_to_a_tip_within_its_tolerance_i
     robot = load_robot(TABLE7)
     q_true = np.array([1.0, 0.5, -0.05])
     alpha, beta = robot.configuration(q_true)
-    setup_probe = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="probe"), echo=lambda *a: None)
+    setup_probe = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="probe"))
     target = solve_standard(robot, alpha, beta, setup_probe.check_settings).tip_position
     goal = f"""
 [[goals]]
@@ -99,10 +99,10 @@ type = "task"
 tip_position_m = [{float(target[0])!r}, {float(target[1])!r}, {float(target[2])!r}]
 tolerance_m = 1.0e-3
 """
-    setup = pipeline.load_setup(_write(tmp_path, goal), echo=lambda *a: None)
+    setup = pipeline.load_setup(_write(tmp_path, goal))
     field = _field(setup.robot)
     validity = pipeline.check_start(setup, field)
-    resolved = pipeline.resolve_goals(setup, field, validity, echo=lambda *a: None)
+    resolved = pipeline.resolve_goals(setup, field, validity)
     (g,) = resolved.goals
     a, b = setup.robot.configuration(g.q)
     tip = solve_standard(setup.robot, a, b, setup.check_settings).tip_position
@@ -112,16 +112,16 @@ tolerance_m = 1.0e-3
     assert g.bound == pytest.approx(SYNTHETIC[0], rel=1e-9)
     assert resolved.time_s > 0
     # joint goals come back from the aiming stage as resolved (no compensation, nothing to say)
-    setup_j = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="joint"), echo=lambda *a: None)
-    resolved_j = pipeline.resolve_goals(setup_j, field, validity, echo=lambda *a: None)
-    aimed = pipeline.aim_goals(setup_j, resolved_j, validity, echo=lambda *a: None)
+    setup_j = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="joint"))
+    resolved_j = pipeline.resolve_goals(setup_j, field, validity)
+    aimed = pipeline.aim_goals(setup_j, resolved_j, validity)
     np.testing.assert_array_equal(aimed.q[0], [0.6, -0.4, -0.06])
     assert aimed.compensations == (None,) and dict(aimed.errors) == {}
 
 
 def test_check_start_rejects_a_start_in_collision(tmp_path):
     robot = load_robot(TABLE7)
-    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="free"), echo=lambda *a: None)
+    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="free"))
     field = _field(robot)
     assert pipeline.check_start(setup, field)(setup.scenario.start)   # control: free start is valid
     alpha, beta = robot.configuration(setup.scenario.start)
@@ -132,7 +132,7 @@ type = "sphere"
 center_m = [{float(tip[0])!r}, {float(tip[1])!r}, {float(tip[2])!r}]
 radius_m = 0.004
 """
-    blocked = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, sphere, name="blocked"), echo=lambda *a: None)
+    blocked = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, sphere, name="blocked"))
     with pytest.raises(UnreachableGoalError, match="start configuration"):
         pipeline.check_start(blocked, field)
 
@@ -141,12 +141,12 @@ radius_m = 0.004
 def planned(tmp_path_factory):
     """Stages 1-6 on a short joint-space move with the synthetic field (20 RRT* iterations)."""
     tmp_path = tmp_path_factory.mktemp("stages")
-    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "out", echo=lambda *a: None)
+    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "out")
     bound_map = pipeline.BoundMapStage(field=_field(setup.robot), source="synthetic", time_s=0.0)
     validity = pipeline.check_start(setup, bound_map.field)
-    resolved = pipeline.resolve_goals(setup, bound_map.field, validity, echo=lambda *a: None)
-    aimed = pipeline.aim_goals(setup, resolved, validity, echo=lambda *a: None)
-    plans = pipeline.plan_routes(setup, bound_map.field, aimed, compare_blind=True, n_jobs=1, echo=lambda *a: None)
+    resolved = pipeline.resolve_goals(setup, bound_map.field, validity)
+    aimed = pipeline.aim_goals(setup, resolved, validity)
+    plans = pipeline.plan_routes(setup, bound_map.field, aimed, compare_blind=True, n_jobs=1)
     traj = pipeline.time_parameterize(setup, plans.aware.ordered)
     return setup, bound_map, validity, resolved, aimed, plans, traj
 
@@ -212,7 +212,7 @@ def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, m
         return write(path, standard, **kw)
 
     monkeypatch.setattr(view, "write_plan_view", spy)
-    written = pipeline.write_report(setup, plans, traj, rows, summary, echo=lambda *a: None)
+    written = pipeline.write_report(setup, plans, traj, rows, summary)
     html = written["plan.html"].read_text(encoding="utf-8")
     K = len(plans.aware.ordered)
     assert len(re.findall(r'"method":\s*"update"', html)) == K

@@ -47,7 +47,7 @@ def _run(tmp_path, monkeypatch, name, compare_blind):
     monkeypatch.chdir(tmp_path)      # a computed map would be cached under ./.cache
     sc = _shipped_scenario(tmp_path, name)
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, compare_blind=compare_blind, echo=lambda *a: None)
+    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, compare_blind=compare_blind)
     assert summary["bound_map"]["source"] == "shipped"   # no map computed in the default run
     with open(out / "path.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))

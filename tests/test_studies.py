@@ -45,7 +45,7 @@ def test_a_table_across_scenarios_with_a_failure_reported(study, monkeypatch):
     and a table that loses a scenario."""
     tmp, a, b, broken = study
     monkeypatch.chdir(tmp)
-    table = plan_many([tmp / "scenarios"], tmp / "out", iterations=60, compare_blind=True, echo=lambda *x: None)
+    table = plan_many([tmp / "scenarios"], tmp / "out", iterations=60, compare_blind=True)
     assert list(table.columns) == list(COLUMNS) and len(table) == 3
     by = {Path(s).stem: r for s, r in zip(table["scenario"], table.to_dict("records"))}
     assert by["broken"]["status"] == "failed" and "no-such-robot.toml" in by["broken"]["reason"]
@@ -66,7 +66,7 @@ def test_a_rerun_reuses_complete_outputs_and_redoes_a_changed_scenario(study, mo
     monkeypatch.chdir(tmp)
     first = pd.read_csv(tmp / "out" / TABLE_FILE)
     b.write_text(re.sub(r"(?m)^seed = .*$", "seed = 7", b.read_text()))
-    table = plan_many([a, b], tmp / "out", iterations=60, compare_blind=True, echo=lambda *x: None)
+    table = plan_many([a, b], tmp / "out", iterations=60, compare_blind=True)
     status = dict(zip((Path(s).stem for s in table["scenario"]), table["status"]))
     assert status == {"task-target-1": "reused", "task-target-2": "planned"}
     reused = table[table["status"] == "reused"].iloc[0]
@@ -79,8 +79,8 @@ def test_dask_workers_give_the_same_plans(study, tmp_path, monkeypatch):
     this process (the plans are seeded). Catches workers that plan with other inputs."""
     tmp, a, b, _ = study
     monkeypatch.chdir(tmp)
-    serial = plan_many([a, b], tmp_path / "serial", iterations=60, compare_blind=False, echo=lambda *x: None)
-    spread = plan_many([a, b], tmp_path / "dask", n_jobs=2, iterations=60, compare_blind=False, echo=lambda *x: None)
+    serial = plan_many([a, b], tmp_path / "serial", iterations=60, compare_blind=False)
+    spread = plan_many([a, b], tmp_path / "dask", n_jobs=2, iterations=60, compare_blind=False)
     assert list(spread["status"]) == ["planned", "planned"]
     for col in ("cost", "max_bound_mm", "final_bound_mm", "joint_path_length_m"):
         assert list(spread[col]) == pytest.approx(list(serial[col]), rel=1e-9), col

@@ -33,7 +33,7 @@ REPO = Path(__file__).resolve().parents[1]
 COARSE = (math.radians(30.0), 0.01)
 
 
-def _constant_map(robot_path, robot, spec, settings, n_jobs=1, echo=print):
+def _constant_map(robot_path, robot, spec, settings, n_jobs=1, **kwargs):
     coords = map_coordinates(robot)
     axes = [uniform_axis(lo, hi, n, per) for lo, hi, n, per in zip(coords.lower, coords.upper, spec.resolution,
                                                                      coords.periodic)]
@@ -62,8 +62,7 @@ def plan(tmp_path_factory):
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(tmp)
         mp.setattr(pipeline, "load_or_compute_bound_map", _constant_map)
-        result = ctrplan.plan_scenario(_task_target(tmp), tmp / "out", iterations=60, compare_blind=False,
-                                       echo=lambda *a: None)
+        result = ctrplan.plan_scenario(_task_target(tmp), tmp / "out", iterations=60, compare_blind=False)
     return result, tmp / "out"
 
 

@@ -15,6 +15,7 @@ Steps of :func:`compute_bound_map_store`:
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 import uuid
@@ -31,6 +32,8 @@ from .store import BoundMapStore, chunk_shape_for
 
 __all__ = ["DEFAULT_CHUNK_SIZE", "SCHEDULER_TIMEOUT_S", "SchedulerUnreachableError", "BoundMapRun",
            "evaluate_configuration", "compute_bound_map_store", "compute_field", "start_local_cluster"]
+
+logger = logging.getLogger(__name__)
 
 # Grid nodes evaluated per chunk: ~64 nodes x 0.05-0.3 s keeps a chunk between a few seconds
 # and a minute, so an interruption loses little work while the number of files stays small.
@@ -274,7 +277,7 @@ def _axes_and_pilots(robot, coords, spec, executor, evaluator, settings, progres
 
 
 def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n_jobs: int = 1, *,
-                            scheduler=None, chunk_size: int = DEFAULT_CHUNK_SIZE, progress: bool = True,
+                            scheduler=None, chunk_size: int = DEFAULT_CHUNK_SIZE, progress: bool = False,
                             robot_file_text: str | None = None, metadata: dict | None = None,
                             max_chunks: int | None = None, on_chunk=None) -> BoundMapRun:
     """Evaluate a bound map chunk by chunk into a zarr store, resuming finished chunks.
@@ -300,7 +303,7 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
     chunk_size : int, keyword-only
         Nodes per chunk for a new store (an existing store keeps its chunks).
     progress : bool, keyword-only
-        tqdm bars (pilot points, then nodes).
+        tqdm bars (pilot points, then nodes); default none.
     robot_file_text : str, optional, keyword-only
         Robot file content: its sha256 identifies the robot in the store and the key.
     metadata : dict, optional, keyword-only
@@ -344,6 +347,8 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
                 metadata={**(metadata or {}), "pilot_seconds": pilot_secs}, pilots=pilots)
         todo = st.missing_chunks()
         n_reused = st.n_chunks - len(todo)
+        logger.debug(f"bound map store {store or '(in memory)'}: {n_reused} of {st.n_chunks} chunks finished earlier, "
+                     f"{len(todo)} to compute")
         if max_chunks is not None:
             todo = todo[:max(0, int(max_chunks))]
         if todo:

@@ -15,11 +15,13 @@ matches is named with the attribute that differs.
 from __future__ import annotations
 
 import json
+import logging
 import time
 from pathlib import Path
 
 import numpy as np
 
+from .._log import deprecated_echo, progress_level
 from .axes import MapSpec
 from .compute import DEFAULT_CHUNK_SIZE, compute_bound_map_store
 from ..coordinates import map_coordinates
@@ -34,6 +36,8 @@ __all__ = ["DEFAULT_ROTATION_NODES", "DEFAULT_TRANSLATION_NODES", "default_spec"
 # 1.3 mm at the 95th percentile; shipped maps use adaptive placement, docs/boundmaps.md).
 DEFAULT_ROTATION_NODES = 16
 DEFAULT_TRANSLATION_NODES = 6
+
+logger = logging.getLogger(__name__)
 
 # Maps computed by `ctrplan plan` for robots without a shipped map (relative to the working
 # directory).
@@ -85,7 +89,7 @@ def map_paths(robot_path, key: str) -> tuple[Path, Path]:
 
 
 def compute_bound_map(robot_path, spec, settings, evaluator=None, *, out_path=None, store_path=None,
-                      n_jobs: int = 1, scheduler=None, chunk_size: int | None = None, progress: bool = True,
+                      n_jobs: int = 1, scheduler=None, chunk_size: int | None = None, progress: bool = False,
                       max_chunks: int | None = None, on_chunk=None):
     """Compute (or resume) the bound map of a robot file into a zarr store.
 
@@ -182,9 +186,13 @@ def _stale_maps(robot_path, ident) -> list[str]:
     return lines
 
 
-def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1, echo=print, *,
-                              scheduler=None, evaluator=None):
+@deprecated_echo
+def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1, echo=None, *,
+                              scheduler=None, evaluator=None, progress: bool = False):
     """Shipped or cached map with the right key, else compute it (resumable zarr store).
+
+    Logs (logger ``ctrplan.boundmap.files``) that a map is computed (INFO), which file was read
+    (DEBUG), and each map of this robot that is stale or unreadable, and why (WARNING).
 
     Parameters
     ----------
@@ -196,12 +204,15 @@ def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1
     settings : ModelSettings
     n_jobs : int
         Local worker processes when computing.
-    echo : callable
-        Progress messages (also names maps of this robot that are stale and why).
+    echo : callable, optional
+        Deprecated (``DeprecationWarning``): receives the INFO and higher messages of this call;
+        configure :mod:`logging` instead.
     scheduler : str or distributed.Client, optional, keyword-only
         Dask scheduler address for computing.
     evaluator : callable, optional, keyword-only
         Default :func:`ctrplan.mechanics.evaluate_bound`.
+    progress : bool, keyword-only
+        tqdm bars while computing (default none).
 
     Returns
     -------
@@ -227,17 +238,21 @@ def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1
                          (cache.with_suffix(STORE_SUFFIX), "cache"), (cache.with_suffix(".npz"), "cache")):
         if path.exists():
             try:
-                return load_bound_map(path, key=ident.key), source, time.perf_counter() - t0
+                field = load_bound_map(path, key=ident.key)
             except IncompleteBoundMapError:
+                logger.debug(f"{path}: incomplete (an interrupted computation), not read")
                 continue
             except BoundFieldKeyError as exc:
-                echo(f"ignoring {path}: {exc}")
+                logger.warning(f"ignoring {path}: {exc}")
+                continue
+            logger.debug(f"bound map read from {path} ({source})")
+            return field, source, time.perf_counter() - t0
     for line in _stale_maps(robot_path, ident):
-        echo(line)
+        logger.warning(line)
     store = cache.with_suffix(STORE_SUFFIX)
-    echo(f"computing the bound map of {robot_path.name} ({', '.join(map_coordinates(robot).names)}; "
-         f"{ident.spec}) into {store}; interrupt and rerun to resume")
+    logger.log(progress_level(), f"computing the bound map of {robot_path.name} "
+               f"({', '.join(map_coordinates(robot).names)}; {ident.spec}) into {store}; interrupt and rerun to resume")
     store.parent.mkdir(parents=True, exist_ok=True)
     run = compute_bound_map_store(robot, evaluator, spec, settings, store, n_jobs, scheduler=scheduler,
-                                  robot_file_text=text, metadata={"robot_file": robot_path.name})
+                                  robot_file_text=text, metadata={"robot_file": robot_path.name}, progress=progress)
     return run.field, "computed", time.perf_counter() - t0
