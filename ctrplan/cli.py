@@ -3,10 +3,16 @@
 A thin layer over the library: it reads files, sets one BLAS thread per process (the dense
 solves here are small; more threads only oversubscribe the cores), calls the numerics and
 writes outputs atomically.
+
+It also shows the library's messages: for the length of a command, the ``ctrplan`` logger gets a
+handler that prints each message as a plain line on standard output, at INFO (progress lines and
+summaries, and cautions), WARNING with ``--quiet`` (cautions only, and no progress bars) or DEBUG
+with ``--verbose``.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import sys
 from pathlib import Path
@@ -19,6 +25,39 @@ import click  # noqa: E402
 
 from .errors import CtrplanError, JointLimitError  # noqa: E402
 from .models import MODELS  # noqa: E402
+
+# By name, not __name__: the same logger when run as ``python -m ctrplan.cli``.
+logger = logging.getLogger("ctrplan.cli")
+
+
+class _ConsoleHandler(logging.Handler):
+    """Each record's message as a plain line on standard output (``click.echo``: the stream of the
+    moment, so a test runner's capture sees it)."""
+
+    def emit(self, record):
+        try:
+            click.echo(self.format(record))
+        except Exception:  # noqa: BLE001 - logging's own convention: report, never raise
+            self.handleError(record)
+
+
+def _show_messages(ctx: click.Context, level: int) -> None:
+    """Print the ``ctrplan`` logger's messages from ``level`` up until the command ends."""
+    package = logging.getLogger("ctrplan")
+    handler, previous = _ConsoleHandler(), package.level
+    package.addHandler(handler)
+    package.setLevel(level)
+
+    def restore():
+        package.removeHandler(handler)
+        package.setLevel(previous)
+
+    ctx.call_on_close(restore)
+
+
+def _progress(no_progress: bool = False) -> bool:
+    """Progress bars: unless ``--no-progress``, or ``--quiet`` (INFO messages not shown)."""
+    return not no_progress and logging.getLogger("ctrplan").isEnabledFor(logging.INFO)
 
 
 def _settings(ds):
@@ -38,11 +77,18 @@ def _limit_threads():
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="ctrplan")
-def main():
+@click.option("-q", "--quiet", is_flag=True,
+              help="Print only warnings and errors: no progress lines, summaries or progress bars.")
+@click.option("-v", "--verbose", is_flag=True, help="Also print details (debug messages).")
+@click.pass_context
+def main(ctx, quiet, verbose):
     """Friction-bounded motion planning for concentric tube robots.
 
     Mechanics from Ha, Fagogenis & Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906.
     """
+    if quiet and verbose:
+        raise click.UsageError("--quiet and --verbose exclude each other")
+    _show_messages(ctx, logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO)
     _limit_threads()
 
 
@@ -96,15 +142,15 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
                   explain_failures)
     ck = out.with_name(out.name + ".partial.jsonl")
     frame = evaluate_table(robot, alpha, beta, model, settings, eta, n_jobs=jobs or os.cpu_count() or 1,
-                           checkpoint=ck, progress=not no_progress, job_key=key,
+                           checkpoint=ck, progress=_progress(no_progress), job_key=key,
                            explain_failures=explain_failures)
     write_table(out, frame)
     ck.unlink(missing_ok=True)
     bad = frame[frame["status"] != "ok"]
-    click.echo(f"wrote {len(frame)} rows to {out} ({len(bad)} not ok)")
+    logger.info(f"wrote {len(frame)} rows to {out} ({len(bad)} not ok)")
     if len(bad):
         for _, r in bad.head(10).iterrows():
-            click.echo(f"  row {int(r['row'])}: {r['status']}: {r['message']}")
+            logger.info(f"  row {int(r['row'])}: {r['status']}: {r['message']}")
 
 
 @main.command()
@@ -131,13 +177,13 @@ def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind):
         from .api import plan_scenario
 
         result = plan_scenario(scenario_paths[0], out_dir, n_jobs=jobs or os.cpu_count() or 1, iterations=iterations,
-                               compare_blind=not no_blind, echo=click.echo)
-        click.echo(f"outputs in {result.output_dir}")
+                               compare_blind=not no_blind, progress=_progress())
+        logger.info(f"outputs in {result.output_dir}")
         return
     from .studies import plan_many
 
     table = plan_many(scenario_paths, out_dir or "out/scenarios", n_jobs=jobs or 1, scheduler=scheduler,
-                      iterations=iterations, compare_blind=not no_blind, echo=click.echo)
+                      iterations=iterations, compare_blind=not no_blind, progress=_progress())
     if (table["status"] == "failed").any():
         raise SystemExit(1)
 
@@ -211,24 +257,24 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
                                  "store)", param_hint="--store")
     if out.suffix == ".npz" and not store_path:
         store_path = cache.with_suffix(".zarr") if not out_path else out.with_suffix(".zarr")
-    click.echo(f"map coordinates: {', '.join(f'{n} ({r} nodes)' for n, r in zip(coords.names, spec.resolution))}; "
-               f"placement {spec.placement}; key {ident.key[:12]}; mechanics {ident.mechanics_version}")
+    logger.info(f"map coordinates: {', '.join(f'{n} ({r} nodes)' for n, r in zip(coords.names, spec.resolution))}; "
+                f"placement {spec.placement}; key {ident.key[:12]}; mechanics {ident.mechanics_version}")
     n_jobs = 1 if scheduler else (jobs or os.cpu_count() or 1)
     run, path = compute_bound_map(robot_path, spec, settings, out_path=out, store_path=store_path, n_jobs=n_jobs,
-                                  scheduler=scheduler, chunk_size=chunk_size, progress=not no_progress)
+                                  scheduler=scheduler, chunk_size=chunk_size, progress=_progress(no_progress))
     field = run.field
     secs = np.asarray(run.chunk_seconds)
     timing = (f"; chunk time mean {secs.mean():.2f} s, max {secs.max():.2f} s" if secs.size else "")
     pilots = (f"; {run.pilot_evaluations} pilot evaluations in {run.pilot_seconds:.1f} s"
               if run.pilot_evaluations else "")
-    click.echo(f"{run.executor}: {run.n_computed} chunks computed, {run.n_reused} reused of {run.n_chunks} "
-               f"in {run.wall_seconds:.1f} s{timing}{pilots}")
+    logger.info(f"{run.executor}: {run.n_computed} chunks computed, {run.n_reused} reused of {run.n_chunks} "
+                f"in {run.wall_seconds:.1f} s{timing}{pilots}")
     for name, axis in zip(coords.names, field.axes):
         unit, f = ("deg", np.degrees(1.0)) if "alpha" in name else ("mm", 1e3)
-        click.echo(f"  {name} nodes [{unit}]: {np.array2string(axis * f, precision=1, max_line_width=200)}")
+        logger.info(f"  {name} nodes [{unit}]: {np.array2string(axis * f, precision=1, max_line_width=200)}")
     v = field.values[..., 0][field.valid] * 1e3
     stats = (f"bound median {float(np.median(v)):.2f} mm, max {v.max():.2f} mm" if v.size else "no valid node")
-    click.echo(f"wrote {path}: {int(field.valid.sum())} of {field.valid.size} nodes valid; {stats}")
+    logger.info(f"wrote {path}: {int(field.valid.sum())} of {field.valid.size} nodes valid; {stats}")
 
 
 def _effect_options(command):
@@ -310,12 +356,12 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
     noise = Noise(position_rms=noise_mm * 1e-3, angle_rms=float(np.deg2rad(noise_deg)))
     result = synthesize(robot, effects, protocol=protocol, grid=grid, samples=samples, noise=noise,
                         seed=seed, settings=_settings(ds), n_jobs=jobs or os.cpu_count() or 1,
-                        progress=not no_progress)
+                        progress=_progress(no_progress))
     sidecar = write_synth(out_path, result, robot_file=robot_path, robot_hash=file_hash(robot_path))
     t = result.truth
-    click.echo(f"wrote {t['counts']['rows']} rows to {out_path} ({t['protocol']} protocol, "
-               f"{t['truth_model']} truth model, {t['counts']['dropped']} samples dropped, "
-               f"{t['elapsed_s']:.1f} s); truth in {sidecar}")
+    logger.info(f"wrote {t['counts']['rows']} rows to {out_path} ({t['protocol']} protocol, "
+                f"{t['truth_model']} truth model, {t['counts']['dropped']} samples dropped, "
+                f"{t['elapsed_s']:.1f} s); truth in {sidecar}")
 
 
 @main.command()
@@ -430,9 +476,11 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
         noise_position=None if noise_mm is None else noise_mm * 1e-3, envelope_samples=envelope_samples,
         reference_friction=ref_mu, bound_target=bound_target, bound_samples=bound_samples,
         **({} if strengths is None else {"prior_strengths": strengths}))
-    results = run_discrepancy(robot_path, data_path, out_dir, opts, echo=click.echo, progress=not no_progress)
+    # the workflow (ctrplan.discrepancy) takes a callable for its messages: they become INFO records
+    results = run_discrepancy(robot_path, data_path, out_dir, opts, echo=logging.getLogger("ctrplan.discrepancy").info,
+                              progress=_progress(no_progress))
     paths = write_report(results, out_dir)
-    click.echo(f"report: {paths['markdown']}")
+    logger.info(f"report: {paths['markdown']}")
 
 
 def run():  # pragma: no cover - entry point wrapper
