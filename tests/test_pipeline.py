@@ -157,6 +157,66 @@ def test_no_path_within_budget_fails_without_outputs(tmp_path, monkeypatch, caps
     assert not out.exists()
 
 
+# --------------------------------------------------------------------------- messages
+MOVE = "{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}"
+
+
+def test_library_plan_prints_nothing_and_logs_its_lines(tmp_path, monkeypatch, capsys, caplog, synthetic_map):
+    """``ctrplan.plan_scenario`` prints nothing (no stray print, no progress bar), even with INFO
+    enabled, and its progress lines and summary arrive as INFO records of loggers under
+    ``ctrplan``, first the scenario line, last the summary. Catches a message printed around
+    logging, logged under a logger outside ``ctrplan`` or at the wrong level."""
+    import ctrplan
+
+    monkeypatch.chdir(tmp_path)
+    caplog.set_level(logging.INFO, logger="ctrplan")
+    ctrplan.plan_scenario(_scenario(tmp_path, MOVE), tmp_path / "out", iterations=20, compare_blind=False)
+    assert capsys.readouterr() == ("", "")
+    assert caplog.records and all(r.name.startswith("ctrplan.") for r in caplog.records)
+    info = [r.getMessage() for r in caplog.records if r.levelno == logging.INFO]
+    assert info[0] == "scenario probe: robot ha2019-table7-calibrated (alpha_2, alpha_3, beta_3)"
+    assert "bound map: synthetic in 0.0 s" in info
+    assert info[-1].startswith("scenario: probe\n")   # the summary, one record
+
+
+def test_plan_command_prints_its_lines_and_quiet_silences_them(tmp_path, monkeypatch, synthetic_map):
+    """``ctrplan plan``: by default the stages' lines, the summary and ``outputs in`` are plain
+    lines on stdout (no logger prefix), each once although the command runs twice in this
+    process; ``--quiet`` prints none of them, ``--verbose`` adds details; afterwards the
+    ``ctrplan`` logger is as before. Catches a handler left behind (lines doubled), a format with
+    prefixes, a line printed around logging, and options that do not reach the level."""
+    from click.testing import CliRunner
+
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "out"
+    args = ["plan", str(_scenario(tmp_path, MOVE)), "--out", str(out), "--jobs", "1", "--iterations", "20",
+            "--no-blind"]
+    package = logging.getLogger("ctrplan")
+    before = (list(package.handlers), package.level)
+    runner = CliRunner()
+    for _ in range(2):
+        r = runner.invoke(cli.main, args)
+        assert r.exit_code == 0, (r.output, r.exception)
+        lines = r.stdout.splitlines()
+        assert lines[:2] == ["scenario probe: robot ha2019-table7-calibrated (alpha_2, alpha_3, beta_3)",
+                             "bound map: synthetic in 0.0 s"]
+        assert lines[2].startswith("goal 1: q = [0.6, -0.4, -0.06], tip error ")
+        assert lines[3].startswith("bound_aware: ") and " ordered waypoints, planning " in lines[3]
+        assert lines[4] == "scenario: probe"            # the summary's first line
+        assert lines[-1] == f"outputs in {out}"
+        assert sum(line.startswith("scenario probe:") for line in lines) == 1
+        assert r.stderr == ""
+    quiet = runner.invoke(cli.main, ["--quiet", *args])
+    assert quiet.exit_code == 0 and quiet.output == ""
+    assert (out / "summary.json").exists()
+    verbose = runner.invoke(cli.main, ["-v", *args])
+    assert verbose.exit_code == 0
+    assert "wrote path.csv, " in verbose.stdout and verbose.stdout.endswith(f"outputs in {out}\n")
+    assert (list(package.handlers), package.level) == before
+    both = runner.invoke(cli.main, ["-q", "-v", *args])
+    assert both.exit_code == 2 and "exclude each other" in both.output
+
+
 # --------------------------------------------------------------------------- full run (slow)
 def _shipped_scenario(tmp_path, name):
     """A copy of a shipped scenario with absolute paths (its map is the shipped one)."""

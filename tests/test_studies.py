@@ -88,7 +88,9 @@ def test_dask_workers_give_the_same_plans(study, tmp_path, monkeypatch):
 
 def test_the_plan_command_takes_several_scenarios_and_fails_when_one_fails(study, tmp_path, monkeypatch):
     """``ctrplan plan GOOD BROKEN --out DIR``: both get a row in DIR/scenarios.csv, the exit status is
-    1 and the console names the failing scenario. Catches a command that still takes one file."""
+    1 and the console names the failing scenario, with one line per scenario and no scenario's own
+    progress lines (DEBUG in a study). Catches a command that still takes one file, and a study
+    that prints every scenario's stages."""
     from click.testing import CliRunner
 
     from ctrplan.cli import main
@@ -99,5 +101,6 @@ def test_the_plan_command_takes_several_scenarios_and_fails_when_one_fails(study
                                   "--no-blind"])
     assert r.exit_code == 1, r.output
     assert "broken.toml: failed" in r.output
+    assert f"{a}: planned in " in r.output and "ordered waypoints" not in r.output, r.output
     table = pd.read_csv(tmp_path / "cli" / TABLE_FILE)
     assert list(table["status"]) == ["planned", "failed"]
