@@ -486,7 +486,7 @@ def resolve_goals(setup: PlanSetup, field, validity, echo=None) -> ResolvedGoals
     return ResolvedGoals(goals=goals, time_s=seconds)
 
 
-def aim_decision(robot, aim_with: str = "auto") -> dict:
+def aim_decision(validation, aim_with: str = "auto") -> dict:
     """Which model task-space goals are aimed with, and why.
 
     With ``aim_with = "auto"`` the history-aware prediction is used only when the robot file's
@@ -497,7 +497,8 @@ def aim_decision(robot, aim_with: str = "auto") -> dict:
 
     Parameters
     ----------
-    robot : Robot
+    validation : PredictionValidation or None
+        The robot file's ``[prediction_validation]`` (``Scenario.calibration.prediction``).
     aim_with : {"auto", "history", "standard"}
 
     Returns
@@ -505,7 +506,7 @@ def aim_decision(robot, aim_with: str = "auto") -> dict:
     dict
         ``model`` ("history-aware prediction" or "standard model"), ``use_history`` (bool),
         ``reason``, ``measured_mean_mm`` and ``measured_max_mm`` (the measured tip error of the
-        model aimed with; None when not measured), ``validation`` (the file's table or None).
+        model aimed with; None when not measured), ``validation`` (``validation``).
 
     Raises
     ------
@@ -514,16 +515,16 @@ def aim_decision(robot, aim_with: str = "auto") -> dict:
     """
     if aim_with not in ("auto", "history", "standard"):
         raise ValueError(f"aim_with must be 'auto', 'history' or 'standard', got {aim_with!r}")
-    pv = (robot.metadata or {}).get("prediction_validation")
+    pv = validation
     figures = ""
     if pv is not None:
-        figures = (f"on measurements ({pv.get('data_file') or 'unnamed data'}, {pv.get('test_samples')} test samples) "
-                   f"the history-aware prediction's tip error is mean {pv['history_mean_m'] * 1e3:.2f} / max "
-                   f"{pv['history_max_m'] * 1e3:.2f} mm against the standard model's {pv['standard_mean_m'] * 1e3:.2f}"
-                   f" / {pv['standard_max_m'] * 1e3:.2f} mm")
-        if pv.get("difference_low_m") is not None:
-            figures += (f" (mean difference {pv['difference_mean_m'] * 1e3:+.2f} mm, 95 % interval "
-                        f"{pv['difference_low_m'] * 1e3:+.2f}..{pv['difference_high_m'] * 1e3:+.2f} mm)")
+        figures = (f"on measurements ({pv.data_file or 'unnamed data'}, {pv.test_samples} test samples) "
+                   f"the history-aware prediction's tip error is mean {pv.history_mean_m * 1e3:.2f} / max "
+                   f"{pv.history_max_m * 1e3:.2f} mm against the standard model's {pv.standard_mean_m * 1e3:.2f}"
+                   f" / {pv.standard_max_m * 1e3:.2f} mm")
+        if pv.difference_low_m is not None:
+            figures += (f" (mean difference {pv.difference_mean_m * 1e3:+.2f} mm, 95 % interval "
+                        f"{pv.difference_low_m * 1e3:+.2f}..{pv.difference_high_m * 1e3:+.2f} mm)")
     if aim_with == "history":
         use, reason = True, "[planner] aim_with = \"history\"" + (f"; {figures}" if figures else
                                                                    "; not validated on measurements")
@@ -533,12 +534,12 @@ def aim_decision(robot, aim_with: str = "auto") -> dict:
         use, reason = False, ("the robot file has no [prediction_validation]: the history-aware prediction is not "
                               "validated on measurements (ctrplan discrepancy writes it)")
     else:
-        use = bool(pv["history_beats_standard"])
+        use = bool(pv.history_beats_standard)
         reason = figures + ("" if use else ": it does not beat the standard model")
     side = "history" if use else "standard"
     return {"model": "history-aware prediction" if use else "standard model", "use_history": use, "reason": reason,
-            "measured_mean_mm": None if pv is None else pv[f"{side}_mean_m"] * 1e3,
-            "measured_max_mm": None if pv is None else pv[f"{side}_max_m"] * 1e3, "validation": pv}
+            "measured_mean_mm": None if pv is None else getattr(pv, f"{side}_mean_m") * 1e3,
+            "measured_max_mm": None if pv is None else getattr(pv, f"{side}_max_m") * 1e3, "validation": pv}
 
 
 @deprecated_echo
@@ -574,7 +575,7 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo=None) ->
     compensations, goal_q = [], []
     motion = [np.asarray(sc.start, dtype=float)]      # the assumed motion so far (approaches to the goals)
     errors = {}
-    aim = aim_decision(robot, getattr(sc.planner, "aim_with", "auto"))
+    aim = aim_decision(sc.calibration.prediction, sc.planner.aim_with)
     if any(isinstance(doc, TaskGoal) for doc in sc.goals):
         logger.log(progress_level(), f"aiming task-space goals with the {aim['model']}: {aim['reason']}")
     for k, (doc, g) in enumerate(zip(sc.goals, resolved.goals)):
@@ -797,7 +798,7 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
     """
     sc = setup.scenario
     iters = iterations or sc.planner.iterations
-    modes = ([("bound_aware", effective_bound_weight(setup.robot, sc.planner.bound_weight))]
+    modes = ([("bound_aware", effective_bound_weight(sc.calibration.bound, sc.planner.bound_weight))]
              + ([("bound_blind", 0.0)] if compare_blind else []))
     jobs = {mode: _PlanJob(robot=setup.robot, field=field, obstacles=list(setup.obstacles),
                            check_settings=setup.check_settings, settings=setup.settings, start=sc.start,
@@ -855,13 +856,14 @@ def time_parameterize(setup: PlanSetup, ordered):
 
 
 # --------------------------------------------------------------------------- stage 7: report
-def calibrated_bound(robot, bound) -> np.ndarray:
+def calibrated_bound(calibration, bound) -> np.ndarray:
     """The calibrated bound ``factor (bound + noise_margin_m)`` of the robot file's
     ``[bound_calibration]`` (:mod:`ctrplan.discrepancy.coverage`) [m]; NaN without one.
 
     Parameters
     ----------
-    robot : Robot
+    calibration : CalibratedBound or None
+        ``Scenario.calibration.bound``.
     bound : array-like
         The model's bound [m].
 
@@ -870,14 +872,13 @@ def calibrated_bound(robot, bound) -> np.ndarray:
     ndarray
         Same shape as ``bound``.
     """
-    cal = (robot.metadata or {}).get("bound_calibration")
     b = np.asarray(bound, float)
-    if cal is None:
+    if calibration is None:
         return np.full_like(b, np.nan)
-    return cal["factor"] * (b + cal["noise_margin_m"])
+    return calibration.apply(b)
 
 
-def effective_bound_weight(robot, weight: float) -> float:
+def effective_bound_weight(calibration, weight: float) -> float:
     """The bound weight that ranks paths by the calibrated bound.
 
     Planning minimises ``L + w integral(b) ds``; with the calibrated bound ``c (b + m)`` in place
@@ -886,28 +887,29 @@ def effective_bound_weight(robot, weight: float) -> float:
 
     Parameters
     ----------
-    robot : Robot
+    calibration : CalibratedBound or None
+        ``Scenario.calibration.bound``.
     weight : float
         ``[planner] bound_weight`` [1/m].
 
     Returns
     -------
     float
-        [1/m].
+        [1/m] (:meth:`ctrplan.calibration.CalibratedBound.effective_weight`).
     """
-    cal = (robot.metadata or {}).get("bound_calibration")
-    if cal is None or weight == 0.0:
+    if calibration is None:
         return float(weight)
-    c, m = float(cal["factor"]), float(cal["noise_margin_m"])
-    return float(weight * c / (1.0 + weight * c * m))
+    return calibration.effective_weight(weight)
 
 
-def path_rows(plan: RoutePlan, robot=None) -> list[dict]:
+def path_rows(plan: RoutePlan, calibration=None) -> list[dict]:
     """Rows of ``path.csv`` for a plan, one per ordered waypoint (SI units, as the file stores them).
 
     Parameters
     ----------
     plan : RoutePlan
+    calibration : CalibratedBound, optional
+        The robot file's ``[bound_calibration]``; without one ``calibrated_bound_m`` is NaN.
 
     Returns
     -------
@@ -920,7 +922,7 @@ def path_rows(plan: RoutePlan, robot=None) -> list[dict]:
         (:func:`ctrplan.report.write_plan_outputs`).
     """
     lm, planned, pred = plan.bounds.exact, plan.bounds.planned, plan.prediction
-    calibrated = calibrated_bound(robot, lm.position) if robot is not None else np.full(len(lm.position), np.nan)
+    calibrated = calibrated_bound(calibration, lm.position)
     rows = []
     for k, w in enumerate(plan.ordered.waypoints):
         res = lm.results[k]
@@ -967,14 +969,14 @@ def _route_summary(r: RoutePlan) -> dict:
     }
 
 
-def _goal_prediction(goal_docs, aimed: AimedGoals, plan: RoutePlan, robot) -> dict:
+def _goal_prediction(goal_docs, aimed: AimedGoals, plan: RoutePlan, robot, validation) -> dict:
     """Per goal: the model it was aimed with and that model's measured tip error (from the robot
     file; None when not measured), the predicted miss of standard-model IK next to the
     compensated one (task-space goals, with the assumed approach), and the tip predicted at the
     goal's waypoint of the plan (with the history the ordered plan creates there). Report units
     (mm)."""
     pred = plan.prediction
-    aim = aimed.aim or aim_decision(robot)
+    aim = aimed.aim or aim_decision(validation)
     out = {}
     for k, (doc, c, gi) in enumerate(zip(goal_docs, aimed.compensations, plan.goal_indices)):
         planned_eta, _, planned_cases = pair_friction(pred.state.at(gi), robot.friction_coefficients)
@@ -1025,24 +1027,23 @@ def _robot_effects(robot) -> dict:
     return out
 
 
-def _bound_calibration(robot, weight: float) -> dict:
+def _bound_calibration(cal, weight: float) -> dict:
     """What the bound the plan ranks paths by stands for (``summary.json["bound_calibration"]``)."""
-    cal = (robot.metadata or {}).get("bound_calibration")
     if cal is None:
         return {"calibrated": False, "note": "the bound is the model's (Ha et al. 2019, Sec. III), not validated on "
                                              "measurements: the robot file has no [bound_calibration]"}
-    cov = cal.get("test_coverage")
-    return {"calibrated": True, "factor": cal["factor"], "noise_margin_mm": cal["noise_margin_m"] * 1e3,
-            "target_coverage": cal["target_coverage"], "test_coverage": cov,
-            "test_coverage_interval": [cal.get("test_coverage_low"), cal.get("test_coverage_high")],
-            "failing": bool(cal.get("failing", False)), "data_file": cal.get("data_file"),
-            "effective_bound_weight_per_metre": effective_bound_weight(robot, weight),
-            "note": (f"paths ranked by the calibrated bound {cal['factor']:.3g} x (bound + "
-                     f"{cal['noise_margin_m'] * 1e3:.2f} mm), validated at "
+    cov = cal.test_coverage
+    return {"calibrated": True, "factor": cal.factor, "noise_margin_mm": cal.noise_margin_m * 1e3,
+            "target_coverage": cal.target_coverage, "test_coverage": cov,
+            "test_coverage_interval": [cal.test_coverage_low, cal.test_coverage_high],
+            "failing": bool(cal.failing), "data_file": cal.data_file,
+            "effective_bound_weight_per_metre": effective_bound_weight(cal, weight),
+            "note": (f"paths ranked by the calibrated bound {cal.factor:.3g} x (bound + "
+                     f"{cal.noise_margin_m * 1e3:.2f} mm), validated at "
                      + ("-" if cov is None else f"{100 * cov:.0f} %") + f" coverage of measured tips (target "
-                     f"{100 * cal['target_coverage']:.0f} %) on {cal.get('data_file') or 'unnamed data'}"
-                     + ("; FAILING its target on the test split" if cal.get("failing") else
-                        "; conservative on the test split" if cal.get("status") == "conservative" else ""))}
+                     f"{100 * cal.target_coverage:.0f} %) on {cal.data_file or 'unnamed data'}"
+                     + ("; FAILING its target on the test split" if cal.failing else
+                        "; conservative on the test split" if cal.status == "conservative" else ""))}
 
 
 def plan_summary(setup: PlanSetup, bound_map: BoundMapStage, validity, resolved: ResolvedGoals,
@@ -1080,9 +1081,10 @@ def plan_summary(setup: PlanSetup, bound_map: BoundMapStage, validity, resolved:
                   for g, qp in zip(resolved.goals, aimed.q)],
         "final_motion": aimed.final_motion,
         "robot_effects": _robot_effects(robot),
-        "aiming": {k: v for k, v in (aimed.aim or aim_decision(robot)).items() if k != "validation"},
-        "bound_calibration": _bound_calibration(robot, sc.planner.bound_weight),
-        "goal_prediction": _goal_prediction(sc.goals, aimed, aware, robot),
+        "aiming": {k: v for k, v in (aimed.aim or aim_decision(sc.calibration.prediction)).items()
+                   if k != "validation"},
+        "bound_calibration": _bound_calibration(sc.calibration.bound, sc.planner.bound_weight),
+        "goal_prediction": _goal_prediction(sc.goals, aimed, aware, robot, sc.calibration.prediction),
         "bound_map": {"source": bound_map.source, "time_s": bound_map.time_s, "coordinates": field.coordinate_names,
                       "resolution": list(field.shape), "placement": setup.spec.placement, "key": field.key,
                       "mechanics_version": field.metadata.get("mechanics_version"), "ds_m": setup.settings.ds},
@@ -1300,7 +1302,7 @@ def plan_stages(scenario_path, out_dir=None, *, n_jobs: int = 1, iterations: int
     plans = plan_routes(setup, bound_map.field, aimed, iterations=iterations, compare_blind=compare_blind,
                         n_jobs=n_jobs)
     traj = time_parameterize(setup, plans.aware.ordered)
-    rows = path_rows(plans.aware, setup.robot)
+    rows = path_rows(plans.aware, setup.scenario.calibration.bound)
     summary = plan_summary(setup, bound_map, validity, resolved, aimed, plans, traj)
     summary["times_s"]["total"] = time.perf_counter() - t_start
     write_report(setup, plans, traj, rows, summary)

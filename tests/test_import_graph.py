@@ -18,7 +18,7 @@ LAYERS = (
     ("errors", "constants", "models", "planner_info",  # planner_info: names only, no OMPL
      "_log"),                                  # logging helpers (levels, the deprecated echo)
     ("history",),                              # pure numerics of motion history
-    ("robot",),
+    ("robot", "calibration"),                  # calibration: the robot file's records of measurements, typed
     ("coordinates", "effects"),                # robot-level quantities and the registry of effects
     ("obstacles",),                            # obstacle types and their registry: the scenario loader (io),
                                                # the collision checker (planning) and the plots use them
