@@ -28,7 +28,7 @@ LAYERS = (
     ("planning",),
     ("plots", "report"),
     ("view",),                                 # the interactive view draws with plots' helpers
-    ("discrepancy", "pipeline"),
+    ("discrepancy", "pipeline"),               # pipeline: a subpackage, one module per stage and the report
     ("api",),                                  # plan_scenario: the pipeline's results as arrays
     ("studies", "testing"),                    # many scenarios; assertions on plans for pytest suites
     ("cli",),                                  # command line

@@ -84,7 +84,7 @@ def synthetic_map(monkeypatch):
                            coordinates=coords)
         return field, "synthetic", 0.0
 
-    monkeypatch.setattr(pipeline, "load_or_compute_bound_map", fake)
+    monkeypatch.setattr(pipeline.bound_map, "load_or_compute_bound_map", fake)
     return calls
 
 
@@ -132,7 +132,7 @@ radius_m = 0.004
     def no_plan(*args, **kwargs):
         raise UnreachableGoalError("planner stopped by the test")
 
-    monkeypatch.setattr(pipeline, "plan_route", no_plan)
+    monkeypatch.setattr(pipeline.routes, "plan_route", no_plan)
     code, _, err = _run_entry(monkeypatch, capsys, ["plan", str(_scenario(tmp_path, q, "", name="free")),
                                                     "--out", str(out), "--jobs", "1"])
     assert code == 2 and "planner stopped by the test" in err, err
@@ -146,7 +146,7 @@ def test_no_path_within_budget_fails_without_outputs(tmp_path, monkeypatch, caps
         calls.append(kwargs.get("iterations"))
         raise UnreachableGoalError(f"RRTstar found no exact path in {kwargs.get('iterations')} iterations")
 
-    monkeypatch.setattr(pipeline, "plan_route", no_plan)
+    monkeypatch.setattr(pipeline.routes, "plan_route", no_plan)
     sc = _scenario(tmp_path, "{alpha_2 = 2.0, alpha_3 = 2.0, beta_3 = -0.06}")
     out = tmp_path / "out"
     code, _, err = _run_entry(monkeypatch, capsys, ["plan", str(sc), "--out", str(out), "--jobs", "1",

@@ -61,7 +61,7 @@ def plan(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("plan")
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(tmp)
-        mp.setattr(pipeline, "load_or_compute_bound_map", _constant_map)
+        mp.setattr(pipeline.bound_map, "load_or_compute_bound_map", _constant_map)
         result = ctrplan.plan_scenario(_task_target(tmp), tmp / "out", iterations=60, compare_blind=False)
     return result, tmp / "out"
 
