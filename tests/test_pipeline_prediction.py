@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import ctrplan
 from ctrplan import pipeline
 from ctrplan.errors import ModelFileError
 from ctrplan.io.scenario import load_scenario
@@ -43,12 +44,14 @@ def _rows(out: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
-def _run(tmp_path, monkeypatch, sc):
+def _run(tmp_path, monkeypatch, sc, calibration=None):
+    """Plan (bound-aware only, 60 iterations) with the shipped map into ``tmp_path/out``: the
+    summary and path.csv's rows."""
     monkeypatch.chdir(tmp_path)      # a computed map would be cached under ./.cache
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, iterations=60, compare_blind=False)
-    assert summary["bound_map"]["source"] == "shipped"
-    return summary, _rows(out)
+    result = ctrplan.plan(sc, calibration=calibration, out_dir=out, n_jobs=1, iterations=60, compare_blind=False)
+    assert result.run.bound_map.source == "shipped"
+    return result.summary, _rows(out)
 
 
 def _hand_eta(robot, rows) -> np.ndarray:
@@ -144,21 +147,14 @@ def test_bad_final_motion_names_file_key_and_value(tmp_path):
         load_scenario(sc)
 
 
-def _with_calibration(monkeypatch, prediction_validation=None, bound_calibration=None):
-    """Make the scenario loader read these robot-file tables with the robot (the robot file's
-    text, and so its shipped bound map, stay the same)."""
-    import ctrplan.io.scenario as scenario_module
+def _calibration(prediction_validation=None, bound_calibration=None):
+    """Robot-file tables as the typed records a plan is handed (the robot file's text, and so its
+    shipped bound map, stay the same)."""
     from ctrplan.calibration import CalibratedBound, PredictionValidation, RobotCalibration
 
-    original = scenario_module._load_robot_file
-    calibration = RobotCalibration(
+    return RobotCalibration(
         bound=None if bound_calibration is None else CalibratedBound.from_table(bound_calibration),
         prediction=None if prediction_validation is None else PredictionValidation.from_table(prediction_validation))
-
-    def load(path):
-        return original(path)[0], calibration
-
-    monkeypatch.setattr(scenario_module, "_load_robot_file", load)
 
 
 def test_auto_aims_with_the_standard_model_when_the_prediction_is_not_validated(tmp_path, monkeypatch):
@@ -191,9 +187,8 @@ def test_auto_aims_with_a_validated_prediction_and_ranks_by_the_calibrated_bound
           "history_beats_standard": True, "test_samples": 250, "data_file": "measured.csv"}
     bc = {"factor": 1.5, "noise_margin_m": 0.3e-3, "target_coverage": 0.9, "test_coverage": 0.88,
           "test_coverage_low": 0.8, "test_coverage_high": 0.95, "failing": False, "data_file": "measured.csv"}
-    _with_calibration(monkeypatch, prediction_validation=pv, bound_calibration=bc)
     sc = _task_target(tmp_path, aim_with=None)
-    summary, rows = _run(tmp_path, monkeypatch, sc)
+    summary, rows = _run(tmp_path, monkeypatch, sc, _calibration(prediction_validation=pv, bound_calibration=bc))
     g = summary["goal_prediction"]["goal_1"]
     assert summary["aiming"]["use_history"] and g["aimed_with"] == "history-aware prediction"
     assert g["compensation_used"] and g["measured_error_of_aiming_model_mean_mm"] == pytest.approx(3.0)

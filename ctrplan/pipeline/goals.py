@@ -1,6 +1,6 @@
-"""Stages 3 and 4 of the plan: the start checked, each goal as a joint vector
-(:class:`ResolvedGoals`), task-space goals aimed with the tip predicted after the final approach
-(:class:`AimedGoals`)."""
+"""Stages 3 and 4 of a plan: the start checked (:func:`check_start`), each goal as a joint vector
+(:class:`ResolvedGoals`), the model goals are aimed with (:class:`AimDecision`) and task-space goals
+aimed with the tip predicted after the final approach (:class:`AimedGoals`)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from typing import Mapping
 import numpy as np
 
 from .._log import deprecated_echo, progress_level
+from ..calibration import PredictionValidation
 from ..errors import CtrplanError, UnreachableGoalError
 from ..io.scenario import TaskGoal
 from ..planning import JointStateSpace, resolve_goal
@@ -21,7 +22,8 @@ from ..planning.history import approach_history, approach_rows
 from ..planning.route import route_checks
 from .setup import PlanSetup
 
-__all__ = ["ResolvedGoals", "AimedGoals", "check_start", "resolve_goals", "aim_decision", "aim_goals"]
+__all__ = ["ResolvedGoals", "AimDecision", "AimedGoals", "GoalCheckCounts", "check_start", "resolve_goals",
+           "aim_decision", "aim_goals"]
 
 logger = logging.getLogger(__package__)
 
@@ -44,6 +46,67 @@ class ResolvedGoals:
     time_s: float
 
 
+@dataclass(frozen=True)
+class AimDecision:
+    """Which model task-space goals are aimed with, and why (:func:`aim_decision`).
+
+    Attributes
+    ----------
+    model : str
+        ``"history-aware prediction"`` or ``"standard model"``.
+    use_history : bool
+        Whether task-space goals are compensated with the history-aware prediction.
+    reason : str
+        Why (the option, or the measured errors of the robot file's ``[prediction_validation]``).
+    measured_mean_m, measured_max_m : float or None
+        Mean and largest measured tip error of the model aimed with [m]; None when not measured.
+    validation : PredictionValidation or None
+        The robot file's ``[prediction_validation]``.
+    """
+
+    model: str
+    use_history: bool
+    reason: str
+    measured_mean_m: float | None = None
+    measured_max_m: float | None = None
+    validation: PredictionValidation | None = None
+
+
+@dataclass(frozen=True)
+class GoalCheckCounts:
+    """Work of the validity checker that checked the start and the goals (inverse kinematics and
+    compensation included), as the summary reports it.
+
+    Attributes
+    ----------
+    n_calls : int
+        States checked.
+    n_model : int
+        Standard-model solves.
+    collision_time_s : float
+        Time in collision checks [s].
+    """
+
+    n_calls: int
+    n_model: int
+    collision_time_s: float
+
+    @classmethod
+    def of(cls, validity) -> "GoalCheckCounts":
+        """The counters of a checker (:func:`check_start`'s) as they stand.
+
+        Parameters
+        ----------
+        validity : BatchValidityChecker
+
+        Returns
+        -------
+        GoalCheckCounts
+        """
+        return cls(n_calls=int(validity.n_calls), n_model=int(validity.n_model),
+                   collision_time_s=float(validity.seconds_collision))
+
+
 @dataclass(frozen=True, eq=False)
 class AimedGoals:
     """Stage 4: the joint vectors the planner goes to.
@@ -61,8 +124,8 @@ class AimedGoals:
         Goal index -> why it was not compensated (the exception, as text).
     time_s : float
         Compensation time [s].
-    aim : dict
-        :func:`aim_decision`: the model goals are aimed with and why, with its measured error.
+    aim : AimDecision
+        The model goals are aimed with and why, with its measured error.
     """
 
     final_motion: str
@@ -70,7 +133,7 @@ class AimedGoals:
     compensations: tuple
     errors: Mapping[int, str]
     time_s: float
-    aim: dict = None
+    aim: AimDecision
 
 
 def check_start(setup: PlanSetup, field):
@@ -142,7 +205,7 @@ def resolve_goals(setup: PlanSetup, field, validity, echo=None) -> ResolvedGoals
     return ResolvedGoals(goals=goals, time_s=seconds)
 
 
-def aim_decision(validation, aim_with: str = "auto") -> dict:
+def aim_decision(validation: PredictionValidation | None, aim_with: str = "auto") -> AimDecision:
     """Which model task-space goals are aimed with, and why.
 
     With ``aim_with = "auto"`` the history-aware prediction is used only when the robot file's
@@ -159,10 +222,7 @@ def aim_decision(validation, aim_with: str = "auto") -> dict:
 
     Returns
     -------
-    dict
-        ``model`` ("history-aware prediction" or "standard model"), ``use_history`` (bool),
-        ``reason``, ``measured_mean_mm`` and ``measured_max_mm`` (the measured tip error of the
-        model aimed with; None when not measured), ``validation`` (``validation``).
+    AimDecision
 
     Raises
     ------
@@ -193,9 +253,9 @@ def aim_decision(validation, aim_with: str = "auto") -> dict:
         use = bool(pv.history_beats_standard)
         reason = figures + ("" if use else ": it does not beat the standard model")
     side = "history" if use else "standard"
-    return {"model": "history-aware prediction" if use else "standard model", "use_history": use, "reason": reason,
-            "measured_mean_mm": None if pv is None else getattr(pv, f"{side}_mean_m") * 1e3,
-            "measured_max_mm": None if pv is None else getattr(pv, f"{side}_max_m") * 1e3, "validation": pv}
+    return AimDecision(model="history-aware prediction" if use else "standard model", use_history=use, reason=reason,
+                       measured_mean_m=None if pv is None else getattr(pv, f"{side}_mean_m"),
+                       measured_max_m=None if pv is None else getattr(pv, f"{side}_max_m"), validation=pv)
 
 
 @deprecated_echo
@@ -233,10 +293,10 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo=None) ->
     errors = {}
     aim = aim_decision(sc.calibration.prediction, sc.planner.aim_with)
     if any(isinstance(doc, TaskGoal) for doc in sc.goals):
-        logger.log(progress_level(), f"aiming task-space goals with the {aim['model']}: {aim['reason']}")
+        logger.log(progress_level(), f"aiming task-space goals with the {aim.model}: {aim.reason}")
     for k, (doc, g) in enumerate(zip(sc.goals, resolved.goals)):
         c = None
-        if isinstance(doc, TaskGoal) and aim["use_history"]:
+        if isinstance(doc, TaskGoal) and aim.use_history:
             before = np.array(motion)
 
             def state_at(q, before=before):

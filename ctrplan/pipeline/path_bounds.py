@@ -1,5 +1,6 @@
-"""Stage 5b of the plan: the bounds along an ordered path, interpolated from the map, and the
-exact bound given the last motion at its waypoints (:class:`PathBounds`)."""
+"""The exact bounds along a plan (part of stage 5): the bounds along an ordered path, interpolated
+from the map, and the exact bound given the last motion at its waypoints (:class:`PathBounds`,
+:func:`bounds_along_path`)."""
 
 from __future__ import annotations
 
@@ -11,11 +12,11 @@ import numpy as np
 from ..mechanics import evaluate_bound
 from ..planning import bounds_given_last_motion
 
-__all__ = ["PATH_SAMPLE_SPACING", "PathBounds"]
+__all__ = ["PATH_SAMPLE_SPACING", "PathBounds", "bounds_along_path"]
 
 
-# Spacing of interpolated-bound samples along an ordered path for the bound plot and the
-# max-bound comparison [m of the weighted joint metric].
+#: Spacing of interpolated-bound samples along an ordered path for the bound plot and the
+#: max-bound comparison [m of the weighted joint metric].
 PATH_SAMPLE_SPACING = 2e-3
 
 
@@ -70,8 +71,27 @@ def _dense_path(ordered_q, motions, joint_space, spacing):
     return np.array(pts), np.array(s), seg_motion
 
 
-def _path_bounds(ordered, robot, field, settings, joint_space) -> PathBounds:
-    """Interpolated bounds sampled along an ordered path, and the exact bound at its waypoints."""
+def bounds_along_path(ordered, robot, field, settings, joint_space) -> PathBounds:
+    """Interpolated bounds sampled along an ordered path, and the exact bound at its waypoints.
+
+    Parameters
+    ----------
+    ordered : OrderedPath
+        K waypoints, shape (K, n_joints) [rad or m], with the motion ending at each.
+    robot : Robot
+    field : BoundField
+        The planner's bound map [m, rad].
+    settings : ModelSettings
+        Settings of the exact model.
+    joint_space : JointStateSpace
+        Its metric spaces the samples (:data:`PATH_SAMPLE_SPACING`).
+
+    Returns
+    -------
+    PathBounds
+        In m and rad; the exact bound given the last motion is
+        :func:`ctrplan.planning.bounds_given_last_motion` (Section V-B of Ha et al. 2019).
+    """
     qd, sd, md = _dense_path(ordered.q, ordered.motions, joint_space, PATH_SAMPLE_SPACING)
     friction = np.asarray(field(qd, "position"))
     tlast = np.asarray(field(qd, "translation_last_position"))

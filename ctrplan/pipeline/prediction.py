@@ -1,5 +1,5 @@
-"""Stage 5c of the plan: the tip predicted at every ordered waypoint for the motion history the
-ordered path creates (:class:`WaypointPredictions`)."""
+"""The prediction along a plan (part of stage 5): the tip predicted at every ordered waypoint for
+the motion history the ordered path creates (:class:`WaypointPredictions`, :func:`predict_waypoints`)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from ..history import pair_friction
 from ..mechanics import predict_tip
 from ..planning.history import path_history
 
-__all__ = ["WaypointPredictions"]
+__all__ = ["WaypointPredictions", "predict_waypoints"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,14 +61,30 @@ class WaypointPredictions:
     shape: tuple = ()
 
 
-def _predictions(ordered, robot, settings, exact) -> WaypointPredictions:
+def predict_waypoints(ordered, robot, settings, exact) -> WaypointPredictions:
     """Tip predicted at every ordered waypoint for the history the ordered path creates.
 
     The history (:func:`ctrplan.planning.history.path_history`) gives per pair eta and whether
     a translation followed the last rotation; :func:`ctrplan.mechanics.predict_tip` reuses the
     exact bound's clearance or friction solution at the waypoint when it is the one needed, and
-    solves only partial histories. Waypoints where the bound failed, or the prediction raises,
-    get NaN."""
+    solves only partial histories.
+
+    Parameters
+    ----------
+    ordered : OrderedPath
+        K waypoints, shape (K, n_joints) [rad or m].
+    robot : Robot
+    settings : ModelSettings
+        Settings of the exact model.
+    exact : LastMotionBounds
+        The exact bound at the K waypoints (``PathBounds.exact``), whose solutions are reused.
+
+    Returns
+    -------
+    WaypointPredictions
+        In m; waypoints where the bound failed, or the prediction raises, get NaN and their
+        message.
+    """
     t0 = time.perf_counter()
     hist = path_history(robot, ordered.q)
     mu_robot = robot.friction_coefficients

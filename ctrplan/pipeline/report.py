@@ -1,82 +1,75 @@
-"""The report stage: ``path.csv`` rows, the figures, ``plan.html`` and ``summary.json`` of a run
-(millimetres and degrees only here and in :mod:`~ctrplan.pipeline.summary`)."""
+"""The files of a run (:func:`write_report`: ``path.csv``, ``trajectory.csv``, the figures,
+``plan.html`` and ``summary.json``) and its printed summary (:func:`log_summary`).
+
+With :mod:`~ctrplan.pipeline.summary`, the only part of the pipeline that converts to millimetres
+and degrees: the figures and the view plot in mm, the summary's keys carry their unit.
+"""
 
 from __future__ import annotations
 
 import logging
+import os
+from pathlib import Path
 
 import numpy as np
 
 from .._log import deprecated_echo, progress_level
 from .goals import _eta_text
-from .routes import Plans, RoutePlan
-from .setup import PlanSetup
+from .summary import plan_summary
+from .waypoints import WaypointTable
 
-__all__ = ["calibrated_bound", "path_rows", "write_report"]
+__all__ = ["path_rows", "write_report", "log_summary"]
 
 logger = logging.getLogger(__package__)
 
 
-def calibrated_bound(calibration, bound) -> np.ndarray:
-    """The calibrated bound ``factor (bound + noise_margin_m)`` of the robot file's
-    ``[bound_calibration]`` (:mod:`ctrplan.discrepancy.coverage`) [m]; NaN without one.
+def path_rows(table: WaypointTable) -> list[dict]:
+    """Rows of ``path.csv``, one per ordered waypoint (SI units, as the file stores them).
 
     Parameters
     ----------
-    calibration : CalibratedBound or None
-        ``Scenario.calibration.bound``.
-    bound : array-like
-        The model's bound [m].
-
-    Returns
-    -------
-    ndarray
-        Same shape as ``bound``.
-    """
-    b = np.asarray(bound, float)
-    if calibration is None:
-        return np.full_like(b, np.nan)
-    return calibration.apply(b)
-
-
-def path_rows(plan: RoutePlan, calibration=None) -> list[dict]:
-    """Rows of ``path.csv`` for a plan, one per ordered waypoint (SI units, as the file stores them).
-
-    Parameters
-    ----------
-    plan : RoutePlan
-    calibration : CalibratedBound, optional
-        The robot file's ``[bound_calibration]``; without one ``calibrated_bound_m`` is NaN.
+    table : WaypointTable
+        The plan's waypoints (``PlanRun.waypoints``).
 
     Returns
     -------
     list of dict
         Keys ``motion``, ``q`` (shape (n_joints,) [rad or m]), ``tip`` (standard model, shape (3,)
         [m]; NaN where the exact bound failed), ``bound_position_m`` and ``planned_bound_m`` [m],
-        ``calibrated_bound_m`` [m] (:func:`calibrated_bound`; NaN without a calibration in the
-        robot file), ``bound_angle_rad`` [rad], ``bound_kind``, ``predicted_tip`` (shape (3,) [m]),
+        ``calibrated_bound_m`` [m] (NaN without a calibration in the robot file),
+        ``bound_angle_rad`` [rad], ``bound_kind``, ``predicted_tip`` (shape (3,) [m]),
         ``predicted_offset_m`` [m], ``prediction_eta`` and ``prediction_cases``
         (:func:`ctrplan.report.write_plan_outputs`).
     """
-    lm, planned, pred = plan.bounds.exact, plan.bounds.planned, plan.prediction
-    calibrated = calibrated_bound(calibration, lm.position)
-    rows = []
-    for k, w in enumerate(plan.ordered.waypoints):
-        res = lm.results[k]
-        tip = res.standard.tip_position if res is not None else np.full(3, np.nan)
-        rows.append({"motion": w.motion, "q": w.q, "tip": tip, "bound_position_m": float(lm.position[k]),
-                     "calibrated_bound_m": float(calibrated[k]),
-                     "planned_bound_m": float(planned[k]), "bound_angle_rad": float(lm.angle[k]),
-                     "bound_kind": "translation_last" if w.motion == "translation" else "friction",
-                     "predicted_tip": pred.tip[k], "predicted_offset_m": float(pred.offset[k]),
-                     "prediction_eta": _eta_text(pred.eta_used[k]), "prediction_cases": pred.cases[k]})
-    return rows
+    t = table
+    return [{"motion": str(t.motion[k]), "q": t.q[k], "tip": t.tip[k], "bound_position_m": float(t.bound_position_m[k]),
+             "calibrated_bound_m": float(t.calibrated_bound_m[k]), "planned_bound_m": float(t.planned_bound_m[k]),
+             "bound_angle_rad": float(t.bound_angle_rad[k]), "bound_kind": str(t.bound_kind[k]),
+             "predicted_tip": t.predicted_tip[k], "predicted_offset_m": float(t.predicted_offset_m[k]),
+             "prediction_eta": _eta_text(t.prediction_eta[k]), "prediction_cases": t.prediction_cases[k]}
+            for k in range(len(t))]
+
+
+def log_summary(summary: dict) -> None:
+    """Log the run's summary as ``ctrplan plan`` prints it: one record, one ``label: value unit``
+    line per key (:func:`ctrplan.report.format_summary`), at the progress level (INFO, DEBUG in a
+    study).
+
+    Parameters
+    ----------
+    summary : dict
+        :func:`~ctrplan.pipeline.summary.plan_summary`.
+    """
+    from ..report import format_summary
+
+    logger.log(progress_level(), format_summary(summary))
 
 
 @deprecated_echo
-def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo=None) -> dict:
+def write_report(run, out_dir: str | os.PathLike | None = None, echo=None, *,
+                 summary: dict | None = None) -> dict:
     """Write path.csv, trajectory.csv, the figures, the interactive view ``plan.html`` and
-    summary.json (last) into ``setup.out_dir``.
+    summary.json (last) of a run.
 
     Every file is written atomically (:func:`ctrplan.report.write_plan_outputs`); the figures
     plot bounds in mm. ``plan.html`` (:func:`ctrplan.view.write_plan_view`) shows the bound-aware
@@ -86,27 +79,35 @@ def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo
 
     Parameters
     ----------
-    setup : PlanSetup
-    plans : Plans
-    traj : Trajectory or None
-    rows : list of dict
-        :func:`path_rows` of the bound-aware plan.
-    summary : dict
-        :func:`plan_summary`, with ``times_s["total"]`` set.
+    run : PlanRun
+        Every stage's result (:func:`~ctrplan.pipeline.run.run_stages`).
+    out_dir : str or path-like, optional
+        Output folder (created if missing); default ``run.setup.out_dir``.
     echo : callable, optional
         Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
         higher; configure :mod:`logging` instead (logger ``ctrplan``).
+    summary : dict, optional, keyword-only
+        :func:`~ctrplan.pipeline.summary.plan_summary` of the run, if already made.
 
     Returns
     -------
     dict of str to Path
         Written files by name.
+
+    Raises
+    ------
+    ValueError
+        No output folder: neither ``out_dir`` nor ``run.setup.out_dir``.
     """
     from ..plots import plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes
-    from ..report import format_summary, write_plan_outputs
+    from ..report import write_plan_outputs
     from ..view import PLAN_VIEW_FILE, write_plan_view
 
-    sc, robot = setup.scenario, setup.robot
+    out = Path(out_dir) if out_dir is not None else run.setup.out_dir
+    if out is None:
+        raise ValueError("no output folder: give out_dir (the run was set up without one)")
+    summary = plan_summary(run) if summary is None else summary
+    sc, robot, plans, traj = run.setup.scenario, run.setup.robot, run.plans, run.trajectory
     shapes, tips = [], []
     for res in plans.aware.bounds.exact.results:
         if res is None:
@@ -158,8 +159,7 @@ def write_report(setup: PlanSetup, plans: Plans, traj, rows, summary: dict, echo
     if traj is not None:
         figures["joint_trajectories.png"] = lambda path: plot_joint_trajectories(
             path, traj, robot.joint_names, [j.kind for j in robot.joints], title=f"{sc.name}: drive trajectory")
-    written = write_plan_outputs(setup.out_dir, rows, traj, summary, joint_names=robot.joint_names,
+    written = write_plan_outputs(out, path_rows(run.waypoints), traj, summary, joint_names=robot.joint_names,
                                  figures=figures)
-    logger.debug(f"wrote {', '.join(written)} into {setup.out_dir}")
-    logger.log(progress_level(), format_summary(summary))
+    logger.debug(f"wrote {', '.join(written)} into {out}")
     return written

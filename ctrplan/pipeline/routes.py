@@ -1,5 +1,6 @@
-"""Stage 5 of the plan: every leg planned bound-aware (and bound-blind), ordered, checked, with
-the exact bound and the prediction at its waypoints (:class:`RoutePlan`, :class:`Plans`)."""
+"""Stage 5 of a plan: every leg planned bound-aware (and bound-blind), ordered, checked, with the
+exact bound (:mod:`~ctrplan.pipeline.path_bounds`) and the prediction
+(:mod:`~ctrplan.pipeline.prediction`) at its waypoints (:class:`RoutePlan`, :class:`Plans`)."""
 
 from __future__ import annotations
 
@@ -18,8 +19,8 @@ from ..planning import BoundCostObjective, JointStateSpace
 from ..planning.history import end_with, goal_indices
 from ..planning.route import DEFAULT_REWIRE_FACTOR, plan_route, route_checks
 from .goals import AimedGoals
-from .path_bounds import PathBounds, _path_bounds
-from .prediction import WaypointPredictions, _predictions
+from .path_bounds import PathBounds, bounds_along_path
+from .prediction import WaypointPredictions, predict_waypoints
 from .setup import PlanSetup
 
 __all__ = ["RoutePlan", "Plans", "plan_routes", "effective_bound_weight"]
@@ -129,9 +130,9 @@ def _plan_mode(job: _PlanJob) -> RoutePlan:
         final_status.append(status)
     plan_time = time.perf_counter() - t0
     t0 = time.perf_counter()
-    bounds = _path_bounds(ordered, robot, field, job.settings, joint_space)
+    bounds = bounds_along_path(ordered, robot, field, job.settings, joint_space)
     exact_time = time.perf_counter() - t0
-    pred = _predictions(ordered, robot, job.settings, bounds.exact)
+    pred = predict_waypoints(ordered, robot, job.settings, bounds.exact)
     return RoutePlan(legs=route.legs, ordered=ordered, bounds=bounds, plan_time_s=plan_time,
                      exact_time_s=exact_time, checks=checks.counters(),
                      max_body_step_m=checks.final.max_body_step, prediction=pred, goal_indices=idx,
