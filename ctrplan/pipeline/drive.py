@@ -1,4 +1,4 @@
-"""Stage 6 of the plan: the drive trajectory along the ordered path."""
+"""Stage 6 of a plan: the drive trajectory along the ordered path (:func:`time_parameterize`)."""
 
 from __future__ import annotations
 

@@ -139,7 +139,7 @@ def compare_plans(plans: Plans) -> PlanComparison:
     -------
     PlanComparison
     """
-    blind = plans.routes.get("bound_blind")
+    blind = plans.blind
     return PlanComparison(aware=route_metrics(plans.aware), blind=None if blind is None else route_metrics(blind))
 
 

@@ -34,7 +34,7 @@ class RoutePlan:
 
     Attributes
     ----------
-    legs : list of PlanResult
+    legs : list of ctrplan.planning.planners.PlanResult
         One planner result per leg (start -> goal 1 -> goal 2 ...).
     ordered : OrderedPath
         The ordered path (pure rotation and pure translation phases) [rad or m].
@@ -88,6 +88,11 @@ class Plans:
     def aware(self) -> RoutePlan:
         """The bound-aware plan (the one that is executed)."""
         return self.routes["bound_aware"]
+
+    @property
+    def blind(self) -> RoutePlan | None:
+        """The bound-blind plan (length only, same planner and seed); None when not planned."""
+        return self.routes.get("bound_blind")
 
 
 @dataclass(frozen=True, eq=False)
