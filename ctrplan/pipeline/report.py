@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._log import deprecated_echo, progress_level
+from .._log import progress_level
 from .goals import _eta_text
 from .summary import plan_summary
 from .waypoints import WaypointTable
@@ -65,9 +65,7 @@ def log_summary(summary: dict) -> None:
     logger.log(progress_level(), format_summary(summary))
 
 
-@deprecated_echo
-def write_report(run, out_dir: str | os.PathLike | None = None, echo=None, *,
-                 summary: dict | None = None) -> dict:
+def write_report(run, out_dir: str | os.PathLike | None = None, *, summary: dict | None = None) -> dict:
     """Write path.csv, trajectory.csv, the figures, the interactive view ``plan.html`` and
     summary.json (last) of a run.
 
@@ -83,9 +81,6 @@ def write_report(run, out_dir: str | os.PathLike | None = None, echo=None, *,
         Every stage's result (:func:`~ctrplan.pipeline.run.run_stages`).
     out_dir : str or path-like, optional
         Output folder (created if missing); default ``run.setup.out_dir``.
-    echo : callable, optional
-        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
-        higher; configure :mod:`logging` instead (logger ``ctrplan``).
     summary : dict, optional, keyword-only
         :func:`~ctrplan.pipeline.summary.plan_summary` of the run, if already made.
 
