@@ -2,7 +2,7 @@
 the per-state reference checker, side by side, with their decisions compared.
 
 On ``scenarios/obstacles.toml`` (its robot, obstacles, model settings with ``multistart=0`` and
-the shipped bound map, loaded as ``ctrplan/pipeline.py`` loads it), in one process:
+the shipped bound map, loaded as ``ctrplan.pipeline.load_bound_map`` loads it), in one process:
 
 1. states: the same seeded random states (default 600) go, one at a time, through the per-state
    :class:`ctrplan.planning.ValidityChecker` and the batched
@@ -49,7 +49,7 @@ MAX_MOTION_LENGTH = 0.04
 
 
 def _load_field(sc, settings):
-    """The scenario's bound map, loaded as ctrplan/pipeline.py loads it (shipped, cached, else
+    """The scenario's bound map, loaded as ctrplan.pipeline.load_bound_map loads it (shipped, cached, else
     computed)."""
     from ctrplan.boundmap import load_or_compute_bound_map
     from ctrplan.pipeline import map_spec

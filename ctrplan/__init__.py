@@ -4,8 +4,10 @@ Mechanics from Ha, Fagogenis & Dupont, "Modeling Tube Clearance and Bounding the
 Friction in Concentric Tube Robot Kinematics", IEEE T-RO 35(2):353-370, 2019,
 doi:10.1109/TRO.2018.2878906.
 
-``ctrplan.plan_scenario`` and ``ctrplan.PlanResult`` (:mod:`ctrplan.api`) are imported on first
-use, so ``import ctrplan`` stays light.
+``ctrplan.plan`` (the entry point: a loaded scenario, optionally its bound map, in; a typed
+result out, files only when asked), ``ctrplan.plan_scenario`` (what ``ctrplan plan`` does with a
+scenario file) and ``ctrplan.PlanResult`` (:mod:`ctrplan.api`) are imported on first use, so
+``import ctrplan`` stays light.
 
 Messages go through the standard :mod:`logging` module, under the ``ctrplan`` logger (progress
 and summaries INFO, details DEBUG, cautions WARNING), which has only a ``logging.NullHandler``: the
@@ -23,7 +25,7 @@ __version__ = "0.1.0"
 
 _logging.getLogger(__name__).addHandler(_logging.NullHandler())
 
-_LAZY = {"plan_scenario": "api", "PlanResult": "api"}
+_LAZY = {"plan": "api", "plan_scenario": "api", "PlanResult": "api"}
 
 
 def __getattr__(name):

@@ -1,24 +1,36 @@
-"""One call that plans a scenario and returns its results as arrays: :func:`plan_scenario`.
+"""Plan a scenario from Python: :func:`plan`, the entry point, and :func:`plan_scenario`, what
+``ctrplan plan`` does with one scenario file.
 
-A thin layer over :func:`ctrplan.pipeline.plan_stages` (the same stages and output files as
-``ctrplan plan``); the result is a frozen :class:`PlanResult` in SI units (m, rad, s), for scripts
-and for the assertions of :mod:`ctrplan.testing`. It prints nothing: the lines ``ctrplan plan``
-shows are logged at INFO under the ``ctrplan`` logger (``logging.basicConfig(level=logging.INFO)``
-shows them).
+:func:`plan` takes its inputs as objects (a loaded scenario, optionally a robot and its bound
+map) and writes no file unless given ``out_dir``; it returns a frozen :class:`PlanResult` in SI
+units (m, rad, s), for scripts and for the assertions of :mod:`ctrplan.testing`, which also holds
+every stage's result (:class:`ctrplan.pipeline.PlanRun`). Neither prints anything: the lines
+``ctrplan plan`` shows are logged at INFO under the ``ctrplan`` logger
+(``logging.basicConfig(level=logging.INFO)`` shows them).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import time
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
 from ._log import deprecated_echo
+from .boundmap import BoundField
+from .calibration import RobotCalibration
+from .io.scenario import Scenario, load_scenario
+from .pipeline import (BoundMapStage, PlanRun, default_out_dir, given_bound_map, load_bound_map, log_summary,
+                       plan_summary, run_stages, setup_plan, write_report)
+from .robot import Robot
+from .trajectory import Trajectory
 
-__all__ = ["PlanResult", "plan_scenario"]
+__all__ = ["PlanResult", "plan", "plan_scenario"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,7 +42,7 @@ class PlanResult:
     Attributes
     ----------
     scenario : Scenario
-        The loaded scenario (:func:`ctrplan.io.scenario.load_scenario`).
+        The scenario planned (:func:`ctrplan.io.scenario.load_scenario`).
     robot : Robot
         Its robot.
     joint_names : tuple of str
@@ -47,7 +59,8 @@ class PlanResult:
         Dupont 2019); NaN where it failed.
     calibrated_bound_m : ndarray, shape (K,)
         The robot file's calibrated bound ``factor (bound + noise margin)`` [m]
-        (``[bound_calibration]``, :func:`ctrplan.pipeline.calibrated_bound`); NaN without one.
+        (``[bound_calibration]``, :meth:`ctrplan.calibration.CalibratedBound.apply`); NaN without
+        one.
     bound_kind : ndarray of str, shape (K,)
         ``"friction"`` or ``"translation_last"``.
     predicted_tip : ndarray, shape (K, 3)
@@ -58,18 +71,20 @@ class PlanResult:
     trajectory : ctrplan.trajectory.Trajectory or None
         The drive trajectory (ruckig, rest to rest at every waypoint); None when the scenario has
         no ``[drive]`` table.
-    summary : dict
-        The content of ``summary.json`` (report units: keys ending ``_mm`` in mm, ``_deg`` in
-        degrees, ``_s`` in s), plus ``output_dir``.
-    output_dir : pathlib.Path
-        Folder of ``path.csv``, ``trajectory.csv``, ``summary.json`` and the figures.
+    output_dir : pathlib.Path or None
+        Folder of ``path.csv``, ``trajectory.csv``, ``summary.json`` and the figures; None when
+        no file was written.
     timings_s : dict of str to float
-        Stage times [s] (``summary["times_s"]``: ``bound_map``, ``inverse_kinematics``, ...,
-        ``total``).
+        Stage times [s] (``bound_map``, ``inverse_kinematics``, ``compensation``,
+        ``prediction_at_waypoints``, ``plans_wall``, ``plans_in_parallel`` (bool), ``total``).
+    run : ctrplan.pipeline.PlanRun
+        Every stage's result (SI units): the bound map, the resolved and aimed goals, both plans
+        with their exact bounds and predictions, the comparison of the bound-aware plan with the
+        bound-blind one (``run.comparison``), the outcome at each goal (``run.goals``).
     """
 
-    scenario: Any
-    robot: Any
+    scenario: Scenario
+    robot: Robot
     joint_names: tuple
     q: np.ndarray
     motion: np.ndarray
@@ -79,22 +94,145 @@ class PlanResult:
     bound_kind: np.ndarray
     predicted_tip: np.ndarray
     goal_waypoints: tuple
-    trajectory: Any
-    summary: dict
-    output_dir: Path
+    trajectory: Trajectory | None
+    output_dir: Path | None
     timings_s: dict
+    run: PlanRun
+
+    @cached_property
+    def summary(self) -> dict:
+        """The content of ``summary.json`` (report units: keys ending ``_mm`` in mm, ``_deg`` in
+        degrees, ``_s`` in s; :func:`ctrplan.pipeline.plan_summary`), plus ``output_dir`` when
+        files were written."""
+        out = plan_summary(self.run)
+        if self.output_dir is not None:
+            out["output_dir"] = str(self.output_dir)
+        return out
+
+    def write(self, out_dir: str | os.PathLike) -> dict:
+        """Write the files of ``ctrplan plan`` (``path.csv``, ``trajectory.csv``, the figures,
+        ``plan.html``, ``summary.json`` last, each atomically) into a folder.
+
+        Parameters
+        ----------
+        out_dir : str or path-like
+            Output folder (created if missing).
+
+        Returns
+        -------
+        dict of str to pathlib.Path
+            Written files by name.
+        """
+        return write_report(self.run, out_dir)
 
 
-@deprecated_echo
-def plan_scenario(scenario: str | os.PathLike, out_dir: str | os.PathLike | None = None, *, n_jobs: int = 1,
-                  iterations: int | None = None, compare_blind: bool = True,
-                  echo: Callable[[str], Any] | None = None, progress: bool = False) -> PlanResult:
-    """Plan, order, time-parameterize and report one scenario, as ``ctrplan plan`` does.
+def _result(run: PlanRun, output_dir: Path | None) -> PlanResult:
+    table, aware, robot = run.waypoints, run.plans.aware, run.setup.robot
+    return PlanResult(
+        scenario=run.setup.scenario, robot=robot, joint_names=tuple(robot.joint_names), q=table.q,
+        motion=table.motion, tip=table.tip, bound_position_m=table.bound_position_m,
+        calibrated_bound_m=table.calibrated_bound_m, bound_kind=table.bound_kind, predicted_tip=table.predicted_tip,
+        goal_waypoints=tuple(int(g) for g in aware.goal_indices), trajectory=run.trajectory,
+        output_dir=output_dir, timings_s=run.timings_s, run=run)
+
+
+def plan(scenario: Scenario | str | os.PathLike, *, bound_map: BoundField | BoundMapStage | None = None,
+         robot: Robot | None = None, calibration: RobotCalibration | None = None,
+         out_dir: str | os.PathLike | None = None, n_jobs: int = 1, iterations: int | None = None,
+         compare_blind: bool = True, progress: bool = False) -> PlanResult:
+    """Plan, order and time-parameterize one scenario, bound-aware (and bound-blind to compare).
+
+    The stages of :mod:`ctrplan.pipeline`: the start and the goals checked, task-space goals
+    resolved and aimed, every leg planned with the bound as a cost (length + weight x integral
+    of the bound), ordered into rotations then translations, checked, the exact bound and the
+    predicted tip evaluated at its waypoints, the drive trajectory computed (Ha, Fagogenis &
+    Dupont 2019, Section V-B).
 
     Parameters
     ----------
-    scenario : str or path-like
-        Scenario TOML file (``docs/file-formats.md``; SI units).
+    scenario : Scenario or str or path-like
+        A loaded scenario (:func:`ctrplan.io.scenario.load_scenario`), or its TOML file (SI units).
+    bound_map : BoundField or BoundMapStage, keyword-only, optional
+        The bound map to plan with, over the robot's map coordinates [m, rad]; default the robot
+        file's shipped or cached map for the scenario's ``[bound_field]``, computed (and cached)
+        if there is none.
+    robot : Robot, keyword-only, optional
+        Plan for this robot instead of the scenario's (same joint names, in the same order); its
+        bound map must then be given (maps on disk are keyed by the robot file's bytes).
+    calibration : RobotCalibration, keyword-only, optional
+        The robot's records of measurements (calibrated bound, validated prediction); default the
+        scenario's (``Scenario.calibration``), none with a given ``robot``.
+    out_dir : str or path-like, keyword-only, optional
+        Write the files of ``ctrplan plan`` there (created if missing); default none written
+        (:meth:`PlanResult.write` writes them later).
+    n_jobs : int, keyword-only
+        Worker processes: for a bound map that must be computed, and, with 2 or more, the
+        bound-blind plan runs beside the bound-aware one (same result as in series).
+    iterations : int, keyword-only, optional
+        Overrides the scenario's planner iterations.
+    compare_blind : bool, keyword-only
+        Also plan bound-blind (length only, same planner and seed) and compare.
+    progress : bool, keyword-only
+        tqdm bars while a bound map is computed (default none).
+
+    Returns
+    -------
+    PlanResult
+        The bound-aware plan; ``result.run`` holds every stage's result.
+
+    Raises
+    ------
+    ModelFileError
+        Malformed scenario or robot file, or a start or joint goal outside the joint limits.
+    ValueError
+        A ``robot`` with other joints than the scenario's, or without a ``bound_map``; a bound map
+        over other coordinates than the robot's map coordinates.
+    UnreachableGoalError
+        Invalid start, unreachable goal, or no valid path within the budget.
+    JointLimitError
+        The time-parameterized trajectory violates the drive limits.
+    """
+    from .mechanics import warmup
+
+    t0 = time.perf_counter()
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    if robot is not None:
+        if list(robot.joint_names) != list(sc.robot.joint_names):
+            raise ValueError(f"robot {robot.name!r} has joints {robot.joint_names}, the scenario's robot "
+                             f"{sc.robot.joint_names}")
+        if bound_map is None:
+            raise ValueError(f"robot {robot.name!r} is given without its bound map: maps on disk are keyed by the "
+                             "robot file's bytes; give bound_map (e.g. ctrplan.boundmap.compute_field)")
+        sc = dataclasses.replace(sc, robot=robot, calibration=RobotCalibration())
+    if calibration is not None:
+        sc = dataclasses.replace(sc, calibration=calibration)
+    warmup.start()   # the final check's contact kernels compile beside planning on a cold start
+    setup = setup_plan(sc, out_dir)
+    if bound_map is None:
+        stage = load_bound_map(setup, n_jobs, progress=progress)
+    elif isinstance(bound_map, BoundMapStage):
+        stage = bound_map
+    else:
+        stage = given_bound_map(setup, bound_map)
+    run = run_stages(setup, stage, iterations=iterations, compare_blind=compare_blind, n_jobs=n_jobs, started=t0)
+    summary = plan_summary(run)
+    if setup.out_dir is not None:
+        write_report(run, setup.out_dir, summary=summary)
+    log_summary(summary)
+    return _result(run, setup.out_dir)
+
+
+@deprecated_echo
+def plan_scenario(scenario: Scenario | str | os.PathLike, out_dir: str | os.PathLike | None = None, *,
+                  n_jobs: int = 1, iterations: int | None = None, compare_blind: bool = True,
+                  echo: Callable[[str], Any] | None = None, progress: bool = False) -> PlanResult:
+    """Plan, order, time-parameterize and report one scenario, as ``ctrplan plan`` does:
+    :func:`plan` writing its files.
+
+    Parameters
+    ----------
+    scenario : Scenario or str or path-like
+        Scenario TOML file (``docs/file-formats.md``; SI units), or the loaded scenario.
     out_dir : str or path-like, optional
         Output folder; default the scenario's ``[output] dir``, else ``out/<scenario name>``.
     n_jobs : int, keyword-only
@@ -124,20 +262,6 @@ def plan_scenario(scenario: str | os.PathLike, out_dir: str | os.PathLike | None
     JointLimitError
         The time-parameterized trajectory violates the drive limits.
     """
-    from .mechanics import warmup
-    from .pipeline import plan_stages
-
-    warmup.start()   # the final check's contact kernels compile beside planning on a cold start
-    run = plan_stages(Path(scenario), out_dir, n_jobs=n_jobs, iterations=iterations,
-                      compare_blind=compare_blind, progress=progress)
-    aware, robot = run.plans.aware, run.setup.robot
-    return PlanResult(
-        scenario=run.setup.scenario, robot=robot, joint_names=tuple(robot.joint_names),
-        q=np.array(aware.ordered.q, dtype=float), motion=np.array(aware.ordered.motions),
-        tip=np.array([r["tip"] for r in run.rows], dtype=float).reshape(-1, 3),
-        bound_position_m=np.array(aware.bounds.exact.position, dtype=float),
-        calibrated_bound_m=np.array([r["calibrated_bound_m"] for r in run.rows], dtype=float),
-        bound_kind=np.array([r["bound_kind"] for r in run.rows]),
-        predicted_tip=np.array(aware.prediction.tip, dtype=float).reshape(-1, 3),
-        goal_waypoints=tuple(int(g) for g in aware.goal_indices), trajectory=run.trajectory,
-        summary=run.summary, output_dir=Path(run.setup.out_dir), timings_s=dict(run.summary["times_s"]))
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(Path(scenario))
+    return plan(sc, out_dir=out_dir if out_dir else default_out_dir(sc), n_jobs=n_jobs, iterations=iterations,
+                compare_blind=compare_blind, progress=progress)

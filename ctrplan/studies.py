@@ -1,8 +1,8 @@
 """Many scenarios in one run: :func:`plan_many` (``ctrplan plan A.toml B.toml DIR/ ...``).
 
-Each scenario is planned by :func:`ctrplan.plan_scenario` into its own folder ``<out>/<scenario
-stem>/`` (the files of ``ctrplan plan``); the compiled kernels and bound maps are loaded once per
-process. One table across scenarios, ``<out>/scenarios.csv`` (and ``scenarios.png``), has a row per
+Each scenario is planned by :func:`ctrplan.plan_scenario` (:func:`ctrplan.plan` writing its files)
+into its own folder ``<out>/<scenario stem>/`` (the files of ``ctrplan plan``); the compiled kernels
+and bound maps are loaded once per process. One table across scenarios, ``<out>/scenarios.csv`` (and ``scenarios.png``), has a row per
 scenario: its status (``planned``, ``reused``, ``failed``), the reason of a failure, the time,
 cost, joint-path length, largest and final exact bound of the bound-aware plan and the
 bound-blind plan's largest bound, and the final check's repairs and failures. A failing scenario is
@@ -10,9 +10,11 @@ reported and the others go on.
 
 A scenario whose folder holds a complete run (``summary.json``, written last) for the same inputs
 (the scenario and robot files' bytes, the options, the mechanics version) is not planned again:
-its row is read from that summary (``reused``). With ``n_jobs`` > 1 or a ``scheduler`` address the
-scenarios are spread over dask.distributed workers (a local cluster of ``n_jobs`` single-threaded
-processes, or the cluster at that address, whose workers need ctrplan installed).
+its row is read from that summary (``reused``; :func:`ctrplan.pipeline.read_plan_record`); the
+other rows come from the typed results of the plans (``PlanResult.run.comparison``). With
+``n_jobs`` > 1 or a ``scheduler`` address the scenarios are spread over dask.distributed workers
+(a local cluster of ``n_jobs`` single-threaded processes, or the cluster at that address, whose
+workers need ctrplan installed).
 
 Messages go to the ``ctrplan.studies`` logger (:mod:`logging`): one line per scenario (WARNING for
 a failed one) and the closing summary at INFO. Each scenario's own progress lines (:mod:`ctrplan.pipeline`) are DEBUG
@@ -27,9 +29,12 @@ import logging
 import os
 import time
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from ._log import deprecated_echo, details
+
+if TYPE_CHECKING:
+    from .pipeline import PlanComparison, PlanRecord
 
 __all__ = ["scenario_files", "plan_many", "input_key", "TABLE_FILE", "PLOT_FILE", "COLUMNS"]
 
@@ -75,9 +80,7 @@ def input_key(scenario: Path, iterations: int | None, compare_blind: bool) -> st
     try:
         from .io.scenario import load_scenario
 
-        robot_file = load_scenario(scenario).robot.metadata.get("file")
-        if robot_file:
-            h.update(Path(robot_file).read_bytes())
+        h.update(load_scenario(scenario).robot_file.read_bytes())
     except Exception:                                    # noqa: BLE001 - the planning run reports it
         pass
     h.update(json.dumps({"iterations": iterations, "compare_blind": compare_blind,
@@ -85,18 +88,17 @@ def input_key(scenario: Path, iterations: int | None, compare_blind: bool) -> st
     return h.hexdigest()
 
 
-def _row(scenario: Path, status: str, summary: dict | None, seconds: float, out: Path, reason: str = "") -> dict:
+def _row(scenario: Path, status: str, comparison: PlanComparison | None, seconds: float | None, out: Path,
+         reason: str = "") -> dict:
+    """A row of the table across scenarios (its report units: bounds in mm)."""
     row = dict.fromkeys(COLUMNS)
     row.update(scenario=str(scenario), status=status, reason=reason, time_s=seconds, output_dir=str(out))
-    if summary:
-        a = summary.get("bound_aware") or {}
-        fc = a.get("final_check") or {}
-        row.update(cost=a.get("cost"), joint_path_length_m=a.get("joint_path_length_m"),
-                   max_bound_mm=a.get("max_bound_at_waypoints_mm"), final_bound_mm=a.get("final_bound_mm"),
-                   blind_max_bound_mm=(summary.get("bound_blind") or {}).get("max_bound_at_waypoints_mm"),
-                   repairs=fc.get("repairs"), failures=len(fc.get("failures") or []))
-        if status == "reused":
-            row["time_s"] = (summary.get("times_s") or {}).get("total")
+    if comparison is not None:
+        a, b = comparison.aware, comparison.blind
+        row.update(cost=a.cost, joint_path_length_m=a.joint_path_length_m, max_bound_mm=a.max_bound_at_waypoints_m * 1e3,
+                   final_bound_mm=a.final_bound_m * 1e3,
+                   blind_max_bound_mm=None if b is None else b.max_bound_at_waypoints_m * 1e3,
+                   repairs=a.repairs, failures=len(a.failures))
     return row
 
 
@@ -115,7 +117,7 @@ def _plan_one(scenario: Path, out: Path, key: str, iterations, compare_blind: bo
         reason = (f"{type(exc).__name__}: {exc}".splitlines() or [type(exc).__name__])[0]
         return _row(scenario, "failed", None, time.perf_counter() - t0, out, reason)
     (out / "inputs.sha256").write_text(key + "\n")
-    return _row(scenario, "planned", result.summary, time.perf_counter() - t0, out)
+    return _row(scenario, "planned", result.run.comparison, time.perf_counter() - t0, out)
 
 
 def _log_row(scenario, row: dict) -> None:
@@ -124,10 +126,17 @@ def _log_row(scenario, row: dict) -> None:
     logger.log(level, f"{scenario}: {row['status']} in {row['time_s']:.1f} s {row['reason']}".rstrip())
 
 
-def _reusable(out: Path, key: str) -> dict | None:
+def _reusable(out: Path, key: str) -> PlanRecord | None:
+    """The record of a complete run in ``out`` for the same inputs (``inputs.sha256``), else None
+    (also for a summary this version cannot read)."""
+    from .pipeline import read_plan_record
+
     summary, stamp = out / "summary.json", out / "inputs.sha256"
     if summary.exists() and stamp.exists() and stamp.read_text().strip() == key:
-        return json.loads(summary.read_text())
+        try:
+            return read_plan_record(summary)
+        except ValueError:
+            return None
     return None
 
 
@@ -185,7 +194,7 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
         out, key = root / f.stem, input_key(f, iterations, compare_blind)
         done = _reusable(out, key)
         if done is not None:
-            rows[f] = _row(f, "reused", done, 0.0, out)
+            rows[f] = _row(f, "reused", done.comparison, done.time_s, out)
             logger.info(f"{f}: complete outputs for the same inputs in {out}, reused")
         else:
             todo.append((f, out, key))

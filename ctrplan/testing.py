@@ -1,6 +1,6 @@
 """Assertions on a plan for pytest suites: ``from ctrplan.testing import assert_bound_below``.
 
-Each assertion takes either a :class:`ctrplan.api.PlanResult` (:func:`ctrplan.plan_scenario`) or
+Each assertion takes either a :class:`ctrplan.api.PlanResult` (:func:`ctrplan.plan`) or
 the output folder of ``ctrplan plan`` (``path.csv``, ``trajectory.csv`` and ``summary.json``,
 whose ``scenario_file`` names the scenario, read again for its robot, obstacles and drive
 limits). Arguments are in SI units (m, rad); a failure raises :class:`AssertionError` whose
@@ -80,11 +80,11 @@ def _plan(result_or_dir) -> _Plan:
         t = r.trajectory
         traj = None if t is None else {"t": t.t, "position": t.position, "velocity": t.velocity,
                                        "acceleration": t.acceleration}
-        return _Plan(label=str(r.output_dir), scenario=r.scenario, robot=r.robot, settings=_settings(r.scenario),
+        return _Plan(label=str(r.output_dir or f"plan of {r.scenario.name}"), scenario=r.scenario, robot=r.robot,
+                     settings=r.run.setup.settings,
                      q=np.asarray(r.q, float), motion=[str(m) for m in r.motion],
                      bound_position_m=np.asarray(r.bound_position_m, float),
-                     goal_waypoints=tuple(r.goal_waypoints), final_motion=r.summary.get("final_motion", ""),
-                     traj=traj)
+                     goal_waypoints=tuple(r.goal_waypoints), final_motion=r.run.aimed.final_motion, traj=traj)
     if not isinstance(result_or_dir, (str, os.PathLike)):
         raise TypeError(f"expected a PlanResult or an output folder, got {type(result_or_dir).__name__}")
     from .io.scenario import load_scenario
@@ -159,7 +159,7 @@ def assert_bound_below(result_or_dir, limit_m: float, *, between: bool = True,
     Parameters
     ----------
     result_or_dir : PlanResult or str or path-like
-        A plan (:func:`ctrplan.plan_scenario`) or the output folder of ``ctrplan plan``.
+        A plan (:func:`ctrplan.plan`) or the output folder of ``ctrplan plan``.
     limit_m : float
         Largest bound allowed [m].
     between : bool, keyword-only
@@ -223,7 +223,7 @@ def assert_rotations_before_translations(result_or_dir) -> None:
     Parameters
     ----------
     result_or_dir : PlanResult or str or path-like
-        A plan (:func:`ctrplan.plan_scenario`) or the output folder of ``ctrplan plan``.
+        A plan (:func:`ctrplan.plan`) or the output folder of ``ctrplan plan``.
 
     Raises
     ------
@@ -275,7 +275,7 @@ def assert_collision_free(result_or_dir, clearance_m: float = 0.0, *, between: b
     Parameters
     ----------
     result_or_dir : PlanResult or str or path-like
-        A plan (:func:`ctrplan.plan_scenario`) or the output folder of ``ctrplan plan``.
+        A plan (:func:`ctrplan.plan`) or the output folder of ``ctrplan plan``.
     clearance_m : float
         Smallest body-obstacle distance allowed [m], >= 0.
     between : bool, keyword-only
@@ -329,7 +329,7 @@ def assert_trajectory_within_limits(result_or_dir) -> None:
     Parameters
     ----------
     result_or_dir : PlanResult or str or path-like
-        A plan (:func:`ctrplan.plan_scenario`) or the output folder of ``ctrplan plan``.
+        A plan (:func:`ctrplan.plan`) or the output folder of ``ctrplan plan``.
 
     Raises
     ------

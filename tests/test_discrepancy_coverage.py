@@ -11,7 +11,7 @@ import pytest
 
 from ctrplan.discrepancy.coverage import calibrate_bound, conformal_factor, coverage_figures
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
-from ctrplan.io.robot_file import load_robot, robot_to_toml
+from ctrplan.io.robot_file import load_robot, load_robot_calibration, robot_to_toml
 from ctrplan.pipeline import aim_decision
 from reference.synth_reference import synthesize_reference
 
@@ -92,7 +92,7 @@ def test_friction_measurements_give_a_bound_that_covers_and_a_prediction_plannin
     robot = load_robot(res["updated_model_file"])
     assert robot.metadata["bound_calibration"]["factor"] == pytest.approx(bound["factor"])
     assert robot.metadata["prediction_validation"]["history_beats_standard"] is True
-    assert aim_decision(robot)["use_history"]
+    assert aim_decision(load_robot_calibration(res["updated_model_file"]).prediction).use_history
 
 
 def test_measurements_of_another_effect_refuse_the_prediction_and_widen_the_bound(tmp_path):
@@ -107,6 +107,6 @@ def test_measurements_of_another_effect_refuse_the_prediction_and_widen_the_boun
     robot = load_robot(res["updated_model_file"])
     assert not pc["history_beats_standard"], pc
     assert robot.metadata["prediction_validation"]["history_beats_standard"] is False
-    decision = aim_decision(robot)
-    assert not decision["use_history"] and "does not beat" in decision["reason"]
+    decision = aim_decision(load_robot_calibration(res["updated_model_file"]).prediction)
+    assert not decision.use_history and "does not beat" in decision.reason
     assert res["bound"]["factor"] > 1.0

@@ -18,7 +18,7 @@ LAYERS = (
     ("errors", "constants", "models", "planner_info",  # planner_info: names only, no OMPL
      "_log"),                                  # logging helpers (levels, the deprecated echo)
     ("history",),                              # pure numerics of motion history
-    ("robot",),
+    ("robot", "calibration"),                  # calibration: the robot file's records of measurements, typed
     ("coordinates", "effects"),                # robot-level quantities and the registry of effects
     ("obstacles",),                            # obstacle types and their registry: the scenario loader (io),
                                                # the collision checker (planning) and the plots use them
@@ -28,7 +28,7 @@ LAYERS = (
     ("planning",),
     ("plots", "report"),
     ("view",),                                 # the interactive view draws with plots' helpers
-    ("discrepancy", "pipeline"),
+    ("discrepancy", "pipeline"),               # pipeline: a subpackage, one module per stage and the report
     ("api",),                                  # plan_scenario: the pipeline's results as arrays
     ("studies", "testing"),                    # many scenarios; assertions on plans for pytest suites
     ("cli",),                                  # command line

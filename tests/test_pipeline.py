@@ -1,9 +1,10 @@
-"""The main job ``ctrplan plan`` / :func:`ctrplan.pipeline.run_plan`.
+"""The main job: :func:`ctrplan.plan` and ``ctrplan plan``.
 
 Default run: planning failures (goal outside the joint limits, goal in collision, no path within
-the budget) stop with exit code 2, an ``error:`` message, and no output folder. These use a
-synthetic constant bound field in place of the robot's map (the failures happen before or
-without using its values), so they take seconds.
+the budget) stop with exit code 2, an ``error:`` message, and no output folder. These plan with
+a synthetic constant bound field instead of the robot's map (the failures happen before or
+without using its values), so they take seconds: handed to :func:`ctrplan.plan`, or, for the
+command line, placed in the map cache of the working folder (``tests/_maps.py``).
 
 Slow (``-m slow``): a full bound-aware versus bound-blind plan on a shipped scenario with the
 shipped bound map, checking the output files' invariants and that the bound-aware path has the
@@ -15,17 +16,19 @@ from __future__ import annotations
 import csv
 import json
 import logging
+import re
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+import ctrplan
+from _maps import cache_constant_field, constant_field
 from ctrplan import cli, pipeline
 from ctrplan.errors import UnreachableGoalError
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings, solve_standard
-from ctrplan.boundmap import BoundField, map_coordinates, uniform_axis
 
 REPO = Path(__file__).resolve().parents[1]
 TABLE7 = REPO / "model" / "ha2019-table7-calibrated.toml"
@@ -68,24 +71,18 @@ ds_m = 0.004
 
 
 @pytest.fixture
-def synthetic_map(monkeypatch):
-    """Replace the bound map by a constant, everywhere-valid field (1 mm, 0.1 rad) and count
-    the calls: no map is computed or read."""
-    calls = []
+def cached_map(tmp_path, monkeypatch):
+    """Work in ``tmp_path`` with the constant, everywhere-valid field (1 mm, 0.1 rad) as the cached
+    map of the Table VII robot for the scenarios here: the command line reads it, nothing is
+    computed."""
+    monkeypatch.chdir(tmp_path)
+    return cache_constant_field(TABLE7)
 
-    def fake(robot_path, robot, spec, settings, n_jobs=1, **kwargs):
-        calls.append(spec.resolution)
-        coords = map_coordinates(robot)
-        axes = [uniform_axis(lo, hi, n, per) for lo, hi, n, per in zip(coords.lower, coords.upper, spec.resolution,
-                                                                         coords.periodic)]
-        shape = tuple(len(a) for a in axes)
-        values = np.broadcast_to(np.array([1e-3, 0.1, 5e-4, 0.05]), shape + (4,)).copy()
-        field = BoundField(axes, coords.periodic, values, np.ones(shape, bool), key="synthetic",
-                           coordinates=coords)
-        return field, "synthetic", 0.0
 
-    monkeypatch.setattr(pipeline, "load_or_compute_bound_map", fake)
-    return calls
+@pytest.fixture(scope="module")
+def field():
+    """The constant field over the Table VII robot's map coordinates, to hand to ctrplan.plan."""
+    return constant_field(load_robot(TABLE7))
 
 
 def _run_entry(monkeypatch, capsys, args):
@@ -97,18 +94,18 @@ def _run_entry(monkeypatch, capsys, args):
     return (0 if info.value.code is None else info.value.code), out.out, out.err
 
 
-def test_goal_outside_joint_limits_fails_without_outputs(tmp_path, monkeypatch, capsys, synthetic_map):
+def test_goal_outside_joint_limits_fails_without_outputs(tmp_path, monkeypatch, capsys, cached_map):
     sc = _scenario(tmp_path, "{alpha_2 = 1.0, alpha_3 = 0.0, beta_3 = -0.2}")
     out = tmp_path / "out"
-    code, _, err = _run_entry(monkeypatch, capsys, ["plan", str(sc), "--out", str(out), "--jobs", "1"])
+    code, stdout, err = _run_entry(monkeypatch, capsys, ["plan", str(sc), "--out", str(out), "--jobs", "1"])
     assert code == 2
     assert err.startswith("error: ")
     assert "goals[1].q.beta_3" in err and "joint limits" in err, err
     assert not out.exists()
-    assert synthetic_map == []  # rejected while reading the scenario
+    assert "bound map" not in stdout  # rejected while reading the scenario
 
 
-def test_goal_in_collision_fails_without_outputs(tmp_path, monkeypatch, capsys, synthetic_map):
+def test_goal_in_collision_fails_without_outputs(tmp_path, monkeypatch, capsys, cached_map):
     goal = (1.0, 0.5, -0.05)
     robot = load_robot(TABLE7)
     alpha, beta = robot.configuration(np.array(goal))
@@ -121,32 +118,32 @@ radius_m = 0.004
 """
     q = f"{{alpha_2 = {goal[0]}, alpha_3 = {goal[1]}, beta_3 = {goal[2]}}}"
     out = tmp_path / "out"
-    code, _, err = _run_entry(monkeypatch, capsys, ["plan", str(_scenario(tmp_path, q, sphere)), "--out", str(out),
-                                                    "--jobs", "1"])
+    code, stdout, err = _run_entry(monkeypatch, capsys, ["plan", str(_scenario(tmp_path, q, sphere)), "--out",
+                                                         str(out), "--jobs", "1"])
     assert code == 2
     assert err.startswith("error: ") and "goal" in err and "invalid" in err, err
     assert not out.exists()
-    assert len(synthetic_map) == 1
+    assert "bound map: cache in " in stdout   # the goal is rejected by the checker that reads the map
     # control: without the sphere the same goal is valid and the run gets to planning (stopped
     # here by a failing planner so that the test stays fast)
     def no_plan(*args, **kwargs):
         raise UnreachableGoalError("planner stopped by the test")
 
-    monkeypatch.setattr(pipeline, "plan_route", no_plan)
+    monkeypatch.setattr(pipeline.routes, "plan_route", no_plan)
     code, _, err = _run_entry(monkeypatch, capsys, ["plan", str(_scenario(tmp_path, q, "", name="free")),
                                                     "--out", str(out), "--jobs", "1"])
     assert code == 2 and "planner stopped by the test" in err, err
     assert not out.exists()
 
 
-def test_no_path_within_budget_fails_without_outputs(tmp_path, monkeypatch, capsys, synthetic_map):
+def test_no_path_within_budget_fails_without_outputs(tmp_path, monkeypatch, capsys, cached_map):
     calls = []
 
     def no_plan(robot, start_q, goal_q, *args, **kwargs):
         calls.append(kwargs.get("iterations"))
         raise UnreachableGoalError(f"RRTstar found no exact path in {kwargs.get('iterations')} iterations")
 
-    monkeypatch.setattr(pipeline, "plan_route", no_plan)
+    monkeypatch.setattr(pipeline.routes, "plan_route", no_plan)
     sc = _scenario(tmp_path, "{alpha_2 = 2.0, alpha_3 = 2.0, beta_3 = -0.06}")
     out = tmp_path / "out"
     code, _, err = _run_entry(monkeypatch, capsys, ["plan", str(sc), "--out", str(out), "--jobs", "1",
@@ -161,25 +158,24 @@ def test_no_path_within_budget_fails_without_outputs(tmp_path, monkeypatch, caps
 MOVE = "{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}"
 
 
-def test_library_plan_prints_nothing_and_logs_its_lines(tmp_path, monkeypatch, capsys, caplog, synthetic_map):
-    """``ctrplan.plan_scenario`` prints nothing (no stray print, no progress bar), even with INFO
+def test_library_plan_prints_nothing_and_logs_its_lines(tmp_path, monkeypatch, capsys, caplog, field):
+    """``ctrplan.plan`` prints nothing (no stray print, no progress bar), even with INFO
     enabled, and its progress lines and summary arrive as INFO records of loggers under
     ``ctrplan``, first the scenario line, last the summary. Catches a message printed around
     logging, logged under a logger outside ``ctrplan`` or at the wrong level."""
-    import ctrplan
-
     monkeypatch.chdir(tmp_path)
     caplog.set_level(logging.INFO, logger="ctrplan")
-    ctrplan.plan_scenario(_scenario(tmp_path, MOVE), tmp_path / "out", iterations=20, compare_blind=False)
+    ctrplan.plan(_scenario(tmp_path, MOVE), bound_map=field, out_dir=tmp_path / "out", iterations=20,
+                 compare_blind=False)
     assert capsys.readouterr() == ("", "")
     assert caplog.records and all(r.name.startswith("ctrplan.") for r in caplog.records)
     info = [r.getMessage() for r in caplog.records if r.levelno == logging.INFO]
     assert info[0] == "scenario probe: robot ha2019-table7-calibrated (alpha_2, alpha_3, beta_3)"
-    assert "bound map: synthetic in 0.0 s" in info
+    assert "bound map: given in 0.0 s" in info
     assert info[-1].startswith("scenario: probe\n")   # the summary, one record
 
 
-def test_plan_command_prints_its_lines_and_quiet_silences_them(tmp_path, monkeypatch, synthetic_map):
+def test_plan_command_prints_its_lines_and_quiet_silences_them(tmp_path, monkeypatch, cached_map):
     """``ctrplan plan``: by default the stages' lines, the summary and ``outputs in`` are plain
     lines on stdout (no logger prefix), each once although the command runs twice in this
     process; ``--quiet`` prints none of them, ``--verbose`` adds details; afterwards the
@@ -187,7 +183,6 @@ def test_plan_command_prints_its_lines_and_quiet_silences_them(tmp_path, monkeyp
     prefixes, a line printed around logging, and options that do not reach the level."""
     from click.testing import CliRunner
 
-    monkeypatch.chdir(tmp_path)
     out = tmp_path / "out"
     args = ["plan", str(_scenario(tmp_path, MOVE)), "--out", str(out), "--jobs", "1", "--iterations", "20",
             "--no-blind"]
@@ -198,8 +193,8 @@ def test_plan_command_prints_its_lines_and_quiet_silences_them(tmp_path, monkeyp
         r = runner.invoke(cli.main, args)
         assert r.exit_code == 0, (r.output, r.exception)
         lines = r.stdout.splitlines()
-        assert lines[:2] == ["scenario probe: robot ha2019-table7-calibrated (alpha_2, alpha_3, beta_3)",
-                             "bound map: synthetic in 0.0 s"]
+        assert lines[0] == "scenario probe: robot ha2019-table7-calibrated (alpha_2, alpha_3, beta_3)"
+        assert re.fullmatch(r"bound map: cache in \d+\.\d s", lines[1]), lines[1]
         assert lines[2].startswith("goal 1: q = [0.6, -0.4, -0.06], tip error ")
         assert lines[3].startswith("bound_aware: ") and " ordered waypoints, planning " in lines[3]
         assert lines[4] == "scenario: probe"            # the summary's first line
@@ -246,20 +241,20 @@ def test_shipped_scenario_bound_aware_beats_bound_blind(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # a computed map would be cached under ./.cache
     sc = _shipped_scenario(tmp_path, "obstacles")
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, compare_blind=True)
-    assert summary["bound_map"]["source"] == "shipped"
+    result = ctrplan.plan(sc, out_dir=out, n_jobs=1, compare_blind=True)
+    assert result.run.bound_map.source == "shipped"
 
-    comp = summary["comparison"]
-    for key in ("max_bound_at_waypoints_mm", "max_interpolated_bound_given_last_motion_mm",
-                "max_interpolated_friction_bound_along_path_mm", "final_bound_mm", "joint_path_length_m"):
-        assert set(comp[key]) == {"bound_aware", "bound_blind"}, key
-    for key in ("max_bound_at_waypoints_mm", "max_interpolated_bound_given_last_motion_mm"):
-        assert comp[key]["bound_aware"] < comp[key]["bound_blind"] - 0.5, (key, comp[key])
-    assert comp["mean_interpolated_friction_bound_along_path_mm"]["bound_aware"] < \
-        comp["mean_interpolated_friction_bound_along_path_mm"]["bound_blind"]
-    # the file says the same as the returned summary
-    on_disk = json.loads((out / "summary.json").read_text())
-    assert on_disk["comparison"] == json.loads(json.dumps(comp))
+    aware, blind = result.run.comparison.aware, result.run.comparison.blind
+    for key in ("max_bound_at_waypoints_m", "max_interpolated_bound_given_last_motion_m"):
+        assert getattr(aware, key) < getattr(blind, key) - 0.5e-3, (key, aware, blind)
+    assert aware.mean_interpolated_friction_bound_m < blind.mean_interpolated_friction_bound_m
+    # the file says the same as the typed result, in mm
+    comp = json.loads((out / "summary.json").read_text())["comparison"]
+    for key in ("max_bound_at_waypoints", "max_interpolated_bound_given_last_motion", "final_bound"):
+        assert comp[f"{key}_mm"] == {"bound_aware": pytest.approx(1e3 * getattr(aware, f"{key}_m"), rel=1e-12),
+                                     "bound_blind": pytest.approx(1e3 * getattr(blind, f"{key}_m"), rel=1e-12)}
+    assert comp["joint_path_length_m"] == {"bound_aware": aware.joint_path_length_m,
+                                           "bound_blind": blind.joint_path_length_m}
 
     _check_outputs(out, load_robot(TABLE7), sc)
 
@@ -275,11 +270,11 @@ def test_six_joint_scenario_plans_bound_aware_below_bound_blind(tmp_path, monkey
     monkeypatch.chdir(tmp_path)
     sc = _shipped_scenario(tmp_path, "six-joint")
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, compare_blind=True)
-    assert summary["bound_map"]["source"] == "shipped" and len(summary["bound_map"]["coordinates"]) == 4
-    comp = summary["comparison"]["max_bound_at_waypoints_mm"]
-    assert comp["bound_aware"] < comp["bound_blind"], comp
-    assert summary["goals"][0]["tip_error_mm"] <= 1.0
+    run = ctrplan.plan(sc, out_dir=out, n_jobs=1, compare_blind=True).run
+    assert run.bound_map.source == "shipped" and len(run.bound_map.field.axes) == 4
+    comp = run.comparison
+    assert comp.aware.max_bound_at_waypoints_m < comp.blind.max_bound_at_waypoints_m, comp
+    assert run.resolved.goals[0].tip_error <= 1e-3
     rows = _check_outputs(out, load_robot(REPO / "model" / "ha2019-table2-six-joint.toml"), sc)
     diff = [abs(float(r["planned_bound_m"]) - float(r["bound_position_m"])) for r in rows]
     assert max(diff) < 2e-3, diff
@@ -347,37 +342,92 @@ def _check_outputs(out: Path, robot, scenario_path: Path):
     return rows
 
 
-def test_short_plan_outputs_are_ordered_at_rest_and_complete(tmp_path, monkeypatch, synthetic_map):
-    """A short joint-space move (no obstacles, constant synthetic bound field, RRTstar 20
-    iterations): path.csv alternates pure rotation / pure translation phases, trajectory.csv is
-    rest-to-rest within the drive limits, summary.json has the comparison, the PNGs exist."""
+def test_short_plan_outputs_are_ordered_at_rest_and_complete(tmp_path, monkeypatch, field):
+    """A short joint-space move (no obstacles, constant synthetic bound field handed to the plan,
+    RRTstar 20 iterations): path.csv alternates pure rotation / pure translation phases,
+    trajectory.csv is rest-to-rest within the drive limits, summary.json has the comparison and is
+    the result's summary, the PNGs exist, and the result's arrays are path.csv's."""
     monkeypatch.chdir(tmp_path)
     sc = _scenario(tmp_path, "{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}")
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, iterations=20, compare_blind=True)
+    result = ctrplan.plan(sc, bound_map=field, out_dir=out, n_jobs=1, iterations=20, compare_blind=True)
     on_disk = json.loads((out / "summary.json").read_text())
     for key in ("max_bound_at_waypoints_mm", "max_interpolated_friction_bound_along_path_mm", "final_bound_mm",
                 "joint_path_length_m"):
         assert set(on_disk["comparison"][key]) == {"bound_aware", "bound_blind"}, key
-    assert on_disk["bound_map"]["source"] == "synthetic"
-    assert summary["output_dir"] == str(out)
+    assert on_disk["bound_map"]["source"] == "given" and on_disk["bound_map"]["key"] == "synthetic"
+    assert result.output_dir == out and result.summary["output_dir"] == str(out)
+    assert {k: v for k, v in json.loads(json.dumps(result.summary)).items() if k != "output_dir"} == \
+        {k: v for k, v in on_disk.items() if k not in ("n_waypoints", "n_segments")}
     rows = _check_outputs(out, load_robot(TABLE7), sc)
+    np.testing.assert_array_equal(result.q, [[float(r[n]) for n in result.joint_names] for r in rows])
+    np.testing.assert_array_equal(result.bound_position_m, [float(r["bound_position_m"]) for r in rows])
     # the synthetic map is 1 mm (friction) and 0.5 mm (translation-last) everywhere: the planned
     # bound of each waypoint is the one of its motion
     planned = [float(r["planned_bound_m"]) for r in rows]
     np.testing.assert_allclose(planned, [5e-4 if r["motion"] == "translation" else 1e-3 for r in rows], rtol=1e-12)
+    np.testing.assert_array_equal(result.run.waypoints.planned_bound_m, planned)
 
 
-def test_plans_in_parallel_equal_plans_in_series(tmp_path, monkeypatch, synthetic_map):
-    """With --jobs 2 the bound-blind plan runs in a forked process beside the bound-aware one: the
+def test_plans_in_parallel_equal_plans_in_series(tmp_path, monkeypatch, field):
+    """With n_jobs 2 the bound-blind plan runs in a forked process beside the bound-aware one: the
     outputs equal those of the serial run (seeded planners, iteration-count termination)."""
     monkeypatch.chdir(tmp_path)
     sc = _scenario(tmp_path, "{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}")
     runs = {}
     for jobs in (1, 2):
         out = tmp_path / f"out{jobs}"
-        s = pipeline.run_plan(sc, out_dir=out, n_jobs=jobs, iterations=30, compare_blind=True)
-        assert s["times_s"]["plans_in_parallel"] == (jobs == 2)
-        runs[jobs] = ((out / "path.csv").read_text(), s["bound_blind"]["joint_path_length_m"],
-                      s["bound_blind"]["max_bound_at_waypoints_mm"], s["bound_aware"]["cost"])
+        run = ctrplan.plan(sc, bound_map=field, out_dir=out, n_jobs=jobs, iterations=30, compare_blind=True).run
+        assert run.plans.in_parallel == (jobs == 2)
+        blind = run.comparison.blind
+        runs[jobs] = ((out / "path.csv").read_text(), blind.joint_path_length_m, blind.max_bound_at_waypoints_m,
+                      run.comparison.aware.cost)
     assert runs[1] == runs[2]
+
+
+def test_plan_writes_no_file_unless_asked(tmp_path, monkeypatch, field):
+    """Without ``out_dir`` the plan writes nothing (the working folder keeps only the scenario
+    file) and its result has no output folder; ``PlanResult.write`` writes afterwards the files a
+    plan with ``out_dir`` writes, with the same path.csv. Catches a plan that writes by default
+    and a later report that differs from the run's."""
+    monkeypatch.chdir(tmp_path)
+    sc = _scenario(tmp_path, MOVE)
+    result = ctrplan.plan(sc, bound_map=field, iterations=20, compare_blind=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [sc.name]
+    assert result.output_dir is None and "output_dir" not in result.summary
+    written = result.write(tmp_path / "later")
+    assert {"path.csv", "trajectory.csv", "summary.json", "plan.html"} <= set(written)
+    direct = ctrplan.plan(sc, bound_map=field, out_dir=tmp_path / "direct", iterations=20, compare_blind=False)
+    assert (tmp_path / "later" / "path.csv").read_text() == (direct.output_dir / "path.csv").read_text()
+
+
+def test_plan_takes_a_loaded_scenario_a_robot_and_a_calibration(tmp_path, field):
+    """The entry point's inputs as objects: a loaded scenario; a calibration, which the plan
+    applies (the calibrated bound at every waypoint, the summary's note); a robot, which needs its
+    bound map and the scenario's joints; a bound map over the robot's map coordinates. Catches
+    inputs that are accepted and then ignored."""
+    from ctrplan.calibration import CalibratedBound, RobotCalibration
+    from ctrplan.io.scenario import load_scenario
+
+    sc = load_scenario(_scenario(tmp_path, MOVE))
+    cal = RobotCalibration(bound=CalibratedBound(factor=1.5, target_coverage=0.9, noise_margin_m=3e-4))
+    result = ctrplan.plan(sc, bound_map=field, calibration=cal, iterations=20, compare_blind=False)
+    np.testing.assert_allclose(result.calibrated_bound_m, 1.5 * (result.bound_position_m + 3e-4), rtol=1e-12)
+    assert result.summary["bound_calibration"]["calibrated"] and result.scenario.calibration == cal
+    with pytest.raises(ValueError, match="without its bound map"):
+        ctrplan.plan(sc, robot=sc.robot)
+    six = load_robot(REPO / "model" / "ha2019-table2-six-joint.toml")
+    with pytest.raises(ValueError, match="has joints"):
+        ctrplan.plan(sc, robot=six, bound_map=field)
+    with pytest.raises(ValueError, match="map coordinates"):
+        ctrplan.plan(sc, bound_map=constant_field(six, (4, 4, 4, 3)))
+
+
+def test_run_plan_is_deprecated_and_returns_the_written_summary(tmp_path, monkeypatch, cached_map):
+    """The earlier entry point still plans and reports, with a DeprecationWarning."""
+    sc = _scenario(tmp_path, MOVE)
+    with pytest.warns(DeprecationWarning, match="ctrplan.plan"):
+        summary = pipeline.run_plan(sc, out_dir=tmp_path / "out", iterations=20, compare_blind=False)
+    assert summary["output_dir"] == str(tmp_path / "out") and summary["bound_map"]["source"] == "cache"
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["bound_aware"] == \
+        json.loads(json.dumps(summary["bound_aware"]))

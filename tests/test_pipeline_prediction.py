@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import ctrplan
 from ctrplan import pipeline
 from ctrplan.errors import ModelFileError
 from ctrplan.io.scenario import load_scenario
@@ -43,12 +44,14 @@ def _rows(out: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
-def _run(tmp_path, monkeypatch, sc):
+def _run(tmp_path, monkeypatch, sc, calibration=None):
+    """Plan (bound-aware only, 60 iterations) with the shipped map into ``tmp_path/out``: the
+    summary and path.csv's rows."""
     monkeypatch.chdir(tmp_path)      # a computed map would be cached under ./.cache
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, iterations=60, compare_blind=False)
-    assert summary["bound_map"]["source"] == "shipped"
-    return summary, _rows(out)
+    result = ctrplan.plan(sc, calibration=calibration, out_dir=out, n_jobs=1, iterations=60, compare_blind=False)
+    assert result.run.bound_map.source == "shipped"
+    return result.summary, _rows(out)
 
 
 def _hand_eta(robot, rows) -> np.ndarray:
@@ -144,18 +147,14 @@ def test_bad_final_motion_names_file_key_and_value(tmp_path):
         load_scenario(sc)
 
 
-def _with_metadata(monkeypatch, **tables):
-    """Make the scenario loader add robot-file tables to the robot's metadata (the robot file's
-    text, and so its shipped bound map, stay the same)."""
-    import ctrplan.io.scenario as scenario_module
+def _calibration(prediction_validation=None, bound_calibration=None):
+    """Robot-file tables as the typed records a plan is handed (the robot file's text, and so its
+    shipped bound map, stay the same)."""
+    from ctrplan.calibration import CalibratedBound, PredictionValidation, RobotCalibration
 
-    original = scenario_module.load_robot
-
-    def load(path, *args, **kwargs):
-        robot = original(path, *args, **kwargs)
-        return robot.replace(metadata={**robot.metadata, **tables})
-
-    monkeypatch.setattr(scenario_module, "load_robot", load)
+    return RobotCalibration(
+        bound=None if bound_calibration is None else CalibratedBound.from_table(bound_calibration),
+        prediction=None if prediction_validation is None else PredictionValidation.from_table(prediction_validation))
 
 
 def test_auto_aims_with_the_standard_model_when_the_prediction_is_not_validated(tmp_path, monkeypatch):
@@ -188,9 +187,8 @@ def test_auto_aims_with_a_validated_prediction_and_ranks_by_the_calibrated_bound
           "history_beats_standard": True, "test_samples": 250, "data_file": "measured.csv"}
     bc = {"factor": 1.5, "noise_margin_m": 0.3e-3, "target_coverage": 0.9, "test_coverage": 0.88,
           "test_coverage_low": 0.8, "test_coverage_high": 0.95, "failing": False, "data_file": "measured.csv"}
-    _with_metadata(monkeypatch, prediction_validation=pv, bound_calibration=bc)
     sc = _task_target(tmp_path, aim_with=None)
-    summary, rows = _run(tmp_path, monkeypatch, sc)
+    summary, rows = _run(tmp_path, monkeypatch, sc, _calibration(prediction_validation=pv, bound_calibration=bc))
     g = summary["goal_prediction"]["goal_1"]
     assert summary["aiming"]["use_history"] and g["aimed_with"] == "history-aware prediction"
     assert g["compensation_used"] and g["measured_error_of_aiming_model_mean_mm"] == pytest.approx(3.0)
@@ -206,15 +204,13 @@ def test_auto_aims_with_a_validated_prediction_and_ranks_by_the_calibrated_bound
 def test_the_effective_bound_weight_ranks_paths_as_the_calibrated_bound_does():
     """For any paths (length L, bound integral I), L + w' I is (1 + w c m)^-1 times the cost with the
     calibrated bound, (1 + w c m) L + w c I: the same order. Catches a wrong effective weight."""
-    from ctrplan.io.robot_file import load_robot
+    from ctrplan.calibration import CalibratedBound
 
-    robot = load_robot(REPO / "model" / "ha2019-table7-calibrated.toml")
-    robot = robot.replace(metadata={**robot.metadata, "bound_calibration": {"factor": 1.7, "noise_margin_m": 0.4e-3}})
+    cal = CalibratedBound(factor=1.7, target_coverage=0.9, noise_margin_m=0.4e-3)
     w, c, m = 1000.0, 1.7, 0.4e-3
-    w_eff = pipeline.effective_bound_weight(robot, w)
+    w_eff = pipeline.effective_bound_weight(cal, w)
     rng = np.random.default_rng(2718)
     L, I = rng.uniform(0.1, 2.0, 50), rng.uniform(0.0, 5e-3, 50)
     np.testing.assert_allclose((1 + w * c * m) * L + w * c * I, (1 + w * c * m) * (L + w_eff * I), rtol=1e-12)
-    assert pipeline.effective_bound_weight(robot, 0.0) == 0.0
-    plain = load_robot(REPO / "model" / "ha2019-table7-calibrated.toml")
-    assert pipeline.effective_bound_weight(plain, w) == w
+    assert pipeline.effective_bound_weight(cal, 0.0) == 0.0
+    assert pipeline.effective_bound_weight(None, w) == w

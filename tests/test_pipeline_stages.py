@@ -1,5 +1,5 @@
-"""Stage functions of :mod:`ctrplan.pipeline`: each returns SI values (m, rad), and the report
-stage alone converts to mm and degrees.
+"""Stage functions of :mod:`ctrplan.pipeline`: each returns a frozen result in SI values (m, rad),
+and the report (``plan_summary``, ``write_report``) alone converts to mm and degrees.
 
 The stages run on the Table VII robot with a synthetic constant bound field (friction 1 mm,
 0.1 rad; translation-last 0.5 mm, 0.05 rad), so no bound map is read or computed and each test
@@ -142,17 +142,22 @@ def planned(tmp_path_factory):
     """Stages 1-6 on a short joint-space move with the synthetic field (20 RRT* iterations)."""
     tmp_path = tmp_path_factory.mktemp("stages")
     setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "out")
-    bound_map = pipeline.BoundMapStage(field=_field(setup.robot), source="synthetic", time_s=0.0)
+    bound_map = pipeline.given_bound_map(setup, _field(setup.robot))
     validity = pipeline.check_start(setup, bound_map.field)
     resolved = pipeline.resolve_goals(setup, bound_map.field, validity)
     aimed = pipeline.aim_goals(setup, resolved, validity)
     plans = pipeline.plan_routes(setup, bound_map.field, aimed, compare_blind=True, n_jobs=1)
     traj = pipeline.time_parameterize(setup, plans.aware.ordered)
-    return setup, bound_map, validity, resolved, aimed, plans, traj
+    run = pipeline.PlanRun(setup=setup, bound_map=bound_map, goal_checks=pipeline.GoalCheckCounts.of(validity),
+                           resolved=resolved, aimed=aimed, plans=plans, trajectory=traj,
+                           waypoints=pipeline.waypoint_table(plans.aware, setup.calibration.bound),
+                           comparison=pipeline.compare_plans(plans),
+                           goals=pipeline.goal_outcomes(setup.robot, bound_map.field, aimed, plans.aware), time_s=1.5)
+    return setup, bound_map, validity, resolved, aimed, plans, traj, run
 
 
 def test_plan_routes_returns_bounds_and_lengths_in_si_units(planned):
-    setup, _, _, _, aimed, plans, _ = planned
+    setup, _, _, _, aimed, plans, _, _ = planned
     assert list(plans.routes) == ["bound_aware", "bound_blind"] and not plans.in_parallel
     for plan in plans.routes.values():
         ordered = plan.ordered
@@ -176,12 +181,37 @@ def test_plan_routes_returns_bounds_and_lengths_in_si_units(planned):
         assert np.all(plan.prediction.offset[plan.prediction.ok] < 0.03)
 
 
+def test_evaluation_stages_are_in_si_units(planned):
+    """The waypoint table, the plans' metrics and the goal outcomes hold m and rad: the exact
+    bounds of the Table VII robot (millimetres, i.e. ~1e-3) and the synthetic map's 1 mm as 1e-3."""
+    setup, bound_map, _, _, aimed, plans, _, run = planned
+    exact = plans.aware.bounds.exact
+    table = run.waypoints
+    assert len(table) == len(plans.aware.ordered) and table.q.shape == (len(table), 3)
+    np.testing.assert_array_equal(table.bound_position_m, exact.position)
+    np.testing.assert_array_equal(table.q, plans.aware.ordered.q)
+    assert not table.q.flags.writeable                                    # frozen arrays
+    assert np.all(np.isnan(table.calibrated_bound_m))                     # no [bound_calibration]
+    assert list(table.bound_kind) == ["translation_last" if m == "translation" else "friction"
+                                      for m in table.motion]
+    aware, blind = run.comparison.aware, run.comparison.blind
+    assert aware.max_bound_at_waypoints_m == np.nanmax(exact.position) and 1e-5 < aware.final_bound_m < 0.03
+    assert aware.final_bound_angle_rad == exact.angle[-1]
+    assert aware.max_interpolated_friction_bound_m == pytest.approx(SYNTHETIC[0], rel=1e-12)
+    assert blind is not None and blind.joint_path_length_m == plans.routes["bound_blind"].bounds.dense_s[-1]
+    (goal,) = run.goals
+    assert goal.waypoint == plans.aware.goal_indices[0] == len(table) - 1
+    assert goal.planned_field_bound_m == pytest.approx(SYNTHETIC[0], rel=1e-12)
+    assert goal.predicted_miss_m is None and goal.planned_history_as_assumed is None   # a joint goal
+    assert run.timings_s["total"] == 1.5 and run.timings_s["bound_map"] == 0.0
+
+
 def test_report_stage_converts_the_si_results_to_mm_and_degrees_once(planned):
-    setup, bound_map, validity, resolved, aimed, plans, traj = planned
-    rows = pipeline.path_rows(plans.aware)
+    setup, bound_map, validity, resolved, aimed, plans, traj, run = planned
+    rows = pipeline.path_rows(run.waypoints)
     exact = plans.aware.bounds.exact
     assert [r["bound_position_m"] for r in rows] == [float(x) for x in exact.position]
-    summary = pipeline.plan_summary(setup, bound_map, validity, resolved, aimed, plans, traj)
+    summary = pipeline.plan_summary(run)
     aware = summary["bound_aware"]
     assert aware["max_bound_at_waypoints_mm"] == pytest.approx(1e3 * np.nanmax(exact.position), rel=1e-12)
     assert aware["final_bound_angle_deg"] == pytest.approx(np.degrees(exact.angle[-1]), rel=1e-12)
@@ -189,8 +219,21 @@ def test_report_stage_converts_the_si_results_to_mm_and_degrees_once(planned):
     assert aware["joint_path_length_m"] == plans.aware.bounds.dense_s[-1]            # m stays m
     assert summary["goals"][0]["field_bound_planned_mm"] == pytest.approx(1e3 * SYNTHETIC[0], rel=1e-12)
     assert summary["bound_map"]["ds_m"] == setup.settings.ds
-    assert summary["duration_s"] == traj.duration and summary["times_s"]["total"] is None
+    assert summary["duration_s"] == traj.duration and summary["times_s"]["total"] == 1.5
+    assert summary["bound_map"]["source"] == "given" and summary["bound_map"]["time_s"] == 0.0
     assert set(summary["comparison"]["final_bound_mm"]) == {"bound_aware", "bound_blind"}
+    # the summary read back in SI units gives the plans' metrics again
+    import json
+
+    path = setup.out_dir.parent / "summary-back.json"
+    path.write_text(json.dumps(summary))
+    record = pipeline.read_plan_record(path)
+    assert record.time_s == 1.5
+    for back, metrics in ((record.comparison.aware, run.comparison.aware),
+                          (record.comparison.blind, run.comparison.blind)):
+        assert back.max_bound_at_waypoints_m == pytest.approx(metrics.max_bound_at_waypoints_m, rel=1e-12)
+        assert back.final_bound_angle_rad == pytest.approx(metrics.final_bound_angle_rad, rel=1e-12)
+        assert (back.cost, back.repairs, back.failures) == (metrics.cost, metrics.repairs, metrics.failures)
 
 
 def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, monkeypatch):
@@ -201,9 +244,7 @@ def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, m
 
     from ctrplan import view
 
-    setup, bound_map, validity, resolved, aimed, plans, traj = planned
-    rows = pipeline.path_rows(plans.aware)
-    summary = pipeline.plan_summary(setup, bound_map, validity, resolved, aimed, plans, traj)
+    setup, bound_map, validity, resolved, aimed, plans, traj, run = planned
     captured = {}
     write = view.write_plan_view
 
@@ -212,7 +253,7 @@ def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, m
         return write(path, standard, **kw)
 
     monkeypatch.setattr(view, "write_plan_view", spy)
-    written = pipeline.write_report(setup, plans, traj, rows, summary)
+    written = pipeline.write_report(run)
     html = written["plan.html"].read_text(encoding="utf-8")
     K = len(plans.aware.ordered)
     assert len(re.findall(r'"method":\s*"update"', html)) == K

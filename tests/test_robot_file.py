@@ -287,6 +287,16 @@ def test_bound_calibration_and_prediction_validation_round_trip_and_are_checked(
     back = load_robot(path)
     assert {k: back.metadata["bound_calibration"][k] for k in bound} == bound
     assert {k: back.metadata["prediction_validation"][k] for k in pred} == pred
+    # as typed objects, the way planning reads them (and a scenario carries them)
+    from ctrplan.calibration import CalibratedBound, PredictionValidation
+    from ctrplan.io.robot_file import load_robot_calibration
+
+    cal = load_robot_calibration(path)
+    assert cal.bound == CalibratedBound(**bound) and cal.prediction == PredictionValidation(**pred)
+    np.testing.assert_allclose(cal.bound.apply([0.0, 1e-3]), 1.2849400356625302 * (np.array([0.0, 1e-3])
+                                                                                   + 0.0008186517513246324))
+    plain = load_robot_calibration(MODEL_DIR / "ha2019-table1-tube-pair.toml")
+    assert plain.bound is None and plain.prediction is None
     path.write_text(text.replace("factor = 1.2849400356625302", "factor = -1.0"))
     with pytest.raises(ModelFileError, match=r"r\.toml.*bound_calibration\.factor.*-1"):
         load_robot(path)

@@ -135,6 +135,13 @@ q = {alpha_2 = 0.0, alpha_3 = 1.0, beta_3 = -0.034}
     assert s.obstacles == () and s.drive is None and s.output_dir is None
     assert s.planner.iterations == 3000 and s.planner.name == "RRTstar"
     assert s.bound_field.resolution is None
+    # the robot file records no measurements; with them, the scenario carries them typed
+    assert s.calibration.bound is None and s.calibration.prediction is None
+    (tmp_path / "model.toml").write_text(TABLE2.read_text() + "\n[bound_calibration]\ntarget_coverage = 0.9\n"
+                                         "factor = 1.25\nnoise_margin_m = 0.0002\n")
+    cal = load_scenario(tmp_path / "scenario.toml").calibration
+    assert (cal.bound.factor, cal.bound.noise_margin_m, cal.bound.target_coverage) == (1.25, 2e-4, 0.9)
+    assert cal.prediction is None
 
 
 def test_joint_array_helpers(tmp_path):

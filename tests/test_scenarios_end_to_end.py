@@ -1,12 +1,13 @@
 """The shipped task-target and sequence scenarios, end to end, in the default run.
 
-``ctrplan.pipeline.run_plan`` on copies of ``scenarios/task-target.toml`` and
+``ctrplan.plan_scenario`` on copies of ``scenarios/task-target.toml`` and
 ``scenarios/sequence.toml`` as shipped (their own planner, iterations, seed and shipped bound map),
 into ``tmp_path``. Checked here, beyond the shared output invariants of ``test_pipeline``
 (``_check_outputs``: pure rotation / translation phases, start, rest-to-rest trajectory within the
 drive limits, figures):
 
-- the summary agrees with the files (its bound maxima are those of path.csv's rows);
+- the summary agrees with the files (its bound maxima are those of path.csv's rows), and the
+  typed result with both (the goals' waypoints);
 - every goal is reached, in the scenario's order: a joint goal exactly (modulo 2 pi on the
   periodic joints), a task goal with the tip of the model it was aimed with within its tolerance
   at the goal's waypoint (the standard-model tip when the summary says the standard model was
@@ -32,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan import pipeline
+import ctrplan
 from ctrplan.io.robot_file import load_robot
 from ctrplan.io.scenario import TaskGoal, load_scenario
 
@@ -47,12 +48,12 @@ def _run(tmp_path, monkeypatch, name, compare_blind):
     monkeypatch.chdir(tmp_path)      # a computed map would be cached under ./.cache
     sc = _shipped_scenario(tmp_path, name)
     out = tmp_path / "out"
-    summary = pipeline.run_plan(sc, out_dir=out, n_jobs=1, compare_blind=compare_blind)
-    assert summary["bound_map"]["source"] == "shipped"   # no map computed in the default run
+    result = ctrplan.plan_scenario(sc, out, n_jobs=1, compare_blind=compare_blind)
+    assert result.run.bound_map.source == "shipped"   # no map computed in the default run
     with open(out / "path.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     on_disk = json.loads((out / "summary.json").read_text())
-    return sc, out, summary, on_disk, rows
+    return sc, out, result, on_disk, rows
 
 
 def _goal_waypoints(robot, scenario, rows, summary):
@@ -79,8 +80,9 @@ def _goal_waypoints(robot, scenario, rows, summary):
     return found
 
 
-def _check_goals_and_summary(robot, sc_path, summary, on_disk, rows, plans):
+def _check_goals_and_summary(robot, sc_path, result, on_disk, rows, plans):
     scenario = load_scenario(sc_path)
+    summary = result.summary
     # the file says what the function returned, and its bound maxima are those of path.csv
     assert on_disk["bound_aware"] == json.loads(json.dumps(summary["bound_aware"]))
     exact = np.array([float(r["bound_position_m"]) for r in rows])
@@ -104,6 +106,7 @@ def _check_goals_and_summary(robot, sc_path, summary, on_disk, rows, plans):
     # every goal reached, in order; the last waypoint is the last goal
     idx = _goal_waypoints(robot, scenario, rows, on_disk)
     assert idx == sorted(idx) and idx[-1] == len(rows) - 1
+    assert tuple(idx) == result.goal_waypoints == tuple(g.waypoint for g in result.run.goals)
     for k, (goal, i) in enumerate(zip(scenario.goals, idx)):
         if not isinstance(goal, TaskGoal):
             continue
@@ -122,10 +125,10 @@ def test_task_target_scenario_end_to_end(tmp_path, monkeypatch):
     the waypoints below the bound-blind one's (measured 3.80 against 8.51 mm). Catches a run that
     no longer reaches the task target, a summary that disagrees with path.csv, a phase that
     skipped the final check, and a bound cost that no longer steers the planner."""
-    sc, out, summary, on_disk, rows = _run(tmp_path, monkeypatch, "task-target", compare_blind=True)
+    sc, out, result, on_disk, rows = _run(tmp_path, monkeypatch, "task-target", compare_blind=True)
     robot = load_robot(REPO / "model" / "ha2019-table7-calibrated.toml")
     _check_outputs(out, robot, sc)
-    _check_goals_and_summary(robot, sc, summary, on_disk, rows, ("bound_aware", "bound_blind"))
+    _check_goals_and_summary(robot, sc, result, on_disk, rows, ("bound_aware", "bound_blind"))
     comp = on_disk["comparison"]["max_bound_at_waypoints_mm"]
     assert comp["bound_aware"] < comp["bound_blind"], comp
     # both plans end at the same goal, so their final bounds are equal
@@ -139,10 +142,10 @@ def test_sequence_scenario_end_to_end(tmp_path, monkeypatch):
     exactly, the task goal within 1 mm), every phase checked, and the path returns to the start
     configuration. Catches a leg dropped or planned out of order, a task goal reached only
     approximately beyond its tolerance, and a route whose legs do not join."""
-    sc, out, summary, on_disk, rows = _run(tmp_path, monkeypatch, "sequence", compare_blind=False)
+    sc, out, result, on_disk, rows = _run(tmp_path, monkeypatch, "sequence", compare_blind=False)
     robot = load_robot(REPO / "model" / "ha2019-table7-calibrated.toml")
     _check_outputs(out, robot, sc)
-    scenario = _check_goals_and_summary(robot, sc, summary, on_disk, rows, ("bound_aware",))
+    scenario = _check_goals_and_summary(robot, sc, result, on_disk, rows, ("bound_aware",))
     assert len(scenario.goals) == 3 and "bound_blind" not in on_disk
     last = np.array([float(rows[-1][n]) for n in robot.joint_names])
     d = last - scenario.start

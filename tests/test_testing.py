@@ -1,8 +1,8 @@
 """The assertions of ``ctrplan.testing`` on a real plan and on broken copies of its outputs.
 
 One plan per module: the shipped task-target scenario (its goal, planner, seed and drive
-limits) with 60 RRT* iterations, bound-aware only, through :func:`ctrplan.plan_scenario`. Its
-bound map is replaced by a constant synthetic field (as in ``test_pipeline``): the assertions
+limits) with 60 RRT* iterations, bound-aware only, through :func:`ctrplan.plan`. It is handed a
+constant synthetic bound field (``tests/_maps.py``) instead of the robot's map: the assertions
 read the plan and the exact model, not the map, and the module does not depend on a shipped
 map matching the robot file. Each assertion passes on the plan (as a ``PlanResult`` and as its
 output folder) and fails, naming the waypoint, the quantity, its value and the limit, on an
@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 import ctrplan
-from ctrplan import pipeline
-from ctrplan.boundmap import BoundField, map_coordinates, uniform_axis
+from _maps import constant_field
+from ctrplan.io.scenario import load_scenario
 from ctrplan.testing import _between, _plan
 from ctrplan.testing import (assert_bound_below, assert_collision_free, assert_rotations_before_translations,
                              assert_trajectory_within_limits)
@@ -31,16 +31,6 @@ REPO = Path(__file__).resolve().parents[1]
 
 # Few, coarse points between waypoints (each costs an exact-bound evaluation).
 COARSE = (math.radians(30.0), 0.01)
-
-
-def _constant_map(robot_path, robot, spec, settings, n_jobs=1, **kwargs):
-    coords = map_coordinates(robot)
-    axes = [uniform_axis(lo, hi, n, per) for lo, hi, n, per in zip(coords.lower, coords.upper, spec.resolution,
-                                                                     coords.periodic)]
-    shape = tuple(len(a) for a in axes)
-    values = np.broadcast_to(np.array([1e-3, 0.1, 5e-4, 0.05]), shape + (4,)).copy()
-    return BoundField(axes, coords.periodic, values, np.ones(shape, bool), key="synthetic",
-                      coordinates=coords), "synthetic", 0.0
 
 
 def _task_target(folder: Path, obstacle: str = "") -> Path:
@@ -59,10 +49,11 @@ def _task_target(folder: Path, obstacle: str = "") -> Path:
 def plan(tmp_path_factory):
     """(PlanResult, output folder) of the task-target plan."""
     tmp = tmp_path_factory.mktemp("plan")
+    sc = load_scenario(_task_target(tmp))
+    field = constant_field(sc.robot, sc.bound_field.resolution)
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(tmp)
-        mp.setattr(pipeline, "load_or_compute_bound_map", _constant_map)
-        result = ctrplan.plan_scenario(_task_target(tmp), tmp / "out", iterations=60, compare_blind=False)
+        result = ctrplan.plan(sc, bound_map=field, out_dir=tmp / "out", iterations=60, compare_blind=False)
     return result, tmp / "out"
 
 

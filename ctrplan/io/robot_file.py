@@ -22,12 +22,13 @@ from typing import Annotated
 import pydantic
 from pydantic import BaseModel, ConfigDict, Field
 
+from ..calibration import CalibratedBound, PredictionValidation, RobotCalibration
 from ..errors import ModelFileError, PhysicalParameterError
 from ..models import MODELS, check_model
 from ..robot import ROTATION, TRANSLATION, Joint, Robot, Section, TranslationLink, Tube
 
-__all__ = ["load_robot", "robot_from_toml_text", "robot_from_document", "robot_to_toml", "file_hash",
-           "RobotDocument", "MODELS"]
+__all__ = ["load_robot", "load_robot_calibration", "robot_from_toml_text", "robot_from_document",
+           "calibration_from_document", "robot_to_toml", "file_hash", "RobotDocument", "MODELS"]
 
 MEMORY = "<memory>"
 
@@ -314,7 +315,9 @@ def load_robot(path: str | os.PathLike) -> Robot:
     Returns
     -------
     Robot
-        In SI units. ``robot.metadata`` holds ``file`` (resolved path) and ``sha256``.
+        In SI units. ``robot.metadata`` holds ``file`` (resolved path) and ``sha256`` (and the
+        file's other tables as dicts; planning reads ``[bound_calibration]`` and
+        ``[prediction_validation]`` through :func:`load_robot_calibration`).
 
     Raises
     ------
@@ -325,10 +328,56 @@ def load_robot(path: str | os.PathLike) -> Robot:
         Physically impossible tubes (e.g. non-positive clearance, inner diameter not below the
         outer diameter); the message starts with the file name and names the tubes.
     """
+    return _load_robot_file(path)[0]
+
+
+def load_robot_calibration(path: str | os.PathLike) -> RobotCalibration:
+    """What a robot model file records about measurements: its ``[bound_calibration]`` and
+    ``[prediction_validation]`` tables as typed objects (``ctrplan discrepancy`` writes them).
+
+    Parameters
+    ----------
+    path : str or path-like
+        TOML robot file.
+
+    Returns
+    -------
+    RobotCalibration
+        Each table, or None where the file has none.
+
+    Raises
+    ------
+    ModelFileError, PhysicalParameterError
+        As :func:`load_robot` (the whole file is checked).
+    """
+    return _load_robot_file(path)[1]
+
+
+def _load_robot_file(path) -> tuple[Robot, RobotCalibration]:
+    """The robot of a robot file and its records of measurements, from one reading of the file."""
     path = Path(path)
-    robot = robot_from_toml_text(read_text(path), file=str(path))
+    doc = validate_document(RobotDocument, parse_toml(read_text(path), str(path)), str(path))
+    robot = robot_from_document(doc, str(path))
     robot.metadata.update(file=str(path.resolve()), sha256=file_hash(path))
-    return robot
+    return robot, calibration_from_document(doc)
+
+
+def calibration_from_document(doc: RobotDocument) -> RobotCalibration:
+    """The ``[bound_calibration]`` and ``[prediction_validation]`` tables of a validated robot
+    document as typed objects (SI units, as in the file).
+
+    Parameters
+    ----------
+    doc : RobotDocument
+
+    Returns
+    -------
+    RobotCalibration
+    """
+    return RobotCalibration(
+        bound=None if doc.bound_calibration is None else CalibratedBound.from_table(doc.bound_calibration.model_dump()),
+        prediction=(None if doc.prediction_validation is None
+                    else PredictionValidation.from_table(doc.prediction_validation.model_dump())))
 
 
 def robot_from_toml_text(text: str, file: str = MEMORY) -> Robot:

@@ -19,12 +19,13 @@ from typing import Annotated, Literal, Mapping, Union
 import numpy as np
 from pydantic import AfterValidator, Field
 
+from ..calibration import RobotCalibration
 from ..coordinates import map_coordinates
 from ..errors import JointLimitError, ModelFileError
 from ..obstacles import OBSTACLE_TYPES, Box, Capsule, Mesh, Sphere  # noqa: F401 (the built-in types, also here)
 from ..planner_info import check_planner
 from ..robot import Robot
-from .robot_file import MAX_METRES, _Strict, load_robot, parse_toml, read_text, validate_document
+from .robot_file import MAX_METRES, _load_robot_file, _Strict, parse_toml, read_text, validate_document
 
 __all__ = [
     "load_scenario",
@@ -291,6 +292,10 @@ class Scenario:
         None when the file has no ``[drive]`` table (no time parameterization possible).
     output_dir : pathlib.Path or None
         Resolved output directory.
+    calibration : RobotCalibration
+        What the robot file records about measurements (its ``[bound_calibration]`` and
+        ``[prediction_validation]``; :func:`ctrplan.io.robot_file.load_robot_calibration`), which
+        planning reads; empty for a robot file without them.
     """
 
     name: str
@@ -304,6 +309,7 @@ class Scenario:
     bound_field: BoundFieldSettings = field(default_factory=BoundFieldSettings)
     drive: DriveLimits | None = None
     output_dir: Path | None = None
+    calibration: RobotCalibration = field(default_factory=RobotCalibration)
 
     @property
     def joint_names(self) -> list[str]:
@@ -410,7 +416,7 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
     robot_file = (base / doc.robot).resolve()
     if not robot_file.is_file():
         raise ModelFileError(file, "robot", f"robot file {doc.robot!r} not found (looked for {robot_file})")
-    robot = load_robot(robot_file)
+    robot, calibration = _load_robot_file(robot_file)
 
     start = _joint_values(robot, doc.start.q, file, "start.q")
 
@@ -452,7 +458,8 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
     scenario_path = Path(file) if file == "<memory>" else Path(file).resolve()
     return Scenario(name=doc.name, file=scenario_path, robot_file=robot_file, robot=robot,
                     start=_frozen_array(start), goals=tuple(goals), obstacles=tuple(doc.obstacles),
-                    planner=planner, bound_field=bound_field, drive=drive, output_dir=output_dir)
+                    planner=planner, bound_field=bound_field, drive=drive, output_dir=output_dir,
+                    calibration=calibration)
 
 
 def _unknown_missing(names: list[str], mapping: Mapping[str, float]) -> tuple[list[str], list[str]]:

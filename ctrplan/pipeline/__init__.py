@@ -1,0 +1,82 @@
+"""The stages of a bound-aware plan, each a function that returns a frozen result in SI units (m,
+rad, s); :func:`ctrplan.plan` composes them and returns them all in its
+:class:`~ctrplan.api.PlanResult` (``result.run``, a :class:`PlanRun`):
+
+1. :func:`setup_plan` (or :func:`load_setup` from a file) -> :class:`PlanSetup`: the scenario,
+   its robot and the robot file's calibration (``Scenario.calibration``), the model settings and
+   the bound map's spec;
+2. :func:`load_bound_map` -> :class:`BoundMapStage`: the robot's bound map (shipped in
+   ``<robot dir>/boundmaps/`` as ``.npz`` or ``.zarr``, or cached) or computed into a zarr store
+   (local cores or a Dask cluster; an interrupted computation resumes from its finished chunks);
+   or :func:`given_bound_map`, a map handed in;
+3. :func:`check_start` -> the search's validity checker, after checking the start;
+   :func:`resolve_goals` -> :class:`ResolvedGoals`: each goal as a joint vector (task-space goals
+   by inverse kinematics preferring the smallest bound);
+4. :func:`aim_decision` -> :class:`AimDecision` and :func:`aim_goals` -> :class:`AimedGoals`:
+   task-space goals aimed with the tip *predicted* after the final approach (``[planner]
+   final_motion``: translation-last, the default, or rotation-last; Section V-B of Ha et al.
+   2019) instead of the standard model's tip (:func:`ctrplan.planning.goals.compensate_goal`),
+   where the robot file's ``[prediction_validation]`` shows the prediction beat the standard
+   model;
+5. :func:`plan_routes` -> :class:`Plans`: every leg planned with the same planner and seed,
+   bound-aware (length + weight x integral of the bound) and bound-blind (length only); each
+   plan (:class:`RoutePlan`) is ordered into rotations then translations (Section V-B) and both
+   phases checked, the phases reaching each goal swapped if the final motion asks for it; the
+   exact model re-run at the ordered waypoints gives the bound given the last motion
+   (:func:`bounds_along_path` -> :class:`PathBounds`) and the tip predicted for the history the
+   ordered plan creates (:func:`predict_waypoints` -> :class:`WaypointPredictions`; one contact
+   solve at most per waypoint, usually none: the bound's own solutions are reused); the
+   bound-aware plan's waypoints as arrays: :func:`waypoint_table` -> :class:`WaypointTable`;
+6. :func:`time_parameterize` -> the drive trajectory (ruckig, rest-to-rest, stop between
+   phases), its samples checked;
+7. :func:`compare_plans` -> :class:`PlanComparison` (:class:`RouteMetrics` of both plans) and
+   :func:`goal_outcomes` -> :class:`GoalOutcome` per goal.
+
+:func:`run_stages` runs stages 3 to 7 -> :class:`PlanRun`. The report is a separate layer, the
+only one with millimetres, degrees and dicts: :func:`plan_summary` (``summary.json``),
+:func:`write_report` (path.csv, trajectory.csv, figures, plan.html and summary.json, written
+atomically) and :func:`log_summary`; :func:`read_plan_record` reads a summary back.
+
+The stages print nothing: they log to ``ctrplan.pipeline`` (:mod:`logging`) the lines ``ctrplan
+plan`` shows (scenario, bound map, goals, plans, then the summary) at INFO, the files written at
+DEBUG, and a goal planned without its compensation at WARNING. Their ``echo`` parameters are
+deprecated, and so is :func:`run_plan` (use :func:`ctrplan.plan`).
+"""
+
+from .bound_map import GIVEN, BoundMapStage, given_bound_map, load_bound_map
+from .drive import time_parameterize
+from .evaluation import GoalOutcome, PlanComparison, RouteMetrics, compare_plans, goal_outcomes, route_metrics
+from .goals import (AimDecision, AimedGoals, GoalCheckCounts, ResolvedGoals, aim_decision, aim_goals, check_start,
+                    resolve_goals)
+from .path_bounds import PATH_SAMPLE_SPACING, PathBounds, bounds_along_path
+from .prediction import WaypointPredictions, predict_waypoints
+from .report import log_summary, path_rows, write_report
+from .routes import Plans, RoutePlan, effective_bound_weight, plan_routes
+from .run import PlanRun, run_plan, run_stages
+from .setup import PlanSetup, default_out_dir, load_setup, map_spec, setup_plan
+from .summary import COMPARED, PlanRecord, plan_summary, read_plan_record
+from .waypoints import WaypointTable, calibrated_bound, waypoint_table
+
+__all__ = [
+    # stage 1
+    "PlanSetup", "setup_plan", "load_setup", "map_spec", "default_out_dir",
+    # stage 2
+    "BoundMapStage", "load_bound_map", "given_bound_map", "GIVEN",
+    # stages 3 and 4
+    "check_start", "GoalCheckCounts", "ResolvedGoals", "resolve_goals", "AimDecision", "aim_decision", "AimedGoals",
+    "aim_goals",
+    # stage 5
+    "RoutePlan", "Plans", "plan_routes", "effective_bound_weight", "PathBounds", "bounds_along_path",
+    "PATH_SAMPLE_SPACING", "WaypointPredictions", "predict_waypoints", "WaypointTable", "waypoint_table",
+    "calibrated_bound",
+    # stage 6
+    "time_parameterize",
+    # stage 7
+    "RouteMetrics", "route_metrics", "PlanComparison", "compare_plans", "GoalOutcome", "goal_outcomes",
+    # all stages
+    "PlanRun", "run_stages",
+    # the report
+    "plan_summary", "COMPARED", "write_report", "path_rows", "log_summary", "PlanRecord", "read_plan_record",
+    # deprecated
+    "run_plan",
+]

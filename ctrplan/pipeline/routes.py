@@ -1,0 +1,270 @@
+"""Stage 5 of a plan: every leg planned bound-aware (and bound-blind), ordered, checked, with the
+exact bound (:mod:`~ctrplan.pipeline.path_bounds`) and the prediction
+(:mod:`~ctrplan.pipeline.prediction`) at its waypoints (:class:`RoutePlan`, :class:`Plans`)."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any, Mapping
+
+import numpy as np
+
+from .._log import deprecated_echo, progress_level
+from ..errors import CtrplanError
+from ..mechanics import ModelSettings
+from ..planning import BoundCostObjective, JointStateSpace
+from ..planning.history import end_with, goal_indices
+from ..planning.route import DEFAULT_REWIRE_FACTOR, plan_route, route_checks
+from .goals import AimedGoals
+from .path_bounds import PathBounds, bounds_along_path
+from .prediction import WaypointPredictions, predict_waypoints
+from .setup import PlanSetup
+
+__all__ = ["RoutePlan", "Plans", "plan_routes", "effective_bound_weight"]
+
+logger = logging.getLogger(__package__)
+
+
+@dataclass(frozen=True, eq=False)
+class RoutePlan:
+    """Stage 5, one plan (bound-aware or bound-blind): search, ordering, final check and report.
+
+    Attributes
+    ----------
+    legs : list of ctrplan.planning.planners.PlanResult
+        One planner result per leg (start -> goal 1 -> goal 2 ...).
+    ordered : OrderedPath
+        The ordered path (pure rotation and pure translation phases) [rad or m].
+    bounds : PathBounds
+        Bounds along it and at its waypoints [m, rad].
+    plan_time_s, exact_time_s : float
+        Search and ordering time; exact-bound time [s].
+    checks : dict
+        The checkers' counters (``RouteChecks.counters``).
+    max_body_step_m : float
+        The final check's largest body displacement between checked states [m].
+    prediction : WaypointPredictions
+        Predicted tip at the ordered waypoints.
+    goal_indices : list of int
+        Waypoint index of each goal.
+    final_motion_status : list of str
+        Per goal: how the motion reaching it ends (:func:`ctrplan.planning.history.end_with`).
+    """
+
+    legs: list
+    ordered: Any
+    bounds: PathBounds
+    plan_time_s: float
+    exact_time_s: float
+    checks: dict
+    max_body_step_m: float
+    prediction: WaypointPredictions
+    goal_indices: list
+    final_motion_status: list
+
+
+@dataclass(frozen=True, eq=False)
+class Plans:
+    """Stage 5: the plans of a run.
+
+    Attributes
+    ----------
+    routes : mapping of str to RoutePlan
+        ``"bound_aware"``, then ``"bound_blind"`` when compared.
+    in_parallel : bool
+        Whether the two plans ran in two processes.
+    time_s : float
+        Wall time of all plans [s].
+    """
+
+    routes: Mapping[str, RoutePlan]
+    in_parallel: bool
+    time_s: float
+
+    @property
+    def aware(self) -> RoutePlan:
+        """The bound-aware plan (the one that is executed)."""
+        return self.routes["bound_aware"]
+
+    @property
+    def blind(self) -> RoutePlan | None:
+        """The bound-blind plan (length only, same planner and seed); None when not planned."""
+        return self.routes.get("bound_blind")
+
+
+@dataclass(frozen=True, eq=False)
+class _PlanJob:
+    """Inputs of one plan (:func:`_plan_mode`); picklable, to run in another process."""
+
+    robot: Any
+    field: Any
+    obstacles: list
+    check_settings: ModelSettings
+    settings: ModelSettings
+    start: np.ndarray
+    goals: list
+    weight: float
+    planner: Any
+    iterations: int
+    final_motion: str
+
+
+def _plan_mode(job: _PlanJob) -> RoutePlan:
+    """One plan of a scenario (bound-aware or bound-blind): search, ordering, final check and the
+    report. Takes and returns only picklable data, so that it can run in another process."""
+    robot, field = job.robot, job.field
+    joint_space = JointStateSpace(robot)
+    checks = route_checks(robot, job.obstacles, field, job.check_settings, joint_space=joint_space)
+    p = job.planner
+    t0 = time.perf_counter()
+    route = plan_route(robot, job.start, job.goals, checks,
+                       BoundCostObjective.factory(field, bound_weight=job.weight), planner=p.name,
+                       iterations=job.iterations, seed=p.seed, time_limit=p.time_limit, range_=p.range,
+                       joint_space=joint_space,
+                       rewire_factor=p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR)
+    ordered = route.ordered
+    # the motion reaching each goal ends as the scenario asks (swap its last two phases if needed
+    # and if the swapped phases pass the final check)
+    idx = goal_indices(ordered, job.goals, robot)
+    final_status = []
+    for gi in idx:
+        ordered, status = end_with(ordered, gi, job.final_motion, checks.final.check)
+        final_status.append(status)
+    plan_time = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    bounds = bounds_along_path(ordered, robot, field, job.settings, joint_space)
+    exact_time = time.perf_counter() - t0
+    pred = predict_waypoints(ordered, robot, job.settings, bounds.exact)
+    return RoutePlan(legs=route.legs, ordered=ordered, bounds=bounds, plan_time_s=plan_time,
+                     exact_time_s=exact_time, checks=checks.counters(),
+                     max_body_step_m=checks.final.max_body_step, prediction=pred, goal_indices=idx,
+                     final_motion_status=final_status)
+
+
+def _compile_before_fork(job) -> None:
+    """The standard-model kernels both plans need (the robot bodies of the validity checks, the
+    shooting with its multistart search of the exact checks), compiled or loaded here before the
+    fork: the forked process inherits them, where on a cold start each process would compile
+    them again side by side. Milliseconds when they are cached: two solves at the start."""
+    from ..mechanics import solve_standard, solve_standard_bodies
+
+    try:
+        alpha, beta = job.robot.configuration(job.start)
+        solve_standard_bodies(job.robot, np.atleast_2d(alpha), np.atleast_2d(beta), job.check_settings)
+        solve_standard(job.robot, alpha, beta, job.settings)
+    except (CtrplanError, ValueError):   # only a warm-up: the plans report a bad start themselves
+        pass
+
+
+def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:
+    """Run the plans of ``jobs`` ({mode: _PlanJob}); with ``n_jobs`` >= 2 and more than one plan,
+    the bound-blind plan runs in a forked process while this one plans bound-aware (the plans are
+    independent and seeded, so the result is the same as in series; a failed child process is
+    replaced by the same plan here). Returns ({mode: RoutePlan}, whether they ran in parallel)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    modes = list(jobs)
+    parallel = n_jobs >= 2 and len(modes) > 1 and "fork" in multiprocessing.get_all_start_methods()
+    if not parallel:
+        return {m: _plan_mode(jobs[m]) for m in modes}, False
+    _compile_before_fork(jobs[modes[0]])
+    out = {}
+    with ProcessPoolExecutor(max_workers=len(modes) - 1, mp_context=multiprocessing.get_context("fork")) as ex:
+        futures = {m: ex.submit(_plan_mode, jobs[m]) for m in modes[1:]}
+        out[modes[0]] = _plan_mode(jobs[modes[0]])
+        for m, fut in futures.items():
+            try:
+                out[m] = fut.result()
+            except BrokenProcessPool:
+                out[m] = _plan_mode(jobs[m])
+    return {m: out[m] for m in modes}, True
+
+
+@deprecated_echo
+def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int | None = None,
+                compare_blind: bool = True, n_jobs: int = 1, echo=None) -> Plans:
+    """Stage 5: plan start -> goals bound-aware (and bound-blind), order, check and evaluate.
+
+    Each plan runs the scenario's planner and seed on every leg with the cost length + weight x
+    integral of the bound (weight ``[planner] bound_weight`` [1/m] bound-aware, 0 bound-blind),
+    orders the path into pure rotation and pure translation phases, checks every phase, ends the
+    motion reaching each goal as ``aimed.final_motion`` asks, and re-runs the exact model at the
+    ordered waypoints (Section V-B of Ha, Fagogenis & Dupont 2019).
+
+    Parameters
+    ----------
+    setup : PlanSetup
+    field : BoundField
+    aimed : AimedGoals
+        The joint goals planned to, shape (n_joints,) each [rad or m].
+    iterations : int, optional, keyword-only
+        Planner iterations per leg; default ``[planner] iterations``.
+    compare_blind : bool, keyword-only
+        Also plan bound-blind.
+    n_jobs : int, keyword-only
+        With 2 or more, the bound-blind plan runs in a forked process beside the bound-aware one
+        (same result as in series).
+    echo : callable, optional, keyword-only
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher; configure :mod:`logging` instead (logger ``ctrplan``).
+
+    Returns
+    -------
+    Plans
+
+    Raises
+    ------
+    UnreachableGoalError
+        No valid path within the planner's budget.
+    """
+    sc = setup.scenario
+    iters = iterations or sc.planner.iterations
+    modes = ([("bound_aware", effective_bound_weight(sc.calibration.bound, sc.planner.bound_weight))]
+             + ([("bound_blind", 0.0)] if compare_blind else []))
+    jobs = {mode: _PlanJob(robot=setup.robot, field=field, obstacles=list(setup.obstacles),
+                           check_settings=setup.check_settings, settings=setup.settings, start=sc.start,
+                           goals=list(aimed.q), weight=weight, planner=sc.planner, iterations=iters,
+                           final_motion=aimed.final_motion)
+            for mode, weight in modes}
+    t0 = time.perf_counter()
+    routes, in_parallel = _plan_modes(jobs, n_jobs)
+    seconds = time.perf_counter() - t0
+    for mode, r in routes.items():
+        lm = r.bounds.exact
+        ordered = r.ordered
+        logger.log(progress_level(),
+                   f"{mode}: {len(ordered)} ordered waypoints, planning {r.plan_time_s:.1f} s "
+                   f"({r.checks['search_states_evaluated']} states checked, final check "
+                   f"{r.checks['final_check_states']} states, "
+                   f"{ordered.n_subdivisions} bisections, {ordered.n_repairs} repairs); exact bound at waypoints: "
+                   f"max {np.nanmax(lm.position) * 1e3:.2f} mm, final {lm.position[-1] * 1e3:.2f} mm")
+    return Plans(routes=MappingProxyType(routes), in_parallel=in_parallel, time_s=seconds)
+
+
+def effective_bound_weight(calibration, weight: float) -> float:
+    """The bound weight that ranks paths by the calibrated bound.
+
+    Planning minimises ``L + w integral(b) ds``; with the calibrated bound ``c (b + m)`` in place
+    of ``b`` the cost is ``(1 + w c m) L + w c integral(b) ds``, which has the same minimiser as
+    ``L + w' integral(b) ds`` with ``w' = w c / (1 + w c m)``. Without a calibration, ``w``.
+
+    Parameters
+    ----------
+    calibration : CalibratedBound or None
+        ``Scenario.calibration.bound``.
+    weight : float
+        ``[planner] bound_weight`` [1/m].
+
+    Returns
+    -------
+    float
+        [1/m] (:meth:`ctrplan.calibration.CalibratedBound.effective_weight`).
+    """
+    if calibration is None:
+        return float(weight)
+    return calibration.effective_weight(weight)
