@@ -11,26 +11,31 @@ scenario carries them (``Scenario.calibration``); the planner reads them from th
   on measurements, which decides the model task-space goals are aimed with;
 - :class:`RobotCalibration`: both, each None when the file has no such table.
 
-All values are in SI units (m); coverages are fractions in [0, 1].
+All values are in SI units (m); coverages are fractions in [0, 1]. The first two are pydantic
+models and are the robot file's schema of their tables: a table read from a file is one of them
+(constructing one checks its values the same way and raises ``pydantic.ValidationError``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
+from typing import Annotated, Literal
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 __all__ = ["CalibratedBound", "PredictionValidation", "RobotCalibration"]
 
 
-def _known(cls, values: dict) -> dict:
-    """The entries of ``values`` that are fields of the dataclass ``cls``."""
-    names = {f.name for f in fields(cls)}
-    return {k: v for k, v in values.items() if k in names}
+class _Table(BaseModel):
+    """Base of the two tables: they are also the robot file's schema for them
+    (:class:`ctrplan.io.robot_file.RobotDocument`), with its rules: unknown keys, coercions and
+    non-finite numbers are errors, and a loaded table is immutable."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, allow_inf_nan=False)
 
 
-@dataclass(frozen=True)
-class CalibratedBound:
+class CalibratedBound(_Table):
     """A friction bound calibrated on measurements (the robot file's ``[bound_calibration]``).
 
     The calibrated bound of a configuration whose model bound is ``b`` [m] is
@@ -66,34 +71,22 @@ class CalibratedBound:
         The measurements it was calibrated on (empty when not recorded).
     """
 
-    factor: float
-    target_coverage: float
-    noise_margin_m: float = 0.0
+    factor: Annotated[float, Field(gt=0.0)]
+    target_coverage: Annotated[float, Field(gt=0.0, lt=1.0)]
+    noise_margin_m: Annotated[float, Field(ge=0.0)] = 0.0
     method: str = ""
-    noise_multiple: float | None = None
-    calibration_samples: int | None = None
-    test_samples: int | None = None
-    test_coverage: float | None = None
-    test_coverage_low: float | None = None
-    test_coverage_high: float | None = None
-    raw_bound_test_coverage: float | None = None
+    noise_multiple: Annotated[float, Field(ge=0.0)] | None = None
+    calibration_samples: Annotated[int, Field(ge=0)] | None = None
+    test_samples: Annotated[int, Field(ge=0)] | None = None
+    test_coverage: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    test_coverage_low: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    test_coverage_high: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    raw_bound_test_coverage: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     failing: bool = False
-    status: str | None = None
+    status: Literal["met", "failing", "conservative"] | None = None
     data_file: str = ""
     data_sha256: str = ""
     date: str = ""
-
-    @classmethod
-    def from_table(cls, table: dict) -> "CalibratedBound":
-        """From the keys of a ``[bound_calibration]`` table (as validated by
-        :class:`ctrplan.io.robot_file.BoundCalibrationDoc`; other keys are ignored).
-
-        Raises
-        ------
-        TypeError
-            ``factor`` or ``target_coverage`` missing.
-        """
-        return cls(**_known(cls, table))
 
     def apply(self, bound) -> np.ndarray:
         """The calibrated bound ``factor (bound + noise_margin_m)``.
@@ -133,8 +126,7 @@ class CalibratedBound:
         return float(weight * c / (1.0 + weight * c * m))
 
 
-@dataclass(frozen=True)
-class PredictionValidation:
+class PredictionValidation(_Table):
     """The history-aware prediction against the standard model on measurements (the robot file's
     ``[prediction_validation]``): tip position errors on the untouched test split.
 
@@ -155,31 +147,19 @@ class PredictionValidation:
         The measurements (empty when not recorded).
     """
 
-    standard_mean_m: float
-    standard_max_m: float
-    history_mean_m: float
-    history_max_m: float
+    standard_mean_m: Annotated[float, Field(ge=0.0)]
+    standard_max_m: Annotated[float, Field(ge=0.0)]
+    history_mean_m: Annotated[float, Field(ge=0.0)]
+    history_max_m: Annotated[float, Field(ge=0.0)]
     history_beats_standard: bool
     difference_mean_m: float | None = None
     difference_low_m: float | None = None
     difference_high_m: float | None = None
-    test_units: int | None = None
-    test_samples: int | None = None
+    test_units: Annotated[int, Field(ge=0)] | None = None
+    test_samples: Annotated[int, Field(ge=0)] | None = None
     data_file: str = ""
     data_sha256: str = ""
     date: str = ""
-
-    @classmethod
-    def from_table(cls, table: dict) -> "PredictionValidation":
-        """From the keys of a ``[prediction_validation]`` table (as validated by
-        :class:`ctrplan.io.robot_file.PredictionValidationDoc`; other keys are ignored).
-
-        Raises
-        ------
-        TypeError
-            A required key missing.
-        """
-        return cls(**_known(cls, table))
 
 
 @dataclass(frozen=True)

@@ -153,8 +153,8 @@ def _calibration(prediction_validation=None, bound_calibration=None):
     from ctrplan.calibration import CalibratedBound, PredictionValidation, RobotCalibration
 
     return RobotCalibration(
-        bound=None if bound_calibration is None else CalibratedBound.from_table(bound_calibration),
-        prediction=None if prediction_validation is None else PredictionValidation.from_table(prediction_validation))
+        bound=None if bound_calibration is None else CalibratedBound(**bound_calibration),
+        prediction=None if prediction_validation is None else PredictionValidation(**prediction_validation))
 
 
 def test_auto_aims_with_the_standard_model_when_the_prediction_is_not_validated(tmp_path, monkeypatch):

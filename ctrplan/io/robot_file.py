@@ -113,50 +113,6 @@ class EffectsSourceDoc(_Strict):
     cautions: list[str] = []
 
 
-class BoundCalibrationDoc(_Strict):
-    """A bound calibrated on measurements (``[bound_calibration]``, written by ``ctrplan
-    discrepancy``; :mod:`ctrplan.discrepancy.coverage`): the calibrated bound of a configuration
-    is ``factor x (bound + noise_margin_m)``."""
-
-    method: str = ""
-    target_coverage: Annotated[float, Field(gt=0.0, lt=1.0)]
-    factor: Annotated[float, Field(gt=0.0)]
-    noise_margin_m: Annotated[float, Field(ge=0.0)] = 0.0
-    noise_multiple: Annotated[float, Field(ge=0.0)] | None = None
-    calibration_samples: Annotated[int, Field(ge=0)] | None = None
-    test_samples: Annotated[int, Field(ge=0)] | None = None
-    test_coverage: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
-    test_coverage_low: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
-    test_coverage_high: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
-    raw_bound_test_coverage: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
-    failing: bool = False
-    status: typing.Literal["met", "failing", "conservative"] | None = None
-    data_file: str = ""
-    data_sha256: str = ""
-    date: str = ""
-
-
-class PredictionValidationDoc(_Strict):
-    """How the history-aware prediction did against the standard model on measurements
-    (``[prediction_validation]``, written by ``ctrplan discrepancy``): tip position errors on its
-    untouched test split [m]; ``history_beats_standard`` when the interval of the per-unit paired
-    difference of their means (``difference_*``, history minus standard) lies below zero."""
-
-    standard_mean_m: Annotated[float, Field(ge=0.0)]
-    standard_max_m: Annotated[float, Field(ge=0.0)]
-    history_mean_m: Annotated[float, Field(ge=0.0)]
-    history_max_m: Annotated[float, Field(ge=0.0)]
-    history_beats_standard: bool
-    difference_mean_m: float | None = None
-    difference_low_m: float | None = None
-    difference_high_m: float | None = None
-    test_units: Annotated[int, Field(ge=0)] | None = None
-    test_samples: Annotated[int, Field(ge=0)] | None = None
-    data_file: str = ""
-    data_sha256: str = ""
-    date: str = ""
-
-
 class RobotDocument(_Strict):
     """Schema of a robot model file (see ``docs/file-formats.md``)."""
 
@@ -174,8 +130,8 @@ class RobotDocument(_Strict):
     # the registry of ctrplan.effects once the robot is built
     effects: dict[str, dict[str, typing.Any]] = {}
     effects_source: EffectsSourceDoc | None = None
-    bound_calibration: BoundCalibrationDoc | None = None
-    prediction_validation: PredictionValidationDoc | None = None
+    bound_calibration: CalibratedBound | None = None   # ctrplan.calibration: the schema is the typed record
+    prediction_validation: PredictionValidation | None = None
 
 
 # --------------------------------------------------------------------------- error reporting
@@ -374,10 +330,7 @@ def calibration_from_document(doc: RobotDocument) -> RobotCalibration:
     -------
     RobotCalibration
     """
-    return RobotCalibration(
-        bound=None if doc.bound_calibration is None else CalibratedBound.from_table(doc.bound_calibration.model_dump()),
-        prediction=(None if doc.prediction_validation is None
-                    else PredictionValidation.from_table(doc.prediction_validation.model_dump())))
+    return RobotCalibration(bound=doc.bound_calibration, prediction=doc.prediction_validation)
 
 
 def robot_from_toml_text(text: str, file: str = MEMORY) -> Robot:
@@ -566,9 +519,9 @@ def robot_to_toml(robot: Robot, *, header: str = "", model: str | None = None,
         ``held_out_position_p95_m``, ``held_out_position_max_m``, ``note``, ``cautions``: a list of
         strings).
     bound_calibration : dict, optional
-        Table ``[bound_calibration]`` (:class:`BoundCalibrationDoc`).
+        Table ``[bound_calibration]`` (:class:`ctrplan.calibration.CalibratedBound`).
     prediction_validation : dict, optional
-        Table ``[prediction_validation]`` (:class:`PredictionValidationDoc`).
+        Table ``[prediction_validation]`` (:class:`ctrplan.calibration.PredictionValidation`).
 
     Returns
     -------
