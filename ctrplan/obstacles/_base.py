@@ -16,7 +16,7 @@ __all__ = ["Obstacle", "Vector3", "PositiveFloat", "DRAWING_RESOLUTION", "rotati
 DRAWING_RESOLUTION = 24
 
 # A direction within this of +-z (cosine distance) gets the identity or the half-turn about x
-# in rotation_z_to; ctrplan.planning.collision._capsule_poses uses the same literal.
+# in rotation_z_to (and in ctrplan.planning.collision._capsule_poses, which imports it).
 _AXIS_PARALLEL_TOL = 1e-12
 
 

@@ -23,6 +23,8 @@ import numpy as np
 from numba import njit
 
 from ..obstacles import as_obstacle, rotation_z_to
+# the tolerance of rotation_z_to, so that _capsule_poses builds the same poses as it does
+from ..obstacles._base import _AXIS_PARALLEL_TOL
 
 __all__ = ["CollisionChecker", "CollisionReport", "AABB_MARGIN"]
 
@@ -37,10 +39,6 @@ DEFAULT_SEGMENT_LENGTH = 2e-3
 # negligible against the 2-5 mm capsules, so the culling loses nothing measurable.
 AABB_MARGIN = 1e-5
 
-# A capsule axis within this of +-z (cosine distance) gets the identity or the half-turn about
-# x as its pose in _capsule_poses: the literal of ctrplan.obstacles.rotation_z_to, so both paths
-# build the same poses.
-_AXIS_PARALLEL_TOL = 1e-12
 
 
 def _capsule_object(a, b, radius) -> fcl.CollisionObject:
