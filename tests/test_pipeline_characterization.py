@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _maps import cache_constant_field
 
 REPO = Path(__file__).resolve().parents[1]
 TABLE7 = REPO / "model" / "ha2019-table7-calibrated.toml"
 REFERENCE = Path(__file__).resolve().parent / "reference" / "plan_characterization.json"
-SYNTHETIC = (1e-3, 0.1, 5e-4, 0.05)   # position [m], angle [rad], translation-last position, angle
 
 CALIBRATION = """
 [bound_calibration]
@@ -106,24 +106,6 @@ max_jerk = {{alpha_2 = 40.0, alpha_3 = 40.0, beta_3 = 0.4}}
     return path
 
 
-def _cache_synthetic_map(robot_file: Path) -> None:
-    """The constant synthetic map, saved where the map lookup of the working folder finds it."""
-    from ctrplan.boundmap import BoundField, MapSpec, map_coordinates, map_identity, map_paths, uniform_axis
-    from ctrplan.io.robot_file import load_robot
-    from ctrplan.mechanics import ModelSettings, evaluate_bound
-
-    robot = load_robot(robot_file)
-    key = map_identity(robot, ModelSettings(ds=0.004), MapSpec((4, 4, 3), "uniform"), evaluate_bound,
-                       robot_file.read_text()).key
-    coords = map_coordinates(robot)
-    axes = [uniform_axis(lo, hi, n, per) for lo, hi, n, per in zip(coords.lower, coords.upper, (4, 4, 3),
-                                                                     coords.periodic)]
-    shape = tuple(len(a) for a in axes)
-    values = np.broadcast_to(np.array(SYNTHETIC), shape + (4,)).copy()
-    field = BoundField(axes, coords.periodic, values, np.ones(shape, bool), key=key, coordinates=coords)
-    field.save(map_paths(robot_file, key)[1].with_suffix(".npz"))
-
-
 _TIME = re.compile(r"\b\d+(\.\d+)?(e[-+]?\d+)? s\b")
 _TIME_ITEM = re.compile(r"'(\w*time_s)': [-+0-9.e]+")
 
@@ -168,7 +150,7 @@ def _run(tmp_path: Path, monkeypatch, calibrated: bool) -> dict:
     monkeypatch.chdir(folder)
     robot_file = folder / "robot.toml"
     robot_file.write_text(TABLE7.read_text() + (CALIBRATION if calibrated else ""))
-    _cache_synthetic_map(robot_file)
+    cache_constant_field(robot_file)   # the same map (4 x 4 x 3, ds 0.004 m, uniform) as when recorded
     scenario = _scenario(folder, robot_file)
     out = folder / "out"
     r = CliRunner().invoke(main, ["plan", str(scenario), "--out", str(out), "--jobs", "1"])
