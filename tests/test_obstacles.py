@@ -29,6 +29,7 @@ from ctrplan.planning import (BoundCostObjective, CollisionChecker, JointStateSp
                               route_checks)
 from ctrplan.plots import plot_robot_shapes
 from ctrplan.view import plan_view_figure
+from test_planning_verify import dense_reference_violations  # exact model, whole body, 0.005 rad / 0.1 mm
 
 REPO = Path(__file__).resolve().parents[1]
 T7 = REPO / "model" / "ha2019-table7-calibrated.toml"
@@ -240,21 +241,6 @@ def test_the_collision_object_and_the_box_are_the_cylinder(cylinder_type):
     np.testing.assert_allclose(box_lo[0], lo - 1e-5)
 
 
-def _dense_violations(robot, obstacles, qs, rot_step=0.005, trans_step=1e-4):
-    """States along the piecewise-straight path ``qs`` where the exact standard model's body
-    (python-fcl on the whole body, 1 mm capsules, nothing inflated, no broad phase) touches an
-    obstacle, at 0.005 rad / 0.1 mm, much finer than the planner's checks."""
-    ref = ValidityChecker(robot, collision=CollisionChecker(obstacles, segment_length=1e-3),
-                          settings=SETTINGS.replace(multistart=0))
-    js = JointStateSpace(robot)
-    bad = []
-    for q0, q1 in zip(qs[:-1], qs[1:]):
-        d = js.difference(q0, q1)
-        n = int(max(np.max(np.abs(d[js.is_rotation])) / rot_step, np.max(np.abs(d[~js.is_rotation])) / trans_step)) + 1
-        bad += [q for q in js.interpolate(q0, q1, np.linspace(0, 1, n + 1)) if not ref(q)]
-    return bad
-
-
 def test_a_route_goes_around_a_registered_obstacle_from_a_scenario_file(tmp_path, cylinder_type):
     """The straight motion from start to goal crosses the post: the planner's batched check
     (broad phase on the type's box, narrow phase on its fcl object) refuses it, and so does a
@@ -267,10 +253,10 @@ def test_a_route_goes_around_a_registered_obstacle_from_a_scenario_file(tmp_path
     js = JointStateSpace(robot)
     checks = route_checks(robot, obstacles, None, SETTINGS, joint_space=js)
     assert not checks.search.check_motion(START, GOAL)
-    assert _dense_violations(robot, obstacles, [START, GOAL])
+    assert dense_reference_violations(robot, obstacles, [START, GOAL])
     route = plan_route(robot, START, [GOAL], checks, BoundCostObjective.factory(None, bound_weight=0.0),
                        iterations=1000, seed=2, joint_space=js)
-    assert _dense_violations(robot, obstacles, route.ordered.q) == []
+    assert dense_reference_violations(robot, obstacles, route.ordered.q) == []
     np.testing.assert_allclose(js.difference(route.ordered.q[-1], GOAL), 0.0, atol=1e-9)
 
 
