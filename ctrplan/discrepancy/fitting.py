@@ -739,13 +739,42 @@ def _fit_nested(ctx) -> CalibrationResult:
                      prior=ctx["prior"], clusters=ctx["units"])
 
 
+def _refine_contact(ctx, start: CalibrationResult, names: tuple) -> CalibrationResult:
+    """A contact-model candidate's parameters ``names``, started from its grid or scan
+    (``start``), refitted together with the baseline's parameters with its own model.
+
+    The grid and the scan only place the coefficients: they run on tube parameters fitted with the
+    clearance model, which absorb part of the friction. Refitting everything together, as the
+    standard-model candidates are (:func:`_fit_nested`), sizes the coefficients continuously and
+    leaves no misfit for a second effect to take up in place of the first. The baseline's prior is
+    kept; a value at the limit of its grid or scan stays reported at bound.
+    """
+    setup, options, k = ctx["setup"], ctx["options"], ctx["k"]
+    base = ctx["base"]
+    values = dict(zip(*start.all_parameters()))
+    fitted = tuple(base.names) + tuple(n for n in names if n not in base.names)
+    fixed = {n: v for n, v in values.items() if n not in fitted}
+    init = [values[n] if n in values else read_parameters(setup.robot, (n,))[0] for n in fitted]
+    fit = calibrate(setup.robot, ctx["fit_data"], start.model, fitted, fixed=fixed, initial=init,
+                    settings=setup.settings, n_jobs=ctx["n_jobs"], max_evaluations=options.max_contact_evaluations,
+                    uncertainty=k is None, warm=True, prior=ctx["prior"], clusters=ctx["units"])
+    if fit.cost > start.cost:
+        # the refinement ends above its start only when every step failed: keep the start
+        return start
+    return replace(fit, message=f"{start.message}; then refitted with the baseline's parameters: {fit.message}",
+                   at_bound=tuple(sorted(set(fit.at_bound) | set(start.at_bound))),
+                   widened=tuple(start.widened) + tuple(fit.widened), converged=fit.converged and start.converged)
+
+
 def _fit_grid(ctx) -> CalibrationResult:
-    """A grid search of its parameters on the clearance-model tube parameters."""
+    """A grid search of its parameters on the clearance-model tube parameters, then those
+    parameters refitted together with the baseline's (:func:`_refine_contact`)."""
     setup, options = ctx["setup"], ctx["options"]
-    return grid_search(setup.robot, ctx["fit_data"], ctx["contact"], ctx["extra"], ctx["entry"].model,
-                       settings=setup.settings, n_jobs=ctx["n_jobs"], coarse=options.friction_grid,
-                       search_samples=options.friction_search_samples, seed=options.seed,
-                       uncertainty=ctx["k"] is None, clusters=ctx["units"])
+    g = grid_search(setup.robot, ctx["fit_data"], ctx["contact"], ctx["extra"], ctx["entry"].model,
+                    settings=setup.settings, n_jobs=ctx["n_jobs"], coarse=options.friction_grid,
+                    search_samples=options.friction_search_samples, seed=options.seed,
+                    uncertainty=False, clusters=ctx["units"])
+    return _refine_contact(ctx, g, tuple(ctx["extra"]))
 
 
 def _fit_none(ctx) -> CalibrationResult:
@@ -756,10 +785,17 @@ def _fit_none(ctx) -> CalibrationResult:
 
 
 def _fit_scan(ctx) -> CalibrationResult:
-    """A 1-D scan on top of the fit of the effect it follows."""
+    """A 1-D scan on top of the fit of the effect it follows; with a contact model, then its
+    parameters and those of the effect it follows refitted together with the baseline's
+    (:func:`_refine_contact`)."""
     setup, entry = ctx["setup"], ctx["entry"]
-    return scan_fit(setup.robot, ctx["fit_data"], entry.model, ctx["after"], ctx["extra"], entry.scan,
-                    setup.settings, ctx["n_jobs"], uncertainty=ctx["k"] is None, clusters=ctx["units"])
+    contact = entry.model != "standard"
+    s = scan_fit(setup.robot, ctx["fit_data"], entry.model, ctx["after"], ctx["extra"], entry.scan,
+                 setup.settings, ctx["n_jobs"], uncertainty=ctx["k"] is None and not contact, clusters=ctx["units"])
+    if not contact:
+        return s
+    followed = effect_parameters(setup.robot, entry.after, setup.data)
+    return _refine_contact(ctx, s, tuple(followed) + tuple(ctx["extra"]))
 
 
 #: Fitting strategy of an effect entry (``Effect.fit``) -> the function that fits it.
@@ -875,9 +911,9 @@ def _fit_pair(ctx) -> CalibrationResult:
     then every parameter together. With a contact model: the tube parameters refitted with the
     clearance model with the named effect's own parameters in place, the second effect by its own
     strategy (its grid, or its parameters alone from its single fit of the same samples), then
-    every effect parameter that is not gridded, and the registration, refitted together with the
-    contact model (the gridded coefficients held); every value is fitted with the other effect
-    present.
+    every effect parameter and the baseline's parameters refitted together with the contact model,
+    as a contact candidate alone is (:func:`_refine_contact`); every value is fitted with the other
+    effect present.
     """
     setup, options, k, n_jobs = ctx["setup"], ctx["options"], ctx["k"], ctx["n_jobs"]
     robot, settings, fit_data, units = setup.robot, setup.settings, ctx["fit_data"], ctx["units"]
@@ -912,21 +948,21 @@ def _fit_pair(ctx) -> CalibrationResult:
                         coarse=options.friction_grid, search_samples=options.friction_search_samples, seed=options.seed,
                         uncertainty=False)
         params.update(zip(extra, g.values))
-        gridded = set(extra)
     else:
         own = second.cv.fold_params(k)
         if extra:
             alone = calibrate(robot, fit_data, model, extra, fixed=params, initial=[own[n] for n in extra],
                               settings=settings, n_jobs=n_jobs, max_evaluations=budget, uncertainty=False, warm=True)
             params.update(zip(extra, alone.values))
-        gridded = set()
-    free = tuple(n for n in (*first_extra, *extra) if n not in gridded and n not in REGISTRATION)
-    free += tuple(n for n in base_names if n in REGISTRATION)
-    if not free:
-        return calibrate(robot, fit_data, model, (), fixed=params, settings=settings, n_jobs=n_jobs)
+    free = base_names + tuple(dict.fromkeys(n for n in (*first_extra, *extra) if n not in base_names))
     fixed = {n: v for n, v in params.items() if n not in free}
-    return calibrate(robot, fit_data, model, free, fixed=fixed, initial=[params[n] for n in free], settings=settings,
-                     n_jobs=n_jobs, max_evaluations=budget, uncertainty=k is None, warm=True, clusters=units)
+    start = calibrate(robot, fit_data, model, (), fixed=params, settings=settings, n_jobs=n_jobs)
+    if not free:
+        return start
+    fit = calibrate(robot, fit_data, model, free, fixed=fixed, initial=[params[n] for n in free], settings=settings,
+                    n_jobs=n_jobs, max_evaluations=budget, uncertainty=k is None, warm=True, prior=ctx["prior"],
+                    clusters=units)
+    return fit if fit.cost <= start.cost else start
 
 
 def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline, contact: CrossValidated | None,

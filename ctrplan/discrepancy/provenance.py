@@ -3,36 +3,78 @@ its options, so that a results file can be tied to the code that made it.
 
 The code is every Python source file of the packages whose behaviour the figures depend on
 (:data:`SOURCE_PACKAGES`: the discrepancy workflow, the effects, the motion history and the
-mechanics); the digest is a SHA-256 over their paths (relative to the ``ctrplan`` package) and
-bytes, in sorted order, so it changes when any of them changes and nowhere else. A results file
-that records it can be checked against the code at hand (``tests/test_docs_results.py`` does so
-for the files the docs quote).
+mechanics) and the modules they take numbers and the robot from (:data:`SOURCE_MODULES`). The
+digest is a SHA-256 over their paths (relative to the ``ctrplan`` package) and their **code**: the
+syntax tree of each file with its docstrings left out (comments and layout never reach it), in
+sorted order. It changes with any change that can change what runs, and not with a corrected
+docstring, comment or line break. A results file that records it can be checked against the
+code at hand (``tests/test_docs_results.py`` does so for the files the docs quote).
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import json
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 
-__all__ = ["SOURCE_PACKAGES", "source_digest", "options_digest", "provenance"]
+__all__ = ["SOURCE_PACKAGES", "SOURCE_MODULES", "source_digest", "code_digest", "options_digest", "provenance"]
 
 #: Subpackages of ``ctrplan`` whose code can move a discrepancy result's figures.
 SOURCE_PACKAGES = ("discrepancy", "effects", "history", "mechanics")
+#: Modules of ``ctrplan`` outside them whose code can too: the solvers' constants, the robot.
+SOURCE_MODULES = ("constants.py", "robot.py")
 
 
 def _root() -> Path:
     return Path(__file__).resolve().parents[1]
 
 
-def source_digest(packages=SOURCE_PACKAGES) -> str:
-    """SHA-256 (hex) of the Python sources of ``packages`` (paths and bytes, sorted).
+def code_digest(source: str, filename: str = "<source>") -> str:
+    """SHA-256 (hex) of a Python module's code: its syntax tree without docstrings.
+
+    A docstring is a string constant that is the first statement of a module, class or function
+    body; it is left out (a body that is only a docstring keeps an empty body). Comments and
+    layout are not part of the tree.
+
+    Parameters
+    ----------
+    source : str
+        The module's text.
+    filename : str
+        Named in the error.
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits.
+
+    Raises
+    ------
+    SyntaxError
+        ``source`` is not valid Python.
+    """
+    tree = ast.parse(source, filename=filename)
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+                    and isinstance(body[0].value.value, str):
+                node.body = body[1:]
+    return hashlib.sha256(ast.dump(tree, annotate_fields=False).encode()).hexdigest()
+
+
+def source_digest(packages=SOURCE_PACKAGES, modules=SOURCE_MODULES) -> str:
+    """SHA-256 (hex) of the code of ``packages`` and ``modules``: their paths and
+    :func:`code_digest`, sorted by path.
 
     Parameters
     ----------
     packages : sequence of str
         Subpackages of ``ctrplan``.
+    modules : sequence of str
+        Module files of ``ctrplan`` (paths relative to the package).
 
     Returns
     -------
@@ -40,11 +82,11 @@ def source_digest(packages=SOURCE_PACKAGES) -> str:
         64 hexadecimal digits.
     """
     root = _root()
+    paths = [p for pkg in packages for p in (root / pkg).rglob("*.py")] + [root / m for m in modules]
     h = hashlib.sha256()
-    for pkg in sorted(packages):
-        for path in sorted((root / pkg).rglob("*.py")):
-            h.update(path.relative_to(root).as_posix().encode() + b"\0")
-            h.update(path.read_bytes() + b"\0")
+    for path in sorted(paths, key=lambda p: p.relative_to(root).as_posix()):
+        rel = path.relative_to(root).as_posix()
+        h.update(rel.encode() + b"\0" + code_digest(path.read_text(), rel).encode() + b"\0")
     return h.hexdigest()
 
 
@@ -56,7 +98,8 @@ def options_digest(options) -> str:
 
 def provenance(options=None) -> dict:
     """``{"source_sha256", "source_packages", "options_sha256"}`` for a results file."""
-    out = {"source_sha256": source_digest(), "source_packages": [f"ctrplan/{p}" for p in SOURCE_PACKAGES]}
+    out = {"source_sha256": source_digest(),
+           "source_packages": [f"ctrplan/{p}" for p in SOURCE_PACKAGES] + [f"ctrplan/{m}" for m in SOURCE_MODULES]}
     if options is not None:
         out["options_sha256"] = options_digest(options)
     return out
