@@ -14,7 +14,6 @@ import shlex
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from _bags import measured_run
@@ -86,11 +85,18 @@ def test_python_example(workdir, monkeypatch, capsys):
 
 @pytest.mark.slow
 def test_discrepancy_command(workdir, monkeypatch, capsys):
-    """The page's discrepancy command on the recorded run: it finishes, and its report says
-    which topics were read. (The verdict on a bag is tested in test_discrepancy_fast.py.)"""
+    """The page's discrepancy command, default options, on the recorded run (the Table II
+    robot, a 0.1 s tracker lag hidden by the reference synthesizer): it names the time offset
+    within 5 ms (measured: 0.0999 s, 366 s on two cores) and its report says which topics and
+    joint names were read."""
+    import json
+
     command = _commands()[1]
     _run(workdir, monkeypatch, capsys, command)
     out = workdir / command.split("--out ")[1].split()[0]
     text = (out / "report.md").read_text()
     assert "joint states /joint_states" in text and "tip poses /tracker/tip" in text
-    assert np.isfinite(float(re.search(r"time span: joints (-?[\d.]+)", text).group(1)))
+    assert "alpha_2 <- tube2_rotation" in text
+    res = json.loads((out / "results.json").read_text())
+    assert (res["verdict"], res["named_effect"]) == ("named", "time_offset"), res["decision"]
+    assert abs(res["candidates"]["time_offset"]["parameters"]["time_offset"] - 0.1) < 5e-3

@@ -29,7 +29,7 @@ import math
 import os
 import shutil
 import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
