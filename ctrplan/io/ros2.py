@@ -704,16 +704,11 @@ def _sphere(ts, header, k: int, pose, diameter: float, label: str):
                   color=T["std_msgs/msg/ColorRGBA"](r=1.0, g=0.55, b=0.0, a=0.35),
                   lifetime=_duration(ts, 0.0), frame_locked=False, points=[], colors=[], text="",
                   mesh_resource="", mesh_use_embedded_materials=False)
-    extra = {"texture_resource": "", "uv_coordinates": [], "mesh_file": None, "texture": None}
-    names = {f for f in M.__dataclass_fields__}
-    for key, value in extra.items():
-        if key not in names:
-            continue
-        if key == "texture":
-            value = T["sensor_msgs/msg/CompressedImage"](header=header, format="", data=np.zeros(0, np.uint8))
-        elif key == "mesh_file":
-            value = T["visualization_msgs/msg/MeshFile"](filename="", data=np.zeros(0, np.uint8))
-        fields[key] = value
+    if "texture" in M.__dataclass_fields__:   # Jazzy's Marker: texture and mesh file fields, empty here
+        empty = np.zeros(0, np.uint8)
+        fields.update(texture_resource="", uv_coordinates=[],
+                      texture=T["sensor_msgs/msg/CompressedImage"](header=header, format="", data=empty),
+                      mesh_file=T["visualization_msgs/msg/MeshFile"](filename="", data=empty))
     return M(**fields)
 
 
