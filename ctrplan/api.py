@@ -30,7 +30,7 @@ from .pipeline import (BoundMapStage, PlanRun, default_out_dir, given_bound_map,
 from .robot import Robot
 from .trajectory import Trajectory
 
-__all__ = ["PlanResult", "plan", "plan_scenario"]
+__all__ = ["PlanResult", "plan", "plan_scenario", "write_plan_ros2"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,3 +265,75 @@ def plan_scenario(scenario: Scenario | str | os.PathLike, out_dir: str | os.Path
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(Path(scenario))
     return plan(sc, out_dir=out_dir if out_dir else default_out_dir(sc), n_jobs=n_jobs, iterations=iterations,
                 compare_blind=compare_blind, progress=progress)
+
+
+def write_plan_ros2(result: PlanResult, out: str | os.PathLike, *, storage: str = "mcap", distro: str = "jazzy",
+                    frame_id: str = "ctr_base", yaml_path: str | os.PathLike | None = None) -> dict[str, Path]:
+    """Write a plan for ROS 2: a rosbag2 folder for RViz, Foxglove or ``ros2 bag play``, and the
+    drive trajectory as the YAML message ``ros2 topic pub`` accepts.
+
+    The bag (:func:`ctrplan.io.ros2.write_plan_bag`) holds the trajectory as
+    ``trajectory_msgs/msg/JointTrajectory`` and its samples as joint states, the waypoint tips
+    as ``nav_msgs/msg/Path`` (orientation: the standard model's tip frame, z the tangent) and
+    the bound as ``visualization_msgs/msg/MarkerArray`` spheres of diameter twice the bound
+    given the last motion at each waypoint tip: the calibrated bound where the robot file has a
+    ``[bound_calibration]``, else the exact one. Joint names are the robot file's.
+
+    Parameters
+    ----------
+    result : PlanResult
+        A plan with a drive trajectory (the scenario's ``[drive]`` table).
+    out : str or path-like
+        Bag folder to create (replaced only if it is a plan bag written by ctrplan).
+    storage : {"mcap", "sqlite3"}
+    distro : {"humble", "jazzy"}
+        Message definitions of the bag.
+    frame_id : str
+        Frame of the tip path and the spheres (the robot's base frame).
+    yaml_path : str or path-like, optional
+        Where to write the trajectory YAML; default ``joint_trajectory.yaml`` in the plan's
+        output folder, or beside the bag folder for a plan written to no folder.
+
+    Returns
+    -------
+    dict of str to Path
+        ``{"bag": ..., "yaml": ...}``.
+
+    Raises
+    ------
+    ValueError
+        The plan has no drive trajectory, or bad storage or distro.
+    FileExistsError
+        ``out`` exists and is not a plan bag written by ctrplan.
+    """
+    from .io.atomic import atomic_write_text
+    from .io.ros2 import PlanBagContent, trajectory_yaml, write_plan_bag
+    from .mechanics import ModelSettings, solve_standard
+
+    traj = result.trajectory
+    if traj is None:
+        raise ValueError(f"scenario {result.scenario.name!r} has no [drive] table, so no drive trajectory to write "
+                         f"for ROS 2")
+    calibrated = np.isfinite(result.calibrated_bound_m)
+    radius = np.where(calibrated, result.calibrated_bound_m, result.bound_position_m)
+    rotations = np.tile(np.eye(3), (len(result.q), 1, 1))
+    settings = ModelSettings(multistart=0)
+    for k, q in enumerate(result.q):
+        if not np.all(np.isfinite(result.tip[k])):
+            continue
+        alpha, beta = result.robot.configuration(q, check_limits=False)
+        sol = solve_standard(result.robot, alpha, beta, settings, check_stability=False)
+        rotations[k] = sol.tip_rotation
+    keep = np.all(np.isfinite(result.tip), axis=1)
+    content = PlanBagContent(joint_names=traj.joint_names, t=traj.t, position=traj.position, velocity=traj.velocity,
+                             acceleration=traj.acceleration, tips=result.tip[keep], tip_rotations=rotations[keep],
+                             bound_radius=radius[keep],
+                             bound_label="calibrated_bound" if calibrated.any() else "bound", frame_id=frame_id)
+    bag = write_plan_bag(out, content, storage=storage, distro=distro)
+    if yaml_path is not None:
+        yaml_file = Path(yaml_path)
+    else:
+        yaml_file = (result.output_dir if result.output_dir is not None else Path(out).parent) / "joint_trajectory.yaml"
+    atomic_write_text(yaml_file, trajectory_yaml(traj.joint_names, traj.t, traj.position, traj.velocity,
+                                                 traj.acceleration, frame_id=frame_id))
+    return {"bag": bag, "yaml": yaml_file}

@@ -166,19 +166,48 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
                    "its workers need ctrplan installed.")
 @click.option("--iterations", type=int, default=None, help="Override the planner's iteration budget.")
 @click.option("--no-blind", is_flag=True, help="Skip the bound-blind comparison plan.")
-def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind):
+@click.option("--ros2", "ros2_out", type=click.Path(file_okay=False), default=None,
+              help="One scenario: also write the plan as a ROS 2 bag in this folder (joint trajectory, tip path, "
+                   "bound spheres) and joint_trajectory.yaml for `ros2 topic pub` in the output folder.")
+@click.option("--ros2-storage", type=click.Choice(["mcap", "sqlite3"]), default="mcap", show_default=True)
+@click.option("--ros2-distro", type=click.Choice(["humble", "jazzy"]), default="jazzy", show_default=True,
+              help="Message definitions written into the bag (visualization_msgs/msg/Marker differs).")
+@click.option("--ros2-frame", default="ctr_base", show_default=True,
+              help="frame_id of the tip path and the bound spheres (the robot's base frame).")
+def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_out, ros2_storage, ros2_distro,
+         ros2_frame):
     """Plan a friction-bound-aware motion for a scenario and write the drive trajectory.
 
     Several scenario files or folders of them are planned in one process (or spread over dask
     workers), each into its own folder, with one table across them; a rerun reuses the complete
     outputs of unchanged scenarios.
     """
-    if len(scenario_paths) == 1 and Path(scenario_paths[0]).is_file() and scheduler is None:
-        from .api import plan_scenario
+    single = len(scenario_paths) == 1 and Path(scenario_paths[0]).is_file() and scheduler is None
+    if ros2_out is not None:
+        from .errors import ModelFileError, PhysicalParameterError
+        from .io.ros2 import check_plan_bag_target
+        from .io.scenario import load_scenario
+
+        if not single:
+            raise PhysicalParameterError("option --ros2 writes the plan of one scenario file; give one")
+        try:
+            check_plan_bag_target(ros2_out)
+        except FileExistsError as exc:
+            raise PhysicalParameterError(f"option --ros2: {exc}") from None
+
+        if load_scenario(scenario_paths[0]).drive is None:
+            raise ModelFileError(str(scenario_paths[0]), "drive", "option --ros2 needs the drive limits that make "
+                                 "the joint trajectory; the scenario has no [drive] table")
+    if single:
+        from .api import plan_scenario, write_plan_ros2
 
         result = plan_scenario(scenario_paths[0], out_dir, n_jobs=jobs or os.cpu_count() or 1, iterations=iterations,
                                compare_blind=not no_blind, progress=_progress())
         logger.info(f"outputs in {result.output_dir}")
+        if ros2_out is not None:
+            written = write_plan_ros2(result, ros2_out, storage=ros2_storage, distro=ros2_distro, frame_id=ros2_frame)
+            logger.info(f"ROS 2 bag in {written['bag']} ({ros2_storage}, {ros2_distro} messages); trajectory for "
+                        f"`ros2 topic pub` in {written['yaml']}")
         return
     from .studies import plan_many
 
@@ -364,12 +393,77 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
                 f"{t['elapsed_s']:.1f} s); truth in {sidecar}")
 
 
+def _bag_options(f):
+    """The options that choose what to read from a ROS 2 bag (:class:`ctrplan.io.ros2.BagSelection`)."""
+    for option in reversed([
+        click.option("--joint-topic", default=None,
+                     help="Bag: sensor_msgs/msg/JointState topic (default: the bag's only one)."),
+        click.option("--pose-topic", default=None,
+                     help="Bag: tip pose topic, geometry_msgs/msg/PoseStamped, TransformStamped or "
+                          "tf2_msgs/msg/TFMessage (default: the bag's only PoseStamped or TransformStamped topic, "
+                          "else its only TFMessage topic)."),
+        click.option("--child-frame", default=None,
+                     help="Bag: child frame of the tip in a TFMessage or TransformStamped topic (default: the only "
+                          "one)."),
+        click.option("--joint-names", "joint_names", default=None,
+                     help="Bag: joint names that differ from the robot file's, BAG_NAME=ROBOT_JOINT,... "
+                          "(e.g. tube2_rotation=alpha_2)."),
+        click.option("--max-joint-gap", type=float, default=5.0, show_default=True,
+                     help="Bag: a pause in the joint stream longer than this many median joint periods starts a "
+                          "new continuous motion."),
+        click.option("--tangent-axis", type=click.Choice(["x", "y", "z", "none"]), default="z", show_default=True,
+                     help="Bag: axis of the pose orientation that is the tip tangent (none: positions only)."),
+    ]):
+        f = option(f)
+    return f
+
+
+def _bag_selection(data_path, joint_topic, pose_topic, child_frame, joint_names, max_joint_gap, tangent_axis):
+    """The BagSelection of the bag options; refuses them for data that is not a bag."""
+    from .errors import PhysicalParameterError
+    from .io.ros2 import BagSelection, is_bag
+
+    try:
+        pairs = BagSelection.parse_joint_names(joint_names)
+    except ValueError as exc:
+        raise PhysicalParameterError(f"option --joint-names {joint_names!r}: {exc}") from None
+    try:
+        bag = BagSelection(joint_topic=joint_topic, pose_topic=pose_topic, child_frame=child_frame, joint_names=pairs,
+                           max_gap_periods=max_joint_gap, tangent_axis=tangent_axis)
+    except ValueError as exc:
+        raise PhysicalParameterError(f"option --max-joint-gap {max_joint_gap!r}: {exc}") from None
+    if bag != BagSelection() and not is_bag(data_path):
+        raise PhysicalParameterError(f"options --joint-topic, --pose-topic, --child-frame, --joint-names, "
+                                     f"--max-joint-gap and --tangent-axis read a ROS 2 bag; {data_path} is not one")
+    return bag
+
+
+@main.command("bag-info")
+@click.argument("bag_path", type=click.Path(exists=True))
+@click.option("--robot", "robot_path", default=None, type=click.Path(exists=True, dir_okay=False),
+              help="Robot model file: also say what `ctrplan discrepancy` would read from the bag (topics, joints, "
+                   "rates, time span, poses outside the joint stream).")
+@_bag_options
+def bag_info(bag_path, robot_path, **bag_options):
+    """List a ROS 2 bag's topics and, with --robot, what the discrepancy workflow would read from it."""
+    from .io.ros2 import bag_topics, describe_bag_summary, read_bag_measurements
+
+    for t in bag_topics(bag_path):
+        click.echo(f"{t['topic']}  {t['type']}  {t['count']} messages")
+    if robot_path is not None:
+        from .io.robot_file import load_robot
+
+        read = read_bag_measurements(bag_path, load_robot(robot_path), _bag_selection(bag_path, **bag_options))
+        for line in describe_bag_summary(read.summary):
+            click.echo(line)
+
+
 @main.command()
 @click.option("--robot", "robot_path", required=True, type=click.Path(exists=True, dir_okay=False),
               help="Robot model file with the candidate effects switched off (TOML, SI units).")
-@click.option("--data", "data_path", required=True, type=click.Path(exists=True, dir_okay=False),
-              help="Measured data: CSV in the project schema (SI units), or Ha's whitespace trajectory "
-                   "format (any other extension).")
+@click.option("--data", "data_path", required=True, type=click.Path(exists=True),
+              help="Measured data: CSV in the project schema (SI units), a ROS 2 bag (rosbag2 folder, .mcap or "
+                   ".db3 file), or Ha's whitespace trajectory format (any other file).")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Report folder (report.md, results.json, PNG plots, updated model file).")
 @click.option("--fit", default=None,
@@ -388,8 +482,9 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
               help="Held-out samples at which to evaluate the friction envelope (all bounding solutions) "
                    "for the coverage figures; 0 skips it.")
 @click.option("--frame", type=click.Choice(["robot", "tracker"]), default=None,
-              help="Frame of the measured poses (default: tracker for Ha's format, robot for CSV); "
+              help="Frame of the measured poses (default: tracker for Ha's format and bags, robot for CSV); "
                    "tracker fits a rigid registration.")
+@_bag_options
 @click.option("--test-fraction", type=float, default=0.2, show_default=True,
               help="Share of the units (time blocks or configuration groups) held back as the untouched test split "
                    "(at least 8 units).")
@@ -419,7 +514,7 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
 @click.option("--no-progress", is_flag=True, help="Hide progress bars.")
 def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, reference_mu, envelope_samples, frame,
                 test_fraction, folds, blocks, prior_strengths, max_calibration_samples, max_contact_samples, bound_target,
-                bound_samples, significance, permutations, ds, jobs, seed, no_progress):
+                bound_samples, significance, permutations, ds, jobs, seed, no_progress, **bag_options):
     """Find where model and measurement disagree, name the missing effect, add it, show the gap shrink.
 
     Interrupted runs resume from <out>/.stages (finished calibrations and evaluations are kept).
@@ -459,6 +554,9 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
         raise PhysicalParameterError(f"option --bound-target {bound_target!r}: must be in (0, 1)")
     if bound_samples < 0:
         raise PhysicalParameterError(f"option --bound-samples {bound_samples!r}: must be >= 0")
+    from .io.ros2 import BagSelection
+
+    bag = _bag_selection(data_path, **bag_options)
     ref_mu = None
     if reference_mu is not None:
         from .discrepancy.synth import parse_values
@@ -469,6 +567,7 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
             raise PhysicalParameterError(f"option --reference-mu {reference_mu!r}: must be >= 0")
     opts = DiscrepancyOptions(
         fit=tuple(x.strip() for x in fit.split(",")) if fit else None, effects=chosen, frame=frame,
+        bag=bag if bag != BagSelection() else None,
         test_fraction=test_fraction, n_folds=folds, n_blocks=blocks, max_calibration_samples=max_calibration_samples,
         max_contact_samples=max_contact_samples,
         significance=significance, n_permutations=permutations, ds=ds or 3e-3,

@@ -30,22 +30,25 @@ SAMPLES = 400
 NOISE_MM = 0.5
 
 
+def _options(candidates, **kw):
+    return DiscrepancyOptions(effects=candidates, ds=6e-3, n_permutations=199, max_evaluations=200, n_folds=5,
+                              prior_strengths=(0.03, float("inf")), max_calibration_samples=200,
+                              friction_search_samples=48, bound_samples=60, n_jobs=1, **kw)
+
+
 def _case(tmp_path, seed, candidates, *, truth=None, **hidden):
     """Synthesize with ``hidden`` effects (:func:`synthesize_reference` keywords) on ``truth``
     (default: the base robot), run the workflow from the base file (friction off, no effect)
-    with ``candidates``."""
+    with ``candidates``. Returns the results, the data file and the synthesizer's truth."""
     base = load_robot(PAIR).replace(friction_coefficients=(0.0,))
     model = tmp_path / "pair.toml"
     model.write_text(robot_to_toml(base, header="Table I tube pair, friction off"))
     data = tmp_path / "d.csv"
-    frame, _ = synthesize_reference(truth or base, samples=SAMPLES, seed=seed, ds=6e-3,
-                                    noise_position_rms=NOISE_MM * 1e-3, **hidden)
+    frame, made = synthesize_reference(truth or base, samples=SAMPLES, seed=seed, ds=6e-3,
+                                       noise_position_rms=NOISE_MM * 1e-3, **hidden)
     frame.to_csv(data, index=False)
-    opts = DiscrepancyOptions(effects=candidates, ds=6e-3, n_permutations=199, max_evaluations=200, n_folds=5,
-                              prior_strengths=(0.03, float("inf")), max_calibration_samples=200,
-                              friction_search_samples=48, bound_samples=60, n_jobs=1)
-    res = run_discrepancy(model, data, tmp_path / "out", opts, echo=lambda s: None, progress=False)
-    return res, data
+    res = run_discrepancy(model, data, tmp_path / "out", _options(candidates), echo=lambda s: None, progress=False)
+    return res, data, made
 
 
 def _verdict_has(res, effect):
@@ -72,7 +75,7 @@ def test_hidden_backlash_beyond_its_typical_range_is_named_with_a_caution(tmp_pa
     excellent fit refused and a worse rival named), a play operator of the wrong sign, and an
     updated file that loses the effect."""
     band = np.deg2rad(6.5)
-    res, _ = _case(tmp_path, 3101, ("backlash", "time_offset", "friction"), backlash=(0.0, band))
+    res, *_ = _case(tmp_path, 3101, ("backlash", "time_offset", "friction"), backlash=(0.0, band))
     assert res["verdict"] == "named" and res["named_effect"] == "backlash", res["decision"]
     assert _fitted(res, "backlash")["backlash_2"] == pytest.approx(band, rel=0.1)
     assert any("backlash_2" in c and "check the couplings" in c for c in res["decision"]["cautions"])
@@ -84,16 +87,53 @@ def test_hidden_backlash_beyond_its_typical_range_is_named_with_a_caution(tmp_pa
     assert any("backlash_2" in c for c in written.metadata["effects_source"]["cautions"])
 
 
-def test_hidden_time_offset_beyond_its_typical_range_is_named_with_a_caution(tmp_path):
+@pytest.fixture(scope="module")
+def lag_case(tmp_path_factory):
+    """The 0.32 s tracker lag case: (results, data file, truth, its folder)."""
+    tmp = tmp_path_factory.mktemp("lag")
+    return (*_case(tmp, 3102, ("time_offset", "backlash", "friction"), time_offset=0.32), tmp)
+
+
+def test_hidden_time_offset_beyond_its_typical_range_is_named_with_a_caution(lag_case):
     """A tracker lag of 0.32 s (|tau| <= 0.3 s is typical), evaluated exactly on the analytic
     motion; rivals: backlash, friction. The time offset is named within 0.01 s, with a caution.
     Catches a time shift of the wrong sign or scale, and a typical range used as a gate."""
-    res, _ = _case(tmp_path, 3102, ("time_offset", "backlash", "friction"), time_offset=0.32)
+    res = lag_case[0]
     assert res["verdict"] == "named" and res["named_effect"] == "time_offset", res["decision"]
     assert _fitted(res, "time_offset")["time_offset"] == pytest.approx(0.32, abs=0.01)
     assert any("time_offset" in c for c in res["decision"]["cautions"])
     assert _shrinks_on_the_test_split(res), res["test_split"]["figures"]
     assert res["reproduced"]
+
+
+def test_the_lag_case_recorded_as_a_ros2_bag_gives_the_csv_verdict(lag_case):
+    """The same run recorded as a ROS 2 bag (MCAP): the drive's joint states at 40 Hz under its
+    own joint name, the tracker's poses at the CSV's 10 Hz samples, on one clock but never at the
+    same instant. The joints read at the pose stamps give the CSV's verdict, a lag within 5 ms of
+    the CSV's fit, and the report says which topics, rates and time span were used. Catches
+    joints read at the record time or from the nearest joint state (a lag of up to 12 ms more),
+    a stamp origin that differs between the streams, and joint names matched by position."""
+    import pandas as pd
+
+    from _bags import measured_run
+    from ctrplan.io.ros2 import BagSelection
+
+    res_csv, data, made, tmp = lag_case
+    frame = pd.read_csv(data)
+    bag = measured_run(tmp / "run_bag", made["motion"], frame["time"].to_numpy(),
+                       frame[["tip_x", "tip_y", "tip_z"]].to_numpy(), frame[["tangent_x", "tangent_y", "tangent_z"]].to_numpy(),
+                       joint_rate_hz=40.0, names=["tube2_drive"])
+    opts = _options(("time_offset", "backlash", "friction"), frame="robot",
+                    bag=BagSelection(joint_names=(("tube2_drive", "alpha_2"),)))
+    res = run_discrepancy(tmp / "pair.toml", bag,
+                          tmp / "out-bag", opts, echo=lambda s: None, progress=False)
+    assert (res["verdict"], res["named_effect"]) == (res_csv["verdict"], res_csv["named_effect"]) == ("named", "time_offset")
+    assert _fitted(res, "time_offset")["time_offset"] == pytest.approx(_fitted(res_csv, "time_offset")["time_offset"],
+                                                                       abs=0.005)
+    source = res["data_source"]
+    assert source["poses_used"] == len(frame) and source["joint_topic"] == "/joint_states"
+    text = Path(write_report(res, tmp / "out-bag")["markdown"]).read_text()
+    assert "joint states /joint_states" in text and "tip poses /tracker/tip" in text and "40 Hz" in text
 
 
 def test_hidden_friction_is_named_with_its_coefficient(tmp_path):
@@ -104,7 +144,7 @@ def test_hidden_friction_is_named_with_its_coefficient(tmp_path):
     interior minimum. The prediction check that planning reads validates the written file: with
     the friction model written, its history-aware row is the final model's test-split error
     (catches a check of another fit than the one written)."""
-    res, _ = _case(tmp_path, 3103, ("friction", "backlash", "time_offset"), mu=(0.25,))
+    res, *_ = _case(tmp_path, 3103, ("friction", "backlash", "time_offset"), mu=(0.25,))
     assert _verdict_has(res, "friction"), res["decision"]
     assert _fitted(res, "friction")["mu_1"] == pytest.approx(0.25, abs=0.05)
     assert res["updated_model"] == "friction"
@@ -125,7 +165,7 @@ def test_correlated_noise_and_a_misspecified_file_name_nothing_and_the_residual_
     base = load_robot(PAIR).replace(friction_coefficients=(0.0,))
     names = ("precurvature_y_1", "precurvature_y_2", "k_xy_relative_2")
     truth = apply_parameters(base, names, read_parameters(base, names) * np.array([1.06, 0.92, 1.12]))
-    res, _ = _case(tmp_path, 3104, ("backlash", "time_offset", "friction"), truth=truth, noise_ar1=0.8)
+    res, *_ = _case(tmp_path, 3104, ("backlash", "time_offset", "friction"), truth=truth, noise_ar1=0.8)
     assert res["verdict"] == "none" and res["named_effect"] is None, res["decision"]
     noise = res["noise"]["noise"]
     assert noise["source"] == "rests" and noise["position_rms_m"] == pytest.approx(NOISE_MM * 1e-3, rel=0.25)

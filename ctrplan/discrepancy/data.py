@@ -1,6 +1,6 @@
 """Measured data for the discrepancy workflow: loading, motion history and configuration groups.
 
-Two inputs are accepted:
+Three inputs are accepted:
 
 - a CSV in the project's one column schema (:mod:`ctrplan.io.tables`), SI units: ``alpha_i``
   [rad], ``beta_i`` [m], ``tip_x..z`` [m], optionally ``tangent_x..z`` or ``R_11..R_33``,
@@ -8,7 +8,10 @@ Two inputs are accepted:
   columns ``config_id`` (same id = same configuration, e.g. the four approaches of the paper's
   protocol) and ``subset`` (``calibration`` / ``validation``);
 - the whitespace format of Ha's measured trajectory (``../shared/data/ha-three-tube-trajectory``),
-  read by :func:`ctrplan.io.tables.load_ha_trajectory` (any file not ending in ``.csv``).
+  read by :func:`ctrplan.io.tables.load_ha_trajectory` (any other file not ending in ``.csv``);
+- a ROS 2 bag (rosbag2 folder, or ``.mcap`` / ``.db3`` file): joint states and tip poses at their
+  own stamps and rates, the joints read at the pose stamps within each continuous motion
+  (:func:`ctrplan.io.ros2.read_bag_measurements`).
 
 The motion history of every sample (direction of each pair's last rotation, release by a later
 translation, history effects such as backlash or a tracker lag) is read by
@@ -27,7 +30,8 @@ import pandas as pd
 
 from ..errors import CtrplanError, DataFileError
 from ..history import HistoryState, MotionRecord, motion_state
-from ..io.tables import read_measurements
+from ..io.ros2 import BagSelection, is_bag, read_bag_measurements
+from ..io.tables import measurements_from_frame, read_measurements
 
 __all__ = ["MeasuredData", "load_measured_data", "configuration_groups"]
 
@@ -71,6 +75,8 @@ class MeasuredData:
         Index of each sample in ``record``.
     given_eta : ndarray of int, shape (N, n - 1)
         The file's ``eta_*`` columns for the whole record (0 where not given).
+    source : dict or None
+        For a bag, what was read from it (:attr:`ctrplan.io.ros2.BagMeasurements.summary`).
     """
 
     alpha: np.ndarray
@@ -88,6 +94,7 @@ class MeasuredData:
     record: MotionRecord
     rows: np.ndarray
     given_eta: np.ndarray
+    source: dict | None = None
     _states: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -144,18 +151,23 @@ def _is_whitespace_format(path: Path) -> bool:
     return path.suffix.lower() != ".csv"
 
 
-def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = None) -> MeasuredData:
+def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = None,
+                       bag: BagSelection | None = None) -> MeasuredData:
     """Load measured data and complete its motion history.
 
     Parameters
     ----------
     path : str or path-like
-        CSV in the project schema, or Ha's whitespace trajectory format (not ``.csv``).
+        CSV in the project schema, a ROS 2 bag (folder, ``.mcap`` or ``.db3``), or Ha's whitespace
+        trajectory format (any other file).
     robot : Robot
-        Gives the number of tubes; joints are checked against its limits.
+        Gives the number of tubes (and, for a bag, the joint names); joints are checked against
+        its limits.
     frame : {"robot", "tracker"}, optional
         Frame of the measured poses. Default: ``"tracker"`` for Ha's format (its README: the
-        registration is not given), ``"robot"`` for CSV.
+        registration is not given) and for a bag (a tracker's poses), ``"robot"`` for CSV.
+    bag : BagSelection, optional
+        Topics, child frame and joint names to read from a bag (default: the bag's only ones).
 
     Returns
     -------
@@ -167,14 +179,22 @@ def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = No
         Missing file or column, non-numeric or non-finite value (named by column and row),
         values that look like millimetres or degrees, a tangent that is not a unit vector, fewer
         than 2 samples, a bad ``subset`` value, or a configuration outside the robot's joint
-        limits (named by row).
+        limits (named by row); for a bag, what :func:`ctrplan.io.ros2.read_bag_measurements` raises.
     """
     path = Path(path)
     file = str(path)
     n = robot.n_tubes
     if not path.exists():
         raise DataFileError(f"{file}: file does not exist")
-    if _is_whitespace_format(path):
+    source = None
+    if is_bag(path):
+        read = read_bag_measurements(path, robot, bag or BagSelection())
+        source = read.summary
+        meas = measurements_from_frame(read.table, n, file)
+        tmp = dict(alpha=meas.alpha, beta=meas.beta, tip=meas.tip, tangent=meas.tangent, eta=None,
+                   time=meas.time, table=meas.frame)
+        default_frame = "tracker"
+    elif _is_whitespace_format(path):
         from ..io.tables import load_ha_trajectory
 
         table = load_ha_trajectory(path)
@@ -226,7 +246,8 @@ def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = No
     return MeasuredData(alpha=tmp["alpha"], beta=tmp["beta"], tip=tmp["tip"], tangent=tmp["tangent"],
                         eta=hist.eta.astype(int), translation_last=np.asarray(hist.released, bool),
                         sequence=sequence, config_id=config_id, subset=subset, time=time,
-                        file=file, frame=frame, record=record, rows=np.arange(k), given_eta=given_eta)
+                        file=file, frame=frame, record=record, rows=np.arange(k), given_eta=given_eta,
+                        source=source)
 
 
 def _frame_to_arrays(table: pd.DataFrame, n: int, file: str) -> dict:

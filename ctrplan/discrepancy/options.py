@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..io.ros2 import BagSelection
 from ..mechanics import ModelSettings
 
 __all__ = ["DiscrepancyOptions", "FIT_VERSION", "MIN_REST_PAIRS", "ALPHA_STEP",
@@ -51,6 +52,9 @@ class DiscrepancyOptions:
     frame : {"robot", "tracker"} or None
         Frame of the measurements (default from the file type, see
         :func:`ctrplan.discrepancy.data.load_measured_data`). "tracker" fits a registration.
+    bag : BagSelection or None
+        What to read when the data is a ROS 2 bag (:class:`ctrplan.io.ros2.BagSelection`; None:
+        the bag's only joint-state and pose topics).
     test_fraction : float
         Share of the units held back as the untouched test split, at least
         :data:`~ctrplan.discrepancy.split.MIN_TEST_UNITS` units
@@ -110,6 +114,7 @@ class DiscrepancyOptions:
     fit: tuple | None = None
     effects: tuple | None = None
     frame: str | None = None
+    bag: BagSelection | None = None
     test_fraction: float = 0.2
     n_blocks: int | None = None
     n_folds: int | None = None

@@ -404,6 +404,7 @@ def discrepancy_results(setup: DiscrepancySetup, split: DataSplit, baseline: Bas
     test_data = setup.data.take(split.test_rows)
     return {
         "robot_file": str(setup.robot_path), "data_file": str(setup.data_path), "frame": setup.data.frame,
+        "data_source": setup.data.source,
         "n_samples": setup.data.n_samples, "split": split.as_dict(), "baseline_parameters": list(setup.base_names),
         "baseline": {"fit": baseline.fit.as_dict(), "folds": [f.as_dict() for f in baseline.cv.folds],
                      "bic": baseline.bic, "parameter_table": baseline.parameters,

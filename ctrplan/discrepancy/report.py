@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import atomic_write_text
+from ..io.ros2 import describe_bag_summary
 
 __all__ = ["write_report", "TABLE_VIII"]
 
@@ -143,7 +144,9 @@ def _verdict_lines(results: dict) -> list[str]:
 
 def _split_lines(results: dict) -> list[str]:
     s = results["split"]
-    return ["## Samples", "",
+    source = results.get("data_source")
+    bag = [] if not source else [f"- {line}" for line in describe_bag_summary(source)]
+    return ["## Samples", "", *bag,
             f"- {results['n_samples']} samples in the {results['frame']} frame; {s['how']}.",
             f"- Folds: {s['n_folds']} of {', '.join(map(str, s['fold_samples']))} samples ({', '.join(map(str, s['fold_units']))} "
             f"units); each fold is predicted by models fitted on the others, from the same cold start as the fit on "

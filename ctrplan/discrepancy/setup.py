@@ -134,7 +134,7 @@ def load_inputs(robot_path, data_path, out_dir, options: DiscrepancyOptions) -> 
     from ..io.robot_file import load_robot
 
     robot = load_robot(robot_path)
-    data = load_measured_data(data_path, robot, frame=options.frame)
+    data = load_measured_data(data_path, robot, frame=options.frame, bag=options.bag)
     register = data.frame == "tracker"
     base_names = tuple(options.fit) if options.fit else default_baseline_parameters(robot, register)
     requested = tuple(options.effects) if options.effects is not None else tuple(REGISTRY)

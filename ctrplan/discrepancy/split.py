@@ -436,4 +436,9 @@ def split_samples(setup, options, echo=print) -> DataSplit:
         raise DataFileError(f"{data.file}: {n_fit} calibration samples per fold are not more than the "
                             f"{len(setup.base_names)} baseline parameters plus the largest effect's; give more samples")
     echo(f"data: {data.n_samples} samples ({data.frame} frame) from {data.file}; {split.how}")
+    if data.source is not None:
+        from ..io.ros2 import describe_bag_summary
+
+        for line in describe_bag_summary(data.source):
+            echo(f"  {line}")
     return split

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..effects import REGISTRY
 from ..io.atomic import atomic_write_text
+from ..io.robot_file import file_hash
 from .calibrate import CalibrationResult
 from .options import FIT_VERSION, DiscrepancyOptions
 
@@ -65,7 +66,7 @@ def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
     Parameters
     ----------
     robot_path, data_path : path
-        The input files (their bytes enter the key).
+        The input files (their bytes enter the key; a bag folder's files with their names).
     options : DiscrepancyOptions
 
     Returns
@@ -78,5 +79,5 @@ def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
                           "reference_friction", "effects", "bound_target", "bound_samples")}
     keyed["fit_version"] = FIT_VERSION
     keyed["effects"] = sorted(options.effects if options.effects is not None else REGISTRY)
-    return hashlib.sha256(Path(robot_path).read_bytes() + Path(data_path).read_bytes()
+    return hashlib.sha256(Path(robot_path).read_bytes() + file_hash(data_path).encode()
                           + json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:12]

@@ -52,6 +52,7 @@ __all__ = [
     "config_columns",
     "read_configurations",
     "read_measurements",
+    "measurements_from_frame",
     "write_table",
     "load_ha_trajectory",
 ]
@@ -178,8 +179,31 @@ def read_measurements(path: str | os.PathLike, n_tubes: int) -> Measurements:
         ``R_ij`` columns, a tangent that is not a unit vector or a matrix that is not a rotation
         (tolerance 1e-2), tip coordinates that look like millimetres.
     """
-    file = str(path)
-    frame = _read_csv(path)
+    return measurements_from_frame(_read_csv(path), n_tubes, str(path))
+
+
+def measurements_from_frame(frame: pd.DataFrame, n_tubes: int, source: str) -> Measurements:
+    """:func:`read_measurements` on a table already in memory (e.g. converted from a ROS 2 bag by
+    :func:`ctrplan.io.ros2.read_bag_measurements`), with the same checks.
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame
+        Columns of the schema, numeric.
+    n_tubes : int
+    source : str
+        Named in the error messages (the file the table came from).
+
+    Returns
+    -------
+    Measurements
+
+    Raises
+    ------
+    DataFileError
+        As :func:`read_measurements`.
+    """
+    file = source
     alpha, beta, eta = _configurations(frame, n_tubes, file)
     _require(frame, TIP, file)
     tip = frame[TIP].to_numpy(float)
