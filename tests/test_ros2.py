@@ -29,7 +29,7 @@ from ctrplan.io.robot_file import load_robot
 from ctrplan.io.ros2 import (BagSelection, bag_topics, read_bag_measurements, read_joint_trajectory,
                              trajectory_yaml, write_plan_bag, PlanBagContent)
 from reference.synth_reference import reference_motion
-from test_pipeline import _scenario, synthetic_map  # noqa: F401 (fixture)
+from test_pipeline import _scenario, cached_map  # noqa: F401 (fixture)
 
 ROOT = Path(__file__).resolve().parents[1]
 NOMINAL = ROOT / "model" / "ha2019-table2-nominal.toml"
@@ -327,14 +327,13 @@ def test_trajectory_yaml_is_the_message(tmp_path):
     assert np.abs(t - c.t).max() <= 1e-9
 
 
-def test_plan_with_ros2_writes_the_trajectory_csv_as_a_bag(tmp_path, monkeypatch, capsys, synthetic_map):
+def test_plan_with_ros2_writes_the_trajectory_csv_as_a_bag(tmp_path, monkeypatch, capsys, cached_map):
     """``ctrplan plan SCENARIO --ros2 OUT`` (synthetic bound field, a short move): the bag's
     trajectory equals ``trajectory.csv`` (times within 1 ns, values within 1e-12), its path the
     tips of ``path.csv``, its spheres twice the bound of ``path.csv`` (the calibrated one where
     the robot file has one); the YAML beside the outputs holds the same trajectory."""
     from ruamel.yaml import YAML
 
-    monkeypatch.chdir(tmp_path)
     sc = _scenario(tmp_path, "{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}")
     out, bag = tmp_path / "plan", tmp_path / "plan_bag"
     monkeypatch.setattr(sys, "argv", ["ctrplan", "plan", str(sc), "--out", str(out), "--iterations", "20",
