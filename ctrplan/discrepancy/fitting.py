@@ -758,9 +758,6 @@ def _refine_contact(ctx, start: CalibrationResult, names: tuple) -> CalibrationR
     fit = calibrate(setup.robot, ctx["fit_data"], start.model, fitted, fixed=fixed, initial=init,
                     settings=setup.settings, n_jobs=ctx["n_jobs"], max_evaluations=options.max_contact_evaluations,
                     uncertainty=k is None, warm=True, prior=ctx["prior"], clusters=ctx["units"])
-    if fit.cost > start.cost:
-        # the refinement ends above its start only when every step failed: keep the start
-        return start
     return replace(fit, message=f"{start.message}; then refitted with the baseline's parameters: {fit.message}",
                    at_bound=tuple(sorted(set(fit.at_bound) | set(start.at_bound))),
                    widened=tuple(start.widened) + tuple(fit.widened), converged=fit.converged and start.converged)
@@ -955,14 +952,12 @@ def _fit_pair(ctx) -> CalibrationResult:
                               settings=settings, n_jobs=n_jobs, max_evaluations=budget, uncertainty=False, warm=True)
             params.update(zip(extra, alone.values))
     free = base_names + tuple(dict.fromkeys(n for n in (*first_extra, *extra) if n not in base_names))
-    fixed = {n: v for n, v in params.items() if n not in free}
-    start = calibrate(robot, fit_data, model, (), fixed=params, settings=settings, n_jobs=n_jobs)
     if not free:
-        return start
-    fit = calibrate(robot, fit_data, model, free, fixed=fixed, initial=[params[n] for n in free], settings=settings,
-                    n_jobs=n_jobs, max_evaluations=budget, uncertainty=k is None, warm=True, prior=ctx["prior"],
-                    clusters=units)
-    return fit if fit.cost <= start.cost else start
+        return calibrate(robot, fit_data, model, (), fixed=params, settings=settings, n_jobs=n_jobs)
+    fixed = {n: v for n, v in params.items() if n not in free}
+    return calibrate(robot, fit_data, model, free, fixed=fixed, initial=[params[n] for n in free], settings=settings,
+                     n_jobs=n_jobs, max_evaluations=budget, uncertainty=k is None, warm=True, prior=ctx["prior"],
+                     clusters=units)
 
 
 def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline, contact: CrossValidated | None,
