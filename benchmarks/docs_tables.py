@@ -1,15 +1,18 @@
-"""The tables of docs/discrepancy.md, made from the results files of the benchmarks that measure them.
+"""The tables of the docs made from the results files of the benchmarks that measure them.
 
     python benchmarks/docs_tables.py          # rewrite the tables between their markers
     python benchmarks/docs_tables.py --check  # exit 1 when the docs differ from the results files
 
-Each table sits between ``<!-- NAME -->`` and ``<!-- /NAME -->`` in docs/discrepancy.md:
+Each table sits between ``<!-- NAME -->`` and ``<!-- /NAME -->`` in its page:
 
-- ``sweep-table``: ``benchmarks/results/discrepancy-sweep.json``
+- docs/discrepancy.md, ``sweep-table``: ``benchmarks/results/discrepancy-sweep.json``
   (``benchmarks/bench_discrepancy_sweep.py``);
-- ``ha-table``: ``benchmarks/results/ha-trajectory-discrepancy.json``
+- docs/discrepancy.md, ``ha-table``: ``benchmarks/results/ha-trajectory-discrepancy.json``
   (``benchmarks/ha_trajectory_discrepancy.py``);
-- ``robot-files-table``: ``benchmarks/results/ha-robot-files.json`` (``benchmarks/ha_robot_files.py``).
+- docs/discrepancy.md, ``robot-files-table``: ``benchmarks/results/ha-robot-files.json``
+  (``benchmarks/ha_robot_files.py``);
+- docs/mechanics.md, ``discretization-table``: ``benchmarks/results/discretization-accuracy.json``
+  (``benchmarks/discretization_accuracy.py``).
 """
 
 from __future__ import annotations
@@ -26,7 +29,11 @@ ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "discrepancy.md"
 RESULTS = ROOT / "benchmarks" / "results"
 SOURCES = {"sweep-table": RESULTS / "discrepancy-sweep.json", "ha-table": RESULTS / "ha-trajectory-discrepancy.json",
-           "robot-files-table": RESULTS / "ha-robot-files.json"}
+           "robot-files-table": RESULTS / "ha-robot-files.json",
+           "discretization-table": RESULTS / "discretization-accuracy.json"}
+#: The page each table is in.
+DOCS = {"sweep-table": DOC, "ha-table": DOC, "robot-files-table": DOC,
+        "discretization-table": ROOT / "docs" / "mechanics.md"}
 OUTCOMES = ("right", "partly right", "ambiguous with truth", "wrong", "nothing")
 KIND_LABELS = {"control": "controls (no effect)", "one": "one effect", "two": "two effects"}
 
@@ -226,12 +233,39 @@ def robot_files_table(res: dict) -> str:
     return "\n".join(lines)
 
 
-MAKERS = {"sweep-table": sweep_table, "ha-table": ha_table, "robot-files-table": robot_files_table}
+def discretization_table(res: dict) -> str:
+    """Accuracy against the converged reference (and speed, where timed) of each discretization,
+    per grid: medians and maxima [mm] of the tips and the bound, configurations flagged otherwise."""
+    names = list(res["candidates"])
+    lines = ["| grid | discretization | nodes | clearance tip, median / max [mm] | friction tip, median / max [mm] "
+             "| bound, median / max [mm] | flags differ (not converged, unstable) | bound time, default / this |",
+             "|---|---|---|---|---|---|---|---|"]
+    for grid, g in res["grids"].items():
+        timing = g.get("timing", {}).get("candidates", {})
+        for n in names:
+            e = g["candidates"][n]
+            kw = res["candidates"][n]
+            label = n if not kw else f"{n} (" + ", ".join(f"{k} {v:g}" for k, v in kw.items()) + ")"
+
+            def cell(q):
+                return f"{e[q]['median'] * 1e3:.3f} / {e[q]['max'] * 1e3:.3f}"
+            speed = f"{timing[n]['speedup_of_medians']:.2f}x" if n in timing else "-"
+            lines.append(f"| {grid}x{grid}x{grid} ({g['reference_settled']} of {g['configurations']}) | {label} | {e['median_nodes']:.0f} | "
+                         f"{cell('clearance_tip')} | {cell('friction_tip')} | {cell('bound')} | "
+                         f"{e['converged_differs']}, {e['unstable_differs']} | {speed} |")
+    return "\n".join(lines)
 
 
-def render(doc: str) -> str:
-    """``doc`` with every table whose results file exists rewritten between its markers."""
+MAKERS = {"sweep-table": sweep_table, "ha-table": ha_table, "robot-files-table": robot_files_table,
+          "discretization-table": discretization_table}
+
+
+def render(doc: str, names=None) -> str:
+    """``doc`` with every table of ``names`` (default all) whose results file exists rewritten
+    between its markers."""
     for name, make in MAKERS.items():
+        if names is not None and name not in names:
+            continue
         if not SOURCES[name].exists():
             continue
         table = make(json.loads(SOURCES[name].read_text()))
@@ -245,15 +279,17 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true")
     args = ap.parse_args(argv)
-    doc = DOC.read_text()
-    new = render(doc)
-    if args.check:
-        if new != doc:
-            print(f"{DOC} differs from the results files; run python benchmarks/docs_tables.py")
-            return 1
-        return 0
-    DOC.write_text(new)
-    return 0
+    status = 0
+    for page in dict.fromkeys(DOCS.values()):
+        doc = page.read_text()
+        new = render(doc, [n for n, p in DOCS.items() if p == page])
+        if args.check:
+            if new != doc:
+                print(f"{page} differs from the results files; run python benchmarks/docs_tables.py")
+                status = 1
+        elif new != doc:
+            page.write_text(new)
+    return status
 
 
 if __name__ == "__main__":

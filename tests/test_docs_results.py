@@ -1,7 +1,8 @@
-"""docs/discrepancy.md quotes the results files of its benchmarks, and those files come from the data
-they name and from the code at hand: catches figures in the docs edited by hand or left behind by
-a newer run, a results file made from another version of the measured data, and one made by code
-that has changed since (its digest of the discrepancy, effects, history and mechanics sources)."""
+"""docs/discrepancy.md and docs/mechanics.md quote the results files of their benchmarks, and those
+files come from the data they name and from the code at hand: catches figures in the docs edited by
+hand or left behind by a newer run, a results file made from another version of the measured data,
+and one made by code that has changed since (its digest of the discrepancy, effects, history and
+mechanics sources, or the mechanics version)."""
 
 from __future__ import annotations
 
@@ -23,18 +24,28 @@ def _tables():
     return mod
 
 
-@pytest.mark.parametrize("name", ["sweep-table", "ha-table", "robot-files-table"])
+@pytest.mark.parametrize("name", ["sweep-table", "ha-table", "robot-files-table", "discretization-table"])
 def test_docs_tables_are_the_results_files(name):
     """The table between the docs' markers is exactly what the results file renders to."""
     tables = _tables()
-    source = tables.SOURCES[name]
-    if not source.exists():
-        pytest.skip(f"{source.relative_to(ROOT)} not written yet: run its benchmark (benchmarks/docs_tables.py)")
-    doc = tables.DOC.read_text()
-    assert f"<!-- {name} -->" in doc and f"<!-- /{name} -->" in doc, f"no {name} block in {tables.DOC}"
+    source, page = tables.SOURCES[name], tables.DOCS[name]
+    assert source.exists(), f"{source.relative_to(ROOT)} is quoted by {page.name} and missing"
+    doc = page.read_text()
+    assert f"<!-- {name} -->" in doc and f"<!-- /{name} -->" in doc, f"no {name} block in {page}"
     table = tables.MAKERS[name](json.loads(source.read_text()))
     assert f"<!-- {name} -->\n{table}\n<!-- /{name} -->" in doc, (
-        f"{tables.DOC.name} differs from {source.name}: run python benchmarks/docs_tables.py")
+        f"{page.name} differs from {source.name}: run python benchmarks/docs_tables.py")
+
+
+def test_discretization_results_come_from_the_present_mechanics():
+    """The discretization table of docs/mechanics.md was measured with the present mechanics
+    (:data:`ctrplan.constants.MECHANICS_VERSION`, changed whenever a tip, bound or flag moves)."""
+    from ctrplan.constants import MECHANICS_VERSION
+
+    stored = json.loads((ROOT / "benchmarks" / "results" / "discretization-accuracy.json").read_text())
+    assert stored["mechanics_version"] == MECHANICS_VERSION, (
+        "discretization-accuracy.json was measured with other mechanics: run benchmarks/discretization_accuracy.py "
+        "again, then benchmarks/docs_tables.py")
 
 
 @pytest.mark.parametrize("name", ["discrepancy-sweep.json", "ha-trajectory-discrepancy.json", "ha-robot-files.json"])
