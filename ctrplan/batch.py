@@ -10,7 +10,6 @@ recomputing it; the final CSV is written atomically and the checkpoint removed.
 from __future__ import annotations
 
 import base64
-import hashlib
 import json
 import logging
 import os
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .cache import content_key, mechanics_version
 from .errors import CtrplanError
 from .mechanics import ModelSettings, solve_standard, solve_standard_batch
 from .mechanics._lie import angle_between
@@ -254,16 +254,19 @@ def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1, 
     return indices, rows
 
 
-def _run_tasks(tasks, n_local, runner):
-    """Results of the delayed ``tasks`` in order of completion: all in this process without a
-    ``runner``, else the first ``n_local`` here and the rest by ``runner`` (joblib.Parallel),
-    started only after those (a generator: the workers start when it gets there)."""
-    if runner is None:
-        n_local = len(tasks)
-    for fn, args, kwargs in tasks[:n_local]:
-        yield fn(*args, **kwargs)
+def _run_tasks(tasks, n_local, n_jobs):
+    """Results of ``tasks`` ([(tag, args of :func:`_chunk_task`)]) in order of completion: the first
+    ``n_local`` in this process, then the others on ``n_jobs`` workers
+    (:class:`ctrplan.parallel.Executor`), started only after those (a generator: the workers
+    start when it gets there)."""
+    from .parallel import Executor
+
+    for _, args in tasks[:n_local]:
+        yield _chunk_task(*args)
     if n_local < len(tasks):
-        yield from runner(tasks[n_local:])
+        with Executor(n_jobs) as ex:
+            for _, result in ex.run(_chunk_task, tasks[n_local:]):
+                yield result
 
 
 def _chunks(todo, model, n_jobs):
@@ -342,8 +345,9 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
     eta : ndarray of int, shape (K, n - 1), optional
         Per-row friction directions (0 = unknown: all directions).
     n_jobs : int
-        Parallel workers (1: in this process, serially). The contact models use joblib worker
-        processes, started once, that take chunks of ``CONTACT_CHUNK`` rows. The standard model
+        Parallel workers (1: in this process, serially). The contact models use local worker
+        processes (:class:`ctrplan.parallel.Executor`), started once, that take chunks of
+        ``CONTACT_CHUNK`` rows. The standard model
         runs in this process, ``n_jobs`` compiled threads sharing each chunk of
         ``STANDARD_CHUNK`` rows: its whole run takes less than starting worker processes.
     checkpoint : path, optional
@@ -364,7 +368,6 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
         same stability flag), computed by ``solve_standard_batch`` with ``check_stability``;
         its ``message`` omits the residual and determinant values.
     """
-    from joblib import Parallel, delayed
     from tqdm.auto import tqdm
 
     from .mechanics import warmup
@@ -396,12 +399,10 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
         first = [todo[:1]] if cold else []
         chunks = first + _chunks(todo[len(first):], model, n_jobs)
         threads = n_jobs if model == "standard" else 1
-        tasks = [delayed(_chunk_task)(robot, alpha[c], beta[c], model, settings,
-                                      None if eta is None else eta[c], [k + 1 for k in c], threads,
-                                      explain_failures)
-                 for c in chunks]
-        runner = None if in_process else Parallel(n_jobs=n_jobs, return_as="generator_unordered")
-        results = _run_tasks(tasks, len(first), runner)
+        tasks = [(i, (robot, alpha[c], beta[c], model, settings, None if eta is None else eta[c],
+                      [k + 1 for k in c], threads, explain_failures))
+                 for i, c in enumerate(chunks)]
+        results = _run_tasks(tasks, len(tasks) if in_process else len(first), n_jobs)
         with tqdm(total=K, initial=K - len(todo), disable=not progress, unit="config",
                   desc=f"{model} model") as bar:
             for indices, rows in results:
@@ -426,9 +427,16 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
 
 def job_key(robot_file_text: str, config_file_text: str, model: str, settings: ModelSettings,
             explain_failures: bool = False) -> str:
-    """Checkpoint key of a batch job (sha256 of its inputs)."""
-    inputs = [robot_file_text, config_file_text, model, settings.as_dict()]
-    if explain_failures:    # appended only when set: keys of jobs without it stay as they were
+    """Checkpoint key of a batch job (:mod:`ctrplan.cache`): the robot and configuration files'
+    text, the model, its settings and the mechanics version, so that a checkpoint written by
+    other mechanics is not reused.
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits.
+    """
+    inputs = [robot_file_text, config_file_text, model, settings.as_dict(), {"mechanics": mechanics_version()}]
+    if explain_failures:
         inputs.append("explain_failures")
-    payload = json.dumps(inputs, sort_keys=True)
-    return hashlib.sha256(payload.encode()).hexdigest()
+    return content_key(inputs)

@@ -160,7 +160,7 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
                    "one folder per scenario and the table scenarios.csv, default out/scenarios).")
 @click.option("--jobs", type=int, default=None,
               help="One scenario: worker processes for a bound map (default: all cores). Several: scenarios "
-                   "planned at once on a local dask cluster (default 1: in this process).")
+                   "planned at once on that many local worker processes (default 1: in this process).")
 @click.option("--scheduler", default=None,
               help="Several scenarios: address of a running dask.distributed scheduler (e.g. tcp://host:8786); "
                    "its workers need ctrplan installed.")
@@ -178,8 +178,8 @@ def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_ou
          ros2_frame):
     """Plan a friction-bound-aware motion for a scenario and write the drive trajectory.
 
-    Several scenario files or folders of them are planned in one process (or spread over dask
-    workers), each into its own folder, with one table across them; a rerun reuses the complete
+    Several scenario files or folders of them are planned in one process (or spread over local
+    worker processes or Dask workers), each into its own folder, with one table across them; a rerun reuses the complete
     outputs of unchanged scenarios.
     """
     single = len(scenario_paths) == 1 and Path(scenario_paths[0]).is_file() and scheduler is None
