@@ -52,11 +52,6 @@ def start_local_cluster(n_workers: int):
                         scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
 
 
-def _tagged(fn: Callable, tag, args: tuple):
-    """``(tag, fn(*args))``: a task's result with the tag that names it (run on a worker)."""
-    return tag, fn(*args)
-
-
 class Executor:
     """Runs independent tasks in this process, on local worker processes or on a Dask cluster.
 
@@ -85,8 +80,9 @@ class Executor:
     Examples
     --------
     >>> with Executor(n_jobs=2) as ex:                                  # doctest: +SKIP
-    ...     for tag, value in ex.run(pow, [(k, (k, 2)) for k in range(4)]):
-    ...         squares[tag] = value
+    ...     squares = dict(ex.run(pow, [(k, (k, 2)) for k in range(4)]))
+    >>> squares                                                         # doctest: +SKIP
+    {0: 0, 1: 1, 2: 4, 3: 9}
     """
 
     def __init__(self, n_jobs: int = 1, scheduler=None, *, fork: bool = False):
