@@ -20,14 +20,12 @@ and the tasks not yet started are cancelled.
 
 from __future__ import annotations
 
-import logging
 from typing import Any, Callable, Hashable, Iterable, Iterator
 
 from .errors import CtrplanError
 
 __all__ = ["SCHEDULER_TIMEOUT_S", "SchedulerUnreachableError", "Executor", "start_local_cluster"]
 
-logger = logging.getLogger(__name__)
 
 #: How long to try to reach a Dask scheduler given by its address [s].
 SCHEDULER_TIMEOUT_S = 30.0
