@@ -22,7 +22,7 @@ from .cache import content_key, mechanics_version
 from .errors import CtrplanError
 from .mechanics import ModelSettings, solve_standard, solve_standard_batch
 from .mechanics._lie import angle_between
-from .models import MODELS  # the one registry of models
+from .models import MODEL_INFO, MODELS, check_model  # the one registry of models
 
 __all__ = ["MODELS", "evaluate_configuration", "evaluate_table", "job_key"]
 
@@ -111,19 +111,18 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
     ValueError
         Unknown model name.
     """
-    if model not in MODELS:
-        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    check_model(model)
     settings = settings or ModelSettings()
     alpha = np.asarray(alpha, dtype=float)
     beta = np.asarray(beta, dtype=float)
     try:
         std = solve_standard(robot, alpha, beta, settings)
-        if model == "standard":
+        if not MODEL_INFO[model].contact:
             return [_row(alpha, beta, None, std, _status(std.diagnostics), std.diagnostics.message, model)]
         # the contact models are imported here, not at the top: a standard-model run does not
         # import them (ctrplan.mechanics imports them lazily; about 40 ms)
         from .mechanics import all_eta, evaluate_bound, solve_clearance, solve_friction
-        if model == "clearance":
+        if not MODEL_INFO[model].friction:
             cl = solve_clearance(robot, alpha, beta, settings, standard=std)
             row = _row(alpha, beta, None, cl, _status(cl.diagnostics), cl.diagnostics.message, model)
             row["translation_last_tip_m"] = float(np.linalg.norm(cl.tip_position - std.tip_position))
@@ -242,7 +241,7 @@ def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1, 
     """Evaluate the configurations ``alpha``, ``beta`` (m, n) of the 1-based rows ``indices``;
     returns (indices, list of m lists of rows), or for the standard model (indices, columns) with
     the columns of :func:`_standard_columns`."""
-    if model == "standard":
+    if not MODEL_INFO[model].contact:
         return indices, _standard_columns(robot, alpha, beta, settings, indices, n_threads)
     rows = []
     for k, index in enumerate(indices):
@@ -272,8 +271,9 @@ def _run_tasks(tasks, n_local, n_jobs):
 def _chunks(todo, model, n_jobs):
     """Split the 0-based rows ``todo`` into tasks: at most the model's chunk size, and (contact
     models in worker processes) at least four tasks per worker so that they stay busy to the end."""
-    size = STANDARD_CHUNK if model == "standard" else CONTACT_CHUNK
-    if n_jobs != 1 and todo and model != "standard":
+    contact = MODEL_INFO[model].contact
+    size = CONTACT_CHUNK if contact else STANDARD_CHUNK
+    if n_jobs != 1 and todo and contact:
         size = max(1, min(size, -(-len(todo) // (4 * max(n_jobs, 1)))))
     return [todo[i:i + size] for i in range(0, len(todo), size)]
 
@@ -372,8 +372,7 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
 
     from .mechanics import warmup
 
-    if model not in MODELS:
-        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    check_model(model)
     settings = settings or ModelSettings()
     alpha = np.asarray(alpha, dtype=float)
     beta = np.asarray(beta, dtype=float)
@@ -391,14 +390,14 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
             fh.write(json.dumps({"job_key": job_key}) + "\n")
             fh.flush()
     try:
-        in_process = n_jobs == 1 or model == "standard"
+        in_process = n_jobs == 1 or not MODEL_INFO[model].contact
         # worker processes on a cold start: the first row runs here first, so that the compiled
         # kernels are on disk before the workers start (else each worker compiles them again);
         # warm, the workers start at once (loading the kernels here too would cost about 0.5 s)
         cold = not in_process and todo and not warmup.contact_kernels_cached()
         first = [todo[:1]] if cold else []
         chunks = first + _chunks(todo[len(first):], model, n_jobs)
-        threads = n_jobs if model == "standard" else 1
+        threads = 1 if MODEL_INFO[model].contact else n_jobs
         tasks = [(i, (robot, alpha[c], beta[c], model, settings, None if eta is None else eta[c],
                       [k + 1 for k in c], threads, explain_failures))
                  for i, c in enumerate(chunks)]

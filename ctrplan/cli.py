@@ -24,7 +24,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 import click  # noqa: E402
 
 from .errors import CtrplanError, JointLimitError  # noqa: E402
-from .models import MODELS  # noqa: E402
+from .models import MODEL_INFO, MODELS  # noqa: E402
 
 # By name, not __name__: the same logger when run as ``python -m ctrplan.cli``.
 logger = logging.getLogger("ctrplan.cli")
@@ -120,10 +120,10 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
     from .io.robot_file import load_robot
     from .io.tables import read_configurations, write_table
 
-    if explain_failures and model != "friction":
+    if explain_failures and not MODEL_INFO[model].friction:
         raise click.UsageError(f"--explain-failures applies to --model friction only, not {model!r}")
     robot = load_robot(robot_path)
-    if model != "standard":
+    if MODEL_INFO[model].contact:
         from .mechanics import warmup
         warmup.start()   # on a cold start, the contact kernels compile beside the standard model's
     alpha, beta, eta, _ = read_configurations(configs_path, robot.n_tubes)
