@@ -27,13 +27,22 @@
 Run:  OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py [--ref-every 4] [--conv-configs 8]
       OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py --ratios-only [--repeat 3] [--tile 32]
       (section 4 only)
-The machine load (``os.getloadavg``) is printed: timings on a shared machine are noisy.
+The speed table of docs/mechanics.md Sec. 10 is made (``python benchmarks/docs_tables.py``) from
+the results file of
+      OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py --skip-convergence \
+          --results benchmarks/results/speed.json
+(sections 1, 2 and 4; section 3 is the discretization table, benchmarks/discretization_accuracy.py).
+The machine load (``os.getloadavg``) is printed and written: timings on a shared machine are noisy.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
+import json
 import os
+import platform
+import subprocess
 import sys
 import time
 import warnings
@@ -48,6 +57,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from ctrplan.io.robot_file import load_robot  # noqa: E402
+from ctrplan.mechanics import MECHANICS_VERSION  # noqa: E402
 from ctrplan.mechanics import (ModelSettings, evaluate_bound, solve_clearance, solve_friction,  # noqa: E402
                                solve_standard, solve_standard_batch)
 from paper_section_4d import PAPER_TIMES_S, grid_4x4x4, grid_8x8x8  # noqa: E402
@@ -145,6 +155,11 @@ def timing_table(robot, settings, ref_every):
             print(f"   not converged, left out of the {kind} times: " + ", ".join(f"{k}: {v}" for k, v in bad.items()))
     print("(paper: MATLAB on an i5-3470; its friction time is clearance + all friction solutions, "
           "Section V-C)")
+    return {"robot": robot.name, "ds_m": settings.ds, "ref_every": ref_every,
+            "models": {k: {"seconds": list(map(float, fast[k])), "paper_s": paper.get(k),
+                           "reference_seconds": list(map(float, ref[k])),
+                           "not_converged": failed["fast"][k], "reference_not_converged": failed["ref"][k]}
+                       for k in names}}
 
 
 def batch_throughput(robot, settings, repeats=5):
@@ -156,6 +171,7 @@ def batch_throughput(robot, settings, repeats=5):
     print(f"\n2. Standard model, batch mode (solve_standard_batch, {A.shape[0]} random configurations, "
           f"no multistart)")
     cores = len(os.sched_getaffinity(0))   # the cores this process may run on (taskset)
+    out = {"configurations": int(A.shape[0]), "rates_per_s": {}}
     for threads in (1, cores):
         solve_standard_batch(robot, A[:2], B[:2], settings, n_threads=threads)
         rates = []
@@ -163,8 +179,10 @@ def batch_throughput(robot, settings, repeats=5):
             _, t = _t(solve_standard_batch, robot, A, B, settings, n_threads=threads)
             rates.append(A.shape[0] / t)
         print(f"   {threads} thread(s): median {np.median(rates):.0f} configurations/s (best {max(rates):.0f})")
+        out["rates_per_s"][str(threads)] = list(map(float, rates))
         if cores == 1:
             break
+    return out
 
 
 def convergence_table(robot, n_configs, steps_mm=(12.0, 6.0, 3.0, 1.5), ref_mm=0.75):
@@ -217,7 +235,6 @@ def _single_standard_times(robot, Q, settings, repeat=5):
 
 
 def _cli(robot_file, configs, model, jobs, out):
-    import subprocess
     cmd = [sys.executable, "-m", "ctrplan.cli", "evaluate", "--robot", str(robot_file), "--configs", str(configs),
            "--model", model, "--out", str(out), "--no-progress"]
     if jobs is not None:
@@ -252,6 +269,7 @@ def ratio_table(repeat=3, tile=32):
           f"robot, 4x4x4 grid): median {unit * 1e3:.3f} ms (mean {single.mean() * 1e3:.3f}, max "
           f"{single.max() * 1e3:.3f}); load average {os.getloadavg()}")
     rows = []
+    extra = {}
     bound = []
     for q in Q:
         a, b = robot.configuration(q)
@@ -272,7 +290,7 @@ def ratio_table(repeat=3, tile=32):
         start = min(_cli(robot_file, tmp / "one.csv", "standard", 1, tmp / "o.csv") for _ in range(repeat))
         fr = [(_cli(robot_file, tmp / "grid.csv", "friction", 1, tmp / "f.csv") - start) / len(Q)
               for _ in range(repeat)]
-        rows.append((f"CLI friction (full bound), --jobs 1, 4x4x4, {repeat} runs", fr))
+        rows.append(("CLI friction (full bound), --jobs 1, 4x4x4, per configuration", fr))
         data = ROOT.parent / "shared" / "data" / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt"
         if data.exists():
             frame = load_ha_trajectory(data)
@@ -297,10 +315,13 @@ def ratio_table(repeat=3, tile=32):
                 for r in range(repeat):
                     for j in (variants if r % 2 == 0 else variants[::-1]):
                         per_row[j].append((_cli(rf, tmp / "traj.csv", "standard", j, tmp / "s.csv") - start_rows[j]) / n_rows)
-                rows.append((f"CLI standard, --jobs 1, {len(TA)} rows x {tile}, {tag}", per_row[1]))
+                rows.append((f"CLI standard, --jobs 1, {len(TA)} rows x {tile}, {tag}, per row", per_row[1]))
                 if tag == "Table II":
-                    rows.append((f"CLI standard, default jobs ({os.cpu_count()}), {tag}", per_row[None]))
+                    rows.append((f"CLI standard, default jobs ({os.cpu_count()}), {len(TA)} rows x {tile}, {tag}, "
+                                 "per row", per_row[None]))
                     pairs = np.array(per_row[1]) / np.array(per_row[None])
+                    extra["cli_scaling_runs"] = list(map(float, pairs))
+                    extra["process_start_s"] = {"jobs_1": start_rows[1], "default_jobs": start_rows[None]}
                     print(f"   throughput scaling, default jobs over --jobs 1 (Table II): "
                           f"{np.median(per_row[1]) / np.median(per_row[None]):.2f}x (whole command, process start "
                           f"subtracted; run by run {', '.join(f'{x:.2f}' for x in pairs)})")
@@ -318,8 +339,9 @@ def ratio_table(repeat=3, tile=32):
                 for nt in (1, 2):
                     _, t = _t(solve_standard_batch, robot, RA, RB, settings, check_stability=True, n_threads=nt)
                     per[nt].append(t / len(RA))
-            rows.append((f"in-process batch + screen, 1 thread, {len(RA)} rows", per[1]))
-            rows.append((f"in-process batch + screen, 2 threads, {len(RA)} rows", per[2]))
+            rows.append((f"in-process batch + screen, 1 thread, {len(RA)} rows, per row", per[1]))
+            rows.append((f"in-process batch + screen, 2 threads, {len(RA)} rows, per row", per[2]))
+            extra["batch_scaling"] = float(np.median(per[1]) / np.median(per[2]))
             print(f"   throughput scaling of the batch call (Table II), 2 threads over 1: "
                   f"{np.median(per[1]) / np.median(per[2]):.2f}x")
         else:
@@ -335,6 +357,8 @@ def ratio_table(repeat=3, tile=32):
     t8 = np.asarray(b8)
     print(f"   8x8x8: slowest / median = {t8.max() / np.median(t8):.1f}")
     print(f"   load average at the end of section 4: {os.getloadavg()}")
+    return {"repeat": repeat, "tile": tile, "single_standard_s": list(map(float, single)),
+            "rows": {name: list(map(float, ts)) for name, ts in rows}, **extra}
 
 
 def main(argv=None):
@@ -347,20 +371,53 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=3, help="command-line runs per measurement (section 4)")
     ap.add_argument("--tile", type=int, default=32,
                     help="times the trajectory's rows are repeated in the command-line standard-model runs")
+    ap.add_argument("--results", type=Path, default=None,
+                    help="write the times [s] of sections 1, 2 and 4 with the run's conditions to this JSON file")
     args = ap.parse_args(argv)
-    if args.ratios_only:
-        print(f"load average (1, 5, 15 min) at start: {os.getloadavg()}, cores: {os.cpu_count()}")
-        ratio_table(args.repeat, args.tile)
-        return
-    robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")
-    settings = ModelSettings(ds=args.ds)
-    print(f"load average (1, 5, 15 min) at start: {os.getloadavg()}, cores: {os.cpu_count()}")
-    timing_table(robot, settings, args.ref_every)
-    batch_throughput(robot, settings)
-    if not args.skip_convergence:
-        convergence_table(robot, args.conv_configs)
-    ratio_table(args.repeat, args.tile)
-    print(f"\nload average at end: {os.getloadavg()}")
+    load0 = os.getloadavg()
+    print(f"load average (1, 5, 15 min) at start: {load0}, cores: {os.cpu_count()}")
+    results = {"command": "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_speed.py " + " ".join(sys.argv[1:] if argv is None else argv),
+               "mechanics_version": MECHANICS_VERSION, "commit": _commit(),
+               "date": datetime.date.today().isoformat(), "cores": os.cpu_count(), "cpu": _cpu(),
+               "python": platform.python_version(), "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
+               "load_average_start": list(load0)}
+    if not args.ratios_only:
+        robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")
+        settings = ModelSettings(ds=args.ds)
+        results["per_configuration"] = timing_table(robot, settings, args.ref_every)
+        results["batch_throughput"] = batch_throughput(robot, settings)
+        if not args.skip_convergence:
+            convergence_table(robot, args.conv_configs)
+    results["ratios"] = ratio_table(args.repeat, args.tile)
+    results["load_average_end"] = list(os.getloadavg())
+    print(f"\nload average at end: {results['load_average_end']}")
+    if args.results:
+        args.results.parent.mkdir(parents=True, exist_ok=True)
+        args.results.write_text(json.dumps(results, indent=1) + "\n")
+        print(f"wrote {args.results}")
+
+
+def _commit() -> str | None:
+    """The checked-out commit, with ``+`` when the tree has changes (None outside git)."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                              check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return head + ("+" if dirty else "")
+
+
+def _cpu() -> str:
+    """The processor's model name (Linux), else the platform's."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
 
 
 if __name__ == "__main__":

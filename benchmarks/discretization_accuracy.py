@@ -41,7 +41,6 @@ candidates.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import sys
@@ -52,16 +51,17 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
-from joblib import Parallel, delayed  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from paper_section_4d import grid_4x4x4, grid_8x8x8  # noqa: E402
 
+from ctrplan.cache import content_key, file_hash  # noqa: E402
 from ctrplan.constants import MECHANICS_VERSION  # noqa: E402
 from ctrplan.io.robot_file import load_robot  # noqa: E402
 from ctrplan.mechanics import ModelSettings, all_eta, evaluate_bound  # noqa: E402
+from ctrplan.parallel import Executor  # noqa: E402
 
 ROBOT_FILE = ROOT / "model" / "ha2019-table2-nominal.toml"
 #: Discretizations compared when none is given: today's default, and gradings with a larger step
@@ -115,7 +115,9 @@ def solve_all(robot, cfgs, settings, jobs: int, cache: Path | None = None) -> di
     if cache is not None and cache.exists():
         with np.load(cache) as z:
             return {k: z[k] for k in FIELDS}
-    rows = Parallel(n_jobs=jobs)(delayed(_solve)(robot, a, b, settings) for a, b in cfgs)
+    with Executor(jobs) as ex:
+        done = dict(ex.run(_solve, [(k, (robot, a, b, settings)) for k, (a, b) in enumerate(cfgs)]))
+    rows = [done[k] for k in range(len(cfgs))]
     out = {k: np.array([r[k] for r in rows]) for k in FIELDS}
     if cache is not None:
         cache.parent.mkdir(parents=True, exist_ok=True)
@@ -130,8 +132,7 @@ def reference(robot, cfgs, grid: str, jobs: int, out: Path) -> tuple[dict, dict]
     Returns (reference fields with ``uncertainty`` [m] per configuration, its largest uncertainty
     [m] per quantity over the configurations where both fine solutions converged)."""
     base = ModelSettings()
-    key = hashlib.sha256(json.dumps([MECHANICS_VERSION, hashlib.sha256(ROBOT_FILE.read_bytes()).hexdigest(),
-                                     asdict(base)], sort_keys=True).encode()).hexdigest()[:12]
+    key = content_key([MECHANICS_VERSION, file_hash(ROBOT_FILE), asdict(base)])[:12]
     fine = {}
     for factor in (4, 8):
         settings = replace(base, ds=base.ds / factor)

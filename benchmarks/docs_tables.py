@@ -12,7 +12,9 @@ Each table sits between ``<!-- NAME -->`` and ``<!-- /NAME -->`` in its page:
 - docs/discrepancy.md, ``robot-files-table``: ``benchmarks/results/ha-robot-files.json``
   (``benchmarks/ha_robot_files.py``);
 - docs/mechanics.md, ``discretization-table``: ``benchmarks/results/discretization-accuracy.json``
-  (``benchmarks/discretization_accuracy.py``).
+  (``benchmarks/discretization_accuracy.py``);
+- docs/mechanics.md, ``speed-table``: ``benchmarks/results/speed.json``
+  (``benchmarks/bench_speed.py``).
 """
 
 from __future__ import annotations
@@ -30,10 +32,10 @@ DOC = ROOT / "docs" / "discrepancy.md"
 RESULTS = ROOT / "benchmarks" / "results"
 SOURCES = {"sweep-table": RESULTS / "discrepancy-sweep.json", "ha-table": RESULTS / "ha-trajectory-discrepancy.json",
            "robot-files-table": RESULTS / "ha-robot-files.json",
-           "discretization-table": RESULTS / "discretization-accuracy.json"}
+           "discretization-table": RESULTS / "discretization-accuracy.json", "speed-table": RESULTS / "speed.json"}
 #: The page each table is in.
 DOCS = {"sweep-table": DOC, "ha-table": DOC, "robot-files-table": DOC,
-        "discretization-table": ROOT / "docs" / "mechanics.md"}
+        "discretization-table": ROOT / "docs" / "mechanics.md", "speed-table": ROOT / "docs" / "mechanics.md"}
 OUTCOMES = ("right", "partly right", "ambiguous with truth", "wrong", "nothing")
 KIND_LABELS = {"control": "controls (no effect)", "one": "one effect", "two": "two effects"}
 
@@ -256,8 +258,62 @@ def discretization_table(res: dict) -> str:
     return "\n".join(lines)
 
 
+def _ms(x: float) -> str:
+    return f"{x * 1e3:.3g}"
+
+
+def speed_table(res: dict) -> str:
+    """Times per configuration or row: mean, median, p90, max [ms], the median as a multiple of one
+    standard solve measured in the same run, the paper's Table VIII times and the frozen reference."""
+    r = res["ratios"]
+    unit = float(np.median(r["single_standard_s"]))
+    lines = [f"Measured {res['date']} at {res['commit']} (mechanics {res['mechanics_version']}), {res['cpu']}, "
+             f"{res['cores']} cores, OPENBLAS_NUM_THREADS={res['openblas_threads']}; load average (1, 5, 15 min) "
+             f"{', '.join(f'{x:.2f}' for x in res['load_average_start'])} at the start, "
+             f"{', '.join(f'{x:.2f}' for x in res['load_average_end'])} at the end. "
+             f"Command: `{res['command']}`.", "",
+             "| quantity (Table II robot, ds = 3 mm) | n | mean / median / p90 / max [ms] | median / one standard solve "
+             "| paper's Table VIII (MATLAB) | frozen reference / this, medians |", "|---|---|---|---|---|---|"]
+
+    def row(name, ts, paper=None, ref=None):
+        t = np.asarray(ts, dtype=float)
+        stats = " / ".join(_ms(v) for v in (t.mean(), np.median(t), np.percentile(t, 90), t.max()))
+        speed = "-" if not ref else f"{np.median(ref) / np.median(t):.0f}x"
+        lines.append(f"| {name} | {t.size} | {stats} | {np.median(t) / unit:.3g} | "
+                     f"{'-' if paper is None else f'{paper * 1e3:.0f} ms'} | {speed} |")
+
+    lines.append(f"| one standard solve, determinant test only (the unit), 4x4x4 | {len(r['single_standard_s'])} | "
+                 + " / ".join(_ms(v) for v in (np.mean(r["single_standard_s"]), unit,
+                                                 np.percentile(r["single_standard_s"], 90),
+                                                 np.max(r["single_standard_s"]))) + " | 1 | - | - |")
+    for name, m in res.get("per_configuration", {}).get("models", {}).items():
+        row(f"{name}, 4x4x4", m["seconds"], m["paper_s"], m["reference_seconds"])
+    for name, ts in r["rows"].items():
+        row(name, ts)
+    notes = []
+    if "cli_scaling_runs" in r:
+        runs = r["cli_scaling_runs"]
+        notes.append(f"whole-command scaling of `ctrplan evaluate --model standard`, default jobs over `--jobs 1`: "
+                     f"{np.median(runs):.2f}x (run by run {', '.join(f'{x:.2f}' for x in runs)}); process start "
+                     f"subtracted {r['process_start_s']['jobs_1']:.2f} s (`--jobs 1`), "
+                     f"{r['process_start_s']['default_jobs']:.2f} s (default jobs)")
+    if "batch_scaling" in r:
+        notes.append(f"the batch call alone (`solve_standard_batch` with the stability screen), 2 threads over 1: "
+                     f"{r['batch_scaling']:.2f}x")
+    b8 = r["rows"].get("full bound, in-process, 8x8x8")
+    if b8:
+        notes.append(f"8x8x8 bound, slowest over median: {np.max(b8) / np.median(b8):.1f}")
+    bt = res.get("batch_throughput")
+    if bt:
+        notes.append(f"`solve_standard_batch` on {bt['configurations']} random configurations, no multistart: "
+                     + ", ".join(f"{np.median(v):.0f} configurations/s on {k} thread(s)"
+                                 for k, v in bt["rates_per_s"].items()))
+    lines += [""] + [f"- {n}." for n in notes]
+    return "\n".join(lines)
+
+
 MAKERS = {"sweep-table": sweep_table, "ha-table": ha_table, "robot-files-table": robot_files_table,
-          "discretization-table": discretization_table}
+          "discretization-table": discretization_table, "speed-table": speed_table}
 
 
 def render(doc: str, names=None) -> str:

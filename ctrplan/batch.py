@@ -10,7 +10,6 @@ recomputing it; the final CSV is written atomically and the checkpoint removed.
 from __future__ import annotations
 
 import base64
-import hashlib
 import json
 import logging
 import os
@@ -19,10 +18,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .cache import content_key, mechanics_version
 from .errors import CtrplanError
 from .mechanics import ModelSettings, solve_standard, solve_standard_batch
 from .mechanics._lie import angle_between
-from .models import MODELS  # the one registry of models
+from .models import MODEL_INFO, MODELS, check_model  # the one registry of models
 
 __all__ = ["MODELS", "evaluate_configuration", "evaluate_table", "job_key"]
 
@@ -111,19 +111,18 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
     ValueError
         Unknown model name.
     """
-    if model not in MODELS:
-        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    check_model(model)
     settings = settings or ModelSettings()
     alpha = np.asarray(alpha, dtype=float)
     beta = np.asarray(beta, dtype=float)
     try:
         std = solve_standard(robot, alpha, beta, settings)
-        if model == "standard":
+        if not MODEL_INFO[model].contact:
             return [_row(alpha, beta, None, std, _status(std.diagnostics), std.diagnostics.message, model)]
         # the contact models are imported here, not at the top: a standard-model run does not
         # import them (ctrplan.mechanics imports them lazily; about 40 ms)
         from .mechanics import all_eta, evaluate_bound, solve_clearance, solve_friction
-        if model == "clearance":
+        if not MODEL_INFO[model].friction:
             cl = solve_clearance(robot, alpha, beta, settings, standard=std)
             row = _row(alpha, beta, None, cl, _status(cl.diagnostics), cl.diagnostics.message, model)
             row["translation_last_tip_m"] = float(np.linalg.norm(cl.tip_position - std.tip_position))
@@ -242,7 +241,7 @@ def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1, 
     """Evaluate the configurations ``alpha``, ``beta`` (m, n) of the 1-based rows ``indices``;
     returns (indices, list of m lists of rows), or for the standard model (indices, columns) with
     the columns of :func:`_standard_columns`."""
-    if model == "standard":
+    if not MODEL_INFO[model].contact:
         return indices, _standard_columns(robot, alpha, beta, settings, indices, n_threads)
     rows = []
     for k, index in enumerate(indices):
@@ -254,23 +253,27 @@ def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1, 
     return indices, rows
 
 
-def _run_tasks(tasks, n_local, runner):
-    """Results of the delayed ``tasks`` in order of completion: all in this process without a
-    ``runner``, else the first ``n_local`` here and the rest by ``runner`` (joblib.Parallel),
-    started only after those (a generator: the workers start when it gets there)."""
-    if runner is None:
-        n_local = len(tasks)
-    for fn, args, kwargs in tasks[:n_local]:
-        yield fn(*args, **kwargs)
+def _run_tasks(tasks, n_local, n_jobs):
+    """Results of ``tasks`` ([(tag, args of :func:`_chunk_task`)]) in order of completion: the first
+    ``n_local`` in this process, then the others on ``n_jobs`` workers
+    (:class:`ctrplan.parallel.Executor`), started only after those (a generator: the workers
+    start when it gets there)."""
+    from .parallel import Executor
+
+    for _, args in tasks[:n_local]:
+        yield _chunk_task(*args)
     if n_local < len(tasks):
-        yield from runner(tasks[n_local:])
+        with Executor(n_jobs) as ex:
+            for _, result in ex.run(_chunk_task, tasks[n_local:]):
+                yield result
 
 
 def _chunks(todo, model, n_jobs):
     """Split the 0-based rows ``todo`` into tasks: at most the model's chunk size, and (contact
     models in worker processes) at least four tasks per worker so that they stay busy to the end."""
-    size = STANDARD_CHUNK if model == "standard" else CONTACT_CHUNK
-    if n_jobs != 1 and todo and model != "standard":
+    contact = MODEL_INFO[model].contact
+    size = CONTACT_CHUNK if contact else STANDARD_CHUNK
+    if n_jobs != 1 and todo and contact:
         size = max(1, min(size, -(-len(todo) // (4 * max(n_jobs, 1)))))
     return [todo[i:i + size] for i in range(0, len(todo), size)]
 
@@ -342,8 +345,9 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
     eta : ndarray of int, shape (K, n - 1), optional
         Per-row friction directions (0 = unknown: all directions).
     n_jobs : int
-        Parallel workers (1: in this process, serially). The contact models use joblib worker
-        processes, started once, that take chunks of ``CONTACT_CHUNK`` rows. The standard model
+        Parallel workers (1: in this process, serially). The contact models use local worker
+        processes (:class:`ctrplan.parallel.Executor`), started once, that take chunks of
+        ``CONTACT_CHUNK`` rows. The standard model
         runs in this process, ``n_jobs`` compiled threads sharing each chunk of
         ``STANDARD_CHUNK`` rows: its whole run takes less than starting worker processes.
     checkpoint : path, optional
@@ -364,13 +368,11 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
         same stability flag), computed by ``solve_standard_batch`` with ``check_stability``;
         its ``message`` omits the residual and determinant values.
     """
-    from joblib import Parallel, delayed
     from tqdm.auto import tqdm
 
     from .mechanics import warmup
 
-    if model not in MODELS:
-        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    check_model(model)
     settings = settings or ModelSettings()
     alpha = np.asarray(alpha, dtype=float)
     beta = np.asarray(beta, dtype=float)
@@ -388,20 +390,18 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
             fh.write(json.dumps({"job_key": job_key}) + "\n")
             fh.flush()
     try:
-        in_process = n_jobs == 1 or model == "standard"
+        in_process = n_jobs == 1 or not MODEL_INFO[model].contact
         # worker processes on a cold start: the first row runs here first, so that the compiled
         # kernels are on disk before the workers start (else each worker compiles them again);
         # warm, the workers start at once (loading the kernels here too would cost about 0.5 s)
         cold = not in_process and todo and not warmup.contact_kernels_cached()
         first = [todo[:1]] if cold else []
         chunks = first + _chunks(todo[len(first):], model, n_jobs)
-        threads = n_jobs if model == "standard" else 1
-        tasks = [delayed(_chunk_task)(robot, alpha[c], beta[c], model, settings,
-                                      None if eta is None else eta[c], [k + 1 for k in c], threads,
-                                      explain_failures)
-                 for c in chunks]
-        runner = None if in_process else Parallel(n_jobs=n_jobs, return_as="generator_unordered")
-        results = _run_tasks(tasks, len(first), runner)
+        threads = 1 if MODEL_INFO[model].contact else n_jobs
+        tasks = [(i, (robot, alpha[c], beta[c], model, settings, None if eta is None else eta[c],
+                      [k + 1 for k in c], threads, explain_failures))
+                 for i, c in enumerate(chunks)]
+        results = _run_tasks(tasks, len(tasks) if in_process else len(first), n_jobs)
         with tqdm(total=K, initial=K - len(todo), disable=not progress, unit="config",
                   desc=f"{model} model") as bar:
             for indices, rows in results:
@@ -426,9 +426,16 @@ def evaluate_table(robot, alpha, beta, model: str, settings: ModelSettings | Non
 
 def job_key(robot_file_text: str, config_file_text: str, model: str, settings: ModelSettings,
             explain_failures: bool = False) -> str:
-    """Checkpoint key of a batch job (sha256 of its inputs)."""
-    inputs = [robot_file_text, config_file_text, model, settings.as_dict()]
-    if explain_failures:    # appended only when set: keys of jobs without it stay as they were
+    """Checkpoint key of a batch job (:mod:`ctrplan.cache`): the robot and configuration files'
+    text, the model, its settings and the mechanics version, so that a checkpoint written by
+    other mechanics is not reused.
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits.
+    """
+    inputs = [robot_file_text, config_file_text, model, settings.as_dict(), {"mechanics": mechanics_version()}]
+    if explain_failures:
         inputs.append("explain_failures")
-    payload = json.dumps(inputs, sort_keys=True)
-    return hashlib.sha256(payload.encode()).hexdigest()
+    return content_key(inputs)

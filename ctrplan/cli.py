@@ -24,7 +24,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 import click  # noqa: E402
 
 from .errors import CtrplanError, JointLimitError  # noqa: E402
-from .models import MODELS  # noqa: E402
+from .models import MODEL_INFO, MODELS  # noqa: E402
 
 # By name, not __name__: the same logger when run as ``python -m ctrplan.cli``.
 logger = logging.getLogger("ctrplan.cli")
@@ -120,10 +120,10 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
     from .io.robot_file import load_robot
     from .io.tables import read_configurations, write_table
 
-    if explain_failures and model != "friction":
+    if explain_failures and not MODEL_INFO[model].friction:
         raise click.UsageError(f"--explain-failures applies to --model friction only, not {model!r}")
     robot = load_robot(robot_path)
-    if model != "standard":
+    if MODEL_INFO[model].contact:
         from .mechanics import warmup
         warmup.start()   # on a cold start, the contact kernels compile beside the standard model's
     alpha, beta, eta, _ = read_configurations(configs_path, robot.n_tubes)
@@ -160,7 +160,7 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
                    "one folder per scenario and the table scenarios.csv, default out/scenarios).")
 @click.option("--jobs", type=int, default=None,
               help="One scenario: worker processes for a bound map (default: all cores). Several: scenarios "
-                   "planned at once on a local dask cluster (default 1: in this process).")
+                   "planned at once on that many local worker processes (default 1: in this process).")
 @click.option("--scheduler", default=None,
               help="Several scenarios: address of a running dask.distributed scheduler (e.g. tcp://host:8786); "
                    "its workers need ctrplan installed.")
@@ -178,8 +178,8 @@ def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_ou
          ros2_frame):
     """Plan a friction-bound-aware motion for a scenario and write the drive trajectory.
 
-    Several scenario files or folders of them are planned in one process (or spread over dask
-    workers), each into its own folder, with one table across them; a rerun reuses the complete
+    Several scenario files or folders of them are planned in one process (or spread over local
+    worker processes or Dask workers), each into its own folder, with one table across them; a rerun reuses the complete
     outputs of unchanged scenarios.
     """
     single = len(scenario_paths) == 1 and Path(scenario_paths[0]).is_file() and scheduler is None

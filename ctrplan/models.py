@@ -30,23 +30,34 @@ class ModelInfo:
     source : str
         Where in Ha, Fagogenis & Dupont 2019 it is defined.
     solver : str
-        The :mod:`ctrplan.mechanics` function that solves it.
+        The :mod:`ctrplan.mechanics` function that solves it (this module sits below the
+        mechanics and names it only).
+    contact : bool
+        Whether it needs the contact solve: the tubes' clearances, the contact forces and the
+        compiled contact kernels (a configuration costs milliseconds, not microseconds).
+    friction : bool
+        Whether it needs the friction directions eta, shape (n - 1,), and the robot's friction
+        coefficient mu; over all 2^(n-1) directions it gives the error bound (Section III).
     """
 
     name: str
     description: str
     source: str
     solver: str
+    contact: bool
+    friction: bool
 
 
 #: The mechanics models, by name, in the order the package lists them (read-only mapping).
 MODEL_INFO = MappingProxyType({
     "standard": ModelInfo("standard", "zero clearance between the tubes, torsionally compliant, no friction",
-                          "Section II-A", "solve_standard"),
+                          "Section II-A", "solve_standard", contact=False, friction=False),
     "clearance": ModelInfo("clearance", "tubes move inside each other's clearance, contact forces, no friction",
-                           "Sections II-B to II-E, Appendices A and B", "solve_clearance"),
+                           "Sections II-B to II-E, Appendices A and B", "solve_clearance",
+                           contact=True, friction=False),
     "friction": ModelInfo("friction", "clearance model with maximal torsional friction in given directions eta",
-                          "Section III, Eqs. (37)-(43)", "solve_friction"),
+                          "Section III, Eqs. (37)-(43)", "solve_friction",
+                          contact=True, friction=True),
 })
 
 #: Names of the mechanics models, in registry order: ``("standard", "clearance", "friction")``.

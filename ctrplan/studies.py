@@ -12,9 +12,9 @@ A scenario whose folder holds a complete run (``summary.json``, written last) fo
 (the scenario and robot files' bytes, the options, the mechanics version) is not planned again:
 its row is read from that summary (``reused``; :func:`ctrplan.pipeline.read_plan_record`); the
 other rows come from the typed results of the plans (``PlanResult.run.comparison``). With
-``n_jobs`` > 1 or a ``scheduler`` address the scenarios are spread over dask.distributed workers
-(a local cluster of ``n_jobs`` single-threaded processes, or the cluster at that address, whose
-workers need ctrplan installed).
+``n_jobs`` > 1 or a ``scheduler`` address the scenarios are spread over worker processes
+(:class:`ctrplan.parallel.Executor`: ``n_jobs`` local processes, or the workers of the Dask
+cluster at that address, which need ctrplan installed).
 
 Messages go to the ``ctrplan.studies`` logger (:mod:`logging`): one line per scenario (WARNING for
 a failed one) and the closing summary at INFO. Each scenario's own progress lines (:mod:`ctrplan.pipeline`) are DEBUG
@@ -23,8 +23,6 @@ records here; its cautions stay WARNING.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import os
 import time
@@ -32,6 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from ._log import deprecated_echo, details
+from .cache import content_key, file_hash, mechanics_version
 
 if TYPE_CHECKING:
     from .pipeline import PlanComparison, PlanRecord
@@ -72,20 +71,17 @@ def scenario_files(paths: Sequence[str | os.PathLike]) -> list[Path]:
 
 
 def input_key(scenario: Path, iterations: int | None, compare_blind: bool) -> str:
-    """SHA-256 of what a scenario's outputs depend on: the scenario and robot files' bytes, the
-    options and the mechanics version (a malformed scenario gives a key of its bytes alone)."""
-    from .constants import MECHANICS_VERSION
-
-    h = hashlib.sha256(Path(scenario).read_bytes())
+    """Key of a scenario's outputs (:mod:`ctrplan.cache`): the scenario and robot files' bytes,
+    the options and the mechanics version (a malformed scenario gives a key without its robot)."""
+    payload = {"scenario": file_hash(scenario), "iterations": iterations, "compare_blind": compare_blind,
+               "mechanics": mechanics_version()}
     try:
         from .io.scenario import load_scenario
 
-        h.update(load_scenario(scenario).robot_file.read_bytes())
+        payload["robot"] = file_hash(load_scenario(scenario).robot_file)
     except Exception:                                    # noqa: BLE001 - the planning run reports it
         pass
-    h.update(json.dumps({"iterations": iterations, "compare_blind": compare_blind,
-                         "mechanics": MECHANICS_VERSION}).encode())
-    return h.hexdigest()
+    return content_key(payload)
 
 
 def _row(scenario: Path, status: str, comparison: PlanComparison | None, seconds: float | None, out: Path,
@@ -153,10 +149,9 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
     out_dir : path
         Root folder: ``<out_dir>/<scenario stem>/`` per scenario, the table and its plot.
     n_jobs : int
-        Scenarios planned at once: 1 in this process; more on a local dask.distributed cluster of
-        that many single-threaded worker processes.
+        Scenarios planned at once: 1 in this process; more on that many local worker processes.
     scheduler : str, optional
-        Address of a running dask.distributed scheduler (``tcp://host:8786``); overrides ``n_jobs``.
+        Address of a running Dask scheduler (``tcp://host:8786``); overrides ``n_jobs``.
     iterations : int, optional
         Overrides every scenario's planner iterations.
     compare_blind : bool
@@ -199,23 +194,10 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
         else:
             todo.append((f, out, key))
     t0 = time.perf_counter()
-    if todo and (scheduler or n_jobs > 1):
-        from dask.distributed import Client, LocalCluster, as_completed
+    from .parallel import Executor
 
-        cluster = None if scheduler else LocalCluster(n_workers=n_jobs, threads_per_worker=1, processes=True,
-                                                      dashboard_address=None)
-        with Client(scheduler or cluster) as client:
-            futures = [client.submit(_plan_one, f, out, key, iterations, compare_blind, progress, pure=False)
-                       for f, out, key in todo]
-            for fut in as_completed(futures):
-                row = fut.result()
-                rows[Path(row["scenario"])] = row
-                _log_row(row["scenario"], row)
-        if cluster is not None:
-            cluster.close()
-    else:
-        for f, out, key in todo:
-            row = _plan_one(f, out, key, iterations, compare_blind, progress)
+    with Executor(n_jobs, scheduler) as ex:
+        for f, row in ex.run(_plan_one, [(f, (f, out, key, iterations, compare_blind, progress)) for f, out, key in todo]):
             rows[f] = row
             _log_row(f, row)
     table = pd.DataFrame([rows[f] for f in files], columns=list(COLUMNS))

@@ -1,10 +1,10 @@
-"""Bound maps on a local Dask cluster started by the tests (2 workers x 1 thread).
+"""Bound maps on local worker processes and on a local Dask cluster started by the tests (2 workers x 1 thread).
 
 The real model (:func:`ctrplan.mechanics.evaluate_bound`) on the Table I tube pair with an extra
 translation joint, a coarse 8 x 3 grid and a 10 mm arc-length step: ~30 ms per node, so a whole
 map takes about a second and the cluster start-up dominates.
 
-- a map computed on the cluster equals the serial map node for node;
+- a map computed on the cluster, or on two local worker processes, equals the serial map node for node;
 - a run stopped after k chunks (an exception from the chunk callback, as an interruption would)
   leaves exactly k chunks in the store, and the rerun computes only the other chunks;
 - ``ctrplan boundmap --jobs 2`` killed with SIGKILL (client and workers) resumes from its store.
@@ -90,6 +90,16 @@ def test_cluster_map_equals_serial_map(robot_file, serial, client, tmp_path):
     loaded = load_bound_map(store, key=serial.field.key)
     np.testing.assert_array_equal(loaded.values, serial.field.values)
     assert loaded.metadata["robot_hash_of"] == "robot file"
+
+
+def test_local_processes_map_equals_serial_map(robot_file, serial, tmp_path):
+    """Catches chunks written to the wrong nodes when they come back out of order from workers."""
+    robot = load_robot(robot_file)
+    run = compute_bound_map_store(robot, evaluate_bound, RES, SETTINGS, tmp_path / "local.zarr", n_jobs=2,
+                                  robot_file_text=robot_file.read_text(), chunk_size=CHUNK, progress=False)
+    assert run.executor == "2 local processes" and run.n_computed == 8
+    np.testing.assert_array_equal(run.field.values, serial.field.values)
+    np.testing.assert_array_equal(run.field.valid, serial.field.valid)
 
 
 class Interrupted(Exception):

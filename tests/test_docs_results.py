@@ -24,7 +24,7 @@ def _tables():
     return mod
 
 
-@pytest.mark.parametrize("name", ["sweep-table", "ha-table", "robot-files-table", "discretization-table"])
+@pytest.mark.parametrize("name", ["sweep-table", "ha-table", "robot-files-table", "discretization-table", "speed-table"])
 def test_docs_tables_are_the_results_files(name):
     """The table between the docs' markers is exactly what the results file renders to."""
     tables = _tables()

@@ -17,6 +17,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "ctrplan"
 LAYERS = (
     ("errors", "constants", "models", "planner_info",  # planner_info: names only, no OMPL
      "_log"),                                  # logging helpers (levels, the deprecated echo)
+    ("parallel", "cache"),                     # the one executor (this process, local workers or Dask);
+                                               # the one rule of keys of stored results
     ("history",),                              # pure numerics of motion history
     ("robot", "calibration"),                  # calibration: the robot file's records of measurements, typed
     ("coordinates", "effects"),                # robot-level quantities and the registry of effects

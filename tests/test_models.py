@@ -55,3 +55,24 @@ def test_other_modules_use_the_same_model_names():
 
     assert robot_file.MODELS is MODELS
     assert batch.MODELS is MODELS and simulate.MODELS is MODELS
+
+
+def test_registry_says_what_each_model_needs():
+    # the contact models need the clearances and contact solve; only friction takes eta and mu
+    assert [MODEL_INFO[m].contact for m in MODELS] == [False, True, True]
+    assert [MODEL_INFO[m].friction for m in MODELS] == [False, False, True]
+    # a friction solver's signature takes eta; the others do not
+    import inspect
+
+    for m in MODELS:
+        params = inspect.signature(getattr(mechanics, MODEL_INFO[m].solver)).parameters
+        assert ("eta" in params) == MODEL_INFO[m].friction, m
+
+
+def test_batch_rejects_an_unregistered_model_before_solving():
+    from ctrplan import batch
+    from ctrplan.io.robot_file import load_robot
+
+    robot = load_robot(TABLE7)
+    with pytest.raises(ValueError, match="standard, clearance, friction.*'magic'"):
+        batch.evaluate_configuration(robot, [0.0] * robot.n_tubes, [0.0] * robot.n_tubes, "magic")

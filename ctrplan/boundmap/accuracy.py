@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compute import _Executor, evaluate_configuration
+from ..parallel import Executor
+from .compute import _run_chunks, evaluate_configuration
 from .field import QUANTITIES
 
 __all__ = ["InterpolationError", "interpolation_error", "sample_exact"]
@@ -102,8 +103,8 @@ def sample_exact(robot, evaluator, q, settings=None, n_jobs: int = 1, scheduler=
     for start in range(0, len(q), _TASK_SIZE):
         cfg = [robot.configuration(x) for x in q[start:start + _TASK_SIZE]]
         tasks.append((start, np.array([a for a, _ in cfg]), np.array([b for _, b in cfg])))
-    with _Executor(scheduler, n_jobs) as ex:
-        for start, (vals, good, *_rest) in ex.run(tasks, robot, evaluator, settings, "exact"):
+    with Executor(n_jobs, scheduler) as ex:
+        for start, (vals, good, *_rest) in _run_chunks(ex, tasks, robot, evaluator, settings):
             values[start:start + len(vals)] = vals
             ok[start:start + len(vals)] = good
     return values, ok

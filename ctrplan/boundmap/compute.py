@@ -18,12 +18,12 @@ from __future__ import annotations
 import logging
 import os
 import time
-import uuid
 from dataclasses import dataclass, field as dc_field
 
 import numpy as np
 
 from ..errors import CtrplanError
+from ..parallel import SCHEDULER_TIMEOUT_S, Executor, SchedulerUnreachableError, start_local_cluster
 from .axes import pilot_design, place_nodes, uniform_axis
 from ..coordinates import map_coordinates
 from .field import QUANTITIES, BoundField
@@ -39,16 +39,9 @@ logger = logging.getLogger(__name__)
 # and a minute, so an interruption loses little work while the number of files stays small.
 DEFAULT_CHUNK_SIZE = 64
 
-# How long to try to reach a Dask scheduler given by its address [s].
-SCHEDULER_TIMEOUT_S = 30.0
-
 # Set in each process that evaluates chunks: the first chunk of a process carries the imports
 # and numba warm-up, which a benchmark must not count as steady-state cost.
 _CHUNKS_IN_THIS_PROCESS = 0
-
-
-class SchedulerUnreachableError(CtrplanError, RuntimeError):
-    """No Dask scheduler answers at the given address."""
 
 
 def evaluate_configuration(robot, evaluator, alpha, beta, settings):
@@ -103,6 +96,12 @@ def _compute_chunk(robot, evaluator, settings, alpha, beta):
     return values, valid, time.perf_counter() - t0, time.thread_time() - c0, _CHUNKS_IN_THIS_PROCESS == 1
 
 
+def _run_chunks(executor, tasks, robot, evaluator, settings):
+    """Evaluate ``tasks`` = [(tag, alpha (m, n), beta (m, n))] with :func:`_compute_chunk` on
+    ``executor`` (:class:`ctrplan.parallel.Executor`); yields (tag, result) as each finishes."""
+    return executor.run(_compute_chunk, [(tag, (robot, evaluator, settings, alpha, beta)) for tag, alpha, beta in tasks])
+
+
 class _Progress:
     """tqdm bar, or nothing (tqdm imported lazily)."""
 
@@ -120,88 +119,6 @@ class _Progress:
     def close(self):
         if self._bar is not None:
             self._bar.close()
-
-
-def start_local_cluster(n_workers: int):
-    """A ``distributed.LocalCluster`` of ``n_workers`` single-threaded worker processes.
-
-    No dashboard; the scheduler's HTTP endpoint listens on a free localhost port (not 8787, which
-    another cluster on the machine may hold). Workers inherit this process's environment (set
-    ``OPENBLAS_NUM_THREADS=1`` before, as the CLI does). Close it (or use it as a context
-    manager) when done.
-    """
-    from distributed import LocalCluster
-
-    return LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True, dashboard_address=None,
-                        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
-
-
-def _open_client(scheduler, n_jobs):
-    """(client, cluster or None, close_client, description) for the dask executors."""
-    from distributed import Client
-
-    if scheduler is None:
-        cluster = start_local_cluster(n_jobs)
-        return Client(cluster), cluster, True, f"local cluster ({int(n_jobs)} workers)"
-    if isinstance(scheduler, str):
-        try:
-            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise SchedulerUnreachableError(
-                f"dask scheduler {scheduler!r}: cannot connect within {SCHEDULER_TIMEOUT_S:g} s ({exc}); start it "
-                "with `dask scheduler` and workers with `dask worker ADDRESS --nthreads 1`") from None
-        return client, None, True, f"dask scheduler {scheduler}"
-    return scheduler, None, False, f"dask client of {scheduler.scheduler.address}"
-
-
-class _Executor:
-    """Runs :func:`_compute_chunk` tasks in this process or on Dask (the cluster or client is
-    opened on first use); yields results as they finish."""
-
-    def __init__(self, scheduler, n_jobs):
-        self.use_dask = scheduler is not None or int(n_jobs) > 1
-        self._scheduler, self._n_jobs = scheduler, n_jobs
-        self.client = self.cluster = None
-        self._close_client = False
-        self.description = "serial"
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        if self._close_client and self.client is not None:
-            self.client.close()
-        if self.cluster is not None:
-            self.cluster.close()
-        return False
-
-    def _ensure_client(self):
-        if self.client is None:
-            self.client, self.cluster, self._close_client, self.description = _open_client(self._scheduler,
-                                                                                           self._n_jobs)
-
-    def run(self, tasks, robot, evaluator, settings, label):
-        """Evaluate ``tasks`` = [(tag, alpha (m, n), beta (m, n))]; yields (tag, result) as done."""
-        if not self.use_dask:
-            for tag, alpha, beta in tasks:
-                yield tag, _compute_chunk(robot, evaluator, settings, alpha, beta)
-            return
-        from distributed import as_completed
-
-        self._ensure_client()
-        run_tag = uuid.uuid4().hex[:8]
-        futures = {}
-        for tag, alpha, beta in tasks:
-            fut = self.client.submit(_compute_chunk, robot, evaluator, settings, alpha, beta,
-                                     key=f"ctrplan-boundmap-{label}-{run_tag}-{tag}", pure=False)
-            futures[fut] = tag
-        try:
-            for fut in as_completed(list(futures)):
-                tag = futures.pop(fut)
-                yield tag, fut.result()
-        finally:
-            if futures:
-                self.client.cancel(list(futures))
 
 
 @dataclass
@@ -224,7 +141,8 @@ class BoundMapRun:
     wall_seconds : float
         Wall time of the run [s], including cluster start-up and pilots.
     executor : str
-        ``"serial"``, ``"local cluster (k workers)"`` or ``"dask scheduler <address>"``.
+        Where the chunks ran (:attr:`ctrplan.parallel.Executor.description`): ``"serial"``,
+        ``"k local processes"`` or ``"dask scheduler <address>"``.
     chunk_seconds : list of float
         Evaluation time of each chunk computed by this run [s].
     pilot_evaluations : int
@@ -264,7 +182,7 @@ def _axes_and_pilots(robot, coords, spec, executor, evaluator, settings, progres
     bar = _Progress(total, 0, progress, f"bound map {robot.name}: pilot lines", unit="point")
     values = {k: np.full(p.shape[:2] + (len(QUANTITIES),), np.nan) for k, (_, p) in designs.items()}
     try:
-        for (k, line), (vals, ok, *_rest) in executor.run(tasks, robot, evaluator, settings, "pilot"):
+        for (k, line), (vals, ok, *_rest) in _run_chunks(executor, tasks, robot, evaluator, settings):
             values[k][line] = np.where(ok[:, None], vals, np.nan)
             bar.update(len(vals))
     finally:
@@ -296,8 +214,8 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
         Store directory (``*.zarr``). Finished chunks found there are reused when the store was
         made for the same map (identity). None: in memory.
     n_jobs : int
-        Without ``scheduler``: 1 evaluates in this process, k > 1 starts a
-        ``distributed.LocalCluster`` of k single-threaded worker processes.
+        Without ``scheduler``: 1 evaluates in this process, k > 1 on k local worker processes
+        (:class:`ctrplan.parallel.Executor`).
     scheduler : str or distributed.Client, optional, keyword-only
         Dask scheduler address (``"tcp://host:8786"``) or a connected client (left open).
     chunk_size : int, keyword-only
@@ -335,7 +253,7 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
     computed: list[float] = []
     pilot_evals, pilot_secs = 0, 0.0
     run = 0
-    with _Executor(scheduler, n_jobs) as ex:
+    with Executor(n_jobs, scheduler) as ex:
         st = BoundMapStore.resume(store, ident)
         if st is None:
             t0 = time.perf_counter()
@@ -355,8 +273,7 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
             sizes = st.chunk_sizes()
             n_nodes = int(np.prod(st.resolution))
             done_nodes = int(sizes[st.done()].sum())
-            if ex.use_dask:
-                ex._ensure_client()
+            ex.open()
             run = st.begin_run({"executor": ex.description, "pid": os.getpid(), "chunks_to_compute": len(todo)})
             bar = _Progress(n_nodes, done_nodes, progress, f"bound map {robot.name}")
             tasks = []
@@ -364,8 +281,7 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
                 alpha, beta = coords.configuration(st.chunk_nodes(c))
                 tasks.append((c, alpha, beta))
             try:
-                for c, (values, valid, secs, cpu, cold) in ex.run(tasks, robot, evaluator, settings,
-                                                                  ident.key[:12]):
+                for c, (values, valid, secs, cpu, cold) in _run_chunks(ex, tasks, robot, evaluator, settings):
                     st.write_chunk(c, values, valid, secs, cold, run, cpu)
                     computed.append(float(secs))
                     bar.update(int(sizes[c]))

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import constants
+from ..cache import content_key, mechanics_version as current_mechanics_version
 from ..errors import CtrplanError
 from .axes import MapSpec
 from ..coordinates import map_coordinates
@@ -105,7 +105,7 @@ def _json_roundtrip(x):
 
 def _version(mechanics_version):
     """The given mechanics version, or the running code's (read at call time)."""
-    return str(constants.MECHANICS_VERSION if mechanics_version is None else mechanics_version)
+    return current_mechanics_version() if mechanics_version is None else str(mechanics_version)
 
 
 def field_key(robot, settings, spec, evaluator, robot_file_text: str | None = None, *,
@@ -140,7 +140,7 @@ def field_key(robot, settings, spec, evaluator, robot_file_text: str | None = No
         "evaluator": evaluator if isinstance(evaluator, str) else evaluator_name(evaluator),
         "mechanics_version": _version(mechanics_version),
     }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=repr).encode()).hexdigest()
+    return content_key(payload)
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,6 @@ order, so ``tubes[2].sections[1].length_m`` is the first section of tube 2.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import re
 import tomllib
@@ -22,6 +21,7 @@ from typing import Annotated
 import pydantic
 from pydantic import BaseModel, ConfigDict, Field
 
+from ..cache import file_hash
 from ..calibration import CalibratedBound, PredictionValidation, RobotCalibration
 from ..errors import ModelFileError, PhysicalParameterError
 from ..models import MODELS, check_model
@@ -250,27 +250,6 @@ def read_text(path: str | os.PathLike) -> str:
 
 
 # --------------------------------------------------------------------------- public API
-def file_hash(path: str | os.PathLike) -> str:
-    """SHA-256 of a file's bytes, as 64 hex digits (to record which model or data a result used).
-    For a folder (a ROS 2 bag), of the names and bytes of the files in it, in sorted order.
-
-    Raises
-    ------
-    FileNotFoundError
-    """
-    p = Path(path)
-    if not p.is_dir():
-        return hashlib.sha256(p.read_bytes()).hexdigest()
-    h = hashlib.sha256()
-    for f in sorted(x for x in p.rglob("*") if x.is_file()):
-        h.update(f.relative_to(p).as_posix().encode() + b"\0")
-        with open(f, "rb") as fh:
-            for chunk in iter(lambda: fh.read(1 << 20), b""):
-                h.update(chunk)
-        h.update(b"\0")
-    return h.hexdigest()
-
-
 def load_robot(path: str | os.PathLike) -> Robot:
     """Load a robot model file.
 

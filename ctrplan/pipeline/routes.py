@@ -161,27 +161,28 @@ def _compile_before_fork(job) -> None:
 
 def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:
     """Run the plans of ``jobs`` ({mode: _PlanJob}); with ``n_jobs`` >= 2 and more than one plan,
-    the bound-blind plan runs in a forked process while this one plans bound-aware (the plans are
-    independent and seeded, so the result is the same as in series; a failed child process is
-    replaced by the same plan here). Returns ({mode: RoutePlan}, whether they ran in parallel)."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    the bound-blind plan runs in a forked worker while this process plans bound-aware
+    (:class:`ctrplan.parallel.Executor`; the plans are independent and seeded, so the result is
+    the same as in series; a plan whose worker died is planned again here). Returns
+    ({mode: RoutePlan}, whether they ran in parallel)."""
     from concurrent.futures.process import BrokenProcessPool
 
+    from ..parallel import Executor
+
     modes = list(jobs)
-    parallel = n_jobs >= 2 and len(modes) > 1 and "fork" in multiprocessing.get_all_start_methods()
-    if not parallel:
+    if n_jobs < 2 or len(modes) < 2:
         return {m: _plan_mode(jobs[m]) for m in modes}, False
     _compile_before_fork(jobs[modes[0]])
     out = {}
-    with ProcessPoolExecutor(max_workers=len(modes) - 1, mp_context=multiprocessing.get_context("fork")) as ex:
-        futures = {m: ex.submit(_plan_mode, jobs[m]) for m in modes[1:]}
-        out[modes[0]] = _plan_mode(jobs[modes[0]])
-        for m, fut in futures.items():
-            try:
-                out[m] = fut.result()
-            except BrokenProcessPool:
-                out[m] = _plan_mode(jobs[m])
+    try:
+        with Executor(min(n_jobs, len(modes)), fork=True) as ex:
+            for m, plan in ex.run(_plan_mode, [(m, (jobs[m],)) for m in modes], first_here=True):
+                out[m] = plan
+    except BrokenProcessPool:
+        pass
+    for m in modes:
+        if m not in out:
+            out[m] = _plan_mode(jobs[m])
     return {m: out[m] for m in modes}, True
 
 

@@ -1,0 +1,70 @@
+"""Keys of everything ctrplan stores to reuse: one rule for checkpoints, stages, outputs and maps.
+
+A stored result is reused only under the key of what it was computed from. Every key is a
+SHA-256 over canonical JSON (:func:`content_key`: sorted keys, values that are not JSON by their
+``repr``) of a payload that names
+
+- the input files by the SHA-256 of their bytes (:func:`file_hash`; a folder, such as a ROS 2
+  bag, by its files' names and bytes),
+- the options that change the result (and none that do not, such as the number of workers),
+- the version of the mechanics (:data:`ctrplan.constants.MECHANICS_VERSION`), so that a result of
+  older mechanics is computed again rather than reused.
+
+Users of the rule: :func:`ctrplan.batch.job_key` (checkpoints of ``ctrplan evaluate``),
+:func:`ctrplan.studies.input_key` (a study's finished scenarios),
+:func:`ctrplan.boundmap.field_key` (bound maps).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any, Mapping
+
+__all__ = ["content_key", "file_hash", "mechanics_version"]
+
+
+def mechanics_version() -> str:
+    """The running code's :data:`ctrplan.constants.MECHANICS_VERSION` (read at call time)."""
+    from . import constants
+
+    return str(constants.MECHANICS_VERSION)
+
+
+def content_key(payload: Mapping[str, Any] | list) -> str:
+    """SHA-256 of ``payload`` as canonical JSON (keys sorted, non-JSON values by ``repr``).
+
+    Parameters
+    ----------
+    payload : mapping or list
+        What the stored result depends on (file hashes, options, versions).
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits.
+    """
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=repr).encode()).hexdigest()
+
+
+def file_hash(path: str | os.PathLike) -> str:
+    """SHA-256 of a file's bytes, as 64 hex digits (to record which model or data a result used).
+    For a folder (a ROS 2 bag), of the names and bytes of the files in it, in sorted order.
+
+    Raises
+    ------
+    FileNotFoundError
+    """
+    p = Path(path)
+    if not p.is_dir():
+        return hashlib.sha256(p.read_bytes()).hexdigest()
+    h = hashlib.sha256()
+    for f in sorted(x for x in p.rglob("*") if x.is_file()):
+        h.update(f.relative_to(p).as_posix().encode() + b"\0")
+        with open(f, "rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+        h.update(b"\0")
+    return h.hexdigest()
