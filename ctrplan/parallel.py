@@ -4,8 +4,9 @@
 finishes:
 
 - ``n_jobs == 1`` and no scheduler: in this process, in order;
-- ``n_jobs > 1``: on ``n_jobs`` local worker processes (loky's reusable executor, from joblib:
-  processes started once per session and reused);
+- ``n_jobs > 1``: on ``n_jobs`` local worker processes (``joblib.Parallel`` on its loky backend:
+  processes started once per session and reused, shared with every other joblib user of the
+  process);
 - ``scheduler`` given (an address such as ``"tcp://host:8786"`` or a connected
   ``distributed.Client``): on the workers of that Dask cluster, which may span several machines.
 
@@ -191,21 +192,27 @@ class Executor:
             futures = {self._client.submit(fn, *args, pure=False): tag for tag, args in tasks}
             return _as_completed(futures, as_completed, self._client.cancel)
         import multiprocessing
-        from concurrent.futures import as_completed
 
         workers = max(1, min(self.n_jobs - reserve, len(tasks)))
-        shutdown = None
         if self.fork and "fork" in multiprocessing.get_all_start_methods():
-            from concurrent.futures import ProcessPoolExecutor
+            from concurrent.futures import ProcessPoolExecutor, as_completed
 
             pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"))
-            shutdown = pool.shutdown
-        else:
-            from joblib.externals.loky import get_reusable_executor
+            futures = {pool.submit(fn, *args): tag for tag, args in tasks}
+            return _as_completed(futures, as_completed, lambda fs: [f.cancel() for f in fs], pool.shutdown)
+        # joblib's own pool (not loky's reusable executor taken directly: joblib assumes that
+        # executor is its own and fails on one created elsewhere). joblib runs a single worker in
+        # this process; one worker beside a task run here is a pool of two given one task at a time.
+        from joblib import Parallel, delayed
 
-            pool = get_reusable_executor(max_workers=workers)
-        futures = {pool.submit(fn, *args): tag for tag, args in tasks}
-        return _as_completed(futures, as_completed, lambda fs: [f.cancel() for f in fs], shutdown)
+        n, ahead = (workers, 2 * workers) if workers > 1 or not reserve else (2, 1)
+        return Parallel(n_jobs=n, pre_dispatch=ahead, batch_size=1, return_as="generator_unordered")(
+            delayed(_tagged)(fn, tag, args) for tag, args in tasks)
+
+
+def _tagged(fn, tag, args):
+    """``(tag, fn(*args))``: a task of the local backend."""
+    return tag, fn(*args)
 
 
 def _as_completed(futures: dict, as_completed, cancel, shutdown=None):

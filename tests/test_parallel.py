@@ -14,6 +14,10 @@ def _pid_and_square(x):
     return os.getpid(), x * x
 
 
+def _square(x):
+    return x * x
+
+
 def _fail_on(x, bad):
     if x == bad:
         raise ValueError(f"task {x} failed")
@@ -65,3 +69,16 @@ def test_bad_arguments_and_an_unreachable_scheduler_are_clear_errors(monkeypatch
 def test_descriptions_name_where_the_tasks_run():
     assert Executor().description == "serial"
     assert Executor(3).description == "3 local processes" and Executor(3).kind == "processes"
+
+
+def test_local_workers_and_joblib_share_one_process():
+    """Other code of the same process uses joblib.Parallel (the discrepancy simulation, user
+    code): its pool must keep working after the executor's local workers ran, and the executor's
+    after joblib's. Catches the executor taking loky's reusable pool, which joblib then finds
+    without its own attributes (AttributeError '_temp_folder_manager')."""
+    from joblib import Parallel, delayed
+
+    for _ in range(2):
+        with Executor(2) as ex:
+            assert sorted(ex.run(_square, [(k, (k,)) for k in range(4)])) == [(k, k * k) for k in range(4)]
+        assert Parallel(n_jobs=2)(delayed(_square)(k) for k in range(4)) == [0, 1, 4, 9]
