@@ -15,6 +15,7 @@ from 10 to 150 % of its typical range (:data:`SIZE_RANGE`). The workflow runs wi
 options (every registered candidate) from the base file without the effects.
 
     python benchmarks/bench_discrepancy_sweep.py [--cases 50] [--first-seed 2000] [--jobs 2]
+                                                 [--run-first SEED ...]
                                                  [--scheduler tcp://host:8786]
                                                  [--out out/bench-discrepancy-sweep]
                                                  [--results benchmarks/results/discrepancy-sweep.json]
@@ -24,7 +25,9 @@ after an interruption) and a line of ``cases.jsonl`` there; finished cases are n
 results file is rewritten after every case with the cases finished so far (``cases`` of
 ``cases_planned``).
 With ``--scheduler`` the cases run on the Dask workers of that cluster (each with ``--jobs``
-processes), else one after the other here.
+processes), else one after the other here. ``--run-first`` runs the cases of the given seeds
+before the others (the cases themselves do not change): until all planned cases are finished,
+the results file holds a chosen subset, and the docs table names its seeds.
 
 Outcomes: **right** (the named effects are the truth), **partly right** (of two hidden effects,
 one is named and nothing else), **ambiguous with truth** (the truth is one of an ambiguous pair),
@@ -276,6 +279,8 @@ def main(argv=None):
     ap.add_argument("--scheduler", default=None, help="address of a Dask scheduler to run the cases on")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench-discrepancy-sweep"))
     ap.add_argument("--results", default=str(ROOT / "benchmarks" / "results" / "discrepancy-sweep.json"))
+    ap.add_argument("--run-first", type=int, nargs="+", default=(), metavar="SEED",
+                    help="run the cases of these seeds (of the planned ones) before the others")
     ap.add_argument("--results-only", action="store_true",
                     help="rewrite the results file from the finished cases without running any")
     args = ap.parse_args(argv)
@@ -294,7 +299,11 @@ def main(argv=None):
                     c["written"] = written_values(files[-1], c["named_effects"], c["fitted"]) if files else None
                 done[c["seed"]] = c
     seeds = [args.first_seed + k for k in range(args.cases)]
-    todo = [s for s in seeds if s not in done]
+    unknown = sorted(set(args.run_first) - set(seeds))
+    if unknown:
+        ap.error(f"--run-first: seeds {unknown} are not among the planned {seeds[0]}..{seeds[-1]}")
+    first = [s for s in args.run_first if s not in done]
+    todo = first + [s for s in seeds if s not in done and s not in first]
     print(f"{len(seeds) - len(todo)} of {len(seeds)} cases finished earlier, {len(todo)} to run; load average "
           f"{os.getloadavg()[0]:.2f}", flush=True)
     t0 = time.perf_counter()

@@ -65,7 +65,8 @@ def sweep_table(res: dict) -> str:
     n = s["cases"]
     planned = res.get("cases_planned", n)
     per_robot = ", ".join(f"{k}: {sum(c[o] for o in OUTCOMES)}" for k, c in s["by_robot"].items())
-    lines = [f"{n} cases" + (f" of the {planned} planned" if planned != n else "") + f" ({per_robot}); "
+    lines = [f"{n} cases" + (f" of the {planned} planned (seeds {_seed_ranges([c['seed'] for c in res['cases']])})"
+                             if planned != n else "") + f" ({per_robot}); "
              f"cost {res['case_seconds']['total'] / 3600:.1f} h of cases (median {res['case_seconds']['median']:.0f} s "
              f"a case).", "",
              "| cases | " + " | ".join(OUTCOMES) + " |", "|---|" + "---|" * len(OUTCOMES)]
@@ -101,6 +102,19 @@ def sweep_table(res: dict) -> str:
         lines.append(f"| {c['seed']} | {c['robot']} | {hidden}" + (f" ({shares})" if shares else "")
                      + f" | {noise} | {verdict} | {written} |")
     return "\n".join(lines)
+
+
+def _seed_ranges(seeds) -> str:
+    """``[2000, 2001, 2002, 2035]`` -> ``"2000-2002, 2035"``."""
+    seeds, parts = sorted(seeds), []
+    start = prev = seeds[0]
+    for s in seeds[1:] + [None]:
+        if s is not None and s == prev + 1:
+            prev = s
+            continue
+        parts.append(f"{start}" if start == prev else f"{start}-{prev}")
+        start = prev = s
+    return ", ".join(parts)
 
 
 def _unit(name: str) -> str:
