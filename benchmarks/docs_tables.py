@@ -65,7 +65,7 @@ def sweep_table(res: dict) -> str:
     n = s["cases"]
     planned = res.get("cases_planned", n)
     per_robot = ", ".join(f"{k}: {sum(c[o] for o in OUTCOMES)}" for k, c in s["by_robot"].items())
-    lines = [f"{n} cases" + (f" of the {planned} planned (seeds {_seed_ranges([c['seed'] for c in res['cases']])})"
+    lines = [f"{n} cases" + (f" of the {planned} planned, seeds {_seed_ranges([c['seed'] for c in res['cases']])}"
                              if planned != n else "") + f" ({per_robot}); "
              f"cost {res['case_seconds']['total'] / 3600:.1f} h of cases (median {res['case_seconds']['median']:.0f} s "
              f"a case).", "",
