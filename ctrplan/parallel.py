@@ -5,7 +5,7 @@ finishes:
 
 - ``n_jobs == 1`` and no scheduler: in this process, in order;
 - ``n_jobs > 1``: on ``n_jobs`` local worker processes (``joblib.Parallel`` on its loky backend:
-  processes started once per session and reused, shared with every other joblib user of the
+  processes started once per Python process and reused, shared with every other joblib user of the
   process);
 - ``scheduler`` given (an address such as ``"tcp://host:8786"`` or a connected
   ``distributed.Client``): on the workers of that Dask cluster, which may span several machines.
