@@ -296,10 +296,7 @@ def speed_table(res: dict) -> str:
         lines.append(f"| {name} | {t.size} | {stats} | {np.median(t) / unit:.3g} | "
                      f"{'-' if paper is None else f'{paper * 1e3:.0f} ms'} | {speed} |")
 
-    lines.append(f"| one standard solve, determinant test only (the unit), 4x4x4 | {len(r['single_standard_s'])} | "
-                 + " / ".join(_ms(v) for v in (np.mean(r["single_standard_s"]), unit,
-                                                 np.percentile(r["single_standard_s"], 90),
-                                                 np.max(r["single_standard_s"]))) + " | 1 | - | - |")
+    row("one standard solve, determinant test only (the unit), 4x4x4", r["single_standard_s"])
     for name, m in res.get("per_configuration", {}).get("models", {}).items():
         row(f"{name}, 4x4x4", m["seconds"], m["paper_s"], m["reference_seconds"])
     for name, ts in r["rows"].items():
