@@ -174,13 +174,20 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
               help="Message definitions written into the bag (visualization_msgs/msg/Marker differs).")
 @click.option("--ros2-frame", default="ctr_base", show_default=True,
               help="frame_id of the tip path and the bound spheres (the robot's base frame).")
+@click.option("--no-full-map", is_flag=True,
+              help="One scenario planned with a preview map (its robot has no map yet): do not compute the full "
+                   "map after the plan (a later run computes it).")
 def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_out, ros2_storage, ros2_distro,
-         ros2_frame):
+         ros2_frame, no_full_map):
     """Plan a friction-bound-aware motion for a scenario and write the drive trajectory.
 
     Several scenario files or folders of them are planned in one process (or spread over local
     worker processes or Dask workers), each into its own folder, with one table across them; a rerun reuses the complete
     outputs of unchanged scenarios.
+
+    A robot without a shipped or cached bound map is planned with a coarse preview map refined
+    where the plan goes; with one scenario, the full map is then computed (resumably: interrupt
+    it and the next run goes on), so that later plans read it.
     """
     single = len(scenario_paths) == 1 and Path(scenario_paths[0]).is_file() and scheduler is None
     if ros2_out is not None:
@@ -208,6 +215,12 @@ def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_ou
             written = write_plan_ros2(result, ros2_out, storage=ros2_storage, distro=ros2_distro, frame_id=ros2_frame)
             logger.info(f"ROS 2 bag in {written['bag']} ({ros2_storage}, {ros2_distro} messages); trajectory for "
                         f"`ros2 topic pub` in {written['yaml']}")
+        if result.run.bound_map.preview and not no_full_map:
+            from .pipeline.bound_map import complete_bound_map
+
+            logger.info("the plan is written; computing the robot's full bound map now (interrupt to stop: the next "
+                        "run goes on from its finished chunks)")
+            complete_bound_map(result.run.setup, jobs or os.cpu_count() or 1, progress=_progress())
         return
     from .studies import plan_many
 

@@ -13,7 +13,9 @@ much inside a sampling planner. A bound map evaluates it once on a grid and inte
 - :mod:`~ctrplan.boundmap.store`: the resumable zarr store and :func:`load_bound_map`;
 - :mod:`~ctrplan.boundmap.compute`: computing a map locally or on a Dask cluster;
 - :mod:`~ctrplan.boundmap.files`: shipped and cached maps of robot files;
-- :mod:`~ctrplan.boundmap.accuracy`: a map against the exact model.
+- :mod:`~ctrplan.boundmap.accuracy`: a map against the exact model;
+- :mod:`~ctrplan.boundmap.refine`: a map corrected to the exact bound where the planner goes, and
+  the coarse preview map a new robot plans with first.
 """
 
 from .accuracy import InterpolationError, interpolation_error, sample_exact
@@ -22,7 +24,9 @@ from .compute import (DEFAULT_CHUNK_SIZE, BoundMapRun, SchedulerUnreachableError
                       compute_field, evaluate_configuration, start_local_cluster)
 from ..coordinates import MapCoordinates, map_coordinates
 from .field import QUANTITIES, UNITS, BoundField
-from .files import compute_bound_map, default_spec, load_or_compute_bound_map, map_paths
+from .files import compute_bound_map, default_spec, find_bound_map, load_or_compute_bound_map, map_paths
+from .refine import (ExactSamples, cell_nodes, evaluate_nodes, preview_spec, refined_field, subdivided,
+                     with_nodes)
 from .identity import (BoundFieldKeyError, BoundMapMismatchError, MapIdentity, evaluator_name, field_key,
                        map_identity)
 from .store import (STORE_SUFFIX, BoundMapStore, IncompleteBoundMapError, chunk_shape_for, is_store_path,
@@ -34,6 +38,8 @@ __all__ = [
     "evaluator_name", "field_key", "map_identity", "BoundMapStore", "IncompleteBoundMapError", "STORE_SUFFIX",
     "chunk_shape_for", "is_store_path", "load_bound_map", "DEFAULT_CHUNK_SIZE", "BoundMapRun",
     "SchedulerUnreachableError", "compute_bound_map_store", "compute_field", "evaluate_configuration",
-    "start_local_cluster", "compute_bound_map", "default_spec", "load_or_compute_bound_map", "map_paths",
-    "InterpolationError", "interpolation_error", "sample_exact",
+    "start_local_cluster", "compute_bound_map", "default_spec", "find_bound_map", "load_or_compute_bound_map",
+    "map_paths",
+    "InterpolationError", "interpolation_error", "sample_exact", "ExactSamples", "refined_field", "preview_spec",
+    "subdivided", "cell_nodes", "with_nodes", "evaluate_nodes",
 ]

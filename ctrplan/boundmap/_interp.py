@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["locate", "corner_sum", "multilinear"]
+__all__ = ["locate", "corner_sum", "multilinear", "cell_corners"]
 
 
 @njit(cache=True, inline="always")
@@ -91,3 +91,28 @@ def multilinear(u, axes, start, size, periodic, strides, values, valid, columns,
             out[p, c], cok = corner_sum(lo, hi, t, strides, values, valid, columns[c], eps)
             good = good and cok
         ok[p] = good
+
+
+@njit(cache=True)
+def cell_corners(u, axes, start, size, periodic, strides, index, weight):
+    """The 2^d corners of each point's cell and their multilinear weights: for the points ``u``
+    (m, d), flat node indices into ``index`` (m, 2^d) and weights into ``weight`` (m, 2^d), in
+    the corner order of :func:`corner_sum` (the weights of a point sum to 1)."""
+    m, d = u.shape
+    lo = np.empty(d, dtype=np.int64)
+    hi = np.empty(d, dtype=np.int64)
+    t = np.empty(d)
+    for p in range(m):
+        locate(u[p], axes, start, size, periodic, lo, hi, t)
+        for corner in range(1 << d):
+            w = 1.0
+            flat = 0
+            for k in range(d):
+                if (corner >> k) & 1:
+                    w *= t[k]
+                    flat += hi[k] * strides[k]
+                else:
+                    w *= 1.0 - t[k]
+                    flat += lo[k] * strides[k]
+            index[p, corner] = flat
+            weight[p, corner] = w

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import atomic_savez
-from ._interp import multilinear
+from ._interp import cell_corners, multilinear
 from ..coordinates import MapCoordinates
 from .identity import BoundMapMismatchError
 
@@ -162,6 +162,32 @@ class BoundField:
                     self._flat_valid, cols, _WEIGHT_EPS, out, ok)
         out[~ok] = np.nan
         return out, ok
+
+    def cell_weights(self, u) -> tuple[np.ndarray, np.ndarray]:
+        """The nodes the interpolation at each point reads, and their weights.
+
+        Parameters
+        ----------
+        u : array-like, shape (m, d)
+            Map coordinates [rad or m] (periodic ones may be unwrapped, others are clamped).
+
+        Returns
+        -------
+        index : ndarray of int, shape (m, 2^d)
+            Flat (C-order) indices of the corners of each point's cell.
+        weight : ndarray, shape (m, 2^d)
+            Their multilinear weights (each row sums to 1); the interpolated value is
+            ``sum(weight * values.reshape(-1, 4)[index], axis=1)`` where no invalid node has
+            weight.
+        """
+        u = np.ascontiguousarray(np.atleast_2d(np.asarray(u, dtype=float)))
+        if u.shape[1] != len(self.axes):
+            raise ValueError(f"map coordinates need shape (m, {len(self.axes)}), got {u.shape}")
+        d = len(self.axes)
+        index = np.empty((u.shape[0], 1 << d), dtype=np.int64)
+        weight = np.empty((u.shape[0], 1 << d))
+        cell_corners(u, self._axes_flat, self._start, self._size, self.periodic, self._strides, index, weight)
+        return index, weight
 
     def kernel_arrays(self, quantity: str = "position") -> tuple:
         """Arrays of the compiled interpolation of one quantity, for compiled callers:

@@ -29,7 +29,7 @@ from .identity import BoundFieldKeyError, BoundMapMismatchError, map_identity
 from .store import STORE_SUFFIX, IncompleteBoundMapError, load_bound_map
 
 __all__ = ["DEFAULT_ROTATION_NODES", "DEFAULT_TRANSLATION_NODES", "default_spec", "map_paths",
-           "compute_bound_map", "load_or_compute_bound_map", "CACHE_DIR"]
+           "compute_bound_map", "find_bound_map", "load_or_compute_bound_map", "CACHE_DIR"]
 
 # Default grid nodes per periodic rotation and per translation coordinate (uniform): the
 # original default of ctrplan (median interpolation error 0.08 mm on the Table VII robot, but
@@ -186,6 +186,51 @@ def _stale_maps(robot_path, ident) -> list[str]:
     return lines
 
 
+def _read_existing(robot_path: Path, ident) -> tuple | None:
+    """The complete shipped or cached map of ``ident`` as (field, source), else None."""
+    shipped, cache = map_paths(robot_path, ident.key)
+    for path, source in ((shipped.with_suffix(".npz"), "shipped"), (shipped.with_suffix(STORE_SUFFIX), "shipped"),
+                         (cache.with_suffix(STORE_SUFFIX), "cache"), (cache.with_suffix(".npz"), "cache")):
+        if path.exists():
+            try:
+                field = load_bound_map(path, key=ident.key)
+            except IncompleteBoundMapError:
+                logger.debug(f"{path}: incomplete (an interrupted computation), not read")
+                continue
+            except BoundFieldKeyError as exc:
+                logger.warning(f"ignoring {path}: {exc}")
+                continue
+            logger.debug(f"bound map read from {path} ({source})")
+            return field, source
+    return None
+
+
+def find_bound_map(robot_path, robot, spec, settings, *, evaluator=None) -> tuple | None:
+    """The shipped or cached map of a robot file with the right key, without computing one.
+
+    Parameters
+    ----------
+    robot_path : path
+        Robot model file (its content is part of the key).
+    robot : Robot
+        The robot loaded from ``robot_path``.
+    spec : MapSpec or sequence of int
+    settings : ModelSettings
+    evaluator : callable, optional, keyword-only
+        Default :func:`ctrplan.mechanics.evaluate_bound`.
+
+    Returns
+    -------
+    tuple or None
+        ``(field, source)`` with source ``"shipped"`` or ``"cache"``; None when there is no
+        complete map (an interrupted computation is not one).
+    """
+    if evaluator is None:
+        from ..mechanics import evaluate_bound as evaluator
+    robot_path = Path(robot_path)
+    return _read_existing(robot_path, map_identity(robot, settings, spec, evaluator, robot_path.read_text()))
+
+
 @deprecated_echo
 def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1, echo=None, *,
                               scheduler=None, evaluator=None, progress: bool = False):
@@ -233,20 +278,10 @@ def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1
     robot_path = Path(robot_path)
     text = robot_path.read_text()
     ident = map_identity(robot, settings, spec, evaluator, text)
+    found = _read_existing(robot_path, ident)
+    if found is not None:
+        return found[0], found[1], time.perf_counter() - t0
     shipped, cache = map_paths(robot_path, ident.key)
-    for path, source in ((shipped.with_suffix(".npz"), "shipped"), (shipped.with_suffix(STORE_SUFFIX), "shipped"),
-                         (cache.with_suffix(STORE_SUFFIX), "cache"), (cache.with_suffix(".npz"), "cache")):
-        if path.exists():
-            try:
-                field = load_bound_map(path, key=ident.key)
-            except IncompleteBoundMapError:
-                logger.debug(f"{path}: incomplete (an interrupted computation), not read")
-                continue
-            except BoundFieldKeyError as exc:
-                logger.warning(f"ignoring {path}: {exc}")
-                continue
-            logger.debug(f"bound map read from {path} ({source})")
-            return field, source, time.perf_counter() - t0
     for line in _stale_maps(robot_path, ident):
         logger.warning(line)
     store = cache.with_suffix(STORE_SUFFIX)

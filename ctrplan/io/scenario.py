@@ -79,6 +79,9 @@ class _BoundFieldDoc(_Strict):
     resolution: list[Annotated[int, Field(ge=2)]] | None = None
     placement: Literal["uniform", "adaptive"] = "uniform"
     ds_m: Positive | None = None
+    first_plan: Literal["preview", "full"] = "preview"
+    refine_rounds: Annotated[int, Field(ge=0)] | None = None
+    refine_tolerance_m: Positive = 0.25e-3
 
 
 class _DriveDoc(_Strict):
@@ -232,11 +235,24 @@ class BoundFieldSettings:
         Node placement along bounded coordinates (``ctrplan.boundmap.MapSpec``).
     ds : float or None
         Arc-length step of the mechanics [m]; None for the default.
+    first_plan : {"preview", "full"}
+        For a robot whose map is neither shipped nor cached: plan first with a coarse preview map
+        refined where the plan goes (``"preview"``; ``ctrplan plan`` then computes the full map),
+        or compute the full map first (``"full"``).
+    refine_rounds : int or None
+        Most re-plans with the map corrected to the exact bound at the last plan's waypoints
+        (``ctrplan.boundmap.refined_field``); None: 4 with a preview map, 0 with the full map.
+    refine_tolerance : float
+        Refinement stops when the map's bound is within this of the exact bound at every
+        waypoint [m] (default 0.25 mm: the accuracy budget of the bound itself).
     """
 
     resolution: tuple[int, ...] | None = None
     placement: str = "uniform"
     ds: float | None = None
+    first_plan: str = "preview"
+    refine_rounds: int | None = None
+    refine_tolerance: float = 0.25e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -442,7 +458,8 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
                                  f"needs one value per map coordinate ({', '.join(names)}: the base rotations and "
                                  f"translations relative to tube 1 that the joints change), got {bf.resolution!r}")
     bound_field = BoundFieldSettings(resolution=None if bf.resolution is None else tuple(bf.resolution),
-                                     placement=bf.placement, ds=bf.ds_m)
+                                     placement=bf.placement, ds=bf.ds_m, first_plan=bf.first_plan,
+                                     refine_rounds=bf.refine_rounds, refine_tolerance=bf.refine_tolerance_m)
 
     drive = None
     if doc.drive is not None:

@@ -43,13 +43,14 @@ DEBUG, and a goal planned without its compensation at WARNING. Their ``echo`` pa
 deprecated, and so is :func:`run_plan` (use :func:`ctrplan.plan`).
 """
 
-from .bound_map import GIVEN, BoundMapStage, given_bound_map, load_bound_map
+from .bound_map import GIVEN, BoundMapStage, complete_bound_map, given_bound_map, load_bound_map
 from .drive import time_parameterize
 from .evaluation import GoalOutcome, PlanComparison, RouteMetrics, compare_plans, goal_outcomes, route_metrics
 from .goals import (AimDecision, AimedGoals, GoalCheckCounts, ResolvedGoals, aim_decision, aim_goals, check_start,
                     resolve_goals)
 from .path_bounds import PATH_SAMPLE_SPACING, PathBounds, bounds_along_path
 from .prediction import WaypointPredictions, predict_waypoints
+from .refine import MapRefinement, Refinement, RefinementRound, refine_plans, start_refinement
 from .report import log_summary, path_rows, write_report
 from .routes import Plans, RoutePlan, effective_bound_weight, plan_routes
 from .run import PlanRun, run_plan, run_stages
@@ -61,14 +62,14 @@ __all__ = [
     # stage 1
     "PlanSetup", "setup_plan", "load_setup", "map_spec", "default_out_dir",
     # stage 2
-    "BoundMapStage", "load_bound_map", "given_bound_map", "GIVEN",
+    "BoundMapStage", "load_bound_map", "complete_bound_map", "given_bound_map", "GIVEN",
     # stages 3 and 4
     "check_start", "GoalCheckCounts", "ResolvedGoals", "resolve_goals", "AimDecision", "aim_decision", "AimedGoals",
     "aim_goals",
     # stage 5
     "RoutePlan", "Plans", "plan_routes", "effective_bound_weight", "PathBounds", "bounds_along_path",
     "PATH_SAMPLE_SPACING", "WaypointPredictions", "predict_waypoints", "WaypointTable", "waypoint_table",
-    "calibrated_bound",
+    "calibrated_bound", "MapRefinement", "RefinementRound", "Refinement", "start_refinement", "refine_plans",
     # stage 6
     "time_parameterize",
     # stage 7

@@ -71,7 +71,7 @@ def _dense_path(ordered_q, motions, joint_space, spacing):
     return np.array(pts), np.array(s), seg_motion
 
 
-def bounds_along_path(ordered, robot, field, settings, joint_space) -> PathBounds:
+def bounds_along_path(ordered, robot, field, settings, joint_space, *, exact=None) -> PathBounds:
     """Interpolated bounds sampled along an ordered path, and the exact bound at its waypoints.
 
     Parameters
@@ -85,6 +85,8 @@ def bounds_along_path(ordered, robot, field, settings, joint_space) -> PathBound
         Settings of the exact model.
     joint_space : JointStateSpace
         Its metric spaces the samples (:data:`PATH_SAMPLE_SPACING`).
+    exact : LastMotionBounds, optional, keyword-only
+        The exact bounds at these waypoints, computed before (with another map): reused.
 
     Returns
     -------
@@ -104,4 +106,5 @@ def bounds_along_path(ordered, robot, field, settings, joint_space) -> PathBound
                        field(ordered.q, "position"))
     return PathBounds(dense_q=qd, dense_s=sd, dense_motion=md, dense_friction=friction,
                       dense_translation_last=tlast, dense_given_last=given_last, planned=planned,
-                      exact=bounds_given_last_motion(ordered, robot, evaluate_bound, settings))
+                      exact=exact if exact is not None else bounds_given_last_motion(ordered, robot, evaluate_bound,
+                                                                                     settings))

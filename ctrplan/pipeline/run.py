@@ -17,6 +17,7 @@ from .bound_map import BoundMapStage, load_bound_map
 from .drive import time_parameterize
 from .evaluation import PlanComparison, compare_plans, goal_outcomes
 from .goals import AimedGoals, GoalCheckCounts, ResolvedGoals, aim_goals, check_start, resolve_goals
+from .refine import DEFAULT_PREVIEW_ROUNDS, MapRefinement, refine_plans, start_refinement
 from .report import log_summary, write_report
 from .routes import Plans, plan_routes
 from .setup import PlanSetup, load_setup
@@ -56,6 +57,9 @@ class PlanRun:
         there.
     time_s : float
         Time from the start of the run to the end of the last stage [s].
+    refinement : MapRefinement or None
+        Stage 5: the map refined where the plan goes and the plans it took; None without
+        refinement.
     """
 
     setup: PlanSetup
@@ -69,20 +73,31 @@ class PlanRun:
     comparison: PlanComparison
     goals: tuple
     time_s: float
+    refinement: MapRefinement | None = None
+
+    @property
+    def field(self):
+        """The map the bound-aware plan read: the refined one after a refinement [m, rad]."""
+        return self.bound_map.field if self.refinement is None else self.refinement.field
 
     @property
     def timings_s(self) -> dict:
         """Stage times [s]: ``bound_map``, ``inverse_kinematics``, ``compensation``,
-        ``prediction_at_waypoints``, ``plans_wall``, ``plans_in_parallel`` (bool) and ``total``."""
+        ``prediction_at_waypoints``, ``plans_wall`` (the refinement's re-plans included),
+        ``refinement`` (its re-plans), ``plans_in_parallel`` (bool) and ``total``."""
         return {"bound_map": self.bound_map.time_s, "inverse_kinematics": self.resolved.time_s,
                 "compensation": self.aimed.time_s, "prediction_at_waypoints": self.plans.aware.prediction.time_s,
-                "plans_wall": self.plans.time_s, "plans_in_parallel": self.plans.in_parallel, "total": self.time_s}
+                "plans_wall": self.plans.time_s,
+                "refinement": 0.0 if self.refinement is None else self.refinement.time_s,
+                "plans_in_parallel": self.plans.in_parallel, "total": self.time_s}
 
 
 def run_stages(setup: PlanSetup, bound_map: BoundMapStage, *, iterations: int | None = None,
                compare_blind: bool = True, n_jobs: int = 1, started: float | None = None) -> PlanRun:
     """Stages 3 to 7 of a plan: check the start, resolve and aim the goals, plan bound-aware (and
-    bound-blind), time-parameterize, evaluate. Writes nothing; logs the progress lines.
+    bound-blind), refine the map where the plan goes and plan again (``[bound_field]
+    refine_rounds``; by default with a preview map only, :mod:`ctrplan.pipeline.refine`),
+    time-parameterize, evaluate. Writes nothing; logs the progress lines.
 
     Parameters
     ----------
@@ -113,17 +128,26 @@ def run_stages(setup: PlanSetup, bound_map: BoundMapStage, *, iterations: int | 
         The time-parameterized trajectory violates the drive limits.
     """
     t0 = time.perf_counter() if started is None else started
-    field = bound_map.field
+    bf = setup.scenario.bound_field
+    rounds = bf.refine_rounds if bf.refine_rounds is not None else DEFAULT_PREVIEW_ROUNDS if bound_map.preview else 0
+    state = start_refinement(setup, bound_map, n_jobs) if rounds else None
+    field = bound_map.field if state is None else state.field
     validity = check_start(setup, field)
     resolved = resolve_goals(setup, field, validity)
     aimed = aim_goals(setup, resolved, validity)
     goal_checks = GoalCheckCounts.of(validity)
     plans = plan_routes(setup, field, aimed, iterations=iterations, compare_blind=compare_blind, n_jobs=n_jobs)
+    refinement = None
+    if state is not None:
+        plans, refinement = refine_plans(setup, state, aimed, plans, rounds=rounds, tolerance=bf.refine_tolerance,
+                                         iterations=iterations)
+        field = refinement.field
     trajectory = time_parameterize(setup, plans.aware.ordered)
     return PlanRun(setup=setup, bound_map=bound_map, goal_checks=goal_checks, resolved=resolved, aimed=aimed,
                    plans=plans, trajectory=trajectory,
                    waypoints=waypoint_table(plans.aware, setup.calibration.bound), comparison=compare_plans(plans),
-                   goals=goal_outcomes(setup.robot, field, aimed, plans.aware), time_s=time.perf_counter() - t0)
+                   goals=goal_outcomes(setup.robot, field, aimed, plans.aware), time_s=time.perf_counter() - t0,
+                   refinement=refinement)
 
 
 @deprecated_echo

@@ -170,6 +170,7 @@ def plan_summary(run) -> dict:
         stage times (``times_s``, with the run's ``total``).
     """
     setup, field, plans = run.setup, run.bound_map.field, run.plans
+    ref = run.refinement
     sc, robot = setup.scenario, setup.robot
     routes = plans.routes
     summary = {
@@ -187,7 +188,15 @@ def plan_summary(run) -> dict:
         "bound_map": {"source": run.bound_map.source, "time_s": run.bound_map.time_s,
                       "coordinates": field.coordinate_names, "resolution": list(field.shape),
                       "placement": setup.spec.placement, "key": field.key,
-                      "mechanics_version": field.metadata.get("mechanics_version"), "ds_m": setup.settings.ds},
+                      "mechanics_version": field.metadata.get("mechanics_version"), "ds_m": setup.settings.ds,
+                      "preview": run.bound_map.preview,
+                      "refinement": None if ref is None else {
+                          "plans": len(ref.rounds), "converged": ref.converged,
+                          "tolerance_mm": ref.tolerance * 1e3, "exact_samples": ref.samples.n,
+                          "exact_nodes": ref.n_nodes, "node_evaluations": ref.node_evaluations,
+                          "node_time_s": ref.node_time_s, "resolution": list(ref.field.shape), "time_s": ref.time_s,
+                          "max_map_minus_exact_at_waypoints_mm": [r.max_error * 1e3 for r in ref.rounds],
+                          "median_map_minus_exact_at_waypoints_mm": [r.median_error * 1e3 for r in ref.rounds]}},
         "bound_aware": _route_summary(plans.aware, run.comparison.aware),
         "duration_s": float(run.trajectory.duration) if run.trajectory is not None else None,
         "model_evaluations": {
