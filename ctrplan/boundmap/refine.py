@@ -10,14 +10,16 @@ Dupont 2019). Refinement closes the loop, in three steps:
    neighbouring nodes (once or more), its values interpolated (those of the old nodes
    unchanged);
 2. :func:`cell_nodes` and :func:`with_nodes`: the exact bound at every node of the cells the
-   plan's waypoints lie in (evaluated at the nodes' representative configurations, as a map's
-   nodes are), so that the map there is the exact bound interpolated over one fine cell;
-3. :func:`refined_field`: the node values of those cells corrected by the smallest change (in
-   the least-squares sense) that makes the map interpolate the exact bound at every waypoint
-   (:class:`ExactSamples`).
+   plan's path crosses (evaluated at the nodes' representative configurations, as a map's
+   nodes are, :func:`evaluate_nodes`), so that the map there is the exact bound interpolated
+   over one fine cell;
+3. :func:`refined_field`: the node values of the waypoints' cells corrected by the smallest
+   change (in the least-squares sense) that makes the map interpolate the exact bound at every
+   waypoint (:class:`ExactSamples`).
 
-The next plan reads the refined map, and where it goes again its cost is the exact bound. Away
-from the waypoints' cells the map is the subdivided one.
+The next plan reads the refined map: where it goes again, its cost is the exact bound
+interpolated over fine cells, and at the earlier waypoints the exact bound itself. Away from
+the cells the plans crossed the map is the subdivided one.
 
 With ``m`` samples whose cells have corners ``j`` and multilinear weights ``W`` (m, N), the
 correction ``delta`` (N,) of one quantity is the minimum-norm solution of ``W delta = r`` with

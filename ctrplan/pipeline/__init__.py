@@ -50,7 +50,7 @@ from .goals import (AimDecision, AimedGoals, GoalCheckCounts, ResolvedGoals, aim
                     resolve_goals)
 from .path_bounds import PATH_SAMPLE_SPACING, PathBounds, bounds_along_path
 from .prediction import WaypointPredictions, predict_waypoints
-from .refine import MapRefinement, Refinement, RefinementRound, refine_plans, start_refinement
+from .refine import ExactBound, MapRefinement, Refinement, RefinementRound, refine_plans, start_refinement
 from .report import log_summary, path_rows, write_report
 from .routes import Plans, RoutePlan, effective_bound_weight, plan_routes
 from .run import PlanRun, run_plan, run_stages
@@ -69,7 +69,8 @@ __all__ = [
     # stage 5
     "RoutePlan", "Plans", "plan_routes", "effective_bound_weight", "PathBounds", "bounds_along_path",
     "PATH_SAMPLE_SPACING", "WaypointPredictions", "predict_waypoints", "WaypointTable", "waypoint_table",
-    "calibrated_bound", "MapRefinement", "RefinementRound", "Refinement", "start_refinement", "refine_plans",
+    "calibrated_bound", "MapRefinement", "RefinementRound", "Refinement", "ExactBound", "start_refinement",
+    "refine_plans",
     # stage 6
     "time_parameterize",
     # stage 7

@@ -7,9 +7,12 @@ preview map for a robot whose map is not computed yet, or the full map between i
 plan was chosen with the wrong cost. Refinement plans on the map subdivided
 (:func:`ctrplan.boundmap.subdivided`: twice for a preview map, so that its grid is twice as fine
 as the full map's; once for another); after each plan it evaluates the exact bound at every node
-of the cells the waypoints lie in, corrects the map to the waypoints' exact bounds
+of the cells the plan's path crosses, corrects the map to the waypoints' exact bounds
 (:mod:`ctrplan.boundmap.refine`) and plans again, until the map is within the tolerance of the
 exact bound at every waypoint of the last plan, a plan adds no waypoint, or the rounds run out.
+Task-space goals are resolved with the exact bound (:class:`ExactBound`): among the inverse
+kinematics' solutions the one with the smallest exact bound, not the smallest map bound, which
+would favour where the map is too low.
 The bound-blind plan (which does not read the bound) is kept, with its interpolated bounds read
 from the refined map.
 
@@ -38,7 +41,7 @@ from .path_bounds import bounds_along_path
 from .routes import Plans, RoutePlan, plan_routes
 from .setup import PlanSetup
 
-__all__ = ["RefinementRound", "MapRefinement", "Refinement", "start_refinement", "refine_plans",
+__all__ = ["RefinementRound", "MapRefinement", "Refinement", "ExactBound", "start_refinement", "refine_plans",
            "DEFAULT_PREVIEW_ROUNDS"]
 
 logger = logging.getLogger(__package__)
@@ -169,13 +172,16 @@ class Refinement:
         return self._field
 
     def add(self, route: RoutePlan) -> int:
-        """The exact bounds of a plan's waypoints and of the nodes of their cells, into the map.
-        Returns the number of waypoints not seen before."""
+        """The exact bounds of a plan's waypoints, and of the nodes of the cells its path crosses
+        (the samples of its :class:`~ctrplan.pipeline.path_bounds.PathBounds`, at most
+        :data:`~ctrplan.pipeline.path_bounds.PATH_SAMPLE_SPACING` apart, and the waypoints),
+        into the map. Returns the number of waypoints not seen before."""
         new = ExactSamples.from_results(self.base, route.ordered.q, route.bounds.exact.results)
         before = self.samples.n
         self.samples = self.samples.merged(new)
         added = self.samples.n - before
-        need = np.setdiff1d(cell_nodes(self.base, new.u[new.ok]), self.node_index)
+        path = self.base.to_map(route.bounds.dense_q)
+        need = np.setdiff1d(cell_nodes(self.base, np.concatenate([new.u, path])), self.node_index)
         if need.size:
             t0 = time.perf_counter()
             values, ok = evaluate_nodes(self.setup.robot, self.base, need, self.setup.settings, self.n_jobs)
@@ -189,6 +195,33 @@ class Refinement:
                                     self.samples)
         self._save()
         return added
+
+
+class ExactBound:
+    """The exact bound as a map is called: ``bound(q, quantity="position")`` (for choosing among
+    inverse-kinematics solutions where the map is a refinement's, :func:`ctrplan.planning.resolve_goal`).
+
+    Parameters
+    ----------
+    robot : Robot
+    settings : ModelSettings
+        Of the exact model.
+    """
+
+    def __init__(self, robot, settings):
+        self.robot = robot
+        self.settings = settings
+
+    def __call__(self, q, quantity: str = "position"):
+        """The exact ``quantity`` (:data:`~ctrplan.boundmap.field.QUANTITIES`) at joint vectors ``q``
+        (n_joints,) or (m, n_joints) [m or rad]; inf where the model fails or is unstable."""
+        from ..boundmap import QUANTITIES, sample_exact
+        from ..mechanics import evaluate_bound
+
+        single = np.ndim(q) == 1
+        values, ok = sample_exact(self.robot, evaluate_bound, np.atleast_2d(np.asarray(q, float)), self.settings)
+        out = np.where(ok, values[:, QUANTITIES.index(quantity)], np.inf)
+        return float(out[0]) if single else out
 
 
 def start_refinement(setup: PlanSetup, bound_map: BoundMapStage, n_jobs: int = 1) -> Refinement:

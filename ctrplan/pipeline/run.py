@@ -17,7 +17,7 @@ from .bound_map import BoundMapStage, load_bound_map
 from .drive import time_parameterize
 from .evaluation import PlanComparison, compare_plans, goal_outcomes
 from .goals import AimedGoals, GoalCheckCounts, ResolvedGoals, aim_goals, check_start, resolve_goals
-from .refine import DEFAULT_PREVIEW_ROUNDS, MapRefinement, refine_plans, start_refinement
+from .refine import DEFAULT_PREVIEW_ROUNDS, ExactBound, MapRefinement, refine_plans, start_refinement
 from .report import log_summary, write_report
 from .routes import Plans, plan_routes
 from .setup import PlanSetup, load_setup
@@ -96,8 +96,9 @@ def run_stages(setup: PlanSetup, bound_map: BoundMapStage, *, iterations: int | 
                compare_blind: bool = True, n_jobs: int = 1, started: float | None = None) -> PlanRun:
     """Stages 3 to 7 of a plan: check the start, resolve and aim the goals, plan bound-aware (and
     bound-blind), refine the map where the plan goes and plan again (``[bound_field]
-    refine_rounds``; by default with a preview map only, :mod:`ctrplan.pipeline.refine`),
-    time-parameterize, evaluate. Writes nothing; logs the progress lines.
+    refine_rounds``; by default with a preview map only, :mod:`ctrplan.pipeline.refine`; task
+    goals are then resolved with the exact bound), time-parameterize, evaluate. Writes nothing;
+    logs the progress lines.
 
     Parameters
     ----------
@@ -133,7 +134,7 @@ def run_stages(setup: PlanSetup, bound_map: BoundMapStage, *, iterations: int | 
     state = start_refinement(setup, bound_map, n_jobs) if rounds else None
     field = bound_map.field if state is None else state.field
     validity = check_start(setup, field)
-    resolved = resolve_goals(setup, field, validity)
+    resolved = resolve_goals(setup, field if state is None else ExactBound(setup.robot, setup.settings), validity)
     aimed = aim_goals(setup, resolved, validity)
     goal_checks = GoalCheckCounts.of(validity)
     plans = plan_routes(setup, field, aimed, iterations=iterations, compare_blind=compare_blind, n_jobs=n_jobs)
