@@ -76,11 +76,13 @@ class PlanResult:
         no file was written.
     timings_s : dict of str to float
         Stage times [s] (``bound_map``, ``inverse_kinematics``, ``compensation``,
-        ``prediction_at_waypoints``, ``plans_wall``, ``plans_in_parallel`` (bool), ``total``).
+        ``prediction_at_waypoints``, ``plans_wall``, ``refinement``, ``plans_in_parallel`` (bool),
+        ``total``).
     run : ctrplan.pipeline.PlanRun
         Every stage's result (SI units): the bound map, the resolved and aimed goals, both plans
-        with their exact bounds and predictions, the comparison of the bound-aware plan with the
-        bound-blind one (``run.comparison``), the outcome at each goal (``run.goals``).
+        with their exact bounds and predictions, the map's refinement (``run.refinement``), the
+        comparison of the bound-aware plan with the bound-blind one (``run.comparison``), the
+        outcome at each goal (``run.goals``).
     """
 
     scenario: Scenario
@@ -154,8 +156,10 @@ def plan(scenario: Scenario | str | os.PathLike, *, bound_map: BoundField | Boun
         A loaded scenario (:func:`ctrplan.io.scenario.load_scenario`), or its TOML file (SI units).
     bound_map : BoundField or BoundMapStage, keyword-only, optional
         The bound map to plan with, over the robot's map coordinates [m, rad]; default the robot
-        file's shipped or cached map for the scenario's ``[bound_field]``, computed (and cached)
-        if there is none.
+        file's shipped or cached map for the scenario's ``[bound_field]``; if there is none, a
+        preview map (computed and cached) refined where the plan goes (``[bound_field]
+        first_plan``, ``refine_rounds``; docs/boundmaps.md), or with ``first_plan = "full"`` the
+        map computed (and cached).
     robot : Robot, keyword-only, optional
         Plan for this robot instead of the scenario's (same joint names, in the same order); its
         bound map must then be given (maps on disk are keyed by the robot file's bytes).

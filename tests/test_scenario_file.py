@@ -135,6 +135,8 @@ q = {alpha_2 = 0.0, alpha_3 = 1.0, beta_3 = -0.034}
     assert s.obstacles == () and s.drive is None and s.output_dir is None
     assert s.planner.iterations == 3000 and s.planner.name == "RRTstar"
     assert s.bound_field.resolution is None
+    assert s.bound_field.first_plan == "preview" and s.bound_field.refine_rounds is None
+    assert s.bound_field.refine_tolerance == 0.25e-3
     # the robot file records no measurements; with them, the scenario carries them typed
     assert s.calibration.bound is None and s.calibration.prediction is None
     (tmp_path / "model.toml").write_text(TABLE2.read_text() + "\n[bound_calibration]\ntarget_coverage = 0.9\n"
@@ -169,6 +171,9 @@ def test_joint_array_helpers(tmp_path):
     ("scale = 0.001\n", "", "obstacles[4].scale"),
     ("resolution = [9, 9, 5]", "resolution = [9, 9]", "bound_field.resolution"),
     ("ds_m = 0.002", 'placement = "smart"\nds_m = 0.002', "bound_field.placement"),
+    ("ds_m = 0.002", 'ds_m = 0.002\nfirst_plan = "later"', "bound_field.first_plan"),
+    ("ds_m = 0.002", "ds_m = 0.002\nrefine_rounds = -1", "bound_field.refine_rounds"),
+    ("ds_m = 0.002", "ds_m = 0.002\nrefine_tolerance_m = 0.0", "bound_field.refine_tolerance_m"),
     ("max_jerk = {alpha_2 = 50.0, ", "max_jerk = {", "drive.max_jerk.alpha_2"),
     ("max_velocity = {alpha_2 = 1.0,", "max_velocity = {alpha_2 = 0.0,", "drive.max_velocity.alpha_2"),
     ('dir = "out"', "dir = 3", "output.dir"),

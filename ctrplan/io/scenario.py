@@ -240,8 +240,8 @@ class BoundFieldSettings:
         refined where the plan goes (``"preview"``; ``ctrplan plan`` then computes the full map),
         or compute the full map first (``"full"``).
     refine_rounds : int or None
-        Most re-plans with the map corrected to the exact bound at the last plan's waypoints
-        (``ctrplan.boundmap.refined_field``); None: 4 with a preview map, 0 with the full map.
+        Most re-plans with the map refined where the last plan went (``ctrplan.pipeline.refine``);
+        None: 4 with a preview map, 0 with the full map.
     refine_tolerance : float
         Refinement stops when the map's bound is within this of the exact bound at every
         waypoint [m] (default 0.25 mm: the accuracy budget of the bound itself).

@@ -83,8 +83,8 @@ class PlanRun:
     @property
     def timings_s(self) -> dict:
         """Stage times [s]: ``bound_map``, ``inverse_kinematics``, ``compensation``,
-        ``prediction_at_waypoints``, ``plans_wall`` (the refinement's re-plans included),
-        ``refinement`` (its re-plans), ``plans_in_parallel`` (bool) and ``total``."""
+        ``prediction_at_waypoints``, ``plans_wall`` (the refinement included), ``refinement``
+        (its exact nodes and re-plans), ``plans_in_parallel`` (bool) and ``total``."""
         return {"bound_map": self.bound_map.time_s, "inverse_kinematics": self.resolved.time_s,
                 "compensation": self.aimed.time_s, "prediction_at_waypoints": self.plans.aware.prediction.time_s,
                 "plans_wall": self.plans.time_s,
