@@ -93,7 +93,7 @@ class MapRefinement:
         The waypoints' exact bounds, of every plan [m, rad].
     field : BoundField
         The map the final plan read: the loaded map subdivided, exact at the nodes of the cells
-        of the earlier plans' waypoints and corrected to their exact bounds.
+        the earlier plans' paths crossed, and corrected to their waypoints' exact bounds.
     n_nodes : int
         Nodes of ``field`` where the exact bound was evaluated (this run or an earlier one).
     node_evaluations : int
