@@ -245,6 +245,11 @@ def subdivided(field: BoundField, levels: int = 1) -> BoundField:
         Values at the new nodes interpolated (the old nodes' unchanged), valid where the
         interpolation is; same key, coordinates and metadata (``subdivided_from``: the old
         resolution).
+
+    Raises
+    ------
+    ValueError
+        ``levels`` < 0.
     """
     if levels < 0:
         raise ValueError(f"levels must be >= 0, got {levels!r}")
