@@ -268,7 +268,7 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
     """
     import numpy as np
 
-    from .boundmap import MapSpec, default_spec, map_coordinates, map_identity, map_paths
+    from .boundmap import MapSpec, default_spec, map_coordinates, map_file, map_identity, map_paths
     from .boundmap.files import compute_bound_map
     from .io.robot_file import load_robot
     from .mechanics import evaluate_bound
@@ -293,12 +293,12 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
     settings = _settings(ds)
     ident = map_identity(robot, settings, spec, evaluate_bound, Path(robot_path).read_text())
     shipped, cache = map_paths(robot_path, ident.key)
-    out = Path(out_path) if out_path else shipped.with_suffix("." + fmt)
+    out = Path(out_path) if out_path else map_file(shipped, "." + fmt)
     if store_path and out.suffix != ".npz":
         raise click.BadParameter(f"{store_path!r}: a separate store needs an .npz output (a .zarr output is the "
                                  "store)", param_hint="--store")
     if out.suffix == ".npz" and not store_path:
-        store_path = cache.with_suffix(".zarr") if not out_path else out.with_suffix(".zarr")
+        store_path = map_file(cache, ".zarr") if not out_path else out.with_suffix(".zarr")
     logger.info(f"map coordinates: {', '.join(f'{n} ({r} nodes)' for n, r in zip(coords.names, spec.resolution))}; "
                 f"placement {spec.placement}; key {ident.key[:12]}; mechanics {ident.mechanics_version}")
     n_jobs = 1 if scheduler else (jobs or os.cpu_count() or 1)

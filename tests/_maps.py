@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ctrplan.boundmap import BoundField, MapSpec, map_coordinates, map_identity, map_paths, uniform_axis
+from ctrplan.boundmap import BoundField, MapSpec, map_coordinates, map_file, map_identity, map_paths, uniform_axis
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings, evaluate_bound
 
@@ -35,6 +35,6 @@ def cache_constant_field(robot_file: Path, resolution=(4, 4, 3), ds: float = 0.0
     robot = load_robot(robot_file)
     key = map_identity(robot, ModelSettings(ds=ds), MapSpec(tuple(resolution), placement), evaluate_bound,
                        robot_file.read_text()).key
-    path = map_paths(robot_file, key)[1].with_suffix(".npz")
+    path = map_file(map_paths(robot_file, key)[1], ".npz")
     constant_field(robot, resolution, key=key).save(path)
     return path

@@ -140,6 +140,22 @@ def test_npz_output_and_planner_lookup(tmp_path, monkeypatch, caplog):
     assert source == "cache"
 
 
+def test_a_dot_in_the_robot_file_name_keeps_each_map_in_its_own_store(tmp_path, monkeypatch):
+    """Catches the key dropped from a cached map's name by ``Path.with_suffix`` when the robot
+    file's name holds a dot (``pair-x1.1.toml``): two grids of that robot then shared one store, and
+    the second stopped with a mismatch (a preview map and its full map, the first plan of a new robot)."""
+    robot_file = pair_file(tmp_path).rename(tmp_path / "pair-x1.1.toml")
+    robot = load_robot(robot_file)
+    monkeypatch.chdir(tmp_path)
+    coarse, _, _ = load_or_compute_bound_map(robot_file, robot, (3, 3), SETTINGS)
+    fine, source, _ = load_or_compute_bound_map(robot_file, robot, (4, 3), SETTINGS)
+    assert source == "computed" and fine.shape == (4, 3) and coarse.shape == (3, 3)
+    stores = sorted(p.name for p in (tmp_path / ".cache" / "boundmaps").glob("*.zarr"))
+    assert stores == sorted(f"pair-x1.1-{f.key[:12]}.zarr" for f in (coarse, fine))
+    again, source, _ = load_or_compute_bound_map(robot_file, robot, (3, 3), SETTINGS)
+    assert source == "cache" and again.key == coarse.key
+
+
 @pytest.mark.parametrize("scenario", sorted((REPO / "scenarios").glob("*.toml")), ids=lambda p: p.stem)
 def test_shipped_scenarios_find_their_map_without_computing(scenario, caplog):
     """Every shipped scenario's bound map is shipped: the main job computes no map (and says

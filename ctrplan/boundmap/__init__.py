@@ -24,7 +24,7 @@ from .compute import (DEFAULT_CHUNK_SIZE, BoundMapRun, SchedulerUnreachableError
                       compute_field, evaluate_configuration, start_local_cluster)
 from ..coordinates import MapCoordinates, map_coordinates
 from .field import QUANTITIES, UNITS, BoundField
-from .files import compute_bound_map, default_spec, find_bound_map, load_or_compute_bound_map, map_paths
+from .files import compute_bound_map, default_spec, find_bound_map, load_or_compute_bound_map, map_file, map_paths
 from .refine import (ExactSamples, cell_nodes, evaluate_nodes, preview_spec, refined_field, subdivided,
                      with_nodes)
 from .identity import (BoundFieldKeyError, BoundMapMismatchError, MapIdentity, evaluator_name, field_key,
@@ -40,6 +40,7 @@ __all__ = [
     "SchedulerUnreachableError", "compute_bound_map_store", "compute_field", "evaluate_configuration",
     "start_local_cluster", "compute_bound_map", "default_spec", "find_bound_map", "load_or_compute_bound_map",
     "map_paths",
+    "map_file",
     "InterpolationError", "interpolation_error", "sample_exact", "ExactSamples", "refined_field", "preview_spec",
     "subdivided", "cell_nodes", "with_nodes", "evaluate_nodes",
 ]

@@ -28,7 +28,7 @@ from ..coordinates import map_coordinates
 from .identity import BoundFieldKeyError, BoundMapMismatchError, map_identity
 from .store import STORE_SUFFIX, IncompleteBoundMapError, load_bound_map
 
-__all__ = ["DEFAULT_ROTATION_NODES", "DEFAULT_TRANSLATION_NODES", "default_spec", "map_paths",
+__all__ = ["DEFAULT_ROTATION_NODES", "DEFAULT_TRANSLATION_NODES", "default_spec", "map_paths", "map_file",
            "compute_bound_map", "find_bound_map", "load_or_compute_bound_map", "CACHE_DIR"]
 
 # Default grid nodes per periodic rotation and per translation coordinate (uniform): the
@@ -88,6 +88,16 @@ def map_paths(robot_path, key: str) -> tuple[Path, Path]:
     return shipped, cache
 
 
+def map_file(base, suffix: str) -> Path:
+    """``base`` (from :func:`map_paths`) with ``suffix`` (``".npz"``, ``".zarr"``) appended.
+
+    Not ``Path.with_suffix``: a robot file's name may hold a dot (``tube-x1.1.toml``), which would
+    make the key the suffix and drop it (every map of that robot in one store).
+    """
+    base = Path(base)
+    return base.with_name(base.name + suffix)
+
+
 def compute_bound_map(robot_path, spec, settings, evaluator=None, *, out_path=None, store_path=None,
                       n_jobs: int = 1, scheduler=None, chunk_size: int | None = None, progress: bool = False,
                       max_chunks: int | None = None, on_chunk=None):
@@ -136,7 +146,7 @@ def compute_bound_map(robot_path, spec, settings, evaluator=None, *, out_path=No
     text = robot_path.read_text()
     ident = map_identity(robot, settings, spec, evaluator, text)
     shipped, _ = map_paths(robot_path, ident.key)
-    out = Path(out_path) if out_path else shipped.with_suffix(STORE_SUFFIX)
+    out = Path(out_path) if out_path else map_file(shipped, STORE_SUFFIX)
     if out.suffix == STORE_SUFFIX:
         if store_path is not None and Path(store_path) != out:
             raise ValueError(f"--store {store_path} cannot differ from a .zarr output {out} (the store is the map)")
@@ -189,8 +199,8 @@ def _stale_maps(robot_path, ident) -> list[str]:
 def _read_existing(robot_path: Path, ident) -> tuple | None:
     """The complete shipped or cached map of ``ident`` as (field, source), else None."""
     shipped, cache = map_paths(robot_path, ident.key)
-    for path, source in ((shipped.with_suffix(".npz"), "shipped"), (shipped.with_suffix(STORE_SUFFIX), "shipped"),
-                         (cache.with_suffix(STORE_SUFFIX), "cache"), (cache.with_suffix(".npz"), "cache")):
+    for path, source in ((map_file(shipped, ".npz"), "shipped"), (map_file(shipped, STORE_SUFFIX), "shipped"),
+                         (map_file(cache, STORE_SUFFIX), "cache"), (map_file(cache, ".npz"), "cache")):
         if path.exists():
             try:
                 field = load_bound_map(path, key=ident.key)
@@ -284,7 +294,7 @@ def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1
     shipped, cache = map_paths(robot_path, ident.key)
     for line in _stale_maps(robot_path, ident):
         logger.warning(line)
-    store = cache.with_suffix(STORE_SUFFIX)
+    store = map_file(cache, STORE_SUFFIX)
     logger.log(progress_level(), f"computing the bound map of {robot_path.name} "
                f"({', '.join(map_coordinates(robot).names)}; {ident.spec}) into {store}; interrupt and rerun to resume")
     store.parent.mkdir(parents=True, exist_ok=True)
