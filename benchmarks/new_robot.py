@@ -30,6 +30,7 @@ average with the figures:
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import os
 import re
@@ -76,7 +77,10 @@ def _plan_figures(run, wall: float) -> dict:
     t = run.timings_s
     out = {"wall_s": wall, "bound_map_s": t["bound_map"], "bound_map_source": run.bound_map.source,
            "preview": run.bound_map.preview, "resolution": list(run.bound_map.field.shape),
-           "plans_wall_s": t["plans_wall"], "refinement_s": t["refinement"], "total_s": t["total"]}
+           "inverse_kinematics_s": t["inverse_kinematics"], "compensation_s": t["compensation"],
+           "prediction_at_waypoints_s": t["prediction_at_waypoints"], "plans_wall_s": t["plans_wall"],
+           "refinement_s": t["refinement"], "total_s": t["total"]}
+    out["other_s"] = t["total"] - sum(t[k] for k in ("bound_map", "inverse_kinematics", "compensation", "plans_wall"))
     if ref is not None:
         out.update(refinement_plans=len(ref.rounds), converged=ref.converged, exact_nodes=ref.n_nodes,
                    node_evaluations=ref.node_evaluations, node_time_s=ref.node_time_s, exact_samples=ref.samples.n,
@@ -114,7 +118,10 @@ def _along_path(run, fields: dict, n: int, jobs: int) -> dict:
 def _print_plan(label: str, f: dict) -> None:
     print(f"\n{label}: {f['wall_s']:.1f} s wall (bound map {f['bound_map_s']:.1f} s, {f['bound_map_source']}"
           f"{', preview ' + 'x'.join(map(str, f['resolution'])) if f['preview'] else ''}; plans "
-          f"{f['plans_wall_s']:.1f} s, of which refinement {f['refinement_s']:.1f} s)")
+          f"{f['plans_wall_s']:.1f} s, of which refinement {f['refinement_s']:.1f} s and the bound-aware plan's "
+          f"prediction at its waypoints {f['prediction_at_waypoints_s']:.1f} s; goals' inverse kinematics "
+          f"{f['inverse_kinematics_s']:.1f} s; compensation {f['compensation_s']:.1f} s; set-up, trajectory and "
+          f"the rest {f['other_s']:.1f} s)")
     for k, r in enumerate(f.get("rounds", [])):
         print(f"  plan {k + 1}: map - exact at {r['waypoints']} waypoints: median {r['median_mm']:.3f} mm, "
               f"max {r['max_mm']:.3f} mm; {r['plan_s']:.1f} s")
@@ -157,7 +164,14 @@ def main(argv=None) -> int:
     os.chdir(args.out)                  # the map cache (.cache/boundmaps) starts empty here
     load0 = os.getloadavg()
     print(f"robot {robot_file.name}, scenario {scenario.name}, {args.jobs} workers; load average {load0}")
-    results = {"robot": robot_file.name, "scale": args.scale, "jobs": args.jobs, "load_average_start": load0}
+    from bench_speed import _commit, _cpu
+    from ctrplan.constants import MECHANICS_VERSION
+
+    results = {"command": "OPENBLAS_NUM_THREADS=1 python benchmarks/new_robot.py " + " ".join(
+                   sys.argv[1:] if argv is None else argv),
+               "mechanics_version": MECHANICS_VERSION, "commit": _commit(), "date": datetime.date.today().isoformat(),
+               "cores": os.cpu_count(), "cpu": _cpu(), "robot": robot_file.name, "scale": args.scale,
+               "jobs": args.jobs, "load_average_start": load0}
 
     t0 = time.perf_counter()
     first = ctrplan.plan(scenario, n_jobs=args.jobs, compare_blind=True).run

@@ -48,6 +48,17 @@ def test_discretization_results_come_from_the_present_mechanics():
         "again, then benchmarks/docs_tables.py")
 
 
+def test_new_robot_results_come_from_the_present_mechanics():
+    """The new-robot figures of docs/boundmaps.md (benchmarks/results/new-robot.json) were measured
+    with the present mechanics: catches maps and bounds quoted from a solver that has changed since."""
+    from ctrplan.constants import MECHANICS_VERSION
+
+    stored = json.loads((ROOT / "benchmarks" / "results" / "new-robot.json").read_text())
+    assert stored["mechanics_version"] == MECHANICS_VERSION, (
+        "new-robot.json was measured with other mechanics: run OPENBLAS_NUM_THREADS=1 python benchmarks/new_robot.py "
+        "--full-map --results benchmarks/results/new-robot.json again and update docs/boundmaps.md")
+
+
 @pytest.mark.parametrize("name", ["discrepancy-sweep.json", "ha-trajectory-discrepancy.json", "ha-robot-files.json"])
 def test_quoted_results_come_from_the_present_code(name):
     """Each results file the docs quote records the digest of the code that can move its figures
