@@ -89,10 +89,22 @@ def map_paths(robot_path, key: str) -> tuple[Path, Path]:
 
 
 def map_file(base, suffix: str) -> Path:
-    """``base`` (from :func:`map_paths`) with ``suffix`` (``".npz"``, ``".zarr"``) appended.
+    """A map's file: ``base`` with ``suffix`` appended.
 
     Not ``Path.with_suffix``: a robot file's name may hold a dot (``tube-x1.1.toml``), which would
     make the key the suffix and drop it (every map of that robot in one store).
+
+    Parameters
+    ----------
+    base : path
+        ``<folder>/<robot>-<key12>``, from :func:`map_paths`.
+    suffix : str
+        ``".npz"`` or ``".zarr"``.
+
+    Returns
+    -------
+    Path
+        ``<folder>/<robot>-<key12><suffix>``.
     """
     base = Path(base)
     return base.with_name(base.name + suffix)
