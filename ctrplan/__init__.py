@@ -12,8 +12,7 @@ scenario file) and ``ctrplan.PlanResult`` (:mod:`ctrplan.api`) are imported on f
 Messages go through the standard :mod:`logging` module, under the ``ctrplan`` logger (progress
 and summaries INFO, details DEBUG, cautions WARNING), which has only a ``logging.NullHandler``: the
 library prints nothing until the caller configures logging, e.g.
-``logging.basicConfig(level=logging.INFO)``. (The functions of :mod:`ctrplan.discrepancy` still
-take an ``echo`` callable, default ``print``.)
+``logging.basicConfig(level=logging.INFO)``.
 """
 
 import logging as _logging

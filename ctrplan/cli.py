@@ -588,10 +588,8 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
         noise_position=None if noise_mm is None else noise_mm * 1e-3, envelope_samples=envelope_samples,
         reference_friction=ref_mu, bound_target=bound_target, bound_samples=bound_samples,
         **({} if strengths is None else {"prior_strengths": strengths}))
-    # the workflow (ctrplan.discrepancy) takes a callable for its messages: they become INFO records
-    results = run_discrepancy(robot_path, data_path, out_dir, opts, echo=logging.getLogger("ctrplan.discrepancy").info,
-                              progress=_progress(no_progress))
-    paths = write_report(results, out_dir)
+    result = run_discrepancy(robot_path, data_path, out_dir, opts, progress=_progress(no_progress))
+    paths = write_report(result, out_dir)
     logger.info(f"report: {paths['markdown']}")
 
 

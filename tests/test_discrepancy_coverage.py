@@ -4,12 +4,16 @@ data, a calibrated bound and a prediction check that planning reads from the wri
 
 from __future__ import annotations
 
+import dataclasses
+import pickle
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy.coverage import calibrate_bound, conformal_factor, coverage_figures
+from ctrplan.discrepancy import coverage
+from ctrplan.discrepancy.coverage import Coverage, calibrate_bound, conformal_factor, coverage_figures
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.io.robot_file import load_robot, load_robot_calibration, robot_to_toml
 from ctrplan.pipeline import aim_decision
@@ -47,12 +51,108 @@ def test_calibrated_bound_that_misses_its_target_is_failing():
     units = np.repeat(np.arange(20), 10)
     good = calibrate_bound(e[:200], b[:200], e[200:], b[200:], units, noise_rms=0.0)
     bad = calibrate_bound(e[:200], b[:200], 3 * e[200:], b[200:], units, noise_rms=0.0)
-    assert not good.failing and good.status == "met" and good.test["covered"] == pytest.approx(0.9, abs=0.07)
-    assert bad.failing and bad.status == "failing" and bad.test["covered"] < 0.5
+    assert not good.failing and good.status == "met" and good.test.covered == pytest.approx(0.9, abs=0.07)
+    assert bad.failing and bad.status == "failing" and bad.test.covered < 0.5
     wide = calibrate_bound(3 * e[:200], b[:200], e[200:], b[200:], units, noise_rms=0.0)
-    assert not wide.failing and wide.status == "conservative" and wide.test["covered"] == 1.0
+    assert not wide.failing and wide.status == "conservative" and wide.test.covered == 1.0
     fig = coverage_figures(e[200:], b[200:], 0.0, units)
-    assert fig["covered"] == 1.0 and fig["ratio"]["max"] <= 1.0
+    assert fig.covered == 1.0 and fig.ratio["max"] <= 1.0
+
+
+def test_a_test_split_of_one_unit_is_judged_by_the_tolerance_alone():
+    """One test unit: the coverage interval has no finite ends (None). A coverage far below the
+    target is failing, far above it conservative, near it met, by :data:`COVERAGE_TOLERANCE`
+    alone. Catches the comparison of a None end with the target (a TypeError)."""
+    rng = np.random.default_rng(2718)
+    b = rng.uniform(1e-3, 2e-3, 300)
+    e = b * rng.uniform(0.0, 1.0, 300)
+    one = np.zeros(100, int)
+    good = calibrate_bound(e[:200], b[:200], e[200:], b[200:], one, noise_rms=0.0)
+    bad = calibrate_bound(e[:200], b[:200], 3 * e[200:], b[200:], one, noise_rms=0.0)
+    wide = calibrate_bound(3 * e[:200], b[:200], e[200:], b[200:], one, noise_rms=0.0)
+    for cal in (good, bad, wide):
+        assert cal.test.ci == (None, None) and cal.test.n_units == 1
+    assert good.status == "met" and abs(good.test.covered - 0.9) <= coverage.COVERAGE_TOLERANCE
+    assert bad.failing and bad.status == "failing"
+    assert not wide.failing and wide.status == "conservative"
+
+
+def test_coverage_is_frozen_and_its_dict_is_the_former_one():
+    """:class:`Coverage` is frozen, its ``ratio`` read-only, it pickles, and ``as_dict`` gives the
+    former dict (``ci`` a list, ``ratio`` a dict, plain Python values); the calibrated bound's median
+    is that of ``factor (b + m)``. Catches a result that can be changed after the fact."""
+    rng = np.random.default_rng(31)
+    b = rng.uniform(1e-3, 2e-3, 120)
+    e = b * rng.uniform(0.0, 1.2, 120)
+    units = np.repeat(np.arange(12), 10)
+    fig = coverage_figures(e, b, 0.1e-3, units)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fig.covered = 0.0
+    with pytest.raises(TypeError):
+        fig.ratio["max"] = 0.0
+    assert pickle.loads(pickle.dumps(fig)) == fig
+    d = fig.as_dict()
+    assert list(d) == ["n", "covered", "ci", "n_units", "ratio", "bound_median_m", "error_median_m"]
+    assert isinstance(d["ci"], list) and isinstance(d["ratio"], dict) and list(d["ratio"]) == ["median", "p90",
+                                                                                                   "p95", "max"]
+    assert d["n"] == 120 and d["n_units"] == 12 and d["bound_median_m"] == float(np.median(b))
+    empty = coverage_figures([np.nan], [1e-3], 0.0, [0])
+    assert empty == Coverage(0, None, (None, None), 0, dict.fromkeys(("median", "p90", "p95", "max")), None, None)
+    cal = calibrate_bound(e[:60], b[:60], e[60:], b[60:], units[60:], noise_rms=0.5e-4)
+    m = coverage.NOISE_MULTIPLE * 0.5e-4
+    assert cal.test.bound_median_m == pytest.approx(float(np.median(cal.factor * (b[60:] + m))))
+    assert cal.raw_test.bound_median_m == float(np.median(b[60:]))
+    assert cal.file_table("d.csv", "0" * 64)["test_samples"] == 60
+
+
+# --------------------------------------------------------------------------- stored bounds
+def _bound_stage_names(monkeypatch, robot) -> list:
+    """The stage names under which :func:`coverage.check_bound` looks for stored bounds of ``robot``
+    (three development and three test samples; the bound itself is not evaluated)."""
+    k, n = 6, robot.n_tubes
+    names = []
+
+    class Store:
+        def load(self, name):
+            names.append(name)
+            return None
+
+        def save(self, name, value):
+            pass
+
+    def bounds(robot, alpha, beta, settings=None, *, n_jobs=1):
+        m = len(alpha)
+        return coverage.BoundValues(position=np.full(m, 1e-3), translation_last=np.full(m, 1e-3),
+                                    ok=np.ones(m, bool))
+
+    monkeypatch.setattr(coverage, "bound_values", bounds)
+    state = SimpleNamespace(alpha=np.zeros((k, n)), beta=np.tile(robot.home_beta, (k, 1)))
+    data = SimpleNamespace(state=lambda robot, effects: state, translation_last=np.zeros((k, n - 1), bool))
+    setup = SimpleNamespace(robot=robot, data=data, stages=Store(), settings=None)
+    dev = np.arange(k) < 3
+    split = SimpleNamespace(dev_rows=dev, test_rows=~dev, units=np.arange(k))
+    errors = SimpleNamespace(position=np.full(k, 0.5e-3), rows=np.arange(k))
+    options = SimpleNamespace(bound_samples=100, n_jobs=1, bound_target=0.9, seed=0)
+    coverage.check_bound(setup, split, SimpleNamespace(oof=errors), errors, {}, SimpleNamespace(rms=1e-4), options)
+    return names
+
+
+def test_stored_bounds_are_tagged_with_every_parameter_of_the_robot(monkeypatch):
+    """Two robots that differ only in a Poisson ratio, or only in a tube diameter, store their
+    bounds under different stage names (``bound-development-<samples>-<tag>``); the same robot
+    under the same ones. Catches a tag that leaves parameters out, under which the bounds of
+    another calibration would be reused."""
+    robot = load_robot(PAIR)
+    tubes = list(robot.tubes)
+    poisson = robot.replace(tubes=(dataclasses.replace(tubes[0], poisson_ratio=0.35), tubes[1]))
+    diameter = robot.replace(tubes=(tubes[0], dataclasses.replace(tubes[1], outer_diameter=0.9e-3)))
+    first = _bound_stage_names(monkeypatch, robot)
+    assert len(first) == 2 and first[0].startswith("bound-development-100-") and first[1].startswith("bound-test-100-")
+    assert _bound_stage_names(monkeypatch, robot) == first
+    for other in (poisson, diameter):
+        names = _bound_stage_names(monkeypatch, other)
+        assert names[0].rsplit("-", 1)[0] == first[0].rsplit("-", 1)[0]
+        assert not set(names) & set(first), names
 
 
 # --------------------------------------------------------------------------- through the workflow
@@ -70,7 +170,7 @@ def _run(tmp_path, hidden, seed, candidates, file_mu):
     opts = DiscrepancyOptions(effects=candidates, ds=6e-3, n_permutations=199, max_evaluations=200, n_folds=5,
                               prior_strengths=(0.03, float("inf")), max_calibration_samples=200,
                               friction_search_samples=48, bound_samples=100, n_jobs=1)
-    return run_discrepancy(model, data, tmp_path / "out", opts, echo=lambda s: None, progress=False)
+    return run_discrepancy(model, data, tmp_path / "out", opts, progress=False).to_dict()
 
 
 def test_friction_measurements_give_a_bound_that_covers_and_a_prediction_planning_uses(tmp_path):

@@ -39,7 +39,8 @@ def _options(candidates, **kw):
 def _case(tmp_path, seed, candidates, *, truth=None, **hidden):
     """Synthesize with ``hidden`` effects (:func:`synthesize_reference` keywords) on ``truth``
     (default: the base robot), run the workflow from the base file (friction off, no effect)
-    with ``candidates``. Returns the results, the data file and the synthesizer's truth."""
+    with ``candidates``. Returns the results as ``results.json`` holds them, the data file, the
+    synthesizer's truth and the typed result."""
     base = load_robot(PAIR).replace(friction_coefficients=(0.0,))
     model = tmp_path / "pair.toml"
     model.write_text(robot_to_toml(base, header="Table I tube pair, friction off"))
@@ -47,8 +48,8 @@ def _case(tmp_path, seed, candidates, *, truth=None, **hidden):
     frame, made = synthesize_reference(truth or base, samples=SAMPLES, seed=seed, ds=6e-3,
                                        noise_position_rms=NOISE_MM * 1e-3, **hidden)
     frame.to_csv(data, index=False)
-    res = run_discrepancy(model, data, tmp_path / "out", _options(candidates), echo=lambda s: None, progress=False)
-    return res, data, made
+    result = run_discrepancy(model, data, tmp_path / "out", _options(candidates), progress=False)
+    return result.to_dict(), data, made, result
 
 
 def _verdict_has(res, effect):
@@ -91,7 +92,8 @@ def test_hidden_backlash_beyond_its_typical_range_is_named_with_a_caution(tmp_pa
 def lag_case(tmp_path_factory):
     """The 0.32 s tracker lag case: (results, data file, truth, its folder)."""
     tmp = tmp_path_factory.mktemp("lag")
-    return (*_case(tmp, 3102, ("time_offset", "backlash", "friction"), time_offset=0.32), tmp)
+    res, data, made, _ = _case(tmp, 3102, ("time_offset", "backlash", "friction"), time_offset=0.32)
+    return res, data, made, tmp
 
 
 def test_hidden_time_offset_beyond_its_typical_range_is_named_with_a_caution(lag_case):
@@ -125,14 +127,14 @@ def test_the_lag_case_recorded_as_a_ros2_bag_gives_the_csv_verdict(lag_case):
                        joint_rate_hz=40.0, names=["tube2_drive"])
     opts = _options(("time_offset", "backlash", "friction"), frame="robot",
                     bag=BagSelection(joint_names=(("tube2_drive", "alpha_2"),)))
-    res = run_discrepancy(tmp / "pair.toml", bag,
-                          tmp / "out-bag", opts, echo=lambda s: None, progress=False)
+    result = run_discrepancy(tmp / "pair.toml", bag, tmp / "out-bag", opts, progress=False)
+    res = result.to_dict()
     assert (res["verdict"], res["named_effect"]) == (res_csv["verdict"], res_csv["named_effect"]) == ("named", "time_offset")
     assert _fitted(res, "time_offset")["time_offset"] == pytest.approx(_fitted(res_csv, "time_offset")["time_offset"],
                                                                        abs=0.005)
     source = res["data_source"]
     assert source["poses_used"] == len(frame) and source["joint_topic"] == "/joint_states"
-    text = Path(write_report(res, tmp / "out-bag")["markdown"]).read_text()
+    text = Path(write_report(result, tmp / "out-bag")["markdown"]).read_text()
     assert "joint states /joint_states" in text and "tip poses /tracker/tip" in text and "40 Hz" in text
 
 
@@ -165,10 +167,10 @@ def test_correlated_noise_and_a_misspecified_file_name_nothing_and_the_residual_
     base = load_robot(PAIR).replace(friction_coefficients=(0.0,))
     names = ("precurvature_y_1", "precurvature_y_2", "k_xy_relative_2")
     truth = apply_parameters(base, names, read_parameters(base, names) * np.array([1.06, 0.92, 1.12]))
-    res, *_ = _case(tmp_path, 3104, ("backlash", "time_offset", "friction"), truth=truth, noise_ar1=0.8)
+    res, _, _, result = _case(tmp_path, 3104, ("backlash", "time_offset", "friction"), truth=truth, noise_ar1=0.8)
     assert res["verdict"] == "none" and res["named_effect"] is None, res["decision"]
     noise = res["noise"]["noise"]
     assert noise["source"] == "rests" and noise["position_rms_m"] == pytest.approx(NOISE_MM * 1e-3, rel=0.25)
     assert res["decision"]["no_effect_case"] == "noise", res["noise"]
-    text = Path(write_report(res, tmp_path / "out")["markdown"]).read_text()
+    text = Path(write_report(result, tmp_path / "out")["markdown"]).read_text()
     assert "is consistent with the sensor noise" in text

@@ -13,6 +13,7 @@ import pytest
 
 from ctrplan.discrepancy import Noise, synthesize, write_synth
 from ctrplan.discrepancy.envelope import hull_distance
+from ctrplan.discrepancy.estimates import AtypicalValue
 from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, needs_solve, parameter, read_parameters
 from ctrplan.discrepancy.signatures import tip_velocity, vector_signature
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
@@ -131,16 +132,17 @@ def _candidate(effect, split, r_base, r, *, atypical=(), at_bound=()):
                  tip_base=np.zeros((r.size, 3)), seconds=0.0)
     cv = CrossValidated(name=effect, model="standard", fit=None, folds=(), params={}, oof=oof, r=r, fold=split.fold)
     imp = compare(split, r_base, r)
-    return Candidate(effects=(effect,), label=REGISTRY[effect].label, cv=cv, shown={}, units={}, parameters=[],
-                     atypical=list(atypical), at_bound=tuple(at_bound), widened=(), n_parameters=1, bic=0.0,
+    return Candidate(effects=(effect,), label=REGISTRY[effect].label, cv=cv, shown={}, units={}, parameters=(),
+                     atypical=tuple(atypical), at_bound=tuple(at_bound), widened=(), n_parameters=1, bic=0.0,
                      delta_bic=0.0, improvement=imp, improvement_position=imp)
 
 
 def _naming(cands, split):
     from ctrplan.discrepancy.decision import NoiseCheck, name_effect
+    from ctrplan.discrepancy.noise import estimate_noise
 
-    noise = NoiseCheck(noise={"position_rms_m": 0.5e-3, "description": "0.5 mm"}, rms_m=2e-3, ratio=4.0, test=None)
-    return name_effect(split, cands, {}, noise, DiscrepancyOptions(), echo=lambda s: None)
+    noise = NoiseCheck(noise=estimate_noise(split.data, stated=0.5e-3), rms_m=2e-3, ratio=4.0, test=None)
+    return name_effect(split, cands, {}, noise, DiscrepancyOptions())
 
 
 def test_the_best_explanation_wins_whatever_its_typical_range():
@@ -155,19 +157,21 @@ def test_the_best_explanation_wins_whatever_its_typical_range():
     split = _split(units)
     scale = 1.0 + 0.5 * rng.random(40)[units]                  # motion-dependent error sizes
     base = 5.0 * scale + rng.normal(0, 0.2, 400)
-    band = {"name": "backlash_2", "value": float(np.deg2rad(5.9)), "unit": "rad", "typical": [0.0, float(np.deg2rad(5))],
-            "why": "dead band of a geared rotation stage", "check": "the couplings of the drive"}
+    band = AtypicalValue(name="backlash_2", value=float(np.deg2rad(5.9)), unit="rad", typical=(0.0, float(np.deg2rad(5))),
+                         typical_text="0..5 deg", why="dead band of a geared rotation stage",
+                         check="the couplings of the drive")
     cands = {"backlash": _candidate("backlash", split, base, np.abs(rng.normal(0.5, 0.1, 400)), atypical=[band]),
              "time_offset": _candidate("time_offset", split, base, 2.2 * scale + rng.normal(0, 0.2, 400))}
     naming = _naming(cands, split)
     d = naming.decision
-    assert d["verdict"] == "named" and d["named"] == "backlash", d
+    assert d.verdict == "named" and d.named == "backlash", d
     assert naming.candidates["backlash"].eligible and not naming.candidates["time_offset"].eligible
     assert naming.candidates["time_offset"].improvement_significant
-    assert d["worse_than"]["time_offset"] == ["backlash"]
-    assert len(d["cautions"]) == 1 and "5.9 deg" in d["cautions"][0] and "0..5 deg" in d["cautions"][0]
-    assert "check the couplings of the drive" in d["cautions"][0]
-    assert any("time offset" in n and "significantly higher than drive backlash" in n for n in d["notes"])
+    assert d.worse_than["time_offset"] == ("backlash",)
+    assert len(d.cautions) == 1 and "5.9 deg" in d.cautions[0] and "0..5 deg" in d.cautions[0]
+    assert "check the couplings of the drive" in d.cautions[0]
+    assert any("time offset" in n and "significantly higher than drive backlash" in n for n in d.notes)
+    assert json.loads(json.dumps(d.as_dict())) == d.as_dict()           # plain JSON, no typed object left
 
 
 def test_naming_rule_says_ambiguous_for_a_tie_and_leaves_a_best_fit_at_its_limit_unnamed():
@@ -189,15 +193,18 @@ def test_naming_rule_says_ambiguous_for_a_tie_and_leaves_a_best_fit_at_its_limit
              "time_offset": _candidate("time_offset", split, base, r + rng.normal(0, 0.01, 400)),
              "poisson": _candidate("poisson", split, base, base - 0.01 + rng.normal(0, 0.3, 400))}
     d = _naming(cands, split).decision
-    assert d["verdict"] == "ambiguous", d
-    assert {d["named"], d["ambiguous_with"]} == {"backlash", "time_offset"}
-    assert "rests after reversals" in d["separated_by"] or "speed" in d["separated_by"], d["separated_by"]
-    assert d["best"] == "offplane" and any("off-plane" in n and "at its limit" in n for n in d["notes"])
-    assert not d["holm"]["poisson"]
+    assert d.verdict == "ambiguous", d
+    assert {d.named, d.ambiguous_with} == {"backlash", "time_offset"}
+    assert d.runner_up.effect == d.ambiguous_with
+    assert "rests after reversals" in d.separated_by or "speed" in d.separated_by, d.separated_by
+    assert d.best == "offplane" and any("off-plane" in n and "at its limit" in n for n in d.notes)
+    assert not d.holm["poisson"]
+    assert json.loads(json.dumps(d.as_dict())) == d.as_dict()
     cands["offplane"] = _candidate("offplane", split, base, 0.5 * r, at_bound=limit)
     d = _naming(cands, split).decision
-    assert d["verdict"] == "none" and d["best"] == "offplane", d
-    assert set(d["worse_than"]["backlash"]) == {"offplane"}
+    assert d.verdict == "none" and d.best == "offplane", d
+    assert d.no_effect_case == "unknown"
+    assert set(d.worse_than["backlash"]) == {"offplane"}
 
 
 def test_a_named_effect_that_goes_to_zero_with_another_is_dropped_and_a_real_pair_is_named():
@@ -210,7 +217,8 @@ def test_a_named_effect_that_goes_to_zero_with_another_is_dropped_and_a_real_pai
     friction" written though the lag went to zero) and a family that shrinks to the pairs tried."""
     from dataclasses import replace as dc_replace
 
-    from ctrplan.discrepancy.fitting import compare, pair_decision
+    from ctrplan.discrepancy.fitting import compare
+    from ctrplan.discrepancy.pairs import pair_decision
 
     rng = np.random.default_rng(3)
     units = np.repeat(np.arange(40), 10)
@@ -233,7 +241,7 @@ def test_a_named_effect_that_goes_to_zero_with_another_is_dropped_and_a_real_pai
     out, second, dropped, replaced, _ = pair_decision("time_offset", tried, ["backlash"], {}, 0.01)
     assert second == "backlash" and dropped is None
     c = fitted(both, lag, play)
-    weak = dc_replace(c, improvement={**c.improvement, "p_value": 0.004})   # below 0.01, above 0.01 / 6
+    weak = dc_replace(c, improvement=dc_replace(c.improvement, p_value=0.004))   # below 0.01, above 0.01 / 6
     family = ["backlash", "offplane", "poisson", "friction", "clearance", "gradual_friction"]
     out, second, dropped, _, _ = pair_decision("time_offset", {"backlash": weak}, family, {}, 0.01)
     assert not out["backlash"].improvement_significant and second is None and dropped is None
@@ -265,7 +273,7 @@ def _trajectory_case(tmp_path, *, seed, samples=800, candidates=None, jobs=2, **
     opts = DiscrepancyOptions(effects=candidates or ("friction", "backlash", "time_offset", "gradual_friction"),
                               ds=6e-3, n_permutations=199, n_jobs=jobs, friction_grid=(0.0, 0.15, 0.3),
                               friction_search_samples=60, max_evaluations=400)
-    return run_discrepancy(model, data, tmp_path / "out", opts, echo=print, progress=False)
+    return run_discrepancy(model, data, tmp_path / "out", opts, progress=False).to_dict()
 
 
 @pytest.mark.slow

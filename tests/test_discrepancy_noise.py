@@ -14,7 +14,8 @@ import pytest
 from scipy import signal, stats
 
 from ctrplan.discrepancy.data import MeasuredData
-from ctrplan.discrepancy.noise import NoiseEstimate, _median_constant, estimate_noise, noise_test
+from ctrplan.discrepancy.consistency import NoiseTest, noise_test
+from ctrplan.discrepancy.noise import NoiseEstimate, _median_constant, estimate_noise
 from ctrplan.history import MotionRecord
 
 #: rms length of the simulated 3-D noise vector [m] (per component 0.5 / sqrt(3) mm).
@@ -165,7 +166,7 @@ def test_lag1_estimate_reads_a_fifth_of_correlated_noise_the_semivariogram_all_o
         f_old = ms / (old_rms ** 2 / 3.0)
         old_alarm += f_old > stats.f(r.size, 0.6 * 3 * pairs).ppf(0.99)
         new_alarm += not noise_test(r, np.arange(400), np.zeros(400, int), est, n_parameters=0, n_fitted=1,
-                                    alpha=0.01, leave_out_rests=False)["consistent"]
+                                    alpha=0.01, leave_out_rests=False).consistent
     assert np.median(old) == pytest.approx(NOISE_RMS * np.sqrt(1 - PHI), rel=0.1)   # 0.224 mm
     assert np.median(new) == pytest.approx(NOISE_RMS, rel=0.15)     # 0.55 mm here; +2 % over many seeds
     assert 0.65 <= np.median(lag1) <= 0.9
@@ -286,13 +287,32 @@ def test_residual_degrees_of_freedom_match_the_variance_of_a_correlated_mean_squ
     x = np.stack([_noise(rng, 460, PHI)[index] for _ in range(n)])
     ms = np.mean(x * x, axis=(1, 2)) / (NOISE_RMS ** 2 / 3.0)
     t = noise_test(x[0], index, np.zeros(index.size, int), _known(PHI), n_parameters=0, n_fitted=1, alpha=0.05)
-    assert t["dof_residual"] == pytest.approx(2.0 / np.var(ms), rel=0.07)
-    assert t["dof_residual"] < 0.3 * 3 * index.size
-    assert 0.035 <= np.mean(ms > t["threshold"]) <= 0.065
+    assert t.dof_residual == pytest.approx(2.0 / np.var(ms), rel=0.07)
+    assert t.dof_residual < 0.3 * 3 * index.size
+    assert 0.035 <= np.mean(ms > t.threshold) <= 0.065
     white = NoiseEstimate(position_rms_m=NOISE_RMS, source="stated")
     t = noise_test(x[0], index, np.zeros(index.size, int), white, n_parameters=0, n_fitted=1, alpha=0.01)
-    assert t["dof_residual"] == 3 * index.size and t["dof_noise"] is None
-    assert t["threshold"] == pytest.approx(stats.chi2(3 * index.size).ppf(0.99) / (3 * index.size))
+    assert t.dof_residual == 3 * index.size and t.dof_noise is None
+    assert t.threshold == pytest.approx(stats.chi2(3 * index.size).ppf(0.99) / (3 * index.size))
+
+
+def test_noise_test_result_is_frozen_and_its_dict_is_plain_json():
+    """``noise_test`` returns a frozen :class:`NoiseTest` whose ``as_dict`` has the keys of the
+    former dict result, in order, with plain Python values (JSON round trip unchanged). Catches a
+    numpy scalar or a renamed key reaching ``results.json``."""
+    rng = np.random.default_rng(7)
+    index = np.arange(200)
+    r = _noise(rng, 200, PHI)
+    t = noise_test(r, index, np.zeros(200, int), _known(PHI), n_parameters=2, n_fitted=600, alpha=0.05)
+    assert isinstance(t, NoiseTest)
+    with pytest.raises(AttributeError):
+        t.consistent = not t.consistent
+    d = t.as_dict()
+    assert list(d) == ["statistic", "threshold", "p_value", "inflation", "n_fitted_effective", "dof_residual",
+                       "dof_noise", "n_samples", "n_rest_samples_left_out", "consistent", "false_alarm_rate",
+                       "noise_lower_bound", "noise_upper_bound"]
+    assert all(type(v) in (float, int, bool) for v in d.values())
+    assert json.loads(json.dumps(d)) == d and d["consistent"] is t.consistent and d["n_samples"] == 200
 
 
 @pytest.mark.parametrize("smooth", [True, False])
@@ -323,9 +343,9 @@ def test_noise_test_allows_for_parameters_fitted_on_correlated_noise(smooth):
         b = np.linalg.lstsq(x[fit].reshape(-1, p), tip[fit].ravel(), rcond=None)[0]
         r = tip[out] - x[out] @ b
         rejected += not noise_test(r, t[out], seq, est, n_parameters=p, n_fitted=3 * int(fit.sum()), alpha=0.05,
-                                   smooth_regressors=smooth)["consistent"]
+                                   smooth_regressors=smooth).consistent
         white += not noise_test(r, t[out], seq, est, n_parameters=p, n_fitted=3 * int(fit.sum()), alpha=0.05,
-                                smooth_regressors=False)["consistent"]
+                                smooth_regressors=False).consistent
     assert rejected / reps <= _binomial_upper(0.05, reps), rejected
     if smooth:
         assert white / reps > 0.12, white          # the white-noise inflation is not enough
@@ -383,8 +403,8 @@ def test_noise_test_false_alarm_rate_and_power(phi, reps, power_floor):
         seq = np.zeros(rows.size, int)
         for alpha in alarms:
             alarms[alpha] += not noise_test(res, rows, seq, est, n_parameters=6, n_fitted=n_fit,
-                                            alpha=alpha)["consistent"]
-        hits += not noise_test(missed, rows, seq, est, n_parameters=6, n_fitted=n_fit, alpha=0.05)["consistent"]
+                                            alpha=alpha).consistent
+        hits += not noise_test(missed, rows, seq, est, n_parameters=6, n_fitted=n_fit, alpha=0.05).consistent
     for alpha, count in alarms.items():
         assert count / reps <= _binomial_upper(alpha, reps), (alpha, count)
     assert hits / reps >= power_floor, hits

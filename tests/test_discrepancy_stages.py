@@ -1,6 +1,6 @@
 """Stage functions of :mod:`ctrplan.discrepancy.workflow`: each returns SI values (m, rad, s); the
 out-of-fold errors come from fits that never saw their samples, their buffers or a fit that did;
-no fit sees the test split; the stage key is stable; the results stage alone converts to mm.
+no fit sees the test split; the stage key is stable; the report alone converts to mm.
 
 The stages run on a record made independently of the fitting code (``tests/reference``: the
 Table I tube pair, 500 samples of a continuous motion at 10 Hz, a tracker lag of 0.15 s evaluated
@@ -16,8 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import decision, fitting, options, setup as setup_stage, signatures, split as split_stage, stages
-from ctrplan.discrepancy.calibrate import pose_errors, predict
+from ctrplan.discrepancy import (baseline as baseline_stage, decision, fitting, options, report, setup as setup_stage,
+                                 signatures, split as split_stage, stages)
+from ctrplan.discrepancy.calibrate import CalibrationResult, pose_errors, predict
+from ctrplan.discrepancy.consistency import NoiseTest
+from ctrplan.discrepancy.noise import estimate_noise
 from ctrplan.discrepancy.workflow import DiscrepancyOptions
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from reference.synth_reference import synthesize_reference
@@ -31,10 +34,6 @@ OPTIONS = DiscrepancyOptions(effects=("time_offset",), ds=6e-3, n_permutations=1
 REGISTRATION = (0.02, -0.03, 0.4, 0.01, -0.02, 0.15)
 
 
-def _quiet(*_):
-    pass
-
-
 @pytest.fixture(scope="module")
 def staged(tmp_path_factory):
     """Stages 1-6 of a run on data with a hidden 0.15 s tracker lag."""
@@ -46,10 +45,10 @@ def staged(tmp_path_factory):
     frame, _ = synthesize_reference(robot, samples=500, time_offset=LAG_S, registration=REGISTRATION, seed=1, ds=6e-3)
     frame.to_csv(data, index=False)
     setup = setup_stage.load_inputs(model, data, tmp / "out", OPTIONS)
-    split = split_stage.split_samples(setup, OPTIONS, _quiet)
-    split, scale, pilot = fitting.pilot_fit(setup, split, OPTIONS, _quiet)
-    baseline = fitting.calibrate_baseline(setup, split, OPTIONS, _quiet, residual_scale=scale)
-    candidates = fitting.fit_candidates(setup, split, baseline, None, OPTIONS, _quiet)
+    split = split_stage.split_samples(setup, OPTIONS)
+    split, scale, pilot = baseline_stage.pilot_fit(setup, split, OPTIONS)
+    baseline = baseline_stage.calibrate_baseline(setup, split, OPTIONS, residual_scale=scale)
+    candidates = fitting.fit_candidates(setup, split, baseline, None, OPTIONS)
     return setup, split, baseline, candidates
 
 
@@ -92,11 +91,11 @@ def test_every_fold_fit_starts_cold_from_its_own_fold(staged):
     candidate's fold fits start from that fold's own baseline. Catches fold fits warm-started
     from a fit that saw the fold's samples (the basin chosen by the data a fold is scored on)."""
     setup, split, baseline, candidates = staged
-    free = fitting.CalibrationResult.from_dict(setup.stages.load("fit-baseline"))
+    free = CalibrationResult.from_dict(setup.stages.load("fit-baseline"))
     tube = [j for j, n in enumerate(free.names) if not n.startswith("registration")]
     reg = [j for j, n in enumerate(free.names) if n.startswith("registration")]
     for k in range(split.n_folds):
-        fold = fitting.CalibrationResult.from_dict(setup.stages.load(f"fit-baseline-fold{k}"))
+        fold = CalibrationResult.from_dict(setup.stages.load(f"fit-baseline-fold{k}"))
         np.testing.assert_array_equal(fold.initial[tube], free.initial[tube])
         assert not np.allclose(fold.initial[reg], free.values[reg], rtol=0, atol=1e-9)
         assert "skipped" not in fold.message
@@ -120,15 +119,16 @@ def test_time_offset_candidate_is_fitted_in_seconds_and_its_errors_are_in_metres
     base_mean = float(np.nanmean(baseline.oof.position))
     cand_mean = float(np.nanmean(c.oof.position))
     assert 3e-4 < cand_mean < base_mean < 1e-2, (cand_mean, base_mean)       # m
-    assert c.improvement_position["mean_difference"] == pytest.approx(base_mean - cand_mean, rel=0.3)
-    tests = signatures.diagnose_residuals(setup, split, baseline, OPTIONS, _quiet)
+    assert c.improvement_position.mean_difference == pytest.approx(base_mean - cand_mean, rel=0.3)
+    assert c.out_of_fold_figures.position_mean == pytest.approx(cand_mean, rel=1e-12)          # m
+    tests = signatures.diagnose_residuals(setup, split, baseline, OPTIONS)
     assert 1e-4 < tests["time_offset"].effect_size_m < 1e-2
-    noise = decision.check_noise(setup, split, baseline, OPTIONS, _quiet)
-    naming = decision.name_effect(split, candidates, tests, noise, OPTIONS, _quiet)
+    noise = decision.check_noise(setup, split, baseline, OPTIONS)
+    naming = decision.name_effect(split, candidates, tests, noise, OPTIONS)
     assert naming.named == "time_offset" and naming.candidates["time_offset"].eligible
-    report = fitting.candidate_report(naming.candidates["time_offset"])
-    assert report["parameters"]["time_offset"] == pytest.approx(LAG_S, abs=0.01)          # s stays s
-    assert report["out_of_fold"]["position_mean_mm"] == pytest.approx(1e3 * cand_mean, rel=1e-12)
+    written = report.candidate_dict(naming.candidates["time_offset"])
+    assert written["parameters"]["time_offset"] == pytest.approx(LAG_S, abs=0.01)          # s stays s
+    assert written["out_of_fold"]["position_mean_mm"] == pytest.approx(1e3 * cand_mean, rel=1e-12)
     se = dict(zip(c.fit.names, c.fit.stderr))["time_offset"]
     assert 0 < se < 0.02                                                                   # s, not ms
 
@@ -137,29 +137,48 @@ def test_noise_check_is_in_metres_and_the_report_form_in_millimetres():
     """An out-of-fold rms of 1 mm against a noise of 0.8 mm: the check holds rms 1e-3 m and
     ratio 1.25; its report form says 1.0 mm and 0.8 mm. Catches an rms kept in mm in the stage
     result or converted twice."""
-    noise = {"position_rms_m": 0.8e-3, "source": "stated", "description": "x"}
-    test = {"statistic": 1.55, "threshold": 1.2, "consistent": False, "inflation": 1.01, "false_alarm_rate": 0.01}
-    check = decision.NoiseCheck(noise=noise, rms_m=1e-3, ratio=1.25, test=test)
-    d = check.as_dict()
+    stated, unknown = (estimate_noise(_toy_data(), stated=s) for s in (0.8e-3, None))
+    test = NoiseTest(statistic=1.55, threshold=1.2, p_value=0.001, inflation=1.01, n_fitted_effective=300.0,
+                     dof_residual=400.0, dof_noise=None, n_samples=100, n_rest_samples_left_out=0, consistent=False,
+                     false_alarm_rate=0.01, noise_lower_bound=False, noise_upper_bound=False)
+    check = decision.NoiseCheck(noise=stated, rms_m=1e-3, ratio=1.25, test=test)
+    assert check.rms == pytest.approx(0.8e-3, rel=1e-12)
+    d = report.noise_dict(check)
     assert d["rms_mm"] == pytest.approx(1.0, rel=1e-12) and d["noise_rms_mm"] == pytest.approx(0.8, rel=1e-12)
+    assert d["test"]["statistic"] == 1.55 and d["noise"]["position_rms_m"] == pytest.approx(0.8e-3, rel=1e-12)
     assert check.consistent is False
-    assert decision.NoiseCheck(noise={**noise, "position_rms_m": None}, rms_m=1e-3, ratio=None,
-                               test=None).consistent is None
+    assert unknown.position_rms_m is None
+    assert decision.NoiseCheck(noise=unknown, rms_m=1e-3, ratio=None, test=None).consistent is None
+
+
+def _toy_data():
+    """A record of 20 samples without rests (the noise can only be stated)."""
+    from ctrplan.discrepancy.data import MeasuredData
+    from ctrplan.history import MotionRecord
+
+    k = 20
+    z = np.linspace(0.0, 1.0, 2 * k).reshape(k, 2)
+    return MeasuredData(alpha=z, beta=z, tip=np.zeros((k, 3)), tangent=None, eta=np.zeros((k, 1), int),
+                        translation_last=np.zeros((k, 1), bool), sequence=np.zeros(k, int), config_id=np.arange(k),
+                        subset=None, time=None, file="toy.csv", frame="robot",
+                        record=MotionRecord(z, z, sequence=np.zeros(k, int)), rows=np.arange(k),
+                        given_eta=np.zeros((k, 1), int))
 
 
 def test_stage_key_ignores_workers_and_tests_and_follows_fits_inputs_and_procedure(tmp_path, monkeypatch):
     """The key is unchanged by the workers, the permutations, the level, the stated noise, the
-    envelope and the reference friction; it changes with an option that changes a fit, with the
-    effects tried, with either input file's bytes, and with the fitting procedure's version.
-    Catches a key that sends every rerun back to the start, or reuses stages fitted with other
-    options, other data or an earlier procedure."""
+    envelope, the reference friction and the bound's samples and target; it changes with an
+    option that changes a fit, with the effects tried, with either input file's bytes, with the
+    fitting procedure's version and with the mechanics version. Catches a key that sends every
+    rerun back to the start, or reuses stages fitted with other options, other data, an earlier
+    procedure or other mechanics."""
     robot, data = tmp_path / "r.toml", tmp_path / "d.csv"
     robot.write_bytes(b"robot")
     data.write_bytes(b"data")
     base = DiscrepancyOptions()
     key = stages.stage_key(robot, data, base)
     same = DiscrepancyOptions(n_jobs=2, n_permutations=99, significance=0.05, noise_position=2e-4,
-                              envelope_samples=10, reference_friction=(0.2,))
+                              envelope_samples=10, reference_friction=(0.2,), bound_samples=7, bound_target=0.8)
     assert stages.stage_key(robot, data, same) == key
     for changed in (DiscrepancyOptions(ds=6e-3), DiscrepancyOptions(n_blocks=10), DiscrepancyOptions(test_fraction=0.3),
                     DiscrepancyOptions(seed=1), DiscrepancyOptions(effects=("backlash",)),
@@ -168,5 +187,14 @@ def test_stage_key_ignores_workers_and_tests_and_follows_fits_inputs_and_procedu
     data.write_bytes(b"data2")
     assert stages.stage_key(robot, data, base) != key
     data.write_bytes(b"data")
+    robot.write_bytes(b"robot2")
+    assert stages.stage_key(robot, data, base) != key
+    robot.write_bytes(b"robot")
+    assert stages.stage_key(robot, data, base) == key
     monkeypatch.setattr(stages, "FIT_VERSION", options.FIT_VERSION + 1)
+    assert stages.stage_key(robot, data, base) != key
+    monkeypatch.setattr(stages, "FIT_VERSION", options.FIT_VERSION)
+    from ctrplan import constants
+
+    monkeypatch.setattr(constants, "MECHANICS_VERSION", f"{constants.MECHANICS_VERSION}-changed")
     assert stages.stage_key(robot, data, base) != key

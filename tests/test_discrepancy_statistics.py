@@ -56,7 +56,7 @@ def test_fold_comparison_holds_its_size_where_a_test_over_units_does_not():
     for _ in range(reps):
         a, b, fold, units = _fold_errors(rng)
         out = cv_comparison(a, b, fold)
-        corrected += out["p_value"] < alpha
+        corrected += out.p_value < alpha
         d = np.array([np.mean((a - b)[units == u]) for u in np.unique(units)])
         naive += stats.t.sf(d.mean() / (d.std(ddof=1) / np.sqrt(d.size)), d.size - 1) < alpha
     assert corrected / reps <= _binomial_upper(alpha, reps), corrected
@@ -75,8 +75,8 @@ def test_fold_comparison_finds_a_real_improvement_and_its_interval_covers_it():
     for _ in range(reps):
         a, b, fold, _ = _fold_errors(rng, shift=0.4, fit_scatter=0.1)
         out = cv_comparison(a, b, fold)
-        hits += out["p_value"] < 0.01 and out["p_worse"] > 0.99
-        lo, hi = out["ci"]
+        hits += out.p_value < 0.01 and out.p_worse > 0.99
+        lo, hi = out.ci
         covered += lo <= 0.4 <= hi
     assert hits / reps >= 0.95, hits
     assert covered / reps >= 0.9, covered
@@ -91,13 +91,13 @@ def test_fold_comparison_is_the_clustered_t_statistic_of_log_ratios():
     out = cv_comparison(a, np.ones(40), fold)
     logs = np.log([2.0, 4.0, 6.0, 12.0])
     se = np.std(logs, ddof=1) / 2.0
-    assert out["ratio"] == pytest.approx(np.exp(logs.mean()))
-    assert out["reduction"] == pytest.approx(1 - np.exp(-logs.mean()))
-    assert out["se"] == pytest.approx(se)
-    assert out["p_value"] == pytest.approx(stats.t.sf(logs.mean() / se, 3))
-    assert out["mean_difference"] == pytest.approx(5.0)
-    assert out["ci"][1] - 5.0 == pytest.approx(stats.t.ppf(0.975, 3) * np.std([1, 3, 5, 11], ddof=1) / 2.0)
-    assert out["dof"] == 3 and out["positive_folds"] == 4
+    assert out.ratio == pytest.approx(np.exp(logs.mean()))
+    assert out.reduction == pytest.approx(1 - np.exp(-logs.mean()))
+    assert out.se == pytest.approx(se)
+    assert out.p_value == pytest.approx(stats.t.sf(logs.mean() / se, 3))
+    assert out.mean_difference == pytest.approx(5.0)
+    assert out.ci[1] - 5.0 == pytest.approx(stats.t.ppf(0.975, 3) * np.std([1, 3, 5, 11], ddof=1) / 2.0)
+    assert out.dof == 3 and out.positive_folds == 4
 
 
 def test_fold_comparison_holds_its_size_when_the_folds_share_their_training_data():
@@ -133,8 +133,8 @@ def test_fold_comparison_holds_its_size_when_the_folds_share_their_training_data
                 coef = np.linalg.lstsq(X[train], y[train], rcond=None)[0]
                 err[m, val] = np.abs(y[val] - X[val] @ coef)
         out = cv_comparison(err[0], err[1], fold)
-        hits["b"] += out["p_value"] < alpha
-        hits["a"] += out["p_worse"] < alpha
+        hits["b"] += out.p_value < alpha
+        hits["a"] += out.p_worse < alpha
     for side, count in hits.items():
         assert count / reps <= _binomial_upper(alpha, reps), (side, count)
 
@@ -168,9 +168,9 @@ def test_mean_and_shrink_intervals_over_units_cover_on_serially_correlated_error
         before = 5.0 + e
         after = 0.7 * before + 0.3 * rng.normal(0, 1, 300)
         m = mean_interval(before, units)
-        covered += m["ci"][0] <= 5.0 <= m["ci"][1]
+        covered += m.ci[0] <= 5.0 <= m.ci[1]
         s = shrink_interval(before, after, units)
-        shrunk += s["ci"][0] <= 0.3 <= s["ci"][1]
+        shrunk += s.ci[0] <= 0.3 <= s.ci[1]
         half = 1.96 * before.std() / np.sqrt(before.size)
         naive += abs(before.mean() - 5.0) <= half
     assert 0.88 <= covered / reps <= 0.99, covered
@@ -183,8 +183,8 @@ def test_ratio_interval_of_known_unit_sums():
     se = sqrt(3 var(z)) / 6, t with 2 degrees of freedom."""
     out = ratio_interval(np.array([2.0, 4.0, 9.0]), np.array([1.0, 2.0, 3.0]))
     se = np.sqrt(3 * np.var([-0.5, -1.0, 1.5], ddof=1)) / 6
-    assert out["value"] == pytest.approx(2.5) and out["se"] == pytest.approx(se)
-    assert out["ci"][1] - out["value"] == pytest.approx(stats.t.ppf(0.975, 2) * se)
+    assert out.value == pytest.approx(2.5) and out.se == pytest.approx(se)
+    assert out.ci[1] - out.value == pytest.approx(stats.t.ppf(0.975, 2) * se)
 
 
 # --------------------------------------------------------------------------- split

@@ -4,6 +4,7 @@ the updated model file, and (slow) naming of hidden effects on synthetic data an
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from ctrplan.discrepancy import Noise, synthesize, write_synth
-from ctrplan.discrepancy.calibrate import grid_search_friction
+from ctrplan.discrepancy.gridsearch import grid_search_friction
 from ctrplan.discrepancy.data import MeasuredData, load_measured_data
 from ctrplan.discrepancy.decision import cautions
 from ctrplan.discrepancy.output import reproduce_errors
@@ -93,7 +94,7 @@ def test_too_few_samples_are_refused_before_any_work(tmp_path):
     path = tmp_path / "few.csv"
     _good_frame(12).to_csv(path, index=False)
     with pytest.raises(DataFileError, match=r"few.csv: .*(too few for a test split|are not more than the 5 baseline parameters)"):
-        run_discrepancy(model, path, tmp_path / "out", DiscrepancyOptions(effects=("offplane",)), echo=lambda s: None)
+        run_discrepancy(model, path, tmp_path / "out", DiscrepancyOptions(effects=("offplane",)))
     assert not (tmp_path / "out" / ".stages").exists()
 
 
@@ -195,7 +196,8 @@ def test_hidden_registration_is_recovered_and_the_updated_model_reproduces_the_e
     _reference_grid(robot, data, grid=3, registration=tuple(rv) + tuple(t))
     out = tmp_path / "out"
     opts = DiscrepancyOptions(effects=("offplane",), frame="tracker", ds=6e-3, n_permutations=99, n_jobs=1)
-    res = run_discrepancy(model, data, out, opts, echo=lambda s: None, progress=False)
+    result = run_discrepancy(model, data, out, opts, progress=False)
+    res = result.to_dict()
     fit = res["baseline"]["fit"]["parameters"]
     rv_fit = np.array([fit[f"registration_r{a}"] for a in "xyz"])
     t_fit = np.array([fit[f"registration_t{a}"] for a in "xyz"])
@@ -217,18 +219,19 @@ def test_hidden_registration_is_recovered_and_the_updated_model_reproduces_the_e
     again = reproduce_errors(res["updated_model_file"], data_obj.take(test_rows), ModelSettings(ds=6e-3, multistart=0))
     assert np.nanmean(again["position"]) * 1e3 == pytest.approx(res["test_split"]["after"]["position_mean_mm"],
                                                                 abs=1e-9)
-    paths = write_report(res, out)
+    paths = write_report(result, out)
     assert Path(paths["markdown"]).read_text().count("|") > 20
     assert json.loads(Path(paths["json"]).read_text())["reproduced"] is True
     assert all((out / p).stat().st_size > 1000 for p in paths["plots"])
 
 
-def test_an_interrupted_run_resumes_from_finished_stages(tmp_path):
+def test_an_interrupted_run_resumes_from_finished_stages(tmp_path, caplog, capsys):
     """A real run in a subprocess is killed (SIGKILL) right after its first stage file appears;
     the rerun reuses that stage (file untouched, "reused" in the log) and ends with the same
     result as an uninterrupted run. Catches stages that are not written before the run ends,
     written non-atomically (a half-written file would not parse), keyed differently on rerun,
-    or reused with different content."""
+    or reused with different content. The runs log under ``ctrplan.discrepancy`` and print
+    nothing (catches a stage that writes to the caller's stdout)."""
     import os
     import signal
     import subprocess
@@ -243,8 +246,7 @@ def test_an_interrupted_run_resumes_from_finished_stages(tmp_path):
     out = tmp_path / "out"
     script = ("import sys; from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy; "
               f"run_discrepancy({str(model)!r}, {str(data)!r}, {str(out)!r}, DiscrepancyOptions(fit={fit!r}, "
-              "effects=('offplane',), ds=6e-3, n_permutations=99, n_jobs=1), "
-              "echo=lambda s: None, progress=False)")
+              "effects=('offplane',), ds=6e-3, n_permutations=99, n_jobs=1), progress=False)")
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, env=env)
     stage_dir = out / ".stages"
@@ -259,11 +261,13 @@ def test_an_interrupted_run_resumes_from_finished_stages(tmp_path):
     assert not (out / "results.json").exists()
     stage = next(stage_dir.glob("*-pilot.json"))
     stamp = stage.stat().st_mtime_ns
-    lines = []
-    resumed = run_discrepancy(model, data, out, opts, echo=lines.append, progress=False)
-    assert "  pilot: reused from an earlier run" in lines
+    with caplog.at_level(logging.INFO, logger="ctrplan"):
+        resumed = run_discrepancy(model, data, out, opts, progress=False).to_dict()
+    assert "  pilot: reused from an earlier run" in caplog.messages
+    assert {r.name.rpartition(".")[0] for r in caplog.records} == {"ctrplan.discrepancy"}
+    assert capsys.readouterr().out == ""
     assert stage.stat().st_mtime_ns == stamp
-    fresh = run_discrepancy(model, data, tmp_path / "fresh", opts, echo=lambda s: None, progress=False)
+    fresh = run_discrepancy(model, data, tmp_path / "fresh", opts, progress=False).to_dict()
     untimed = (lambda d: {k: v for k, v in d.items() if k != "evaluation_ms_per_sample"})
     assert untimed(resumed["test_split"]["after"]) == untimed(fresh["test_split"]["after"])
     assert resumed["baseline"]["fit"]["parameters"] == fresh["baseline"]["fit"]["parameters"]
@@ -276,8 +280,7 @@ def test_hidden_friction_is_named_and_the_gap_shrinks_by_40_percent(tmp_path):
     robot, model = _no_effects_model(tmp_path)
     data = tmp_path / "friction.csv"
     _reference_grid(robot, data, grid=5, ds=3e-3, mu=(0.22, 0.12))
-    res = run_discrepancy(model, data, tmp_path / "out", DiscrepancyOptions(n_jobs=2, n_permutations=199),
-                          echo=print, progress=False)
+    res = run_discrepancy(model, data, tmp_path / "out", DiscrepancyOptions(n_jobs=2, n_permutations=199), progress=False).to_dict()
     assert res["named_effect"] == "friction"
     before, after = res["test_split"]["before"], res["test_split"]["after"]
     assert after["position_mean_mm"] <= 0.6 * before["position_mean_mm"]
@@ -292,7 +295,7 @@ def test_hidden_offplane_precurvature_is_named_not_friction(tmp_path):
     _reference_grid(apply_parameters(robot, ("precurvature_x_2", "precurvature_x_3"), (0.5, 2.5)), data, grid=5)
     opts = DiscrepancyOptions(n_jobs=2, n_permutations=199, ds=6e-3, friction_grid=(0.0, 0.15, 0.3),
                               friction_search_samples=48)
-    res = run_discrepancy(model, data, tmp_path / "out", opts, echo=print, progress=False)
+    res = run_discrepancy(model, data, tmp_path / "out", opts, progress=False).to_dict()
     assert res["named_effect"] == "offplane"
     assert not res["candidates"]["friction"]["eligible"]
 
@@ -304,7 +307,7 @@ def test_noise_only_names_no_effect(tmp_path):
     _reference_grid(robot, data, grid=5, seed=4)
     opts = DiscrepancyOptions(n_jobs=2, n_permutations=199, ds=6e-3, friction_grid=(0.0, 0.15, 0.3),
                               friction_search_samples=48)
-    res = run_discrepancy(model, data, tmp_path / "out", opts, echo=print, progress=False)
+    res = run_discrepancy(model, data, tmp_path / "out", opts, progress=False).to_dict()
     assert res["named_effect"] is None and res["verdict"] == "none"
     assert res["baseline"]["out_of_fold"]["position_mean_mm"] < 1.6
 
@@ -320,7 +323,7 @@ def test_real_trajectory_runs_end_to_end(tmp_path):
     than the noise; the written file loads back and reproduces its errors. Catches a calibration
     that ends clearly worse than the file it starts from."""
     res = run_discrepancy(ROOT / "model" / "ha2019-table2-nominal.toml", HA_DATA, tmp_path / "out",
-                          DiscrepancyOptions(n_jobs=2, n_permutations=199), echo=print, progress=False)
+                          DiscrepancyOptions(n_jobs=2, n_permutations=199), progress=False).to_dict()
     fig = res["test_split"]["figures"]
     assert res["frame"] == "tracker" and res["n_samples"] == 1307
     assert res["test_split"]["before"]["n_failed"] < 0.05 * res["test_split"]["before"]["n_samples"]
@@ -351,23 +354,63 @@ def test_friction_grid_search_extends_past_the_coarse_grid_edge(tmp_path):
     assert "grown to" in fit.message and fit.widened
 
 
+def _figures(mean_mm, max_mm):
+    from ctrplan.discrepancy.evaluation import ErrorFigures
+
+    return ErrorFigures(position_mean=mean_mm * 1e-3, position_std=None, position_p95=None,
+                        position_max=max_mm * 1e-3, tangent_mean=None, tangent_max=None, seconds_per_sample=0.0,
+                        n_samples=10, n_failed=0)
+
+
 def test_cautions_flag_an_atypical_friction_coefficient_and_a_worse_maximum():
     """A named friction coefficient beyond its typical range gets a caution with the value, the
-    range and its source, and what to check; a maximum error that rises gets another. Catches a
-    caution that loses what a reader must check."""
-    before = {"position_mean_mm": 5.2, "position_max_mm": 16.8}
-    worse_max = {"position_mean_mm": 4.3, "position_max_mm": 23.2}
-    cand = {"label": "torsional friction", "parameters": {"mu_1": 0.975, "mu_2": 0.05},
-            "atypical": [{"name": "mu_1", "value": 0.975, "typical": [0.0, 0.5], "unit": "-", "why": "NiTi on NiTi",
-                          "check": "the tube surfaces"}]}
-    notes = cautions("named", cand, before, worse_max)
+    range and its source, and what to check; a maximum error that rises gets another (the
+    figures are in m, the caution in mm). Catches a caution that loses what a reader must check,
+    and one that prints metres as millimetres."""
+    from types import SimpleNamespace
+
+    from ctrplan.discrepancy.estimates import AtypicalValue
+
+    before, worse_max = _figures(5.2, 16.8), _figures(4.3, 23.2)
+    mu = AtypicalValue(name="mu_1", value=0.975, typical=(0.0, 0.5), typical_text="0..0.5", unit="-",
+                       why="NiTi on NiTi", check="the tube surfaces")
+    notes = cautions("named", SimpleNamespace(label="torsional friction", atypical=(mu,)), before, worse_max)
     assert len(notes) == 2
     assert notes[0] == ("torsional friction: mu_1 = 0.975, more than its typical 0..0.5 (NiTi on NiTi): check the "
                         "tube surfaces")
     assert "16.80 to 23.20 mm" in notes[1]
-    assert cautions("named", {"parameters": {"mu_1": 0.22, "mu_2": 0.12}, "atypical": []}, before,
-                    {"position_mean_mm": 2.0, "position_max_mm": 8.0}) == []
+    assert cautions("named", SimpleNamespace(label="torsional friction", atypical=()), before,
+                    _figures(2.0, 8.0)) == []
     assert cautions("none", None, before, before) == []
+
+
+def test_a_baseline_parameter_outside_its_range_is_a_caution_in_report_units(caplog):
+    """A registration rotation of 0.2 rad outside its typical range and a translation of 4 mm at
+    its bound are cautions in degrees and millimetres (11.46 deg, 4 mm), logged as warnings, with
+    the range's source; a parameter within its range is none. Catches SI values printed as they
+    are stored ("0.2 rad") and cautions that a caller's logging cannot see."""
+    from types import SimpleNamespace
+
+    from ctrplan.discrepancy.estimates import ParameterEstimate
+    from ctrplan.discrepancy.evaluation import Errors
+    from ctrplan.discrepancy.output import run_cautions
+
+    def row(name, unit, value, *, typical=True, at_bound=False):
+        return ParameterEstimate(name=name, unit=unit, value=value, stderr=None, ci=None, typical=None,
+                                 in_typical_range=typical, typical_source="a stated range", check=None,
+                                 at_bound=at_bound, resolution=None, fitted=True)
+
+    baseline = SimpleNamespace(parameters=(row("registration_rx", "rad", 0.2, typical=False),
+                                           row("registration_tx", "m", 4e-3, at_bound=True),
+                                           row("k_xy_relative_2", "-", 0.9)))
+    errors = Errors(rows=np.arange(3), position=np.full(3, 1e-3), angle=np.zeros(3), residual_base=np.zeros((3, 3)),
+                    tip_base=np.zeros((3, 3)), seconds=0.0)
+    naming = SimpleNamespace(verdict="none", named=None, candidates={})
+    with caplog.at_level(logging.WARNING, logger="ctrplan"):
+        notes = run_cautions(naming, None, baseline, SimpleNamespace(baseline=errors, final=errors))
+    assert notes == ("baseline registration_rx = 11.46 deg; typical: a stated range",
+                     "baseline registration_tx = 4 mm: at its bound; typical: a stated range")
+    assert [r.getMessage() for r in caplog.records] == [f"caution: {n}" for n in notes]
 
 
 def test_friction_grid_search_that_cannot_bracket_the_minimum_says_at_bound(tmp_path, monkeypatch):
@@ -379,7 +422,7 @@ def test_friction_grid_search_that_cannot_bracket_the_minimum_says_at_bound(tmp_
     import dataclasses
     import importlib
 
-    calibration = importlib.import_module("ctrplan.discrepancy.calibrate")
+    calibration = importlib.import_module("ctrplan.discrepancy.gridsearch")
 
     pair = load_robot(ROOT / "model" / "ha2019-table1-tube-pair.toml")
     data = tmp_path / "pair.csv"

@@ -197,7 +197,7 @@ def test_an_effect_registered_at_run_time_is_hidden_by_synth_and_named_by_the_wo
                                      settings=ModelSettings(ds=6e-3)))
         opts = DiscrepancyOptions(effects=("backlash", "time_offset", "tip_offset_z"), ds=6e-3, n_permutations=199,
                                   max_evaluations=200, n_folds=5, prior_strengths=(0.03, float("inf")), n_jobs=1)
-        res = run_discrepancy(model, data, tmp_path / "out", opts, echo=lambda s: None, progress=False)
+        res = run_discrepancy(model, data, tmp_path / "out", opts, progress=False).to_dict()
         assert res["named_effect"] == "tip_offset_z", res["decision"]
         assert res["candidates"]["tip_offset_z"]["parameters"]["tip_offset_z"] == pytest.approx(0.003, abs=5e-4)
         assert res["signature_tests"]["tip_offset_z"]["p_value"] < 0.01

@@ -95,3 +95,24 @@ def test_evaluate_table_shows_no_bar_by_default(capsys):
     frame = evaluate_table(robot, alpha[None], beta[None], "standard")
     assert list(frame["status"]) == ["ok"]
     assert capsys.readouterr() == ("", "")
+
+
+def test_no_library_function_prints_or_takes_print_as_its_echo():
+    """No function of the package defaults a parameter to ``print`` and no module calls
+    ``print(...)`` outside the command line: read from the syntax trees, so that a module the
+    other tests never import is checked too. Catches a stage that would write to stdout in a
+    caller's program whatever its logging configuration."""
+    import ast
+
+    offenders = []
+    for path in sorted((REPO / "ctrplan").rglob("*.py")):
+        if path.name == "cli.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                defaults = node.args.defaults + [d for d in node.args.kw_defaults if d is not None]
+                if any(isinstance(d, ast.Name) and d.id == "print" for d in defaults):
+                    offenders.append(f"{path.relative_to(REPO)}:{node.lineno} {node.name} defaults to print")
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "print":
+                offenders.append(f"{path.relative_to(REPO)}:{node.lineno} calls print")
+    assert not offenders, offenders

@@ -7,22 +7,29 @@
 - :mod:`.synth`: measured-like data with hidden effects of the registry :mod:`ctrplan.effects`
   and sensor noise (``ctrplan synth``);
 - :mod:`.parameters`: calibration parameters (baseline tube parameters and effect parameters);
-- :mod:`.calibrate`: least squares on Eq. (49), Kabsch registration, grid search;
-- the workflow (``ctrplan discrepancy``, :func:`run_discrepancy`), by stage: :mod:`.options`,
-  :mod:`.stages`, :mod:`.setup`, :mod:`.split`, :mod:`.evaluation`, :mod:`.fitting`,
-  :mod:`.signatures`, :mod:`.decision`, :mod:`.envelope`, :mod:`.output`, :mod:`.workflow`;
-- :mod:`.report`: the report folder (markdown, JSON, plots).
+- :mod:`.calibrate`: least squares on Eq. (49), Kabsch registration; :mod:`.gridsearch`: the
+  grid search of friction coefficients;
+- :mod:`.noise`: the sensor noise from rests; :mod:`.consistency`: is a residual noise;
+- :mod:`.statistics`: comparisons of cross-validated models and intervals over units;
+- the workflow (``ctrplan discrepancy``, :func:`run_discrepancy`, which returns a
+  :class:`DiscrepancyResult`), by stage: :mod:`.options`, :mod:`.stages`, :mod:`.setup`,
+  :mod:`.split`, :mod:`.evaluation`, :mod:`.baseline`, :mod:`.signatures`, :mod:`.decision`,
+  :mod:`.fitting`, :mod:`.estimates`, :mod:`.pairs`, :mod:`.envelope`, :mod:`.coverage`,
+  :mod:`.output`, :mod:`.workflow`;
+- :mod:`.report`: the report folder (markdown, ``results.json``, plots), the only module that
+  converts results to millimetres and degrees.
 """
 
 from .simulate import Simulation, simulate
 from .synth import Noise, SynthResult, synthesize, truth_path, write_synth
-from .calibrate import CalibrationResult, calibrate, grid_search, pose_errors, predict
+from .calibrate import CalibrationResult, calibrate, pose_errors, predict
+from .gridsearch import grid_search
 from .data import MeasuredData, load_measured_data
 from .split import DataSplit, make_split
 from .parameters import apply_parameters, read_parameters
 from .signatures import SignatureTest, friction_signature, regression_signature, registration_signature
 from .options import DiscrepancyOptions
-from .workflow import run_discrepancy
+from .workflow import DiscrepancyResult, run_discrepancy
 from .report import write_report
 
 __all__ = [
@@ -31,5 +38,5 @@ __all__ = [
     "CalibrationResult", "calibrate", "grid_search", "pose_errors", "predict",
     "MeasuredData", "load_measured_data", "DataSplit", "make_split", "apply_parameters", "read_parameters",
     "SignatureTest", "friction_signature", "regression_signature", "registration_signature",
-    "DiscrepancyOptions", "run_discrepancy", "write_report",
+    "DiscrepancyOptions", "DiscrepancyResult", "run_discrepancy", "write_report",
 ]

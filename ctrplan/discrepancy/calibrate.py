@@ -9,14 +9,11 @@
   of the pose error first (a smooth least-squares problem), then Eq. (49) itself from there with
   a Gauss-Newton model that keeps the curvature of its norms, stopped when the decrease still
   predicted is negligible in BIC units (see :func:`calibrate` for why);
-- :func:`grid_search_friction`: the friction coefficients by a 2-D (in general (n-1)-D) grid
-  search, as the paper does to avoid local minima, made cheaper by a coarse grid on a subset of
-  whole configuration groups followed by refinement on the whole calibration set.
+- the grid search of the friction coefficients: :mod:`ctrplan.discrepancy.gridsearch`.
 """
 
 from __future__ import annotations
 
-import itertools
 import time
 from dataclasses import dataclass, field
 
@@ -26,12 +23,13 @@ from scipy.spatial.transform import Rotation
 
 from ..errors import CtrplanError
 from ..mechanics import ModelSettings
+from ..models import MODEL_INFO, check_model
 from .data import MeasuredData
 from ..effects import EffectSet, apply_output_effects, robot_effects
-from .parameters import REGISTRATION, apply_parameters, needs_solve, parameter
+from .parameters import REGISTRATION, apply_parameters, needs_solve, parameter, read_parameters
 
 __all__ = ["Prediction", "CalibrationResult", "Prior", "predict", "pose_errors", "eq49_residuals", "calibrate",
-           "grid_search", "grid_search_friction", "kabsch_registration", "information_criterion", "covariance"]
+           "kabsch_registration", "information_criterion", "covariance"]
 
 #: Eq. (49) weighting: this many metres of position error weigh as ...
 POSITION_UNIT = 1e-3
@@ -160,9 +158,8 @@ class CalibrationResult:
 
     def all_parameters(self) -> tuple[tuple, np.ndarray]:
         """Fixed and fitted parameters together: ``(names, values)``."""
-        names = tuple(self.fixed) + tuple(self.names)
-        values = np.concatenate([np.asarray(list(self.fixed.values()), float), self.values])
-        return names, values
+        return tuple(self.fixed) + tuple(self.names), np.concatenate([np.asarray(list(self.fixed.values()), float),
+                                                                      self.values])
 
     def as_dict(self) -> dict:
         return {"model": self.model, "parameters": dict(zip(self.names, map(float, self.values))),
@@ -223,19 +220,20 @@ def predict(robot, names, values, data: MeasuredData, model: str, settings: Mode
     ParameterError, PhysicalParameterError
         Parameter values that give an impossible robot.
     ValueError
-        A time offset on data without times.
+        A time offset on data without times; an unknown model.
     """
     from .simulate import simulate
 
     t0 = time.perf_counter()
+    friction = MODEL_INFO[check_model(model)].friction
     names = tuple(names)
     values = np.asarray(values, float)
     robot_p = apply_parameters(robot, names, values)
     effects, _ = EffectSet.from_parameters(robot, names, values)
     state = data.state(robot_p, effects)
     eta, mu = state.applied(robot_p.friction_coefficients)
-    sim = simulate(robot_p, state.alpha, state.beta, model=model, eta=eta if model == "friction" else None,
-                   mu=mu if model == "friction" else None, sequence=data.sequence, settings=settings, n_jobs=n_jobs,
+    sim = simulate(robot_p, state.alpha, state.beta, model=model, eta=eta if friction else None,
+                   mu=mu if friction else None, sequence=data.sequence, settings=settings, n_jobs=n_jobs,
                    progress=progress)
     tip_base = np.asarray(sim.tip, float)
     tip, tangent = apply_output_effects(tip_base, sim.tangent, robot_effects(robot_p).merged(effects))
@@ -302,8 +300,7 @@ def kabsch_registration(model_tip, measured_tip) -> tuple[np.ndarray, np.ndarray
     a, b = measured_tip[ok], model_tip[ok]
     ca, cb = a.mean(axis=0), b.mean(axis=0)
     rot, _ = Rotation.align_vectors(a - ca, b - cb)
-    R = rot.as_matrix()
-    return rot.as_rotvec(), ca - R @ cb
+    return rot.as_rotvec(), ca - rot.as_matrix() @ cb
 
 
 def information_criterion(cost: float, n_samples: int, n_params: int) -> float:
@@ -504,9 +501,7 @@ class Prior:
     def of(cls, names, prior: dict | None) -> "Prior | None":
         """The rows for the parameters ``names`` that ``prior`` (``{name: (center, scale)}``) covers;
         None when it covers none."""
-        if not prior:
-            return None
-        idx = [j for j, n in enumerate(names) if n in prior and np.isfinite(prior[n][1])]
+        idx = [j for j, n in enumerate(names) if n in prior and np.isfinite(prior[n][1])] if prior else []
         if not idx:
             return None
         return cls(np.array(idx), np.array([prior[names[j]][0] for j in idx], float),
@@ -692,10 +687,11 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     ------
     CtrplanError
         Fewer samples than fitted parameters, or every sample failing at the start.
+    ValueError
+        An unknown model.
     """
-    from .parameters import read_parameters
-
     t0 = time.perf_counter()
+    check_model(model)
     names = tuple(names)
     fixed = dict(fixed or {})
     k = data.n_samples
@@ -796,155 +792,8 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
                              at_bound, tuple(widened), prior_cost)
 
 
-def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
-                settings: ModelSettings | None = None, n_jobs: int = 1, coarse=(0.0, 0.1, 0.2, 0.3, 0.4),
-                refinements: int = 2, search_samples: int = 96, seed: int = 0, progress=None, start=None,
-                uncertainty: bool = True, clusters=None) -> CalibrationResult:
-    """Parameters by grid search, other parameters ``fixed``: the paper's calibration of the
-    friction coefficients (Section V-C: "calibrated during a second pass using a 2-D grid search
-    to avoid local minima").
-
-    The coarse grid (``coarse`` per parameter) is scored on at most ``search_samples``
-    calibration samples made of whole configuration groups; while its best point lies on the
-    upper edge of a parameter's axis, that axis grows by a step that doubles each time, up to the
-    parameter's limit (``ParameterSpec.hard``), and the new points are scored with every value of
-    the other axes. Then rounds of a 3^m grid with half the previous step around the best point
-    are scored on the whole calibration set: ``refinements`` rounds below the coarse step, and
-    one more for every doubling of the grid's spacing at the best point.
-
-    Parameters
-    ----------
-    robot : Robot
-    data : MeasuredData
-        Calibration samples.
-    fixed : dict
-        ``{name: value}`` of the other parameters (e.g. the calibrated baseline, registration).
-    names : sequence of str
-        The m gridded parameters (e.g. ``mu_1``, ``mu_2``).
-    model : {"standard", "clearance", "friction"}
-    settings : ModelSettings, optional
-    n_jobs : int
-    coarse : sequence of float
-        Coarse grid values of every parameter, increasing, >= their lower bound.
-    refinements : int
-    search_samples : int
-    seed : int
-        Choice of the coarse-search subset.
-    progress : callable, optional
-        ``progress(done, total)`` after each grid point.
-    start : array-like, shape (m,), optional
-        A point found before: the coarse grid is skipped and the refinements start there.
-    uncertainty : bool
-        Standard errors and correlations at the best point (from one Jacobian of Eq. (49)).
-    clusters : array-like, shape (K,), optional
-        Unit of each sample: standard errors clustered over units (:func:`covariance`).
-
-    Returns
-    -------
-    CalibrationResult
-        With the score of every grid point in ``message``, the grid's growth in ``widened``; not
-        converged, with ``at_bound``, when the best point lies on the grid's upper edge at the
-        parameters' limit.
-    """
-    t0 = time.perf_counter()
-    names = tuple(names)
-    m = len(names)
-    specs = [parameter(robot, n) for n in names]
-    lowest = np.array([p.lower for p in specs])
-    coarse = np.asarray(sorted(coarse), float)
-    groups = np.unique(data.config_id)
-    rng = np.random.default_rng(seed)
-    rows_per_group = data.n_samples / groups.size
-    n_groups = max(1, min(groups.size, int(search_samples // max(rows_per_group, 1))))
-    chosen = rng.choice(groups, size=n_groups, replace=False)
-    sub = data.take(np.isin(data.config_id, chosen))
-    obj_sub = _Objective(robot, sub, model, names, fixed, settings, n_jobs)
-    obj_all = _Objective(robot, data, model, names, fixed, settings, n_jobs)
-    grid = list(itertools.product(coarse, repeat=m))
-    step0 = float(np.min(np.diff(coarse))) if coarse.size > 1 else 0.05
-    total = len(grid) + refinements * (3 ** m)
-    done = [0]
-
-    def scan(obj, points, costs):
-        """Cost of every grid point (each distinct point solved once, ``costs`` kept across
-        calls); the best point scored so far."""
-        for q in points:
-            q = tuple(round(float(v), 6) for v in q)
-            if q not in costs:
-                r = obj.residuals(np.array(q))
-                costs[q] = float(r @ r)
-            done[0] += 1
-            if progress:
-                progress(done[0], total)
-        best = min(costs, key=costs.get)
-        return best, costs[best]
-
-    axes = [list(coarse) for _ in range(m)]
-    limits = [p.hard[1] for p in specs]
-    widened = []
-    if start is None:
-        coarse_costs: dict = {}
-        best, cost = scan(obj_sub, grid, coarse_costs)
-        # a best point on an axis' upper edge is no minimum: grow that axis by a step that
-        # doubles each time, up to the parameter's limit
-        grow = [step0] * m
-        while coarse.size > 1:
-            edge = [j for j in range(m) if best[j] >= axes[j][-1] - 1e-9 and axes[j][-1] < limits[j] - 1e-9]
-            if not edge:
-                break
-            new = []
-            for j in edge:
-                axes[j].append(round(min(limits[j], axes[j][-1] + grow[j]), 6))
-                grow[j] *= 2.0
-                new += [q for q in itertools.product(*axes) if q[j] >= axes[j][-1] - 1e-9]
-            total += len(new)
-            best, cost = scan(obj_sub, new, coarse_costs)
-        widened = [f"grid of {n} grown to {ax[-1]:g}" for n, ax in zip(names, axes) if ax[-1] > coarse[-1]]
-        trail = [f"coarse grid {coarse[0]:g}..{coarse[-1]:g} (step {step0:g})"
-                 + (f", grown to {', '.join(f'{ax[-1]:g}' for ax in axes)}" if widened else "")
-                 + f" on {sub.n_samples} samples: best {names} {best} cost {cost:.4g}"]
-        best_all = np.array(best)
-    else:
-        best_all = np.asarray(start, float).reshape(m)
-        trail = [f"refinements from {tuple(np.round(best_all, 6))}"]
-    # refine from half the grid's spacing at the best point down to a quarter of the coarse step
-    spacing = step0
-    for j in range(m):
-        ax = np.asarray(axes[j])
-        at = int(np.argmin(np.abs(ax - best_all[j])))
-        if ax.size > 1:
-            spacing = max(spacing, float(np.max(np.diff(ax)[max(at - 1, 0):at + 1])))
-    rounds = refinements + int(round(np.log2(spacing / step0)))
-    total = done[0] + rounds * (3 ** m)
-    step = spacing
-    for _ in range(rounds):
-        step /= 2.0
-        best, cost = scan(obj_all, (np.clip(best_all + step * np.array(d), lowest, limits)
-                                    for d in itertools.product((-1, 0, 1), repeat=m)), {})
-        best_all = np.array(best)
-        trail.append(f"refined (step {step:.4g}) on {data.n_samples} samples: best {best} cost {cost:.4g}")
-    r = obj_all.residuals(best_all)
-    # the grid could not grow past the parameters' limit and the minimum lies at (or past) it
-    edge = tuple(f"{n} (edge of the grid at its limit {lim:g})" for n, v, lim in zip(names, best_all, limits)
-                 if v >= lim - 1e-9)
-    if edge:
-        trail.append("at the edge of the grid, not converged: " + ", ".join(edge))
-    se, corr = _uncertainty(obj_all, specs, best_all, clusters) if uncertainty else (None, None)
-    return CalibrationResult(model, names, best_all, np.zeros(m), dict(fixed), float(r @ r),
-                             data.n_samples, int((r == FAILED_RESIDUAL).sum()),
-                             obj_sub.evaluations + obj_all.evaluations, time.perf_counter() - t0,
-                             "; ".join(trail), not edge, se, corr, edge, tuple(widened))
-
-
 def _uncertainty(obj: _Objective, specs, x, clusters=None) -> tuple[np.ndarray, np.ndarray]:
     """Standard errors and correlations (:func:`covariance`) at ``x`` from one Jacobian of Eq. (49)."""
     model = _Eq49Model(obj, [p.hard[0] for p in specs], [p.hard[1] for p in specs])
     rows = model.jac(x)
     return covariance(rows, model.fun(x), obj.data.n_samples, clusters=clusters, width=model.width)
-
-
-def grid_search_friction(robot, data: MeasuredData, fixed: dict, **kwargs) -> CalibrationResult:
-    """The friction coefficients mu_1..mu_(n-1) by :func:`grid_search` with the friction model
-    (keyword arguments as there)."""
-    return grid_search(robot, data, fixed, tuple(f"mu_{k + 1}" for k in range(robot.n_tubes - 1)), "friction",
-                       **kwargs)

@@ -29,16 +29,22 @@ on less data than the final one).
 from __future__ import annotations
 
 import datetime
-import hashlib
-from dataclasses import dataclass
+import logging
+from dataclasses import dataclass, replace
+from types import MappingProxyType
+from typing import Mapping
 
 import numpy as np
 
+from .._log import progress_level
+from ..parallel import Executor
 from .options import CONFIDENCE, ENVELOPE_NOISE_FACTOR
 from .statistics import mean_interval
 
-__all__ = ["NOISE_MULTIPLE", "DEFAULT_TARGET", "COVERAGE_TOLERANCE", "BoundValues", "bound_values",
+__all__ = ["NOISE_MULTIPLE", "DEFAULT_TARGET", "COVERAGE_TOLERANCE", "BoundValues", "bound_values", "Coverage",
            "coverage_figures", "conformal_factor", "BoundCalibration", "calibrate_bound", "BOUND_DEFINITION"]
+
+logger = logging.getLogger(__name__)
 
 #: Noise margin of the bound in units of the sensor's rms position noise (95 % of 3-D Gaussian
 #: noise vectors are shorter than 1.62 times their rms length).
@@ -76,6 +82,7 @@ class BoundValues:
 
 
 def _bound_chunk(robot, alpha, beta, settings):
+    """The bound at the rows of ``alpha``, ``beta`` (m, n): a list of m ``(position, translation_last, ok)``."""
     from ..mechanics import evaluate_bound
 
     out = []
@@ -86,6 +93,17 @@ def _bound_chunk(robot, alpha, beta, settings):
         except Exception:                                    # noqa: BLE001 - a failed sample is flagged, not fatal
             out.append((np.nan, np.nan, False))
     return out
+
+
+def _bound_task(single_thread, robot, alpha, beta, settings):
+    """:func:`_bound_chunk` as a task of the executor; ``single_thread``: with one BLAS / OpenMP
+    thread (``threadpoolctl``) for the length of the task (a worker process)."""
+    if not single_thread:
+        return _bound_chunk(robot, alpha, beta, settings)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        return _bound_chunk(robot, alpha, beta, settings)
 
 
 def bound_values(robot, alpha, beta, settings=None, *, n_jobs: int = 1) -> BoundValues:
@@ -99,7 +117,8 @@ def bound_values(robot, alpha, beta, settings=None, *, n_jobs: int = 1) -> Bound
         Base rotations [rad], translations [m].
     settings : ModelSettings, optional
     n_jobs : int
-        Worker processes (joblib), chunks of configurations.
+        Worker processes (:class:`ctrplan.parallel.Executor`, one BLAS thread each), over chunks of
+        configurations; 1 evaluates them in this process.
 
     Returns
     -------
@@ -107,19 +126,67 @@ def bound_values(robot, alpha, beta, settings=None, *, n_jobs: int = 1) -> Bound
         A configuration whose solve raised or did not converge has ``ok`` False (NaN where it
         raised).
     """
-    from joblib import Parallel, delayed
-
     alpha = np.asarray(alpha, float)
     beta = np.asarray(beta, float)
     k = alpha.shape[0]
     chunks = np.array_split(np.arange(k), max(1, min(k, 4 * n_jobs))) if k else []
-    if n_jobs > 1 and k > 1:
-        parts = Parallel(n_jobs=n_jobs)(delayed(_bound_chunk)(robot, alpha[c], beta[c], settings) for c in chunks)
-    else:
-        parts = [_bound_chunk(robot, alpha[c], beta[c], settings) for c in chunks]
+    workers = n_jobs if n_jobs > 1 and k > 1 else 1
+    parts = [None] * len(chunks)
+    with Executor(workers) as ex:
+        for t, part in ex.run(_bound_task, [(t, (workers > 1, robot, alpha[c], beta[c], settings))
+                                            for t, c in enumerate(chunks)]):
+            parts[t] = part
     rows = [r for p in parts for r in p]
     arr = np.array([(r[0], r[1]) for r in rows], float).reshape(k, 2)
     return BoundValues(position=arr[:, 0], translation_last=arr[:, 1], ok=np.array([r[2] for r in rows], bool))
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """How often a bound covers measured tips (:func:`coverage_figures`).
+
+    Attributes
+    ----------
+    n : int
+        Samples with a finite error and bound.
+    covered : float or None
+        Share of them with ``e <= b + m`` [-]; None without samples.
+    ci : tuple of (float or None, float or None)
+        Its t-interval over units at :data:`~ctrplan.discrepancy.options.CONFIDENCE`, clipped to
+        [0, 1] [-]; an end is None where it is not finite (fewer than two units, no samples).
+    n_units : int
+        Units of the interval.
+    ratio : mapping of str to float or None
+        Read-only ``{"median", "p90", "p95", "max"}`` of ``e / (b + m)`` [-]; None without samples.
+    bound_median_m : float or None
+        Median bound [m] (:func:`calibrate_bound`: of the calibrated bound ``c (b + m)``).
+    error_median_m : float or None
+        Median error [m].
+    """
+
+    n: int
+    covered: float | None
+    ci: tuple[float | None, float | None]
+    n_units: int
+    ratio: Mapping[str, float | None]
+    bound_median_m: float | None
+    error_median_m: float | None
+
+    def __post_init__(self):
+        object.__setattr__(self, "ci", tuple(self.ci))
+        object.__setattr__(self, "ratio", MappingProxyType(dict(self.ratio)))
+
+    def __reduce__(self):
+        # a mappingproxy does not pickle: rebuild from a plain dict
+        return (type(self), (self.n, self.covered, self.ci, self.n_units, dict(self.ratio), self.bound_median_m,
+                             self.error_median_m))
+
+    def as_dict(self) -> dict:
+        """``{"n", "covered", "ci": [low, high], "n_units", "ratio": {...}, "bound_median_m",
+        "error_median_m"}`` (SI; plain Python types)."""
+        return {"n": self.n, "covered": self.covered, "ci": list(self.ci), "n_units": self.n_units,
+                "ratio": dict(self.ratio), "bound_median_m": self.bound_median_m,
+                "error_median_m": self.error_median_m}
 
 
 def _quantiles(x) -> dict:
@@ -131,7 +198,7 @@ def _quantiles(x) -> dict:
             "max": float(np.max(x))}
 
 
-def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> dict:
+def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> Coverage:
     """Share of samples with ``error <= bound + margin``, with a t-interval over units, and the
     distribution of ``error / (bound + margin)``.
 
@@ -148,10 +215,7 @@ def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> di
 
     Returns
     -------
-    dict
-        ``n``, ``covered`` (share), ``ci`` ([low, high] at
-        :data:`~ctrplan.discrepancy.options.CONFIDENCE`, clipped to [0, 1]), ``n_units``, ``ratio``
-        (median, p90, p95, max of e / (b + m)), ``bound_median_m``, ``error_median_m``.
+    Coverage
     """
     e = np.asarray(error, float)
     b = np.asarray(bound, float)
@@ -159,14 +223,14 @@ def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> di
     ok = np.isfinite(e) & np.isfinite(b)
     e, b, u = e[ok], b[ok], u[ok]
     if not e.size:
-        return {"n": 0, "covered": None, "ci": [None, None], "n_units": 0, "ratio": _quantiles([]),
-                "bound_median_m": None, "error_median_m": None}
+        return Coverage(n=0, covered=None, ci=(None, None), n_units=0, ratio=_quantiles([]), bound_median_m=None,
+                        error_median_m=None)
     inside = (e <= b + margin).astype(float)
     share = mean_interval(inside, u, confidence=CONFIDENCE)
-    ci = [None if not np.isfinite(x) else float(np.clip(x, 0.0, 1.0)) for x in share["ci"]]
-    return {"n": int(e.size), "covered": float(inside.mean()), "ci": ci, "n_units": share["n_units"],
-            "ratio": _quantiles(e / (b + margin)), "bound_median_m": float(np.median(b)),
-            "error_median_m": float(np.median(e))}
+    ci = tuple(None if not np.isfinite(x) else float(np.clip(x, 0.0, 1.0)) for x in share.ci)
+    return Coverage(n=int(e.size), covered=float(inside.mean()), ci=ci, n_units=int(share.n_units),
+                    ratio=_quantiles(e / (b + margin)), bound_median_m=float(np.median(b)),
+                    error_median_m=float(np.median(e)))
 
 
 def conformal_factor(error, bound, margin: float, target: float = DEFAULT_TARGET) -> float:
@@ -218,16 +282,18 @@ class BoundCalibration:
     noise_multiple : float
     noise_rms_m : float
     n_calibration : int
-    test : dict
-        :func:`coverage_figures` of the calibrated bound on the test split.
-    raw_test : dict
+    test : Coverage
+        :func:`coverage_figures` of the calibrated bound on the test split (``bound_median_m``: of
+        the calibrated bound ``factor (b + margin)``).
+    raw_test : Coverage
         The same for the raw bound ``b + margin``.
-    translation_last : dict or None
+    translation_last : Coverage or None
         The translation-last bound's coverage on the test samples after a final translation of
         every pair (None without such samples).
     failing : bool
         The test coverage falls short of the target by more than :data:`COVERAGE_TOLERANCE` and its
-        interval excludes it.
+        interval excludes it (an interval without finite ends, e.g. of a single unit, excludes
+        nothing: the tolerance decides alone).
     status : {"met", "failing", "conservative"}
         ``"conservative"``: the coverage exceeds the target by as much.
     """
@@ -239,9 +305,9 @@ class BoundCalibration:
     noise_multiple: float
     noise_rms_m: float
     n_calibration: int
-    test: dict
-    raw_test: dict
-    translation_last: dict | None
+    test: Coverage
+    raw_test: Coverage
+    translation_last: Coverage | None
     failing: bool
     status: str = "met"
 
@@ -249,23 +315,12 @@ class BoundCalibration:
         """The robot file's ``[bound_calibration]`` table (SI; unknown figures left out)."""
         table = {"method": self.method, "target_coverage": self.target, "factor": self.factor,
                 "noise_margin_m": self.margin_m, "noise_multiple": self.noise_multiple,
-                "calibration_samples": self.n_calibration, "test_samples": self.test["n"],
-                "test_coverage": self.test["covered"], "test_coverage_low": self.test["ci"][0],
-                "test_coverage_high": self.test["ci"][1], "raw_bound_test_coverage": self.raw_test["covered"],
+                "calibration_samples": self.n_calibration, "test_samples": self.test.n,
+                "test_coverage": self.test.covered, "test_coverage_low": self.test.ci[0],
+                "test_coverage_high": self.test.ci[1], "raw_bound_test_coverage": self.raw_test.covered,
                 "failing": self.failing, "status": self.status, "data_file": data_file, "data_sha256": data_sha256,
                 "date": datetime.date.today().isoformat()}
         return {k: v for k, v in table.items() if not (isinstance(v, float) and not np.isfinite(v))}
-
-    def as_dict(self) -> dict:
-        """``results.json["bound"]`` (mm where the key says so)."""
-        mm = (lambda x: None if x is None else x * 1e3)
-        return {"definition": BOUND_DEFINITION, "method": self.method, "target": self.target, "factor": self.factor,
-                "margin_mm": self.margin_m * 1e3, "noise_multiple": self.noise_multiple,
-                "noise_rms_mm": self.noise_rms_m * 1e3, "n_calibration": self.n_calibration,
-                "test": {**self.test, "bound_median_mm": mm(self.test["bound_median_m"]),
-                         "error_median_mm": mm(self.test["error_median_m"])},
-                "raw_test": {**self.raw_test, "bound_median_mm": mm(self.raw_test["bound_median_m"])},
-                "translation_last": self.translation_last, "failing": self.failing, "status": self.status}
 
 
 def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *, noise_rms: float,
@@ -301,15 +356,17 @@ def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *,
     te = np.asarray(test_error, float)
     calibrated = factor * (tb + margin) - margin if np.isfinite(factor) else np.full_like(tb, np.inf)
     test = coverage_figures(te, calibrated, margin, test_units, seed=seed)
-    test["bound_median_m"] = float(np.nanmedian(factor * (tb + margin))) if tb.size else None
+    test = replace(test, bound_median_m=float(np.nanmedian(factor * (tb + margin))) if tb.size else None)
     raw = coverage_figures(te, tb, margin, test_units, seed=seed)
     tl = None
     if test_translation_last is not None and test_released is not None and np.any(test_released):
         rel = np.asarray(test_released, bool)
         tl = coverage_figures(te[rel], np.asarray(test_translation_last, float)[rel], margin,
                               np.asarray(test_units)[rel], seed=seed)
-    cov = test["covered"]
-    outside = cov is None or (abs(cov - target) > COVERAGE_TOLERANCE and not (test["ci"][0] <= target <= test["ci"][1]))
+    cov, (low, high) = test.covered, test.ci
+    # an interval without finite ends (a single unit) excludes nothing: the tolerance decides alone
+    in_interval = low is not None and high is not None and low <= target <= high
+    outside = cov is None or (abs(cov - target) > COVERAGE_TOLERANCE and not in_interval)
     failing = bool(outside and (cov is None or cov < target))
     status = "failing" if failing else "conservative" if outside else "met"
     method = (f"split-conformal: factor = the ceil((n + 1) x {target:g})-th smallest of e / (b + m) over {n_cal} "
@@ -319,21 +376,33 @@ def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *,
                             test=test, raw_test=raw, translation_last=tl, failing=failing, status=status)
 
 
-def _stored_bounds(setup, stage: str, robot, alpha, beta, n_jobs: int, echo) -> BoundValues:
+def _stored_bounds(setup, stage: str, robot, alpha, beta, n_jobs: int) -> BoundValues:
+    """The bound values of stage ``stage``: stored by an earlier run, else evaluated and stored."""
     cached = setup.stages.load(stage)
     if cached is not None:
-        echo(f"  {stage}: reused from an earlier run")
+        logger.log(progress_level(), f"  {stage}: reused from an earlier run")
         return BoundValues(position=np.array(cached["position"], float),
                            translation_last=np.array(cached["translation_last"], float),
                            ok=np.array(cached["ok"], bool))
-    echo(f"  evaluating the friction bound at {len(alpha)} samples ({stage}) ...")
+    logger.log(progress_level(), f"  evaluating the friction bound at {len(alpha)} samples ({stage}) ...")
     values = bound_values(robot, alpha, beta, setup.settings, n_jobs=n_jobs)
     setup.stages.save(stage, {"position": values.position, "translation_last": values.translation_last,
                               "ok": values.ok})
     return values
 
 
-def check_bound(setup, split, final, test_errors, final_params: dict, noise, options, echo=print) -> BoundCalibration:
+def _bound_tag(robot, effects) -> str:
+    """Tag of the stored bounds of ``robot`` (the written robot: every tube and pair parameter, as
+    its robot file states it) with the history ``effects`` (:class:`ctrplan.effects.EffectSet`)
+    and the running mechanics (:func:`ctrplan.cache.content_key`): 12 hexadecimal digits."""
+    from ..cache import content_key, mechanics_version
+    from ..io.robot_file import robot_to_toml
+
+    return content_key({"robot": robot_to_toml(robot), "effects": effects.to_dict(),
+                        "mechanics_version": mechanics_version()})[:12]
+
+
+def check_bound(setup, split, final, test_errors, final_params: dict, noise, options) -> BoundCalibration:
     """Stage 10b: the friction bound of the written robot against the measured tips, and the
     calibrated bound (module docstring).
 
@@ -343,7 +412,8 @@ def check_bound(setup, split, final, test_errors, final_params: dict, noise, opt
     the final model's: out of fold at up to ``options.bound_samples`` development samples (evenly
     spaced), which calibrate the factor, and on the test split at up to as many samples, which
     check it. The noise margin comes from the development samples' noise. Bounds are stored as
-    stages.
+    stages, tagged with the written robot, the history effects and the mechanics' version
+    (:func:`_bound_tag`).
 
     Parameters
     ----------
@@ -359,7 +429,6 @@ def check_bound(setup, split, final, test_errors, final_params: dict, noise, opt
         Estimated on the development samples.
     options : DiscrepancyOptions
         ``bound_target``, ``bound_samples``, ``n_jobs``, ``seed``.
-    echo : callable
 
     Returns
     -------
@@ -380,12 +449,11 @@ def check_bound(setup, split, final, test_errors, final_params: dict, noise, opt
         return idx if idx.size <= limit else idx[np.linspace(0, idx.size - 1, limit).round().astype(int)]
 
     cal_rows, test_rows = pick(dev), pick(tst)
-    tag = hashlib.sha256(repr((robot.friction_coefficients, [t.sections for t in robot.tubes],
-                               [t.k_xy for t in robot.tubes], effects.to_dict())).encode()).hexdigest()[:8]
+    tag = _bound_tag(robot, effects)
     cal_b = _stored_bounds(setup, f"bound-development-{limit}-{tag}", robot, state.alpha[cal_rows],
-                           state.beta[cal_rows], options.n_jobs, echo)
+                           state.beta[cal_rows], options.n_jobs)
     test_b = _stored_bounds(setup, f"bound-test-{limit}-{tag}", robot, state.alpha[test_rows], state.beta[test_rows],
-                            options.n_jobs, echo)
+                            options.n_jobs)
     oof = final.oof
     cal_e = oof.position[np.searchsorted(oof.rows, cal_rows)]
     test_e = test_errors.position[np.searchsorted(test_errors.rows, test_rows)]
@@ -396,9 +464,10 @@ def check_bound(setup, split, final, test_errors, final_params: dict, noise, opt
                           noise_rms=sigma, target=options.bound_target,
                           test_translation_last=test_b.translation_last, test_released=released, seed=options.seed)
     raw, t = cal.raw_test, cal.test
-    echo(f"friction bound (mu = {', '.join(f'{m:g}' for m in robot.friction_coefficients)}) on the test split: "
-         f"{100 * (raw['covered'] or 0):.0f} % of {raw['n']} measured tips within b + {cal.margin_m * 1e3:.2f} mm "
-         f"(median e / (b + m) {raw['ratio']['median'] or float('nan'):.2f}); calibrated bound = {cal.factor:.3g} x "
-         f"(b + m) covers {100 * (t['covered'] or 0):.0f} % ({100 * (t['ci'][0] or 0):.0f}..{100 * (t['ci'][1] or 0):.0f} "
-         f"%, target {100 * cal.target:.0f} %: {cal.status})")
+    logger.log(progress_level(),
+               f"friction bound (mu = {', '.join(f'{m:g}' for m in robot.friction_coefficients)}) on the test split: "
+               f"{100 * (raw.covered or 0):.0f} % of {raw.n} measured tips within b + {cal.margin_m * 1e3:.2f} mm "
+               f"(median e / (b + m) {raw.ratio['median'] or float('nan'):.2f}); calibrated bound = {cal.factor:.3g} "
+               f"x (b + m) covers {100 * (t.covered or 0):.0f} % ({100 * (t.ci[0] or 0):.0f}.."
+               f"{100 * (t.ci[1] or 0):.0f} %, target {100 * cal.target:.0f} %: {cal.status})")
     return cal

@@ -133,7 +133,7 @@ class MeasuredData:
         ValueError
             A time offset on data without times.
         """
-        from ..effects import REGISTRY, EffectSet, history_state, robot_effects
+        from ..effects import REGISTRY, history_state, robot_effects
 
         # the state depends only on the effects that act on the motion: keep one per such set
         acting = robot_effects(robot).merged(effects or {})

@@ -32,21 +32,28 @@ rate ``options.significance``.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Mapping
 
 import numpy as np
 
+from .._log import progress_level
 from ..effects import REGISTRY
-from .fitting import Candidate, compare, display_value
-from .noise import estimate_noise, noise_test
+from .consistency import NoiseTest, noise_test
+from .estimates import AtypicalValue, display_value
+from .evaluation import ErrorFigures
+from .fitting import Candidate, compare
+from .noise import NoiseEstimate, estimate_noise
 from .options import DiscrepancyOptions
 from .split import DataSplit
-from .statistics import holm
+from .statistics import Comparison, holm
 
-__all__ = ["NoiseCheck", "Naming", "check_noise", "name_effect", "cautions", "atypical_caution",
-           "no_effect_sentence", "range_text", "VERDICTS"]
+__all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "check_noise", "name_effect", "cautions",
+           "atypical_caution", "no_effect_sentence", "range_text", "VERDICTS"]
+
+logger = logging.getLogger(__name__)
 
 #: What a run concludes: one effect (or a pair) named, two candidates the data cannot tell apart,
 #: or none.
@@ -59,38 +66,123 @@ class NoiseCheck:
 
     Attributes
     ----------
-    noise : dict
-        The noise estimate (:meth:`~ctrplan.discrepancy.noise.NoiseEstimate.as_dict`:
-        ``position_rms_m`` [m] or None, ``source``, ``dof``, ``description``, ...), from the
-        development samples only.
+    noise : NoiseEstimate
+        The noise estimate (:func:`~ctrplan.discrepancy.noise.estimate_noise`), from the
+        development samples only; its ``position_rms_m`` [m] is None when unknown.
     rms_m : float
         rms of the baseline's out-of-fold position errors [m] (NaN without a finite one).
     ratio : float or None
-        ``rms_m`` over the noise rms; None when the noise is unknown.
-    test : dict or None
-        :func:`~ctrplan.discrepancy.noise.noise_test`; None when the noise is unknown.
+        ``rms_m`` over the noise rms [-]; None when the noise is unknown.
+    test : NoiseTest or None
+        :func:`~ctrplan.discrepancy.consistency.noise_test`; None when the noise is unknown.
     """
 
-    noise: dict
+    noise: NoiseEstimate
     rms_m: float
     ratio: float | None
-    test: dict | None
+    test: NoiseTest | None
 
     @property
     def consistent(self) -> bool | None:
         """The residual is consistent with the noise (None: the noise is unknown)."""
-        return None if self.test is None else bool(self.test["consistent"])
+        return None if self.test is None else bool(self.test.consistent)
 
     @property
     def rms(self) -> float | None:
         """The noise rms [m] (None when unknown)."""
-        return self.noise.get("position_rms_m")
+        return self.noise.position_rms_m
+
+
+@dataclass(frozen=True)
+class RunnerUp:
+    """The second candidate of an ambiguous verdict.
+
+    Attributes
+    ----------
+    effect, label : str
+    difference : Comparison
+        The named candidate's out-of-fold Eq. (49) residuals against this one's (positive: the
+        named one is better) [mm + deg].
+    """
+
+    effect: str
+    label: str
+    difference: Comparison
+
+
+@dataclass(frozen=True)
+class Decision:
+    """Stage 7's verdict and what it rests on.
+
+    Attributes
+    ----------
+    verdict : str
+        One of :data:`VERDICTS`.
+    named : str or None
+        The best eligible effect (the first of an ambiguous pair), or None.
+    ambiguous_with : str or None
+        The second of an ambiguous pair.
+    eligible : tuple of str
+        Eligible candidates, lowest out-of-fold error first.
+    holm : mapping of str to bool
+        Each candidate's improvement over the baseline significant within the Holm family.
+    family : tuple of str
+        Every candidate tried alone (the Holm family).
+    best : str or None
+        The candidate with the lowest out-of-fold error, eligible or not.
+    worse_than : mapping of str to tuple of str
+        Candidate -> the candidates whose out-of-fold error is significantly lower.
+    why_not : mapping of str to tuple of str
+        Candidate -> why it may not be named (only candidates with a reason).
+    comparisons : mapping of str to Comparison
+        ``"<b> vs <a>"`` -> :func:`~ctrplan.discrepancy.statistics.cv_comparison` of a's and b's
+        out-of-fold Eq. (49) residuals (positive: b better) [mm + deg], every ordered pair.
+    separated_by : str or None
+        What data would tell an ambiguous pair apart.
+    cautions : tuple of str
+        The named effect's values outside their typical range, with what to check.
+    notes : tuple of str
+    rule : str
+        The naming rule with its levels.
+    runner_up : RunnerUp or None
+        The second of an ambiguous pair.
+    no_effect_case : str or None
+        When none is named: ``"noise"`` (the residual is consistent with noise),
+        ``"unexplained"`` (it is not) or ``"unknown"`` (the noise is unknown).
+    """
+
+    verdict: str
+    named: str | None
+    ambiguous_with: str | None
+    eligible: tuple
+    holm: Mapping
+    family: tuple
+    best: str | None
+    worse_than: Mapping
+    why_not: Mapping
+    comparisons: Mapping
+    separated_by: str | None
+    cautions: tuple
+    notes: tuple
+    rule: str
+    runner_up: RunnerUp | None = None
+    no_effect_case: str | None = None
 
     def as_dict(self) -> dict:
-        """The report's form (``results.json["noise"]``; mm)."""
-        sigma = self.rms
-        return {"rms_mm": self.rms_m * 1e3, "noise_rms_mm": None if sigma is None else sigma * 1e3,
-                "ratio": self.ratio, "consistent": self.consistent, "test": self.test, "noise": self.noise}
+        """Plain JSON form (``results.json["decision"]``; comparisons in Eq. (49) units)."""
+        out = {"verdict": self.verdict, "named": self.named, "ambiguous_with": self.ambiguous_with,
+               "eligible": list(self.eligible), "holm": dict(self.holm), "family": list(self.family),
+               "best": self.best, "worse_than": {k: list(v) for k, v in self.worse_than.items()},
+               "why_not": {k: list(v) for k, v in self.why_not.items()},
+               "comparisons": {k: c.as_dict() for k, c in self.comparisons.items()},
+               "separated_by": self.separated_by, "cautions": list(self.cautions), "notes": list(self.notes),
+               "rule": self.rule}
+        if self.runner_up is not None:
+            r = self.runner_up
+            out["runner_up"] = {"effect": r.effect, "label": r.label, "difference": r.difference.as_dict()}
+        if self.no_effect_case is not None:
+            out["no_effect_case"] = self.no_effect_case
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,36 +192,38 @@ class Naming:
     Attributes
     ----------
     candidates : mapping of str to Candidate
-        Every tried candidate with the naming rule's verdicts.
-    decision : dict
-        ``verdict`` (:data:`VERDICTS`), ``named`` (the best eligible effect or None),
-        ``ambiguous_with`` (the second of an ambiguous pair or None), ``eligible``, ``holm``,
-        ``family``, ``best`` (the candidate with the lowest out-of-fold error, eligible or not),
-        ``worse_than`` ({candidate: [candidates significantly better]}), ``comparisons`` (every
-        ordered pair's :func:`~ctrplan.discrepancy.statistics.cv_comparison`), ``separated_by``
-        (what data would tell an ambiguous pair apart), ``cautions`` (of the named effect's
-        atypical values), ``notes``, ``rule``, and ``no_effect_case`` (``"noise"``,
-        ``"unexplained"``, ``"unknown"``) when none is named.
+        Every tried candidate with the naming rule's verdicts (``improvement_significant``,
+        ``eligible``).
+    decision : Decision
     """
 
     candidates: Mapping[str, Candidate]
-    decision: dict
+    decision: Decision
 
     @property
     def named(self) -> str | None:
         """The best eligible effect (first of an ambiguous pair), or None."""
-        return self.decision["named"]
+        return self.decision.named
 
     @property
     def verdict(self) -> str:
-        return self.decision["verdict"]
+        """One of :data:`VERDICTS`."""
+        return self.decision.verdict
 
 
-def check_noise(setup, split: DataSplit, baseline, options: DiscrepancyOptions, echo=print) -> NoiseCheck:
+def check_noise(setup, split: DataSplit, baseline, options: DiscrepancyOptions) -> NoiseCheck:
     """Stage 5: the sensor noise (:func:`~ctrplan.discrepancy.noise.estimate_noise` of the
     development samples, never the test split) against the baseline's out-of-fold residual on the
-    development samples (:func:`~ctrplan.discrepancy.noise.noise_test` with the baseline's fitted
-    parameters and the position components, 3 per sample, each fold's fit used).
+    development samples (:func:`~ctrplan.discrepancy.consistency.noise_test` with the baseline's
+    fitted parameters and the position components, 3 per sample, each fold's fit used).
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : DataSplit
+    baseline : Baseline
+    options : DiscrepancyOptions
+        ``noise_position`` (a stated noise) and ``significance`` (the false-alarm rate).
 
     Returns
     -------
@@ -137,40 +231,40 @@ def check_noise(setup, split: DataSplit, baseline, options: DiscrepancyOptions, 
     """
     data = setup.data
     estimate = estimate_noise(data, rows=split.dev_rows, stated=options.noise_position)
-    noise = estimate.as_dict()
     oof = baseline.oof
     res = oof.residual_base
     fin = res[np.all(np.isfinite(res), axis=1)]
     rms = float(np.sqrt(np.mean(np.sum(fin * fin, axis=1)))) if fin.size else float("nan")
-    sigma = noise["position_rms_m"]
+    sigma = estimate.position_rms_m
     test = None
     if sigma and fin.size:
         n_fit = min(f.n_samples for f in baseline.cv.folds)
         test = noise_test(res, data.rows[oof.rows], data.sequence[oof.rows], estimate,
                           n_parameters=len(baseline.fit.names), n_fitted=3 * n_fit, alpha=options.significance)
-    check = NoiseCheck(noise=noise, rms_m=rms, ratio=rms / sigma if sigma else None, test=test)
-    echo(f"  sensor noise: {noise['description']}; out-of-fold baseline rms {rms * 1e3:.3f} mm"
-         + (f" = {check.ratio:.2f} x noise; consistent with noise: {check.consistent} (F = {test['statistic']:.3g}, "
-            f"threshold {test['threshold']:.3g} at false-alarm rate {test['false_alarm_rate']:g})" if test else ""))
+    check = NoiseCheck(noise=estimate, rms_m=rms, ratio=rms / sigma if sigma else None, test=test)
+    logger.log(progress_level(),
+               f"  sensor noise: {estimate.description}; out-of-fold baseline rms {rms * 1e3:.3f} mm"
+               + (f" = {check.ratio:.2f} x noise; consistent with noise: {check.consistent} (F = {test.statistic:.3g}, "
+                  f"threshold {test.threshold:.3g} at false-alarm rate {test.false_alarm_rate:g})" if test else ""))
     return check
 
 
-def range_text(b: dict) -> str:
-    """A typical range ``{"typical": [lo, hi], "unit": ...}`` for a report (rad as deg)."""
-    lo, hi = b["typical"]
-    if b["unit"] == "rad":
+def range_text(b: AtypicalValue) -> str:
+    """The typical range of an atypical value for a report (rad as deg)."""
+    lo, hi = b.typical
+    if b.unit == "rad":
         return f"{np.rad2deg(lo):.3g}..{np.rad2deg(hi):.3g} deg"
-    return f"{lo:.3g}..{hi:.3g}" + ("" if b["unit"] == "-" else f" {b['unit']}")
+    return f"{lo:.3g}..{hi:.3g}" + ("" if b.unit == "-" else f" {b.unit}")
 
 
-def atypical_caution(label: str, b: dict) -> str:
+def atypical_caution(label: str, b: AtypicalValue) -> str:
     """The caution beside a named value outside its typical range: the value, the range with its
     source, and what to check (``b`` an entry of ``Candidate.atypical``)."""
-    lo, hi = b["typical"]
-    side = "more" if b["value"] > hi else "less"
-    shown = display_value(b["name"], b["value"], b["unit"])
-    check = f": check {b['check']}" if b.get("check") else ""
-    return f"{label}: {shown}, {side} than its typical {range_text(b)} ({b['why']}){check}"
+    lo, hi = b.typical
+    side = "more" if b.value > hi else "less"
+    shown = display_value(b.name, b.value, b.unit)
+    check = f": check {b.check}" if b.check else ""
+    return f"{label}: {shown}, {side} than its typical {range_text(b)} ({b.why}){check}"
 
 
 def _separated_by(a: str, b: str) -> str:
@@ -179,35 +273,49 @@ def _separated_by(a: str, b: str) -> str:
     return "; ".join(parts) if parts else "more data of the kinds of motion where they differ"
 
 
-def no_effect_sentence(decision: dict, check: dict, candidates: dict) -> str:
-    """Why no effect was named, for the report (``check`` is :meth:`NoiseCheck.as_dict`)."""
-    case = decision["no_effect_case"]
-    noise = check["noise"]
-    test = check.get("test") or {}
-    best = decision.get("best")
+def no_effect_sentence(decision: Decision, noise: NoiseCheck, candidates: Mapping[str, Candidate]) -> str:
+    """Why no effect was named, for the log and the report.
+
+    Parameters
+    ----------
+    decision : Decision
+        With ``no_effect_case`` set.
+    noise : NoiseCheck
+    candidates : mapping of str to Candidate
+
+    Returns
+    -------
+    str
+        One sentence (mm in the text).
+    """
+    case = decision.no_effect_case
+    description = noise.noise.description
+    test = noise.test
+    rms_mm = noise.rms_m * 1e3
+    best = decision.best
     best_text = ""
-    if best and candidates.get(best):
+    if best and candidates.get(best) is not None:
         c = candidates[best]
-        best_text = (f"; the best explanation is {c['label']} (out-of-fold mean "
-                     f"{c['out_of_fold']['position_mean_mm']:.3f} mm), not named: "
-                     + "; ".join(decision.get("why_not", {}).get(best, ["its improvement is not significant"])))
+        best_text = (f"; the best explanation is {c.label} (out-of-fold mean "
+                     f"{1e3 * c.out_of_fold_figures.position_mean:.3f} mm), not named: "
+                     + "; ".join(decision.why_not.get(best, ("its improvement is not significant",))))
     if case == "noise":
         return (f"no candidate is eligible, and the out-of-fold residual of the calibrated baseline (rms "
-                f"{check['rms_mm']:.3f} mm) is consistent with the sensor noise ({noise['description']}; F = "
-                f"{test['statistic']:.3g} <= {test['threshold']:.3g}, false-alarm rate {test['false_alarm_rate']:g})"
+                f"{rms_mm:.3f} mm) is consistent with the sensor noise ({description}; F = "
+                f"{test.statistic:.3g} <= {test.threshold:.3g}, false-alarm rate {test.false_alarm_rate:g})"
                 + best_text)
     if case == "unexplained":
-        return (f"the out-of-fold residual of the calibrated baseline (rms {check['rms_mm']:.3f} mm, "
-                f"{check['ratio']:.1f} times the sensor noise: {noise['description']}) is NOT consistent with noise "
-                f"(F = {test['statistic']:.3g} > {test['threshold']:.3g} at false-alarm rate "
-                f"{test['false_alarm_rate']:g}, after allowing for the {100 * (test['inflation'] - 1):.0f} % a fitted "
+        return (f"the out-of-fold residual of the calibrated baseline (rms {rms_mm:.3f} mm, "
+                f"{noise.ratio:.1f} times the sensor noise: {description}) is NOT consistent with noise "
+                f"(F = {test.statistic:.3g} > {test.threshold:.3g} at false-alarm rate "
+                f"{test.false_alarm_rate:g}, after allowing for the {100 * (test.inflation - 1):.0f} % a fitted "
                 f"model adds): the model misses something that no candidate explains" + best_text)
-    return (f"no candidate is eligible; whether the out-of-fold residual (rms {check['rms_mm']:.3f} mm) is noise "
-            f"cannot be said: the sensor noise is {noise['description']}" + best_text)
+    return (f"no candidate is eligible; whether the out-of-fold residual (rms {rms_mm:.3f} mm) is noise "
+            f"cannot be said: the sensor noise is {description}" + best_text)
 
 
 def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Mapping, noise: NoiseCheck,
-                options: DiscrepancyOptions, echo=print) -> Naming:
+                options: DiscrepancyOptions) -> Naming:
     """Stage 7: the verdict, by the rule of the module docstring.
 
     Parameters
@@ -222,14 +330,13 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     noise : NoiseCheck
     options : DiscrepancyOptions
         ``significance``.
-    echo : callable
 
     Returns
     -------
     Naming
     """
     alpha = options.significance
-    significant = holm({e: (c.improvement["p_value"] if c.improvement["mean_difference"] > 0 else 1.0)
+    significant = holm({e: (c.improvement.p_value if c.improvement.mean_difference > 0 else 1.0)
                         for e, c in candidates.items()}, alpha) if candidates else {}
     names = list(candidates)
     comparisons, worse_than = {}, {e: [] for e in names}
@@ -239,18 +346,18 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
                 continue
             # positive: b better than a
             cmp = comparisons[f"{b} vs {a}"] = compare(split, candidates[a].r, candidates[b].r)
-            if cmp["p_worse"] < alpha and cmp["mean_difference"] < 0:
+            if cmp.p_worse < alpha and cmp.mean_difference < 0:
                 worse_than[b].append(a)
     why_not: dict = {}
     judged = {}
     for e, c in candidates.items():
         reasons = []
         if not significant.get(e, False):
-            reasons.append(f"its improvement over the baseline is not significant (p = {c.improvement['p_value']:.3g}, "
+            reasons.append(f"its improvement over the baseline is not significant (p = {c.improvement.p_value:.3g}, "
                            f"Holm over {len(candidates)} candidates at {alpha})")
         if worse_than[e]:
             reasons.append("its out-of-fold error is significantly higher than "
-                           + ", ".join(f"{candidates[d].label}'s (p = {comparisons[f'{e} vs {d}']['p_worse']:.2g})"
+                           + ", ".join(f"{candidates[d].label}'s (p = {comparisons[f'{e} vs {d}'].p_worse:.2g})"
                                        for d in worse_than[e]))
         if c.at_bound:
             reasons.append("at its limit, not converged: " + "; ".join(c.at_bound))
@@ -258,49 +365,53 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
         judged[e] = replace(c, improvement_significant=bool(significant.get(e, False)), eligible=not reasons)
     eligible = sorted((e for e, c in judged.items() if c.eligible), key=lambda e: judged[e].mean_error)
     best = min(judged, key=lambda e: judged[e].mean_error) if judged else None
-    decision = {"verdict": "none", "named": None, "ambiguous_with": None, "eligible": eligible,
-                "holm": {e: bool(v) for e, v in significant.items()}, "family": names, "best": best,
-                "worse_than": worse_than, "why_not": {e: r for e, r in why_not.items() if r},
-                "comparisons": comparisons, "separated_by": None, "cautions": [], "notes": [],
-                "rule": (f"out-of-fold improvement over the baseline significant at {alpha} (corrected resampled t test "
-                         f"over {split.n_folds} folds, Holm over the {len(names)} candidates tried), no other "
-                         f"candidate significantly better (one-sided at {alpha}), no value at its limit; the lowest "
-                         f"out-of-fold error wins; ambiguous when another such candidate remains")}
-    for e, c in judged.items():
-        if c.improvement_significant and not c.eligible:
-            decision["notes"].append(f"{c.label} improves on the baseline significantly but is not named: "
-                                     + "; ".join(why_not[e]))
+    notes = [f"{c.label} improves on the baseline significantly but is not named: " + "; ".join(why_not[e])
+             for e, c in judged.items() if c.improvement_significant and not c.eligible]
+    decision = Decision(
+        verdict="none", named=None, ambiguous_with=None, eligible=tuple(eligible),
+        holm=MappingProxyType({e: bool(v) for e, v in significant.items()}), family=tuple(names), best=best,
+        worse_than=MappingProxyType({e: tuple(v) for e, v in worse_than.items()}),
+        why_not=MappingProxyType({e: tuple(r) for e, r in why_not.items() if r}),
+        comparisons=MappingProxyType(comparisons), separated_by=None, cautions=(), notes=(),
+        rule=(f"out-of-fold improvement over the baseline significant at {alpha} (corrected resampled t test "
+              f"over {split.n_folds} folds, Holm over the {len(names)} candidates tried), no other "
+              f"candidate significantly better (one-sided at {alpha}), no value at its limit; the lowest "
+              f"out-of-fold error wins; ambiguous when another such candidate remains"))
+    level = progress_level()
     if eligible:
         named = eligible[0]
-        decision.update(verdict="named", named=named)
+        decision = replace(decision, verdict="named", named=named)
         rivals = [e for e in eligible[1:] if not contained(e, named)]
         if rivals:
             second = rivals[0]
             diff = comparisons[f"{named} vs {second}"]
-            decision.update(verdict="ambiguous", ambiguous_with=second, separated_by=_separated_by(named, second),
-                            runner_up={"effect": second, "label": judged[second].label, "difference": diff})
-            decision["notes"].append(
+            decision = replace(decision, verdict="ambiguous", ambiguous_with=second,
+                               separated_by=_separated_by(named, second),
+                               runner_up=RunnerUp(effect=second, label=judged[second].label, difference=diff))
+            notes.append(
                 f"ambiguous: {judged[named].label} and {judged[second].label} explain the data equally well within "
-                f"their uncertainty (out-of-fold Eq. (49) error of the first lower by {100 * diff['reduction']:.0f} %, "
-                f"{100 * diff['reduction_ci'][0]:.0f}..{100 * diff['reduction_ci'][1]:.0f} %, p = {diff['p_value']:.2g} "
-                f"over {diff['n_folds']} folds); data that "
-                f"would separate them: {decision['separated_by']}")
-        decision["cautions"] = [atypical_caution(judged[named].label, b) for b in judged[named].atypical]
+                f"their uncertainty (out-of-fold Eq. (49) error of the first lower by {100 * diff.reduction:.0f} %, "
+                f"{100 * diff.reduction_ci[0]:.0f}..{100 * diff.reduction_ci[1]:.0f} %, p = {diff.p_value:.2g} "
+                f"over {diff.n_folds} folds); data that "
+                f"would separate them: {decision.separated_by}")
+        decision = replace(decision, cautions=tuple(atypical_caution(judged[named].label, b)
+                                                    for b in judged[named].atypical))
         if best != named:
-            decision["notes"].append(f"the lowest out-of-fold error is {judged[best].label}'s, which cannot be named: "
-                                     + "; ".join(why_not[best]))
-        echo(f"{'ambiguous' if decision['verdict'] == 'ambiguous' else 'named effect'}: {judged[named].label}"
-             + (f" or {judged[decision['ambiguous_with']].label}" if decision["ambiguous_with"] else ""))
-        for line in decision["cautions"]:
-            echo(f"  caution: {line}")
+            notes.append(f"the lowest out-of-fold error is {judged[best].label}'s, which cannot be named: "
+                         + "; ".join(why_not[best]))
+        logger.log(level, f"{'ambiguous' if decision.verdict == 'ambiguous' else 'named effect'}: "
+                          f"{judged[named].label}"
+                   + (f" or {judged[decision.ambiguous_with].label}" if decision.ambiguous_with else ""))
+        for line in decision.cautions:
+            logger.warning(f"  caution: {line}")
+        decision = replace(decision, notes=tuple(notes))
     else:
-        decision["no_effect_case"] = ("noise" if noise.consistent else
-                                      "unexplained" if noise.consistent is False else "unknown")
-        brief = {n: {"label": c.label, "out_of_fold": {"position_mean_mm": 1e3 * float(np.nanmean(c.oof.position))}}
-                 for n, c in judged.items()}
-        echo("no effect named: " + no_effect_sentence(decision, noise.as_dict(), brief))
-    for line in decision["notes"]:
-        echo(f"  {line}")
+        decision = replace(decision, notes=tuple(notes),
+                           no_effect_case=("noise" if noise.consistent else
+                                           "unexplained" if noise.consistent is False else "unknown"))
+        logger.log(level, "no effect named: " + no_effect_sentence(decision, noise, judged))
+    for line in decision.notes:
+        logger.log(level, f"  {line}")
     return Naming(candidates=MappingProxyType(judged), decision=decision)
 
 
@@ -309,7 +420,7 @@ def contained(a: str, b: str) -> bool:
     return a in REGISTRY[b].contains or b in REGISTRY[a].contains
 
 
-def cautions(verdict: str, candidate, before: dict, after: dict) -> list[str]:
+def cautions(verdict: str, candidate: Candidate | None, before: ErrorFigures, after: ErrorFigures) -> list[str]:
     """What a reader of the named effect must not overlook: a fitted value outside its typical
     range (with what to check), or an addition that lowers the mean error but raises the maximum.
 
@@ -317,10 +428,10 @@ def cautions(verdict: str, candidate, before: dict, after: dict) -> list[str]:
     ----------
     verdict : str
         :data:`VERDICTS`.
-    candidate : dict or None
-        The final model's candidate report (``label``, ``atypical`` list).
-    before, after : dict
-        Error summaries on the test split (``position_max_mm``).
+    candidate : Candidate or None
+        The final model's candidate.
+    before, after : ErrorFigures
+        The calibrated baseline's and the final model's errors on the test split [m].
 
     Returns
     -------
@@ -329,10 +440,10 @@ def cautions(verdict: str, candidate, before: dict, after: dict) -> list[str]:
     out = []
     if verdict == "none" or candidate is None:
         return out
-    for b in candidate.get("atypical") or []:
-        out.append(atypical_caution(candidate.get("label", "the named effect"), b))
-    if after["position_max_mm"] is not None and after["position_max_mm"] > before["position_max_mm"]:
-        out.append(f"the test split's maximum tip error rises from {before['position_max_mm']:.2f} to "
-                   f"{after['position_max_mm']:.2f} mm while the mean falls: the added effect makes some "
+    for b in candidate.atypical:
+        out.append(atypical_caution(candidate.label, b))
+    if after.position_max is not None and after.position_max > before.position_max:
+        out.append(f"the test split's maximum tip error rises from {1e3 * before.position_max:.2f} to "
+                   f"{1e3 * after.position_max:.2f} mm while the mean falls: the added effect makes some "
                    f"samples worse")
     return out

@@ -3,18 +3,23 @@ the untouched test split."""
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
 
+from .._log import progress_level
 from ..effects import EffectSet, registration_transform
 from .data import MeasuredData
-from .evaluation import evaluate_rows, stats_mm
+from .evaluation import evaluate_rows
+from .noise import NoiseEstimate
 from .options import ENVELOPE_NOISE_FACTOR, DiscrepancyOptions
 from .parameters import apply_parameters
 
 __all__ = ["EnvelopeCoverage", "HistoryPrediction", "PREDICTION_DESCRIPTION", "predict_with_history",
            "envelope_coverage", "hull_distance"]
+
+logger = logging.getLogger(__name__)
 
 #: What the prediction comparison reports (``results.json["prediction"]["description"]``).
 PREDICTION_DESCRIPTION = (
@@ -62,15 +67,6 @@ class EnvelopeCoverage:
     coefficients: dict
     label: str
 
-    def as_dict(self) -> dict:
-        """The report's form (mm)."""
-        mm = (lambda x: None if x is None else x * 1e3)
-        return {"n": self.n, "inside": self.inside, "fraction_inside": self.fraction_inside,
-                "margin_mm": self.margin_m * 1e3, "outside_median_mm": mm(self.outside_median_m),
-                "outside_p95_mm": mm(self.outside_p95_m), "outside_max_mm": mm(self.outside_max_m),
-                "size_median_mm": mm(self.size_median_m), "description": self.description,
-                "coefficients": self.coefficients, "label": self.label}
-
 
 @dataclass(frozen=True, eq=False)
 class HistoryPrediction:
@@ -86,15 +82,6 @@ class HistoryPrediction:
 
     rows: tuple
     envelopes: tuple
-
-    def as_dict(self) -> dict:
-        """``results.json["prediction"]`` (mm)."""
-        out = {"description": PREDICTION_DESCRIPTION,
-               "rows": [{"label": label, **stats_mm(pos)} for label, pos in self.rows]}
-        if self.envelopes:
-            out["envelopes"] = [env.as_dict() for env in self.envelopes]
-            out["envelope"] = out["envelopes"][0]
-        return out
 
 
 def hull_distance(points, x) -> float:
@@ -112,10 +99,10 @@ def hull_distance(points, x) -> float:
 
 
 def _mm(x):
-    return "-" if x is None else f"{x:.2f} mm"
+    return "-" if x is None else f"{1e3 * x:.2f} mm"
 
 
-def envelope_coverage(robot, params, sub: MeasuredData, noise, stages, stage, settings, n_jobs, echo, *,
+def envelope_coverage(robot, params, sub: MeasuredData, noise: NoiseEstimate, stages, stage, settings, n_jobs, *,
                       coefficients: dict, label: str) -> EnvelopeCoverage:
     """Coverage of the friction envelope: the convex hull of the 2^(n-1) bounding friction
     solutions (fixed eta, no release) at each sample of ``sub``, plus
@@ -129,13 +116,12 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise, stages, stage, se
         Calibrated parameters [SI] (tube parameters, friction coefficients, registration).
     sub : MeasuredData
         The samples.
-    noise : dict
-        :func:`~ctrplan.discrepancy.decision.estimate_noise`.
+    noise : NoiseEstimate
+        :func:`~ctrplan.discrepancy.noise.estimate_noise` (its rms sets the margin; 0 when unknown).
     stages : StageStore
     stage : str
     settings : ModelSettings
     n_jobs : int
-    echo : callable
     coefficients : dict, keyword-only
         Friction coefficients used (reported).
     label : str, keyword-only
@@ -147,12 +133,13 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise, stages, stage, se
     from ..mechanics import all_eta
     from .simulate import simulate
 
-    sigma = noise.get("position_rms_m")
+    sigma = noise.position_rms_m
     margin = ENVELOPE_NOISE_FACTOR * sigma if sigma else 0.0
     cached = stages.load(stage)
     if cached is None:
         etas = all_eta(robot.n_tubes)
-        echo(f"  friction envelope: {len(etas)} bounding solutions at {sub.n_samples} held-out samples ...")
+        logger.log(progress_level(), f"  friction envelope: {len(etas)} bounding solutions at {sub.n_samples} "
+                                     f"held-out samples ...")
         robot_p = apply_parameters(robot, tuple(params), tuple(params.values()))
         effects, _ = EffectSet.from_parameters(robot, tuple(params), tuple(params.values()))
         R, t = registration_transform(effects["registration"] if "registration" in effects else {})
@@ -184,12 +171,12 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise, stages, stage, se
         size_median_m=float(np.nanmedian(size)) if ok.any() else None,
         description=f"{sub.n_samples} evenly spaced held-out samples; convex hull of the "
                     f"{tips.shape[1]} bounding friction solutions (all eta, no release); margin "
-                    f"{ENVELOPE_NOISE_FACTOR} x the noise rms ({noise['description']})",
+                    f"{ENVELOPE_NOISE_FACTOR} x the noise rms ({noise.description})",
         coefficients=coefficients, label=label)
 
 
-def predict_with_history(setup, split, baseline, naming, noise, options: DiscrepancyOptions, echo=print,
-                         progress: bool = False, *, final_params: dict | None = None) -> HistoryPrediction | None:
+def predict_with_history(setup, split, baseline, naming, noise, options: DiscrepancyOptions, progress: bool = False, *,
+                         final_params: dict | None = None) -> HistoryPrediction | None:
     """Stage 9: prediction errors of the standard and the history-aware models on the test split,
     and the coverage of the friction envelope there (every model fitted on the development
     samples only).
@@ -205,6 +192,19 @@ def predict_with_history(setup, split, baseline, naming, noise, options: Discrep
     solutions plus :data:`ENVELOPE_NOISE_FACTOR` times the noise rms) is evaluated at that many
     evenly spaced test samples, for each coefficient set.
 
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : DataSplit
+    baseline : Baseline
+    naming : Naming
+    noise : NoiseCheck
+        Its estimate sets the envelope's margin.
+    options : DiscrepancyOptions
+    progress : bool
+        Progress bars of the model evaluations.
+    final_params : dict, optional, keyword-only
+
     Returns
     -------
     HistoryPrediction or None
@@ -219,8 +219,7 @@ def predict_with_history(setup, split, baseline, naming, noise, options: Discrep
     val = setup.data.take(test)
 
     def on_test(name, model, params):
-        return evaluate_rows(setup, test, f"test-{name}", model, params, n_jobs=options.n_jobs, progress=progress,
-                             echo=echo)
+        return evaluate_rows(setup, test, f"test-{name}", model, params, n_jobs=options.n_jobs, progress=progress)
 
     fr = candidates["friction"]
     written = dict(baseline.params if final_params is None else final_params)
@@ -245,9 +244,11 @@ def predict_with_history(setup, split, baseline, naming, noise, options: Discrep
     if named and named != "friction":
         rows.append((f"named effect: {candidates[named].label}",
                      on_test(named, candidates[named].model, candidates[named].params).position))
+    level = progress_level()
     for label, pos in rows:
-        s = stats_mm(pos)
-        echo(f"  prediction: {label}: mean {s['mean_mm']:.3f}, p95 {s['p95_mm']:.3f}, max {s['max_mm']:.3f} mm")
+        p = pos[np.isfinite(pos)] * 1e3
+        logger.log(level, f"  prediction: {label}: mean {p.mean():.3f}, p95 {np.percentile(p, 95):.3f}, max "
+                          f"{p.max():.3f} mm")
     k_env = min(int(options.envelope_samples), val.n_samples)
     if k_env <= 0:
         return HistoryPrediction(rows=tuple(rows), envelopes=())
@@ -257,12 +258,11 @@ def predict_with_history(setup, split, baseline, naming, noise, options: Discrep
     for label, params, key in sets:
         stage = f"envelope-{rows_env.size}" if label == "fitted" else f"envelope-{key}-{rows_env.size}"
         env = envelope_coverage(setup.robot, params, sub, noise.noise, setup.stages, stage, setup.settings,
-                                options.n_jobs, echo,
+                                options.n_jobs,
                                 coefficients={k: float(v) for k, v in params.items() if k.startswith("mu_")},
                                 label=label)
         envelopes.append(env)
-        e = env.as_dict()
-        echo(f"  envelope ({label}): {e['inside']} of {e['n']} inside ({100 * e['fraction_inside']:.0f} %), "
-             f"outside by median {_mm(e['outside_median_mm'])}, max {_mm(e['outside_max_mm'])}; size median "
-             f"{_mm(e['size_median_mm'])}")
+        logger.log(level, f"  envelope ({label}): {env.inside} of {env.n} inside ({100 * env.fraction_inside:.0f} %), "
+                          f"outside by median {_mm(env.outside_median_m)}, max {_mm(env.outside_max_m)}; size median "
+                          f"{_mm(env.size_median_m)}")
     return HistoryPrediction(rows=tuple(rows), envelopes=tuple(envelopes))

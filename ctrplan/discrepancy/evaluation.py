@@ -5,12 +5,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Mapping
 
+import logging
+
 import numpy as np
 
+from .._log import progress_level
 from ..effects import EffectSet, registration_transform
 from .calibrate import pose_errors, predict
 
-__all__ = ["Errors", "evaluate_rows", "out_of_fold", "error_summary", "stats_mm"]
+logger = logging.getLogger(__name__)
+
+__all__ = ["Errors", "ErrorFigures", "evaluate_rows", "out_of_fold"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,6 +57,49 @@ class Errors:
                    tip_base=np.array(d["tip_base"], float).reshape(-1, 3), seconds=float(d["seconds"]))
 
 
+@dataclass(frozen=True)
+class ErrorFigures:
+    """A model's errors at K samples summarized as a row of Table VIII of Ha et al. 2019.
+
+    Attributes
+    ----------
+    position_mean, position_std, position_p95, position_max : float or None
+        Of the finite tip position errors [m]; None when none is finite.
+    tangent_mean, tangent_max : float or None
+        Of the finite tip tangent errors [rad]; None when none is finite.
+    seconds_per_sample : float
+        Evaluation time per sample [s].
+    n_samples : int
+        Samples evaluated.
+    n_failed : int
+        Samples where the model failed (no finite position error).
+    """
+
+    position_mean: float | None
+    position_std: float | None
+    position_p95: float | None
+    position_max: float | None
+    tangent_mean: float | None
+    tangent_max: float | None
+    seconds_per_sample: float
+    n_samples: int
+    n_failed: int
+
+    @classmethod
+    def of(cls, errors: Errors) -> "ErrorFigures":
+        """The figures of :class:`Errors` (its ``rows`` are the samples evaluated)."""
+        pos, ang, n = errors.position, errors.angle, int(errors.rows.size)
+        p = pos[np.isfinite(pos)]
+        a = ang[np.isfinite(ang)]
+        return cls(position_mean=float(p.mean()) if p.size else None,
+                   position_std=float(p.std()) if p.size else None,
+                   position_p95=float(np.percentile(p, 95)) if p.size else None,
+                   position_max=float(p.max()) if p.size else None,
+                   tangent_mean=float(a.mean()) if a.size else None, tangent_max=float(a.max()) if a.size else None,
+                   seconds_per_sample=errors.seconds / max(n, 1), n_samples=n,
+                   n_failed=int(np.count_nonzero(~np.isfinite(pos))))
+
+
 def _errors(setup, rows: np.ndarray, model: str, params: Mapping, *, n_jobs: int, progress: bool) -> Errors:
     sub = setup.data.take(rows)
     pred = predict(setup.robot, tuple(params), tuple(params.values()), sub, model, setup.settings, n_jobs=n_jobs,
@@ -63,8 +111,8 @@ def _errors(setup, rows: np.ndarray, model: str, params: Mapping, *, n_jobs: int
                   seconds=pred.seconds)
 
 
-def evaluate_rows(setup, rows, stage: str, model: str, params: Mapping, *, n_jobs: int = 1, progress: bool = False,
-                  echo=print) -> Errors:
+def evaluate_rows(setup, rows, stage: str, model: str, params: Mapping, *, n_jobs: int = 1,
+                  progress: bool = False) -> Errors:
     """A model's errors at the samples ``rows``, read from the stage ``stage`` if an earlier run
     finished it, else evaluated (along the whole recorded history) and stored there.
 
@@ -79,7 +127,6 @@ def evaluate_rows(setup, rows, stage: str, model: str, params: Mapping, *, n_job
         Parameters applied (baseline and effect parameters, registration included) [SI].
     n_jobs : int
     progress : bool
-    echo : callable
 
     Returns
     -------
@@ -89,14 +136,14 @@ def evaluate_rows(setup, rows, stage: str, model: str, params: Mapping, *, n_job
     if cached is not None:
         return Errors.from_dict(cached)
     rows = np.flatnonzero(rows) if np.asarray(rows).dtype == bool else np.asarray(rows, int)
-    echo(f"  evaluating {stage} ({model} model) on {rows.size} samples ...")
+    logger.log(progress_level(), f"  evaluating {stage} ({model} model) on {rows.size} samples ...")
     res = _errors(setup, rows, model, params, n_jobs=n_jobs, progress=progress)
     setup.stages.save(stage, res.as_dict())
     return res
 
 
-def out_of_fold(setup, split, name: str, model: str, fold_params, *, n_jobs: int = 1, progress: bool = False,
-                echo=print) -> Errors:
+def out_of_fold(setup, split, name: str, model: str, fold_params, *, n_jobs: int = 1,
+                progress: bool = False) -> Errors:
     """Out-of-fold errors on the development samples: each fold evaluated with the parameters
     fitted without it (blocked cross-validation), read from the stage ``oof-<name>`` if an
     earlier run finished it.
@@ -112,7 +159,6 @@ def out_of_fold(setup, split, name: str, model: str, fold_params, *, n_jobs: int
         The parameters fitted without each fold [SI].
     n_jobs : int
     progress : bool
-    echo : callable
 
     Returns
     -------
@@ -124,7 +170,8 @@ def out_of_fold(setup, split, name: str, model: str, fold_params, *, n_jobs: int
     if cached is not None:
         return Errors.from_dict(cached)
     dev = np.flatnonzero(split.dev_rows)
-    echo(f"  cross-validating {name} ({model} model): {split.n_folds} folds, {dev.size} samples ...")
+    logger.log(progress_level(), f"  cross-validating {name} ({model} model): {split.n_folds} folds, {dev.size} "
+                                 f"samples ...")
     pos = np.full(dev.size, np.nan)
     ang = np.full(dev.size, np.nan)
     res = np.full((dev.size, 3), np.nan)
@@ -140,36 +187,3 @@ def out_of_fold(setup, split, name: str, model: str, fold_params, *, n_jobs: int
     out = Errors(rows=dev, position=pos, angle=ang, residual_base=res, tip_base=tip, seconds=seconds)
     setup.stages.save(stage, out.as_dict())
     return out
-
-
-def error_summary(pos, ang, seconds, n) -> dict:
-    """Table VIII row: tip position error mean, std, p95, max [mm]; tangent mean, max [deg].
-
-    Parameters
-    ----------
-    pos : ndarray, shape (K,) [m]
-    ang : ndarray, shape (K,) [rad]
-    seconds : float
-        Evaluation time [s].
-    n : int
-        Samples evaluated.
-    """
-    pos_mm = pos[np.isfinite(pos)] * 1e3
-    ang_deg = np.rad2deg(ang[np.isfinite(ang)])
-    return {"position_mean_mm": float(pos_mm.mean()) if pos_mm.size else None,
-            "position_std_mm": float(pos_mm.std()) if pos_mm.size else None,
-            "position_p95_mm": float(np.percentile(pos_mm, 95)) if pos_mm.size else None,
-            "position_max_mm": float(pos_mm.max()) if pos_mm.size else None,
-            "tangent_mean_deg": float(ang_deg.mean()) if ang_deg.size else None,
-            "tangent_max_deg": float(ang_deg.max()) if ang_deg.size else None,
-            "evaluation_ms_per_sample": 1e3 * seconds / max(n, 1),
-            "n_samples": int(n), "n_failed": int(np.count_nonzero(~np.isfinite(pos)))}
-
-
-def stats_mm(pos) -> dict:
-    """Mean, p95 and max of position errors (K,) [m], in mm."""
-    p = pos[np.isfinite(pos)] * 1e3
-    if not p.size:
-        return {"n": 0, "mean_mm": None, "p95_mm": None, "max_mm": None}
-    return {"n": int(p.size), "mean_mm": float(p.mean()), "p95_mm": float(np.percentile(p, 95)),
-            "max_mm": float(p.max())}

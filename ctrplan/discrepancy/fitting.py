@@ -1,17 +1,19 @@
-"""Stages 3, 6 and 8 of the discrepancy workflow: the baseline, the candidates and a second effect,
-each fitted on the development data and cross-validated over its folds.
+"""Fitting and cross-validating the models of the discrepancy workflow, and stage 6: the candidate
+effects.
 
 Every model is fitted once on all development samples (its reported parameters, with standard
 errors clustered over units) and once per fold without that fold's samples and their buffer
 (:class:`~ctrplan.discrepancy.split.DataSplit`), by the **same procedure from the same cold
-start**: every start scan, coarse grid and least-squares stage runs in every fold fit, and what a
-fold fit starts from is that fold's own fit of the model it builds on (the baseline, the contact
-baseline, the named effect). No fold fit sees its validation samples, not even through a
-starting point. The fold fits give the out-of-fold errors that the decision reads
-(:func:`~ctrplan.discrepancy.evaluation.out_of_fold`). Chosen once on the development data and
-reused by the folds: the buffer and the scale of the prior (from the pilot fit,
-:func:`pilot_fit`), and the prior's strength (by the baseline's out-of-fold error,
-:func:`calibrate_baseline`).
+start** (:func:`cross_validate`): every start scan, coarse grid and least-squares stage runs in
+every fold fit, and what a fold fit starts from is that fold's own fit of the model it builds on
+(the baseline, the contact baseline, the named effect). No fold fit sees its validation samples,
+not even through a starting point. The fold fits give the out-of-fold errors that the decision
+reads (:func:`~ctrplan.discrepancy.evaluation.out_of_fold`). Chosen once on the development data
+and reused by the folds: the buffer and the scale of the prior (from the pilot fit,
+:func:`~ctrplan.discrepancy.baseline.pilot_fit`), and the prior's strength (by the baseline's
+out-of-fold error, :func:`~ctrplan.discrepancy.baseline.calibrate_baseline`). The baseline is in
+:mod:`~ctrplan.discrepancy.baseline`, a second effect fitted with the named one in
+:mod:`~ctrplan.discrepancy.pairs`.
 
 How each candidate is fitted is its registry entry's ``fit`` (:data:`ctrplan.effects.FIT_STRATEGIES`),
 dispatched through :data:`FITTERS`:
@@ -20,7 +22,8 @@ dispatched through :data:`FITTERS`:
   switched off or, with a start scan (``Effect.scan``), from the best scanned value refined alone
   with the baseline held;
 - ``"grid"``: a grid search of its parameters with the tube parameters refitted with the
-  clearance model (the paper's friction calibration, Section V-C and Table VII of Ha et al. 2019);
+  clearance model (the paper's friction calibration, Section V-C and Table VII of Ha et al. 2019),
+  then refitted together with the baseline's parameters;
 - ``"none"``: nothing to fit: evaluated with the clearance-model tube parameters;
 - ``"scan"``: a 1-D scan of its parameters on top of the fit of the effect it follows.
 
@@ -31,28 +34,33 @@ only a value at that limit is "at bound".
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, replace
-from types import MappingProxyType
-from typing import Mapping
 
 import numpy as np
 
-from ..effects import MODEL_ORDER, REGISTRY
-from .calibrate import (FAILED_RESIDUAL, CalibrationResult, _Objective, _uncertainty, calibrate, eq49_residuals,
-                        grid_search, information_criterion)
+from .._log import progress_level
+from ..effects import REGISTRY
+from ..models import MODEL_INFO, MODELS
+from ..parallel import Executor
+from .calibrate import FAILED_RESIDUAL, CalibrationResult, _Objective, _uncertainty, calibrate, eq49_residuals, \
+    information_criterion
 from .data import MeasuredData
-from .evaluation import Errors, error_summary, out_of_fold
+from .estimates import atypical_values, display_value, parameter_table
+from .evaluation import ErrorFigures, Errors, out_of_fold
+from .gridsearch import grid_search
 from .options import CONFIDENCE, DiscrepancyOptions
-from .parameters import REGISTRATION, parameter, read_parameters
+from .parameters import parameter, read_parameters
 from .setup import DiscrepancySetup, effect_parameters, reported_parameters
-from .split import DataSplit, choose_buffer, subsample
-from .statistics import cv_comparison, holm
+from .split import DataSplit, subsample
+from .statistics import Comparison, cv_comparison
 
-__all__ = ["CrossValidated", "Baseline", "Candidate", "Combination", "FITTERS", "cross_validate", "pilot_fit",
-           "calibrate_baseline", "refit_contact_baseline", "fit_candidates", "fit_second_effect", "scan_fit",
-           "atypical_values", "parameter_table", "display_value", "combined_model", "needs_contact_baseline",
-           "candidate_report", "candidate_reports", "contained", "compare", "pair_decision"]
+__all__ = ["CrossValidated", "Candidate", "FITTERS", "cross_validate", "refit_contact_baseline", "fit_candidates",
+           "scan_fit", "combined_model", "needs_contact_baseline", "contained", "compare", "run_fits", "fit_rows", "stage_name",
+           "make_candidate"]
+
+logger = logging.getLogger(__name__)
 
 
 # --------------------------------------------------------------------------- results
@@ -105,63 +113,9 @@ class CrossValidated:
 
 
 @dataclass(frozen=True, eq=False)
-class Baseline:
-    """Stage 3: the calibrated baseline (standard model) and the choice of its prior.
-
-    Attributes
-    ----------
-    cv : CrossValidated
-        The baseline with the chosen prior strength.
-    bic : float
-        BIC of its development fit (:func:`~ctrplan.discrepancy.calibrate.information_criterion`).
-    parameters : list of dict
-        :func:`parameter_table` of its fitted values: uncertainty, change from the robot file's
-        value, typical range.
-    strength : float
-        The chosen prior strength tau (0: the robot file's tube parameters, only the registration
-        fitted; inf: no prior).
-    prior : dict
-        ``{name: (robot file's value, scale)}`` of the chosen prior (:class:`~ctrplan.discrepancy.calibrate.Prior`);
-        empty for tau 0 and inf.
-    choices : list of dict
-        Every strength tried: ``strength``, its out-of-fold mean tip error [m] and Eq. (49)
-        residual, and its comparison with the robot file's parameters
-        (:func:`~ctrplan.discrepancy.statistics.cv_comparison`, positive: better than the file).
-    file_cv : CrossValidated
-        The robot file's tube parameters with only a registration fitted (tau 0).
-    residual_scale : float
-        The pilot fit's rms Eq. (49) residual [mm + deg] that scales the prior.
-    """
-
-    cv: CrossValidated
-    bic: float
-    parameters: list
-    strength: float
-    prior: dict
-    choices: list
-    file_cv: CrossValidated
-    residual_scale: float
-
-    @property
-    def fit(self) -> CalibrationResult:
-        return self.cv.fit
-
-    @property
-    def params(self) -> dict:
-        return self.cv.params
-
-    @property
-    def oof(self) -> Errors:
-        return self.cv.oof
-
-    @property
-    def r(self) -> np.ndarray:
-        return self.cv.r
-
-
-@dataclass(frozen=True, eq=False)
 class Candidate:
-    """A candidate effect (or, in :class:`Combination`, a pair of effects), fitted and cross-validated.
+    """A candidate effect (or, in :class:`~ctrplan.discrepancy.pairs.Combination`, a pair of effects),
+    fitted and cross-validated.
 
     Attributes
     ----------
@@ -172,10 +126,11 @@ class Candidate:
     shown : dict of str to float
         The parameters reported as its own [SI].
     units : dict of str to str
-    parameters : list of dict
-        :func:`parameter_table` of the shown parameters.
-    atypical : list of dict
-        Shown values outside their typical range (:func:`atypical_values`), each with what to check.
+    parameters : tuple of ParameterEstimate
+        :func:`~ctrplan.discrepancy.estimates.parameter_table` of the shown parameters.
+    atypical : tuple of AtypicalValue
+        Shown values outside their typical range
+        (:func:`~ctrplan.discrepancy.estimates.atypical_values`), each with what to check.
     at_bound : tuple of str
         Fitted values at a bound or a grid's or scan's edge that could not be widened (the
         development fit's or a fold's).
@@ -186,10 +141,10 @@ class Candidate:
     bic, delta_bic : float
         BIC of the development fit, and its difference to the baseline's (to the named effect's
         for a pair).
-    improvement : dict
+    improvement : Comparison
         :func:`~ctrplan.discrepancy.statistics.cv_comparison` of the out-of-fold Eq. (49)
         residuals against the baseline's (against the named effect's for a pair) [mm + deg].
-    improvement_position : dict
+    improvement_position : Comparison
         The same for the tip position errors [m].
     fit_note : str
         What its fits say about themselves ("" if nothing).
@@ -200,7 +155,7 @@ class Candidate:
         not at a bound.
     significant : bool or None
         A pair's verdict (stage 8).
-    reverse : dict or None
+    reverse : Comparison or None
         A pair against its second effect alone (does the named effect still add anything?).
     """
 
@@ -209,20 +164,20 @@ class Candidate:
     cv: CrossValidated
     shown: dict
     units: dict
-    parameters: list
-    atypical: list
+    parameters: tuple
+    atypical: tuple
     at_bound: tuple
     widened: tuple
     n_parameters: int
     bic: float
     delta_bic: float
-    improvement: dict
-    improvement_position: dict
+    improvement: Comparison
+    improvement_position: Comparison
     fit_note: str = ""
     improvement_significant: bool | None = None
     eligible: bool | None = None
     significant: bool | None = None
-    reverse: dict | None = None
+    reverse: Comparison | None = None
 
     @property
     def model(self) -> str:
@@ -254,104 +209,17 @@ class Candidate:
         """Mean out-of-fold Eq. (49) residual [mm + deg]."""
         return float(np.nanmean(self.r))
 
-
-@dataclass(frozen=True, eq=False)
-class Combination:
-    """Stage 8: a second effect fitted together with the named one.
-
-    Attributes
-    ----------
-    first, first_label : str
-        The named effect.
-    named : str or None
-        The second effect named with it (the pair is the final model).
-    dropped : str or None
-        The named effect, when a pair shows it adds nothing once the second effect is in (the
-        second effect alone is then the final model: ``replaced_by``).
-    replaced_by : str or None
-    tried : mapping of str to Candidate
-        Second effect -> the pair fitted and cross-validated.
-    not_tried : mapping of str to str
-        Every other candidate -> why it was not tried with the named one.
-    family : tuple of str
-        Every candidate that could be paired with the named one: the Holm family of the pairs
-        (a pair not tried counts with p = 1).
-    rule : str
-        The rule a pair is named by.
-    """
-
-    first: str
-    first_label: str
-    named: str | None
-    tried: Mapping[str, Candidate]
-    not_tried: Mapping[str, str]
-    family: tuple
-    rule: str
-    dropped: str | None = None
-    replaced_by: str | None = None
+    @property
+    def out_of_fold_figures(self) -> ErrorFigures:
+        """Its out-of-fold errors at the development samples summarized [m, rad]."""
+        return ErrorFigures.of(self.oof)
 
 
 # --------------------------------------------------------------------------- helpers
-def display_value(name: str, value: float, unit: str) -> str:
-    """A parameter for a printed report: rad as deg, m as mm, others in their SI unit."""
-    if unit == "rad":
-        return f"{name} = {np.rad2deg(value):.4g} deg"
-    if unit == "m":
-        return f"{name} = {value * 1e3:.4g} mm"
-    return f"{name} = {value:.4g}" + ("" if unit == "-" else f" {unit}")
-
-
-def atypical_values(robot, params: Mapping) -> list:
-    """Fitted values outside their typical range: ``[{name, value, typical, typical_text, unit, why,
-    check}]`` (``why``: the range's source; ``check``: what to check on the robot)."""
-    out = []
-    for name, value in params.items():
-        p = parameter(robot, name)
-        if not p.is_typical(value):
-            out.append({"name": name, "value": float(value), "typical": list(p.typical), "unit": p.unit,
-                        "typical_text": p.typical_text(), "why": p.typical_source, "check": p.check})
-    return out
-
-
-def parameter_table(robot, fit: CalibrationResult, names, *, reference: Mapping | None = None) -> list:
-    """The fitted parameters ``names`` of ``fit`` as a report reads them.
-
-    Returns
-    -------
-    list of dict
-        Per parameter: ``name``, ``unit``, ``value``, ``stderr`` (clustered over units when the
-        fit computed it so) and the ``ci`` at :data:`~ctrplan.discrepancy.options.CONFIDENCE`
-        (normal approximation; None without a standard error), ``typical`` range and whether
-        the value lies in it, ``at_bound`` (flag of the fit), ``resolution`` of a scan or grid
-        that set it, and, with ``reference`` (e.g. the robot file's values), ``reference`` and
-        ``relative_change``.
-    """
-    from scipy import stats
-
-    z = float(stats.norm.ppf(0.5 + CONFIDENCE / 2))
-    values = dict(zip(fit.names, fit.values))
-    errors = dict(zip(fit.names, fit.stderr)) if fit.stderr is not None else {}
-    flagged = {b.split(" ")[0] for b in fit.at_bound}
-    out = []
-    for n in names:
-        v = float(values.get(n, fit.fixed.get(n, np.nan)))
-        p = parameter(robot, n)
-        se = errors.get(n)
-        row = {"name": n, "unit": p.unit, "value": v, "stderr": None if se is None else float(se),
-               "ci": None if se is None or not np.isfinite(se) else [v - z * se, v + z * se],
-               "typical": None if p.typical is None else list(p.typical), "in_typical_range": p.is_typical(v),
-               "typical_source": p.typical_source, "check": p.check, "at_bound": n in flagged,
-               "resolution": p.resolution, "fitted": n in values}
-        if reference is not None and n in reference:
-            ref = float(reference[n])
-            row.update({"reference": ref, "relative_change": (v - ref) / ref if ref else None})
-        out.append(row)
-    return out
-
-
 def combined_model(*effects: str) -> str:
-    """Mechanics model of effects together: the most complete one any of them needs."""
-    return max((REGISTRY[e].model for e in effects), key=MODEL_ORDER.index)
+    """Mechanics model of effects together: the most complete one any of them needs (the latest in
+    :data:`ctrplan.models.MODELS`)."""
+    return max((REGISTRY[e].model for e in effects), key=MODELS.index)
 
 
 def needs_contact_baseline(effect: str) -> bool:
@@ -365,7 +233,7 @@ def contained(a: str, b: str) -> bool:
     return a in REGISTRY[b].contains or b in REGISTRY[a].contains
 
 
-def compare(split: DataSplit, err_a, err_b) -> dict:
+def compare(split: DataSplit, err_a, err_b) -> Comparison:
     """:func:`~ctrplan.discrepancy.statistics.cv_comparison` of two models' out-of-fold errors at
     the development samples (positive: b is better)."""
     return cv_comparison(err_a, err_b, split.fold[split.dev_rows], confidence=CONFIDENCE)
@@ -428,25 +296,31 @@ def scan_fit(robot, data: MeasuredData, model: str, fixed: dict, names, values, 
     return CalibrationResult(model, names, x, np.zeros(len(names)), dict(fixed), float(r @ r), data.n_samples,
                              int((r == FAILED_RESIDUAL).sum()), obj.evaluations, time.perf_counter() - t0,
                              f"scan of {', '.join(names)} (value: cost) {trail}; best {b:.4g}; resolution "
-                             f"{resolution:.4g}" + (f"; at the end of the scan, not converged" if edge else ""),
+                             f"{resolution:.4g}" + ("; at the end of the scan, not converged" if edge else ""),
                              not edge, se, corr, edge, tuple(widened))
 
 
 # --------------------------------------------------------------------------- cross-validation
-def _run_fits(jobs: list, n_jobs: int):
-    """Run independent fits ``[(callable, args)]``: in joblib (loky) worker processes when there
-    are several and ``n_jobs`` > 1, else here; yields the results in order as they finish (so
-    that each is stored before the next ends: an interrupted run loses at most the fits under way)."""
-    if n_jobs > 1 and len(jobs) > 1:
-        from joblib import Parallel, delayed
-
-        yield from Parallel(n_jobs=min(n_jobs, len(jobs)), return_as="generator")(delayed(f)(*a) for f, a in jobs)
-    else:
-        for f, a in jobs:
-            yield f(*a)
+def _call(fn, args):
+    return fn(*args)
 
 
-def _fit_rows(setup, split: DataSplit, k: int | None, limit: int | None = None) -> tuple[MeasuredData, np.ndarray]:
+def run_fits(jobs: list, n_jobs: int):
+    """Run independent fits ``[(callable, args)]``: on ``n_jobs`` local worker processes when there
+    are several (:class:`ctrplan.parallel.Executor`), else here in order.
+
+    Yields
+    ------
+    tuple
+        ``(index into jobs, result)`` as each fit finishes, so that each is stored at once: an
+        interrupted run loses at most the fits under way.
+    """
+    workers = min(n_jobs, len(jobs)) if n_jobs > 1 and len(jobs) > 1 else 1
+    with Executor(workers) as ex:
+        yield from ex.run(_call, [(i, (f, a)) for i, (f, a) in enumerate(jobs)])
+
+
+def fit_rows(setup, split: DataSplit, k: int | None, limit: int | None = None) -> tuple[MeasuredData, np.ndarray]:
     """The samples fold ``k``'s fit uses (all development samples for None; at most ``limit`` of
     them, evenly chosen) and their units."""
     rows = split.fit_rows(setup.data, k)
@@ -456,11 +330,13 @@ def _fit_rows(setup, split: DataSplit, k: int | None, limit: int | None = None) 
 
 
 def cross_validate(setup: DiscrepancySetup, split: DataSplit, options: DiscrepancyOptions, name: str, model: str,
-                   fit_one, *, evaluate: bool = True, echo=print, progress: bool = False) -> CrossValidated:
+                   fit_one, *, evaluate: bool = True, progress: bool = False) -> CrossValidated:
     """Fit a model on all development samples and without each fold, and its out-of-fold errors.
 
     The fits are independent (each fold's from the same cold start), so they run in parallel
-    worker processes with ``options.n_jobs`` > 1, each with one model-evaluation process.
+    worker processes with ``options.n_jobs`` > 1 (:func:`run_fits`), each with one
+    model-evaluation process. Fits stored by an earlier run with the same stage key are reused,
+    and each new fit is stored as it finishes.
 
     Parameters
     ----------
@@ -475,8 +351,8 @@ def cross_validate(setup: DiscrepancySetup, split: DataSplit, options: Discrepan
         all development samples), evaluating the model with ``n_jobs`` processes.
     evaluate : bool
         Compute the out-of-fold errors.
-    echo : callable
     progress : bool
+        Progress bars of the model evaluations.
 
     Returns
     -------
@@ -484,219 +360,58 @@ def cross_validate(setup: DiscrepancySetup, split: DataSplit, options: Discrepan
     """
     fits, todo = {}, []
     for k in [None] + list(range(split.n_folds)):
-        done = setup.stages.load(_stage(name, k))
+        done = setup.stages.load(stage_name(name, k))
         if done is not None:
             fits[k] = CalibrationResult.from_dict(done)
         else:
             todo.append(k)
+    level = progress_level()
     if len(todo) < split.n_folds + 1:
-        echo(f"  fit-{name}: {split.n_folds + 1 - len(todo)} of {split.n_folds + 1} fits reused from an earlier run")
+        logger.log(level, f"  fit-{name}: {split.n_folds + 1 - len(todo)} of {split.n_folds + 1} fits reused from an "
+                          f"earlier run")
     if todo:
         parallel = options.n_jobs > 1 and len(todo) > 1
-        echo(f"  fitting {name} ({model} model) on the development samples and without each of {split.n_folds} folds"
-             + (f" ({len(todo)} fits, {min(options.n_jobs, len(todo))} at once)" if parallel else f" ({len(todo)} fits)")
-             + " ...")
+        logger.log(level, f"  fitting {name} ({model} model) on the development samples and without each of "
+                          f"{split.n_folds} folds"
+                   + (f" ({len(todo)} fits, {min(options.n_jobs, len(todo))} at once)" if parallel
+                      else f" ({len(todo)} fits)") + " ...")
         inner = 1 if parallel else options.n_jobs
-        for k, res in zip(todo, _run_fits([(fit_one, (k, inner)) for k in todo], options.n_jobs)):
-            fits[k] = res
-            setup.stages.save(_stage(name, k), res.as_dict())
+        for i, res in run_fits([(fit_one, (k, inner)) for k in todo], options.n_jobs):
+            fits[todo[i]] = res
+            setup.stages.save(stage_name(name, todo[i]), res.as_dict())
     folds = tuple(fits[k] for k in range(split.n_folds))
     oof = r = None
     if evaluate:
         oof = out_of_fold(setup, split, name, model, [dict(zip(*f.all_parameters())) for f in folds],
-                          n_jobs=options.n_jobs, progress=progress, echo=echo)
+                          n_jobs=options.n_jobs, progress=progress)
         r = eq49_residuals(oof.position, oof.angle)
     return CrossValidated(name=name, model=model, fit=fits[None], folds=folds, params=dict(zip(*fits[None].all_parameters())),
                           oof=oof, r=r, fold=split.fold[split.dev_rows])
 
 
-def _stage(name: str, k: int | None) -> str:
+def stage_name(name: str, k: int | None) -> str:
+    """The stage a fit of model ``name`` is stored under: ``fit-<name>`` (development fit, ``k``
+    None) or ``fit-<name>-fold<k>``."""
     return f"fit-{name}" + ("" if k is None else f"-fold{k}")
 
 
-# --------------------------------------------------------------------------- stage 3
-def _tube_names(setup) -> tuple:
-    return tuple(n for n in setup.base_names if n not in REGISTRATION)
-
-
-def pilot_fit(setup: DiscrepancySetup, split: DataSplit, options: DiscrepancyOptions, echo=print) -> tuple:
-    """Stage 3a: the baseline fitted once on the development samples without a prior (the pilot),
-    to choose what the folds then share: the buffer (from its residuals' autocorrelation,
-    :func:`~ctrplan.discrepancy.split.choose_buffer`) and the prior's scale (its rms Eq. (49)
-    residual). It never sees the test split.
-
-    Returns
-    -------
-    split : DataSplit
-        With the buffer.
-    residual_scale : float
-        rms Eq. (49) residual of the pilot fit [mm + deg].
-    pilot : CalibrationResult
-    """
-    from .evaluation import evaluate_rows
-
-    data = setup.data
-    stage = setup.stages.load("pilot")
-    if stage is not None:
-        pilot = CalibrationResult.from_dict(stage)
-        echo("  pilot: reused from an earlier run")
-    else:
-        echo("calibrating the baseline once on the development samples (pilot: buffer and prior scale) ...")
-        pilot = calibrate(setup.robot, data.take(split.fit_rows(data)), "standard", setup.base_names, settings=setup.settings,
-                          n_jobs=options.n_jobs, register=setup.register, max_evaluations=options.max_evaluations,
-                          uncertainty=False)
-        setup.stages.save("pilot", pilot.as_dict())
-    dev = split.dev_rows
-    e = evaluate_rows(setup, dev, "pilot-residual", "standard", dict(zip(*pilot.all_parameters())),
-                      n_jobs=options.n_jobs, echo=echo)
-    buffer, why = choose_buffer(e.residual_base, data.take(dev), split.block_samples)
-    scale = float(np.sqrt(pilot.cost / max(pilot.n_samples, 1)))
-    echo(f"  buffer: {why}; prior scale: the pilot's rms Eq. (49) residual {scale:.3g} mm + deg")
-    return split.with_buffer(buffer, why), scale, pilot
-
-
-def baseline_prior(setup, strength: float, scale: float) -> dict:
-    """The prior of strength ``strength`` (tau) toward the robot file's tube parameters:
-    ``{name: (file value, tau |file value| / scale)}`` (a relative change tau costs as much as one
-    sample's Eq. (49) residual of ``scale``); empty for tau 0 (the parameters are held) and inf."""
-    if not (0.0 < strength < np.inf):
-        return {}
-    names = _tube_names(setup)
-    values = read_parameters(setup.robot, names)
-    out = {}
-    for n, v in zip(names, values):
-        ref = abs(v) if v != 0.0 else parameter(setup.robot, n).scale
-        out[n] = (float(v), strength * ref / scale)
-    return out
-
-
-def _baseline_path(setup, split, options, strengths, scale, k, n_jobs) -> dict:
-    """The baseline of every prior strength on fold ``k``'s calibration samples: tau inf from the
-    cold start (robot file's values, closed-form registration), each stronger prior continued
-    from the previous one's minimum, tau 0 the registration alone (tube parameters held at the
-    robot file's values). Same procedure for every fold and the development fit."""
-    fit_data, units = _fit_rows(setup, split, k)
-    tube = _tube_names(setup)
-    fixed_file = dict(zip(tube, read_parameters(setup.robot, tube)))
-    out, prev = {}, None
-    for tau in sorted(strengths, reverse=True):
-        kw = dict(settings=setup.settings, n_jobs=n_jobs, register=setup.register,
-                  max_evaluations=options.max_evaluations, uncertainty=k is None, clusters=units)
-        if tau == 0.0:
-            names = tuple(n for n in setup.base_names if n in REGISTRATION)
-            fit = calibrate(setup.robot, fit_data, "standard", names, fixed=fixed_file, **kw)
-        elif prev is None:
-            fit = calibrate(setup.robot, fit_data, "standard", setup.base_names,
-                            prior=baseline_prior(setup, tau, scale), **kw)
-        else:
-            fit = calibrate(setup.robot, fit_data, "standard", setup.base_names, initial=prev.values, warm=True,
-                            prior=baseline_prior(setup, tau, scale), **kw)
-        out[tau] = fit
-        prev = fit if tau > 0 else prev
-    return out
-
-
-def _tau_name(tau: float) -> str:
-    return "baseline" + ("-file" if tau == 0 else "" if np.isinf(tau) else f"-tau{tau:g}")
-
-
-def calibrate_baseline(setup: DiscrepancySetup, split: DataSplit, options: DiscrepancyOptions, echo=print,
-                       progress: bool = False, *, residual_scale: float = 1.0) -> Baseline:
-    """Stage 3b: the baseline (standard model), by least squares on Eq. (49) of Ha, Fagogenis &
-    Dupont 2019 (:func:`~ctrplan.discrepancy.calibrate.calibrate`) with a prior toward the robot
-    file's tube parameters, on the development samples and without each fold.
-
-    The prior adds rows ``residual_scale (theta - theta_file) / (tau |theta_file|)`` for every tube
-    parameter (:func:`baseline_prior`); its strength tau is the one of ``options.prior_strengths``
-    whose baseline has the lowest mean out-of-fold Eq. (49) residual, among them 0 (the robot
-    file's tube parameters with only a registration) and inf (no prior). Every strength is
-    cross-validated with the same folds; fits finished by an earlier run are reused.
-
-    Returns
-    -------
-    Baseline
-        With the chosen strength, every strength's out-of-fold figures and its comparison with
-        the robot file's parameters, and the parameters' clustered standard errors, changes from
-        the robot file's values and typical ranges (:func:`parameter_table`).
-    """
-    strengths = tuple(sorted(set(float(t) for t in options.prior_strengths) | {0.0}, reverse=True))
-    cache: dict = {}
-
-    def path(k, n_jobs):
-        if k not in cache:
-            cache[k] = _baseline_path(setup, split, options, strengths, residual_scale, k, n_jobs)
-        return cache[k]
-
-    # the path of every fold is one job; each strength is then stored as its own cross-validated model
-    missing = [k for k in [None] + list(range(split.n_folds))
-               if any(setup.stages.load(_stage(_tau_name(t), k)) is None for t in strengths)]
-    if missing:
-        echo(f"calibrating the baseline (standard model) with prior strengths {', '.join(f'{t:g}' for t in strengths)} "
-             f"on the development samples and without each of {split.n_folds} folds ({len(missing)} paths) ...")
-        parallel = options.n_jobs > 1 and len(missing) > 1
-        for k, res in zip(missing, _run_fits([(_baseline_path, (setup, split, options, strengths, residual_scale, k,
-                                                                 1 if parallel else options.n_jobs))
-                                              for k in missing], options.n_jobs)):
-            cache[k] = res
-            for t, fit in res.items():
-                setup.stages.save(_stage(_tau_name(t), k), fit.as_dict())
-    cvs = {t: cross_validate(setup, split, options, _tau_name(t), "standard", lambda k, n, t=t: path(k, n)[t],
-                             echo=lambda s: None, progress=progress) for t in strengths}
-    file_cv = cvs[0.0]
-    choices = []
-    for t in strengths:
-        cv = cvs[t]
-        cmp = compare(split, file_cv.r, cv.r)
-        choices.append({"strength": t, "mean_position_m": float(np.nanmean(cv.oof.position)),
-                        "mean_eq49": float(np.nanmean(cv.r)), "against_file": cmp})
-    best = min(strengths, key=lambda t: (np.nanmean(cvs[t].r), -t))
-    cv = cvs[best]
-    base = cv.fit
-    echo("  prior strength tau: out-of-fold mean tip error "
-         + ", ".join(f"{_strength_label(c['strength'])} {1e3 * c['mean_position_m']:.3f} mm" for c in choices)
-         + f"; chosen: {_strength_text(best)}")
-    echo(f"  baseline: cost {base.cost:.4g} on {base.n_samples} samples, {base.evaluations} model evaluations, "
-         f"{base.seconds:.1f} s ({base.message})")
-    tube_names = _tube_names(setup)
-    reference = dict(zip(tube_names, read_parameters(setup.robot, tube_names)))
-    table = parameter_table(setup.robot, base, setup.base_names, reference=reference)
-    if setup.data.frame == "tracker":
-        # the registration of a tracker-frame file maps between two unrelated frames: any value
-        # is typical (its range is the one a robot-frame file must keep)
-        for row in table:
-            if row["name"] in REGISTRATION:
-                row.update(typical=None, in_typical_range=True, typical_source="tracker frame: any rigid registration")
-    for row in table:
-        if not row["in_typical_range"] or row["at_bound"]:
-            echo(f"  baseline {display_value(row['name'], row['value'], row['unit'])}: "
-                 + ("at a bound; " if row["at_bound"] else "") + f"outside its typical range ({row['typical_source']})")
-    n_fitted = len(base.names)
-    return Baseline(cv=cv, bic=information_criterion(base.cost, base.n_samples, n_fitted), parameters=table,
-                    strength=best, prior=baseline_prior(setup, best, residual_scale), choices=choices,
-                    file_cv=file_cv, residual_scale=residual_scale)
-
-
-def _strength_label(t: float) -> str:
-    return "file" if t == 0 else "none" if np.isinf(t) else f"{t:g}"
-
-
-def _strength_text(t: float) -> str:
-    if t == 0:
-        return "the robot file's tube parameters (registration only)"
-    if np.isinf(t):
-        return "no prior"
-    return f"tau = {t:g}"
-
-
 # --------------------------------------------------------------------------- stage 6
-def refit_contact_baseline(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline, options: DiscrepancyOptions,
-                           echo=print) -> CrossValidated | None:
+def refit_contact_baseline(setup: DiscrepancySetup, split: DataSplit, baseline, options: DiscrepancyOptions
+                           ) -> CrossValidated | None:
     """Stage 6a: the baseline's tube parameters refitted with the clearance model (with the same
     prior), on the development samples and without each fold, each started from the baseline's
     fit of the same samples; shared by the candidates fitted on it (friction, clearance; Section
     V-C and Table VII of Ha et al. 2019), within ``options.max_contact_evaluations``, on at most
     ``options.max_contact_samples`` of the fit's samples (a contact solve costs some 30 standard
     ones).
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : DataSplit
+    baseline : Baseline
+        Stage 3 (:func:`~ctrplan.discrepancy.baseline.calibrate_baseline`).
+    options : DiscrepancyOptions
 
     Returns
     -------
@@ -708,14 +423,14 @@ def refit_contact_baseline(setup: DiscrepancySetup, split: DataSplit, baseline: 
 
     def fit_one(k, n_jobs):
         base = baseline.cv.fold_fit(k)
-        fit_data, units = _fit_rows(setup, split, k, options.max_contact_samples)
+        fit_data, units = fit_rows(setup, split, k, options.max_contact_samples)
         return calibrate(setup.robot, fit_data, "clearance", base.names, fixed=base.fixed, initial=base.values,
                          settings=setup.settings, n_jobs=n_jobs, max_evaluations=options.max_contact_evaluations,
                          uncertainty=False, warm=True, prior=baseline.prior, clusters=units)
 
-    cv = cross_validate(setup, split, options, "contact-baseline", "clearance", fit_one, evaluate=False, echo=echo)
-    echo(f"  clearance-model tube parameters: cost {cv.fit.cost:.4g}, {cv.fit.evaluations} evaluations"
-         + ("" if cv.fit.converged else "; NOT converged (stopped at its budget)"))
+    cv = cross_validate(setup, split, options, "contact-baseline", "clearance", fit_one, evaluate=False)
+    logger.log(progress_level(), f"  clearance-model tube parameters: cost {cv.fit.cost:.4g}, {cv.fit.evaluations} "
+                                 f"evaluations" + ("" if cv.fit.converged else "; NOT converged (stopped at its budget)"))
     return cv
 
 
@@ -786,7 +501,7 @@ def _fit_scan(ctx) -> CalibrationResult:
     parameters and those of the effect it follows refitted together with the baseline's
     (:func:`_refine_contact`)."""
     setup, entry = ctx["setup"], ctx["entry"]
-    contact = entry.model != "standard"
+    contact = MODEL_INFO[entry.model].contact
     s = scan_fit(setup.robot, ctx["fit_data"], entry.model, ctx["after"], ctx["extra"], entry.scan,
                  setup.settings, ctx["n_jobs"], uncertainty=ctx["k"] is None and not contact, clusters=ctx["units"])
     if not contact:
@@ -799,7 +514,7 @@ def _fit_scan(ctx) -> CalibrationResult:
 FITTERS = {"nested": _fit_nested, "grid": _fit_grid, "none": _fit_none, "scan": _fit_scan}
 
 
-def _fit_note(effect: str, c: CrossValidated, base: Baseline, contact: CrossValidated | None, options) -> str:
+def _fit_note(effect: str, c: CrossValidated, base, contact: CrossValidated | None, options) -> str:
     """What a candidate's fits say about themselves: not converged, at a bound, worse on the
     calibration data than the baseline, or better there but worse out of fold (overfitting)."""
     notes = []
@@ -832,8 +547,11 @@ def _fit_note(effect: str, c: CrossValidated, base: Baseline, contact: CrossVali
     return "; ".join(notes)
 
 
-def _candidate(setup, split, baseline, effects, label, cv, shown_names, reference: "Candidate | Baseline", note,
-               widened=()) -> Candidate:
+def make_candidate(setup, split, baseline, effects, label, cv, shown_names, reference, note, widened=()) -> Candidate:
+    """A fitted and cross-validated model as a :class:`Candidate`: its shown parameters
+    ``shown_names`` with their table and atypical values, its BIC (every baseline and shown
+    parameter counted) and its comparisons with ``reference`` (the baseline, or the named
+    effect for a pair: anything with ``bic``, ``r`` and ``oof``)."""
     robot = setup.robot
     params = cv.params
     shown = {n: float(params[n]) for n in shown_names}
@@ -851,20 +569,32 @@ def _candidate(setup, split, baseline, effects, label, cv, shown_names, referenc
 
 
 def _context(setup, split, baseline, contact, candidates, entry, extra, options, k, n_jobs) -> dict:
-    fit_data, units = _fit_rows(setup, split, k, None if entry.model == "standard" else options.max_contact_samples)
+    fit_data, units = fit_rows(setup, split, k, options.max_contact_samples if MODEL_INFO[entry.model].contact else None)
     return {"setup": setup, "entry": entry, "k": k, "extra": extra, "options": options, "n_jobs": n_jobs,
             "fit_data": fit_data, "units": units, "base": baseline.cv.fold_fit(k), "prior": baseline.prior,
             "contact": None if contact is None else contact.fold_params(k),
             "after": None if entry.after is None else candidates[entry.after].cv.fold_params(k)}
 
 
-def fit_candidates(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline, contact: CrossValidated | None,
-                   options: DiscrepancyOptions, echo=print, progress: bool = False) -> dict:
+def fit_candidates(setup: DiscrepancySetup, split: DataSplit, baseline, contact: CrossValidated | None,
+                   options: DiscrepancyOptions, progress: bool = False) -> dict:
     """Stage 6b: switch each candidate effect on, fit it by its entry's strategy (:data:`FITTERS`)
     on the development samples and without each fold (each fold from its own baseline), and
     compare its out-of-fold errors with the baseline's
     (:func:`~ctrplan.discrepancy.statistics.cv_comparison`). Fits finished by an earlier run are
     reused.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : DataSplit
+    baseline : Baseline
+        Stage 3.
+    contact : CrossValidated or None
+        Stage 6a (:func:`refit_contact_baseline`).
+    options : DiscrepancyOptions
+    progress : bool
+        Progress bars of the model evaluations.
 
     Returns
     -------
@@ -876,248 +606,27 @@ def fit_candidates(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline
     for e in setup.effects:
         entry = REGISTRY[e]
         extra = effect_parameters(robot, e, data)
-        echo(f"candidate {entry.label}: fitting {', '.join(extra) or 'no parameters'} ({entry.model} model) ...")
+        logger.log(progress_level(), f"candidate {entry.label}: fitting {', '.join(extra) or 'no parameters'} "
+                                     f"({entry.model} model) ...")
 
         def fit_one(k, n_jobs, entry=entry, extra=extra):
             return FITTERS[entry.fit](_context(setup, split, baseline, contact, candidates, entry, extra, options, k,
                                                n_jobs))
 
-        cv = cross_validate(setup, split, options, e, entry.model, fit_one, echo=echo, progress=progress)
-        c = _candidate(setup, split, baseline, (e,), entry.label, cv, reported_parameters(robot, e, data), baseline,
+        cv = cross_validate(setup, split, options, e, entry.model, fit_one, progress=progress)
+        c = make_candidate(setup, split, baseline, (e,), entry.label, cv, reported_parameters(robot, e, data), baseline,
                        _fit_note(e, cv, baseline, contact, options))
         if entry.after is not None and candidates[entry.after].at_bound:
             # it carries the values of the fit it starts from: a value at its limit there is one here
             c = replace(c, at_bound=tuple(sorted(set(c.at_bound) | set(candidates[entry.after].at_bound))))
         candidates[e] = c
-        imp = c.improvement
-        held = error_summary(c.oof.position, c.oof.angle, c.oof.seconds, c.oof.rows.size)
-        echo(f"  {entry.label}: " + (", ".join(display_value(n, v, c.units[n]) for n, v in c.shown.items()) or "nominal")
-             + f"; out-of-fold mean {held['position_mean_mm']:.3f} mm, max {held['position_max_mm']:.3f} mm; "
-               f"error lower by {100 * imp['reduction']:.0f} % ({100 * imp['reduction_ci'][0]:.0f}.."
-               f"{100 * imp['reduction_ci'][1]:.0f} %; {imp['mean_difference']:.3f} mm + deg), p = {imp['p_value']:.3g}"
-             + (f"; {c.fit_note}" if c.fit_note else ""))
+        imp, held = c.improvement, c.out_of_fold_figures
+        logger.log(progress_level(),
+                   f"  {entry.label}: " + (", ".join(display_value(n, v, c.units[n]) for n, v in c.shown.items())
+                                           or "nominal")
+                   + f"; out-of-fold mean {1e3 * held.position_mean:.3f} mm, max {1e3 * held.position_max:.3f} mm; "
+                     f"error lower by {100 * imp.reduction:.0f} % ({100 * imp.reduction_ci[0]:.0f}.."
+                     f"{100 * imp.reduction_ci[1]:.0f} %; {imp.mean_difference:.3f} mm + deg), p = {imp.p_value:.3g}"
+                   + (f"; {c.fit_note}" if c.fit_note else ""))
     return candidates
 
-
-# --------------------------------------------------------------------------- stage 8
-def _fit_pair(ctx) -> CalibrationResult:
-    """A second effect fitted together with the named one, on fold ``k``'s samples.
-
-    Started from the named effect's fit of the same samples. With the standard model: the second
-    effect's own procedure (its start scan, then its parameters alone) with the named fit held,
-    then every parameter together. With a contact model: the tube parameters refitted with the
-    clearance model with the named effect's own parameters in place, the second effect by its own
-    strategy (its grid, or its parameters alone from its single fit of the same samples), then
-    every effect parameter and the baseline's parameters refitted together with the contact model,
-    as a contact candidate alone is (:func:`_refine_contact`); every value is fitted with the other
-    effect present.
-    """
-    setup, options, k, n_jobs = ctx["setup"], ctx["options"], ctx["k"], ctx["n_jobs"]
-    robot, settings, fit_data, units = setup.robot, setup.settings, ctx["fit_data"], ctx["units"]
-    first, second, model = ctx["first"], ctx["second"], ctx["model"]
-    f1 = first.cv.fold_fit(k)
-    p1 = dict(zip(*f1.all_parameters()))
-    entry = REGISTRY[second.effects[0]]
-    extra = ctx["extra"]
-    if model == "standard":
-        own = second.cv.fold_params(k)
-        start = np.array([own[n] for n in extra], float)
-        if entry.scan is not None:
-            start = scan_fit(robot, fit_data, model, p1, extra, entry.scan, settings, n_jobs, uncertainty=False).values
-        alone = calibrate(robot, fit_data, model, extra, fixed=p1, initial=start, settings=settings, n_jobs=n_jobs,
-                          max_evaluations=options.max_evaluations, uncertainty=False)
-        names = tuple(f1.names) + extra
-        init = np.concatenate([f1.values, alone.values])
-        return calibrate(robot, fit_data, model, names, fixed=f1.fixed, initial=init, settings=settings, n_jobs=n_jobs,
-                         max_evaluations=options.max_evaluations, uncertainty=k is None, warm=True,
-                         prior=ctx["prior"], clusters=units)
-    budget = options.max_contact_evaluations
-    # the baseline parameters the named fit fitted (the robot file's, held by a prior of strength 0, stay held)
-    base_names = tuple(n for n in setup.base_names if n in f1.names)
-    first_extra = tuple(n for n in f1.names if n not in base_names)
-    held = {n: v for n, v in p1.items() if n not in base_names}
-    tube = calibrate(robot, fit_data, "clearance", base_names, fixed=held, initial=[p1[n] for n in base_names],
-                     settings=settings, n_jobs=n_jobs, max_evaluations=budget, uncertainty=False, warm=True,
-                     prior=ctx["prior"])
-    params = {**held, **dict(zip(base_names, tube.values))}
-    if entry.fit == "grid":
-        g = grid_search(robot, fit_data, params, extra, model, settings=settings, n_jobs=n_jobs,
-                        coarse=options.friction_grid, search_samples=options.friction_search_samples, seed=options.seed,
-                        uncertainty=False)
-        params.update(zip(extra, g.values))
-    else:
-        own = second.cv.fold_params(k)
-        if extra:
-            alone = calibrate(robot, fit_data, model, extra, fixed=params, initial=[own[n] for n in extra],
-                              settings=settings, n_jobs=n_jobs, max_evaluations=budget, uncertainty=False, warm=True)
-            params.update(zip(extra, alone.values))
-    free = base_names + tuple(dict.fromkeys(n for n in (*first_extra, *extra) if n not in base_names))
-    if not free:
-        return calibrate(robot, fit_data, model, (), fixed=params, settings=settings, n_jobs=n_jobs)
-    fixed = {n: v for n, v in params.items() if n not in free}
-    return calibrate(robot, fit_data, model, free, fixed=fixed, initial=[params[n] for n in free], settings=settings,
-                     n_jobs=n_jobs, max_evaluations=budget, uncertainty=k is None, warm=True, prior=ctx["prior"],
-                     clusters=units)
-
-
-def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline, contact: CrossValidated | None,
-                      naming, options: DiscrepancyOptions, echo=print, progress: bool = False) -> Combination | None:
-    """Stage 8: a second effect fitted together with the named one, and whether either adds to
-    the other (nested comparisons in both directions).
-
-    The family: every other candidate that does not contain the named one or lie inside it
-    (``Effect.contains``), adds a parameter, and can be fitted without a third effect (Holm over
-    this family, fixed before any pair is fitted; a pair not tried counts with p = 1). Tried:
-    those whose fit alone lowered the baseline's out-of-fold error on average (one that alone
-    makes it worse is not fitted). Each pair is fitted jointly (:func:`_fit_pair`) on the
-    development samples and without each fold, cross-validated, and compared with the named
-    effect alone (does the second effect add?) and with the second effect alone (does the named
-    effect still add?). A pair is named when it improves on the named effect significantly
-    (Holm), no fitted value is at its limit, and the named effect still adds to it significantly
-    (``options.significance``); among such pairs the one with the lowest out-of-fold error. When
-    the best significant pair is not better than its second effect alone, the named effect is
-    dropped: it goes to zero when fitted with the second, and the second effect alone is the
-    final model.
-
-    Returns
-    -------
-    Combination or None
-        None when no effect is named.
-    """
-    named = naming.named
-    if not named:
-        return None
-    robot, data = setup.robot, setup.data
-    candidates = naming.candidates
-    first = candidates[named]
-    first_names = reported_parameters(robot, named, data)
-    rule = (f"out-of-fold Eq. (49) improvement over {first.label} alone significant at {options.significance} "
-            f"(corrected resampled t test over the folds, Holm over the family of pairs), no value at its limit, and "
-            f"{first.label} still improving on the second effect alone at {options.significance}")
-    not_tried, family, pool = {}, [], []
-    for e, c in candidates.items():
-        if e == named:
-            continue
-        if contained(e, named):
-            not_tried[e] = f"{'it contains' if named in REGISTRY[e].contains else 'it is contained in'} {first.label}"
-            continue
-        entry = REGISTRY[e]
-        if entry.after is not None and entry.after != named:
-            not_tried[e] = f"it is fitted on top of {REGISTRY[entry.after].label}, a third effect"
-            continue
-        if not tuple(n for n in reported_parameters(robot, e, data) if n not in first.params) and entry.fit != "none":
-            not_tried[e] = f"it adds no parameter to {first.label}"
-            continue
-        family.append(e)
-        if not c.improvement["mean_difference"] > 0:
-            not_tried[e] = (f"alone it does not lower the baseline's out-of-fold error (mean difference "
-                            f"{c.improvement['mean_difference']:.3g} mm + deg): counted in the family, not fitted")
-            continue
-        pool.append(e)
-    tried = {}
-    for e in pool:
-        model = combined_model(named, e)
-        extra = tuple(n for n in effect_parameters(robot, e, data) if n not in first.params)
-        tag = f"{named}+{e}"
-        echo(f"second effect: {candidates[e].label} with {first.label} ({model} model) ...")
-
-        def fit_one(k, n_jobs, e=e, model=model, extra=extra):
-            fit_data, units = _fit_rows(setup, split, k, None if model == "standard" else options.max_contact_samples)
-            return _fit_pair({"setup": setup, "options": options, "k": k, "n_jobs": n_jobs, "fit_data": fit_data,
-                              "units": units, "first": first, "second": candidates[e], "model": model, "extra": extra,
-                              "prior": baseline.prior})
-
-        cv = cross_validate(setup, split, options, tag, model, fit_one, echo=echo, progress=progress)
-        shown_names = first_names + tuple(n for n in reported_parameters(robot, e, data) if n not in first_names)
-        note = "" if cv.converged else "a fit did not converge or sits at its limit"
-        c = _candidate(setup, split, baseline, (named, e), f"{first.label} + {candidates[e].label}", cv, shown_names,
-                       first, note)
-        tried[e] = replace(c, reverse=compare(split, candidates[e].r, cv.r))
-    out, second, dropped, replaced, notes = pair_decision(named, tried, family, naming.decision.get("worse_than", {}),
-                                                          options.significance)
-    for e, c in out.items():
-        imp, rev = c.improvement, c.reverse
-        echo(f"  {c.label}: " + ", ".join(display_value(n, v, c.units[n]) for n, v in c.shown.items())
-             + f"; error lower than {first.label} alone by {100 * imp['reduction']:.0f} %, p = {imp['p_value']:.3g}; "
-               f"than {candidates[e].label} alone by {100 * rev['reduction']:.0f} %, p = {rev['p_value']:.3g}"
-             + ("" if c.cv.converged else "; a fit NOT converged"))
-    for line in notes:
-        echo(line)
-    return Combination(first=named, first_label=first.label, named=second, tried=MappingProxyType(out),
-                       not_tried=MappingProxyType(not_tried), family=tuple(family), rule=rule, dropped=dropped,
-                       replaced_by=replaced)
-
-
-def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha: float) -> tuple:
-    """Which pair, if any, replaces the named effect (the rule of :func:`fit_second_effect`).
-
-    Parameters
-    ----------
-    named : str
-        The named effect A.
-    tried : mapping of str to Candidate
-        Second effect B -> the pair fitted jointly, with ``improvement`` (against A alone) and
-        ``reverse`` (against B alone) comparisons.
-    family : sequence of str
-        Every B that could be paired with A (a B not in ``tried`` counts with p = 1).
-    worse_than : mapping of str to list of str
-        Stage 7's ``{candidate: [candidates significantly better]}``.
-    alpha : float
-
-    Returns
-    -------
-    pairs : dict of str to Candidate
-        ``tried`` with ``improvement_significant`` (Holm over ``family``) and ``significant``
-        (also no value at its limit).
-    second : str or None
-        B of the named pair: it improves on A significantly and A still improves on B alone.
-    dropped, replaced_by : str or None
-        A and B when the best significant pair is no better than B alone (A goes to zero with B)
-        and B alone is not significantly worse than A: B alone is the final model.
-    notes : list of str
-    """
-    verdict = holm({e: (tried[e].improvement["p_value"] if e in tried else 1.0) for e in family}, alpha) if family else {}
-    out = {}
-    for e, c in tried.items():
-        ok = bool(verdict.get(e) and c.improvement["mean_difference"] > 0)
-        out[e] = replace(c, improvement_significant=ok, significant=ok and not c.at_bound)
-    passing = [e for e, c in out.items() if c.significant]
-    best = min(passing, key=lambda e: out[e].mean_error) if passing else None
-    second = dropped = replaced = None
-    notes = []
-    if best is not None:
-        rev = out[best].reverse
-        if rev["p_value"] < alpha and rev["mean_difference"] > 0:
-            second = best
-            notes.append(f"named combination: {out[best].label}")
-        elif named not in worse_than.get(best, ()):
-            dropped, replaced = named, best
-            notes.append(f"{named} adds nothing once {best} is fitted with it (the pair against {best} alone: "
-                         f"p = {rev['p_value']:.3g}): {named} is dropped, {best} alone is the final model")
-        else:
-            notes.append(f"the pair {out[best].label} improves on {named} alone but not on {best} alone, which is "
-                         f"itself significantly worse than {named}: {named} alone stays the final model")
-    return out, second, dropped, replaced, notes
-
-
-# --------------------------------------------------------------------------- report form
-def candidate_report(c: Candidate) -> dict:
-    """A candidate as ``results.json`` stores it (mm in ``out_of_fold``; SI in ``parameters``)."""
-    oof = c.oof
-    out = {"effects": list(c.effects), "label": c.label, "model": c.model, "fit": c.fit.as_dict(),
-           "folds": [f.as_dict() for f in c.cv.folds], "parameters": c.shown, "units": c.units,
-           "parameter_table": c.parameters, "atypical": c.atypical, "typical": c.typical,
-           "at_bound": list(c.at_bound), "widened": list(c.widened), "converged": c.cv.converged,
-           "n_parameters": c.n_parameters, "bic": c.bic, "delta_bic": c.delta_bic,
-           "out_of_fold": error_summary(oof.position, oof.angle, oof.seconds, oof.rows.size),
-           "mean_eq49": c.mean_error, "improvement_eq49": c.improvement, "improvement_position": c.improvement_position,
-           "fit_note": c.fit_note}
-    for key in ("improvement_significant", "eligible", "significant", "reverse"):
-        if getattr(c, key) is not None:
-            out[key] = getattr(c, key)
-    return out
-
-
-def candidate_reports(candidates: Mapping[str, Candidate]) -> dict:
-    """:func:`candidate_report` of every candidate."""
-    return {e: candidate_report(c) for e, c in candidates.items()}

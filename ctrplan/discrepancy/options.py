@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -11,7 +11,11 @@ from ..mechanics import ModelSettings
 
 __all__ = ["DiscrepancyOptions", "FIT_VERSION", "MIN_REST_PAIRS", "ALPHA_STEP",
            "TRAJECTORY_ROTATION_BIN", "TRAJECTORY_TRANSLATION_BIN", "ENVELOPE_NOISE_FACTOR",
-           "CONFIDENCE", "BOOTSTRAP_RESAMPLES"]
+           "CONFIDENCE", "BOOTSTRAP_RESAMPLES", "NOT_IN_STAGE_KEY"]
+
+#: Field metadata of an option that changes no stored stage (a worker count, a test's level, what
+#: is evaluated after the fits): :func:`~ctrplan.discrepancy.stages.stage_key` leaves it out.
+NOT_IN_STAGE_KEY = {"stage_key": False}
 
 #: Rests (consecutive samples at identical joints) needed to estimate the noise from the data.
 MIN_REST_PAIRS = 10
@@ -41,6 +45,9 @@ FIT_VERSION = 6
 @dataclass(frozen=True)
 class DiscrepancyOptions:
     """Options of :func:`~ctrplan.discrepancy.workflow.run_discrepancy`.
+
+    The options that change no stored stage carry :data:`NOT_IN_STAGE_KEY` in their field
+    metadata (a rerun with another value reuses the finished fits and evaluations).
 
     Attributes
     ----------
@@ -76,7 +83,7 @@ class DiscrepancyOptions:
         the signature tests, and the false-alarm rate of the noise test.
     prior_strengths : tuple of float
         Strengths tau of the prior toward the robot file's tube parameters among which the
-        baseline's out-of-fold error chooses (:func:`~ctrplan.discrepancy.fitting.calibrate_baseline`;
+        baseline's out-of-fold error chooses (:func:`~ctrplan.discrepancy.baseline.calibrate_baseline`;
         a relative change tau costs one residual of the pilot fit's rms); 0 (the robot file's
         parameters, only a registration fitted) is always among them, ``inf`` is no prior.
     n_permutations : int
@@ -112,7 +119,7 @@ class DiscrepancyOptions:
     """
 
     fit: tuple | None = None
-    effects: tuple | None = None
+    effects: tuple | None = field(default=None, metadata=NOT_IN_STAGE_KEY)   # the effects tried enter it
     frame: str | None = None
     bag: BagSelection | None = None
     test_fraction: float = 0.2
@@ -120,21 +127,21 @@ class DiscrepancyOptions:
     n_folds: int | None = None
     max_calibration_samples: int = 300
     max_contact_samples: int = 150
-    significance: float = 0.01
+    significance: float = field(default=0.01, metadata=NOT_IN_STAGE_KEY)
     prior_strengths: tuple = (0.003, 0.01, 0.03, 0.1, float("inf"))
-    n_permutations: int = 999
+    n_permutations: int = field(default=999, metadata=NOT_IN_STAGE_KEY)
     friction_grid: tuple = (0.0, 0.1, 0.2, 0.3, 0.4)
     friction_search_samples: int = 96
     max_evaluations: int = 400
     max_contact_evaluations: int = 150
     ds: float = 3e-3
-    n_jobs: int = 1
+    n_jobs: int = field(default=1, metadata=NOT_IN_STAGE_KEY)
     seed: int = 0
-    noise_position: float | None = None
-    envelope_samples: int = 0
-    reference_friction: tuple | None = None
-    bound_target: float = 0.9
-    bound_samples: int = 200
+    noise_position: float | None = field(default=None, metadata=NOT_IN_STAGE_KEY)
+    envelope_samples: int = field(default=0, metadata=NOT_IN_STAGE_KEY)
+    reference_friction: tuple | None = field(default=None, metadata=NOT_IN_STAGE_KEY)
+    bound_target: float = field(default=0.9, metadata=NOT_IN_STAGE_KEY)
+    bound_samples: int = field(default=200, metadata=NOT_IN_STAGE_KEY)
 
     def settings(self) -> ModelSettings:
         """Model settings of every fit and evaluation (no multistart stability search in

@@ -1,32 +1,37 @@
-"""Stages 10-12 of the discrepancy workflow: the test split, the updated robot file, its check, and
-the results."""
+"""Stages 10-12 of the discrepancy workflow: the test split, the history-aware prediction's check,
+the updated robot file and its reload, and the run's cautions."""
 
 from __future__ import annotations
 
 import datetime
-from dataclasses import asdict, dataclass
+import logging
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 
+from .._log import progress_level
 from ..effects import REGISTRY, EffectSet, robot_effects
 from ..io.atomic import atomic_write_text
+from .baseline import Baseline
 from .calibrate import pose_errors, predict
 from .data import MeasuredData
-from .decision import Naming, NoiseCheck, atypical_caution, cautions
-from .evaluation import Errors, error_summary, evaluate_rows
-from .fitting import Baseline, Candidate, Combination, CrossValidated, candidate_report, candidate_reports
+from .decision import Naming, atypical_caution, cautions
+from .estimates import display_value
+from .evaluation import ErrorFigures, Errors, evaluate_rows
+from .fitting import Candidate
 from .options import CONFIDENCE, DiscrepancyOptions
-from .parameters import REGISTRATION, apply_parameters, parameter
-from .provenance import provenance
+from .pairs import Combination
+from .parameters import REGISTRATION, apply_parameters
 from .setup import DiscrepancySetup
 from .split import DataSplit
-from .statistics import mean_interval, shrink_interval
+from .statistics import Interval, mean_interval, shrink_interval
 
-__all__ = ["TestSplit", "evaluate_test_split", "UpdatedModel", "Reproduction", "write_updated_model",
-           "check_reproduction", "reproduce_errors", "discrepancy_results", "final_candidate", "final_parameters",
-           "validate_prediction"]
+__all__ = ["ModelFigures", "TestFigures", "PredictionCheck", "TestSplit", "evaluate_test_split", "UpdatedModel",
+           "Reproduction", "write_updated_model", "check_reproduction", "reproduce_errors", "final_candidate",
+           "final_parameters", "validate_prediction", "run_cautions"]
+
+logger = logging.getLogger(__name__)
 
 
 def final_candidate(naming: Naming, combination: Combination | None) -> Candidate | None:
@@ -46,21 +51,81 @@ def final_parameters(naming: Naming, combination: Combination | None, baseline: 
     return dict(final.params if final is not None else baseline.params)
 
 
+@dataclass(frozen=True)
+class ModelFigures:
+    """One model's tip position errors on the test split.
+
+    Attributes
+    ----------
+    mean : Interval
+        Mean error with its t-interval over the test split's units [m].
+    p95, max : float or None
+        [m]; None without a finite error.
+    """
+
+    mean: Interval
+    p95: float | None
+    max: float | None
+
+
 def _figures(errors: dict, units) -> dict:
-    """Mean (with a t-interval over units), p95 and max of each model's tip errors [m] -> mm, on the
-    samples where every model is finite."""
+    """:class:`ModelFigures` of each model's tip errors [m], on the samples where every model is
+    finite."""
     ok = np.all([np.isfinite(v) for v in errors.values()], axis=0)
     u = np.asarray(units)[ok]
     out = {}
     for name, e in errors.items():
-        x = np.asarray(e, float)[ok] * 1e3
-        m = mean_interval(x, u, confidence=CONFIDENCE)
-        out[name] = {"mean_mm": m, "p95_mm": float(np.percentile(x, 95)) if x.size else None,
-                     "max_mm": float(x.max()) if x.size else None}
+        x = np.asarray(e, float)[ok]
+        out[name] = ModelFigures(mean=mean_interval(x, u, confidence=CONFIDENCE),
+                                 p95=float(np.percentile(x, 95)) if x.size else None,
+                                 max=float(x.max()) if x.size else None)
     return out
 
 
-def validate_prediction(prediction, split: DataSplit, seed: int = 0) -> dict | None:
+@dataclass(frozen=True)
+class PredictionCheck:
+    """The history-aware prediction against the standard model on the test split
+    (:func:`validate_prediction`).
+
+    Attributes
+    ----------
+    standard, history : ModelFigures
+        The written robot file evaluated with the standard model and along the recorded history
+        with the friction model [m].
+    difference : Interval
+        Per-unit paired difference of their mean errors, history - standard [m].
+    history_label : str
+    history_beats_standard : bool
+        ``difference``'s interval lies below zero: planning may aim with the history-aware
+        prediction.
+    n_samples, n_units : int
+        Test samples where both are finite, and their units.
+    confidence : float
+        Level of the intervals.
+    method : str
+    """
+
+    standard: ModelFigures
+    history: ModelFigures
+    difference: Interval
+    history_label: str
+    history_beats_standard: bool
+    n_samples: int
+    n_units: int
+    confidence: float
+    method: str
+
+    def file_table(self, data_file: str, data_sha256: str, date: str) -> dict:
+        """The robot file's ``[prediction_validation]`` table (SI)."""
+        return {"standard_mean_m": self.standard.mean.value, "standard_max_m": self.standard.max,
+                "history_mean_m": self.history.mean.value, "history_max_m": self.history.max,
+                "history_beats_standard": bool(self.history_beats_standard),
+                "difference_mean_m": self.difference.value, "difference_low_m": self.difference.low,
+                "difference_high_m": self.difference.high, "test_units": self.n_units,
+                "test_samples": self.n_samples, "data_file": data_file, "data_sha256": data_sha256, "date": date}
+
+
+def validate_prediction(prediction, split: DataSplit) -> PredictionCheck | None:
     """The history-aware prediction against the standard model on the test split: mean (with a
     t-interval over units), p95 and max tip position error of each [mm], and the per-unit paired
     difference of their means with its t-interval; the history "beats" the standard model when
@@ -73,15 +138,11 @@ def validate_prediction(prediction, split: DataSplit, seed: int = 0) -> dict | N
         Its first row is the standard model, its second the history-aware model with the fitted
         friction coefficients, both on the test split in data order.
     split : DataSplit
-    seed : int
-        Unused (kept for callers).
 
     Returns
     -------
-    dict or None
-        ``standard`` and ``history`` ({``mean_mm``: {value, ci, ...}, ``p95_mm``, ``max_mm``}),
-        ``difference_mm`` (history - standard, per-unit paired, {value, ci}), ``history_label``,
-        ``history_beats_standard``, ``n_samples``, ``n_units``; None without a prediction.
+    PredictionCheck or None
+        None without a prediction.
     """
     if prediction is None or len(prediction.rows) < 2:
         return None
@@ -89,11 +150,46 @@ def validate_prediction(prediction, split: DataSplit, seed: int = 0) -> dict | N
     std, hist = (np.asarray(prediction.rows[i][1], float) for i in (0, 1))
     ok = np.isfinite(std) & np.isfinite(hist)
     figs = _figures({"standard": std, "history": hist}, units)
-    diff = mean_interval((hist[ok] - std[ok]) * 1e3, units[ok], confidence=CONFIDENCE)
-    return {"n_samples": int(ok.sum()), "n_units": int(np.unique(units[ok]).size),
-            "history_label": prediction.rows[1][0], "confidence": CONFIDENCE, **figs, "difference_mm": diff,
-            "history_beats_standard": bool(np.isfinite(diff["ci"][1]) and diff["ci"][1] < 0.0),
-            "method": "t-interval over the test split's units of the per-unit paired difference of the mean errors"}
+    diff = mean_interval(hist[ok] - std[ok], units[ok], confidence=CONFIDENCE)
+    return PredictionCheck(standard=figs["standard"], history=figs["history"], difference=diff,
+                           history_label=prediction.rows[1][0],
+                           history_beats_standard=bool(np.isfinite(diff.high) and diff.high < 0.0),
+                           n_samples=int(ok.sum()), n_units=int(np.unique(units[ok]).size), confidence=CONFIDENCE,
+                           method="t-interval over the test split's units of the per-unit paired difference of the "
+                                  "mean errors")
+
+
+@dataclass(frozen=True)
+class TestFigures:
+    """The test split's figures (:func:`evaluate_test_split`), on the samples where every model is
+    finite.
+
+    Attributes
+    ----------
+    file, before, after : ModelFigures
+        The robot file with only a registration, the calibrated baseline, and the final model [m].
+    shrink : Interval
+        Relative fall of the mean error from ``before`` to ``after``, with a t-interval from the
+        per-unit paired sums [-].
+    calibration_shrink : Interval
+        The same from ``file`` to ``before`` [-].
+    n_samples, n_units : int
+    confidence : float
+        Level of the intervals.
+    method : str
+    """
+
+    file: ModelFigures
+    before: ModelFigures
+    after: ModelFigures
+    shrink: Interval
+    calibration_shrink: Interval
+    n_samples: int
+    n_units: int
+    confidence: float
+    method: str
+
+    __test__ = False    # a result, not a pytest test class
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,40 +207,47 @@ class TestSplit:
         the baseline's when nothing is named).
     label : str
         The final model.
-    figures : dict
-        ``file``, ``before`` (the calibrated baseline) and ``after`` (the final model): mean
-        (with a t-interval over units), p95 and max of the tip position error [mm]; ``shrink``:
-        the relative fall of the mean from before to after (and ``calibration_shrink``, from
-        the file to the calibrated baseline), with t-intervals from the per-unit paired sums;
-        ``units``, ``n_samples``, ``confidence``, ``method``.
+    figures : TestFigures
     """
 
     file: Errors
     baseline: Errors
     final: Errors
     label: str
-    figures: dict
+    figures: TestFigures
+
+    __test__ = False    # a result, not a pytest test class
 
 
-def _shrink_figures(file: Errors, before: Errors, after: Errors, units) -> dict:
+def _test_figures(file: Errors, before: Errors, after: Errors, units) -> TestFigures:
     ok = np.isfinite(before.position) & np.isfinite(after.position) & np.isfinite(file.position)
     u = np.asarray(units)[ok]
     figs = _figures({"file": file.position[ok], "before": before.position[ok], "after": after.position[ok]}, u)
-    return {**figs,
-            "shrink": {"mean": shrink_interval(before.position[ok], after.position[ok], u, confidence=CONFIDENCE)},
-            "calibration_shrink": {"mean": shrink_interval(file.position[ok], before.position[ok], u,
-                                                           confidence=CONFIDENCE)},
-            "n_samples": int(ok.sum()), "n_units": int(np.unique(u).size), "confidence": CONFIDENCE,
-            "method": f"t-intervals over the test split's {np.unique(u).size} units (means and the shrink of the "
-                      f"mean from per-unit sums, paired; Cochran 1977, Sec. 6.4); p95 and max without an interval"}
+    return TestFigures(
+        **figs, shrink=shrink_interval(before.position[ok], after.position[ok], u, confidence=CONFIDENCE),
+        calibration_shrink=shrink_interval(file.position[ok], before.position[ok], u, confidence=CONFIDENCE),
+        n_samples=int(ok.sum()), n_units=int(np.unique(u).size), confidence=CONFIDENCE,
+        method=f"t-intervals over the test split's {np.unique(u).size} units (means and the shrink of the mean from "
+               f"per-unit sums, paired; Cochran 1977, Sec. 6.4); p95 and max without an interval")
 
 
 def evaluate_test_split(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline, naming: Naming,
-                        combination: Combination | None, options: DiscrepancyOptions, echo=print,
+                        combination: Combination | None, options: DiscrepancyOptions,
                         progress: bool = False) -> TestSplit:
     """Stage 10: evaluate the robot file with only a registration, the calibrated baseline and the
     final model (their development fits) on the test split, once, and the gains there with
     t-intervals over units.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : DataSplit
+    baseline : Baseline
+    naming : Naming
+    combination : Combination or None
+    options : DiscrepancyOptions
+    progress : bool
+        Progress bars of the model evaluations.
 
     Returns
     -------
@@ -153,21 +256,21 @@ def evaluate_test_split(setup: DiscrepancySetup, split: DataSplit, baseline: Bas
     final = final_candidate(naming, combination)
     test = split.test_rows
     file = evaluate_rows(setup, test, "test-file", "standard", baseline.file_cv.params, n_jobs=options.n_jobs,
-                         progress=progress, echo=echo)
+                         progress=progress)
     before = evaluate_rows(setup, test, "test-baseline", "standard", baseline.params, n_jobs=options.n_jobs,
-                           progress=progress, echo=echo)
+                           progress=progress)
     after = before if final is None else evaluate_rows(setup, test, f"test-{final.cv.name}", final.model, final.params,
-                                                       n_jobs=options.n_jobs, progress=progress, echo=echo)
-    figures = _shrink_figures(file, before, after, split.units[test])
+                                                       n_jobs=options.n_jobs, progress=progress)
+    f = _test_figures(file, before, after, split.units[test])
     label = final.label if final is not None else "baseline (nothing named)"
-    s, c = figures["shrink"]["mean"], figures["calibration_shrink"]["mean"]
-    echo(f"test split ({split.n_test} samples in {figures['n_units']} units, untouched until now): robot file with a "
-         f"registration {figures['file']['mean_mm']['value']:.3f} mm, calibrated baseline "
-         f"{figures['before']['mean_mm']['value']:.3f} mm (shrink {100 * c['value']:.0f} %, {100 * c['ci'][0]:.0f}.."
-         f"{100 * c['ci'][1]:.0f} %), {label} {figures['after']['mean_mm']['value']:.3f} mm (shrink "
-         f"{100 * s['value']:.0f} %, {CONFIDENCE:.0%} interval {100 * s['ci'][0]:.0f}..{100 * s['ci'][1]:.0f} %); max "
-         f"{figures['before']['max_mm']:.2f} -> {figures['after']['max_mm']:.2f} mm")
-    return TestSplit(file=file, baseline=before, final=after, label=label, figures=figures)
+    s, c = f.shrink, f.calibration_shrink
+    logger.log(progress_level(),
+               f"test split ({split.n_test} samples in {f.n_units} units, untouched until now): robot file with a "
+               f"registration {1e3 * f.file.mean.value:.3f} mm, calibrated baseline {1e3 * f.before.mean.value:.3f} mm "
+               f"(shrink {100 * c.value:.0f} %, {100 * c.low:.0f}..{100 * c.high:.0f} %), {label} "
+               f"{1e3 * f.after.mean.value:.3f} mm (shrink {100 * s.value:.0f} %, {CONFIDENCE:.0%} interval "
+               f"{100 * s.low:.0f}..{100 * s.high:.0f} %); max {1e3 * f.before.max:.2f} -> {1e3 * f.after.max:.2f} mm")
+    return TestSplit(file=file, baseline=before, final=after, label=label, figures=f)
 
 
 @dataclass(frozen=True, eq=False)
@@ -215,7 +318,7 @@ class Reproduction:
 
 
 def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Naming, combination: Combination | None,
-                        test: TestSplit, echo=print, *, bound=None, prediction_check: dict | None = None) -> UpdatedModel:
+                        test: TestSplit, *, bound=None, prediction_check: PredictionCheck | None = None) -> UpdatedModel:
     """Stage 11: write one robot model file with the final model's calibrated parameters (the
     recalibrated baseline when nothing is named) into ``setup.out_dir``, atomically.
 
@@ -228,6 +331,16 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
     :class:`~ctrplan.discrepancy.coverage.BoundCalibration` with a finite factor), the table
     ``[bound_calibration]``; with ``prediction_check`` (:func:`validate_prediction`),
     ``[prediction_validation]``: planning reads both.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    baseline : Baseline
+    naming : Naming
+    combination : Combination or None
+    test : TestSplit
+    bound : BoundCalibration, optional, keyword-only
+    prediction_check : PredictionCheck, optional, keyword-only
 
     Returns
     -------
@@ -252,7 +365,7 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
     merged = robot_effects(robot).merged(stored)
     verdict = naming.verdict
     if verdict == "ambiguous":
-        suffix = f"{naming.named}-or-{naming.decision['ambiguous_with']}"
+        suffix = f"{naming.named}-or-{naming.decision.ambiguous_with}"
     else:
         suffix = "-".join(named_effects) or "recalibrated"
     updated = updated.replace(name=f"{robot.name}-{suffix}",
@@ -260,7 +373,7 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
                                      + "".join(f"; caution: {c}" for c in notes),
                               effects=tuple((n, tuple(merged[n].items())) for n in merged))
     pos = test.final.position[np.isfinite(test.final.position)]
-    note = ("ambiguous: " + naming.candidates[naming.decision["ambiguous_with"]].label + " explains the data equally "
+    note = ("ambiguous: " + naming.candidates[naming.decision.ambiguous_with].label + " explains the data equally "
             "well" if verdict == "ambiguous" else "")
     source = {"method": "ctrplan discrepancy (fitted on the development split; errors on the untouched test split)",
               "data_file": data_name, "data_sha256": file_hash(setup.data_path),
@@ -277,24 +390,13 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
               + "".join(f"\nCaution: {c}" for c in notes))
     sha = source["data_sha256"]
     bound_table = (bound.file_table(data_name, sha) if bound is not None and np.isfinite(bound.factor) else None)
-    pred_table = None
-    if prediction_check is not None:
-        pc = prediction_check
-        pred_table = {"standard_mean_m": pc["standard"]["mean_mm"]["value"] * 1e-3,
-                      "standard_max_m": pc["standard"]["max_mm"] * 1e-3,
-                      "history_mean_m": pc["history"]["mean_mm"]["value"] * 1e-3,
-                      "history_max_m": pc["history"]["max_mm"] * 1e-3,
-                      "history_beats_standard": bool(pc["history_beats_standard"]),
-                      "difference_mean_m": pc["difference_mm"]["value"] * 1e-3,
-                      "difference_low_m": pc["difference_mm"]["ci"][0] * 1e-3,
-                      "difference_high_m": pc["difference_mm"]["ci"][1] * 1e-3, "test_units": pc["n_units"],
-                      "test_samples": pc["n_samples"],
-                      "data_file": data_name, "data_sha256": sha, "date": source["date"]}
+    pred_table = (None if prediction_check is None else
+                  prediction_check.file_table(data_name, sha, source["date"]))
     atomic_write_text(model_path, robot_to_toml(updated, header=header, model=final_model, registration=registration,
                                                 effects_source=source if updated.effects else None,
                                                 bound_calibration=bound_table, prediction_validation=pred_table))
     for c in notes:
-        echo(f"  written with a caution: {c}")
+        logger.warning(f"  written with a caution: {c}")
     return UpdatedModel(path=model_path, model=final_model, params=final_params, named_effects=tuple(named_effects),
                         candidate=final, cautions=notes)
 
@@ -336,7 +438,7 @@ def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: i
 
 
 def check_reproduction(setup: DiscrepancySetup, split: DataSplit, updated: UpdatedModel, test: TestSplit,
-                       options: DiscrepancyOptions, echo=print) -> Reproduction:
+                       options: DiscrepancyOptions) -> Reproduction:
     """Stage 12: load the written model file back (:func:`reproduce_errors`) and check that it
     gives the final model's errors on the test split (the whole split, so that each motion's
     branch following is the same).
@@ -352,86 +454,37 @@ def check_reproduction(setup: DiscrepancySetup, split: DataSplit, updated: Updat
     """
     check = reproduce_errors(updated.path, setup.data.take(split.test_rows), setup.settings, n_jobs=options.n_jobs)
     reproduced = bool(np.allclose(check["position"], test.final.position, atol=1e-9, equal_nan=True))
-    echo(f"wrote {updated.path}; reloaded, it reproduces the test split's errors of {split.n_test} samples: "
-         f"{reproduced} (mean {np.nanmean(check['position']) * 1e3:.3f} mm)")
+    logger.log(progress_level(), f"wrote {updated.path}; reloaded, it reproduces the test split's errors of "
+                                 f"{split.n_test} samples: {reproduced} (mean "
+                                 f"{np.nanmean(check['position']) * 1e3:.3f} mm)")
     return Reproduction(position=check["position"], reproduced=reproduced)
 
 
-def _combination_report(combination: Combination | None) -> dict | None:
-    if combination is None:
-        return None
-    return {"first": combination.first, "first_label": combination.first_label, "named": combination.named,
-            "tried": {e: candidate_report(c) for e, c in combination.tried.items()},
-            "not_tried": dict(combination.not_tried), "family": list(combination.family), "rule": combination.rule,
-            "dropped": combination.dropped, "replaced_by": combination.replaced_by}
+def run_cautions(naming: Naming, combination: Combination | None, baseline: Baseline, test: TestSplit) -> tuple:
+    """What a reader of the run must not overlook (logged as warnings): the final model's values
+    outside their typical range and a maximum error that rises on the test split
+    (:func:`~ctrplan.discrepancy.decision.cautions`), and baseline parameters outside their typical
+    range or at a bound.
 
-
-def _errors_arrays(e: Errors) -> dict:
-    return {"position": e.position, "angle": e.angle, "residual": e.residual_base, "tip_base": e.tip_base}
-
-
-def discrepancy_results(setup: DiscrepancySetup, split: DataSplit, baseline: Baseline, contact: CrossValidated | None,
-                        tests: Mapping, noise: NoiseCheck, naming: Naming, combination: Combination | None,
-                        test: TestSplit, prediction, updated: UpdatedModel, reproduction: Reproduction,
-                        options: DiscrepancyOptions, echo=print, *, bound=None,
-                        prediction_check: dict | None = None) -> dict:
-    """The run's results as ``results.json`` stores them (report units: keys ending ``_mm`` in mm,
-    ``_deg`` in degrees, others SI), with the cautions a reader must not overlook (echoed).
+    Parameters
+    ----------
+    naming : Naming
+    combination : Combination or None
+    baseline : Baseline
+    test : TestSplit
 
     Returns
     -------
-    dict
-        JSON-ready results (``seconds`` is None: the caller sets it); arrays for plots under
-        ``"_arrays"`` (SI).
+    tuple of str
     """
-    base_oof = baseline.oof
     final = final_candidate(naming, combination)
-    before_test = error_summary(test.baseline.position, test.baseline.angle, test.baseline.seconds, split.n_test)
-    after_test = error_summary(test.final.position, test.final.angle, test.final.seconds, split.n_test)
-    candidates = candidate_reports(naming.candidates)
-    file_test = error_summary(test.file.position, test.file.angle, test.file.seconds, split.n_test)
-    notes = cautions(naming.verdict, None if final is None else candidate_report(final), before_test, after_test)
-    bad_base = [r for r in baseline.parameters if not r["in_typical_range"] or r["at_bound"]]
-    for r in bad_base:
-        change = "" if r.get("relative_change") is None else f", {100 * r['relative_change']:+.0f} % from the robot file"
-        notes.append(f"baseline {r['name']} = {r['value']:.4g} {r['unit']}{change}"
-                     + (": at its bound" if r["at_bound"] else "") + f"; typical: {r['typical_source']}")
+    notes = cautions(naming.verdict, final, ErrorFigures.of(test.baseline), ErrorFigures.of(test.final))
+    for r in baseline.parameters:
+        if r.in_typical_range and not r.at_bound:
+            continue
+        change = "" if r.relative_change is None else f", {100 * r.relative_change:+.0f} % from the robot file"
+        notes.append(f"baseline {display_value(r.name, r.value, r.unit)}{change}"
+                     + (": at its bound" if r.at_bound else "") + f"; typical: {r.typical_source}")
     for line in notes:
-        echo(f"caution: {line}")
-    opts = asdict(options)
-    opts["effects"] = list(setup.effects) if options.effects is None else list(options.effects)
-    dev = setup.data.take(split.dev_rows)
-    test_data = setup.data.take(split.test_rows)
-    return {
-        "robot_file": str(setup.robot_path), "data_file": str(setup.data_path), "frame": setup.data.frame,
-        "data_source": setup.data.source,
-        "n_samples": setup.data.n_samples, "split": split.as_dict(), "baseline_parameters": list(setup.base_names),
-        "baseline": {"fit": baseline.fit.as_dict(), "folds": [f.as_dict() for f in baseline.cv.folds],
-                     "bic": baseline.bic, "parameter_table": baseline.parameters,
-                     "out_of_fold": error_summary(base_oof.position, base_oof.angle, base_oof.seconds, base_oof.rows.size),
-                     "prior_strength": baseline.strength, "prior_choices": baseline.choices,
-                     "residual_scale": baseline.residual_scale,
-                     "file_fit": baseline.file_cv.fit.as_dict()},
-        "contact_baseline": None if contact is None else {"fit": contact.fit.as_dict(),
-                                                          "folds": [f.as_dict() for f in contact.folds]},
-        "signature_tests": {e: t.as_dict() for e, t in tests.items()},
-        "skipped_effects": dict(setup.skipped), "noise": noise.as_dict(), "decision": naming.decision,
-        "verdict": naming.verdict, "named_effect": naming.named,
-        "named_label": REGISTRY[naming.named].label if naming.named else None,
-        "ambiguous_with": naming.decision.get("ambiguous_with"),
-        "candidates": candidates, "named_effects": list(updated.named_effects),
-        "combination": _combination_report(combination),
-        "test_split": {"label": test.label, "file": file_test, "before": before_test, "after": after_test,
-                       "figures": test.figures},
-        "prediction": None if prediction is None else prediction.as_dict(),
-        "prediction_check": prediction_check, "bound": None if bound is None else bound.as_dict(),
-        "updated_model_file": str(updated.path), "updated_model": updated.model,
-        "reproduced": reproduction.reproduced, "reproduced_samples": split.n_test,
-        "reproduced_position_mean_mm": float(np.nanmean(reproduction.position) * 1e3),
-        "cautions": notes, "significance": options.significance, "options": opts, "seconds": None,
-        "provenance": provenance(options),
-        "_arrays": {"dev_eta": dev.eta, "test_eta": test_data.eta, "oof": _errors_arrays(base_oof),
-                    "oof_final": None if final is None else _errors_arrays(final.oof),
-                    "test_before": _errors_arrays(test.baseline), "test_after": _errors_arrays(test.final),
-                    "test_file": _errors_arrays(test.file)},
-    }
+        logger.warning(f"caution: {line}")
+    return tuple(notes)

@@ -1,21 +1,31 @@
 """Report folder of the discrepancy workflow: ``report.md``, ``results.json`` and PNG plots.
 
-The report only formats the results (:func:`~ctrplan.discrepancy.output.discrepancy_results`);
-it computes nothing. People read millimetres and degrees; the JSON keeps SI values where the
-key says so (``_m``, ``_rad``) and millimetres / degrees where the key says ``_mm`` / ``_deg``.
+The report formats a run's typed results (:class:`~ctrplan.discrepancy.workflow.DiscrepancyResult`,
+SI units) for people, who read millimetres and degrees; it computes no figure of its own. This is
+the one module of the workflow that turns results into report units: ``results.json`` keeps SI
+values where the key says so (``_m``, ``_rad``, or no unit suffix) and millimetres / degrees
+where the key says ``_mm`` / ``_deg`` (:func:`results_dict`).
 """
 
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
+from ..effects import REGISTRY
 from ..io.atomic import atomic_write_text
 from ..io.ros2 import describe_bag_summary
+from .coverage import BOUND_DEFINITION
+from .decision import no_effect_sentence
+from .envelope import PREDICTION_DESCRIPTION
+from .estimates import display_value
+from .evaluation import ErrorFigures
+from .provenance import provenance
 
-__all__ = ["write_report", "TABLE_VIII"]
+__all__ = ["write_report", "results_dict", "candidate_dict", "noise_dict", "error_dict", "bound_dict", "TABLE_VIII"]
 
 #: The paper's gain with its friction model on its own grid data (Table VIII of Ha et al. 2019):
 #: relative fall of the mean and of the maximum tip position error.
@@ -40,8 +50,6 @@ def _pct(cmp: dict) -> str:
 
 def _value(row) -> str:
     """A parameter row of a parameter table, with its standard error, in report units."""
-    from .fitting import display_value
-
     text = display_value(row["name"], row["value"], row["unit"])
     se = row.get("stderr")
     if se is not None:
@@ -64,17 +72,31 @@ def _tangential(residual, tip):
     return np.einsum("ij,ij->i", residual, t)
 
 
-def _plots(results: dict, out: Path) -> list[str]:
+def _errors_arrays(e) -> dict:
+    return {"position": e.position, "angle": e.angle, "residual": e.residual_base, "tip_base": e.tip_base}
+
+
+def _arrays(result) -> dict:
+    """The arrays the plots draw [SI]."""
+    split, data, final = result.split, result.setup.data, result.final
+    return {"dev_eta": data.take(split.dev_rows).eta, "test_eta": data.take(split.test_rows).eta,
+            "oof": _errors_arrays(result.baseline.oof),
+            "oof_final": None if final is None else _errors_arrays(final.oof),
+            "test_before": _errors_arrays(result.test.baseline), "test_after": _errors_arrays(result.test.final),
+            "test_file": _errors_arrays(result.test.file)}
+
+
+def _plots(result, out: Path) -> list[str]:
     from ..plots import _figure, _save
 
-    a = results["_arrays"]
+    a = _arrays(result)
     files = []
     fig = _figure((10, 3.8))
     axes = fig.subplots(1, 2)
     before, after = a["test_before"]["position"] * 1e3, a["test_after"]["position"] * 1e3
     top = np.nanmax(np.concatenate([before, after]))
     bins = np.linspace(0, top if np.isfinite(top) and top > 0 else 1.0, 40)
-    final = results["test_split"]["label"]
+    final = result.test.label
     axes[0].hist(before[np.isfinite(before)], bins, alpha=0.6, label="baseline (standard, calibrated)")
     axes[0].hist(after[np.isfinite(after)], bins, alpha=0.6, label=final)
     axes[0].set_xlabel("test-split tip position error [mm]")
@@ -111,9 +133,7 @@ def _plots(results: dict, out: Path) -> list[str]:
     return files
 
 
-def _verdict_lines(results: dict) -> list[str]:
-    from .decision import no_effect_sentence
-
+def _verdict_lines(results: dict, result) -> list[str]:
     d = results["decision"]
     ts = results["test_split"]
     f = ts["figures"]
@@ -126,7 +146,8 @@ def _verdict_lines(results: dict) -> list[str]:
             f"mm; {100 * f['confidence']:.0f} % intervals: {f['method']}. Table VIII of Ha et al. 2019 (friction, grid "
             f"data): mean -{100 * TABLE_VIII['mean']:.0f} %, max -{100 * TABLE_VIII['max']:.0f} %.")
     if d["verdict"] == "none":
-        return [f"**No effect named.** {no_effect_sentence(d, results['noise'], results['candidates'])}.", "", gain, ""]
+        sentence = no_effect_sentence(result.naming.decision, result.noise, result.naming.candidates)
+        return [f"**No effect named.** {sentence}.", "", gain, ""]
     comb = results.get("combination") or {}
     caution = "".join(f" **Caution:** {c}." for c in d.get("cautions") or [])
     if d["verdict"] == "ambiguous":
@@ -350,12 +371,13 @@ def _bound_lines(results: dict) -> list[str]:
     return lines
 
 
-def write_report(results: dict, out_dir) -> dict:
-    """Write ``report.md``, ``results.json`` and the plots into ``out_dir``.
+def write_report(result, out_dir) -> dict:
+    """Write ``report.md``, ``results.json`` (:func:`results_dict`) and the plots into ``out_dir``
+    (atomically).
 
     Parameters
     ----------
-    results : dict
+    result : DiscrepancyResult
         From :func:`ctrplan.discrepancy.workflow.run_discrepancy`.
     out_dir : path
 
@@ -366,12 +388,12 @@ def write_report(results: dict, out_dir) -> dict:
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    plots = _plots(results, out)
-    public = {k: v for k, v in results.items() if not k.startswith("_")}
-    public["plots"] = plots
-    atomic_write_text(out / "results.json", json.dumps(public, indent=2, default=_plain))
+    plots = _plots(result, out)
+    results = results_dict(result)
+    results["plots"] = plots
+    atomic_write_text(out / "results.json", json.dumps(results, indent=2, default=_plain))
     lines = [f"# Discrepancy report: {Path(results['robot_file']).name} on {Path(results['data_file']).name}", ""]
-    lines += _verdict_lines(results)
+    lines += _verdict_lines(results, result)
     if results.get("cautions"):
         lines += ["Cautions:", ""] + [f"- {c}." for c in results["cautions"]] + [""]
     lines += _noise_lines(results)
@@ -391,6 +413,176 @@ def write_report(results: dict, out_dir) -> dict:
     lines += [f"![{p}]({p})" for p in plots]
     atomic_write_text(out / "report.md", "\n".join(lines) + "\n")
     return {"markdown": str(out / "report.md"), "json": str(out / "results.json"), "plots": plots}
+
+
+# --------------------------------------------------------------------------- results.json
+def _mm(x):
+    return None if x is None else x * 1e3
+
+
+def error_dict(f: ErrorFigures) -> dict:
+    """A row of Table VIII of Ha et al. 2019 in report units: tip position error mean, std, p95,
+    max [mm]; tangent mean, max [deg]; evaluation time per sample [ms]."""
+    deg = (lambda x: None if x is None else float(np.rad2deg(x)))
+    return {"position_mean_mm": _mm(f.position_mean), "position_std_mm": _mm(f.position_std),
+            "position_p95_mm": _mm(f.position_p95), "position_max_mm": _mm(f.position_max),
+            "tangent_mean_deg": deg(f.tangent_mean), "tangent_max_deg": deg(f.tangent_max),
+            "evaluation_ms_per_sample": 1e3 * f.seconds_per_sample, "n_samples": f.n_samples,
+            "n_failed": f.n_failed}
+
+
+def _model_figures(m) -> dict:
+    """:class:`~ctrplan.discrepancy.output.ModelFigures` in mm."""
+    return {"mean_mm": m.mean.scaled(1e3).as_dict(), "p95_mm": _mm(m.p95), "max_mm": _mm(m.max)}
+
+
+def candidate_dict(c) -> dict:
+    """A :class:`~ctrplan.discrepancy.fitting.Candidate` as ``results.json`` stores it (mm in
+    ``out_of_fold``; SI in ``parameters`` and ``parameter_table``; Eq. (49) units in
+    ``improvement_eq49``)."""
+    out = {"effects": list(c.effects), "label": c.label, "model": c.model, "fit": c.fit.as_dict(),
+           "folds": [f.as_dict() for f in c.cv.folds], "parameters": c.shown, "units": c.units,
+           "parameter_table": [p.as_dict() for p in c.parameters], "atypical": [a.as_dict() for a in c.atypical],
+           "typical": c.typical, "at_bound": list(c.at_bound), "widened": list(c.widened), "converged": c.cv.converged,
+           "n_parameters": c.n_parameters, "bic": c.bic, "delta_bic": c.delta_bic,
+           "out_of_fold": error_dict(c.out_of_fold_figures), "mean_eq49": c.mean_error,
+           "improvement_eq49": c.improvement.as_dict(), "improvement_position": c.improvement_position.as_dict(),
+           "fit_note": c.fit_note}
+    for key in ("improvement_significant", "eligible", "significant"):
+        if getattr(c, key) is not None:
+            out[key] = getattr(c, key)
+    if c.reverse is not None:
+        out["reverse"] = c.reverse.as_dict()
+    return out
+
+
+def noise_dict(check) -> dict:
+    """A :class:`~ctrplan.discrepancy.decision.NoiseCheck` as ``results.json`` stores it (mm)."""
+    sigma = check.rms
+    return {"rms_mm": check.rms_m * 1e3, "noise_rms_mm": None if sigma is None else sigma * 1e3,
+            "ratio": check.ratio, "consistent": check.consistent,
+            "test": None if check.test is None else check.test.as_dict(), "noise": check.noise.as_dict()}
+
+
+def _coverage_dict(c, *, error_median: bool) -> dict:
+    out = {**c.as_dict(), "bound_median_mm": _mm(c.bound_median_m)}
+    if error_median:
+        out["error_median_mm"] = _mm(c.error_median_m)
+    return out
+
+
+def bound_dict(b) -> dict:
+    """A :class:`~ctrplan.discrepancy.coverage.BoundCalibration` as ``results.json`` stores it (mm
+    where the key says so)."""
+    return {"definition": BOUND_DEFINITION, "method": b.method, "target": b.target, "factor": b.factor,
+            "margin_mm": b.margin_m * 1e3, "noise_multiple": b.noise_multiple, "noise_rms_mm": b.noise_rms_m * 1e3,
+            "n_calibration": b.n_calibration, "test": _coverage_dict(b.test, error_median=True),
+            "raw_test": _coverage_dict(b.raw_test, error_median=False),
+            "translation_last": None if b.translation_last is None else b.translation_last.as_dict(),
+            "failing": b.failing, "status": b.status}
+
+
+def _envelope_dict(env) -> dict:
+    return {"n": env.n, "inside": env.inside, "fraction_inside": env.fraction_inside, "margin_mm": env.margin_m * 1e3,
+            "outside_median_mm": _mm(env.outside_median_m), "outside_p95_mm": _mm(env.outside_p95_m),
+            "outside_max_mm": _mm(env.outside_max_m), "size_median_mm": _mm(env.size_median_m),
+            "description": env.description, "coefficients": env.coefficients, "label": env.label}
+
+
+def _position_stats(pos) -> dict:
+    p = pos[np.isfinite(pos)] * 1e3
+    if not p.size:
+        return {"n": 0, "mean_mm": None, "p95_mm": None, "max_mm": None}
+    return {"n": int(p.size), "mean_mm": float(p.mean()), "p95_mm": float(np.percentile(p, 95)),
+            "max_mm": float(p.max())}
+
+
+def _prediction_dict(prediction) -> dict | None:
+    if prediction is None:
+        return None
+    out = {"description": PREDICTION_DESCRIPTION,
+           "rows": [{"label": label, **_position_stats(pos)} for label, pos in prediction.rows]}
+    if prediction.envelopes:
+        out["envelopes"] = [_envelope_dict(env) for env in prediction.envelopes]
+        out["envelope"] = out["envelopes"][0]
+    return out
+
+
+def _prediction_check_dict(pc) -> dict | None:
+    if pc is None:
+        return None
+    return {"n_samples": pc.n_samples, "n_units": pc.n_units, "history_label": pc.history_label,
+            "confidence": pc.confidence, "standard": _model_figures(pc.standard),
+            "history": _model_figures(pc.history), "difference_mm": pc.difference.scaled(1e3).as_dict(),
+            "history_beats_standard": pc.history_beats_standard, "method": pc.method}
+
+
+def _test_figures_dict(f) -> dict:
+    return {"file": _model_figures(f.file), "before": _model_figures(f.before), "after": _model_figures(f.after),
+            "shrink": {"mean": f.shrink.as_dict()}, "calibration_shrink": {"mean": f.calibration_shrink.as_dict()},
+            "n_samples": f.n_samples, "n_units": f.n_units, "confidence": f.confidence, "method": f.method}
+
+
+def _combination_dict(combination) -> dict | None:
+    if combination is None:
+        return None
+    return {"first": combination.first, "first_label": combination.first_label, "named": combination.named,
+            "tried": {e: candidate_dict(c) for e, c in combination.tried.items()},
+            "not_tried": dict(combination.not_tried), "family": list(combination.family), "rule": combination.rule,
+            "dropped": combination.dropped, "replaced_by": combination.replaced_by}
+
+
+def results_dict(result) -> dict:
+    """A run's results as ``results.json`` stores them (report units: keys ending ``_mm`` in mm,
+    ``_deg`` in degrees, others SI or the Eq. (49) units the key names).
+
+    Parameters
+    ----------
+    result : DiscrepancyResult
+
+    Returns
+    -------
+    dict
+        JSON-ready (numpy values are converted by :func:`write_report`).
+    """
+    setup, split, baseline, naming, test = result.setup, result.split, result.baseline, result.naming, result.test
+    options = result.options
+    opts = asdict(options)
+    opts["effects"] = list(setup.effects) if options.effects is None else list(options.effects)
+    return {
+        "robot_file": str(setup.robot_path), "data_file": str(setup.data_path), "frame": setup.data.frame,
+        "data_source": setup.data.source,
+        "n_samples": setup.data.n_samples, "split": split.as_dict(), "baseline_parameters": list(setup.base_names),
+        "baseline": {"fit": baseline.fit.as_dict(), "folds": [f.as_dict() for f in baseline.cv.folds],
+                     "bic": baseline.bic, "parameter_table": [p.as_dict() for p in baseline.parameters],
+                     "out_of_fold": error_dict(ErrorFigures.of(baseline.oof)),
+                     "prior_strength": baseline.strength,
+                     "prior_choices": [{"strength": c.strength, "mean_position_m": c.mean_position,
+                                        "mean_eq49": c.mean_eq49, "against_file": c.against_file.as_dict()}
+                                       for c in baseline.choices],
+                     "residual_scale": baseline.residual_scale, "file_fit": baseline.file_cv.fit.as_dict()},
+        "contact_baseline": None if result.contact is None else {"fit": result.contact.fit.as_dict(),
+                                                                 "folds": [f.as_dict() for f in result.contact.folds]},
+        "signature_tests": {e: {**t.as_dict(), "effect_size_mm": t.effect_size_m * 1e3} for e, t in result.tests.items()},
+        "skipped_effects": dict(setup.skipped), "noise": noise_dict(result.noise), "decision": naming.decision.as_dict(),
+        "verdict": naming.verdict, "named_effect": naming.named,
+        "named_label": REGISTRY[naming.named].label if naming.named else None,
+        "ambiguous_with": naming.decision.ambiguous_with,
+        "candidates": {e: candidate_dict(c) for e, c in naming.candidates.items()},
+        "named_effects": list(result.updated.named_effects),
+        "combination": _combination_dict(result.combination),
+        "test_split": {"label": test.label, "file": error_dict(ErrorFigures.of(test.file)),
+                       "before": error_dict(ErrorFigures.of(test.baseline)),
+                       "after": error_dict(ErrorFigures.of(test.final)), "figures": _test_figures_dict(test.figures)},
+        "prediction": _prediction_dict(result.prediction),
+        "prediction_check": _prediction_check_dict(result.prediction_check),
+        "bound": None if result.bound is None else bound_dict(result.bound),
+        "updated_model_file": str(result.updated.path), "updated_model": result.updated.model,
+        "reproduced": result.reproduction.reproduced, "reproduced_samples": split.n_test,
+        "reproduced_position_mean_mm": float(np.nanmean(result.reproduction.position) * 1e3),
+        "cautions": list(result.cautions), "significance": options.significance, "options": opts,
+        "seconds": result.seconds, "provenance": provenance(options),
+    }
 
 
 def _plain(x):

@@ -37,14 +37,18 @@ tests.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from .._log import progress_level
 from ..effects import REGISTRY
 
 __all__ = ["SignatureTest", "SignatureContext", "diagnose_residuals", "friction_signature", "regression_signature",
            "registration_signature", "vector_signature", "untestable", "tip_velocity", "label"]
+
+logger = logging.getLogger(__name__)
 
 
 def label(effect: str) -> str:
@@ -92,9 +96,9 @@ class SignatureTest:
         return replace(self, effect=effect)
 
     def as_dict(self) -> dict:
+        """The attributes (SI) and the effect's report ``label``."""
         d = asdict(self)
         d["label"] = label(self.effect)
-        d["effect_size_mm"] = self.effect_size_m * 1e3
         return d
 
 
@@ -589,7 +593,7 @@ class SignatureContext:
         return untestable(effect, reason)
 
 
-def diagnose_residuals(setup, split, baseline, options, echo=print) -> dict:
+def diagnose_residuals(setup, split, baseline, options) -> dict:
     """Stage 4: one signature test per candidate effect on the baseline's out-of-fold residuals
     at the development samples.
 
@@ -605,7 +609,6 @@ def diagnose_residuals(setup, split, baseline, options, echo=print) -> dict:
         Its out-of-fold residual vectors [m] are tested.
     options : DiscrepancyOptions
         ``n_permutations``, ``seed``, ``n_jobs``.
-    echo : callable
 
     Returns
     -------
@@ -618,7 +621,7 @@ def diagnose_residuals(setup, split, baseline, options, echo=print) -> dict:
     from .split import configurations_repeat
 
     dev, params = setup.data.take(split.dev_rows), baseline.params
-    echo("testing residual signatures ...")
+    logger.log(progress_level(), "testing residual signatures ...")
     groups = dev.config_id if configurations_repeat(dev.config_id) else configuration_groups(
         dev.alpha, dev.beta, TRAJECTORY_ROTATION_BIN, TRAJECTORY_TRANSLATION_BIN)
     base_robot = apply_parameters(setup.robot, tuple(params), tuple(params.values()))
@@ -632,7 +635,8 @@ def diagnose_residuals(setup, split, baseline, options, echo=print) -> dict:
                     else untestable(e, "its entry defines no signature test"))
     for e, t in tests.items():
         if t.testable:
-            echo(f"  {label(e):>30s}: effect {t.effect_size_m * 1e3:.3f} mm, p = {t.p_value:.4f}")
+            logger.log(progress_level(),
+                       f"  {label(e):>30s}: effect {t.effect_size_m * 1e3:.3f} mm, p = {t.p_value:.4f}")
         else:
-            echo(f"  {label(e):>30s}: {t.description}")
+            logger.log(progress_level(), f"  {label(e):>30s}: {t.description}")
     return tests

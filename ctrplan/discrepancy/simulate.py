@@ -19,7 +19,8 @@ import numpy as np
 from ..errors import CtrplanError
 from ..history import MotionRecord, motion_state, sequence_segments
 from ..mechanics import ModelSettings, solve_contact, solve_standard
-from ..models import MODELS  # the one registry of models
+from ..models import MODEL_INFO, MODELS, check_model  # the one registry of models
+from ..parallel import Executor
 
 __all__ = ["MODELS", "Simulation", "simulate"]
 
@@ -221,33 +222,39 @@ def _chunks(order, alpha, beta, size):
     return np.split(order, cuts)
 
 
+def _solve_task(single_thread, *args):
+    """:func:`_solve_rows` as a task of the executor; ``single_thread``: with one BLAS / OpenMP
+    thread (``threadpoolctl``) for the length of the task (a worker process; a worker's BLAS may
+    otherwise start with several threads, which only oversubscribe the cores)."""
+    if not single_thread:
+        return _solve_rows(*args)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        return _solve_rows(*args)
+
+
 def _run(tasks, alpha, beta, guess, follow, eta, mu, contact, robot, settings, check_stability,
          n_jobs, progress, desc, K):
-    """Run tasks (each an index array in processing order) and scatter results to rows."""
+    """Run tasks (each an index array in processing order) and scatter results to rows, in task
+    order (the results arrive in order of completion)."""
     tip, tan, ok, msg, torsion, counts = _no_results(K, alpha.shape[1])
-
-    def args(idx):
-        return (robot, alpha[idx], beta[idx], guess[idx], follow[idx], eta[idx], mu[idx], contact,
-                settings, check_stability)
-
-    if n_jobs == 1 or len(tasks) <= 1:
-        results = (_solve_rows(*args(idx)) for idx in tasks)
-    else:
-        from joblib import Parallel, delayed, parallel_config
-
-        with parallel_config(backend="loky", inner_max_num_threads=1):
-            results = Parallel(n_jobs=n_jobs, return_as="generator")(
-                delayed(_solve_rows)(*args(idx)) for idx in tasks)
+    workers = n_jobs if n_jobs > 1 and len(tasks) > 1 else 1
+    jobs = [(t, (workers > 1, robot, alpha[idx], beta[idx], guess[idx], follow[idx], eta[idx], mu[idx], contact,
+                 settings, check_stability)) for t, idx in enumerate(tasks)]
+    results = [None] * len(tasks)
     from tqdm.auto import tqdm
 
-    with tqdm(total=K, disable=not progress, unit="sample", desc=desc) as bar:
-        for idx, (t, g, o, m, s, c) in zip(tasks, results):
-            tip[idx], tan[idx], ok[idx], torsion[idx] = t, g, o, s
-            for j, k in enumerate(idx):
-                msg[k] = m[j]
-            for name in counts:
-                counts[name] += c[name]
-            bar.update(idx.size)
+    with Executor(workers) as ex, tqdm(total=K, disable=not progress, unit="sample", desc=desc) as bar:
+        for t, result in ex.run(_solve_task, jobs):
+            results[t] = result
+            bar.update(tasks[t].size)
+    for idx, (t, g, o, m, s, c) in zip(tasks, results):
+        tip[idx], tan[idx], ok[idx], torsion[idx] = t, g, o, s
+        for j, k in enumerate(idx):
+            msg[k] = m[j]
+        for name in counts:
+            counts[name] += c[name]
     return tip, tan, ok, msg, torsion, counts
 
 
@@ -281,9 +288,9 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, mu=None, sequence=None
         every row is independent (solved from zero twist).
     settings : ModelSettings, optional
     n_jobs : int
-        Worker processes (joblib/loky, one BLAS thread each); 1 solves in this process, as
-        does any call whose estimated serial work is below about 2 s (e.g. fewer than about 700
-        standard-model samples or 20 contact samples).
+        Worker processes (:class:`ctrplan.parallel.Executor`, one BLAS thread each); 1 solves in
+        this process, as does any call whose estimated serial work is below about 2 s (e.g. fewer
+        than about 700 standard-model samples or 20 contact samples).
     progress : bool
         tqdm progress bar.
     check_stability : bool
@@ -328,8 +335,7 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, mu=None, sequence=None
     (40)-(41)).
     """
     t0 = time.perf_counter()
-    if model not in MODELS:
-        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    info = MODEL_INFO[check_model(model)]
     if not isinstance(n_jobs, (int, np.integer)) or n_jobs < 1:
         raise ValueError(f"n_jobs must be an integer >= 1, got {n_jobs!r}")
     settings = settings or ModelSettings()
@@ -338,7 +344,7 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, mu=None, sequence=None
     if n != robot.n_tubes:
         raise ValueError(f"alpha has {n} columns but robot {robot.name!r} has {robot.n_tubes} tubes")
     groups = _sequence_groups(sequence, K)
-    contact = model != "standard"
+    contact = info.contact
     if K * (_CONTACT_COST_S if contact else _STANDARD_COST_S) < _MIN_PARALLEL_SECONDS:
         n_jobs = 1   # not worth the worker overhead
     eta_used = np.zeros((K, n - 1), dtype=int)
@@ -346,7 +352,7 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, mu=None, sequence=None
     n_released = 0
     if contact:
         robot.clearances  # noqa: B018 - raises PhysicalParameterError without clearances
-    if model == "friction":
+    if info.friction:
         if eta is None:
             if groups is None:
                 raise ValueError("model 'friction' needs eta or sequence (the motion history)")
@@ -409,5 +415,5 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, mu=None, sequence=None
             solved[order] = True
             msg = [msg2[k] if solved[k] else msg[k] for k in range(K)]
     return Simulation(tip=tip, tangent=tan, ok=ok, message=msg, model=model, eta=eta_used,
-                      mu=mu_used, base_torsion=torsion, n_released=n_released if model == "friction" else 0,
+                      mu=mu_used, base_torsion=torsion, n_released=n_released if info.friction else 0,
                       n_failed=int(np.sum(~ok)), elapsed=time.perf_counter() - t0, **counts)

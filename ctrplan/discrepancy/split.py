@@ -21,16 +21,20 @@ half a block.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .._log import progress_level
 from ..errors import DataFileError
 from .data import MeasuredData
 
 __all__ = ["DataSplit", "make_split", "split_samples", "configurations_repeat", "sample_units", "subsample",
            "choose_buffer", "residual_autocorrelation", "near_rows", "MIN_BLOCK_SAMPLES", "MAX_BLOCKS",
            "MIN_TEST_UNITS", "MAX_FOLDS", "MIN_UNITS_PER_FOLD", "BUFFER_AUTOCORRELATION"]
+
+logger = logging.getLogger(__name__)
 
 #: Shortest time block [samples]: shorter blocks would share too much of their serial
 #: correlation with their neighbours to count as separate units.
@@ -416,8 +420,18 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
                      n_folds=folds, max_fit_samples=max_fit_samples, seed=seed, data=data)
 
 
-def split_samples(setup, options, echo=print) -> DataSplit:
+def split_samples(setup, options) -> DataSplit:
     """Stage 2: :func:`make_split` of the data with the options' test fraction, blocks and folds.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    options : DiscrepancyOptions
+
+    Returns
+    -------
+    DataSplit
+        Without a buffer (:func:`~ctrplan.discrepancy.baseline.pilot_fit` chooses it).
 
     Raises
     ------
@@ -435,10 +449,10 @@ def split_samples(setup, options, echo=print) -> DataSplit:
     if n_fit <= len(setup.base_names) + largest:
         raise DataFileError(f"{data.file}: {n_fit} calibration samples per fold are not more than the "
                             f"{len(setup.base_names)} baseline parameters plus the largest effect's; give more samples")
-    echo(f"data: {data.n_samples} samples ({data.frame} frame) from {data.file}; {split.how}")
+    logger.log(progress_level(), f"data: {data.n_samples} samples ({data.frame} frame) from {data.file}; {split.how}")
     if data.source is not None:
         from ..io.ros2 import describe_bag_summary
 
         for line in describe_bag_summary(data.source):
-            echo(f"  {line}")
+            logger.log(progress_level(), f"  {line}")
     return split

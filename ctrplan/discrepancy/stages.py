@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-import hashlib
 import json
-from dataclasses import asdict
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
+from ..cache import content_key, file_hash, mechanics_version
 from ..effects import REGISTRY
 from ..io.atomic import atomic_write_text
-from ..io.robot_file import file_hash
-from .calibrate import CalibrationResult
 from .options import FIT_VERSION, DiscrepancyOptions
 
 __all__ = ["StageStore", "stage_key"]
@@ -56,12 +54,15 @@ def _jsonable(x):
 
 
 def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
-    """The key under which a run's finished stages are stored.
+    """The key under which a run's finished stages are stored (the key rule of :mod:`ctrplan.cache`).
 
-    The stages depend on the inputs, on the options that change a fit and on the effects tried,
-    not on the number of workers, the tests' permutations and level (the tests are not stored),
-    the stated noise, the envelope or the reference friction; :data:`FIT_VERSION` enters it so
-    that stages of an earlier fitting procedure are not reused.
+    The stages depend on the inputs (by the SHA-256 of their bytes), on the options that change a
+    fit and on the effects tried, not on the options marked
+    :data:`~ctrplan.discrepancy.options.NOT_IN_STAGE_KEY` (the number of workers, the tests'
+    permutations and level, the stated noise, the envelope, the reference friction, the bound's
+    samples and target); :data:`~ctrplan.discrepancy.options.FIT_VERSION` and
+    :data:`ctrplan.constants.MECHANICS_VERSION` enter it so that stages of an earlier fitting
+    procedure or of other mechanics are not reused.
 
     Parameters
     ----------
@@ -74,10 +75,7 @@ def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
     str
         12 hexadecimal digits of a SHA-256.
     """
-    keyed = {k: v for k, v in asdict(options).items()
-             if k not in ("n_jobs", "n_permutations", "significance", "noise_position", "envelope_samples",
-                          "reference_friction", "effects", "bound_target", "bound_samples")}
-    keyed["fit_version"] = FIT_VERSION
+    keyed = {f.name: getattr(options, f.name) for f in fields(options) if f.metadata.get("stage_key", True)}
     keyed["effects"] = sorted(options.effects if options.effects is not None else REGISTRY)
-    return hashlib.sha256(Path(robot_path).read_bytes() + file_hash(data_path).encode()
-                          + json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:12]
+    return content_key({"robot_sha256": file_hash(robot_path), "data_sha256": file_hash(data_path), "options": keyed,
+                        "fit_version": FIT_VERSION, "mechanics_version": mechanics_version()})[:12]

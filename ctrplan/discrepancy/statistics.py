@@ -19,13 +19,129 @@ configuration group of a grid protocol) is an independent observation of how two
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import numpy as np
 from scipy import stats
 
-__all__ = ["cv_comparison", "holm", "unit_sums", "ratio_interval", "mean_interval", "shrink_interval"]
+__all__ = ["Comparison", "Interval", "cv_comparison", "holm", "unit_sums", "ratio_interval", "mean_interval",
+           "shrink_interval"]
+
+_NAN2 = (float("nan"), float("nan"))
 
 
-def cv_comparison(err_a, err_b, fold, *, confidence: float = 0.95) -> dict:
+@dataclass(frozen=True)
+class Comparison:
+    """Two models' out-of-fold errors compared over the cross-validation folds (:func:`cv_comparison`;
+    positive: model b is better).
+
+    Attributes
+    ----------
+    mean_difference : float
+        Mean over folds of ``A_f - B_f``, in the errors' unit (Eq. (49) residuals [mm + deg], or
+        tip distances [m]).
+    ci : tuple of float
+        Its t-interval over folds (low, high), same unit; NaN with fewer than two folds.
+    ratio : float
+        ``exp(mean d_f)``: the geometric mean of ``A_f / B_f`` [-].
+    ratio_ci : tuple of float
+        Its interval [-].
+    reduction : float
+        ``1 - 1 / ratio``: the share by which b lowers a's error [-].
+    reduction_ci : tuple of float
+        Its interval [-].
+    se : float
+        Standard error of the mean log ratio [-].
+    t : float
+        t statistic of the mean log ratio.
+    dof : int
+        Degrees of freedom (folds - 1).
+    p_value : float
+        One-sided: b better than a.
+    p_worse : float
+        One-sided: b worse than a.
+    n_folds : int
+    n_samples : int
+        Samples where both errors are finite.
+    positive_folds : int
+        Folds where b's mean error is lower.
+    fold_differences : tuple of float, length n_folds
+        ``A_f - B_f`` per fold, in the errors' unit.
+    fold_log_ratios : tuple of float, length n_folds
+        ``ln(A_f / B_f)`` per fold.
+    method : str
+    """
+
+    mean_difference: float
+    ci: tuple
+    ratio: float
+    ratio_ci: tuple
+    reduction: float
+    reduction_ci: tuple
+    se: float
+    t: float
+    dof: int
+    p_value: float
+    p_worse: float
+    n_folds: int
+    n_samples: int
+    positive_folds: int
+    fold_differences: tuple
+    fold_log_ratios: tuple
+    method: str
+
+    def as_dict(self) -> dict:
+        """Plain JSON form (intervals as ``[low, high]`` lists; the errors' unit)."""
+        return {"n_folds": self.n_folds, "n_samples": self.n_samples, "fold_differences": list(self.fold_differences),
+                "fold_log_ratios": list(self.fold_log_ratios), "positive_folds": self.positive_folds,
+                "method": self.method, "mean_difference": self.mean_difference, "ci": list(self.ci),
+                "ratio": self.ratio, "ratio_ci": list(self.ratio_ci), "reduction": self.reduction,
+                "reduction_ci": list(self.reduction_ci), "se": self.se, "t": self.t, "dof": self.dof,
+                "p_value": self.p_value, "p_worse": self.p_worse}
+
+
+@dataclass(frozen=True)
+class Interval:
+    """An estimate with its t-interval over units (:func:`ratio_interval`).
+
+    Attributes
+    ----------
+    value : float
+        The estimate, in the unit of what it estimates (e.g. a mean tip error [m], or a share [-]);
+        NaN without data.
+    se : float
+        Its standard error, same unit; NaN with fewer than two units.
+    low, high : float
+        The interval's ends, same unit; NaN with fewer than two units.
+    dof : int
+        Degrees of freedom (units - 1; 0 with fewer than two units).
+    n_units : int
+    """
+
+    value: float
+    se: float
+    low: float
+    high: float
+    dof: int
+    n_units: int
+
+    @property
+    def ci(self) -> tuple:
+        """``(low, high)``."""
+        return (self.low, self.high)
+
+    def scaled(self, factor: float) -> "Interval":
+        """The same interval in another unit: value, standard error and ends times ``factor`` (> 0)."""
+        return replace(self, value=self.value * factor, se=self.se * factor, low=self.low * factor,
+                       high=self.high * factor)
+
+    def as_dict(self) -> dict:
+        """``{"value", "se", "ci": [low, high], "dof", "n_units"}``."""
+        return {"value": self.value, "se": self.se, "ci": [self.low, self.high], "dof": self.dof,
+                "n_units": self.n_units}
+
+
+def cv_comparison(err_a, err_b, fold, *, confidence: float = 0.95) -> Comparison:
     """Is model b's out-of-fold error lower than model a's? A t test clustered by fold.
 
     Per fold f the mean errors ``A_f`` and ``B_f`` of the two models over its validation samples
@@ -55,14 +171,8 @@ def cv_comparison(err_a, err_b, fold, *, confidence: float = 0.95) -> dict:
 
     Returns
     -------
-    dict
-        ``mean_difference`` (mean over folds of ``A_f - B_f``, in the errors' unit: positive when
-        b is better), ``ci`` (its t-interval over folds), ``ratio`` (``exp(mean d_f)``, the
-        geometric mean of ``A_f / B_f``) and ``ratio_ci``, ``reduction`` (``1 - 1 / ratio``: the
-        share by which b lowers a's error) and ``reduction_ci``, ``se`` (of the mean log ratio),
-        ``t``, ``dof``, ``p_value`` (one-sided: b better than a), ``p_worse`` (one-sided: b worse
-        than a), ``n_folds``, ``positive_folds``, ``fold_differences``, ``fold_log_ratios``,
-        ``n_samples``, ``method``.
+    Comparison
+        Positive ``mean_difference`` and ``reduction`` when b is better.
 
     Raises
     ------
@@ -83,15 +193,14 @@ def cv_comparison(err_a, err_b, fold, *, confidence: float = 0.95) -> dict:
     logs = np.log(np.maximum(mean_a, tiny) / np.maximum(mean_b, tiny))
     diffs = mean_a - mean_b
     n_folds = int(ids.size)
-    nan2 = [float("nan"), float("nan")]
-    out = {"n_folds": n_folds, "n_samples": int(ok.sum()), "fold_differences": diffs.tolist(),
-           "fold_log_ratios": logs.tolist(), "positive_folds": int(np.sum(logs > 0)),
-           "method": "t test of the log ratio of the folds' mean errors, clustered by fold"}
+    common = dict(n_folds=n_folds, n_samples=int(ok.sum()), fold_differences=tuple(diffs.tolist()),
+                  fold_log_ratios=tuple(logs.tolist()), positive_folds=int(np.sum(logs > 0)),
+                  method="t test of the log ratio of the folds' mean errors, clustered by fold")
     if n_folds < 2:
-        return {**out, "mean_difference": float(diffs.mean()) if n_folds else float("nan"), "ci": nan2,
-                "ratio": float(np.exp(logs.mean())) if n_folds else float("nan"), "ratio_ci": nan2,
-                "reduction": float("nan"), "reduction_ci": nan2, "se": float("nan"), "t": float("nan"), "dof": 0,
-                "p_value": 1.0, "p_worse": 1.0}
+        return Comparison(mean_difference=float(diffs.mean()) if n_folds else float("nan"), ci=_NAN2,
+                          ratio=float(np.exp(logs.mean())) if n_folds else float("nan"), ratio_ci=_NAN2,
+                          reduction=float("nan"), reduction_ci=_NAN2, se=float("nan"), t=float("nan"), dof=0,
+                          p_value=1.0, p_worse=1.0, **common)
     dof = n_folds - 1
     q = float(stats.t.ppf(0.5 + confidence / 2, dof))
     mean = float(logs.mean())
@@ -102,13 +211,13 @@ def cv_comparison(err_a, err_b, fold, *, confidence: float = 0.95) -> dict:
     else:                                    # every fold the same ratio
         t = float(np.sign(mean)) * np.inf if mean else 0.0
         p, p_worse = (0.0, 1.0) if mean > 0 else (1.0, 0.0) if mean < 0 else (1.0, 1.0)
-    ratio_ci = [float(np.exp(mean - q * se)), float(np.exp(mean + q * se))]
+    ratio_ci = (float(np.exp(mean - q * se)), float(np.exp(mean + q * se)))
     dmean = float(diffs.mean())
     dhalf = float(q * diffs.std(ddof=1) / np.sqrt(n_folds))
-    return {**out, "mean_difference": dmean, "ci": [dmean - dhalf, dmean + dhalf], "ratio": float(np.exp(mean)),
-            "ratio_ci": ratio_ci, "reduction": float(1.0 - np.exp(-mean)),
-            "reduction_ci": [1.0 - 1.0 / ratio_ci[0], 1.0 - 1.0 / ratio_ci[1]], "se": se, "t": float(t), "dof": dof,
-            "p_value": p, "p_worse": p_worse}
+    return Comparison(mean_difference=dmean, ci=(dmean - dhalf, dmean + dhalf), ratio=float(np.exp(mean)),
+                      ratio_ci=ratio_ci, reduction=float(1.0 - np.exp(-mean)),
+                      reduction_ci=(1.0 - 1.0 / ratio_ci[0], 1.0 - 1.0 / ratio_ci[1]), se=se, t=float(t), dof=dof,
+                      p_value=p, p_worse=p_worse, **common)
 
 
 def holm(p_values: dict, alpha: float) -> dict:
@@ -135,7 +244,7 @@ def unit_sums(values, units) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.bincount(u, values[ok], ids.size), np.bincount(u, minlength=ids.size).astype(float), ids
 
 
-def ratio_interval(numerator, denominator, *, confidence: float = 0.95) -> dict:
+def ratio_interval(numerator, denominator, *, confidence: float = 0.95) -> Interval:
     """``R = sum(numerator) / sum(denominator)`` over units, with a t-interval.
 
     The variance comes from the linearization ``z_u = N_u - R D_u`` of the ratio over the U units:
@@ -150,32 +259,32 @@ def ratio_interval(numerator, denominator, *, confidence: float = 0.95) -> dict:
 
     Returns
     -------
-    dict
-        ``value``, ``se``, ``ci`` ([low, high]), ``dof``, ``n_units``; NaN interval with fewer than
-        two units.
+    Interval
+        In the unit of ``numerator / denominator``; NaN interval with fewer than two units.
     """
     num = np.asarray(numerator, float)
     den = np.asarray(denominator, float)
     n = num.size
+    nan = float("nan")
     if n == 0 or not np.sum(den) > 0:
-        return {"value": float("nan"), "se": float("nan"), "ci": [float("nan"), float("nan")], "dof": 0, "n_units": n}
+        return Interval(value=nan, se=nan, low=nan, high=nan, dof=0, n_units=n)
     r = float(num.sum() / den.sum())
     if n < 2:
-        return {"value": r, "se": float("nan"), "ci": [float("nan"), float("nan")], "dof": 0, "n_units": n}
+        return Interval(value=r, se=nan, low=nan, high=nan, dof=0, n_units=n)
     z = num - r * den
     se = float(np.sqrt(n * z.var(ddof=1)) / den.sum())
     half = float(stats.t.ppf(0.5 + confidence / 2, n - 1) * se)
-    return {"value": r, "se": se, "ci": [r - half, r + half], "dof": n - 1, "n_units": n}
+    return Interval(value=r, se=se, low=r - half, high=r + half, dof=n - 1, n_units=n)
 
 
-def mean_interval(values, units, *, confidence: float = 0.95) -> dict:
+def mean_interval(values, units, *, confidence: float = 0.95) -> Interval:
     """The mean of the finite ``values`` (K,) with a t-interval over ``units`` (K,)
-    (:func:`ratio_interval` of per-unit sums and counts)."""
+    (:func:`ratio_interval` of per-unit sums and counts), an :class:`Interval` in the values' unit."""
     s, c, _ = unit_sums(values, units)
     return ratio_interval(s, c, confidence=confidence)
 
 
-def shrink_interval(before, after, units, *, confidence: float = 0.95) -> dict:
+def shrink_interval(before, after, units, *, confidence: float = 0.95) -> Interval:
     """The relative fall of the mean error, ``1 - mean(after) / mean(before)`` over the samples where
     both are finite, with a t-interval from the per-unit paired sums (:func:`ratio_interval`).
 
@@ -188,8 +297,8 @@ def shrink_interval(before, after, units, *, confidence: float = 0.95) -> dict:
 
     Returns
     -------
-    dict
-        ``value``, ``se``, ``ci`` ([low, high]), ``dof``, ``n_units``.
+    Interval
+        The relative fall [-].
     """
     b = np.asarray(before, float)
     a = np.asarray(after, float)
@@ -197,5 +306,4 @@ def shrink_interval(before, after, units, *, confidence: float = 0.95) -> dict:
     sa, _, ida = unit_sums(a[ok], np.asarray(units)[ok])
     sb, _, _ = unit_sums(b[ok], np.asarray(units)[ok])
     r = ratio_interval(sa, sb, confidence=confidence)
-    lo, hi = r["ci"]
-    return {**r, "value": 1.0 - r["value"], "ci": [1.0 - hi, 1.0 - lo]}
+    return replace(r, value=1.0 - r.value, low=1.0 - r.high, high=1.0 - r.low)

@@ -38,6 +38,7 @@ from ..effects import REGISTRY, EffectSet, apply_output_effects, apply_robot_eff
 from ..errors import PhysicalParameterError
 from ..history import MotionRecord, motion_state
 from ..mechanics import ModelSettings
+from ..models import MODEL_INFO
 from ..robot import ROTATION, TRANSLATION
 from .simulate import simulate
 
@@ -393,12 +394,13 @@ def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
     effects = EffectSet(effects or {}, robot)
     truth_robot = apply_robot_effects(robot, effects)
     model = truth_model(effects)
+    info = MODEL_INFO[model]
     moving = [n for n in effects.active() if REGISTRY[n].needs_motion]
     if moving and protocol != "trajectory":
         raise PhysicalParameterError(
             f"effects {', '.join(moving)} change the motion history and need the trajectory protocol (protocol "
             f"{protocol!r} solves every target without its approach path)")
-    if model != "standard":
+    if info.contact:
         try:
             truth_robot.clearances  # noqa: B018
         except PhysicalParameterError as exc:
@@ -412,7 +414,7 @@ def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
         frame = paper_protocol(robot, grid)
         alpha, beta = frame[acols].to_numpy(float), frame[bcols].to_numpy(float)
         eta = frame[ecols].to_numpy(int)
-        if model == "friction":
+        if info.friction:
             state = motion_state(MotionRecord(alpha, beta, sequence=frame["sequence"].to_numpy(int)), given_eta=eta)
             eta_a, mu_a = state.applied(truth_robot.friction_coefficients)
             sim = simulate(truth_robot, alpha, beta, model=model, eta=eta_a, mu=mu_a, settings=settings,
@@ -437,13 +439,13 @@ def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
         # the truth moves along the history the tubes really saw (and the tracker showed)
         state = history_state(truth_robot, record, effects)
         eta_t, mu_t = state.applied(truth_robot.friction_coefficients)
-        sim = simulate(truth_robot, state.alpha, state.beta, model=model, eta=eta_t if model == "friction" else None,
-                       mu=mu_t if model == "friction" else None, sequence=seq, settings=settings, n_jobs=n_jobs,
+        sim = simulate(truth_robot, state.alpha, state.beta, model=model, eta=eta_t if info.friction else None,
+                       mu=mu_t if info.friction else None, sequence=seq, settings=settings, n_jobs=n_jobs,
                        progress=progress)
         extra = {"samples": int(samples), "rate_hz": TRAJECTORY_RATE_HZ,
                  "translation_last_samples": int(np.any(hist.released, axis=1).sum()),
                  "reversals": {j.name: _reversals(frame[j.name]) for j in robot.joints}}
-    if protocol == "trajectory" or model == "friction":
+    if protocol == "trajectory" or info.friction:
         tip, tangent, ok, message = sim.tip, sim.tangent, sim.ok, sim.message
     tip, tangent = apply_output_effects(tip, tangent, effects)
     tip_n, tan_n = add_noise(np.nan_to_num(tip), np.nan_to_num(tangent, nan=1.0), noise, rng)

@@ -9,8 +9,8 @@ mm + deg of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906):
    of finished stages (:mod:`ctrplan.discrepancy.stages`);
 2. :func:`~ctrplan.discrepancy.split.split_samples`: an untouched test split held back, the rest
    (development) in blocked cross-validation folds;
-3. :func:`~ctrplan.discrepancy.fitting.pilot_fit` and
-   :func:`~ctrplan.discrepancy.fitting.calibrate_baseline`: a pilot fit on the development samples
+3. :func:`~ctrplan.discrepancy.baseline.pilot_fit` and
+   :func:`~ctrplan.discrepancy.baseline.calibrate_baseline`: a pilot fit on the development samples
    chooses the buffer around validation and test blocks and the prior's scale; then the standard
    model by least squares on Eq. (49) with a prior toward the robot file's tube parameters whose
    strength the out-of-fold error chooses, on the development samples and without each fold;
@@ -21,7 +21,7 @@ mm + deg of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906):
    :func:`~ctrplan.discrepancy.fitting.fit_candidates`: every candidate fitted by its entry's
    strategy and cross-validated;
 7. :func:`~ctrplan.discrepancy.decision.name_effect`: the verdict (named, ambiguous or none);
-8. :func:`~ctrplan.discrepancy.fitting.fit_second_effect`: a second effect fitted together with
+8. :func:`~ctrplan.discrepancy.pairs.fit_second_effect`: a second effect fitted together with
    it, compared in both directions;
 9. :func:`~ctrplan.discrepancy.output.evaluate_test_split`: the final model's gain on the test
    split, with intervals (the only use of the test split for a decision's figures);
@@ -31,34 +31,142 @@ mm + deg of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906):
     measured tips and a bound calibrated to cover a chosen share;
 11. :func:`~ctrplan.discrepancy.output.write_updated_model` and
     :func:`~ctrplan.discrepancy.output.check_reproduction`: one robot file with what was learned,
-    reloaded and checked;
-12. :func:`~ctrplan.discrepancy.output.discrepancy_results`: the results dictionary, which
-    :mod:`ctrplan.discrepancy.report` formats.
+    reloaded and checked; :func:`~ctrplan.discrepancy.output.run_cautions`: what a reader must not
+    overlook.
+
+The stages' results make one :class:`DiscrepancyResult`, which :mod:`ctrplan.discrepancy.report`
+formats (``results.json``, ``report.md``, plots; millimetres and degrees only there).
 
 Every stage that fits or evaluates reads its result from ``out_dir/.stages`` when an earlier run
-with the same stage key finished it, and stores it there otherwise.
+with the same stage key finished it, and stores it there otherwise. The workflow logs its progress
+through :mod:`logging` (loggers under ``ctrplan.discrepancy``) and prints nothing itself.
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
+from pathlib import Path
 
-from .decision import check_noise, name_effect
-from .envelope import predict_with_history
-from .fitting import calibrate_baseline, fit_candidates, fit_second_effect, pilot_fit, refit_contact_baseline
+from .._log import deprecated_echo
+from .baseline import Baseline, calibrate_baseline, pilot_fit
+from .coverage import BoundCalibration, check_bound
+from .decision import Naming, NoiseCheck, check_noise, name_effect
+from .envelope import HistoryPrediction, predict_with_history
+from .fitting import CrossValidated, fit_candidates, refit_contact_baseline
 from .options import DiscrepancyOptions
-from .coverage import check_bound
-from .output import (check_reproduction, discrepancy_results, evaluate_test_split, final_candidate, final_parameters,
-                     validate_prediction, write_updated_model)
-from .setup import load_inputs
+from .output import (PredictionCheck, Reproduction, TestSplit, UpdatedModel, check_reproduction, evaluate_test_split,
+                     final_candidate, final_parameters, run_cautions, validate_prediction, write_updated_model)
+from .pairs import Combination, fit_second_effect
+from .setup import DiscrepancySetup, load_inputs
 from .signatures import diagnose_residuals
-from .split import split_samples
+from .split import DataSplit, split_samples
 
-__all__ = ["run_discrepancy", "DiscrepancyOptions"]
+__all__ = ["run_discrepancy", "DiscrepancyOptions", "DiscrepancyResult"]
 
 
+@dataclass(frozen=True, eq=False)
+class DiscrepancyResult:
+    """What a run of the discrepancy workflow found: every stage's result, in SI units (Eq. (49)
+    residuals and costs in the paper's mm + deg).
+
+    Attributes
+    ----------
+    setup : DiscrepancySetup
+        Stage 1: the robot, the data, the baseline parameters and the effects tried.
+    split : DataSplit
+        Stage 2: the test split, the folds and the buffer.
+    baseline : Baseline
+        Stage 3: the calibrated baseline and the choice of its prior.
+    tests : mapping of str to SignatureTest
+        Stage 4: each effect's signature test on the baseline's out-of-fold residuals.
+    noise : NoiseCheck
+        Stage 5.
+    contact : CrossValidated or None
+        Stage 6a: the clearance-model refit of the tube parameters.
+    naming : Naming
+        Stages 6b and 7: every candidate, fitted and cross-validated, and the verdict.
+    combination : Combination or None
+        Stage 8: a second effect fitted with the named one.
+    test : TestSplit
+        Stage 10: the robot file, the baseline and the final model on the untouched test split.
+    prediction : HistoryPrediction or None
+        Stage 9: the history-aware prediction (None without a friction candidate).
+    prediction_check : PredictionCheck or None
+    bound : BoundCalibration or None
+        The friction bound against the measured tips and its calibration (None when
+        ``options.bound_samples`` is 0).
+    updated : UpdatedModel
+        Stage 11: the written robot file.
+    reproduction : Reproduction
+        Stage 12: that file reloaded, on the test split.
+    options : DiscrepancyOptions
+    cautions : tuple of str
+        What a reader must not overlook (:func:`~ctrplan.discrepancy.output.run_cautions`).
+    seconds : float
+        Wall time of the run [s].
+    """
+
+    setup: DiscrepancySetup
+    split: DataSplit
+    baseline: Baseline
+    tests: dict
+    noise: NoiseCheck
+    contact: CrossValidated | None
+    naming: Naming
+    combination: Combination | None
+    test: TestSplit
+    prediction: HistoryPrediction | None
+    prediction_check: PredictionCheck | None
+    bound: BoundCalibration | None
+    updated: UpdatedModel
+    reproduction: Reproduction
+    options: DiscrepancyOptions
+    cautions: tuple
+    seconds: float
+
+    @property
+    def verdict(self) -> str:
+        """``"named"``, ``"ambiguous"`` or ``"none"``."""
+        return self.naming.verdict
+
+    @property
+    def named_effect(self) -> str | None:
+        """The best eligible effect (the first of an ambiguous pair), or None."""
+        return self.naming.named
+
+    @property
+    def named_effects(self) -> tuple:
+        """The effects of the final model (the written robot file), e.g. a named pair."""
+        return self.updated.named_effects
+
+    @property
+    def final(self):
+        """The final model's :class:`~ctrplan.discrepancy.fitting.Candidate` (None: the
+        recalibrated baseline)."""
+        return final_candidate(self.naming, self.combination)
+
+    @property
+    def final_parameters(self) -> dict:
+        """The final model's parameters [SI]."""
+        return final_parameters(self.naming, self.combination, self.baseline)
+
+    @property
+    def updated_model_file(self) -> Path:
+        """The written robot file."""
+        return self.updated.path
+
+    def to_dict(self) -> dict:
+        """The results as ``results.json`` stores them (:func:`ctrplan.discrepancy.report.results_dict`;
+        report units where a key ends ``_mm`` or ``_deg``)."""
+        from .report import results_dict
+
+        return results_dict(self)
+
+
+@deprecated_echo
 def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions = DiscrepancyOptions(),
-                    echo=print, progress: bool = True) -> dict:
+                    echo=None, progress: bool = True) -> DiscrepancyResult:
     """Run the whole workflow and return its results (see the module docstring).
 
     Parameters
@@ -70,17 +178,18 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         Measured data (:func:`ctrplan.discrepancy.data.load_measured_data`).
     out_dir : path
         Report folder; finished stages are kept in ``out_dir/.stages`` and reused by a rerun
-        with the same inputs and options.
+        with the same inputs and options. The updated robot file is written there;
+        :func:`ctrplan.discrepancy.report.write_report` writes the report.
     options : DiscrepancyOptions
-    echo : callable
-        Receives one line per step.
+    echo : callable, optional
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher; configure :mod:`logging` instead (logger ``ctrplan``).
     progress : bool
         Progress bars of model evaluations.
 
     Returns
     -------
-    dict
-        JSON-ready results; arrays for plots under the key ``"_arrays"``.
+    DiscrepancyResult
 
     Raises
     ------
@@ -91,27 +200,29 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     """
     t_start = time.perf_counter()
     setup = load_inputs(robot_path, data_path, out_dir, options)
-    split = split_samples(setup, options, echo)
-    split, scale, _ = pilot_fit(setup, split, options, echo)
-    baseline = calibrate_baseline(setup, split, options, echo, progress, residual_scale=scale)
-    tests = diagnose_residuals(setup, split, baseline, options, echo)
-    noise = check_noise(setup, split, baseline, options, echo)
-    contact = refit_contact_baseline(setup, split, baseline, options, echo)
-    candidates = fit_candidates(setup, split, baseline, contact, options, echo, progress)
-    naming = name_effect(split, candidates, tests, noise, options, echo)
-    combination = fit_second_effect(setup, split, baseline, contact, naming, options, echo, progress)
-    test = evaluate_test_split(setup, split, baseline, naming, combination, options, echo, progress)
-    prediction = predict_with_history(setup, split, baseline, naming, noise, options, echo, progress,
-                                      final_params=final_parameters(naming, combination, baseline))
-    prediction_check = validate_prediction(prediction, split, options.seed)
+    split = split_samples(setup, options)
+    split, scale, _ = pilot_fit(setup, split, options)
+    baseline = calibrate_baseline(setup, split, options, progress, residual_scale=scale)
+    tests = diagnose_residuals(setup, split, baseline, options)
+    noise = check_noise(setup, split, baseline, options)
+    contact = refit_contact_baseline(setup, split, baseline, options)
+    candidates = fit_candidates(setup, split, baseline, contact, options, progress)
+    naming = name_effect(split, candidates, tests, noise, options)
+    combination = fit_second_effect(setup, split, baseline, contact, naming, options, progress)
+    test = evaluate_test_split(setup, split, baseline, naming, combination, options, progress)
+    final_params = final_parameters(naming, combination, baseline)
+    prediction = predict_with_history(setup, split, baseline, naming, noise, options, progress,
+                                      final_params=final_params)
+    prediction_check = validate_prediction(prediction, split)
     final = final_candidate(naming, combination)
-    bound = (check_bound(setup, split, baseline.cv if final is None else final.cv, test.final,
-                         final_parameters(naming, combination, baseline), noise, options, echo)
-             if options.bound_samples > 0 else None)
-    updated = write_updated_model(setup, baseline, naming, combination, test, echo, bound=bound,
+    bound = (check_bound(setup, split, baseline.cv if final is None else final.cv, test.final, final_params, noise,
+                         options) if options.bound_samples > 0 else None)
+    updated = write_updated_model(setup, baseline, naming, combination, test, bound=bound,
                                   prediction_check=prediction_check)
-    reproduction = check_reproduction(setup, split, updated, test, options, echo)
-    results = discrepancy_results(setup, split, baseline, contact, tests, noise, naming, combination, test, prediction,
-                                  updated, reproduction, options, echo, bound=bound, prediction_check=prediction_check)
-    results["seconds"] = time.perf_counter() - t_start
-    return results
+    reproduction = check_reproduction(setup, split, updated, test, options)
+    notes = run_cautions(naming, combination, baseline, test)
+    return DiscrepancyResult(setup=setup, split=split, baseline=baseline, tests=tests, noise=noise, contact=contact,
+                             naming=naming, combination=combination, test=test, prediction=prediction,
+                             prediction_check=prediction_check, bound=bound, updated=updated,
+                             reproduction=reproduction, options=options, cautions=notes,
+                             seconds=time.perf_counter() - t_start)

@@ -1,0 +1,279 @@
+"""Stage 8 of the discrepancy workflow: a second effect fitted together with the named one, and
+whether either adds to the other (nested comparisons in both directions, cross-validated over the
+same folds as every candidate; :mod:`~ctrplan.discrepancy.fitting`)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, replace
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+
+from .._log import progress_level
+from ..effects import REGISTRY
+from ..models import MODEL_INFO
+from .calibrate import CalibrationResult, calibrate
+from .estimates import display_value
+from .fitting import Candidate, combined_model, compare, contained, cross_validate, fit_rows, make_candidate, scan_fit
+from .gridsearch import grid_search
+from .options import DiscrepancyOptions
+from .setup import DiscrepancySetup, effect_parameters, reported_parameters
+from .split import DataSplit
+from .statistics import holm
+
+__all__ = ["Combination", "fit_second_effect", "pair_decision"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class Combination:
+    """Stage 8: a second effect fitted together with the named one.
+
+    Attributes
+    ----------
+    first, first_label : str
+        The named effect.
+    named : str or None
+        The second effect named with it (the pair is the final model).
+    dropped : str or None
+        The named effect, when a pair shows it adds nothing once the second effect is in (the
+        second effect alone is then the final model: ``replaced_by``).
+    replaced_by : str or None
+    tried : mapping of str to Candidate
+        Second effect -> the pair fitted and cross-validated.
+    not_tried : mapping of str to str
+        Every other candidate -> why it was not tried with the named one.
+    family : tuple of str
+        Every candidate that could be paired with the named one: the Holm family of the pairs
+        (a pair not tried counts with p = 1).
+    rule : str
+        The rule a pair is named by.
+    """
+
+    first: str
+    first_label: str
+    named: str | None
+    tried: Mapping[str, Candidate]
+    not_tried: Mapping[str, str]
+    family: tuple
+    rule: str
+    dropped: str | None = None
+    replaced_by: str | None = None
+
+
+def _fit_pair(ctx) -> CalibrationResult:
+    """A second effect fitted together with the named one, on fold ``k``'s samples.
+
+    Started from the named effect's fit of the same samples. With the standard model: the second
+    effect's own procedure (its start scan, then its parameters alone) with the named fit held,
+    then every parameter together. With a contact model: the tube parameters refitted with the
+    clearance model with the named effect's own parameters in place, the second effect by its own
+    strategy (its grid, or its parameters alone from its single fit of the same samples), then
+    every effect parameter and the baseline's parameters refitted together with the contact model,
+    as a contact candidate alone is (:func:`ctrplan.discrepancy.fitting._refine_contact`); every
+    value is fitted with the other effect present.
+    """
+    setup, options, k, n_jobs = ctx["setup"], ctx["options"], ctx["k"], ctx["n_jobs"]
+    robot, settings, fit_data, units = setup.robot, setup.settings, ctx["fit_data"], ctx["units"]
+    first, second, model = ctx["first"], ctx["second"], ctx["model"]
+    f1 = first.cv.fold_fit(k)
+    p1 = dict(zip(*f1.all_parameters()))
+    entry = REGISTRY[second.effects[0]]
+    extra = ctx["extra"]
+    if not MODEL_INFO[model].contact:
+        own = second.cv.fold_params(k)
+        start = np.array([own[n] for n in extra], float)
+        if entry.scan is not None:
+            start = scan_fit(robot, fit_data, model, p1, extra, entry.scan, settings, n_jobs, uncertainty=False).values
+        alone = calibrate(robot, fit_data, model, extra, fixed=p1, initial=start, settings=settings, n_jobs=n_jobs,
+                          max_evaluations=options.max_evaluations, uncertainty=False)
+        names = tuple(f1.names) + extra
+        init = np.concatenate([f1.values, alone.values])
+        return calibrate(robot, fit_data, model, names, fixed=f1.fixed, initial=init, settings=settings, n_jobs=n_jobs,
+                         max_evaluations=options.max_evaluations, uncertainty=k is None, warm=True,
+                         prior=ctx["prior"], clusters=units)
+    budget = options.max_contact_evaluations
+    # the baseline parameters the named fit fitted (the robot file's, held by a prior of strength 0, stay held)
+    base_names = tuple(n for n in setup.base_names if n in f1.names)
+    first_extra = tuple(n for n in f1.names if n not in base_names)
+    held = {n: v for n, v in p1.items() if n not in base_names}
+    tube = calibrate(robot, fit_data, "clearance", base_names, fixed=held, initial=[p1[n] for n in base_names],
+                     settings=settings, n_jobs=n_jobs, max_evaluations=budget, uncertainty=False, warm=True,
+                     prior=ctx["prior"])
+    params = {**held, **dict(zip(base_names, tube.values))}
+    if entry.fit == "grid":
+        g = grid_search(robot, fit_data, params, extra, model, settings=settings, n_jobs=n_jobs,
+                        coarse=options.friction_grid, search_samples=options.friction_search_samples, seed=options.seed,
+                        uncertainty=False)
+        params.update(zip(extra, g.values))
+    else:
+        own = second.cv.fold_params(k)
+        if extra:
+            alone = calibrate(robot, fit_data, model, extra, fixed=params, initial=[own[n] for n in extra],
+                              settings=settings, n_jobs=n_jobs, max_evaluations=budget, uncertainty=False, warm=True)
+            params.update(zip(extra, alone.values))
+    free = base_names + tuple(dict.fromkeys(n for n in (*first_extra, *extra) if n not in base_names))
+    if not free:
+        return calibrate(robot, fit_data, model, (), fixed=params, settings=settings, n_jobs=n_jobs)
+    fixed = {n: v for n, v in params.items() if n not in free}
+    return calibrate(robot, fit_data, model, free, fixed=fixed, initial=[params[n] for n in free], settings=settings,
+                     n_jobs=n_jobs, max_evaluations=budget, uncertainty=k is None, warm=True, prior=ctx["prior"],
+                     clusters=units)
+
+
+def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, contact, naming, options: DiscrepancyOptions,
+                      progress: bool = False) -> Combination | None:
+    """Stage 8: a second effect fitted together with the named one, and whether either adds to
+    the other (nested comparisons in both directions).
+
+    The family: every other candidate that does not contain the named one or lie inside it
+    (``Effect.contains``), adds a parameter, and can be fitted without a third effect (Holm over
+    this family, fixed before any pair is fitted; a pair not tried counts with p = 1). Tried:
+    those whose fit alone lowered the baseline's out-of-fold error on average (one that alone
+    makes it worse is not fitted). Each pair is fitted jointly (:func:`_fit_pair`) on the
+    development samples and without each fold, cross-validated, and compared with the named
+    effect alone (does the second effect add?) and with the second effect alone (does the named
+    effect still add?). A pair is named when it improves on the named effect significantly
+    (Holm), no fitted value is at its limit, and the named effect still adds to it significantly
+    (``options.significance``); among such pairs the one with the lowest out-of-fold error. When
+    the best significant pair is not better than its second effect alone, the named effect is
+    dropped: it goes to zero when fitted with the second, and the second effect alone is the
+    final model.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : DataSplit
+    baseline : Baseline
+        Stage 3 (its prior is kept in the pair fits).
+    contact : CrossValidated or None
+        Stage 6a (unused: a pair refits its tube parameters from the named effect's fit).
+    naming : Naming
+        Stage 7.
+    options : DiscrepancyOptions
+    progress : bool
+        Progress bars of the model evaluations.
+
+    Returns
+    -------
+    Combination or None
+        None when no effect is named.
+    """
+    named = naming.named
+    if not named:
+        return None
+    robot, data = setup.robot, setup.data
+    candidates = naming.candidates
+    first = candidates[named]
+    first_names = reported_parameters(robot, named, data)
+    rule = (f"out-of-fold Eq. (49) improvement over {first.label} alone significant at {options.significance} "
+            f"(corrected resampled t test over the folds, Holm over the family of pairs), no value at its limit, and "
+            f"{first.label} still improving on the second effect alone at {options.significance}")
+    not_tried, family, pool = {}, [], []
+    for e, c in candidates.items():
+        if e == named:
+            continue
+        if contained(e, named):
+            not_tried[e] = f"{'it contains' if named in REGISTRY[e].contains else 'it is contained in'} {first.label}"
+            continue
+        entry = REGISTRY[e]
+        if entry.after is not None and entry.after != named:
+            not_tried[e] = f"it is fitted on top of {REGISTRY[entry.after].label}, a third effect"
+            continue
+        if not tuple(n for n in reported_parameters(robot, e, data) if n not in first.params) and entry.fit != "none":
+            not_tried[e] = f"it adds no parameter to {first.label}"
+            continue
+        family.append(e)
+        if not c.improvement.mean_difference > 0:
+            not_tried[e] = (f"alone it does not lower the baseline's out-of-fold error (mean difference "
+                            f"{c.improvement.mean_difference:.3g} mm + deg): counted in the family, not fitted")
+            continue
+        pool.append(e)
+    tried = {}
+    for e in pool:
+        model = combined_model(named, e)
+        extra = tuple(n for n in effect_parameters(robot, e, data) if n not in first.params)
+        tag = f"{named}+{e}"
+        logger.log(progress_level(), f"second effect: {candidates[e].label} with {first.label} ({model} model) ...")
+
+        def fit_one(k, n_jobs, e=e, model=model, extra=extra):
+            fit_data, units = fit_rows(setup, split, k, options.max_contact_samples if MODEL_INFO[model].contact else None)
+            return _fit_pair({"setup": setup, "options": options, "k": k, "n_jobs": n_jobs, "fit_data": fit_data,
+                              "units": units, "first": first, "second": candidates[e], "model": model, "extra": extra,
+                              "prior": baseline.prior})
+
+        cv = cross_validate(setup, split, options, tag, model, fit_one, progress=progress)
+        shown_names = first_names + tuple(n for n in reported_parameters(robot, e, data) if n not in first_names)
+        note = "" if cv.converged else "a fit did not converge or sits at its limit"
+        c = make_candidate(setup, split, baseline, (named, e), f"{first.label} + {candidates[e].label}", cv, shown_names,
+                       first, note)
+        tried[e] = replace(c, reverse=compare(split, candidates[e].r, cv.r))
+    out, second, dropped, replaced, notes = pair_decision(named, tried, family, naming.decision.worse_than,
+                                                          options.significance)
+    level = progress_level()
+    for e, c in out.items():
+        imp, rev = c.improvement, c.reverse
+        logger.log(level, f"  {c.label}: " + ", ".join(display_value(n, v, c.units[n]) for n, v in c.shown.items())
+                   + f"; error lower than {first.label} alone by {100 * imp.reduction:.0f} %, p = {imp.p_value:.3g}; "
+                     f"than {candidates[e].label} alone by {100 * rev.reduction:.0f} %, p = {rev.p_value:.3g}"
+                   + ("" if c.cv.converged else "; a fit NOT converged"))
+    for line in notes:
+        logger.log(level, line)
+    return Combination(first=named, first_label=first.label, named=second, tried=MappingProxyType(out),
+                       not_tried=MappingProxyType(not_tried), family=tuple(family), rule=rule, dropped=dropped,
+                       replaced_by=replaced)
+
+
+def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha: float) -> tuple:
+    """Which pair, if any, replaces the named effect (the rule of :func:`fit_second_effect`).
+
+    Parameters
+    ----------
+    named : str
+        The named effect A.
+    tried : mapping of str to Candidate
+        Second effect B -> the pair fitted jointly, with ``improvement`` (against A alone) and
+        ``reverse`` (against B alone) comparisons.
+    family : sequence of str
+        Every B that could be paired with A (a B not in ``tried`` counts with p = 1).
+    worse_than : mapping of str to sequence of str
+        Stage 7's ``{candidate: [candidates significantly better]}``.
+    alpha : float
+
+    Returns
+    -------
+    pairs : dict of str to Candidate
+        ``tried`` with ``improvement_significant`` (Holm over ``family``) and ``significant``
+        (also no value at its limit).
+    second : str or None
+        B of the named pair: it improves on A significantly and A still improves on B alone.
+    dropped, replaced_by : str or None
+        A and B when the best significant pair is no better than B alone (A goes to zero with B)
+        and B alone is not significantly worse than A: B alone is the final model.
+    notes : list of str
+    """
+    verdict = holm({e: (tried[e].improvement.p_value if e in tried else 1.0) for e in family}, alpha) if family else {}
+    out = {}
+    for e, c in tried.items():
+        ok = bool(verdict.get(e) and c.improvement.mean_difference > 0)
+        out[e] = replace(c, improvement_significant=ok, significant=ok and not c.at_bound)
+    passing = [e for e, c in out.items() if c.significant]
+    best = min(passing, key=lambda e: out[e].mean_error) if passing else None
+    second = dropped = replaced = None
+    notes = []
+    if best is not None:
+        rev = out[best].reverse
+        if rev.p_value < alpha and rev.mean_difference > 0:
+            second = best
+            notes.append(f"named combination: {out[best].label}")
+        elif named not in worse_than.get(best, ()):
+            dropped, replaced = named, best
+            notes.append(f"{named} adds nothing once {best} is fitted with it (the pair against {best} alone: "
+                         f"p = {rev.p_value:.3g}): {named} is dropped, {best} alone is the final model")
+        else:
+            notes.append(f"the pair {out[best].label} improves on {named} alone but not on {best} alone, which is "
+                         f"itself significantly worse than {named}: {named} alone stays the final model")
+    return out, second, dropped, replaced, notes
