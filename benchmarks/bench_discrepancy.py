@@ -17,6 +17,7 @@ Target: the whole workflow within 30 minutes on a 2-core machine.
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import sys
 import time
@@ -61,14 +62,21 @@ def main(argv=None):
 
     marks = []
 
-    def echo(line):
-        marks.append((time.perf_counter(), line))
-        print(f"[{time.perf_counter() - t1:7.1f} s] {line}", flush=True)
+    class Marks(logging.Handler):
+        """Each message of the workflow with the time it came."""
 
+        def emit(self, record):
+            line = record.getMessage()
+            marks.append((time.perf_counter(), line))
+            print(f"[{time.perf_counter() - t1:7.1f} s] {line}", flush=True)
+
+    package = logging.getLogger("ctrplan")
+    package.addHandler(Marks(logging.INFO))
+    package.setLevel(logging.INFO)
     t1 = time.perf_counter()
-    results = run_discrepancy(model, data, out / "report", DiscrepancyOptions(n_jobs=args.jobs), echo=echo,
-                              progress=False)
-    write_report(results, out / "report")
+    result = run_discrepancy(model, data, out / "report", DiscrepancyOptions(n_jobs=args.jobs), progress=False)
+    write_report(result, out / "report")
+    results = result.to_dict()
     total = time.perf_counter() - t1
 
     print()

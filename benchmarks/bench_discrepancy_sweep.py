@@ -19,11 +19,15 @@ options (every registered candidate) from the base file without the effects.
                                                  [--scheduler tcp://host:8786]
                                                  [--out out/bench-discrepancy-sweep]
                                                  [--results benchmarks/results/discrepancy-sweep.json]
+                                                 [--synthesize-only | --results-only]
 
 Each case is a folder under ``--out`` (the workflow's log in ``workflow.log``; its stages are reused when the sweep is run again
 after an interruption) and a line of ``cases.jsonl`` there; finished cases are not run again. The
 results file is rewritten after every case with the cases finished so far (``cases`` of
-``cases_planned``).
+``cases_planned``). ``--synthesize-only`` makes every case's data (``data.csv`` in its folder; the
+reference synthesizer takes up to half an hour for a three-tube case) and stops, so that another
+process or machine can make the data while the cases run; a case whose data exists does not make
+it again.
 With ``--scheduler`` the cases run on the Dask workers of that cluster (each with ``--jobs``
 processes), else one after the other here. ``--run-first`` runs the cases of the given seeds
 before the others (the cases themselves do not change): until all planned cases are finished,
@@ -44,6 +48,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import logging
 import os
 import sys
 import time
@@ -167,15 +172,13 @@ def outcome(truth: list, res: dict) -> str:
     return "right" if named == set(truth) else "partly right"
 
 
-def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
-    """Synthesize case ``index`` (seeded by ``seed``; reference synthesizer) and run the workflow
-    on it; the case's line of ``cases.jsonl``."""
+def synthesize_case(seed: int, index: int, out: str) -> tuple:
+    """The base file and the data of case ``index`` (seeded by ``seed``; reference synthesizer) in
+    its folder under ``out``, the data made unless an earlier run made it: ``(plan, base file,
+    data file, seconds spent making the data)``."""
     sys.path.insert(0, str(ROOT / "tests"))
-    import numpy as np
-
     from reference.synth_reference import synthesize_reference
 
-    from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
     from ctrplan.io.robot_file import robot_to_toml
 
     plan = plan_case(seed, index)
@@ -202,14 +205,31 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
         tmp = data.with_suffix(".tmp")
         frame.to_csv(tmp, index=False)
         tmp.replace(data)
-    synth_s = time.perf_counter() - t0
-    opts = DiscrepancyOptions(n_jobs=jobs, seed=seed)
-    with (folder / "workflow.log").open("a") as log:
-        def echo(line):
-            log.write(f"{time.strftime('%H:%M:%S')} {line}\n")
-            log.flush()
+    return plan, model, data, time.perf_counter() - t0
 
-        res = run_discrepancy(model, data, folder / "report", opts, echo=echo, progress=False)
+
+def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
+    """Case ``index`` (seeded by ``seed``): its data (:func:`synthesize_case`), then the workflow
+    on it; the case's line of ``cases.jsonl`` (``seconds`` counts the data's making where this
+    call made it, ``synth_seconds``)."""
+    from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
+
+    t0 = time.perf_counter()
+    plan, model, data, synth_s = synthesize_case(seed, index, out)
+    folder = model.parent
+    opts = DiscrepancyOptions(n_jobs=jobs, seed=seed)
+    log = logging.FileHandler(folder / "workflow.log")
+    log.setFormatter(logging.Formatter("%(asctime)s %(message)s", "%H:%M:%S"))
+    package = logging.getLogger("ctrplan")
+    level = package.level
+    package.addHandler(log)
+    package.setLevel(logging.INFO)
+    try:
+        res = run_discrepancy(model, data, folder / "report", opts, progress=False).to_dict()
+    finally:
+        package.removeHandler(log)
+        package.setLevel(level)
+        log.close()
     final = res["named_effects"]
     fitted = {e: res["candidates"][e]["parameters"] for e in final if e in res["candidates"]}
     return {**plan, "verdict": res["verdict"], "named": res["named_effect"], "ambiguous_with": res["ambiguous_with"],
@@ -281,6 +301,8 @@ def main(argv=None):
     ap.add_argument("--results", default=str(ROOT / "benchmarks" / "results" / "discrepancy-sweep.json"))
     ap.add_argument("--run-first", type=int, nargs="+", default=(), metavar="SEED",
                     help="run the cases of these seeds (of the planned ones) before the others")
+    ap.add_argument("--synthesize-only", action="store_true",
+                    help="make the data of the planned cases not made yet, run no workflow, write no results")
     ap.add_argument("--results-only", action="store_true",
                     help="rewrite the results file from the finished cases without running any")
     args = ap.parse_args(argv)
@@ -335,6 +357,11 @@ def main(argv=None):
               + (f" or {case['ambiguous_with']}" if case["ambiguous_with"] else "") + f"); {case['seconds']:.0f} s",
               flush=True)
 
+    if args.synthesize_only:
+        for s in todo:
+            t = synthesize_case(s, s - args.first_seed, str(out))[3]
+            print(f"  {s} data made in {t:.0f} s", flush=True)
+        return 0
     if args.results_only:
         todo = []
     if args.scheduler and todo:

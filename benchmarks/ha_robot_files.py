@@ -104,9 +104,9 @@ def evaluate_file(path: Path, data_path: Path, ds: float, n_jobs: int) -> dict:
             "median_error_over_bound": float(np.median(e_std[ok] / b[rest][ok])),
             "noise": noise.description, "noise_multiple": NOISE_MULTIPLE,
             "calibrated_bound": {"factor": cal.factor, "margin_mm": cal.margin_m * 1e3, "status": cal.status,
-                                 "test_coverage": cal.test["covered"], "test_coverage_ci": cal.test["ci"],
-                                 "median_size_mm": cal.test["bound_median_m"] * 1e3,
-                                 "raw_coverage": cal.raw_test["covered"]},
+                                 "test_coverage": cal.test.covered, "test_coverage_ci": list(cal.test.ci),
+                                 "median_size_mm": cal.test.bound_median_m * 1e3,
+                                 "raw_coverage": cal.raw_test.covered},
             "seconds": time.perf_counter() - t0}
 
 

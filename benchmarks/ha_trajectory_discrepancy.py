@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import sys
 import time
@@ -115,12 +116,13 @@ def main(argv=None):
     from ctrplan.discrepancy.report import write_report
     from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 
+    logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout)
     t0 = time.perf_counter()
     opts = DiscrepancyOptions(n_jobs=args.jobs, reference_friction=(0.22, 0.12))
-    res = run_discrepancy(Path(args.robot).resolve(), data, args.out, opts, echo=print, progress=False)
-    write_report(res, args.out)
+    result = run_discrepancy(Path(args.robot).resolve(), data, args.out, opts, progress=False)
+    write_report(result, args.out)
     seconds = time.perf_counter() - t0
-    summary = summarize(res, data, Path(args.robot).resolve(), seconds,
+    summary = summarize(result.to_dict(), data, Path(args.robot).resolve(), seconds,
                         "python benchmarks/ha_trajectory_discrepancy.py")
     out = Path(args.results)
     out.parent.mkdir(parents=True, exist_ok=True)
