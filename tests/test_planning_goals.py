@@ -54,3 +54,28 @@ def test_scenario_goal_objects():
     assert sol.tip_error < 1e-4
     sol = resolve_goal(SimpleNamespace(q=np.array([0.1, 0.2, -0.05])), robot)
     np.testing.assert_array_equal(sol.q, [0.1, 0.2, -0.05])
+
+
+
+def test_tie_in_bound_and_residual_goes_to_the_solution_found_first():
+    """On a flat bound map, two elbows both converged far inside a 1 mm tolerance (residuals of
+    order 0.1 um, set by where least squares stopped) are a tie: the choice goes to the solution
+    the seeded starts found first, not to the smaller residual, whose order is rounding noise."""
+    from types import SimpleNamespace
+
+    robot = fake_robot()
+    target = fake_tip(*robot.configuration(np.array([0.4, 1.6, -0.06])))
+
+    def flat(robot_, alpha, beta, settings=None):
+        p = 1e-3
+        return SimpleNamespace(position=p, angle=p, translation_last_position=p, translation_last_angle=p,
+                               diagnostics=SimpleNamespace(converged=True, unstable=False))
+
+    field = compute_field(robot, flat, (12, 6, 3), progress=False)
+    sol = resolve_goal(TaskSpaceGoal(tuple(target), 1e-3), robot, lambda q: True, field=field,
+                       solve_standard=fake_solve_standard, seed=0)
+    assert len(sol.candidates) >= 2
+    np.testing.assert_array_equal(sol.candidate_bounds, sol.candidate_bounds[0])
+    assert np.all(sol.candidate_errors < 1e-6)
+    assert np.argmin(sol.candidate_errors) != 0   # the smaller residual is not the first found
+    np.testing.assert_array_equal(sol.q, sol.candidates[0])

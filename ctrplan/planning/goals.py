@@ -41,6 +41,13 @@ _FAILED_RESIDUAL = 1.0
 # Two IK solutions closer than this in every joint are the same [rad or m].
 _DUPLICATE_TOL = 1e-4
 
+# Resolutions at which IK candidates are ranked: friction bounds closer than _BOUND_RESOLUTION [m]
+# and tip residuals closer than _RESIDUAL_RESOLUTION times the goal tolerance count as equal, so a
+# tie (a flat bound map, two solutions both converged far inside the tolerance) goes to the
+# solution found first from the seeded starts rather than to floating-point rounding.
+_BOUND_RESOLUTION = 1e-9
+_RESIDUAL_RESOLUTION = 1e-3
+
 
 @dataclass(frozen=True)
 class JointGoal:
@@ -126,7 +133,10 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
     validity_fn : callable, optional
         ``validity_fn(q) -> bool``; invalid IK solutions are discarded.
     field : BoundField, optional
-        Chooses among solutions by the smallest ``position`` bound.
+        Chooses among solutions by the smallest ``position`` bound (bounds within 1 nm are
+        equal), then by the smallest tip residual (residuals within 1e-3 of the tolerance are
+        equal), then by the order the seeded starts found them. Without a field, by residual
+        and order found.
     solve_standard : callable, optional
         ``(robot, alpha, beta, settings) -> StandardSolution``; default
         :func:`ctrplan.mechanics.solve_standard`.
@@ -223,12 +233,15 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
             f"{best_err * 1e3:.3g} mm{where} from {len(starts)} starts")
     cand = np.array(sols)
     errs = np.array(errs)
+    found = np.arange(len(cand))
+    err_rank = np.floor(errs / (_RESIDUAL_RESOLUTION * tol))
     if field is not None:
         bounds = np.asarray(field(cand), dtype=float).reshape(-1)
-        order = np.lexsort((errs, np.where(np.isfinite(bounds), bounds, np.inf)))
+        bound_rank = np.where(np.isfinite(bounds), np.round(bounds / _BOUND_RESOLUTION), np.inf)
+        order = np.lexsort((found, err_rank, bound_rank))
     else:
         bounds = np.full(len(cand), np.nan)
-        order = np.argsort(errs)
+        order = np.lexsort((found, err_rank))
     i = int(order[0])
     return GoalSolution(cand[i], float(errs[i]), float(bounds[i]), cand, errs, bounds, n_eval)
 
