@@ -169,7 +169,7 @@ def _run(tmp_path, hidden, seed, candidates, file_mu):
     frame.to_csv(data, index=False)
     opts = DiscrepancyOptions(effects=candidates, ds=6e-3, n_permutations=199, max_evaluations=200, n_folds=5,
                               prior_strengths=(0.03, float("inf")), max_calibration_samples=200,
-                              friction_search_samples=48, bound_samples=100, n_jobs=1)
+                              friction_search_samples=48, bound_samples=100, n_jobs=2)
     return run_discrepancy(model, data, tmp_path / "out", opts, progress=False).to_dict()
 
 

@@ -33,7 +33,7 @@ NOISE_MM = 0.5
 def _options(candidates, **kw):
     return DiscrepancyOptions(effects=candidates, ds=6e-3, n_permutations=199, max_evaluations=200, n_folds=5,
                               prior_strengths=(0.03, float("inf")), max_calibration_samples=200,
-                              friction_search_samples=48, bound_samples=60, n_jobs=1, **kw)
+                              friction_search_samples=48, bound_samples=60, n_jobs=2, **kw)
 
 
 def _case(tmp_path, seed, candidates, *, truth=None, **hidden):

@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
 LAG_S = 0.15
 OPTIONS = DiscrepancyOptions(effects=("time_offset",), ds=6e-3, n_permutations=199, max_evaluations=200, n_folds=5,
-                             n_jobs=1, frame="tracker")
+                             n_jobs=2, frame="tracker")
 #: Robot-to-tracker registration of the record: rotation vector [rad], translation [m].
 REGISTRATION = (0.02, -0.03, 0.4, 0.01, -0.02, 0.15)
 
