@@ -212,14 +212,15 @@ def test_six_joint_model_joint_box_is_feasible():
 
 
 def test_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
+    from ctrplan import parallel
     from ctrplan.boundmap import compute as bound_store
 
-    monkeypatch.setattr(bound_store, "SCHEDULER_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(parallel, "SCHEDULER_TIMEOUT_S", 1.0)   # the executor's connection timeout
     robot_file = pair_file(tmp_path)
     res = CliRunner().invoke(cli.main, ["boundmap", "--robot", str(robot_file), "--resolution", "4,3",
                                         "--scheduler", "tcp://127.0.0.1:9", "--out", str(tmp_path / "m.zarr")])
     assert isinstance(res.exception, bound_store.SchedulerUnreachableError)
-    assert "tcp://127.0.0.1:9" in str(res.exception)
+    assert "tcp://127.0.0.1:9" in str(res.exception) and "within 1 s" in str(res.exception)
 
 
 def test_maps_of_other_mechanics_are_stale_and_named(tmp_path, monkeypatch, caplog):
