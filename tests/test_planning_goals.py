@@ -56,7 +56,6 @@ def test_scenario_goal_objects():
     np.testing.assert_array_equal(sol.q, [0.1, 0.2, -0.05])
 
 
-
 def test_tie_in_bound_and_residual_goes_to_the_solution_found_first():
     """On a flat bound map, two elbows both converged far inside a 1 mm tolerance (residuals of
     order 0.1 um, set by where least squares stopped) are a tie: the choice goes to the solution
