@@ -17,7 +17,8 @@
   :mod:`.fitting`, :mod:`.estimates`, :mod:`.pairs`, :mod:`.envelope`, :mod:`.coverage`,
   :mod:`.output`, :mod:`.workflow`;
 - :mod:`.report`: the report folder (markdown, ``results.json``, plots), the only module that
-  converts results to millimetres and degrees.
+  converts results to millimetres and degrees; the markdown is formatted from ``results.json``
+  alone (:func:`write_report_from_results` writes it again).
 """
 
 from .simulate import Simulation, simulate
@@ -30,7 +31,7 @@ from .parameters import apply_parameters, read_parameters
 from .signatures import SignatureTest, friction_signature, regression_signature, registration_signature
 from .options import DiscrepancyOptions
 from .workflow import DiscrepancyResult, run_discrepancy
-from .report import write_report
+from .report import write_report, write_report_from_results
 
 __all__ = [
     "Simulation", "simulate",
@@ -38,5 +39,5 @@ __all__ = [
     "CalibrationResult", "calibrate", "grid_search", "pose_errors", "predict",
     "MeasuredData", "load_measured_data", "DataSplit", "make_split", "apply_parameters", "read_parameters",
     "SignatureTest", "friction_signature", "regression_signature", "registration_signature",
-    "DiscrepancyOptions", "DiscrepancyResult", "run_discrepancy", "write_report",
+    "DiscrepancyOptions", "DiscrepancyResult", "run_discrepancy", "write_report", "write_report_from_results",
 ]

@@ -5,17 +5,26 @@ SI units) for people, who read millimetres and degrees; it computes no figure of
 the one module of the workflow that turns results into report units: ``results.json`` keeps SI
 values where the key says so (``_m``, ``_rad``, or no unit suffix) and millimetres / degrees
 where the key says ``_mm`` / ``_deg`` (:func:`results_dict`).
+
+``report.md`` is formatted from ``results.json`` alone, which is written first: a report that
+could not be written is written again from it (:func:`write_report_from_results`,
+``ctrplan discrepancy-report OUT``). A figure the data leave undefined (an interval over one
+unit, a mean over no samples, a comparison over one fold, a failed fit's parameter) is null or
+NaN in ``results.json`` and printed as "undefined", with the reason where the results give one.
 """
 
 from __future__ import annotations
 
 import json
+import logging
+import math
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from ..effects import REGISTRY
+from ..errors import DataFileError
 from ..io.atomic import atomic_write_text
 from ..io.ros2 import describe_bag_summary
 from .coverage import BOUND_DEFINITION
@@ -25,35 +34,120 @@ from .estimates import display_value
 from .evaluation import ErrorFigures
 from .provenance import provenance
 
-__all__ = ["write_report", "results_dict", "candidate_dict", "noise_dict", "error_dict", "bound_dict", "TABLE_VIII"]
+__all__ = ["write_report", "write_report_from_results", "report_markdown", "results_dict", "candidate_dict",
+           "noise_dict", "error_dict", "bound_dict", "TABLE_VIII", "UNDEFINED"]
+
+logger = logging.getLogger(__name__)
 
 #: The paper's gain with its friction model on its own grid data (Table VIII of Ha et al. 2019):
 #: relative fall of the mean and of the maximum tip position error.
 TABLE_VIII = {"mean": 0.46, "max": 0.49}
 
+#: How the report prints a figure the data leave undefined (null or NaN in ``results.json``).
+UNDEFINED = "undefined"
 
-def _fmt(x, nd=2):
-    return "-" if x is None or (isinstance(x, float) and not np.isfinite(x)) else f"{x:.{nd}f}"
+#: The command that writes ``report.md`` again from ``results.json`` (``{out}``: the report folder).
+REWRITE_COMMAND = "ctrplan discrepancy-report {out}"
+
+
+def _number(x) -> float | None:
+    """``x`` as a float, or None where it is no number or NaN (an undefined figure)."""
+    if x is None or isinstance(x, (bool, str)):
+        return None
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return None
+    return None if math.isnan(v) else v
+
+
+def _undefined(reason: str | None = None) -> str:
+    """``undefined`` or ``undefined (reason)``."""
+    return UNDEFINED if not reason else f"{UNDEFINED} ({reason})"
+
+
+def _count_reason(n, what: str) -> str | None:
+    """Why a figure over ``n`` units (or folds, ...) is undefined: none, or one (``n`` < 2)."""
+    n = _number(n)
+    if n is None or n >= 2:
+        return None
+    return f"no {what}s" if n < 1 else f"one {what}"
+
+
+def _num(x, spec: str = ".2f", reason: str | None = None) -> str:
+    """``x`` formatted by ``spec``; :data:`UNDEFINED` (with ``reason``) for None or NaN, ``inf``
+    for an infinite value."""
+    v = _number(x)
+    return _undefined(reason) if v is None else format(v, spec)
+
+
+def _fmt(x, nd=2, reason: str | None = None):
+    """A figure with ``nd`` decimals (:func:`_num`)."""
+    return _num(x, f".{nd}f", reason)
+
+
+def _ends(ci) -> tuple:
+    """The finite ends ``(low, high)`` of an interval ``[low, high]``; (None, None) where either
+    is missing, null or not finite."""
+    try:
+        lo, hi = (_number(v) for v in ci)
+    except (TypeError, ValueError):
+        return None, None
+    if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
+        return None, None
+    return lo, hi
+
+
+def _interval_text(lo, hi, scale: float, nd: int, reason: str | None, suffix: str = "") -> str:
+    """``(low..high)`` times ``scale``, or ``(interval undefined: reason)`` without finite ends."""
+    if lo is None:
+        return f"(interval {UNDEFINED}: {reason})" if reason else f"(interval {UNDEFINED})"
+    return f"({lo * scale:.{nd}f}..{hi * scale:.{nd}f}{suffix})"
 
 
 def _ci(d, nd=2, scale=1.0, unit=""):
-    """``value (low..high)`` of a ``{"value", "ci"}`` dict."""
-    lo, hi = d["ci"]
-    return f"{_fmt(d['value'] * scale, nd)}{unit} ({_fmt(lo * scale, nd)}..{_fmt(hi * scale, nd)})"
+    """``value (low..high)`` of a ``{"value", "ci", "n_units"}`` dict; an undefined value or
+    interval says so, and why where its unit count tells (none, or one unit)."""
+    d = d or {}
+    why = _count_reason(d.get("n_units"), "unit")
+    value = _number(d.get("value"))
+    if value is None or not math.isfinite(value):
+        return _undefined("no samples" if _number(d.get("n_units")) == 0 else why)
+    lo, hi = _ends(d.get("ci"))
+    return f"{value * scale:.{nd}f}{unit} {_interval_text(lo, hi, scale, nd, why)}"
 
 
 def _pct(cmp: dict) -> str:
     """The reduction of a :func:`~ctrplan.discrepancy.statistics.cv_comparison` in % with its interval."""
-    lo, hi = cmp["reduction_ci"]
-    return f"{_fmt(100 * cmp['reduction'], 0)} % ({_fmt(100 * lo, 0)}..{_fmt(100 * hi, 0)} %)"
+    cmp = cmp or {}
+    why = _count_reason(cmp.get("n_folds"), "fold")
+    value = _number(cmp.get("reduction"))
+    if value is None or not math.isfinite(value):
+        return _undefined(why)
+    lo, hi = _ends(cmp.get("reduction_ci"))
+    return f"{100 * value:.0f} % {_interval_text(lo, hi, 100, 0, why, ' %')}"
+
+
+def _share(d) -> str:
+    """A :class:`~ctrplan.discrepancy.coverage.Coverage` dict's covered share in % with its
+    interval (ends None over one unit)."""
+    d = d or {}
+    why = _count_reason(d.get("n_units"), "unit")
+    value = _number(d.get("covered"))
+    if value is None:
+        return _undefined("no samples" if not d.get("n") else why)
+    lo, hi = _ends(d.get("ci"))
+    return f"{100 * value:.0f} % {_interval_text(lo, hi, 100, 0, why, ' %')}"
 
 
 def _value(row) -> str:
     """A parameter row of a parameter table, with its standard error, in report units."""
-    text = display_value(row["name"], row["value"], row["unit"])
+    value = _number(row.get("value"))
+    text = f"{row['name']} = {UNDEFINED}" if value is None else display_value(row["name"], value, row["unit"])
     se = row.get("stderr")
     if se is not None:
-        if not np.isfinite(se):
+        se = _number(se)
+        if se is None or not math.isfinite(se):
             text += " (not determined by the data)"
         else:
             s = np.rad2deg(se) if row["unit"] == "rad" else se * 1e3 if row["unit"] == "m" else se
@@ -105,7 +199,7 @@ def _plots(result, out: Path) -> list[str]:
     ab, aa = np.rad2deg(a["test_before"]["angle"]), np.rad2deg(a["test_after"]["angle"])
     if np.isfinite(ab).any():
         top = np.nanmax(np.concatenate([ab, aa]))
-        bins = np.linspace(0, top, 40)
+        bins = np.linspace(0, top if top > 0 else 1.0, 40)
         axes[1].hist(ab[np.isfinite(ab)], bins, alpha=0.6, label="baseline")
         axes[1].hist(aa[np.isfinite(aa)], bins, alpha=0.6, label="final")
         axes[1].legend(fontsize=8)
@@ -133,7 +227,33 @@ def _plots(result, out: Path) -> list[str]:
     return files
 
 
-def _verdict_lines(results: dict, result) -> list[str]:
+def _label(results: dict, effect) -> str:
+    """The report label of a candidate effect of ``results`` (its name where it has none)."""
+    c = (results.get("candidates") or {}).get(effect) or {}
+    return c.get("label") or str(effect)
+
+
+def _no_effect_text(results: dict) -> str:
+    """Why no effect was named: the sentence the run stored, or, in a ``results.json`` written
+    without it, a shorter one from the decision and the noise check."""
+    if results.get("no_effect_sentence"):
+        return results["no_effect_sentence"]
+    d, noise = results["decision"], results.get("noise") or {}
+    case = d.get("no_effect_case")
+    rms = f"rms {_num(noise.get('rms_mm'), '.3f')} mm"
+    text = {"noise": f"no candidate is eligible, and the out-of-fold residual of the calibrated baseline ({rms}) is "
+                     f"consistent with the sensor noise",
+            "unexplained": f"the out-of-fold residual of the calibrated baseline ({rms}) is NOT consistent with noise: "
+                           f"the model misses something that no candidate explains"}.get(
+        case, f"no candidate is eligible; whether the out-of-fold residual ({rms}) is noise cannot be said")
+    best = d.get("best")
+    if best and best in (results.get("candidates") or {}):
+        why = "; ".join((d.get("why_not") or {}).get(best) or ["its improvement is not significant"])
+        text += f"; the best explanation is {_label(results, best)}, not named: {why}"
+    return text
+
+
+def _verdict_lines(results: dict) -> list[str]:
     d = results["decision"]
     ts = results["test_split"]
     f = ts["figures"]
@@ -143,15 +263,14 @@ def _verdict_lines(results: dict, result) -> list[str]:
             f"with the calibrated baseline (shrink {_ci(cal, 0, 100, ' %')}) and {_ci(f['after']['mean_mm'])} mm with "
             f"{ts['label']} (shrink {_ci(f['shrink']['mean'], 0, 100, ' %')}); the p95 {_fmt(f['before']['p95_mm'])} -> "
             f"{_fmt(f['after']['p95_mm'])} mm and the maximum {_fmt(f['before']['max_mm'])} -> {_fmt(f['after']['max_mm'])} "
-            f"mm; {100 * f['confidence']:.0f} % intervals: {f['method']}. Table VIII of Ha et al. 2019 (friction, grid "
-            f"data): mean -{100 * TABLE_VIII['mean']:.0f} %, max -{100 * TABLE_VIII['max']:.0f} %.")
+            f"mm; {_num(100 * f['confidence'], '.0f')} % intervals: {f['method']}. Table VIII of Ha et al. 2019 "
+            f"(friction, grid data): mean -{100 * TABLE_VIII['mean']:.0f} %, max -{100 * TABLE_VIII['max']:.0f} %.")
     if d["verdict"] == "none":
-        sentence = no_effect_sentence(result.naming.decision, result.noise, result.naming.candidates)
-        return [f"**No effect named.** {sentence}.", "", gain, ""]
+        return [f"**No effect named.** {_no_effect_text(results)}.", "", gain, ""]
     comb = results.get("combination") or {}
     caution = "".join(f" **Caution:** {c}." for c in d.get("cautions") or [])
     if d["verdict"] == "ambiguous":
-        a, b = results["candidates"][d["named"]]["label"], results["candidates"][d["ambiguous_with"]]["label"]
+        a, b = _label(results, d["named"]), _label(results, d["ambiguous_with"])
         head = (f"**Ambiguous: {a} or {b}.** Both lower the cross-validated error, and the data cannot tell them apart "
                 f"within their uncertainty. Data that would separate them: {d['separated_by']}. The updated model "
                 f"file carries {ts['label']} (the lower out-of-fold error of the two).{caution}")
@@ -194,16 +313,17 @@ def _candidate_lines(results: dict) -> list[str]:
                  f"{_fmt(base['position_max_mm'], 3)} | - | - | - | - |")
     for e, c in results["candidates"].items():
         params = "; ".join(_value(r) for r in c["parameter_table"]) or "none (nominal)"
-        imp = c["improvement_eq49"]
+        imp = c.get("improvement_eq49") or {}
         if c.get("fit_note"):
             notes.append(f"- {c['label']}: {c['fit_note']}.")
         if c.get("widened"):
             notes.append(f"- {c['label']}: widened because a fit ended at them: {'; '.join(c['widened'])}.")
         lines.append(f"| {c['label']} | {params} | {_fmt(c['out_of_fold']['position_mean_mm'], 3)} / "
-                     f"{_fmt(c['out_of_fold']['position_max_mm'], 3)} | {_pct(imp)} | {imp['p_value']:.2g} | "
+                     f"{_fmt(c['out_of_fold']['position_max_mm'], 3)} | {_pct(imp)} | "
+                     f"{_num(imp.get('p_value'), '.2g')} | "
                      f"{yes(c.get('improvement_significant'))} | {yes(c.get('eligible'))} |")
     lines += ["", f"Rule: {d['rule']}.", ""]
-    lines += [f"- {n}." for n in d["notes"]]
+    lines += [f"- {n}." for n in d.get("notes") or []]
     if notes:
         lines += ["", "Fits:", ""] + notes
     return lines + [""]
@@ -212,34 +332,37 @@ def _candidate_lines(results: dict) -> list[str]:
 def _strength(t) -> str:
     if t == 0:
         return "0 (the robot file's tube parameters, a registration only)"
-    return "inf (no prior)" if t is None or not np.isfinite(t) else f"{t:g}"
+    t = _number(t)
+    return "inf (no prior)" if t is None or not math.isfinite(t) else f"{t:g}"
 
 
 def _baseline_lines(results: dict) -> list[str]:
     b = results["baseline"]
     lines = ["## Baseline parameters", "",
              "Prior toward the robot file's tube parameters, strength tau chosen by the out-of-fold error (a relative "
-             f"change tau costs one squared residual of {b['residual_scale']:.3g} mm + deg, the pilot fit's rms):", "",
+             f"change tau costs one squared residual of {_num(b.get('residual_scale'), '.3g')} mm + deg, the pilot "
+             f"fit's rms):", "",
              "| tau | out-of-fold mean tip error [mm] | out-of-fold Eq. (49) [mm + deg] | error lower than the robot "
              "file's by (95 % interval), p |", "|---|---|---|---|"]
     for c in b["prior_choices"]:
-        cmp = c["against_file"]
+        cmp = c.get("against_file") or {}
+        mean = _number(c.get("mean_position_m"))
         lines.append(f"| {_strength(c['strength'])}{' (chosen)' if c['strength'] == b['prior_strength'] else ''} | "
-                     f"{1e3 * c['mean_position_m']:.3f} | {c['mean_eq49']:.3f} | "
-                     + ("-" if c["strength"] == 0 else f"{_pct(cmp)}, {cmp['p_value']:.2g}") + " |")
-    lines += ["", f"Fit on the development samples: {b['fit']['message']}" + ("" if b["fit"]["converged"] else
+                     f"{_fmt(None if mean is None else 1e3 * mean, 3)} | {_fmt(c.get('mean_eq49'), 3)} | "
+                     + ("-" if c["strength"] == 0 else f"{_pct(cmp)}, {_num(cmp.get('p_value'), '.2g')}") + " |")
+    lines += ["", f"Fit on the development samples: {b['fit']['message']}" + ("" if b["fit"].get("converged") else
                                                                              " (**not converged**)") + ".", "",
              "| parameter | value +- standard error | robot file | change | typical range |", "|---|---|---|---|---|"]
     for r in b["parameter_table"]:
-        ref = "-" if r.get("reference") is None else f"{r['reference']:.4g}"
-        change = "-" if r.get("relative_change") is None else f"{100 * r['relative_change']:+.0f} %"
-        rng = "-" if r["typical"] is None else f"{r['typical'][0]:.4g}..{r['typical'][1]:.4g}"
+        ref = "-" if r.get("reference") is None else _num(r["reference"], ".4g")
+        change = "-" if r.get("relative_change") is None else _num(100 * r["relative_change"], "+.0f") + " %"
+        rng = "-" if not r.get("typical") else f"{_num(r['typical'][0], '.4g')}..{_num(r['typical'][1], '.4g')}"
         lines.append(f"| {r['name']} | {_value(r).split(' = ', 1)[-1]} | {ref} | {change} | {rng} |")
     corr = b["fit"].get("correlation")
-    if corr is not None:
-        names = list(b["fit"]["parameters"])
+    names = list(b["fit"].get("parameters") or [])
+    if corr is not None and len(corr) == len(names):
         strong = [(names[i], names[j], corr[i][j]) for i in range(len(names)) for j in range(i + 1, len(names))
-                  if corr[i][j] is not None and np.isfinite(corr[i][j]) and abs(corr[i][j]) >= 0.9]
+                  if _number(corr[i][j]) is not None and abs(corr[i][j]) >= 0.9]
         if strong:
             lines += ["", "Strongly correlated (|r| >= 0.9; the data determine their combination better than each): "
                       + ", ".join(f"{a} and {c} ({r:+.2f})" for a, c, r in strong) + "."]
@@ -253,8 +376,8 @@ def _signature_lines(results: dict) -> list[str]:
         if not t.get("testable", True):
             lines.append(f"| {t['label']} | - | - | - | - | {t['description']} |")
             continue
-        lines.append(f"| {t['label']} | {t['effect_size_mm']:.3f} | {t['p_value']:.4f} | {t['statistic']:.4g} | "
-                     f"{t['n_units']} | {t['description']} |")
+        lines.append(f"| {t['label']} | {_num(t.get('effect_size_mm'), '.3f')} | {_num(t.get('p_value'), '.4f')} | "
+                     f"{_num(t.get('statistic'), '.4g')} | {t['n_units']} | {t['description']} |")
     for e, why in (results.get("skipped_effects") or {}).items():
         lines.append(f"| {e} | - | - | - | - | not tried, because {why} |")
     return lines + ["", "The signature tests are evidence for a reader; the verdict rests on the cross-validated "
@@ -265,14 +388,19 @@ def _noise_lines(results: dict) -> list[str]:
     n = results["noise"]
     t = n.get("test")
     text = (f"Sensor noise (development samples): {n['noise']['description']} (source: {n['noise']['source'] or 'none'}); "
-            f"out-of-fold baseline rms position error {n['rms_mm']:.3f} mm")
+            f"out-of-fold baseline rms position error {_num(n.get('rms_mm'), '.3f')} mm")
     if t:
-        dof = "" if t.get("dof_residual") is None else (f", {t['dof_residual']:.0f} and "
-                                                        + ("inf" if t.get("dof_noise") is None else f"{t['dof_noise']:.0f}")
+        dof = "" if t.get("dof_residual") is None else (f", {_num(t['dof_residual'], '.0f')} and "
+                                                        + ("inf" if t.get("dof_noise") is None else
+                                                           _num(t["dof_noise"], ".0f"))
                                                         + " effective degrees of freedom")
-        text += (f" = {n['ratio']:.2f} x the noise; {'consistent' if t['consistent'] else '**not consistent**'} with noise "
-                 f"(F = {t['statistic']:.3g}, threshold {t['threshold']:.3g} at false-alarm rate "
-                 f"{t['false_alarm_rate']:g}, allowing {100 * (t['inflation'] - 1):.0f} % for the fitted parameters{dof}).")
+        inflation = _number(t.get("inflation"))
+        text += (f" = {_num(n.get('ratio'), '.2f')} x the noise; "
+                 f"{'consistent' if t['consistent'] else '**not consistent**'} with noise "
+                 f"(F = {_num(t.get('statistic'), '.3g')}, threshold {_num(t.get('threshold'), '.3g')} at false-alarm "
+                 f"rate {_num(t.get('false_alarm_rate'), 'g')}, allowing "
+                 f"{_num(None if inflation is None else 100 * (inflation - 1), '.0f')} % for the fitted "
+                 f"parameters{dof}).")
     return [text, ""]
 
 
@@ -286,17 +414,17 @@ def _combination_lines(results: dict) -> list[str]:
                   "effect's alone by (95 % interval), p | than the second effect's alone by, p | named |",
                   "|---|---|---|---|---|---|"]
         for e, c in comb["tried"].items():
-            imp, rev = c["improvement_eq49"], c.get("reverse") or {}
+            imp, rev = c.get("improvement_eq49") or {}, c.get("reverse") or {}
+            reverse = f"{_pct(rev)}, {_num(rev.get('p_value'), '.2g')}" if rev else "-"
             lines.append(f"| {c['label']} | {'; '.join(_value(r) for r in c['parameter_table'])} | "
-                         f"{_fmt(c['out_of_fold']['position_mean_mm'], 3)} | {_pct(imp)}, {imp['p_value']:.2g} | "
-                         f"{_pct(rev) if rev else '-'}, {rev.get('p_value', float('nan')):.2g} | "
-                         f"{'yes' if e == comb['named'] else 'no'} |")
+                         f"{_fmt(c['out_of_fold']['position_mean_mm'], 3)} | {_pct(imp)}, "
+                         f"{_num(imp.get('p_value'), '.2g')} | {reverse} | {'yes' if e == comb['named'] else 'no'} |")
         lines.append("")
     if comb.get("dropped"):
         lines += [f"{comb['first_label']} goes to zero when fitted with "
-                  f"{results['candidates'][comb['replaced_by']]['label']}: the pair is no better than the latter alone, "
+                  f"{_label(results, comb['replaced_by'])}: the pair is no better than the latter alone, "
                   f"which is the final model.", ""]
-    lines += [f"- not tried: {results['candidates'][e]['label']}, because {why}." for e, why in comb["not_tried"].items()]
+    lines += [f"- not tried: {_label(results, e)}, because {why}." for e, why in (comb.get("not_tried") or {}).items()]
     return lines + [""]
 
 
@@ -307,13 +435,17 @@ def _prediction_lines(results: dict) -> list[str]:
     lines = ["## Prediction with the motion history (test split)", "", pred["description"], "",
              "| model | samples | mean [mm] | p95 [mm] | max [mm] |", "|---|---|---|---|---|"]
     for row in pred["rows"]:
-        lines.append(f"| {row['label']} | {row['n']} | {_fmt(row['mean_mm'])} | {_fmt(row['p95_mm'])} | "
-                     f"{_fmt(row['max_mm'])} |")
+        why = "no samples" if not row.get("n") else None
+        lines.append(f"| {row['label']} | {row['n']} | {_fmt(row['mean_mm'], reason=why)} | "
+                     f"{_fmt(row['p95_mm'], reason=why)} | {_fmt(row['max_mm'], reason=why)} |")
     for env in pred.get("envelopes") or []:
-        coeff = ", ".join(f"{k} = {v:.3g}" for k, v in env.get("coefficients", {}).items())
+        coeff = ", ".join(f"{k} = {_num(v, '.3g')}" for k, v in (env.get("coefficients") or {}).items())
+        inside = _number(env.get("fraction_inside"))
         lines += ["", f"Envelope coverage ({env.get('label', 'fitted')} coefficients {coeff}; {env['description']}): "
-                      f"{env['inside']} of {env['n']} measured tips ({100 * env['fraction_inside']:.0f} %) lie inside "
-                      f"the envelope of the bounding solutions plus {env['margin_mm']:.2f} mm of sensor noise; the "
+                      f"{env['inside']} of {env['n']} measured tips "
+                      f"({_undefined('no samples') if inside is None else f'{100 * inside:.0f} %'}) lie inside "
+                      f"the envelope of the bounding solutions plus {_num(env.get('margin_mm'), '.2f')} mm of sensor "
+                      f"noise; the "
                       f"others lie outside by median {_fmt(env['outside_median_mm'])} mm, p95 "
                       f"{_fmt(env['outside_p95_mm'])} mm, max {_fmt(env['outside_max_mm'])} mm. Median envelope size: "
                       f"{_fmt(env['size_median_mm'])} mm."]
@@ -325,7 +457,7 @@ def _prediction_check_lines(results: dict) -> list[str]:
     if not pc:
         return []
     lines = [f"Measured prediction error on the test split ({pc['n_samples']} samples in {pc['n_units']} units; "
-             f"{100 * pc['confidence']:.0f} % intervals: {pc['method']}):", "",
+             f"{_num(100 * pc['confidence'], '.0f')} % intervals: {pc['method']}):", "",
              "| model | mean [mm] | p95 [mm] | max [mm] |", "|---|---|---|---|"]
     for side, label in (("standard", "standard model, the written robot file"), ("history", pc["history_label"])):
         f = pc[side]
@@ -344,75 +476,193 @@ def _bound_lines(results: dict) -> list[str]:
         return []
     raw, cal, tl = b["raw_test"], b["test"], b.get("translation_last")
 
-    def share(d):
-        return "-" if d["covered"] is None else (f"{100 * d['covered']:.0f} % ({100 * d['ci'][0]:.0f}.."
-                                                 f"{100 * d['ci'][1]:.0f} %)")
-
     def ratio(d):
-        r = d["ratio"]
-        return " / ".join(_fmt(r[k]) for k in ("median", "p90", "max"))
+        r = d.get("ratio") or {}
+        why = "no samples" if not d.get("n") else None
+        return " / ".join(_fmt(r.get(k), reason=why) for k in ("median", "p90", "max"))
 
+    def size(d):
+        """Median size of the raw or translation-last bound plus the margin [mm]."""
+        median = _number(d.get("bound_median_m"))
+        margin = _number(b.get("margin_mm")) or 0.0
+        return _fmt(None if median is None else median * 1e3 + margin, reason="no samples" if not d.get("n") else None)
+
+    status = b.get("status", "met")
     lines = ["## The friction bound against the measured tips (test split)", "", f"Definition: {b['definition']} "
-             f"(m = {b['margin_mm']:.2f} mm from {b['noise_rms_mm']:.3f} mm rms noise).", "",
+             f"(m = {_num(b.get('margin_mm'), '.2f')} mm from {_num(b.get('noise_rms_mm'), '.3f')} mm rms noise).", "",
              "| bound | samples | covered (95 % interval) | e / (b + m): median / p90 / max | median size [mm] |",
              "|---|---|---|---|---|",
-             f"| friction bound b + m | {raw['n']} | {share(raw)} | {ratio(raw)} | "
-             f"{_fmt(None if raw['bound_median_m'] is None else raw['bound_median_m'] * 1e3 + b['margin_mm'])} |",
-             f"| calibrated bound {b['factor']:.3g} x (b + m) | {cal['n']} | {share(cal)} | {ratio(cal)} | "
-             f"{_fmt(cal.get('bound_median_mm'))} |"]
+             f"| friction bound b + m | {raw['n']} | {_share(raw)} | {ratio(raw)} | {size(raw)} |",
+             f"| calibrated bound {_num(b.get('factor'), '.3g')} x (b + m) | {cal['n']} | {_share(cal)} | "
+             f"{ratio(cal)} | {_fmt(cal.get('bound_median_mm'), reason='no samples' if not cal.get('n') else None)} |"]
     if tl:
-        lines.append(f"| translation-last bound + m (after a final translation of every pair) | {tl['n']} | {share(tl)} | "
-                     f"{ratio(tl)} | {_fmt(None if tl['bound_median_m'] is None else tl['bound_median_m'] * 1e3 + b['margin_mm'])} |")
-    lines += ["", f"Calibrated bound: {b['method']}; target {100 * b['target']:.0f} %: "
+        lines.append(f"| translation-last bound + m (after a final translation of every pair) | {tl['n']} | "
+                     f"{_share(tl)} | {ratio(tl)} | {size(tl)} |")
+    target = _number(b.get("target"))
+    lines += ["", f"Calibrated bound: {b['method']}; target {_num(None if target is None else 100 * target, '.0f')} %: "
                   + {"failing": "**FAILING** on the test split (its coverage falls short of the target).",
                      "conservative": "conservative on the test split (its coverage exceeds the target by more than "
                                      "5 points).",
-                     "met": "met on the test split within its interval or 5 points."}[b.get("status", "met")], ""]
+                     "met": "met on the test split within its interval or 5 points."}.get(status, f"{status}."), ""]
     return lines
 
 
+def _cautions_lines(results: dict) -> list[str]:
+    cautions = results.get("cautions")
+    return ["Cautions:", ""] + [f"- {c}." for c in cautions] + [""] if cautions else []
+
+
+def _updated_model_lines(results: dict) -> list[str]:
+    seconds = _number(results.get("seconds"))
+    return ["## Updated model file", "",
+            f"`{Path(results['updated_model_file']).name}` (evaluate with the {results['updated_model']} model); loaded "
+            f"back, it reproduces the test split's errors: {'yes' if results['reproduced'] else '**NO**'} "
+            f"(mean {_num(results.get('reproduced_position_mean_mm'), '.3f')} mm over {results['reproduced_samples']} "
+            f"samples). Total time {_num(seconds, '.0f')} s.", ""]
+
+
+def _plot_lines(results: dict, out: Path) -> list[str]:
+    """The plots ``results["plots"]`` names that are in ``out``, and why the others are not."""
+    lines = ["## Plots", ""]
+    plots = list(results.get("plots") or [])
+    if results.get("plots_error"):
+        lines += [f"No plots: they could not be made ({results['plots_error']}). They are made from the run's "
+                  f"arrays, which results.json does not hold: the same `ctrplan discrepancy` command makes them "
+                  f"again (its finished stages are reused).", ""]
+    missing = [p for p in plots if not (out / p).exists()]
+    lines += [f"![{p}]({p})" for p in plots if p not in missing]
+    if missing:
+        lines += ["", f"Not in the report folder: {', '.join(missing)} (made from the run's arrays, which "
+                      f"results.json does not hold: the same `ctrplan discrepancy` command makes them again)."]
+    return lines
+
+
+#: The report's sections after its title, in order; each formats ``results.json`` alone.
+_SECTIONS = (_verdict_lines, _cautions_lines, _noise_lines, _split_lines, _candidate_lines, _combination_lines,
+             _baseline_lines, _signature_lines, _prediction_lines, _prediction_check_lines, _bound_lines,
+             _updated_model_lines)
+
+
+def _title(results: dict) -> list[str]:
+    robot, data = results.get("robot_file"), results.get("data_file")
+    return [f"# Discrepancy report: {Path(str(robot)).name} on {Path(str(data)).name}", ""]
+
+
+def report_markdown(results: dict, out_dir) -> str:
+    """``report.md``: the text of :func:`write_report`, formatted from ``results`` alone.
+
+    A figure that is null or NaN prints as :data:`UNDEFINED`, with the reason where the results
+    give one ("one unit", "no samples", "one fold"). A section whose figures do not have the
+    form the formatters expect is replaced by a line that says so (logged as a warning); the
+    others are written.
+
+    Parameters
+    ----------
+    results : dict
+        As ``results.json`` holds it (:func:`results_dict` after a JSON round trip).
+    out_dir : path
+        The report folder (the plots are looked for there).
+
+    Returns
+    -------
+    str
+    """
+    lines = []
+    for section in (_title, *_SECTIONS):
+        try:
+            lines += section(results)
+        except Exception as exc:  # noqa: BLE001 - one unexpected figure must not lose the rest of the report
+            logger.warning(f"report.md: section {section.__name__.strip('_')} not written ({type(exc).__name__}: "
+                           f"{exc}); its figures are in results.json", exc_info=logger.isEnabledFor(logging.DEBUG))
+            lines += [f"*This section could not be written ({type(exc).__name__}: {exc}); its figures are in "
+                      f"results.json.*", ""]
+    lines += _plot_lines(results, Path(out_dir))
+    return "\n".join(lines) + "\n"
+
+
+def _json_text(results: dict) -> str:
+    return json.dumps(results, indent=2, default=_plain)
+
+
 def write_report(result, out_dir) -> dict:
-    """Write ``report.md``, ``results.json`` (:func:`results_dict`) and the plots into ``out_dir``
-    (atomically).
+    """Write ``results.json`` (:func:`results_dict`), the plots and ``report.md`` into ``out_dir``,
+    in this order and each atomically.
+
+    ``results.json`` is on disk before anything else is made; ``report.md`` is formatted from what
+    it holds (:func:`report_markdown`), so :func:`write_report_from_results` writes the same
+    report again from the folder. Plots that cannot be made are left out with a warning and a
+    note in the report.
 
     Parameters
     ----------
     result : DiscrepancyResult
         From :func:`ctrplan.discrepancy.workflow.run_discrepancy`.
     out_dir : path
+        Report folder (made if missing).
 
     Returns
     -------
     dict
-        Paths written: ``markdown``, ``json``, ``plots`` (list).
+        Paths written: ``markdown``, ``json``, ``plots`` (list of file names in ``out_dir``).
+
+    Raises
+    ------
+    OSError
+        A file cannot be written (``results.json`` first: then nothing is written).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    plots = _plots(result, out)
     results = results_dict(result)
-    results["plots"] = plots
-    atomic_write_text(out / "results.json", json.dumps(results, indent=2, default=_plain))
-    lines = [f"# Discrepancy report: {Path(results['robot_file']).name} on {Path(results['data_file']).name}", ""]
-    lines += _verdict_lines(results, result)
-    if results.get("cautions"):
-        lines += ["Cautions:", ""] + [f"- {c}." for c in results["cautions"]] + [""]
-    lines += _noise_lines(results)
-    lines += _split_lines(results)
-    lines += _candidate_lines(results)
-    lines += _combination_lines(results)
-    lines += _baseline_lines(results)
-    lines += _signature_lines(results)
-    lines += _prediction_lines(results)
-    lines += _prediction_check_lines(results)
-    lines += _bound_lines(results)
-    lines += ["## Updated model file", "",
-              f"`{Path(results['updated_model_file']).name}` (evaluate with the {results['updated_model']} model); loaded "
-              f"back, it reproduces the test split's errors: {'yes' if results['reproduced'] else '**NO**'} "
-              f"(mean {results['reproduced_position_mean_mm']:.3f} mm over {results['reproduced_samples']} samples). "
-              f"Total time {results['seconds']:.0f} s.", "", "## Plots", ""]
-    lines += [f"![{p}]({p})" for p in plots]
-    atomic_write_text(out / "report.md", "\n".join(lines) + "\n")
-    return {"markdown": str(out / "report.md"), "json": str(out / "results.json"), "plots": plots}
+    results["plots"], results["plots_error"] = [], None
+    atomic_write_text(out / "results.json", _json_text(results))
+    try:
+        results["plots"] = _plots(result, out)
+    except Exception as exc:  # noqa: BLE001 - the plots illustrate; the figures are in results.json
+        logger.warning(f"plots not made ({type(exc).__name__}: {exc}); results.json and report.md are written",
+                       exc_info=logger.isEnabledFor(logging.DEBUG))
+        results["plots_error"] = f"{type(exc).__name__}: {exc}"
+    text = _json_text(results)
+    atomic_write_text(out / "results.json", text)
+    atomic_write_text(out / "report.md", report_markdown(json.loads(text), out))
+    return {"markdown": str(out / "report.md"), "json": str(out / "results.json"), "plots": results["plots"]}
+
+
+def write_report_from_results(out_dir) -> dict:
+    """Write ``report.md`` again from the ``results.json`` of a report folder (e.g. after the
+    report of a run could not be written; ``ctrplan discrepancy-report OUT``).
+
+    The text is that :func:`write_report` writes from the same ``results.json``. The plots are
+    not made again (they need the run's arrays, which ``results.json`` does not hold): the report
+    shows those still in the folder and names the missing ones.
+
+    Parameters
+    ----------
+    out_dir : path
+        A report folder written by :func:`write_report` (``results.json`` in it).
+
+    Returns
+    -------
+    dict
+        Paths: ``markdown``, ``json``, ``plots`` (file names listed in ``results.json`` and present).
+
+    Raises
+    ------
+    DataFileError
+        ``out_dir/results.json`` is missing or is not a JSON object.
+    """
+    out = Path(out_dir)
+    path = out / "results.json"
+    try:
+        results = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DataFileError(f"{path}: not found; a report folder of `ctrplan discrepancy` holds it") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DataFileError(f"{path}: not readable as JSON ({exc})") from None
+    if not isinstance(results, dict) or "decision" not in results:
+        raise DataFileError(f"{path}: not the results of `ctrplan discrepancy` (no 'decision' key)")
+    atomic_write_text(out / "report.md", report_markdown(results, out))
+    return {"markdown": str(out / "report.md"), "json": str(path),
+            "plots": [p for p in results.get("plots") or [] if (out / p).exists()]}
 
 
 # --------------------------------------------------------------------------- results.json
@@ -566,6 +816,8 @@ def results_dict(result) -> dict:
         "signature_tests": {e: {**t.as_dict(), "effect_size_mm": t.effect_size_m * 1e3} for e, t in result.tests.items()},
         "skipped_effects": dict(setup.skipped), "noise": noise_dict(result.noise), "decision": naming.decision.as_dict(),
         "verdict": naming.verdict, "named_effect": naming.named,
+        "no_effect_sentence": (no_effect_sentence(naming.decision, result.noise, naming.candidates)
+                               if naming.verdict == "none" else None),
         "named_label": REGISTRY[naming.named].label if naming.named else None,
         "ambiguous_with": naming.decision.ambiguous_with,
         "candidates": {e: candidate_dict(c) for e, c in naming.candidates.items()},

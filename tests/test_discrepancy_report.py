@@ -1,0 +1,298 @@
+"""The discrepancy report (``ctrplan.discrepancy.report``) formats ``results.json`` alone, never
+stops at a figure the data leave undefined, and can be written again from the report folder.
+
+The results are built here in the form :func:`~ctrplan.discrepancy.report.results_dict` gives
+them (a named friction effect on 240 samples, with every section of the report), and each test
+sets some of its figures to what the workflow writes when the data cannot define them: an
+interval over one unit (ends None or NaN), a mean over no samples, a comparison over one fold,
+a fit that failed (parameters None or NaN), a missing p-value. ``write_report`` is called with
+its ``results_dict`` and plots replaced, so the formatting is tested without a run (a run of the
+workflow writes a report in tests/test_discrepancy_workflow.py).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import logging
+import re
+from pathlib import Path
+
+import pytest
+
+from ctrplan.discrepancy import report
+
+ROOT = Path(__file__).resolve().parents[1]
+NAN = float("nan")
+
+
+def _interval(value, low, high, n_units=12):
+    """An :class:`~ctrplan.discrepancy.statistics.Interval` dict."""
+    return {"value": value, "se": (high - low) / 4, "ci": [low, high], "dof": n_units - 1, "n_units": n_units}
+
+
+def _comparison(reduction, low, high, p, n_folds=10):
+    """A :class:`~ctrplan.discrepancy.statistics.Comparison` dict (Eq. (49) units)."""
+    return {"n_folds": n_folds, "n_samples": 192, "fold_differences": [0.1] * n_folds,
+            "fold_log_ratios": [0.2] * n_folds, "positive_folds": n_folds, "method": "t test of the log ratio",
+            "mean_difference": 0.1, "ci": [0.05, 0.15], "ratio": 1 / (1 - reduction),
+            "ratio_ci": [1 / (1 - low), 1 / (1 - high)], "reduction": reduction, "reduction_ci": [low, high],
+            "se": 0.02, "t": 6.0, "dof": n_folds - 1, "p_value": p, "p_worse": 1 - p}
+
+
+def _coverage(n, covered, low, high, n_units, bound_median_m=0.004, mm=True):
+    """A :class:`~ctrplan.discrepancy.coverage.Coverage` dict as ``bound_dict`` stores it."""
+    out = {"n": n, "covered": covered, "ci": [low, high], "n_units": n_units,
+           "ratio": {"median": 0.6, "p90": 0.9, "p95": 1.0, "max": 1.3}, "bound_median_m": bound_median_m,
+           "error_median_m": 0.0021}
+    if mm:
+        out.update(bound_median_mm=None if bound_median_m is None else bound_median_m * 1e3, error_median_mm=2.1)
+    return out
+
+
+def _model(mean, p95, mx, n_units=12):
+    return {"mean_mm": _interval(mean, mean - 0.2, mean + 0.2, n_units), "p95_mm": p95, "max_mm": mx}
+
+
+def _parameter(name, value, unit, stderr, **kw):
+    return {"name": name, "unit": unit, "value": value, "stderr": stderr, "ci": None, "typical": [0.0, 0.5],
+            "in_typical_range": True, "typical_source": "", "check": "", "at_bound": False, "resolution": None,
+            "fitted": True, **kw}
+
+
+def _results() -> dict:
+    """A run's results in the form ``results_dict`` gives them, every figure defined."""
+    friction = {"effects": ["friction"], "label": "friction (Coulomb, along the motion)", "model": "friction",
+                "parameter_table": [_parameter("mu_1", 0.21, "-", 0.02)], "widened": [], "fit_note": None,
+                "out_of_fold": {"position_mean_mm": 1.1, "position_max_mm": 3.2},
+                "improvement_eq49": _comparison(0.42, 0.30, 0.52, 1e-4), "improvement_significant": True,
+                "eligible": True}
+    offplane = {**copy.deepcopy(friction), "effects": ["offplane"], "label": "off-plane precurvature",
+                "model": "standard", "parameter_table": [_parameter("precurvature_x_1", 0.3, "1/m", 0.1)],
+                "out_of_fold": {"position_mean_mm": 1.8, "position_max_mm": 4.0},
+                "improvement_eq49": _comparison(0.05, -0.02, 0.11, 0.08), "improvement_significant": False,
+                "eligible": False}
+    clearance = {**copy.deepcopy(offplane), "effects": ["friction", "clearance"], "label": "friction + clearance",
+                 "reverse": _comparison(0.30, 0.20, 0.40, 1e-3)}
+    return {
+        "robot_file": "/data/pair.toml", "data_file": "/data/run.csv", "frame": "robot", "data_source": None,
+        "n_samples": 240,
+        "split": {"how": "contiguous time blocks of 10 samples", "n_folds": 10, "fold_samples": [19] * 10,
+                  "fold_units": [2] * 10, "fit_samples": [190] + [171] * 10, "max_fit_samples": 300,
+                  "buffer_note": "2 samples", "n_test": 48, "n_test_units": 5, "test_units": [3, 9, 14, 18, 22]},
+        "baseline": {"fit": {"message": "converged", "converged": True, "parameters": {"precurvature_y_1": 5.0},
+                             "correlation": [[1.0]]},
+                     "parameter_table": [_parameter("precurvature_y_1", 5.0, "1/m", 0.1, reference=4.8,
+                                                    relative_change=0.04)],
+                     "out_of_fold": {"position_mean_mm": 1.9, "position_max_mm": 4.4}, "prior_strength": 0.03,
+                     "prior_choices": [{"strength": 0.0, "mean_position_m": 0.0025, "mean_eq49": 3.1,
+                                        "against_file": _comparison(0.0, 0.0, 0.0, 1.0)},
+                                       {"strength": 0.03, "mean_position_m": 0.0019, "mean_eq49": 2.4,
+                                        "against_file": _comparison(0.2, 0.1, 0.3, 1e-3)}],
+                     "residual_scale": 1.7},
+        "signature_tests": {"friction": {"effect": "friction", "label": "friction", "testable": True,
+                                         "statistic": 4.2, "effect_size_mm": 0.8, "p_value": 0.001,
+                                         "n_permutations": 999, "n_units": 24, "description": "sign test"}},
+        "skipped_effects": {},
+        "noise": {"rms_mm": 1.9, "noise_rms_mm": 0.5, "ratio": 3.8, "consistent": False,
+                  "test": {"statistic": 14.4, "threshold": 1.3, "p_value": 0.0, "inflation": 1.05,
+                           "dof_residual": 300.0, "dof_noise": None, "consistent": False, "false_alarm_rate": 0.01},
+                  "noise": {"description": "0.5 mm rms, stated", "source": "stated"}},
+        "decision": {"verdict": "named", "named": "friction", "ambiguous_with": None, "best": "friction",
+                     "why_not": {}, "separated_by": None, "cautions": [], "notes": ["offplane: not significant"],
+                     "rule": "the lowest out-of-fold error among the eligible"},
+        "verdict": "named", "named_effect": "friction", "no_effect_sentence": None,
+        "candidates": {"friction": friction, "offplane": offplane},
+        "combination": {"first": "friction", "first_label": friction["label"], "named": None,
+                        "tried": {"clearance": clearance}, "not_tried": {"offplane": "it is not eligible"},
+                        "family": ["clearance", "offplane"], "rule": "Holm over the pairs", "dropped": None,
+                        "replaced_by": None},
+        "test_split": {"label": friction["label"],
+                       "figures": {"file": _model(3.0, 5.5, 7.0), "before": _model(2.0, 4.0, 5.0),
+                                   "after": _model(1.2, 2.5, 3.1),
+                                   "shrink": {"mean": _interval(0.4, 0.3, 0.5)},
+                                   "calibration_shrink": {"mean": _interval(0.33, 0.2, 0.45)},
+                                   "n_samples": 48, "n_units": 12, "confidence": 0.95,
+                                   "method": "t-intervals over the test split's units"}},
+        "prediction": {"description": "the friction model along the recorded motion",
+                       "rows": [{"label": "standard model", "n": 48, "mean_mm": 2.0, "p95_mm": 4.0, "max_mm": 5.0},
+                                {"label": "history-aware", "n": 48, "mean_mm": 1.2, "p95_mm": 2.5, "max_mm": 3.1}],
+                       "envelopes": [{"n": 20, "inside": 18, "fraction_inside": 0.9, "margin_mm": 1.0,
+                                      "outside_median_mm": 0.3, "outside_p95_mm": 0.5, "outside_max_mm": 0.6,
+                                      "size_median_mm": 2.2, "description": "every friction direction",
+                                      "coefficients": {"mu_1": 0.21}, "label": "fitted"}]},
+        "prediction_check": {"n_samples": 48, "n_units": 12, "history_label": "history-aware", "confidence": 0.95,
+                             "standard": _model(2.0, 4.0, 5.0), "history": _model(1.2, 2.5, 3.1),
+                             "difference_mm": _interval(-0.8, -1.1, -0.5), "history_beats_standard": True,
+                             "method": "t-interval of the paired differences"},
+        "bound": {"definition": "e <= b + m", "method": "split-conformal", "target": 0.9, "factor": 1.3,
+                  "margin_mm": 1.0, "noise_multiple": 2.0, "noise_rms_mm": 0.5, "n_calibration": 60,
+                  "test": _coverage(48, 0.9, 0.8, 0.97, 12), "raw_test": _coverage(48, 0.7, 0.55, 0.85, 12),
+                  "translation_last": _coverage(30, 0.8, 0.6, 0.95, 8, mm=False), "failing": False, "status": "met"},
+        "updated_model_file": "/data/out/pair-friction.toml", "updated_model": "friction", "reproduced": True,
+        "reproduced_samples": 48, "reproduced_position_mean_mm": 1.2, "cautions": [], "seconds": 3600.0,
+    }
+
+
+def _write(monkeypatch, out, results) -> str:
+    """``write_report`` of ``results`` into ``out`` (its ``results_dict`` and plots replaced);
+    the text of report.md."""
+    monkeypatch.setattr(report, "results_dict", lambda result: copy.deepcopy(results))
+    monkeypatch.setattr(report, "_plots", lambda result, out: [])
+    report.write_report(object(), out)
+    return (out / "report.md").read_text()
+
+
+def _set(results, path, value):
+    """``results`` with the item at ``path`` (keys separated by ``/``; list indices as numbers) set."""
+    keys = [int(k) if k.isdigit() else k for k in path.split("/")]
+    node = results
+    for k in keys[:-1]:
+        node = node[k]
+    node[keys[-1]] = value
+    return results
+
+
+def test_a_translation_last_coverage_over_one_unit_has_an_undefined_interval(monkeypatch, tmp_path):
+    """The translation-last bound's test samples (10) all in one unit: its coverage interval is
+    (None, None) (``coverage_figures``). The report says the interval is undefined over one unit,
+    prints the rest of the bound's row and of the report, and results.json keeps the ends null.
+    Catches the formatter that multiplied the interval's None ends and lost report.md after an
+    hour's run."""
+    results = _set(_results(), "bound/translation_last", _coverage(10, 0.8, None, None, 1, mm=False))
+    text = _write(monkeypatch, tmp_path, results)
+    assert ("| translation-last bound + m (after a final translation of every pair) | 10 | "
+            "80 % (interval undefined: one unit) | 0.60 / 0.90 / 1.30 | 5.00 |") in text
+    assert text.rstrip().endswith("## Plots") and "could not be written" not in text
+    assert json.loads((tmp_path / "results.json").read_text())["bound"]["translation_last"]["ci"] == [None, None]
+
+
+UNDEFINED_FIGURES = [
+    # (what, path in results.json, value, text of report.md)
+    ("test split mean over one unit", "test_split/figures/after/mean_mm", _interval(1.2, NAN, NAN, 1),
+     "1.20 (interval undefined: one unit) mm with friction"),
+    ("test split shrink over one unit", "test_split/figures/shrink/mean", _interval(0.4, NAN, NAN, 1),
+     "(shrink 40 % (interval undefined: one unit))"),
+    ("test split without samples", "test_split/figures/after",
+     {"mean_mm": _interval(NAN, NAN, NAN, 0), "p95_mm": None, "max_mm": None},
+     "undefined (no samples) mm with friction"),
+    ("comparison over one fold", "candidates/offplane/improvement_eq49", _comparison(NAN, NAN, NAN, 1.0, 1),
+     "| 1.800 / 4.000 | undefined (one fold) | 1 | no | no |"),
+    ("p-value missing", "candidates/friction/improvement_eq49/p_value", None, "% (30..52 %) | undefined | yes |"),
+    ("parameter of a failed fit", "candidates/friction/parameter_table/0",
+     _parameter("mu_1", None, "-", None), "| friction (Coulomb, along the motion) | mu_1 = undefined |"),
+    ("NaN parameter and standard error", "candidates/friction/parameter_table/0",
+     _parameter("mu_1", NAN, "-", NAN), "mu_1 = undefined (not determined by the data) |"),
+    ("signature test p-value missing", "signature_tests/friction/p_value", None, "| friction | 0.800 | undefined |"),
+    ("noise ratio missing", "noise/ratio", None, "1.900 mm = undefined x the noise"),
+    ("prior choice mean missing", "baseline/prior_choices/1/mean_position_m", None,
+     "| 0.03 (chosen) | undefined | 2.400 |"),
+    ("prediction row without samples", "prediction/rows/1",
+     {"label": "history-aware", "n": 0, "mean_mm": None, "p95_mm": None, "max_mm": None},
+     "| history-aware | 0 | undefined (no samples) | undefined (no samples) | undefined (no samples) |"),
+    ("envelope without samples", "prediction/envelopes/0/fraction_inside", NAN,
+     "18 of 20 measured tips (undefined (no samples)) lie inside"),
+    ("prediction difference over one unit", "prediction_check/difference_mm", _interval(-0.8, NAN, NAN, 1),
+     "-0.80 (interval undefined: one unit) mm"),
+    ("calibrated coverage over one unit", "bound/test", _coverage(10, 0.9, None, None, 1),
+     "| 10 | 90 % (interval undefined: one unit) |"),
+    ("raw coverage without samples", "bound/raw_test",
+     {"n": 0, "covered": None, "ci": [None, None], "n_units": 0,
+      "ratio": {"median": None, "p90": None, "p95": None, "max": None}, "bound_median_m": None,
+      "error_median_m": None, "bound_median_mm": None},
+     "| friction bound b + m | 0 | undefined (no samples) | undefined (no samples) / undefined (no samples) / "
+     "undefined (no samples) | undefined (no samples) |"),
+    ("ratio with undefined quantiles", "bound/test/ratio", {"median": 0.6, "p90": None, "p95": None, "max": None},
+     "| 0.60 / undefined / undefined |"),
+    ("reverse comparison p-value missing", "combination/tried/clearance/reverse/p_value", None,
+     "| 30 % (20..40 %), undefined | no |"),
+    ("reproduced mean undefined", "reproduced_position_mean_mm", NAN, "(mean undefined mm over 48 samples)"),
+]
+
+
+@pytest.mark.parametrize("what, path, value, expected", UNDEFINED_FIGURES, ids=[u[0] for u in UNDEFINED_FIGURES])
+def test_an_undefined_figure_is_printed_as_undefined(monkeypatch, tmp_path, what, path, value, expected):
+    """Each figure the data can leave undefined prints as "undefined" (with the reason where the
+    results give one), and the rest of the report is written. Catches a formatter that raises on
+    None, or prints "nan", "-" or "- % (-..- %)" where a figure is undefined."""
+    text = _write(monkeypatch, tmp_path, _set(_results(), path, value))
+    assert expected in text
+    assert not re.search(r"\bnan\b", text, re.IGNORECASE) and "could not be written" not in text
+    assert text.rstrip().endswith("## Plots")
+
+
+def test_the_report_is_written_again_from_results_json(monkeypatch, tmp_path):
+    """With some figures undefined: ``write_report_from_results`` writes report.md again from
+    results.json alone, the same text; plots listed in
+    results.json that left the folder are named as missing. Catches a report that needs the run's
+    objects (the no-effect sentence, the plots) and can only be written at the end of a run."""
+    results = _results()
+    _set(results, "bound/translation_last", _coverage(10, 0.8, None, None, 1, mm=False))
+    _set(results, "candidates/offplane/improvement_eq49", _comparison(NAN, NAN, NAN, 1.0, 1))
+    _set(results, "decision", {**results["decision"], "verdict": "none", "named": None, "no_effect_case": "noise"})
+    results["no_effect_sentence"] = "no candidate is eligible, and the residual is consistent with the sensor noise"
+
+    def plots(result, out):
+        (out / "error_histograms.png").write_bytes(b"png")
+        return ["error_histograms.png"]
+
+    monkeypatch.setattr(report, "_plots", plots)
+    monkeypatch.setattr(report, "results_dict", lambda result: copy.deepcopy(results))
+    report.write_report(object(), tmp_path)
+    first = (tmp_path / "report.md").read_text()
+    assert "**No effect named.** no candidate is eligible, and the residual" in first
+    assert "![error_histograms.png](error_histograms.png)" in first
+    (tmp_path / "report.md").unlink()
+    paths = report.write_report_from_results(tmp_path)
+    assert Path(paths["markdown"]).read_text() == first and paths["plots"] == ["error_histograms.png"]
+    (tmp_path / "error_histograms.png").unlink()
+    again = report.write_report_from_results(tmp_path)
+    text = Path(again["markdown"]).read_text()
+    assert again["plots"] == [] and "Not in the report folder: error_histograms.png" in text
+    assert "![error_histograms.png]" not in text
+
+
+def test_a_results_json_without_the_no_effect_sentence_still_makes_a_report(monkeypatch, tmp_path):
+    """A results.json of a run that named nothing, written before it held the sentence: the
+    verdict is said from the decision and the noise check. Catches a report that reads the run's
+    objects for it."""
+    results = _results()
+    results.pop("no_effect_sentence")
+    _set(results, "decision", {**results["decision"], "verdict": "none", "named": None, "best": "offplane",
+                               "why_not": {"offplane": ["its improvement is not significant (Holm)"]},
+                               "no_effect_case": "unexplained"})
+    text = _write(monkeypatch, tmp_path, results)
+    assert ("**No effect named.** the out-of-fold residual of the calibrated baseline (rms 1.900 mm) is NOT consistent "
+            "with noise: the model misses something that no candidate explains; the best explanation is off-plane "
+            "precurvature, not named: its improvement is not significant (Holm).") in text
+
+
+def test_plots_that_cannot_be_made_leave_a_note(monkeypatch, tmp_path, caplog):
+    """The plots raise: results.json and report.md are written, the report says why there are no
+    plots, and a warning is logged. Catches plots made before results.json, whose failure lost
+    every file of the report."""
+    def broken(result, out):
+        raise ValueError("bins must increase monotonically")
+
+    monkeypatch.setattr(report, "results_dict", lambda result: _results())
+    monkeypatch.setattr(report, "_plots", broken)
+    with caplog.at_level(logging.WARNING, logger="ctrplan.discrepancy.report"):
+        paths = report.write_report(object(), tmp_path)
+    assert paths["plots"] == []
+    assert json.loads((tmp_path / "results.json").read_text())["plots_error"] == (
+        "ValueError: bins must increase monotonically")
+    assert "No plots: they could not be made (ValueError: bins must increase monotonically)" in (
+        tmp_path / "report.md").read_text()
+    assert any("plots not made" in m for m in caplog.messages)
+
+
+def test_a_missing_results_json_is_a_data_file_error(tmp_path):
+    """``ctrplan discrepancy-report`` of a folder without results.json stops with a message that
+    names the file (exit status 2, no traceback)."""
+    from ctrplan.errors import DataFileError
+
+    with pytest.raises(DataFileError, match="results.json: not found"):
+        report.write_report_from_results(tmp_path)
+    (tmp_path / "results.json").write_text("{not json")
+    with pytest.raises(DataFileError, match="not readable as JSON"):
+        report.write_report_from_results(tmp_path)
