@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shlex
 import sys
 from pathlib import Path
 
@@ -589,7 +590,45 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
         reference_friction=ref_mu, bound_target=bound_target, bound_samples=bound_samples,
         **({} if strengths is None else {"prior_strengths": strengths}))
     result = run_discrepancy(robot_path, data_path, out_dir, opts, progress=_progress(no_progress))
-    paths = write_report(result, out_dir)
+    try:
+        paths = write_report(result, out_dir)
+    except Exception as exc:  # noqa: BLE001 - the run's results are on disk: say how to write the report again
+        _report_failed(result, out_dir, exc)
+        raise SystemExit(1) from None
+    logger.info(f"report: {paths['markdown']}")
+
+
+def _report_failed(result, out_dir, exc: Exception) -> None:
+    """Log that the report of a finished discrepancy run could not be written, what is on disk,
+    and the command that writes it (the traceback at DEBUG, ``ctrplan -v``)."""
+    import json
+
+    from .discrepancy.report import REWRITE_COMMAND
+
+    logger.debug("the report's traceback:", exc_info=exc)
+    path = Path(out_dir) / "results.json"
+    try:                 # this run's results.json (not an earlier run's): it holds this run's wall time
+        written = json.loads(path.read_text()).get("seconds") == result.seconds
+    except Exception:  # noqa: BLE001 - missing or unreadable: not written
+        written = False
+    command = REWRITE_COMMAND.format(out=shlex.quote(str(out_dir)))
+    retry = (f"{path} is written; write the report from it with: {command}" if written else
+             f"run the same command again to write it (finished stages are reused from {Path(out_dir) / '.stages'})")
+    logger.error(f"the report could not be written ({type(exc).__name__}: {exc}); the updated robot file "
+                 f"{result.updated_model_file} is written; {retry}")
+
+
+@main.command("discrepancy-report")
+@click.argument("out_dir", type=click.Path(exists=True, file_okay=False))
+def discrepancy_report(out_dir):
+    """Write report.md of a `ctrplan discrepancy` folder again from its results.json.
+
+    For a run whose report could not be written, or a report to be formatted by the present code.
+    The plots are not made again (they need the run's arrays): the report shows those in the folder.
+    """
+    from .discrepancy.report import write_report_from_results
+
+    paths = write_report_from_results(out_dir)
     logger.info(f"report: {paths['markdown']}")
 
 

@@ -17,12 +17,16 @@ import json
 import logging
 import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
+from click.testing import CliRunner
 
+from ctrplan import cli
 from ctrplan.discrepancy import report
 
 ROOT = Path(__file__).resolve().parents[1]
+PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
 NAN = float("nan")
 
 
@@ -222,8 +226,8 @@ def test_an_undefined_figure_is_printed_as_undefined(monkeypatch, tmp_path, what
 
 
 def test_the_report_is_written_again_from_results_json(monkeypatch, tmp_path):
-    """With some figures undefined: ``write_report_from_results`` writes report.md again from
-    results.json alone, the same text; plots listed in
+    """With some figures undefined: ``write_report_from_results`` and ``ctrplan discrepancy-report
+    OUT`` write report.md again from results.json alone, the same text; plots listed in
     results.json that left the folder are named as missing. Catches a report that needs the run's
     objects (the no-effect sentence, the plots) and can only be written at the end of a run."""
     results = _results()
@@ -245,6 +249,10 @@ def test_the_report_is_written_again_from_results_json(monkeypatch, tmp_path):
     (tmp_path / "report.md").unlink()
     paths = report.write_report_from_results(tmp_path)
     assert Path(paths["markdown"]).read_text() == first and paths["plots"] == ["error_histograms.png"]
+    (tmp_path / "report.md").unlink()
+    res = CliRunner().invoke(cli.main, ["discrepancy-report", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "report.md").read_text() == first and f"report: {tmp_path / 'report.md'}" in res.output
     (tmp_path / "error_histograms.png").unlink()
     again = report.write_report_from_results(tmp_path)
     text = Path(again["markdown"]).read_text()
@@ -296,3 +304,40 @@ def test_a_missing_results_json_is_a_data_file_error(tmp_path):
     (tmp_path / "results.json").write_text("{not json")
     with pytest.raises(DataFileError, match="not readable as JSON"):
         report.write_report_from_results(tmp_path)
+
+
+@pytest.mark.parametrize("fails", ["report.md", "results.json"])
+def test_a_report_that_cannot_be_written_says_how_to_write_it(monkeypatch, tmp_path, fails):
+    """``ctrplan discrepancy`` after the run: writing ``fails`` raises (a full disk). The command
+    ends without a traceback (exit status 1) and says what is written and how to write the report:
+    ``ctrplan discrepancy-report OUT`` once results.json is on disk, the same command otherwise.
+    Catches a run whose hour of results ends in a traceback, and a retry that needs the run
+    again when its results are on disk."""
+    from ctrplan.discrepancy import workflow
+
+    out = tmp_path / "out"
+    data = tmp_path / "run.csv"
+    data.write_text("t\n0\n")
+    fake = SimpleNamespace(updated_model_file=out / "pair-friction.toml", seconds=3600.0)
+    monkeypatch.setattr(workflow, "run_discrepancy", lambda *a, **k: fake)
+    monkeypatch.setattr(report, "results_dict", lambda result: _results())
+    monkeypatch.setattr(report, "_plots", lambda result, out: [])
+    write = report.atomic_write_text
+
+    def full_disk(path, text):
+        if Path(path).name == fails:
+            raise OSError(28, "No space left on device")
+        write(path, text)
+
+    monkeypatch.setattr(report, "atomic_write_text", full_disk)
+    res = CliRunner().invoke(cli.main, ["discrepancy", "--robot", str(PAIR), "--data", str(data), "--out", str(out),
+                                        "--no-progress"])
+    assert res.exit_code == 1 and isinstance(res.exception, SystemExit), res.output
+    assert "Traceback" not in res.output
+    assert "the report could not be written (OSError: [Errno 28] No space left on device)" in res.output
+    if fails == "report.md":
+        assert json.loads((out / "results.json").read_text())["seconds"] == 3600.0
+        assert f"write the report from it with: ctrplan discrepancy-report {out}" in res.output
+    else:
+        assert not (out / "results.json").exists()
+        assert "run the same command again to write it (finished stages are reused" in res.output
