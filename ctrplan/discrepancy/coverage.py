@@ -38,6 +38,7 @@ import numpy as np
 
 from .._log import progress_level
 from ..parallel import Executor
+from .logtext import figure, interval
 from .options import CONFIDENCE, ENVELOPE_NOISE_FACTOR
 from .statistics import mean_interval
 
@@ -463,11 +464,29 @@ def check_bound(setup, split, final, test_errors, final_params: dict, noise, opt
                           np.where(test_b.ok, test_e, np.nan), test_b.position, split.units[test_rows],
                           noise_rms=sigma, target=options.bound_target,
                           test_translation_last=test_b.translation_last, test_released=released, seed=options.seed)
-    raw, t = cal.raw_test, cal.test
-    logger.log(progress_level(),
-               f"friction bound (mu = {', '.join(f'{m:g}' for m in robot.friction_coefficients)}) on the test split: "
-               f"{100 * (raw.covered or 0):.0f} % of {raw.n} measured tips within b + {cal.margin_m * 1e3:.2f} mm "
-               f"(median e / (b + m) {raw.ratio['median'] or float('nan'):.2f}); calibrated bound = {cal.factor:.3g} "
-               f"x (b + m) covers {100 * (t.covered or 0):.0f} % ({100 * (t.ci[0] or 0):.0f}.."
-               f"{100 * (t.ci[1] or 0):.0f} %, target {100 * cal.target:.0f} %: {cal.status})")
+    logger.log(progress_level(), _bound_line(robot.friction_coefficients, cal))
     return cal
+
+
+def _bound_line(mu, cal: BoundCalibration) -> str:
+    """The log line of :func:`check_bound` (mm, %): the raw bound's coverage of the test split's
+    measured tips, the calibrated factor and its coverage with its interval; a share over no
+    sample, a ratio without samples and an interval over one unit print as "undefined" (never
+    as 0 %).
+
+    Parameters
+    ----------
+    mu : sequence of float
+        The written robot's friction coefficients [-].
+    cal : BoundCalibration
+
+    Returns
+    -------
+    str
+    """
+    raw, t = cal.raw_test, cal.test
+    return (f"friction bound (mu = {', '.join(f'{m:g}' for m in mu)}) on the test split: "
+            f"{figure(raw.covered, '.0f', 100, ' %')} of {raw.n} measured tips within b + {cal.margin_m * 1e3:.2f} mm "
+            f"(median e / (b + m) {figure(raw.ratio['median'], '.2f')}); calibrated bound = "
+            f"{cal.factor:.3g} x (b + m) covers {figure(t.covered, '.0f', 100, ' %')} (interval "
+            f"{interval(t.ci[0], t.ci[1], '.0f', 100, ' %')}, target {100 * cal.target:.0f} %: {cal.status})")

@@ -12,6 +12,7 @@ from .._log import progress_level
 from ..effects import EffectSet, registration_transform
 from .data import MeasuredData
 from .evaluation import evaluate_rows
+from .logtext import UNDEFINED, figure
 from .noise import NoiseEstimate
 from .options import ENVELOPE_NOISE_FACTOR, DiscrepancyOptions
 from .parameters import apply_parameters
@@ -100,6 +101,18 @@ def hull_distance(points, x) -> float:
 
 def _mm(x):
     return "-" if x is None else f"{1e3 * x:.2f} mm"
+
+
+def _prediction_line(label: str, position) -> str:
+    """The log line of one prediction row: mean, p95 and maximum of its finite tip position errors
+    ``position`` (array, shape (K,) [m]) in mm, each "undefined" where no error is finite (every
+    evaluation failed, or no test sample)."""
+    p = np.asarray(position, float)
+    p = p[np.isfinite(p)]
+    if not p.size:
+        return f"  prediction: {label}: mean, p95 and max {UNDEFINED} (no finite error of {np.size(position)})"
+    return (f"  prediction: {label}: mean {1e3 * p.mean():.3f}, p95 {1e3 * np.percentile(p, 95):.3f}, max "
+            f"{1e3 * p.max():.3f} mm ({p.size} samples)")
 
 
 def envelope_coverage(robot, params, sub: MeasuredData, noise: NoiseEstimate, stages, stage, settings, n_jobs, *,
@@ -246,9 +259,7 @@ def predict_with_history(setup, split, baseline, naming, noise, options: Discrep
                      on_test(named, candidates[named].model, candidates[named].params).position))
     level = progress_level()
     for label, pos in rows:
-        p = pos[np.isfinite(pos)] * 1e3
-        logger.log(level, f"  prediction: {label}: mean {p.mean():.3f}, p95 {np.percentile(p, 95):.3f}, max "
-                          f"{p.max():.3f} mm")
+        logger.log(level, _prediction_line(label, pos))
     k_env = min(int(options.envelope_samples), val.n_samples)
     if k_env <= 0:
         return HistoryPrediction(rows=tuple(rows), envelopes=())
@@ -262,7 +273,8 @@ def predict_with_history(setup, split, baseline, naming, noise, options: Discrep
                                 coefficients={k: float(v) for k, v in params.items() if k.startswith("mu_")},
                                 label=label)
         envelopes.append(env)
-        logger.log(level, f"  envelope ({label}): {env.inside} of {env.n} inside ({100 * env.fraction_inside:.0f} %), "
+        inside = figure(env.fraction_inside, ".0f", 100, " %")
+        logger.log(level, f"  envelope ({label}): {env.inside} of {env.n} inside ({inside}), "
                           f"outside by median {_mm(env.outside_median_m)}, max {_mm(env.outside_max_m)}; size median "
                           f"{_mm(env.size_median_m)}")
     return HistoryPrediction(rows=tuple(rows), envelopes=tuple(envelopes))

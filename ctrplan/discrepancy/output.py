@@ -20,6 +20,7 @@ from .decision import Naming, atypical_caution, cautions
 from .estimates import display_value
 from .evaluation import ErrorFigures, Errors, evaluate_rows
 from .fitting import Candidate
+from .logtext import figure, interval
 from .options import CONFIDENCE, DiscrepancyOptions
 from .pairs import Combination
 from .parameters import REGISTRATION, apply_parameters
@@ -263,14 +264,37 @@ def evaluate_test_split(setup: DiscrepancySetup, split: DataSplit, baseline: Bas
                                                        n_jobs=options.n_jobs, progress=progress)
     f = _test_figures(file, before, after, split.units[test])
     label = final.label if final is not None else "baseline (nothing named)"
-    s, c = f.shrink, f.calibration_shrink
-    logger.log(progress_level(),
-               f"test split ({split.n_test} samples in {f.n_units} units, untouched until now): robot file with a "
-               f"registration {1e3 * f.file.mean.value:.3f} mm, calibrated baseline {1e3 * f.before.mean.value:.3f} mm "
-               f"(shrink {100 * c.value:.0f} %, {100 * c.low:.0f}..{100 * c.high:.0f} %), {label} "
-               f"{1e3 * f.after.mean.value:.3f} mm (shrink {100 * s.value:.0f} %, {CONFIDENCE:.0%} interval "
-               f"{100 * s.low:.0f}..{100 * s.high:.0f} %); max {1e3 * f.before.max:.2f} -> {1e3 * f.after.max:.2f} mm")
+    logger.log(progress_level(), _test_split_line(split.n_test, f, label))
     return TestSplit(file=file, baseline=before, final=after, label=label, figures=f)
+
+
+def _test_split_line(n_test: int, f: TestFigures, label: str) -> str:
+    """The log line of :func:`evaluate_test_split` (millimetres, %): the three models' mean errors,
+    the shrinks with their intervals and the maxima; a figure the test split leaves undefined (no
+    finite sample: mean and maximum None or NaN; one unit: no interval) prints as "undefined".
+
+    Parameters
+    ----------
+    n_test : int
+        Samples of the test split (finite or not).
+    f : TestFigures
+        Its figures [m; shrinks -].
+    label : str
+        The final model.
+
+    Returns
+    -------
+    str
+    """
+    s, c = f.shrink, f.calibration_shrink
+    return (f"test split ({n_test} samples, {f.n_samples} with every model finite, in {f.n_units} units, untouched "
+            f"until now): robot file with a registration {figure(f.file.mean.value, '.3f', 1e3, ' mm')}, calibrated "
+            f"baseline {figure(f.before.mean.value, '.3f', 1e3, ' mm')} (shrink {figure(c.value, '.0f', 100, ' %')}, "
+            f"interval {interval(c.low, c.high, '.0f', 100, ' %')}), {label} "
+            f"{figure(f.after.mean.value, '.3f', 1e3, ' mm')} "
+            f"(shrink {figure(s.value, '.0f', 100, ' %')}, {CONFIDENCE:.0%} interval "
+            f"{interval(s.low, s.high, '.0f', 100, ' %')}); max {figure(f.before.max, '.2f', 1e3, ' mm')} -> "
+            f"{figure(f.after.max, '.2f', 1e3, ' mm')}")
 
 
 @dataclass(frozen=True, eq=False)

@@ -32,6 +32,7 @@ from .decision import no_effect_sentence
 from .envelope import PREDICTION_DESCRIPTION
 from .estimates import display_value
 from .evaluation import ErrorFigures
+from .logtext import UNDEFINED  # how the report prints a figure the data leave undefined (null or NaN)
 from .provenance import provenance
 
 __all__ = ["write_report", "write_report_from_results", "report_markdown", "results_dict", "candidate_dict",
@@ -43,8 +44,6 @@ logger = logging.getLogger(__name__)
 #: relative fall of the mean and of the maximum tip position error.
 TABLE_VIII = {"mean": 0.46, "max": 0.49}
 
-#: How the report prints a figure the data leave undefined (null or NaN in ``results.json``).
-UNDEFINED = "undefined"
 
 #: The command that writes ``report.md`` again from ``results.json`` (``{out}``: the report folder).
 REWRITE_COMMAND = "ctrplan discrepancy-report {out}"
