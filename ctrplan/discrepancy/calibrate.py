@@ -15,7 +15,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -186,7 +186,7 @@ class CalibrationResult:
 
 
 def predict(robot, names, values, data: MeasuredData, model: str, settings: ModelSettings | None = None,
-            *, n_jobs: int = 1, progress: bool = False) -> Prediction:
+            *, n_jobs: int = 1, progress: bool = False, warm_starts=None) -> Prediction:
     """Evaluate a model with the given parameters at every sample of ``data``.
 
     The named effects are applied where they act (:mod:`ctrplan.effects`): the mechanical ones
@@ -209,6 +209,9 @@ def predict(robot, names, values, data: MeasuredData, model: str, settings: Mode
     settings : ModelSettings, optional
     n_jobs : int
     progress : bool
+    warm_starts : WarmStarts, optional
+        Contact solutions of earlier evaluations of the same samples to start from
+        (:class:`ctrplan.discrepancy.simulate.WarmStarts`).
 
     Returns
     -------
@@ -234,7 +237,7 @@ def predict(robot, names, values, data: MeasuredData, model: str, settings: Mode
     eta, mu = state.applied(robot_p.friction_coefficients)
     sim = simulate(robot_p, state.alpha, state.beta, model=model, eta=eta if friction else None,
                    mu=mu if friction else None, sequence=data.sequence, settings=settings, n_jobs=n_jobs,
-                   progress=progress)
+                   progress=progress, warm_starts=warm_starts)
     tip_base = np.asarray(sim.tip, float)
     tip, tangent = apply_output_effects(tip_base, sim.tangent, robot_effects(robot_p).merged(effects))
     return Prediction(tip=tip, tangent=tangent, tip_base=tip_base, tangent_base=np.asarray(sim.tangent, float),
@@ -398,9 +401,23 @@ def covariance(rows: np.ndarray, residual: np.ndarray, n_samples: int, *, cluste
 
 class _Objective:
     """Eq. (49) residuals as a function of the fitted parameters, with the mechanics cached on
-    the mechanical parameters (a registration step re-uses the last solve)."""
+    the mechanical parameters (a registration step re-uses the last solve).
+
+    With a contact model, every evaluation starts each contact solve from the solution of the
+    objective's previous evaluation at that sample (:class:`~ctrplan.discrepancy.simulate.WarmStarts`),
+    with the outer and complementarity tolerances tightened to
+    :data:`~ctrplan.discrepancy.simulate.WARM_OUTER_TOL` so that finite differences between
+    evaluations stay accurate."""
 
     def __init__(self, robot, data, model, names, fixed, settings, n_jobs):
+        from .simulate import WARM_OUTER_TOL, WarmStarts
+
+        settings = settings or ModelSettings()
+        self.warm_starts = None
+        if MODEL_INFO[check_model(model)].contact:
+            self.warm_starts = WarmStarts()
+            settings = replace(settings, outer_tol=min(settings.outer_tol, WARM_OUTER_TOL),
+                               complementarity_tol=min(settings.complementarity_tol, WARM_OUTER_TOL))
         self.robot, self.data, self.model, self.settings, self.n_jobs = robot, data, model, settings, n_jobs
         self.names = tuple(names)
         self.fixed = dict(fixed)
@@ -420,7 +437,7 @@ class _Objective:
         if base is None:
             mech_names = [self.all_names[k] for k in self.mech]
             base = predict(self.robot, mech_names, v[self.mech], self.data, self.model, self.settings,
-                           n_jobs=self.n_jobs)
+                           n_jobs=self.n_jobs, warm_starts=self.warm_starts)
             self.evaluations += 1
             if len(self._cache) > 64:
                 self._cache.clear()

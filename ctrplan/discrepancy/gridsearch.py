@@ -97,6 +97,7 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
     sub = data.take(np.isin(data.config_id, chosen))
     obj_sub = _Objective(robot, sub, model, names, fixed, settings, n_jobs)
     obj_all = _Objective(robot, data, model, names, fixed, settings, n_jobs)
+    obj_all.warm_starts = obj_sub.warm_starts   # the refinements start from the coarse grid's solutions
     grid = list(itertools.product(coarse, repeat=m))
     step0 = float(np.min(np.diff(coarse))) if coarse.size > 1 else 0.05
     total = len(grid) + refinements * (3 ** m)

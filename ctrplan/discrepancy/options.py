@@ -37,9 +37,11 @@ ENVELOPE_NOISE_FACTOR = 1.62
 #: along the whole record; 5 = a test split and cross-validation folds, parameter uncertainties,
 #: baseline parameters bounded about the robot file's values; 6 = every fold fit from the same cold
 #: start as the development fit, buffers, a prior toward the robot file's tube parameters, bounds
-#: widened where a fit ends at them, pairs fitted jointly, a smooth time-shift interpolant. Stages
+#: widened where a fit ends at them, pairs fitted jointly, a smooth time-shift interpolant; 7 =
+#: contact solves of a fit started from the fit's previous evaluation at the same sample, to
+#: the tighter tolerances of :data:`~ctrplan.discrepancy.simulate.WARM_OUTER_TOL`. Stages
 #: written by an earlier version are redone.
-FIT_VERSION = 6
+FIT_VERSION = 7
 
 
 @dataclass(frozen=True)
