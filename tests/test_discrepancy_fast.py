@@ -108,6 +108,25 @@ def test_hidden_time_offset_beyond_its_typical_range_is_named_with_a_caution(lag
     assert res["reproduced"]
 
 
+def test_the_lag_case_says_where_its_time_went(lag_case):
+    """``stage_seconds``: the wall time of every stage of the run in its order, each candidate
+    separately, none negative, together at most the run's total and nearly all of it (the code
+    between the stages takes no time); a first run in its folder reuses nothing. Catches a stage
+    left out of the timing, a candidate's time counted twice, and a fresh run reported reused."""
+    from ctrplan.discrepancy.workflow import CANDIDATE_STAGE, STAGES
+
+    res = lag_case[0]
+    seconds = res["stage_seconds"]
+    at = STAGES.index("candidates")
+    assert list(seconds) == [*STAGES[:at], *(CANDIDATE_STAGE.format(e) for e in res["candidates"]), *STAGES[at + 1:]]
+    assert sorted(res["candidates"]) == ["backlash", "friction", "time_offset"]
+    assert all(s >= 0.0 for s in seconds.values()), seconds
+    total = sum(seconds.values())
+    assert 0.95 * res["seconds"] <= total <= res["seconds"] + 1e-6, (total, res["seconds"])
+    assert all(seconds[CANDIDATE_STAGE.format(e)] > 0.0 for e in res["candidates"])
+    assert res["stage_reused"] == {}
+
+
 def test_the_lag_case_recorded_as_a_ros2_bag_gives_the_csv_verdict(lag_case):
     """The same run recorded as a ROS 2 bag (MCAP): the drive's joint states at 40 Hz under its
     own joint name, the tracker's poses at the CSV's 10 Hz samples, on one clock but never at the

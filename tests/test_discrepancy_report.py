@@ -135,6 +135,11 @@ def _results() -> dict:
                   "translation_last": _coverage(30, 0.8, 0.6, 0.95, 8, mm=False), "failing": False, "status": "met"},
         "updated_model_file": "/data/out/pair-friction.toml", "updated_model": "friction", "reproduced": True,
         "reproduced_samples": 48, "reproduced_position_mean_mm": 1.2, "cautions": [], "seconds": 3600.0,
+        "stage_seconds": {"setup": 2.0, "split": 0.5, "baseline": 600.0, "signature_tests": 30.0, "noise_check": 1.5,
+                          "contact_baseline": 300.0, "candidate:friction": 1800.0, "candidate:offplane": 240.0,
+                          "naming": 0.1, "second_effect": 400.0, "test_split": 60.0, "prediction": 90.0,
+                          "bound": 50.0, "updated_model": 20.0, "cautions": 0.0},
+        "stage_reused": {"baseline": "reused", "candidate:friction": "partly reused"},
     }
 
 
@@ -211,6 +216,8 @@ UNDEFINED_FIGURES = [
     ("reverse comparison p-value missing", "combination/tried/clearance/reverse/p_value", None,
      "| 30 % (20..40 %), undefined | no |"),
     ("reproduced mean undefined", "reproduced_position_mean_mm", NAN, "(mean undefined mm over 48 samples)"),
+    ("stage time missing", "stage_seconds/naming", None, "| naming | undefined | undefined | - |"),
+    ("total time missing", "seconds", None, "| total | undefined | undefined | - |"),
 ]
 
 
@@ -223,6 +230,36 @@ def test_an_undefined_figure_is_printed_as_undefined(monkeypatch, tmp_path, what
     assert expected in text
     assert not re.search(r"\bnan\b", text, re.IGNORECASE) and "could not be written" not in text
     assert text.rstrip().endswith("## Plots")
+
+
+def test_where_the_time_went_is_a_table_of_seconds_and_shares(monkeypatch, tmp_path):
+    """``stage_seconds`` in results.json (seconds, in the run's order) is the table "Where the
+    time went": each stage's wall time and share of the run's total, a candidate under its label,
+    the stages that read stored results of an earlier run marked, and the rest of the total as
+    time between the stages. Catches a table that loses the run's order or takes its shares of
+    the stages' sum rather than of the total."""
+    text = _write(monkeypatch, tmp_path, _results())
+    table = text[text.index("## Where the time went"):text.index("## Plots")]
+    rows = [r for r in table.splitlines() if r.startswith("| ") and not r.startswith("| stage")]
+    assert rows[0] == "| setup: robot, data, effects, stage store | 2.0 | 0.1 % | - |"
+    assert "| pilot fit and baseline calibration | 600.0 | 16.7 % | reused |" in rows
+    assert "| naming | 0.100 | 0.0 % | - |" in rows       # under a second: to the millisecond
+    assert rows[6:8] == ["| candidate friction (Coulomb, along the motion) | 1800.0 | 50.0 % | partly reused |",
+                         "| candidate off-plane precurvature | 240.0 | 6.7 % | - |"]
+    assert rows[-2:] == ["| between the stages | 5.9 | 0.2 % | - |", "| total | 3600.0 | 100 % | - |"]
+    assert len(rows) == len(_results()["stage_seconds"]) + 2
+    assert json.loads((tmp_path / "results.json").read_text())["stage_seconds"]["candidate:friction"] == 1800.0
+
+
+def test_a_results_json_without_stage_seconds_still_makes_a_report(monkeypatch, tmp_path):
+    """A results.json written before it held ``stage_seconds`` and ``stage_reused``: the report
+    is written, without the table, and still says the total time. Catches a formatter that
+    needs the new keys."""
+    results = _results()
+    del results["stage_seconds"], results["stage_reused"]
+    text = _write(monkeypatch, tmp_path, results)
+    assert "Where the time went" not in text and "could not be written" not in text
+    assert "Total time 3600 s." in text and text.rstrip().endswith("## Plots")
 
 
 def test_the_report_is_written_again_from_results_json(monkeypatch, tmp_path):

@@ -12,6 +12,7 @@ time offset tried and 5 folds, so the module takes well under a minute. ``test_d
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -198,3 +199,59 @@ def test_stage_key_ignores_workers_and_tests_and_follows_fits_inputs_and_procedu
 
     monkeypatch.setattr(constants, "MECHANICS_VERSION", f"{constants.MECHANICS_VERSION}-changed")
     assert stages.stage_key(robot, data, base) != key
+
+
+def test_the_store_records_what_an_earlier_run_stored_apart_from_what_this_run_wrote(tmp_path):
+    """A store reading a value an earlier run stored records "read", one reading back what it wrote
+    itself "read back", a save "written", and a load that finds nothing nothing. Catches a fresh
+    run whose stages read back their own fits and are reported as reused."""
+    earlier = stages.StageStore(tmp_path, "k")
+    earlier.save("pilot", {"x": 1})
+    store = stages.StageStore(tmp_path, "k")
+    assert store.load("pilot") == {"x": 1} and store.load("fit-baseline") is None
+    store.save("fit-baseline", {"x": 2})
+    store.load("fit-baseline")
+    assert [e[:2] for e in store.events] == [("pilot", "read"), ("fit-baseline", "written"),
+                                             ("fit-baseline", "read back")]
+    assert all(a[2] <= b[2] for a, b in zip(store.events, store.events[1:]))
+
+
+def test_stage_clock_times_each_stage_and_divides_the_candidates_at_their_out_of_fold_errors():
+    """The workflow's clock: each stage's wall time in order; the candidates' stage divided at
+    the moment each candidate's out-of-fold errors were stored or read (the last candidate to the
+    stage's end), summing to the stage's time; a stage that read an earlier run's values and wrote
+    none is "reused", one that did both "partly reused", one that only read back its own values
+    neither. Catches a division that loses time between candidates or marks a fresh run reused."""
+    import time
+
+    from ctrplan.discrepancy.workflow import CANDIDATE_STAGE, _StageClock
+
+    store = SimpleNamespace(events=[])
+
+    def event(name, kind, pause=0.01):
+        time.sleep(pause)
+        store.events.append((name, kind, time.perf_counter()))
+
+    clock = _StageClock()
+    with clock.stage("setup"):
+        time.sleep(0.01)
+    clock.store = store
+    with clock.stage("baseline"):
+        event("pilot", "read")
+        event("fit-baseline", "written")
+        event("fit-baseline", "read back")
+    with clock.stage("candidates"):
+        event("fit-friction", "read")
+        event("oof-friction", "read")
+        event("fit-offplane", "written")
+        event("oof-offplane", "written")
+        time.sleep(0.01)
+    candidates = clock.seconds["candidates"]
+    clock.divide("candidates", {CANDIDATE_STAGE.format(e): f"oof-{e}" for e in ("friction", "offplane")})
+    with clock.stage("naming"):
+        event("oof-friction", "read back")
+    assert list(clock.seconds) == ["setup", "baseline", "candidate:friction", "candidate:offplane", "naming"]
+    assert all(s > 0 for s in clock.seconds.values())
+    assert clock.seconds["candidate:friction"] + clock.seconds["candidate:offplane"] == pytest.approx(candidates)
+    assert clock.seconds["candidate:friction"] >= 0.02 and clock.seconds["candidate:offplane"] >= 0.03
+    assert clock.reused == {"baseline": "partly reused", "candidate:friction": "reused"}

@@ -264,10 +264,12 @@ def test_an_interrupted_run_resumes_from_finished_stages(tmp_path, caplog, capsy
     with caplog.at_level(logging.INFO, logger="ctrplan"):
         resumed = run_discrepancy(model, data, out, opts, progress=False).to_dict()
     assert "  pilot: reused from an earlier run" in caplog.messages
+    assert resumed["stage_reused"]["baseline"] == "partly reused"      # the pilot and a fold's fit read
     assert {r.name.rpartition(".")[0] for r in caplog.records} == {"ctrplan.discrepancy"}
     assert capsys.readouterr().out == ""
     assert stage.stat().st_mtime_ns == stamp
     fresh = run_discrepancy(model, data, tmp_path / "fresh", opts, progress=False).to_dict()
+    assert fresh["stage_reused"] == {}
     untimed = (lambda d: {k: v for k, v in d.items() if k != "evaluation_ms_per_sample"})
     assert untimed(resumed["test_split"]["after"]) == untimed(fresh["test_split"]["after"])
     assert resumed["baseline"]["fit"]["parameters"] == fresh["baseline"]["fit"]["parameters"]

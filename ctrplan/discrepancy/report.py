@@ -520,6 +520,56 @@ def _updated_model_lines(results: dict) -> list[str]:
             f"samples). Total time {_num(seconds, '.0f')} s.", ""]
 
 
+#: Report names of the stages of ``results.json["stage_seconds"]``
+#: (:data:`ctrplan.discrepancy.workflow.STAGES`); a candidate's stage is ``candidate:<effect>``.
+STAGE_LABELS = {
+    "setup": "setup: robot, data, effects, stage store", "split": "split: test split and folds",
+    "baseline": "pilot fit and baseline calibration", "signature_tests": "signature tests",
+    "noise_check": "noise check", "contact_baseline": "clearance-model refit of the tube parameters",
+    "naming": "naming", "second_effect": "second effect (pairs)", "test_split": "test split",
+    "prediction": "history-aware prediction and its check", "bound": "friction bound and its calibration",
+    "updated_model": "updated robot file and its reproduction", "cautions": "cautions",
+}
+
+
+def _stage_label(results: dict, stage: str) -> str:
+    effect = stage.partition("candidate:")[2]
+    return f"candidate {_label(results, effect)}" if effect else STAGE_LABELS.get(stage, stage)
+
+
+def _time_lines(results: dict) -> list[str]:
+    """The table "Where the time went": each stage's wall time [s] and share of the run's total
+    (``results["stage_seconds"]``); nothing for a ``results.json`` written without it."""
+    stages = results.get("stage_seconds")
+    if not stages:
+        return []
+    total = _number(results.get("seconds"))
+    reused = results.get("stage_reused") or {}
+
+    def share(x):
+        x = _number(x)
+        return _undefined() if x is None or not total else f"{100 * x / total:.1f} %"
+
+    def wall(x):
+        """Seconds: three decimals under one second, one above."""
+        x = _number(x)
+        return _num(x, ".3f" if x is not None and abs(x) < 1.0 else ".1f")
+
+    lines = ["## Where the time went", "",
+             "Wall time of each stage of the run; a candidate's runs from the end of the one before it to its "
+             "out-of-fold errors. 'From an earlier run': the stage read stored results of a run with the same "
+             "inputs and options (`.stages` in the report folder) instead of computing them.", "",
+             "| stage | wall time [s] | share of the total | from an earlier run |", "|---|---|---|---|"]
+    for stage, seconds in stages.items():
+        lines.append(f"| {_stage_label(results, stage)} | {wall(seconds)} | {share(seconds)} | "
+                     f"{reused.get(stage, '-')} |")
+    rest = None if total is None else total - sum(_number(v) or 0.0 for v in stages.values())
+    if rest is not None:
+        lines.append(f"| between the stages | {wall(max(rest, 0.0))} | {share(max(rest, 0.0))} | - |")
+    lines.append(f"| total | {wall(total)} | {'100 %' if total else _undefined()} | - |")
+    return lines + [""]
+
+
 def _plot_lines(results: dict, out: Path) -> list[str]:
     """The plots ``results["plots"]`` names that are in ``out``, and why the others are not."""
     lines = ["## Plots", ""]
@@ -539,7 +589,7 @@ def _plot_lines(results: dict, out: Path) -> list[str]:
 #: The report's sections after its title, in order; each formats ``results.json`` alone.
 _SECTIONS = (_verdict_lines, _cautions_lines, _noise_lines, _split_lines, _candidate_lines, _combination_lines,
              _baseline_lines, _signature_lines, _prediction_lines, _prediction_check_lines, _bound_lines,
-             _updated_model_lines)
+             _updated_model_lines, _time_lines)
 
 
 def _title(results: dict) -> list[str]:
@@ -832,7 +882,8 @@ def results_dict(result) -> dict:
         "reproduced": result.reproduction.reproduced, "reproduced_samples": split.n_test,
         "reproduced_position_mean_mm": float(np.nanmean(result.reproduction.position) * 1e3),
         "cautions": list(result.cautions), "significance": options.significance, "options": opts,
-        "seconds": result.seconds, "provenance": provenance(options),
+        "seconds": result.seconds, "stage_seconds": {k: float(v) for k, v in result.stage_seconds.items()},
+        "stage_reused": dict(result.stage_reused), "provenance": provenance(options),
     }
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import fields
 from pathlib import Path
 
@@ -25,11 +26,23 @@ class StageStore:
         The report folder.
     key : str
         :func:`stage_key` of the run.
+
+    Attributes
+    ----------
+    events : list of (str, str, float)
+        ``(name, kind, time.perf_counter())`` of every stored value this store read (a load that
+        found one) or wrote, in order; ``kind`` is ``"read"`` for a value an earlier run stored,
+        ``"read back"`` for one this store wrote, ``"written"``. The workflow reads from it which
+        of its stages came from an earlier run and where each candidate's stages ended
+        (:func:`ctrplan.discrepancy.workflow.run_discrepancy`). A copy sent to a worker process
+        records there, not here.
     """
 
     def __init__(self, folder, key: str):
         self.folder = Path(folder) / ".stages"
         self.key = key
+        self.events = []
+        self._written = set()
 
     def path(self, name: str) -> Path:
         return self.folder / f"{self.key}-{name}.json"
@@ -37,12 +50,18 @@ class StageStore:
     def load(self, name: str):
         """The stored value of stage ``name``, or None."""
         p = self.path(name)
-        return json.loads(p.read_text()) if p.exists() else None
+        if not p.exists():
+            return None
+        value = json.loads(p.read_text())
+        self.events.append((name, "read back" if name in self._written else "read", time.perf_counter()))
+        return value
 
     def save(self, name: str, value) -> None:
         """Store a stage's value (numpy arrays as lists), atomically."""
         self.folder.mkdir(parents=True, exist_ok=True)
         atomic_write_text(self.path(name), json.dumps(value, default=_jsonable))
+        self._written.add(name)
+        self.events.append((name, "written", time.perf_counter()))
 
 
 def _jsonable(x):

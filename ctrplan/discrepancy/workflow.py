@@ -40,12 +40,17 @@ formats (``results.json``, ``report.md``, plots; millimetres and degrees only th
 Every stage that fits or evaluates reads its result from ``out_dir/.stages`` when an earlier run
 with the same stage key finished it, and stores it there otherwise. The workflow logs its progress
 through :mod:`logging` (loggers under ``ctrplan.discrepancy``) and prints nothing itself.
+
+Where the time went: :attr:`DiscrepancyResult.stage_seconds` holds the wall time of each stage
+(:data:`STAGES`, each candidate separately), :attr:`DiscrepancyResult.stage_reused` the stages
+whose stored results came from an earlier run.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from .._log import deprecated_echo
@@ -62,7 +67,20 @@ from .setup import DiscrepancySetup, load_inputs
 from .signatures import diagnose_residuals
 from .split import DataSplit, split_samples
 
-__all__ = ["run_discrepancy", "DiscrepancyOptions", "DiscrepancyResult"]
+__all__ = ["run_discrepancy", "DiscrepancyOptions", "DiscrepancyResult", "STAGES", "CANDIDATE_STAGE"]
+
+#: The stages of :func:`run_discrepancy` whose wall time :attr:`DiscrepancyResult.stage_seconds`
+#: holds, in order (the report's names for them: :data:`ctrplan.discrepancy.report.STAGE_LABELS`):
+#: ``setup`` (:func:`load_inputs`), ``split``, ``baseline`` (the pilot fit and the baseline's
+#: calibration), ``signature_tests``, ``noise_check``, ``contact_baseline``, ``candidates`` (one
+#: entry per candidate effect, ``CANDIDATE_STAGE.format(effect)``, in the order they are fitted),
+#: ``naming``, ``second_effect``, ``test_split``, ``prediction`` (the history-aware prediction
+#: and its check), ``bound``, ``updated_model`` (written, reloaded and checked), ``cautions``.
+STAGES = ("setup", "split", "baseline", "signature_tests", "noise_check", "contact_baseline", "candidates", "naming",
+          "second_effect", "test_split", "prediction", "bound", "updated_model", "cautions")
+
+#: Key of one candidate effect's stage in :attr:`DiscrepancyResult.stage_seconds`.
+CANDIDATE_STAGE = "candidate:{}"
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,6 +123,18 @@ class DiscrepancyResult:
         What a reader must not overlook (:func:`~ctrplan.discrepancy.output.run_cautions`).
     seconds : float
         Wall time of the run [s].
+    stage_seconds : dict of str to float
+        Wall time of each stage [s], in the order of the run (keys of :data:`STAGES`, with
+        ``"candidates"`` replaced by one ``CANDIDATE_STAGE.format(effect)`` per candidate); they
+        sum to at most ``seconds``. A candidate's time runs from the end of the one before it to
+        the moment its out-of-fold errors were stored (or read), so what its stage does after
+        that (its comparisons with the baseline, a few milliseconds) counts to the next candidate
+        (the last candidate's runs to the end of the stage). Empty for a result made otherwise.
+    stage_reused : dict of str to str
+        The stages of ``stage_seconds`` that read stored results of an earlier run (the store of
+        ``out_dir/.stages``): ``"reused"`` when they wrote none, ``"partly reused"`` when they also
+        computed and stored some. Stages not listed read nothing stored (they computed
+        everything, or they store nothing).
     """
 
     setup: DiscrepancySetup
@@ -124,6 +154,8 @@ class DiscrepancyResult:
     options: DiscrepancyOptions
     cautions: tuple
     seconds: float
+    stage_seconds: dict = field(default_factory=dict)
+    stage_reused: dict = field(default_factory=dict)
 
     @property
     def verdict(self) -> str:
@@ -164,6 +196,68 @@ class DiscrepancyResult:
         return results_dict(self)
 
 
+def _reuse(events) -> str | None:
+    """``"reused"`` when stage store ``events`` read values an earlier run stored and wrote none,
+    ``"partly reused"`` when they did both, else None."""
+    kinds = {kind for _, kind, _ in events}
+    if "read" not in kinds:
+        return None
+    return "partly reused" if "written" in kinds else "reused"
+
+
+class _StageClock:
+    """Wall time of each stage of a run, and which stages read stored results of an earlier run
+    (from the events of the run's :class:`~ctrplan.discrepancy.stages.StageStore`)."""
+
+    def __init__(self):
+        self.seconds = {}
+        self.reused = {}
+        self.store = None       # the run's StageStore, once the setup has made it
+        self._windows = {}      # stage -> (start, end, store events during it)
+
+    @contextmanager
+    def stage(self, name: str):
+        """Time the block as stage ``name``."""
+        n0 = len(self.store.events) if self.store is not None else 0
+        t0 = time.perf_counter()
+        yield
+        t1 = time.perf_counter()
+        events = self.store.events[n0:] if self.store is not None else []
+        self.seconds[name] = t1 - t0
+        self._windows[name] = (t0, t1, events)
+        if _reuse(events):
+            self.reused[name] = _reuse(events)
+
+    def divide(self, name: str, parts: dict) -> None:
+        """Replace stage ``name`` by its ``parts`` (key -> name of the stored value that ends it,
+        in order): each part runs from the end of the one before it to the last store event of
+        its value, the last part to the end of the stage. Left whole when a part's value was
+        neither read nor written during the stage."""
+        t0, t1, events = self._windows[name]
+        ends = []
+        for key, value in parts.items():
+            at = [t for n, _, t in events if n == value]
+            if not at:
+                return
+            ends.append(at[-1])
+        if not ends:
+            return
+        ends[-1] = t1
+        seconds, reused, start = {}, {}, t0
+        for key, end in zip(parts, ends):
+            seconds[key] = max(end - start, 0.0)
+            inside = [e for e in events if start < e[2] <= end]
+            if _reuse(inside):
+                reused[key] = _reuse(inside)
+            start = max(start, end)
+        merged = {}
+        for k, v in self.seconds.items():
+            merged.update(seconds if k == name else {k: v})
+        self.seconds = merged
+        self.reused.pop(name, None)
+        self.reused.update(reused)
+
+
 @deprecated_echo
 def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions = DiscrepancyOptions(),
                     echo=None, progress: bool = True) -> DiscrepancyResult:
@@ -199,30 +293,49 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         Bad robot file.
     """
     t_start = time.perf_counter()
-    setup = load_inputs(robot_path, data_path, out_dir, options)
-    split = split_samples(setup, options)
-    split, scale, _ = pilot_fit(setup, split, options)
-    baseline = calibrate_baseline(setup, split, options, progress, residual_scale=scale)
-    tests = diagnose_residuals(setup, split, baseline, options)
-    noise = check_noise(setup, split, baseline, options)
-    contact = refit_contact_baseline(setup, split, baseline, options)
-    candidates = fit_candidates(setup, split, baseline, contact, options, progress)
-    naming = name_effect(split, candidates, tests, noise, options)
-    combination = fit_second_effect(setup, split, baseline, contact, naming, options, progress)
-    test = evaluate_test_split(setup, split, baseline, naming, combination, options, progress)
-    final_params = final_parameters(naming, combination, baseline)
-    prediction = predict_with_history(setup, split, baseline, naming, noise, options, progress,
-                                      final_params=final_params)
-    prediction_check = validate_prediction(prediction, split)
-    final = final_candidate(naming, combination)
-    bound = (check_bound(setup, split, baseline.cv if final is None else final.cv, test.final, final_params, noise,
-                         options) if options.bound_samples > 0 else None)
-    updated = write_updated_model(setup, baseline, naming, combination, test, bound=bound,
-                                  prediction_check=prediction_check)
-    reproduction = check_reproduction(setup, split, updated, test, options)
-    notes = run_cautions(naming, combination, baseline, test)
+    clock = _StageClock()
+    with clock.stage("setup"):
+        setup = load_inputs(robot_path, data_path, out_dir, options)
+    clock.store = setup.stages
+    with clock.stage("split"):
+        split = split_samples(setup, options)
+    with clock.stage("baseline"):
+        split, scale, _ = pilot_fit(setup, split, options)
+        baseline = calibrate_baseline(setup, split, options, progress, residual_scale=scale)
+    with clock.stage("signature_tests"):
+        tests = diagnose_residuals(setup, split, baseline, options)
+    with clock.stage("noise_check"):
+        noise = check_noise(setup, split, baseline, options)
+    with clock.stage("contact_baseline"):
+        contact = refit_contact_baseline(setup, split, baseline, options)
+    with clock.stage("candidates"):
+        candidates = fit_candidates(setup, split, baseline, contact, options, progress)
+    # each candidate's stages end with its out-of-fold errors (fitting.cross_validate -> evaluation.out_of_fold)
+    clock.divide("candidates", {CANDIDATE_STAGE.format(e): f"oof-{e}" for e in candidates})
+    with clock.stage("naming"):
+        naming = name_effect(split, candidates, tests, noise, options)
+    with clock.stage("second_effect"):
+        combination = fit_second_effect(setup, split, baseline, contact, naming, options, progress)
+    with clock.stage("test_split"):
+        test = evaluate_test_split(setup, split, baseline, naming, combination, options, progress)
+    with clock.stage("prediction"):
+        final_params = final_parameters(naming, combination, baseline)
+        prediction = predict_with_history(setup, split, baseline, naming, noise, options, progress,
+                                          final_params=final_params)
+        prediction_check = validate_prediction(prediction, split)
+    with clock.stage("bound"):
+        final = final_candidate(naming, combination)
+        bound = (check_bound(setup, split, baseline.cv if final is None else final.cv, test.final, final_params,
+                             noise, options) if options.bound_samples > 0 else None)
+    with clock.stage("updated_model"):
+        updated = write_updated_model(setup, baseline, naming, combination, test, bound=bound,
+                                      prediction_check=prediction_check)
+        reproduction = check_reproduction(setup, split, updated, test, options)
+    with clock.stage("cautions"):
+        notes = run_cautions(naming, combination, baseline, test)
     return DiscrepancyResult(setup=setup, split=split, baseline=baseline, tests=tests, noise=noise, contact=contact,
                              naming=naming, combination=combination, test=test, prediction=prediction,
                              prediction_check=prediction_check, bound=bound, updated=updated,
                              reproduction=reproduction, options=options, cautions=notes,
-                             seconds=time.perf_counter() - t_start)
+                             seconds=time.perf_counter() - t_start, stage_seconds=dict(clock.seconds),
+                             stage_reused=dict(clock.reused))
