@@ -441,6 +441,7 @@ def _fit_nested(ctx) -> CalibrationResult:
     base_all = dict(zip(*base.all_parameters()))
     names = tuple(base.names) + extra
     init = np.concatenate([base.values, read_parameters(robot, extra)])
+    before = []
     if entry.scan is not None and extra:
         # best of a 1-D scan, then the effect's own parameters alone with the baseline held
         # (a few parameters: cheap steps), then everything together
@@ -449,9 +450,13 @@ def _fit_nested(ctx) -> CalibrationResult:
                           settings=settings, n_jobs=n_jobs, max_evaluations=options.max_evaluations,
                           uncertainty=False)
         init[len(base.names):] = alone.values
-    return calibrate(robot, fit_data, entry.model, names, fixed=base.fixed, initial=init, settings=settings,
-                     n_jobs=n_jobs, max_evaluations=options.max_evaluations, uncertainty=ctx["k"] is None,
-                     prior=ctx["prior"], clusters=ctx["units"])
+        before = [best, alone]
+    fit = calibrate(robot, fit_data, entry.model, names, fixed=base.fixed, initial=init, settings=settings,
+                    n_jobs=n_jobs, max_evaluations=options.max_evaluations, uncertainty=ctx["k"] is None,
+                    prior=ctx["prior"], clusters=ctx["units"])
+    # the result's time and work include the start scan's and the effect's own fit
+    return replace(fit, seconds=fit.seconds + sum(f.seconds for f in before),
+                   evaluations=fit.evaluations + sum(f.evaluations for f in before))
 
 
 def _refine_contact(ctx, start: CalibrationResult, names: tuple) -> CalibrationResult:
@@ -474,6 +479,7 @@ def _refine_contact(ctx, start: CalibrationResult, names: tuple) -> CalibrationR
                     settings=setup.settings, n_jobs=ctx["n_jobs"], max_evaluations=options.max_contact_evaluations,
                     uncertainty=k is None, warm=True, prior=ctx["prior"], clusters=ctx["units"])
     return replace(fit, message=f"{start.message}; then refitted with the baseline's parameters: {fit.message}",
+                   seconds=start.seconds + fit.seconds, evaluations=start.evaluations + fit.evaluations,
                    at_bound=tuple(sorted(set(fit.at_bound) | set(start.at_bound))),
                    widened=tuple(start.widened) + tuple(fit.widened), converged=fit.converged and start.converged)
 
