@@ -239,7 +239,8 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
             "noise_mm": res["noise"]["noise_rms_mm"],
             "test_mean_mm": {k: res["test_split"]["figures"][k]["mean_mm"]["value"] for k in ("file", "before", "after")},
             "prior_strength": res["baseline"]["prior_strength"], "synth_seconds": synth_s,
-            "seconds": time.perf_counter() - t0, "source_sha256": res["provenance"]["source_sha256"]}
+            "seconds": time.perf_counter() - t0, "stage_seconds": res.get("stage_seconds", {}),
+            "source_sha256": res["provenance"]["source_sha256"]}
 
 
 def written_values(model_file, named, fitted) -> dict:

@@ -97,6 +97,8 @@ def summarize(res: dict, data_path: Path, robot_path: Path, seconds: float, comm
         "table_viii_shrink": TABLE_VIII_SHRINK, "cautions": res["cautions"],
         "provenance": res["provenance"],
         "seconds_this_invocation": seconds,     # stages of an earlier invocation are reused
+        "stage_seconds": res.get("stage_seconds", {}), "stage_reused": res.get("stage_reused", {}),
+        "load_average_end": os.getloadavg()[0],
     }
 
 
