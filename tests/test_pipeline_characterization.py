@@ -9,9 +9,9 @@ folder under the key of its robot file, so that the run reads it as it reads any
 second run's robot file carries a ``[bound_calibration]`` and a ``[prediction_validation]`` that
 says the history-aware prediction beat the standard model, so its task goal is compensated and
 its paths ranked by the calibrated bound. The same keys in the same order, the same strings and
-the same numbers (to 1e-9 relative; the plans are seeded and stop on an iteration count) are
-expected; times are not compared. Catches a summary key lost, renamed or moved, a value converted
-twice or not at all, and a printed line that changed.
+the same numbers (to :data:`REL_TOL`, see there; the plans are seeded and stop on an iteration
+count) are expected; times are not compared. Catches a summary key lost, renamed or moved, a
+value converted twice or not at all, and a printed line that changed.
 
 ``CTRPLAN_RECORD_CHARACTERIZATION=1`` writes the reference again from the code under test.
 """
@@ -110,6 +110,23 @@ _TIME = re.compile(r"\b\d+(\.\d+)?(e[-+]?\d+)? s\b")
 _TIME_ITEM = re.compile(r"'(\w*time_s)': [-+0-9.e]+")
 
 
+#: Numbers (in the summary, in CSV cells and inside printed lines, integers included) agree with
+#: the recorded ones to this relative tolerance or :data:`ABS_TOL`. The task goal's inverse
+#: kinematics stops at its least-squares tolerance, and where it stops follows the last bits of
+#: the compiled standard model, which differ between CPUs: on two x86-64 machines the goal's q
+#: differed by about 1e-6 rad, its tip residual by 2e-5 mm, the IK's model evaluations by 1.5 %
+#: (1104 and 1121), and the seeded plans from that goal by 0.1 % of their checked states. A value
+#: converted twice or not at all (a factor of 1000, or 57.3 between radians and degrees) is
+#: still far outside it.
+REL_TOL = 0.02
+ABS_TOL = 1e-4
+_NUMBER = re.compile(r"[-+]?\d+(?:\.\d*)?(?:e[-+]?\d+)?")
+
+
+def _close(got: float, want: float) -> bool:
+    return math.isclose(got, want, rel_tol=REL_TOL, abs_tol=ABS_TOL)
+
+
 def _lines_times_out(lines: list[str]) -> list[str]:
     """Printed lines with times replaced: numbers followed by "s", ``'..._time_s': x`` items, and
     the values of the summary's ``times_s:`` block."""
@@ -165,8 +182,8 @@ def _run(tmp_path: Path, monkeypatch, calibrated: bool) -> dict:
 
 
 def _same(got, want, where="") -> list[str]:
-    """Differences between two JSON values: keys (and their order), strings and numbers (relative
-    1e-9; numbers inside strings and CSV cells too)."""
+    """Differences between two JSON values: keys (and their order), strings and numbers (to
+    :data:`REL_TOL` or :data:`ABS_TOL`; numbers inside strings and CSV cells too)."""
     if isinstance(want, dict):
         if not isinstance(got, dict) or list(got) != list(want):
             return [f"{where}: keys {list(got) if isinstance(got, dict) else got!r} != {list(want)}"]
@@ -178,14 +195,13 @@ def _same(got, want, where="") -> list[str]:
     if isinstance(want, bool) or want is None or isinstance(got, bool) or got is None:
         return [] if got == want else [f"{where}: {got!r} != {want!r}"]
     if isinstance(want, (int, float)):
-        ok = isinstance(got, (int, float)) and math.isclose(got, want, rel_tol=1e-9, abs_tol=1e-15)
+        ok = isinstance(got, (int, float)) and _close(got, want)
         return [] if ok else [f"{where}: {got!r} != {want!r}"]
     if isinstance(want, str) and isinstance(got, str):
-        number = r"[-+]?\d+\.\d*(?:e[-+]?\d+)?"
-        if re.sub(number, "#", got) != re.sub(number, "#", want):
+        if _NUMBER.sub("#", got) != _NUMBER.sub("#", want):
             return [f"{where}: {got!r} != {want!r}"]
-        for g, w in zip(re.findall(number, got), re.findall(number, want)):
-            if not math.isclose(float(g), float(w), rel_tol=1e-9, abs_tol=1e-15) and g != w:
+        for g, w in zip(_NUMBER.findall(got), _NUMBER.findall(want)):
+            if not _close(float(g), float(w)) and g != w:
                 return [f"{where}: {got!r} != {want!r}"]
         return []
     return [] if got == want else [f"{where}: {got!r} != {want!r}"]
