@@ -83,17 +83,32 @@ class WarmStarts:
 
     @staticmethod
     def key(alpha, beta, eta=None) -> tuple:
-        """Key of a configuration (and of a friction solve's directions ``eta``; None: the
-        clearance model)."""
+        """Key of a configuration and friction state.
+
+        Parameters
+        ----------
+        alpha, beta : array-like, shape (n,)
+            Base rotations [rad] and translations [m]; matched exactly (their bytes).
+        eta : array-like of int, shape (n - 1,), optional
+            Friction direction per pair (+1, -1; Eq. (39) of Ha et al. 2019) of a friction solve;
+            None: the clearance model.
+
+        Returns
+        -------
+        tuple
+            Hashable.
+        """
         return (np.asarray(alpha, float).tobytes(), np.asarray(beta, float).tobytes(),
                 None if eta is None else tuple(int(e) for e in eta))
 
     def get(self, key):
-        """The stored start for ``key`` or None."""
+        """The stored start for ``key`` (:meth:`key`): an object with ``curvatures`` (list of n
+        arrays, shape (S_i, 3) [1/m]) and ``multipliers`` (shape (M,) or None), or None."""
         return self._entries.get(key)
 
     def update(self, items) -> None:
-        """Store ``(key, start)`` pairs (a later pair replaces an earlier one of its key)."""
+        """Store ``(key, start)`` pairs (:meth:`key`, :meth:`get`'s starts); a later pair
+        replaces an earlier one of its key. Raises nothing."""
         for key, start in items:
             self._entries[key] = start
 
