@@ -8,15 +8,19 @@ rest, so it stops between a rotation phase and the following translation phase.
 
 ruckig (community edition, Berscheid & Kroeger 2021, "Jerk-limited real-time trajectory generation
 with arbitrary target states", RSS, doi:10.15607/RSS.2021.XVII.015) computes one jerk-limited
-rest-to-rest trajectory per segment with Phase synchronization, which keeps the joint-space path on
-the straight segment that the planner validated. Segment durations are rounded up to whole control
-periods (ruckig's discrete duration discretization), so every waypoint is a sample and is reached
-exactly, at rest.
+rest-to-rest motion per segment. It moves the path parameter ``s`` of the straight segment
+``q0 + s (q1 - q0)`` from 0 to 1, with each limit the tightest of the moving joints' limits divided
+by their share of the segment, so that the joint-space path is the straight segment that the planner
+validated, by construction, and the motion is the time-optimal straight one. Segment durations are
+rounded up to whole control periods (ruckig's discrete duration discretization), so every waypoint
+is a sample and is reached exactly, at rest.
 
 Facts about ruckig used here (``shared/notes/ompl-ruckig.md``): intermediate waypoints are not
 available offline (one calculation per segment instead); ``min_position``/``max_position`` are
-ignored offline (position extrema are checked here instead); a segment must start from exactly zero
-velocity and acceleration, or Phase synchronization silently becomes Time synchronization.
+ignored offline (position extrema are checked here instead); a calculation of all joints with Phase
+synchronization gives the same motion only when ruckig finds a phase-synchronized profile: on short
+segments of several joints it falls back to Time synchronization and leaves the straight segment by
+up to 5e-4 rad (hence the one-parameter calculation).
 
 Units: rotations in rad, translations in m, time in s.
 """
@@ -69,7 +73,7 @@ JERK_RTOL = 0.05
 ABS_TOL = 1e-9
 
 # Largest deviation of a segment's samples from its straight joint-space segment, relative to the
-# segment length [-]. Phase synchronization keeps it at round-off level.
+# segment length [-]. The one-parameter motion keeps it at round-off level.
 STRAIGHT_RTOL = 1e-6
 
 
@@ -210,8 +214,9 @@ def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[s
 
     Periodic rotations are first unwrapped along the path (``numpy.unwrap``) so that each segment
     turns the short way, as OMPL's SO2 state space interpolates. Each segment is then one ruckig
-    calculation from rest to rest with Phase synchronization (a straight joint-space segment) and a
-    duration rounded up to a whole number of control periods.
+    calculation from rest to rest of its path parameter (:func:`_path_profile`; the joints stay on
+    the straight joint-space segment by construction) with a duration rounded up to a whole number
+    of control periods.
 
     Parameters
     ----------
@@ -289,54 +294,36 @@ def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[s
     _snap_groups(q, motions, kinds, names)
 
     dt = 1.0 / rate
-    otg = ruckig.Ruckig(n, dt)
-    inp = ruckig.InputParameter(n)
-    inp.max_velocity = vmax.tolist()
-    inp.max_acceleration = amax.tolist()
-    inp.max_jerk = jmax.tolist()
-    inp.synchronization = ruckig.Synchronization.Phase
-    inp.duration_discretization = ruckig.DurationDiscretization.Discrete
-    zeros = [0.0] * n
-    out = ruckig.Trajectory(n)
-
     t_chunks = [np.zeros(1)]
     p_chunks, v_chunks, a_chunks = [q[:1].copy()], [np.zeros((1, n))], [np.zeros((1, n))]
     segments = []
     i0 = 0
     for k in range(n_wp - 1):
         q0, q1 = q[k], q[k + 1]
-        inp.current_position = q0.tolist()
-        inp.current_velocity = zeros
-        inp.current_acceleration = zeros
-        inp.target_position = q1.tolist()
-        inp.target_velocity = zeros
-        inp.target_acceleration = zeros
         try:
-            otg.calculate(inp, out)
+            s, sd, sdd, (s_lo, s_hi) = _path_profile(q1 - q0, vmax, amax, jmax, dt)
         except ruckig.RuckigError as exc:
             moved = ", ".join(f"{names[i]} {q0[i]:.6g} -> {q1[i]:.6g} {_UNITS[kinds[i]]}"
                               for i in range(n) if q0[i] != q1[i])
             raise ruckig.RuckigError(
                 f"ruckig failed on segment {k} ({motions[k + 1]}: {moved or 'no motion'}): {exc}") from exc
-        n_steps = int(round(out.duration * rate))
-        if abs(n_steps - out.duration * rate) > 1e-6:  # discrete durations are whole periods
-            raise RuntimeError(f"segment {k}: ruckig duration {out.duration!r} s is not a multiple "
-                               f"of the control period {dt!r} s")
-        # Samples strictly inside the segment; both ends are set exactly (at rest).
-        local = np.arange(1, n_steps) * dt
-        p = np.empty((n_steps, n))
-        v = np.zeros((n_steps, n))
-        a = np.zeros((n_steps, n))
-        for j, tj in enumerate(local):
-            p[j], v[j], a[j] = out.at_time(tj)
+        n_steps = len(s)
+        d = q1 - q0
+        # Samples strictly inside the segment lie on the straight segment by construction; both
+        # ends are set exactly (at rest).
+        p = q0 + s[:, None] * d
+        v = sd[:, None] * d
+        a = sdd[:, None] * d
         if n_steps > 0:
             p[-1] = q1
-        extrema = out.position_extrema
+            v[-1] = 0.0
+            a[-1] = 0.0
+        ends = np.stack([q0 + s_lo * d, q0 + s_hi * d])
         segments.append(TrajectorySegment(
             index=k, motion=motions[k + 1], t_start=i0 * dt, t_end=(i0 + n_steps) * dt,
             i_start=i0, i_end=i0 + n_steps, q_start=q0.copy(), q_end=q1.copy(),
-            position_min=np.array([b.min for b in extrema]),
-            position_max=np.array([b.max for b in extrema])))
+            position_min=np.minimum(ends.min(axis=0), np.minimum(q0, q1)),
+            position_max=np.maximum(ends.max(axis=0), np.maximum(q0, q1))))
         t_chunks.append((i0 + np.arange(1, n_steps + 1)) * dt)
         p_chunks.append(p)
         v_chunks.append(v)
@@ -529,6 +516,67 @@ def check_trajectory(traj: Trajectory, max_velocity=None, max_acceleration=None,
 
 
 # ---------------------------------------------------------------------------------- helpers
+def _path_profile(d: np.ndarray, vmax: np.ndarray, amax: np.ndarray, jmax: np.ndarray, dt: float):
+    """Rest-to-rest, jerk-limited, time-optimal motion along the straight segment ``q0 + s d``,
+    ``s`` from 0 to 1, sampled every ``dt``.
+
+    One ruckig calculation of the path parameter ``s`` alone, with each limit the tightest of the
+    moving joints' limits divided by their share ``|d_i|`` (a joint's velocity is ``s' d_i``, and
+    likewise its acceleration and jerk): the motion is the time-optimal straight one, and it stays
+    on the segment by construction. (A calculation of all joints with Phase synchronization gives
+    the same motion when ruckig finds it, but on short multi-joint segments it falls back to Time
+    synchronization and leaves the segment.) The duration is rounded up to whole control periods.
+
+    Parameters
+    ----------
+    d : ndarray, shape (n_joints,)
+        ``q1 - q0`` [rad or m].
+    vmax, amax, jmax : ndarray, shape (n_joints,)
+        Drive limits [unit/s, unit/s^2, unit/s^3].
+    dt : float
+        Control period [s].
+
+    Returns
+    -------
+    s, s_dot, s_ddot : ndarray, shape (n_steps,)
+        The path parameter [-] and its first two time derivatives [1/s, 1/s^2] at ``t = j dt``,
+        ``j = 1 .. n_steps``; ``s[-1] == 1``. Empty without motion.
+    (s_min, s_max) : tuple of float
+        Extrema of ``s`` over the continuous motion [-].
+
+    Raises
+    ------
+    ruckig.RuckigError
+        If ruckig fails.
+    RuntimeError
+        If ruckig's discrete duration is not a whole number of control periods.
+    """
+    moving = d != 0.0
+    if not np.any(moving):
+        return np.zeros(0), np.zeros(0), np.zeros(0), (0.0, 0.0)
+    share = np.abs(d[moving])
+    otg = ruckig.Ruckig(1, dt)
+    inp = ruckig.InputParameter(1)
+    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
+    inp.target_position, inp.target_velocity, inp.target_acceleration = [1.0], [0.0], [0.0]
+    inp.max_velocity = [float(np.min(vmax[moving] / share))]
+    inp.max_acceleration = [float(np.min(amax[moving] / share))]
+    inp.max_jerk = [float(np.min(jmax[moving] / share))]
+    inp.duration_discretization = ruckig.DurationDiscretization.Discrete
+    out = ruckig.Trajectory(1)
+    otg.calculate(inp, out)
+    n_steps = int(round(out.duration / dt))
+    if abs(n_steps - out.duration / dt) > 1e-6:  # discrete durations are whole periods
+        raise RuntimeError(f"ruckig duration {out.duration!r} s is not a multiple of the control period {dt!r} s")
+    s, sd, sdd = np.empty(n_steps), np.empty(n_steps), np.empty(n_steps)
+    for j in range(n_steps - 1):
+        (s[j],), (sd[j],), (sdd[j],) = out.at_time((j + 1) * dt)
+    if n_steps:
+        s[-1], sd[-1], sdd[-1] = 1.0, 0.0, 0.0
+    ext = out.position_extrema[0]
+    return s, sd, sdd, (float(ext.min), float(ext.max))
+
+
 def _vector(values, n: int, label: str) -> np.ndarray:
     arr = np.asarray(values, dtype=float).reshape(-1)
     if arr.shape != (n,):

@@ -125,6 +125,54 @@ def test_random_paths_pass_every_check(seed):
     assert np.all(np.abs(np.diff(traj.waypoints[:, :2], axis=0)) <= np.pi + 1e-12)
 
 
+SIX_KINDS = ["rotation"] * 3 + ["translation"] * 3
+SIX_VMAX = np.array([1.0, 1.0, 0.8, 0.01, 0.02, 0.01])
+SIX_AMAX = np.array([4.0, 4.0, 3.0, 0.04, 0.04, 0.03])
+SIX_JMAX = np.array([40.0, 30.0, 40.0, 0.4, 0.4, 0.5])
+
+
+def _six_segment(q0, q1, motion):
+    return time_parameterize([q0, q1], ["start", motion], SIX_KINDS, SIX_VMAX, SIX_AMAX, SIX_JMAX, RATE,
+                             [-9.0] * 3 + [-1.0] * 3, [9.0] * 3 + [1.0] * 3, [False] * 6)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_short_multi_joint_segments_stay_on_their_line_and_are_time_optimal(seed):
+    """Segments of three joints whose shares span four decades (3e-6 m translations, 2e-4 rad
+    rotations beside full ones): a calculation of all joints with Phase synchronization falls back
+    to Time synchronization on some of them and leaves the line by up to 5e-4 rad. Every segment
+    must stay on its line, and take no longer than ruckig's own Phase-synchronized motion where
+    that one is straight (both are the time-optimal straight motion, to one control period)."""
+    rng = np.random.default_rng(seed)
+    compared = 0
+    for trial in range(150):
+        q0 = np.concatenate([rng.uniform(-1, 1, 3), rng.uniform(-0.05, 0.0, 3)])
+        q1 = q0.copy()
+        motion = ("rotation", "translation")[trial % 2]
+        group = slice(0, 3) if motion == "rotation" else slice(3, 6)
+        span = 3.0 if motion == "rotation" else 0.03
+        q1[group] += rng.uniform(-span, span, 3) * rng.choice([1.0, 1e-2, 1e-4], 3)
+        traj = _six_segment(q0, q1, motion)
+        assert check_trajectory(traj) == [], (q0, q1)
+        # reference: ruckig on all joints at once, Phase synchronization
+        otg = ruckig.Ruckig(6, 1.0 / RATE)
+        inp = ruckig.InputParameter(6)
+        inp.current_position, inp.target_position = q0.tolist(), q1.tolist()
+        inp.max_velocity, inp.max_acceleration, inp.max_jerk = SIX_VMAX.tolist(), SIX_AMAX.tolist(), SIX_JMAX.tolist()
+        inp.synchronization = ruckig.Synchronization.Phase
+        inp.duration_discretization = ruckig.DurationDiscretization.Discrete
+        out = ruckig.Trajectory(6)
+        otg.calculate(inp, out)
+        d = q1 - q0
+        pts = np.array([out.at_time(t)[0] for t in np.linspace(0.0, out.duration, 50)]) - q0
+        off_line = np.linalg.norm(pts - np.outer(pts @ d / (d @ d), d), axis=1).max()
+        if off_line < 1e-9:
+            compared += 1
+            assert traj.duration <= out.duration + 1.0 / RATE + 1e-12
+            assert traj.duration >= out.duration - 1.0 / RATE - 1e-12
+    assert compared > 100
+
+
 def test_check_trajectory_catches_an_injected_violation(traj):
     k = traj.segments[0].i_start + 10
     velocity = traj.velocity.copy()
