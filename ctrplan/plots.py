@@ -151,8 +151,12 @@ def plot_bound_along_path(path, s_path: Sequence, bound_mm: Sequence, translatio
                           motions: Sequence[Sequence[str]],
                           labels: Sequence[str] = ("bound-aware plan", "bound-blind plan"), *,
                           threshold_mm: float | None = None, s_label: str = "path parameter s [-]",
-                          title: str = "") -> Path:
+                          title: str = "", given_last_mm: Sequence | None = None) -> Path:
     """Friction-induced tip error bound along one or more plans, side by side.
+
+    Each panel's title leads with the largest bound the plan optimized: the bound given the last
+    motion when ``given_last_mm`` is given (Section V-B of Ha, Fagogenis & Dupont 2019), then the
+    largest friction bound; else the largest friction bound.
 
     Parameters
     ----------
@@ -177,6 +181,10 @@ def plot_bound_along_path(path, s_path: Sequence, bound_mm: Sequence, translatio
     s_label : str
         Label of the horizontal axis, with its unit.
     title : str
+    given_last_mm : sequence of array-like, shape (K_j,), optional
+        Bound given the last motion at each waypoint of plan j [mm]: the translation-last bound
+        along a translation phase, the friction bound along a rotation (what the plan's cost
+        integrates).
 
     Returns
     -------
@@ -191,11 +199,14 @@ def plot_bound_along_path(path, s_path: Sequence, bound_mm: Sequence, translatio
     if len(s_path) and np.ndim(s_path[0]) == 0:  # a single plan given as flat arrays
         s_path, bound_mm, translation_last_mm = [s_path], [bound_mm], [translation_last_mm]
         motions = [motions]
+        given_last_mm = None if given_last_mm is None else [given_last_mm]
     n_plans = len(s_path)
-    if not (len(bound_mm) == len(translation_last_mm) == len(motions) == n_plans) or n_plans == 0:
-        raise ValueError(f"need the same number (>= 1) of plans in s_path, bound_mm, translation_last_mm "
-                         f"and motions, got {len(s_path)}, {len(bound_mm)}, {len(translation_last_mm)}, "
-                         f"{len(motions)}")
+    if not (len(bound_mm) == len(translation_last_mm) == len(motions) == n_plans) or n_plans == 0 or (
+            given_last_mm is not None and len(given_last_mm) != n_plans):
+        raise ValueError(f"need the same number (>= 1) of plans in s_path, bound_mm, translation_last_mm, "
+                         f"motions (and given_last_mm), got {len(s_path)}, {len(bound_mm)}, "
+                         f"{len(translation_last_mm)}, {len(motions)}"
+                         + ("" if given_last_mm is None else f", {len(given_last_mm)}"))
     fig = _figure((5.5 * n_plans, 4.0))
     axes = fig.subplots(1, n_plans, sharey=True, squeeze=False)
     for j, ax in enumerate(axes[0]):
@@ -212,7 +223,17 @@ def plot_bound_along_path(path, s_path: Sequence, bound_mm: Sequence, translatio
         if threshold_mm is not None:
             ax.axhline(threshold_mm, color="k", ls=":", lw=1, label=f"limit {threshold_mm:.3g} mm")
         peak = np.nanmax(b) if np.any(np.isfinite(b)) else float("nan")
-        ax.set_title(f"{labels[j] if j < len(labels) else f'plan {j}'} (max {peak:.3g} mm)")
+        name = labels[j] if j < len(labels) else f"plan {j}"
+        if given_last_mm is None:
+            ax.set_title(f"{name} (max {peak:.3g} mm)")
+        else:
+            g = np.asarray(given_last_mm[j], dtype=float)
+            if g.shape != s.shape:
+                raise ValueError(f"plan {j}: given_last_mm needs the length of s_path, got {g.shape} and {s.shape}")
+            ax.plot(s, g, "-", lw=2.5, alpha=0.5, color="tab:green", label="bound given the last motion")
+            top = np.nanmax(g) if np.any(np.isfinite(g)) else float("nan")
+            ax.set_title(f"{name}: max {top:.3g} mm given the last motion\n(friction bound max {peak:.3g} mm)",
+                         fontsize="medium")
         ax.set_xlabel(s_label)
         ax.grid(alpha=0.3)
     axes[0, 0].set_ylabel("tip error bound [mm]")

@@ -150,6 +150,27 @@ def test_bound_along_two_plans_and_one_plan(tmp_path, figures):
         plot_bound_along_path(tmp_path / "bad.png", s, [bound[0], bound[0]], tl, motions)
 
 
+def test_bound_along_path_leads_with_the_bound_given_the_last_motion(tmp_path, figures):
+    """With the bound given the last motion (what the plan optimized), the title leads with its
+    maximum and gives the friction bound's second, and the curve is drawn as given: catches a
+    title that quotes the full friction bound of the shared goal for both plans."""
+    s = [np.linspace(0, 1, 4), np.linspace(0, 1, 3)]
+    bound = [np.array([0.5, 5.29, 0.8, 0.6]), np.array([0.5, 5.29, 1.1])]
+    tl = [np.array([np.nan, np.nan, 0.4, np.nan]), np.full(3, np.nan)]
+    given = [np.array([0.5, 3.1, 0.4, 0.6]), np.array([0.5, 4.9, 1.1])]
+    motions = [MOTIONS, ["start", "rotation", "translation"]]
+    assert _is_png(plot_bound_along_path(tmp_path / "g.png", s, bound, tl, motions, given_last_mm=given))
+    (fig,) = figures
+    assert fig.axes[0].get_title().startswith("bound-aware plan: max 3.1 mm given the last motion")
+    assert fig.axes[1].get_title().startswith("bound-blind plan: max 4.9 mm given the last motion")
+    assert "friction bound max 5.29 mm" in fig.axes[0].get_title()
+    for j, ax in enumerate(fig.axes):
+        (line,) = _lines_with_label(ax, "bound given the last motion")
+        np.testing.assert_array_equal(line.get_ydata(), given[j])
+    with pytest.raises(ValueError, match="given_last_mm"):
+        plot_bound_along_path(tmp_path / "bad.png", s, bound, tl, motions, given_last_mm=given[:1])
+
+
 def test_joint_trajectories_and_xy(tmp_path, traj, figures):
     """Joint plot: a 3 x 3 grid (joints x position / velocity / acceleration) whose curves are
     the trajectory in deg or mm (per s, per s^2) against t, with the unit in each y label.

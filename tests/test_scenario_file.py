@@ -196,6 +196,14 @@ def test_value_in_message(tmp_path):
     assert "-0.01" in str(err) and str(tmp_path) in str(err)
 
 
+def test_joint_outside_its_limits_prints_values_not_reprs(tmp_path):
+    """A joint value outside its limits is named with its value, limits and unit as numbers
+    (catches "np.float64(-40.0) m")."""
+    msg = str(_error(tmp_path, GOOD.replace("beta_3 = -0.04,", "beta_3 = -40.0,")))
+    assert "-40 m is outside the joint limits [" in msg, msg
+    assert "np.float64" not in msg and "float64" not in msg
+
+
 def test_unknown_planner_is_refused_when_the_scenario_loads(tmp_path):
     """A misspelt planner fails at load (before any planning) naming the value and the planners
     the package has; every registered planner loads. Catches a name checked only by the planner

@@ -506,7 +506,8 @@ def _joint_values(robot: Robot, mapping: Mapping[str, float], file: str, key: st
         if not j.periodic and not (j.lower <= v <= j.upper):
             unit = "rad" if j.kind == "rotation" else "m"
             raise ModelFileError(file, f"{key}.{j.name}",
-                                 f"{v!r} {unit} is outside the joint limits [{j.lower!r}, {j.upper!r}] {unit}")
+                                 f"{float(v):.6g} {unit} is outside the joint limits [{float(j.lower):.6g}, "
+                                 f"{float(j.upper):.6g}] {unit}")
     try:
         alpha, beta = robot.configuration(q)
         robot.check_configuration(alpha, beta)

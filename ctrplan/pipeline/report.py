@@ -122,6 +122,7 @@ def write_report(run, out_dir: str | os.PathLike | None = None, *, summary: dict
                               [np.asarray(b.dense_friction) * 1e3 for b in bounds],
                               [np.asarray(b.dense_translation_last) * 1e3 for b in bounds],
                               [b.dense_motion for b in bounds], labels=labels,
+                              given_last_mm=[np.asarray(b.dense_given_last) * 1e3 for b in bounds],
                               s_label="joint-space path length [m, weighted metric]",
                               title=f"{sc.name}: interpolated bound along the ordered path")
 
