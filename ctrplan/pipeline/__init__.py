@@ -41,6 +41,10 @@ The stages print nothing: they log to ``ctrplan.pipeline`` (:mod:`logging`) the 
 plan`` shows (scenario, bound map, goals, plans, then the summary) at INFO, the files written at
 DEBUG, and a goal planned without its compensation at WARNING. Their ``echo`` parameters are
 deprecated, and so is :func:`run_plan` (use :func:`ctrplan.plan`).
+
+:class:`Planner` (:mod:`~ctrplan.pipeline.interactive`) plans one goal after another from the
+current configuration on a roadmap built once per robot, map and obstacles (stages 3 to 6 for
+one goal, in a fraction of a second) -> :class:`GoalPlan`.
 """
 
 from .bound_map import GIVEN, BoundMapStage, complete_bound_map, given_bound_map, load_bound_map
@@ -48,6 +52,7 @@ from .drive import time_parameterize
 from .evaluation import GoalOutcome, PlanComparison, RouteMetrics, compare_plans, goal_outcomes, route_metrics
 from .goals import (AimDecision, AimedGoals, GoalCheckCounts, ResolvedGoals, aim_decision, aim_goals, check_start,
                     resolve_goals)
+from .interactive import GoalPlan, Planner
 from .path_bounds import PATH_SAMPLE_SPACING, PathBounds, bounds_along_path
 from .prediction import WaypointPredictions, predict_waypoints
 from .refine import ExactBound, MapRefinement, Refinement, RefinementRound, refine_plans, start_refinement
@@ -77,6 +82,8 @@ __all__ = [
     "RouteMetrics", "route_metrics", "PlanComparison", "compare_plans", "GoalOutcome", "goal_outcomes",
     # all stages
     "PlanRun", "run_stages",
+    # one goal after another on a roadmap
+    "Planner", "GoalPlan",
     # the report
     "plan_summary", "COMPARED", "write_report", "path_rows", "log_summary", "PlanRecord", "read_plan_record",
     # deprecated

@@ -31,7 +31,7 @@ from ompl import base as ob
 from ..boundmap._interp import corner_sum, locate
 
 
-__all__ = ["BoundCostObjective", "DEFAULT_BOUND_WEIGHT", "DEFAULT_SAMPLE_SPACING"]
+__all__ = ["BoundCostObjective", "motion_cost_kernel", "DEFAULT_BOUND_WEIGHT", "DEFAULT_SAMPLE_SPACING"]
 
 # Cost weight of the integrated bound [1/m]: with 1000 /m, moving through a region with a 1 mm
 # tip-error bound costs twice as much per unit length as moving where the bound is zero.
@@ -101,6 +101,43 @@ def _segment_cost(q0, q1, periodic, weights, is_rotation, spacing, weight, penal
     return length + weight * length * acc / m, m + 1
 
 
+def motion_cost_kernel(joint_space, bound, bound_weight: float, sample_spacing: float = DEFAULT_SAMPLE_SPACING,
+                       invalid_penalty: float = DEFAULT_INVALID_PENALTY):
+    """The arguments after ``q0, q1`` of the compiled motion cost :func:`_segment_cost`, or None
+    when the bound is neither a bound map (anything with ``kernel_arrays``) nor weighted 0.
+
+    ``_segment_cost(q0, q1, *motion_cost_kernel(...))`` returns ``(cost [m], bound samples)``: the
+    cost ``L + w integral(b) dl`` of the straight motion, as :class:`BoundCostObjective` and the
+    roadmap (:mod:`ctrplan.planning.roadmap`) use it.
+
+    Parameters
+    ----------
+    joint_space : JointStateSpace
+    bound : BoundField or None
+    bound_weight : float
+        w [1/m].
+    sample_spacing : float
+        Largest spacing of bound samples along a motion [m].
+    invalid_penalty : float
+        Bound where the map is invalid [m].
+
+    Returns
+    -------
+    tuple or None
+    """
+    js = joint_space
+    head = (np.ascontiguousarray(js.periodic), np.ascontiguousarray(js.weights, dtype=float),
+            np.ascontiguousarray(js.is_rotation), float(sample_spacing), float(bound_weight), float(invalid_penalty))
+    if bound_weight > 0.0 and hasattr(bound, "kernel_arrays"):
+        return head + tuple(bound.kernel_arrays("position"))
+    if bound_weight == 0.0:   # never reads the map arrays
+        n = len(js.periodic)
+        return head + (np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
+                       np.zeros(0, np.int64), np.zeros(0, np.bool_), np.zeros(0, np.int64),
+                       np.zeros((0, 1)), np.zeros(0, np.bool_), 0, 0.0)
+    return None
+
+
 class BoundCostObjective(ob.OptimizationObjective):
     """Weighted joint-space length plus ``bound_weight`` x integral of the bound.
 
@@ -154,17 +191,8 @@ class BoundCostObjective(ob.OptimizationObjective):
         self.n_bound_evaluations = 0
         self.n_motion_calls = 0
         # compiled motion cost: with a BoundField, or for the plain length (weight 0)
-        self._kernel = None
-        js = joint_space
-        head = (np.ascontiguousarray(js.periodic), np.ascontiguousarray(js.weights, dtype=float),
-                np.ascontiguousarray(js.is_rotation), self.sample_spacing, self.bound_weight, self.invalid_penalty)
-        if self.bound_weight > 0.0 and hasattr(bound, "kernel_arrays"):
-            self._kernel = head + tuple(bound.kernel_arrays("position"))
-        elif self.bound_weight == 0.0:   # never reads the map arrays
-            n = len(js.periodic)
-            self._kernel = head + (np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
-                                   np.zeros(0, np.int64), np.zeros(0, np.bool_), np.zeros(0, np.int64),
-                                   np.zeros((0, 1)), np.zeros(0, np.bool_), 0, 0.0)
+        self._kernel = motion_cost_kernel(joint_space, bound, self.bound_weight, self.sample_spacing,
+                                          self.invalid_penalty)
 
     @classmethod
     def factory(cls, bound=None, **kwargs):

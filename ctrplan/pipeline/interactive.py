@@ -1,0 +1,319 @@
+"""Interactive planning: one goal after another from the current configuration, on a roadmap built
+once (:class:`Planner`).
+
+For a robot, its bound map and a fixed set of obstacles, the roadmap of
+:mod:`ctrplan.planning.roadmap` (valid states joined by valid straight motions, each costing its
+length plus the weighted integral of the friction bound) is built once and stored in the cache,
+keyed by the robot file, the map, the obstacles' geometry and the settings. Each
+:meth:`Planner.plan_to` then does what ``ctrplan plan`` does after its search, for one goal:
+
+1. the goal as a joint vector (a task-space goal by inverse kinematics, the smallest map bound
+   among the solutions; :func:`ctrplan.planning.resolve_goal`);
+2. the cheapest path through the roadmap (:meth:`~ctrplan.planning.roadmap.Roadmap.query`); if
+   none joins the current configuration and the goal, a single-query search with the scenario's
+   planner (``via = "search"``);
+3. rotate-then-translate ordering with the final check of every phase (exact standard model and
+   exact obstacles; bisection and repair as in :func:`ctrplan.planning.plan_route`), and the
+   motion reaching the goal ended as ``[planner] final_motion`` asks;
+4. the exact friction bound at the ordered waypoints given the last motion (Section V-B of Ha,
+   Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906);
+5. the drive trajectory (``[drive]``), checked against every limit.
+
+Units: SI throughout (rad, m, s).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .._log import progress_level
+from ..errors import UnreachableGoalError
+
+__all__ = ["Planner", "GoalPlan"]
+
+logger = logging.getLogger(__package__)
+
+
+@dataclass(frozen=True, eq=False)
+class GoalPlan:
+    """One goal planned by :meth:`Planner.plan_to`.
+
+    Attributes
+    ----------
+    start, goal : ndarray, shape (n_joints,)
+        Where the motion starts and the joint goal it reaches [rad or m].
+    ordered : OrderedPath
+        Pure rotation and pure translation phases, every one checked [rad or m].
+    bounds : LastMotionBounds
+        The exact bound at the ordered waypoints given the last motion [m, rad].
+    trajectory : Trajectory or None
+        The drive trajectory; None without a ``[drive]`` table.
+    cost : float
+        Search cost of the path before ordering, ``sum L + w integral(b) dl`` [m].
+    via : str
+        ``"roadmap"`` or ``"search"`` (the scenario's single-query planner, when the roadmap did
+        not join the start and the goal).
+    times_s : dict
+        ``goal``, ``search``, ``order_and_check``, ``exact_bound``, ``trajectory``, ``total`` [s].
+    """
+
+    start: np.ndarray
+    goal: np.ndarray
+    ordered: object
+    bounds: object
+    trajectory: object
+    cost: float
+    via: str
+    times_s: dict
+
+    @property
+    def max_bound_m(self) -> float:
+        """Largest exact bound at the ordered waypoints given the last motion [m]."""
+        return float(np.nanmax(self.bounds.position))
+
+    @property
+    def final_bound_m(self) -> float:
+        """Exact bound at the goal given the motion that reaches it [m]."""
+        return float(self.bounds.position[-1])
+
+
+class Planner:
+    """Plans one goal after another for a scenario's robot, map and obstacles, on a roadmap built
+    once (module docstring).
+
+    Parameters
+    ----------
+    setup : PlanSetup
+        The scenario's robot, settings and obstacles (:func:`ctrplan.pipeline.setup_plan`).
+    field : BoundField
+        The bound map of the edge costs and of the valid region.
+    n_nodes : int, optional, keyword-only
+        Roadmap states (default :data:`~ctrplan.planning.roadmap.DEFAULT_NODES_PER_JOINT` per joint).
+    neighbours : int, optional, keyword-only
+        Neighbours per state (default PRM*'s).
+    seed : int, optional, keyword-only
+        Sampling seed (default the scenario's planner seed).
+    cache_dir : path, optional, keyword-only
+        Where roadmaps are stored and looked up (default
+        :data:`~ctrplan.planning.roadmap.ROADMAP_CACHE_DIR`); None with ``store=False``.
+    store : bool, keyword-only
+        Read and write the roadmap in ``cache_dir``.
+
+    Attributes
+    ----------
+    current : ndarray, shape (n_joints,)
+        The configuration the next goal is planned from: the scenario's start, then each goal
+        reached [rad or m].
+    roadmap : Roadmap
+    roadmap_source : str
+        ``"built"`` or ``"cache"``.
+    roadmap_path : pathlib.Path or None
+
+    Raises
+    ------
+    UnreachableGoalError
+        The scenario's start is invalid, or too few valid states for a roadmap.
+    """
+
+    def __init__(self, setup, field, *, n_nodes: int | None = None, neighbours: int | None = None,
+                 seed: int | None = None, cache_dir: str | os.PathLike | None = None, store: bool = True):
+        from ..boundmap.identity import settings_dict
+        from ..cache import file_hash, mechanics_version
+        from ..planning import JointStateSpace
+        from ..planning.roadmap import (DEFAULT_NODES_PER_JOINT, ROADMAP_CACHE_DIR, Roadmap, build_roadmap,
+                                        motion_terms, obstacles_digest, prm_star_neighbours, roadmap_key)
+        from ..planning.route import route_checks
+        from .routes import effective_bound_weight
+
+        sc = setup.scenario
+        self.setup, self.field = setup, field
+        self.robot = setup.robot
+        self.joint_space = JointStateSpace(self.robot)
+        self.checks = route_checks(self.robot, list(setup.obstacles), field, setup.check_settings,
+                                   joint_space=self.joint_space)
+        self.bound_weight = effective_bound_weight(sc.calibration.bound, sc.planner.bound_weight)
+        self.terms = motion_terms(self.joint_space, field)
+        self.current = np.array(sc.start, dtype=float)
+        if not self.checks.search(self.current):
+            raise UnreachableGoalError(f"{sc.file}: start configuration {sc.joint_dict(self.current)} is invalid "
+                                       "(collision, elastic instability or outside the bound map's valid region)")
+        d = self.joint_space.n_joints
+        n = DEFAULT_NODES_PER_JOINT * d if n_nodes is None else int(n_nodes)
+        k = prm_star_neighbours(n, d) if neighbours is None else int(neighbours)
+        seed = sc.planner.seed if seed is None else int(seed)
+        search = self.checks.search
+        key = roadmap_key(file_hash(sc.robot_file) if sc.robot_file else "", field.key,
+                          obstacles_digest(setup.obstacles),
+                          {"settings": settings_dict(search.settings), "resolution": search.resolution},
+                          {"n_nodes": n, "neighbours": k, "seed": seed},
+                          mechanics_version())
+        folder = Path(cache_dir) if cache_dir is not None else ROADMAP_CACHE_DIR
+        self.roadmap_path = folder / f"{Path(sc.robot_file).stem if sc.robot_file else 'robot'}-{key[:12]}.npz" \
+            if store else None
+        roadmap = None
+        if self.roadmap_path is not None and self.roadmap_path.exists():
+            try:
+                roadmap = Roadmap.load(self.roadmap_path)
+            except ValueError as exc:
+                logger.warning(f"{exc}; building the roadmap again")
+            if roadmap is not None and roadmap.key != key:
+                roadmap = None
+        self.roadmap_source = "cache"
+        if roadmap is None:
+            logger.log(progress_level(), f"roadmap: {n} states, {k} neighbours each (built once for this robot, map "
+                                         f"and obstacles)")
+            roadmap = build_roadmap(search, self.joint_space, field, n_nodes=n, neighbours=k, seed=seed, key=key)
+            self.roadmap_source = "built"
+            logger.log(progress_level(), f"roadmap: {roadmap.n_nodes} states, {roadmap.n_edges} motions in "
+                                         f"{roadmap.build_seconds:.1f} s")
+            if self.roadmap_path is not None:
+                roadmap.save(self.roadmap_path)
+        self.roadmap = roadmap
+
+    @classmethod
+    def from_scenario(cls, scenario, *, bound_map=None, n_jobs: int = 1, **kwargs) -> "Planner":
+        """A planner for a scenario file (or a loaded :class:`~ctrplan.io.scenario.Scenario`).
+
+        Parameters
+        ----------
+        scenario : path or Scenario
+        bound_map : BoundField, optional, keyword-only
+            Default: the shipped or cached map of the scenario's robot, else its preview map
+            (computed, :func:`ctrplan.pipeline.load_bound_map`).
+        n_jobs : int, keyword-only
+            Worker processes for a map that must be computed.
+        **kwargs
+            As :class:`Planner`.
+
+        Returns
+        -------
+        Planner
+
+        Raises
+        ------
+        ModelFileError
+            Malformed scenario or robot file.
+        UnreachableGoalError
+            As :class:`Planner`.
+        """
+        from ..io.scenario import load_scenario
+        from .bound_map import load_bound_map
+        from .setup import setup_plan
+
+        sc = scenario if hasattr(scenario, "robot") else load_scenario(scenario)
+        setup = setup_plan(sc)
+        field = bound_map if bound_map is not None else load_bound_map(setup, n_jobs).field
+        return cls(setup, field, **kwargs)
+
+    def resolve(self, goal, *, seed: int = 1) -> np.ndarray:
+        """A goal as a valid joint vector [rad or m].
+
+        Parameters
+        ----------
+        goal : array-like of shape (n_joints,), dict, JointGoal or TaskSpaceGoal
+            A joint vector (robot joint order), ``{joint name: value}``, or a tip position with
+            a tolerance (``{"tip_position_m": [x, y, z], "tolerance_m": t}`` [m]).
+        seed : int, keyword-only
+            Seed of the inverse kinematics' starts.
+
+        Raises
+        ------
+        UnreachableGoalError
+            An invalid joint goal, or no valid inverse-kinematics solution within tolerance.
+        ValueError
+            A malformed goal.
+        """
+        from ..planning import resolve_goal
+
+        names = self.robot.joint_names
+        if isinstance(goal, dict) and set(goal) <= set(names) and goal:
+            missing = [nm for nm in names if nm not in goal]
+            if missing:
+                raise ValueError(f"joint goal misses {', '.join(missing)}")
+            goal = np.array([goal[nm] for nm in names], dtype=float)
+        sol = resolve_goal(goal, self.robot, validity_fn=self.checks.search, field=self.field,
+                           settings=self.setup.check_settings, seed=seed)
+        return np.asarray(sol.q, dtype=float)
+
+    def plan_to(self, goal, *, start=None, move: bool = True) -> GoalPlan:
+        """Plan, order, check, bound and time-parameterize the motion to one goal.
+
+        Parameters
+        ----------
+        goal
+            As :meth:`resolve`.
+        start : array-like, shape (n_joints,), optional, keyword-only
+            Default :attr:`current` [rad or m].
+        move : bool, keyword-only
+            Make the goal the new :attr:`current`.
+
+        Returns
+        -------
+        GoalPlan
+
+        Raises
+        ------
+        UnreachableGoalError
+            Invalid start or goal, or no path passes the final check.
+        JointLimitError
+            The drive trajectory violates a drive limit.
+        """
+        from ..mechanics import evaluate_bound
+        from ..planning import BoundCostObjective, bounds_given_last_motion, order_path, plan
+        from ..planning.history import end_with
+        from ..planning.route import DEFAULT_REPAIR_ITERATIONS, DEFAULT_REWIRE_FACTOR
+        from .drive import time_parameterize
+
+        t_all = time.perf_counter()
+        sc, robot, js, checks = self.setup.scenario, self.robot, self.joint_space, self.checks
+        q0 = self.current.copy() if start is None else np.asarray(start, dtype=float).reshape(-1)
+        t0 = time.perf_counter()
+        q1 = self.resolve(goal)
+        t_goal = time.perf_counter() - t0
+        p = sc.planner
+        objective = BoundCostObjective.factory(self.field, bound_weight=self.bound_weight)
+        rewire = p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR
+        t0 = time.perf_counter()
+        try:
+            path = self.roadmap.query(q0, q1, checks.search, self.terms, js, bound_weight=self.bound_weight)
+            waypoints, cost, via = path.waypoints, path.cost, "roadmap"
+        except UnreachableGoalError as exc:
+            if not (checks.search(q0) and checks.search(q1)):
+                raise
+            logger.log(progress_level(), f"{exc}; planning this goal with {p.name}")
+            res = plan(robot, q0, q1, checks.search, objective, planner=p.name, iterations=p.iterations,
+                       time_limit=p.time_limit, seed=p.seed, joint_space=js, range_=p.range, rewire_factor=rewire)
+            waypoints, cost, via = res.waypoints, res.cost, "search"
+        t_search = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        repairs = []
+
+        def repair(a, b):
+            res = plan(robot, a, b, checks.repair_search, objective, planner=p.name,
+                       iterations=DEFAULT_REPAIR_ITERATIONS, seed=p.seed + 1000 + len(repairs), joint_space=js,
+                       range_=p.range, rewire_factor=rewire)
+            repairs.append(res)
+            return res.waypoints
+
+        ordered = order_path(np.asarray(waypoints), robot, motion_check=checks.final.check, repair=repair,
+                             joint_space=js)
+        ordered, _ = end_with(ordered, len(ordered.q) - 1, sc.planner.final_motion, checks.final.check)
+        t_order = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        bounds = bounds_given_last_motion(ordered, robot, evaluate_bound, self.setup.settings)
+        t_exact = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        trajectory = time_parameterize(self.setup, ordered)
+        t_traj = time.perf_counter() - t0
+        if move:
+            self.current = q1.copy()
+        return GoalPlan(start=q0, goal=q1, ordered=ordered, bounds=bounds, trajectory=trajectory, cost=float(cost),
+                        via=via, times_s={"goal": t_goal, "search": t_search, "order_and_check": t_order,
+                                          "exact_bound": t_exact, "trajectory": t_traj,
+                                          "total": time.perf_counter() - t_all})

@@ -1,0 +1,510 @@
+"""A roadmap of the joint space with the friction bound in its edge costs, built once and queried
+for many goals.
+
+A single query with RRT* grows a new tree each time. For a fixed robot, bound map and obstacles,
+the valid part of the joint space and the cost of moving through it do not change between
+queries, so a probabilistic roadmap (PRM*: Karaman & Frazzoli 2011, "Sampling-based algorithms
+for optimal motion planning", IJRR 30(7), doi:10.1177/0278364911406761) is built once:
+
+1. ``n_nodes`` valid states, drawn uniformly from the joint box (seeded) and checked with the
+   planning search's checker (:class:`~ctrplan.planning.validity.BatchValidityChecker`:
+   joint limits, elastic stability, the map's valid region, collision);
+2. each connected to its ``k`` nearest neighbours in the weighted joint metric
+   (:class:`~ctrplan.planning.space.JointStateSpace`), PRM*'s
+   ``k = ceil(e (1 + 1/d) ln n)`` by default, where the straight motion passes the same checker;
+3. each edge stores its weighted length ``L`` and the integral of the map's friction bound along
+   it, ``I = integral(b) dl`` (the trapezoid rule of :func:`~ctrplan.planning.objective._segment_cost`;
+   Section III of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906), so that one roadmap
+   serves every bound weight ``w``: a query minimises ``sum L + w I``, what the RRT* search
+   minimises (``w = 0``: the bound-blind plan).
+
+A query (:meth:`Roadmap.query`) connects the start and the goal to their nearest roadmap states
+(and to each other, when the straight motion is valid), finds the cheapest path with Dijkstra's
+algorithm (``scipy.sparse.csgraph``) and shortcuts it where a straight motion is valid and
+cheaper. Interactive-rate planning of concentric tube robots on a precomputed roadmap: Torres,
+Baykal & Alterovitz, "Interactive-rate motion planning for concentric tube robots", ICRA 2014,
+doi:10.1109/ICRA.2014.6907032.
+
+A roadmap is stored in the cache under a key over the robot, the map, the obstacles' geometry,
+the checker's settings and the roadmap's own (:func:`roadmap_key`), next to the bound maps.
+
+Units: rotations in rad, translations in m, costs in m (of the weighted metric).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import UnreachableGoalError
+from .objective import DEFAULT_SAMPLE_SPACING, _segment_cost, motion_cost_kernel
+from .space import wrap_angle
+
+__all__ = ["Roadmap", "RoadmapPath", "build_roadmap", "roadmap_key", "obstacles_digest", "motion_terms",
+           "prm_star_neighbours", "ROADMAP_FORMAT", "DEFAULT_NODES_PER_JOINT", "ROADMAP_CACHE_DIR"]
+
+#: Version of the stored roadmap layout (part of its key).
+ROADMAP_FORMAT = 1
+
+#: Default roadmap size: this many valid states per joint.
+DEFAULT_NODES_PER_JOINT = 500
+
+#: Folder of stored roadmaps (beside the bound maps' ``.cache/boundmaps``).
+ROADMAP_CACHE_DIR = Path(".cache") / "roadmaps"
+
+# States drawn per validity batch while sampling, and the most draws per requested state.
+_SAMPLE_BATCH = 512
+_MAX_DRAWS_PER_NODE = 200
+
+
+def prm_star_neighbours(n_nodes: int, dimension: int) -> int:
+    """PRM*'s neighbour count ``ceil(e (1 + 1/d) ln n)`` (Karaman & Frazzoli 2011).
+
+    Parameters
+    ----------
+    n_nodes : int
+        Roadmap states.
+    dimension : int
+        Joints.
+
+    Returns
+    -------
+    int
+        At least 1.
+    """
+    return max(1, int(math.ceil(math.e * (1.0 + 1.0 / dimension) * math.log(max(n_nodes, 2)))))
+
+
+def roadmap_key(robot_text: str, field_key: str, obstacles_digest: str, checker_settings: dict,
+                roadmap_settings: dict, mechanics_version: str) -> str:
+    """Key of a stored roadmap: SHA-256 over everything its states, edges and costs depend on.
+
+    Parameters
+    ----------
+    robot_text : str
+        The robot file's text (or a canonical description of the robot).
+    field_key : str
+        The bound map's key (:func:`ctrplan.boundmap.field_key`).
+    obstacles_digest : str
+        :func:`obstacles_digest` of the obstacles.
+    checker_settings : dict
+        Model settings and resolution of the validity checker.
+    roadmap_settings : dict
+        ``n_nodes``, ``neighbours``, ``seed``, ``sample_spacing``.
+    mechanics_version : str
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits.
+    """
+    from ..cache import content_key
+
+    return content_key({"format": ROADMAP_FORMAT, "robot": robot_text, "map": field_key,
+                        "obstacles": obstacles_digest, "checker": checker_settings, "roadmap": roadmap_settings,
+                        "mechanics_version": mechanics_version})
+
+
+def obstacles_digest(obstacles) -> str:
+    """SHA-256 of the obstacles' geometry (type, bounding box and triangles of each, in order).
+
+    Parameters
+    ----------
+    obstacles : sequence of Obstacle
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits.
+    """
+    h = hashlib.sha256()
+    for ob in obstacles:
+        lo, hi = ob.aabb()
+        vertices, faces = ob.triangles()
+        h.update(type(ob).__name__.encode() + b"\0")
+        for arr in (lo, hi, vertices, faces):
+            h.update(np.ascontiguousarray(arr, dtype=float).tobytes())
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class RoadmapPath:
+    """Outcome of :meth:`Roadmap.query`.
+
+    Attributes
+    ----------
+    waypoints : ndarray, shape (K, n_joints)
+        From the start to the goal [rad or m] (periodic angles wrapped to [-pi, pi)).
+    cost : float
+        Its cost, ``sum L + w integral(b) dl`` over its straight motions [m].
+    bound_weight : float
+        ``w`` [1/m].
+    cost_before_shortcut : float
+        The cheapest roadmap path's cost [m].
+    roadmap_states : int
+        Roadmap states on the path before shortcutting.
+    seconds : float
+        Wall time of the query [s].
+    motions_checked : int
+        Straight motions checked during the query.
+    """
+
+    waypoints: np.ndarray
+    cost: float
+    bound_weight: float
+    cost_before_shortcut: float
+    roadmap_states: int
+    seconds: float
+    motions_checked: int
+
+
+@dataclass(frozen=True, eq=False)
+class Roadmap:
+    """Valid states of the joint space joined by valid straight motions, with their costs.
+
+    Attributes
+    ----------
+    nodes : ndarray, shape (N, n_joints)
+        Valid states [rad or m] (periodic angles in [-pi, pi)).
+    edges : ndarray of int, shape (E, 2)
+        Node pairs ``i < j`` joined by a valid straight motion.
+    length : ndarray, shape (E,)
+        Weighted length of each edge's motion [m].
+    integral : ndarray, shape (E,)
+        Integral of the map's friction bound along it [m^2].
+    neighbours : int
+        Neighbours each state was connected to (k).
+    settings : dict
+        ``n_nodes``, ``neighbours``, ``seed``, ``sample_spacing``.
+    key : str
+        :func:`roadmap_key` (empty for a roadmap not meant to be stored).
+    build_seconds : float
+        Wall time of the build [s].
+    draws : int
+        States drawn to find the valid ones.
+    """
+
+    nodes: np.ndarray
+    edges: np.ndarray
+    length: np.ndarray
+    integral: np.ndarray
+    neighbours: int
+    settings: dict
+    key: str = ""
+    build_seconds: float = 0.0
+    draws: int = 0
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.nodes.shape[0])
+
+    @property
+    def n_edges(self) -> int:
+        return int(self.edges.shape[0])
+
+    def cost(self, bound_weight: float) -> np.ndarray:
+        """Edge costs ``L + w I`` [m] for the bound weight ``w`` [1/m], shape (E,)."""
+        return self.length + float(bound_weight) * self.integral
+
+    def components(self) -> np.ndarray:
+        """Connected-component label of each state, shape (N,)."""
+        from scipy.sparse.csgraph import connected_components
+
+        _, labels = connected_components(self._graph(self.n_nodes, self.length), directed=False)
+        return labels
+
+    def _graph(self, size: int, cost, extra=()):
+        """Symmetric sparse cost matrix of ``size`` states with the roadmap's edges at ``cost`` and
+        ``extra`` ``(i, j, cost)`` edges. Zero-cost edges get the smallest positive float (a stored
+        zero would read as no edge)."""
+        from scipy.sparse import coo_matrix
+
+        i = [self.edges[:, 0]] + [np.array([e[0] for e in extra], dtype=np.int64)]
+        j = [self.edges[:, 1]] + [np.array([e[1] for e in extra], dtype=np.int64)]
+        c = [np.asarray(cost, dtype=float)] + [np.array([e[2] for e in extra], dtype=float)]
+        i, j, c = np.concatenate(i), np.concatenate(j), np.maximum(np.concatenate(c), np.finfo(float).tiny)
+        return coo_matrix((np.concatenate([c, c]), (np.concatenate([i, j]), np.concatenate([j, i]))),
+                          shape=(size, size)).tocsr()
+
+    # ------------------------------------------------------------------ query
+    def query(self, start, goal, checker, terms, joint_space, *, bound_weight: float, connect: int | None = None,
+              shortcut: bool = True) -> RoadmapPath:
+        """The cheapest path from ``start`` to ``goal`` through the roadmap.
+
+        Both ends are joined to their ``connect`` nearest roadmap states (default the roadmap's
+        k; three times as many if that leaves them apart) where the straight motion passes
+        ``checker``, and to each other when that motion does; Dijkstra's algorithm finds the
+        cheapest path; with ``shortcut``, each waypoint is then joined straight to the furthest
+        later one whose motion is valid and cheaper than the path between them.
+
+        Parameters
+        ----------
+        start, goal : array-like, shape (n_joints,)
+            Valid states [rad or m].
+        checker : BatchValidityChecker
+            The checker the roadmap was built with (its ``check_motion`` is used).
+        terms : callable
+            ``terms(q0, q1) -> (L [m], I [m^2])`` of a straight motion (:func:`motion_terms` with
+            the roadmap's map).
+        joint_space : JointStateSpace
+        bound_weight : float, keyword-only
+            ``w`` [1/m] of the cost ``L + w I``.
+        connect : int, optional, keyword-only
+        shortcut : bool, keyword-only
+
+        Returns
+        -------
+        RoadmapPath
+
+        Raises
+        ------
+        UnreachableGoalError
+            The start or the goal is invalid, or no path joins them through the roadmap.
+        """
+        from scipy.sparse.csgraph import dijkstra
+
+        t0 = time.perf_counter()
+        n0 = checker.n_motions
+        w = float(bound_weight)
+
+        def cost_fn(a, b):
+            length, integral = terms(a, b)
+            return length + w * integral
+
+        start = np.asarray(start, dtype=float).reshape(-1)
+        goal = np.asarray(goal, dtype=float).reshape(-1)
+        for label, q in (("start", start), ("goal", goal)):
+            if not checker(q):
+                raise UnreachableGoalError(f"{label} configuration {np.round(q, 6).tolist()} is invalid (joint "
+                                           "limits, elastic stability, the bound map's valid region or collision)")
+        n = self.n_nodes
+        k = self.neighbours if connect is None else int(connect)
+        s_idx, g_idx = n, n + 1
+        nodes = np.vstack([self.nodes, start[None, :], goal[None, :]])
+        extra: list[tuple[int, int, float]] = []
+        tried: dict[int, set] = {s_idx: set(), g_idx: set()}
+
+        def join(idx, q, count):
+            d = joint_space.distance(self.nodes, q)
+            for i in np.argsort(d)[:count]:
+                i = int(i)
+                if i in tried[idx]:
+                    continue
+                tried[idx].add(i)
+                if checker.check_motion(q, self.nodes[i]):
+                    extra.append((idx, i, float(cost_fn(q, self.nodes[i]))))
+
+        if checker.check_motion(start, goal):
+            extra.append((s_idx, g_idx, float(cost_fn(start, goal))))
+        path = None
+        for count in (k, 3 * k):
+            join(s_idx, start, count)
+            join(g_idx, goal, count)
+            dist, pred = dijkstra(self._graph(n + 2, self.cost(w), extra), indices=s_idx, return_predecessors=True)
+            if np.isfinite(dist[g_idx]):
+                path = [g_idx]
+                while path[-1] != s_idx:
+                    path.append(int(pred[path[-1]]))
+                path.reverse()
+                best = float(dist[g_idx])
+                break
+        if path is None:
+            raise UnreachableGoalError(
+                f"no path through the roadmap ({n} states, {self.n_edges} motions) joins the start "
+                f"{np.round(start, 6).tolist()} and the goal {np.round(goal, 6).tolist()}: "
+                f"{sum(1 for e in extra if s_idx in e[:2])} valid motions from the start and "
+                f"{sum(1 for e in extra if g_idx in e[:2])} to the goal among their {3 * k} nearest states")
+        q = nodes[path]
+        edge_cost = {}
+        for a, b, c in extra:
+            edge_cost[(a, b)] = edge_cost[(b, a)] = c
+        costs = []
+        for a, b in zip(path[:-1], path[1:]):
+            c = edge_cost.get((a, b))
+            costs.append(float(cost_fn(nodes[a], nodes[b])) if c is None else c)
+        if shortcut and len(q) > 2:
+            q, costs = _shortcut(q, np.array(costs), checker, cost_fn)
+        q = q.copy()
+        q[:, joint_space.periodic] = wrap_angle(q[:, joint_space.periodic])
+        q[0], q[-1] = start, goal
+        return RoadmapPath(waypoints=q, cost=float(np.sum(costs)), bound_weight=w, cost_before_shortcut=best,
+                           roadmap_states=len(path) - 2, seconds=time.perf_counter() - t0,
+                           motions_checked=checker.n_motions - n0)
+
+    # ------------------------------------------------------------------ storage
+    def save(self, path: str | Path) -> Path:
+        """Write the roadmap to ``path`` (``.npz``, atomically).
+
+        Returns
+        -------
+        pathlib.Path
+        """
+        from ..io.atomic import atomic_savez
+
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_savez(path, nodes=self.nodes, edges=self.edges, length=self.length, integral=self.integral,
+                     meta=np.array(json.dumps({"format": ROADMAP_FORMAT, "key": self.key,
+                                               "neighbours": self.neighbours, "settings": self.settings,
+                                               "build_seconds": self.build_seconds, "draws": self.draws})))
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Roadmap":
+        """Read a roadmap written by :meth:`save`.
+
+        Raises
+        ------
+        ValueError
+            Not a roadmap file of this format (the message names the file).
+        """
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
+                nodes, edges, length, integral = z["nodes"], z["edges"], z["length"], z["integral"]
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f"{path}: not a readable roadmap file ({exc})") from None
+        if meta.get("format") != ROADMAP_FORMAT:
+            raise ValueError(f"{path}: roadmap format {meta.get('format')!r}, this code reads {ROADMAP_FORMAT}")
+        return cls(nodes=nodes, edges=edges.astype(np.int64), length=length, integral=integral,
+                   neighbours=int(meta["neighbours"]),
+                   settings=dict(meta["settings"]), key=str(meta["key"]),
+                   build_seconds=float(meta["build_seconds"]), draws=int(meta["draws"]))
+
+
+def _shortcut(q, costs, checker, cost_fn):
+    """Greedy cost-aware shortcutting: from each kept waypoint, the furthest later waypoint whose
+    straight motion is valid and cheaper than the path between them. Returns the waypoints and
+    the cost of each motion."""
+    keep, out_costs = [0], []
+    i, last = 0, len(q) - 1
+    cum = np.concatenate([[0.0], np.cumsum(costs)])
+    while i < last:
+        nxt, c_next = i + 1, costs[i]
+        for j in range(last, i + 1, -1):
+            c = float(cost_fn(q[i], q[j]))
+            if c < cum[j] - cum[i] - 1e-12 and checker.check_motion(q[i], q[j]):
+                nxt, c_next = j, c
+                break
+        keep.append(nxt)
+        out_costs.append(c_next)
+        i = nxt
+    return q[keep], np.array(out_costs)
+
+
+def motion_terms(joint_space, field, sample_spacing: float = DEFAULT_SAMPLE_SPACING):
+    """``terms(q0, q1) -> (L, I)``: the weighted length [m] of the straight motion and the
+    integral of the map's friction bound along it [m^2], by the trapezoid rule of the search's
+    compiled motion cost (:func:`~ctrplan.planning.objective.motion_cost_kernel`), so that
+    ``L + w I`` is the search's motion cost for the bound weight ``w``.
+
+    Parameters
+    ----------
+    joint_space : JointStateSpace
+    field : BoundField
+    sample_spacing : float
+        Bound samples at most this far apart along a motion [m].
+
+    Returns
+    -------
+    callable
+    """
+    unit = motion_cost_kernel(joint_space, field, 1.0, sample_spacing)
+    if unit is None:
+        raise ValueError("the roadmap's edge costs need a bound map (a BoundField)")
+
+    def terms(q0, q1) -> tuple[float, float]:
+        q0 = np.asarray(q0, dtype=float)
+        q1 = np.asarray(q1, dtype=float)
+        length = float(joint_space.distance(q0, q1))
+        return length, float(_segment_cost(q0, q1, *unit)[0]) - length
+
+    return terms
+
+
+def _sample_valid(checker, joint_space, n_nodes: int, rng) -> tuple[np.ndarray, int]:
+    """``n_nodes`` valid states drawn uniformly from the joint box, and the number drawn."""
+    lo = np.where(joint_space.periodic, -np.pi, joint_space.lower)
+    hi = np.where(joint_space.periodic, np.pi, joint_space.upper)
+    found, draws = [], 0
+    while sum(len(f) for f in found) < n_nodes and draws < _MAX_DRAWS_PER_NODE * n_nodes:
+        Q = lo + rng.random((_SAMPLE_BATCH, len(lo))) * (hi - lo)
+        draws += len(Q)
+        found.append(Q[checker.check(Q)])
+    nodes = np.concatenate(found)[:n_nodes] if found else np.zeros((0, len(lo)))
+    return nodes, draws
+
+
+def build_roadmap(checker, joint_space, field, *, n_nodes: int | None = None,
+                  neighbours: int | None = None, seed: int = 1, sample_spacing: float = DEFAULT_SAMPLE_SPACING,
+                  key: str = "", progress=None) -> Roadmap:
+    """Build a roadmap (module docstring).
+
+    Parameters
+    ----------
+    checker : BatchValidityChecker
+        Validity of states and straight motions (the planning search's).
+    joint_space : JointStateSpace
+    field : BoundField
+        The bound map of the edge costs.
+    n_nodes : int, optional, keyword-only
+        Valid states (default :data:`DEFAULT_NODES_PER_JOINT` per joint).
+    neighbours : int, optional, keyword-only
+        k (default :func:`prm_star_neighbours`).
+    seed : int, keyword-only
+    sample_spacing : float, keyword-only
+        Bound samples along a motion at most this far apart [m].
+    key : str, keyword-only
+        :func:`roadmap_key`, stored with it.
+    progress : callable, optional, keyword-only
+        ``progress(done, total)`` while edges are checked.
+
+    Returns
+    -------
+    Roadmap
+
+    Raises
+    ------
+    UnreachableGoalError
+        Fewer than two valid states found in ``200 n_nodes`` draws.
+    """
+    t0 = time.perf_counter()
+    d = joint_space.n_joints
+    n_nodes = DEFAULT_NODES_PER_JOINT * d if n_nodes is None else int(n_nodes)
+    k = prm_star_neighbours(n_nodes, d) if neighbours is None else int(neighbours)
+    terms = motion_terms(joint_space, field, sample_spacing)
+    rng = np.random.default_rng(seed)
+    nodes, draws = _sample_valid(checker, joint_space, n_nodes, rng)
+    if len(nodes) < 2:
+        raise UnreachableGoalError(f"only {len(nodes)} valid states in {draws} drawn from the joint box: the "
+                                   "robot's valid region (limits, stability, map, obstacles) is too small for a roadmap")
+    pairs = set()
+    for a in range(0, len(nodes), 256):
+        block = nodes[a:a + 256]
+        dist = joint_space.distance(block[:, None, :], nodes[None, :, :])
+        dist[np.arange(len(block)), a + np.arange(len(block))] = np.inf
+        near = np.argpartition(dist, min(k, len(nodes) - 1) - 1, axis=1)[:, :k]
+        for r, row in enumerate(near):
+            i = a + r
+            for j in row.tolist():
+                pairs.add((min(i, j), max(i, j)))
+    pairs = sorted(pairs)
+    edges, values = [], []
+    for m, (i, j) in enumerate(pairs):
+        if checker.check_motion(nodes[i], nodes[j]):
+            edges.append((i, j))
+            values.append(terms(nodes[i], nodes[j]))
+        if progress is not None and (m % 500 == 0 or m == len(pairs) - 1):
+            progress(m + 1, len(pairs))
+    settings = {"n_nodes": int(n_nodes), "neighbours": int(k), "seed": int(seed), "sample_spacing": float(sample_spacing)}
+    values = np.array(values, dtype=float).reshape(-1, 2)
+    return Roadmap(nodes=nodes, edges=np.array(edges, dtype=np.int64).reshape(-1, 2), length=values[:, 0],
+                   integral=values[:, 1],
+                   neighbours=k, settings=settings, key=key, build_seconds=time.perf_counter() - t0, draws=draws)
