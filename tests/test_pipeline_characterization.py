@@ -3,7 +3,7 @@ cheap runs compared with the reference recorded from the code before the pipelin
 typed results (``tests/reference/plan_characterization.json``).
 
 Each run plans a task-space goal and then a joint goal on the Table VII robot (60 RRT* iterations,
-seed 1, bound-aware and bound-blind, with a drive) against a constant synthetic bound map (1 mm
+seed 1, no roadmap, bound-aware and bound-blind, with a drive) against a constant synthetic bound map (1 mm
 and 0.1 rad friction, 0.5 mm and 0.05 rad translation-last), placed in the map cache of the working
 folder under the key of its robot file, so that the run reads it as it reads any cached map. The
 second run's robot file carries a ``[bound_calibration]`` and a ``[prediction_validation]`` that
@@ -90,6 +90,7 @@ name = "RRTstar"
 iterations = 60
 seed = 1
 bound_weight = 500.0
+roadmap = false
 
 [bound_field]
 resolution = [4, 4, 3]

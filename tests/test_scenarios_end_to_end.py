@@ -20,8 +20,8 @@ drive limits, figures):
 ``test_pipeline_prediction`` covers the prediction columns and the compensation on task-target
 (bound-aware only, 60 iterations); these tests run the scenarios as a user would.
 Measured run times on the shared 2-core machine (others' jobs running): task-target with the
-bound-blind comparison 11-17 s, sequence bound-aware only 15-24 s (28 s with the comparison, so
-it is left out there); well under a minute each, so both stay in the default run.
+bound-blind comparison 11-17 s, sequence bound-aware only, its roadmap built once and read once,
+about 15 s alone; well under a minute each, so both stay in the default run.
 """
 
 from __future__ import annotations
@@ -137,11 +137,13 @@ def test_task_target_scenario_end_to_end(tmp_path, monkeypatch):
 
 
 def test_sequence_scenario_end_to_end(tmp_path, monkeypatch):
-    """Shipped sequence (joint goal, task goal, joint goal back to the start; 200 RRT* iterations
-    per leg, seed 2), bound-aware only: files, every goal reached in order (the joint goals
-    exactly, the task goal within 1 mm), every phase checked, and the path returns to the start
-    configuration. Catches a leg dropped or planned out of order, a task goal reached only
-    approximately beyond its tolerance, and a route whose legs do not join."""
+    """Shipped sequence (joint goal, task goal, joint goal back to the start), bound-aware only:
+    files, every goal reached in order (the joint goals exactly, the task goal within 1 mm), every
+    phase checked, and the path returns to the start configuration. With three goals and the
+    shipped map, the legs go through the roadmap, built on the first run and read from the cache
+    on the second, which plans the same path. Catches a leg dropped or planned out of order, a
+    task goal reached only approximately beyond its tolerance, a route whose legs do not join, and
+    a roadmap not stored or not found again."""
     sc, out, result, on_disk, rows = _run(tmp_path, monkeypatch, "sequence", compare_blind=False)
     robot = load_robot(REPO / "model" / "ha2019-table7-calibrated.toml")
     _check_outputs(out, robot, sc)
@@ -151,3 +153,8 @@ def test_sequence_scenario_end_to_end(tmp_path, monkeypatch):
     d = last - scenario.start
     d[:2] = (d[:2] + np.pi) % (2 * np.pi) - np.pi
     np.testing.assert_allclose(d, 0.0, atol=1e-9)
+    assert on_disk["roadmap"]["source"] == "built" and on_disk["roadmap"]["states"] == 1500
+    assert [leg["planner"] for leg in on_disk["bound_aware"]["planner"]] == ["roadmap"] * 3
+    again = ctrplan.plan_scenario(sc, tmp_path / "again", n_jobs=1, compare_blind=False)
+    assert again.run.plans.roadmap["source"] == "cache"
+    np.testing.assert_array_equal(again.run.plans.aware.ordered.q, result.run.plans.aware.ordered.q)

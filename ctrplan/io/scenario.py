@@ -73,6 +73,7 @@ class _PlannerDoc(_Strict):
     rewire_factor: Positive | None = None
     final_motion: Literal["translation-last", "rotation-last"] = "translation-last"
     aim_with: Literal["auto", "history", "standard"] = "auto"
+    roadmap: bool | None = None
 
 
 class _BoundFieldDoc(_Strict):
@@ -208,6 +209,11 @@ class PlannerSettings:
         ``"auto"`` the history-aware prediction only where the robot file's
         ``[prediction_validation]`` records that it beat the standard model on measurements in
         mean and max (``ctrplan discrepancy`` writes it), else the standard model.
+    roadmap : bool or None
+        Plan the legs through the roadmap of :class:`ctrplan.Planner` (built once per robot, map
+        and obstacles, stored in the cache; a leg it does not join is planned by ``name``); None
+        (the default): when the scenario has two goals or more and its bound map is complete
+        (not a preview map, which the plan refines).
     """
 
     name: str = "RRTstar"
@@ -219,6 +225,7 @@ class PlannerSettings:
     rewire_factor: float | None = None
     final_motion: str = "translation-last"
     aim_with: str = "auto"
+    roadmap: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -448,7 +455,8 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
     p = doc.planner
     planner = PlannerSettings(name=p.name, iterations=p.iterations, time_limit=p.time_limit_s,
                               seed=p.seed, bound_weight=p.bound_weight, range=p.range,
-                              rewire_factor=p.rewire_factor, final_motion=p.final_motion, aim_with=p.aim_with)
+                              rewire_factor=p.rewire_factor, final_motion=p.final_motion, aim_with=p.aim_with,
+                              roadmap=p.roadmap)
 
     bf = doc.bound_field
     if bf.resolution is not None:

@@ -35,9 +35,71 @@ import numpy as np
 from .._log import progress_level
 from ..errors import UnreachableGoalError
 
-__all__ = ["Planner", "GoalPlan"]
+__all__ = ["Planner", "GoalPlan", "load_roadmap"]
 
 logger = logging.getLogger(__package__)
+
+
+def load_roadmap(setup, field, checker, joint_space, *, n_nodes: int | None = None, neighbours: int | None = None,
+                 seed: int | None = None, cache_dir: str | os.PathLike | None = None, store: bool = True):
+    """The roadmap of a scenario's robot, map and obstacles: read from the cache, else built (and
+    stored).
+
+    Its key (:func:`ctrplan.planning.roadmap.roadmap_key`) covers the robot file's bytes, the map's
+    key, the obstacles' geometry, the checker's model settings and resolution, the roadmap's size,
+    neighbours and seed, and the mechanics version; not the goals, the start or the bound weight.
+
+    Parameters
+    ----------
+    setup : PlanSetup
+    field : BoundField
+    checker : BatchValidityChecker
+        The planning search's checker (:func:`ctrplan.planning.route_checks`).
+    joint_space : JointStateSpace
+    n_nodes, neighbours : int, optional, keyword-only
+        Default :data:`~ctrplan.planning.roadmap.DEFAULT_NODES_PER_JOINT` states per joint and PRM*'s k.
+    seed : int, optional, keyword-only
+        Default the scenario's planner seed.
+    cache_dir : path, optional, keyword-only
+        Default :data:`~ctrplan.planning.roadmap.ROADMAP_CACHE_DIR`.
+    store : bool, keyword-only
+        Read and write the cache.
+
+    Returns
+    -------
+    (Roadmap, str, pathlib.Path or None)
+        The roadmap, ``"cache"`` or ``"built"``, and its file.
+    """
+    from ..boundmap.identity import settings_dict
+    from ..cache import file_hash, mechanics_version
+    from ..planning.roadmap import (DEFAULT_NODES_PER_JOINT, ROADMAP_CACHE_DIR, Roadmap, build_roadmap,
+                                    obstacles_digest, prm_star_neighbours, roadmap_key)
+
+    sc = setup.scenario
+    d = joint_space.n_joints
+    n = DEFAULT_NODES_PER_JOINT * d if n_nodes is None else int(n_nodes)
+    k = prm_star_neighbours(n, d) if neighbours is None else int(neighbours)
+    seed = sc.planner.seed if seed is None else int(seed)
+    key = roadmap_key(file_hash(sc.robot_file) if sc.robot_file else "", field.key, obstacles_digest(setup.obstacles),
+                      {"settings": settings_dict(checker.settings), "resolution": checker.resolution},
+                      {"n_nodes": n, "neighbours": k, "seed": seed}, mechanics_version())
+    folder = Path(cache_dir) if cache_dir is not None else ROADMAP_CACHE_DIR
+    path = folder / f"{Path(sc.robot_file).stem if sc.robot_file else 'robot'}-{key[:12]}.npz" if store else None
+    if path is not None and path.exists():
+        try:
+            roadmap = Roadmap.load(path)
+            if roadmap.key == key:
+                return roadmap, "cache", path
+        except ValueError as exc:
+            logger.warning(f"{exc}; building the roadmap again")
+    logger.log(progress_level(), f"roadmap: {n} states, {k} neighbours each (built once for this robot, map and "
+                                 f"obstacles)")
+    roadmap = build_roadmap(checker, joint_space, field, n_nodes=n, neighbours=k, seed=seed, key=key)
+    logger.log(progress_level(), f"roadmap: {roadmap.n_nodes} states, {roadmap.n_edges} motions in "
+                                 f"{roadmap.build_seconds:.1f} s")
+    if path is not None:
+        roadmap.save(path)
+    return roadmap, "built", path
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,11 +185,8 @@ class Planner:
 
     def __init__(self, setup, field, *, n_nodes: int | None = None, neighbours: int | None = None,
                  seed: int | None = None, cache_dir: str | os.PathLike | None = None, store: bool = True):
-        from ..boundmap.identity import settings_dict
-        from ..cache import file_hash, mechanics_version
         from ..planning import JointStateSpace
-        from ..planning.roadmap import (DEFAULT_NODES_PER_JOINT, ROADMAP_CACHE_DIR, Roadmap, build_roadmap,
-                                        motion_terms, obstacles_digest, prm_star_neighbours, roadmap_key)
+        from ..planning.roadmap import motion_terms
         from ..planning.route import route_checks
         from .routes import effective_bound_weight
 
@@ -143,38 +202,9 @@ class Planner:
         if not self.checks.search(self.current):
             raise UnreachableGoalError(f"{sc.file}: start configuration {sc.joint_dict(self.current)} is invalid "
                                        "(collision, elastic instability or outside the bound map's valid region)")
-        d = self.joint_space.n_joints
-        n = DEFAULT_NODES_PER_JOINT * d if n_nodes is None else int(n_nodes)
-        k = prm_star_neighbours(n, d) if neighbours is None else int(neighbours)
-        seed = sc.planner.seed if seed is None else int(seed)
-        search = self.checks.search
-        key = roadmap_key(file_hash(sc.robot_file) if sc.robot_file else "", field.key,
-                          obstacles_digest(setup.obstacles),
-                          {"settings": settings_dict(search.settings), "resolution": search.resolution},
-                          {"n_nodes": n, "neighbours": k, "seed": seed},
-                          mechanics_version())
-        folder = Path(cache_dir) if cache_dir is not None else ROADMAP_CACHE_DIR
-        self.roadmap_path = folder / f"{Path(sc.robot_file).stem if sc.robot_file else 'robot'}-{key[:12]}.npz" \
-            if store else None
-        roadmap = None
-        if self.roadmap_path is not None and self.roadmap_path.exists():
-            try:
-                roadmap = Roadmap.load(self.roadmap_path)
-            except ValueError as exc:
-                logger.warning(f"{exc}; building the roadmap again")
-            if roadmap is not None and roadmap.key != key:
-                roadmap = None
-        self.roadmap_source = "cache"
-        if roadmap is None:
-            logger.log(progress_level(), f"roadmap: {n} states, {k} neighbours each (built once for this robot, map "
-                                         f"and obstacles)")
-            roadmap = build_roadmap(search, self.joint_space, field, n_nodes=n, neighbours=k, seed=seed, key=key)
-            self.roadmap_source = "built"
-            logger.log(progress_level(), f"roadmap: {roadmap.n_nodes} states, {roadmap.n_edges} motions in "
-                                         f"{roadmap.build_seconds:.1f} s")
-            if self.roadmap_path is not None:
-                roadmap.save(self.roadmap_path)
-        self.roadmap = roadmap
+        self.roadmap, self.roadmap_source, self.roadmap_path = load_roadmap(
+            setup, field, self.checks.search, self.joint_space, n_nodes=n_nodes, neighbours=neighbours, seed=seed,
+            cache_dir=cache_dir, store=store)
 
     @classmethod
     def from_scenario(cls, scenario, *, bound_map=None, n_jobs: int = 1, **kwargs) -> "Planner":
@@ -265,9 +295,9 @@ class Planner:
             The drive trajectory violates a drive limit.
         """
         from ..mechanics import evaluate_bound
-        from ..planning import BoundCostObjective, bounds_given_last_motion, order_path, plan
+        from ..planning import BoundCostObjective, bounds_given_last_motion
         from ..planning.history import end_with
-        from ..planning.route import DEFAULT_REPAIR_ITERATIONS, DEFAULT_REWIRE_FACTOR
+        from ..planning.route import DEFAULT_REWIRE_FACTOR, plan_route
         from .drive import time_parameterize
 
         t_all = time.perf_counter()
@@ -277,34 +307,21 @@ class Planner:
         q1 = self.resolve(goal)
         t_goal = time.perf_counter() - t0
         p = sc.planner
-        objective = BoundCostObjective.factory(self.field, bound_weight=self.bound_weight)
-        rewire = p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR
         t0 = time.perf_counter()
-        try:
-            path = self.roadmap.query(q0, q1, checks.search, self.terms, js, bound_weight=self.bound_weight)
-            waypoints, cost, via = path.waypoints, path.cost, "roadmap"
-        except UnreachableGoalError as exc:
-            if not (checks.search(q0) and checks.search(q1)):
-                raise
-            logger.log(progress_level(), f"{exc}; planning this goal with {p.name}")
-            res = plan(robot, q0, q1, checks.search, objective, planner=p.name, iterations=p.iterations,
-                       time_limit=p.time_limit, seed=p.seed, joint_space=js, range_=p.range, rewire_factor=rewire)
-            waypoints, cost, via = res.waypoints, res.cost, "search"
-        t_search = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        repairs = []
-
-        def repair(a, b):
-            res = plan(robot, a, b, checks.repair_search, objective, planner=p.name,
-                       iterations=DEFAULT_REPAIR_ITERATIONS, seed=p.seed + 1000 + len(repairs), joint_space=js,
-                       range_=p.range, rewire_factor=rewire)
-            repairs.append(res)
-            return res.waypoints
-
-        ordered = order_path(np.asarray(waypoints), robot, motion_check=checks.final.check, repair=repair,
-                             joint_space=js)
-        ordered, _ = end_with(ordered, len(ordered.q) - 1, sc.planner.final_motion, checks.final.check)
-        t_order = time.perf_counter() - t0
+        route = plan_route(robot, q0, [q1], checks, BoundCostObjective.factory(self.field, bound_weight=self.bound_weight),
+                           planner=p.name, iterations=p.iterations, seed=p.seed, time_limit=p.time_limit,
+                           range_=p.range, joint_space=js,
+                           rewire_factor=p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR,
+                           roadmap=(self.roadmap, self.terms, self.bound_weight))
+        leg = route.legs[0]
+        via = "roadmap" if leg.planner == "roadmap" else "search"
+        if via == "search":
+            logger.log(progress_level(), f"the roadmap does not join {np.round(q0, 4).tolist()} and "
+                                         f"{np.round(q1, 4).tolist()}: planned with {p.name}")
+        t_search = leg.solve_time + leg.simplify_time
+        ordered, _ = end_with(route.ordered, len(route.ordered.q) - 1, p.final_motion, checks.final.check)
+        t_order = time.perf_counter() - t0 - t_search
+        cost = leg.cost
         t0 = time.perf_counter()
         bounds = bounds_given_last_motion(ordered, robot, evaluate_bound, self.setup.settings)
         t_exact = time.perf_counter() - t0

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Any, Mapping
 
@@ -77,12 +77,16 @@ class Plans:
     in_parallel : bool
         Whether the two plans ran in two processes.
     time_s : float
-        Wall time of all plans [s].
+        Wall time of all plans [s] (the roadmap's reading or building included).
+    roadmap : dict or None
+        With legs planned through a roadmap: its ``states``, ``motions``, ``source`` (``"cache"``
+        or ``"built"``), ``file`` and ``time_s`` (reading or building) [s]; else None.
     """
 
     routes: Mapping[str, RoutePlan]
     in_parallel: bool
     time_s: float
+    roadmap: dict | None = None
 
     @property
     def aware(self) -> RoutePlan:
@@ -110,6 +114,7 @@ class _PlanJob:
     planner: Any
     iterations: int
     final_motion: str
+    roadmap: Any = None
 
 
 def _plan_mode(job: _PlanJob) -> RoutePlan:
@@ -119,12 +124,18 @@ def _plan_mode(job: _PlanJob) -> RoutePlan:
     joint_space = JointStateSpace(robot)
     checks = route_checks(robot, job.obstacles, field, job.check_settings, joint_space=joint_space)
     p = job.planner
+    roadmap = None
+    if job.roadmap is not None:
+        from ..planning.roadmap import motion_terms
+
+        roadmap = (job.roadmap, motion_terms(joint_space, field), job.weight)
     t0 = time.perf_counter()
     route = plan_route(robot, job.start, job.goals, checks,
                        BoundCostObjective.factory(field, bound_weight=job.weight), planner=p.name,
                        iterations=job.iterations, seed=p.seed, time_limit=p.time_limit, range_=p.range,
                        joint_space=joint_space,
-                       rewire_factor=p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR)
+                       rewire_factor=p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR,
+                       roadmap=roadmap)
     ordered = route.ordered
     # the motion reaching each goal ends as the scenario asks (swap its last two phases if needed
     # and if the swapped phases pass the final check)
@@ -188,7 +199,7 @@ def _plan_modes(jobs: dict, n_jobs: int) -> tuple[dict, bool]:
 
 @deprecated_echo
 def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int | None = None,
-                compare_blind: bool = True, n_jobs: int = 1, echo=None) -> Plans:
+                compare_blind: bool = True, n_jobs: int = 1, use_roadmap: bool = False, echo=None) -> Plans:
     """Stage 5: plan start -> goals bound-aware (and bound-blind), order, check and evaluate.
 
     Each plan runs the scenario's planner and seed on every leg with the cost length + weight x
@@ -210,6 +221,10 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
     n_jobs : int, keyword-only
         With 2 or more, the bound-blind plan runs in a forked process beside the bound-aware one
         (same result as in series).
+    use_roadmap : bool, keyword-only
+        Plan the legs of both plans through the scenario's roadmap
+        (:func:`~ctrplan.pipeline.interactive.load_roadmap`, read from the cache or built here
+        first; the bound-aware legs with the bound weight, the bound-blind ones with weight 0).
     echo : callable, optional, keyword-only
         Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
         higher; configure :mod:`logging` instead (logger ``ctrplan``).
@@ -233,6 +248,17 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
                            final_motion=aimed.final_motion)
             for mode, weight in modes}
     t0 = time.perf_counter()
+    info = None
+    if use_roadmap:
+        from ..planning.route import route_checks
+        from .interactive import load_roadmap
+
+        js = JointStateSpace(setup.robot)
+        checker = route_checks(setup.robot, list(setup.obstacles), field, setup.check_settings, joint_space=js).search
+        roadmap, source, path = load_roadmap(setup, field, checker, js)
+        info = {"states": roadmap.n_nodes, "motions": roadmap.n_edges, "source": source,
+                "file": None if path is None else str(path), "time_s": time.perf_counter() - t0}
+        jobs = {m: replace(job, roadmap=roadmap) for m, job in jobs.items()}
     routes, in_parallel = _plan_modes(jobs, n_jobs)
     seconds = time.perf_counter() - t0
     for mode, r in routes.items():
@@ -244,7 +270,7 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
                    f"{r.checks['final_check_states']} states, "
                    f"{ordered.n_subdivisions} bisections, {ordered.n_repairs} repairs); exact bound at waypoints: "
                    f"max {np.nanmax(lm.position) * 1e3:.2f} mm, final {lm.position[-1] * 1e3:.2f} mm")
-    return Plans(routes=MappingProxyType(routes), in_parallel=in_parallel, time_s=seconds)
+    return Plans(routes=MappingProxyType(routes), in_parallel=in_parallel, time_s=seconds, roadmap=info)
 
 
 def effective_bound_weight(calibration, weight: float) -> float:

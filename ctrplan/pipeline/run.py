@@ -95,7 +95,9 @@ class PlanRun:
 def run_stages(setup: PlanSetup, bound_map: BoundMapStage, *, iterations: int | None = None,
                compare_blind: bool = True, n_jobs: int = 1, started: float | None = None) -> PlanRun:
     """Stages 3 to 7 of a plan: check the start, resolve and aim the goals, plan bound-aware (and
-    bound-blind), refine the map where the plan goes and plan again (``[bound_field]
+    bound-blind; through the roadmap of :class:`~ctrplan.pipeline.interactive.Planner` with
+    ``[planner] roadmap``, by default with two goals or more and a complete map), refine the map
+    where the plan goes and plan again (``[bound_field]
     refine_rounds``; by default with a preview map only, :mod:`ctrplan.pipeline.refine`; task
     goals are then resolved with the exact bound), time-parameterize, evaluate. Writes nothing;
     logs the progress lines.
@@ -137,7 +139,9 @@ def run_stages(setup: PlanSetup, bound_map: BoundMapStage, *, iterations: int | 
     resolved = resolve_goals(setup, field if state is None else ExactBound(setup.robot, setup.settings), validity)
     aimed = aim_goals(setup, resolved, validity)
     goal_checks = GoalCheckCounts.of(validity)
-    plans = plan_routes(setup, field, aimed, iterations=iterations, compare_blind=compare_blind, n_jobs=n_jobs)
+    roadmap = setup.scenario.planner.roadmap
+    plans = plan_routes(setup, field, aimed, iterations=iterations, compare_blind=compare_blind, n_jobs=n_jobs,
+                        use_roadmap=roadmap if roadmap is not None else (len(aimed.q) >= 2 and state is None))
     refinement = None
     if state is not None:
         plans, refinement = refine_plans(setup, state, aimed, plans, rounds=rounds, tolerance=bf.refine_tolerance,

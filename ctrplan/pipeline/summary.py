@@ -166,8 +166,9 @@ def plan_summary(run) -> dict:
         Scenario (its name and ``scenario_file``, the resolved path it was read from) and robot,
         the goals (resolved and planned, with the map's bound there), the goal predictions, the
         bound map, the bound-aware plan (and the bound-blind one with a ``comparison`` of the
-        headline metrics :data:`COMPARED`), the trajectory's duration, model-evaluation counts and
-        stage times (``times_s``, with the run's ``total``).
+        headline metrics :data:`COMPARED`), the trajectory's duration, model-evaluation counts,
+        stage times (``times_s``, with the run's ``total``) and the roadmap the legs went through
+        (``roadmap``: states, motions, source, file, time [s]; None without).
     """
     setup, field, plans = run.setup, run.bound_map.field, run.plans
     ref = run.refinement
@@ -210,6 +211,7 @@ def plan_summary(run) -> dict:
         },
         "times_s": run.timings_s,
         "bound_weight_per_metre": sc.planner.bound_weight,
+        "roadmap": plans.roadmap,
     }
     if run.comparison.blind is not None:
         blind = _route_summary(routes["bound_blind"], run.comparison.blind)

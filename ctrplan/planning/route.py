@@ -173,7 +173,7 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
                iterations: int = DEFAULT_ITERATIONS, seed: int = 1, time_limit: float | None = None,
                range_: float | None = None, joint_space=None,
                repair_iterations: int = DEFAULT_REPAIR_ITERATIONS,
-               rewire_factor: float | None = DEFAULT_REWIRE_FACTOR) -> Route:
+               rewire_factor: float | None = DEFAULT_REWIRE_FACTOR, roadmap=None) -> Route:
     """Plan start -> goals, order into rotate-then-translate phases and check every phase.
 
     Parameters
@@ -194,6 +194,11 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
     joint_space : JointStateSpace, optional, keyword-only
     repair_iterations : int, keyword-only
         Planner iterations of a repair.
+    roadmap : tuple, optional, keyword-only
+        ``(Roadmap, terms, bound_weight)``: each leg is the cheapest path through the roadmap
+        (:meth:`~ctrplan.planning.roadmap.Roadmap.query` with ``terms`` and the weight [1/m]; its
+        :class:`PlanResult` has ``planner == "roadmap"``); a leg the roadmap does not join is
+        planned by ``planner``.
 
     Returns
     -------
@@ -210,8 +215,13 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
     q_prev = np.asarray(start_q, dtype=float)
     waypoints = [q_prev]
     for gi, q_goal in enumerate(goals_q):
-        res = plan(robot, q_prev, q_goal, checks.search, objective, planner=planner, iterations=iterations,
-                   time_limit=time_limit, seed=seed + gi, joint_space=js, range_=range_, rewire_factor=rewire_factor)
+        res = None
+        if roadmap is not None:
+            res = _roadmap_leg(roadmap, q_prev, q_goal, checks.search, js, seed + gi)
+        if res is None:
+            res = plan(robot, q_prev, q_goal, checks.search, objective, planner=planner, iterations=iterations,
+                       time_limit=time_limit, seed=seed + gi, joint_space=js, range_=range_,
+                       rewire_factor=rewire_factor)
         legs.append(res)
         wp = np.array(res.waypoints)
         offset = waypoints[-1] - wp[0]   # continue from where the previous leg ended (unwrapped angles)
@@ -229,3 +239,25 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
                          joint_space=js)
     return Route(legs, ordered, repairs)
 
+
+
+def _roadmap_leg(roadmap, q0, q1, checker, joint_space, seed: int) -> PlanResult | None:
+    """A leg through the roadmap as a :class:`PlanResult`, or None when the roadmap does not join
+    its ends (the caller then plans it by search)."""
+    from ..errors import UnreachableGoalError
+
+    rm, terms, weight = roadmap
+    try:
+        path = rm.query(q0, q1, checker, terms, joint_space, bound_weight=weight)
+    except UnreachableGoalError:
+        if not (checker(q0) and checker(q1)):
+            raise
+        return None
+    wp = path.waypoints.copy()
+    # continuous angles from the leg's start, as the planners return them
+    wp = np.asarray(q0, dtype=float) + np.cumsum(
+        np.vstack([np.zeros(wp.shape[1]), joint_space.difference(wp[:-1], wp[1:])]), axis=0)
+    return PlanResult(waypoints=wp, cost=path.cost, cost_before_simplification=path.cost_before_shortcut, solved=True,
+                      approximate=False, planner="roadmap", iterations=0, n_vertices=rm.n_nodes,
+                      solve_time=path.seconds, simplify_time=0.0, seed=seed, status="Exact solution",
+                      extra={"roadmap_states_on_path": path.roadmap_states, "motions_checked": path.motions_checked})
