@@ -1,0 +1,163 @@
+"""Speed benchmarks of ctrplan for airspeed velocity (asv), run against each commit asked for.
+
+What they time (in-process unless said otherwise):
+
+- ``Bound.time_*``: the friction bound (Section III of Ha, Fagogenis & Dupont 2019) and the
+  standard model at configurations of the paper's 4x4x4 grid (Table II robot);
+- ``ScenarioPlan.time_plan``: ``ctrplan.plan`` of each shipped scenario with its shipped map,
+  bound-aware only, no files;
+- ``RoadmapQuery.time_plan_to``: one goal planned on a built roadmap of the obstacles scenario
+  (``ctrplan.Planner.plan_to``: search, ordering and final check, exact bound, trajectory);
+- ``Discrepancy.time_workflow``: the discrepancy workflow on a small synthetic case (the Table I
+  tube pair, 150 samples along a trajectory with a 0.2 s tracker lag hidden, two candidates,
+  5 folds);
+- ``timeraw_*``: importing ctrplan and the first bound in a fresh interpreter (the compiled
+  kernels read from their cache).
+
+Run from the repository root: ``asv --config benchmarks/asv/asv.conf.json continuous --factor 1.15
+main HEAD`` (docs/benchmarks.md).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[3]
+
+
+def _grid_configurations(robot, n: int = 4):
+    """Joint vectors of the paper's grid over the robot's joint box (n per joint), every
+    ``len // 8``-th, so that each benchmark call sees the same 8 configurations."""
+    axes = [np.linspace(lo, hi, n) for lo, hi in zip(robot.joint_lower, robot.joint_upper)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(axes))
+    return grid[:: max(1, len(grid) // 8)][:8]
+
+
+class Bound:
+    """The friction bound and the standard model at 8 configurations of the 4x4x4 grid."""
+
+    timeout = 300
+
+    def setup(self):
+        from ctrplan.io.robot_file import load_robot
+        from ctrplan.mechanics import ModelSettings, evaluate_bound, solve_standard
+
+        self.robot = load_robot(REPO / "model" / "ha2019-table2-nominal.toml")
+        self.settings = ModelSettings()
+        self.configs = [self.robot.configuration(q) for q in _grid_configurations(self.robot)]
+        self.evaluate_bound, self.solve_standard = evaluate_bound, solve_standard
+        self.evaluate_bound(self.robot, *self.configs[0], self.settings)   # load the compiled kernels
+
+    def time_bound(self):
+        for alpha, beta in self.configs:
+            self.evaluate_bound(self.robot, alpha, beta, self.settings)
+
+    def time_standard(self):
+        for alpha, beta in self.configs:
+            self.solve_standard(self.robot, alpha, beta, self.settings)
+
+
+class ScenarioPlan:
+    """``ctrplan.plan`` of a shipped scenario (bound-aware only, no files)."""
+
+    params = ["obstacles", "sequence", "task-target", "six-joint"]
+    param_names = ["scenario"]
+    timeout = 900
+    number = 1
+    repeat = (1, 3, 120.0)
+    warmup_time = 0.0
+
+    def setup(self, scenario):
+        import ctrplan
+        from ctrplan.io.scenario import load_scenario
+
+        self.scenario = load_scenario(REPO / "scenarios" / f"{scenario}.toml")
+        self.plan = ctrplan.plan
+        # caches (the sequence scenario's roadmap) go to a folder of their own; the first run
+        # fills them, the timed runs read them
+        self.cache = tempfile.TemporaryDirectory(prefix="ctrplan-asv-")
+        self.cwd = os.getcwd()
+        os.chdir(self.cache.name)
+        self.plan(self.scenario, compare_blind=False)
+
+    def teardown(self, scenario):
+        os.chdir(self.cwd)
+        self.cache.cleanup()
+
+    def time_plan(self, scenario):
+        self.plan(self.scenario, compare_blind=False)
+
+
+class RoadmapQuery:
+    """One goal on the obstacles scenario's roadmap, from the scenario's start."""
+
+    timeout = 600
+    number = 1
+    repeat = (3, 10, 60.0)
+
+    def setup_cache(self):
+        import ctrplan
+
+        folder = tempfile.mkdtemp(prefix="ctrplan-asv-roadmap-")
+        ctrplan.Planner.from_scenario(REPO / "scenarios" / "obstacles.toml", cache_dir=folder)
+        return folder
+
+    def setup(self, folder):
+        import ctrplan
+
+        self.planner = ctrplan.Planner.from_scenario(REPO / "scenarios" / "obstacles.toml", cache_dir=folder)
+        self.goal = np.array([2.0, 2.0, -0.06])
+        self.planner.plan_to(self.goal, move=False)
+
+    def time_plan_to(self, folder):
+        self.planner.plan_to(self.goal, move=False)
+
+
+class Discrepancy:
+    """The discrepancy workflow on a small case with a hidden tracker lag."""
+
+    timeout = 1800
+    number = 1
+    repeat = (1, 2, 600.0)
+    warmup_time = 0.0
+
+    def setup_cache(self):
+        from ctrplan.discrepancy.synth import Noise, synthesize
+        from ctrplan.io.robot_file import load_robot, robot_to_toml
+        from ctrplan.mechanics import ModelSettings
+
+        folder = Path(tempfile.mkdtemp(prefix="ctrplan-asv-discrepancy-"))
+        robot = load_robot(REPO / "model" / "ha2019-table1-tube-pair.toml").replace(friction_coefficients=(0.0,))
+        (folder / "pair.toml").write_text(robot_to_toml(robot, header="Table I tube pair, friction off"))
+        made = synthesize(robot, {"time_offset": {"time_offset": 0.2}}, protocol="trajectory", samples=150,
+                          noise=Noise(position_rms=5e-4), seed=7, settings=ModelSettings(ds=6e-3))
+        made.frame.to_csv(folder / "data.csv", index=False)
+        return str(folder)
+
+    def time_workflow(self, folder):
+        from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
+
+        out = tempfile.mkdtemp(prefix="ctrplan-asv-report-")
+        options = DiscrepancyOptions(effects=("time_offset", "backlash"), ds=6e-3, n_permutations=99, n_folds=5,
+                                     max_evaluations=100, prior_strengths=(0.03, float("inf")),
+                                     max_calibration_samples=100, bound_samples=30, n_jobs=1)
+        run_discrepancy(Path(folder) / "pair.toml", Path(folder) / "data.csv", out, options, progress=False)
+
+
+def timeraw_import():
+    """``import ctrplan`` with the planning pipeline, in a fresh interpreter."""
+    return "import ctrplan.pipeline"
+
+
+def timeraw_first_bound():
+    """Import and the first friction bound in a fresh interpreter (compiled kernels from cache)."""
+    return f"""
+from ctrplan.io.robot_file import load_robot
+from ctrplan.mechanics import evaluate_bound
+robot = load_robot({str(REPO / "model" / "ha2019-table2-nominal.toml")!r})
+evaluate_bound(robot, *robot.configuration(robot.joint_lower * 0.5 + robot.joint_upper * 0.5))
+"""
