@@ -9,7 +9,7 @@ What they time (in-process unless said otherwise):
 - ``RoadmapQuery.time_plan_to``: one goal planned on a built roadmap of the obstacles scenario
   (``ctrplan.Planner.plan_to``: search, ordering and final check, exact bound, trajectory);
 - ``Discrepancy.time_workflow``: the discrepancy workflow on a small synthetic case (the Table I
-  tube pair, 150 samples along a trajectory with a 0.2 s tracker lag hidden, two candidates,
+  tube pair, 400 samples along a trajectory with a 0.2 s tracker lag hidden, two candidates,
   5 folds);
 - ``timeraw_*``: importing ctrplan and the first bound in a fresh interpreter (the compiled
   kernels read from their cache).
@@ -133,7 +133,7 @@ class Discrepancy:
         folder = Path(tempfile.mkdtemp(prefix="ctrplan-asv-discrepancy-"))
         robot = load_robot(REPO / "model" / "ha2019-table1-tube-pair.toml").replace(friction_coefficients=(0.0,))
         (folder / "pair.toml").write_text(robot_to_toml(robot, header="Table I tube pair, friction off"))
-        made = synthesize(robot, {"time_offset": {"time_offset": 0.2}}, protocol="trajectory", samples=150,
+        made = synthesize(robot, {"time_offset": {"time_offset": 0.2}}, protocol="trajectory", samples=400,
                           noise=Noise(position_rms=5e-4), seed=7, settings=ModelSettings(ds=6e-3))
         made.frame.to_csv(folder / "data.csv", index=False)
         return str(folder)
