@@ -50,26 +50,38 @@ def test_edges_join_near_valid_states_with_valid_motions(setup):
     assert rm.n_edges > 2 * rm.n_nodes
 
 
-def test_edge_costs_are_length_plus_weighted_bound_integral(setup):
-    """An edge costs L + w integral(b) dl, checked against a fine midpoint rule on the map written
-    out here (to 0.5 %): catches a cost without the bound, with the weight applied twice, or on
-    the long way round a periodic joint."""
+def test_edge_costs_are_length_plus_weighted_bound_along_the_executed_motion(setup):
+    """An edge costs L + w I, I the integral of the friction bound along its rotations and of the
+    translation-last bound along its translations after them (the motion the drive executes),
+    checked each way against a fine midpoint rule on the map written out here (to 0.5 %): catches
+    a cost along the straight segment, the phases' bounds swapped, the weight applied twice, the
+    directions mixed up, or the long way round a periodic joint."""
     robot, field, js, _, rm = setup
-    for e in (0, rm.n_edges // 2, rm.n_edges - 1):
+
+    def executed(a, b):
+        corner = np.where(js.is_rotation, a + js.difference(a, b), a)
+        t = (np.arange(400) + 0.5) / 400
+        rot = js.distance(a, corner) * np.mean(field(js.interpolate(a, corner, t), "position"))
+        tr = js.distance(corner, b) * np.mean(field(js.interpolate(corner, b, t), "translation_last_position"))
+        return rot + tr
+
+    checked = 0
+    for e in range(0, rm.n_edges, rm.n_edges // 40):
         i, j = rm.edges[e]
         a, b = rm.nodes[i], rm.nodes[j]
-        length = js.distance(a, b)
-        t = (np.arange(400) + 0.5) / 400
-        integral = length * np.mean(field(js.interpolate(a, b, t)))
-        assert rm.length[e] == pytest.approx(length, rel=1e-12)
-        assert rm.integral[e] == pytest.approx(integral, rel=5e-3)
-        assert rm.cost(WEIGHT)[e] == pytest.approx(length + WEIGHT * integral, rel=5e-3)
+        assert rm.length[e] == pytest.approx(js.distance(a, b), rel=1e-12)
+        assert rm.integral[e] == pytest.approx(executed(a, b), rel=5e-3)
+        assert rm.integral_reverse[e] == pytest.approx(executed(b, a), rel=5e-3)
+        assert rm.cost(WEIGHT)[e] == pytest.approx(rm.length[e] + WEIGHT * executed(a, b), rel=5e-3)
+        checked += abs(executed(a, b) - executed(b, a)) > 0.02 * executed(a, b)
+    assert checked > 0      # the two directions differ on some edges: the test sees a swap
 
 
 def test_query_is_the_cheapest_roadmap_path(setup):
     """Without shortcutting, the query's cost is the least over all paths of the roadmap joined to
-    the start and the goal, computed here by Bellman-Ford relaxation on the edge list (no scipy):
-    catches a one-way graph, dropped edges or a wrong predecessor walk."""
+    the start and the goal, each motion at its cost in its direction, computed here by
+    Bellman-Ford relaxation on the directed edge list (no scipy): catches a graph without the way
+    back, the directions' costs swapped, dropped edges or a wrong predecessor walk."""
     robot, field, js, checker, rm = setup
     terms = motion_terms(js, field)
     path = rm.query(START, GOAL, checker, terms, js, bound_weight=WEIGHT, shortcut=False)
@@ -80,21 +92,21 @@ def test_query_is_the_cheapest_roadmap_path(setup):
 
     n = rm.n_nodes
     edges = [(int(i), int(j), float(c)) for (i, j), c in zip(rm.edges, rm.cost(WEIGHT))]
+    edges += [(int(j), int(i), float(c)) for (i, j), c in zip(rm.edges, rm.cost(WEIGHT, reverse=True))]
     order = np.argsort(js.distance(rm.nodes, START))[:rm.neighbours]
     edges += [(n, int(i), cost(START, rm.nodes[i])) for i in order if checker.check_motion(START, rm.nodes[i])]
     order = np.argsort(js.distance(rm.nodes, GOAL))[:rm.neighbours]
-    edges += [(n + 1, int(i), cost(GOAL, rm.nodes[i])) for i in order if checker.check_motion(GOAL, rm.nodes[i])]
+    edges += [(int(i), n + 1, cost(rm.nodes[i], GOAL)) for i in order if checker.check_motion(GOAL, rm.nodes[i])]
     if checker.check_motion(START, GOAL):
         edges.append((n, n + 1, cost(START, GOAL)))
     best = np.full(n + 2, np.inf)
     best[n] = 0.0
     for _ in range(n + 2):
         changed = False
-        for i, j, c in edges:
-            for u, v in ((i, j), (j, i)):
-                if best[u] + c < best[v] - 1e-15:
-                    best[v] = best[u] + c
-                    changed = True
+        for u, v, c in edges:
+            if best[u] + c < best[v] - 1e-15:
+                best[v] = best[u] + c
+                changed = True
         if not changed:
             break
     assert path.cost == pytest.approx(best[n + 1], rel=1e-12)
@@ -147,6 +159,7 @@ def test_save_and_load_round_trip(setup, tmp_path):
     np.testing.assert_array_equal(back.edges, rm.edges)
     np.testing.assert_array_equal(back.length, rm.length)
     np.testing.assert_array_equal(back.integral, rm.integral)
+    np.testing.assert_array_equal(back.integral_reverse, rm.integral_reverse)
     assert (back.neighbours, back.settings, back.draws) == (rm.neighbours, rm.settings, rm.draws)
     np.savez(tmp_path / "other.npz", x=np.zeros(3))
     with pytest.raises(ValueError, match="other.npz"):

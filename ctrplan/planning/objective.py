@@ -102,7 +102,7 @@ def _segment_cost(q0, q1, periodic, weights, is_rotation, spacing, weight, penal
 
 
 def motion_cost_kernel(joint_space, bound, bound_weight: float, sample_spacing: float = DEFAULT_SAMPLE_SPACING,
-                       invalid_penalty: float = DEFAULT_INVALID_PENALTY):
+                       invalid_penalty: float = DEFAULT_INVALID_PENALTY, quantity: str = "position"):
     """The arguments after ``q0, q1`` of the compiled motion cost :func:`_segment_cost`, or None
     when the bound is neither a bound map (anything with ``kernel_arrays``) nor weighted 0.
 
@@ -120,6 +120,9 @@ def motion_cost_kernel(joint_space, bound, bound_weight: float, sample_spacing: 
         Largest spacing of bound samples along a motion [m].
     invalid_penalty : float
         Bound where the map is invalid [m].
+    quantity : str
+        The map's quantity integrated (``"position"``: the friction bound; the roadmap also
+        integrates ``"translation_last_position"`` along translations).
 
     Returns
     -------
@@ -129,7 +132,7 @@ def motion_cost_kernel(joint_space, bound, bound_weight: float, sample_spacing: 
     head = (np.ascontiguousarray(js.periodic), np.ascontiguousarray(js.weights, dtype=float),
             np.ascontiguousarray(js.is_rotation), float(sample_spacing), float(bound_weight), float(invalid_penalty))
     if bound_weight > 0.0 and hasattr(bound, "kernel_arrays"):
-        return head + tuple(bound.kernel_arrays("position"))
+        return head + tuple(bound.kernel_arrays(quantity))
     if bound_weight == 0.0:   # never reads the map arrays
         n = len(js.periodic)
         return head + (np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),

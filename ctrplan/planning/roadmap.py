@@ -12,11 +12,15 @@ for optimal motion planning", IJRR 30(7), doi:10.1177/0278364911406761) is built
 2. each connected to its ``k`` nearest neighbours in the weighted joint metric
    (:class:`~ctrplan.planning.space.JointStateSpace`), PRM*'s
    ``k = ceil(e (1 + 1/d) ln n)`` by default, where the straight motion passes the same checker;
-3. each edge stores its weighted length ``L`` and the integral of the map's friction bound along
-   it, ``I = integral(b) dl`` (the trapezoid rule of :func:`~ctrplan.planning.objective._segment_cost`;
-   Section III of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906), so that one roadmap
-   serves every bound weight ``w``: a query minimises ``sum L + w I``, what the RRT* search
-   minimises (``w = 0``: the bound-blind plan).
+3. each edge stores its weighted length ``L`` and, in each direction, the integral ``I`` of the
+   bound along the motion the drive executes for it: its rotations first (the friction bound of
+   the map, Section III of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906), then its
+   translations (the translation-last bound, Section V-B), by the trapezoid rule of
+   :func:`~ctrplan.planning.objective._segment_cost`. One roadmap serves every bound weight
+   ``w``: a query minimises ``sum L + w I`` (``w = 0``: the bound-blind plan). Where the RRT*
+   search integrates the friction bound along the straight segment, the roadmap's cost is that of
+   the executed motion, whose corner (rotated, not yet translated) the exact bound at the ordered
+   waypoints sees.
 
 A query (:meth:`Roadmap.query`) connects the start and the goal to their nearest roadmap states
 (and to each other, when the straight motion is valid), finds the cheapest path with Dijkstra's
@@ -50,7 +54,7 @@ __all__ = ["Roadmap", "RoadmapPath", "build_roadmap", "roadmap_key", "obstacles_
            "prm_star_neighbours", "ROADMAP_FORMAT", "DEFAULT_NODES_PER_JOINT", "ROADMAP_CACHE_DIR"]
 
 #: Version of the stored roadmap layout (part of its key).
-ROADMAP_FORMAT = 1
+ROADMAP_FORMAT = 2
 
 #: Default roadmap size: this many valid states per joint.
 DEFAULT_NODES_PER_JOINT = 500
@@ -142,7 +146,7 @@ class RoadmapPath:
     waypoints : ndarray, shape (K, n_joints)
         From the start to the goal [rad or m] (periodic angles wrapped to [-pi, pi)).
     cost : float
-        Its cost, ``sum L + w integral(b) dl`` over its straight motions [m].
+        Its cost, ``sum L + w I`` over its motions as executed (:func:`motion_terms`) [m].
     bound_weight : float
         ``w`` [1/m].
     cost_before_shortcut : float
@@ -177,7 +181,10 @@ class Roadmap:
     length : ndarray, shape (E,)
         Weighted length of each edge's motion [m].
     integral : ndarray, shape (E,)
-        Integral of the map's friction bound along it [m^2].
+        Integral of the bound along the executed motion from ``edges[:, 0]`` to ``edges[:, 1]``
+        (:func:`motion_terms`) [m^2].
+    integral_reverse : ndarray, shape (E,)
+        The same from ``edges[:, 1]`` to ``edges[:, 0]`` [m^2].
     neighbours : int
         Neighbours each state was connected to (k).
     settings : dict
@@ -194,6 +201,7 @@ class Roadmap:
     edges: np.ndarray
     length: np.ndarray
     integral: np.ndarray
+    integral_reverse: np.ndarray
     neighbours: int
     settings: dict
     key: str = ""
@@ -208,29 +216,31 @@ class Roadmap:
     def n_edges(self) -> int:
         return int(self.edges.shape[0])
 
-    def cost(self, bound_weight: float) -> np.ndarray:
-        """Edge costs ``L + w I`` [m] for the bound weight ``w`` [1/m], shape (E,)."""
-        return self.length + float(bound_weight) * self.integral
+    def cost(self, bound_weight: float, reverse: bool = False) -> np.ndarray:
+        """Edge costs ``L + w I`` [m] for the bound weight ``w`` [1/m], shape (E,): from
+        ``edges[:, 0]`` to ``edges[:, 1]``, or back with ``reverse``."""
+        return self.length + float(bound_weight) * (self.integral_reverse if reverse else self.integral)
 
     def components(self) -> np.ndarray:
         """Connected-component label of each state, shape (N,)."""
         from scipy.sparse.csgraph import connected_components
 
-        _, labels = connected_components(self._graph(self.n_nodes, self.length), directed=False)
+        _, labels = connected_components(self._graph(self.n_nodes, self.length, self.length), directed=False)
         return labels
 
-    def _graph(self, size: int, cost, extra=()):
-        """Symmetric sparse cost matrix of ``size`` states with the roadmap's edges at ``cost`` and
-        ``extra`` ``(i, j, cost)`` edges. Zero-cost edges get the smallest positive float (a stored
-        zero would read as no edge)."""
+    def _graph(self, size: int, forward, backward, extra=()):
+        """Directed sparse cost matrix of ``size`` states: the roadmap's edges at ``forward`` costs
+        from ``edges[:, 0]`` to ``edges[:, 1]`` and ``backward`` costs back, and the directed
+        ``extra`` ``(i, j, cost)`` edges. Zero costs get the smallest positive float (a stored zero
+        would read as no edge)."""
         from scipy.sparse import coo_matrix
 
-        i = [self.edges[:, 0]] + [np.array([e[0] for e in extra], dtype=np.int64)]
-        j = [self.edges[:, 1]] + [np.array([e[1] for e in extra], dtype=np.int64)]
-        c = [np.asarray(cost, dtype=float)] + [np.array([e[2] for e in extra], dtype=float)]
-        i, j, c = np.concatenate(i), np.concatenate(j), np.maximum(np.concatenate(c), np.finfo(float).tiny)
-        return coo_matrix((np.concatenate([c, c]), (np.concatenate([i, j]), np.concatenate([j, i]))),
-                          shape=(size, size)).tocsr()
+        ex = np.array([e[:2] for e in extra], dtype=np.int64).reshape(-1, 2)
+        i = np.concatenate([self.edges[:, 0], self.edges[:, 1], ex[:, 0]])
+        j = np.concatenate([self.edges[:, 1], self.edges[:, 0], ex[:, 1]])
+        c = np.concatenate([np.asarray(forward, dtype=float), np.asarray(backward, dtype=float),
+                            np.array([e[2] for e in extra], dtype=float)])
+        return coo_matrix((np.maximum(c, np.finfo(float).tiny), (i, j)), shape=(size, size)).tocsr()
 
     # ------------------------------------------------------------------ query
     def query(self, start, goal, checker, terms, joint_space, *, bound_weight: float, connect: int | None = None,
@@ -250,8 +260,8 @@ class Roadmap:
         checker : BatchValidityChecker
             The checker the roadmap was built with (its ``check_motion`` is used).
         terms : callable
-            ``terms(q0, q1) -> (L [m], I [m^2])`` of a straight motion (:func:`motion_terms` with
-            the roadmap's map).
+            ``terms(q0, q1) -> (L [m], I [m^2])`` of the motion from ``q0`` to ``q1`` as executed
+            (:func:`motion_terms` with the roadmap's map).
         joint_space : JointStateSpace
         bound_weight : float, keyword-only
             ``w`` [1/m] of the cost ``L + w I``.
@@ -298,7 +308,9 @@ class Roadmap:
                     continue
                 tried[idx].add(i)
                 if checker.check_motion(q, self.nodes[i]):
-                    extra.append((idx, i, float(cost_fn(q, self.nodes[i]))))
+                    # out of the start, into the goal
+                    extra.append((idx, i, float(cost_fn(q, self.nodes[i]))) if idx == s_idx
+                                 else (i, idx, float(cost_fn(self.nodes[i], q))))
 
         if checker.check_motion(start, goal):
             extra.append((s_idx, g_idx, float(cost_fn(start, goal))))
@@ -306,7 +318,8 @@ class Roadmap:
         for count in (k, 3 * k):
             join(s_idx, start, count)
             join(g_idx, goal, count)
-            dist, pred = dijkstra(self._graph(n + 2, self.cost(w), extra), indices=s_idx, return_predecessors=True)
+            dist, pred = dijkstra(self._graph(n + 2, self.cost(w), self.cost(w, reverse=True), extra), directed=True,
+                                  indices=s_idx, return_predecessors=True)
             if np.isfinite(dist[g_idx]):
                 path = [g_idx]
                 while path[-1] != s_idx:
@@ -321,9 +334,7 @@ class Roadmap:
                 f"{sum(1 for e in extra if s_idx in e[:2])} valid motions from the start and "
                 f"{sum(1 for e in extra if g_idx in e[:2])} to the goal among their {3 * k} nearest states")
         q = nodes[path]
-        edge_cost = {}
-        for a, b, c in extra:
-            edge_cost[(a, b)] = edge_cost[(b, a)] = c
+        edge_cost = {(a, b): c for a, b, c in extra}
         costs = []
         for a, b in zip(path[:-1], path[1:]):
             c = edge_cost.get((a, b))
@@ -350,6 +361,7 @@ class Roadmap:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_savez(path, nodes=self.nodes, edges=self.edges, length=self.length, integral=self.integral,
+                     integral_reverse=self.integral_reverse,
                      meta=np.array(json.dumps({"format": ROADMAP_FORMAT, "key": self.key,
                                                "neighbours": self.neighbours, "settings": self.settings,
                                                "build_seconds": self.build_seconds, "draws": self.draws})))
@@ -368,12 +380,14 @@ class Roadmap:
         try:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
-                nodes, edges, length, integral = z["nodes"], z["edges"], z["length"], z["integral"]
+                nodes, edges, length = z["nodes"], z["edges"], z["length"]
+                integral, integral_reverse = z["integral"], z["integral_reverse"]
         except (OSError, KeyError, ValueError) as exc:
             raise ValueError(f"{path}: not a readable roadmap file ({exc})") from None
         if meta.get("format") != ROADMAP_FORMAT:
             raise ValueError(f"{path}: roadmap format {meta.get('format')!r}, this code reads {ROADMAP_FORMAT}")
         return cls(nodes=nodes, edges=edges.astype(np.int64), length=length, integral=integral,
+                   integral_reverse=integral_reverse,
                    neighbours=int(meta["neighbours"]),
                    settings=dict(meta["settings"]), key=str(meta["key"]),
                    build_seconds=float(meta["build_seconds"]), draws=int(meta["draws"]))
@@ -400,31 +414,41 @@ def _shortcut(q, costs, checker, cost_fn):
 
 
 def motion_terms(joint_space, field, sample_spacing: float = DEFAULT_SAMPLE_SPACING):
-    """``terms(q0, q1) -> (L, I)``: the weighted length [m] of the straight motion and the
-    integral of the map's friction bound along it [m^2], by the trapezoid rule of the search's
-    compiled motion cost (:func:`~ctrplan.planning.objective.motion_cost_kernel`), so that
-    ``L + w I`` is the search's motion cost for the bound weight ``w``.
+    """``terms(q0, q1) -> (L, I)`` of the motion from ``q0`` to ``q1`` as the drive executes it:
+    its rotations first, then its translations (:func:`~ctrplan.planning.order_path`).
+
+    ``L`` is the weighted length [m] (that of the straight motion: the metric adds the rotations'
+    and the translation's lengths); ``I`` [m^2] the integral of the map's friction bound along
+    the rotation phase plus that of its translation-last bound along the translation phase (the
+    bound given the last motion, Section V-B of Ha, Fagogenis & Dupont 2019), each by the trapezoid
+    rule of the search's compiled motion cost (:func:`~ctrplan.planning.objective.motion_cost_kernel`).
 
     Parameters
     ----------
     joint_space : JointStateSpace
     field : BoundField
     sample_spacing : float
-        Bound samples at most this far apart along a motion [m].
+        Bound samples at most this far apart along a phase [m].
 
     Returns
     -------
     callable
     """
-    unit = motion_cost_kernel(joint_space, field, 1.0, sample_spacing)
-    if unit is None:
+    friction = motion_cost_kernel(joint_space, field, 1.0, sample_spacing)
+    last = motion_cost_kernel(joint_space, field, 1.0, sample_spacing, quantity="translation_last_position")
+    if friction is None:
         raise ValueError("the roadmap's edge costs need a bound map (a BoundField)")
+    rot = np.asarray(joint_space.is_rotation)
 
     def terms(q0, q1) -> tuple[float, float]:
         q0 = np.asarray(q0, dtype=float)
         q1 = np.asarray(q1, dtype=float)
-        length = float(joint_space.distance(q0, q1))
-        return length, float(_segment_cost(q0, q1, *unit)[0]) - length
+        corner = np.where(rot, q0 + joint_space.difference(q0, q1), q0)
+        l_rot = float(joint_space.distance(q0, corner))
+        l_tr = float(joint_space.distance(corner, q1))
+        integral = float(_segment_cost(q0, corner, *friction)[0]) - l_rot
+        integral += float(_segment_cost(corner, q1, *last)[0]) - l_tr
+        return l_rot + l_tr, integral
 
     return terms
 
@@ -500,11 +524,11 @@ def build_roadmap(checker, joint_space, field, *, n_nodes: int | None = None,
     for m, (i, j) in enumerate(pairs):
         if checker.check_motion(nodes[i], nodes[j]):
             edges.append((i, j))
-            values.append(terms(nodes[i], nodes[j]))
+            values.append(terms(nodes[i], nodes[j]) + (terms(nodes[j], nodes[i])[1],))
         if progress is not None and (m % 500 == 0 or m == len(pairs) - 1):
             progress(m + 1, len(pairs))
     settings = {"n_nodes": int(n_nodes), "neighbours": int(k), "seed": int(seed), "sample_spacing": float(sample_spacing)}
-    values = np.array(values, dtype=float).reshape(-1, 2)
+    values = np.array(values, dtype=float).reshape(-1, 3)
     return Roadmap(nodes=nodes, edges=np.array(edges, dtype=np.int64).reshape(-1, 2), length=values[:, 0],
-                   integral=values[:, 1],
+                   integral=values[:, 1], integral_reverse=values[:, 2],
                    neighbours=k, settings=settings, key=key, build_seconds=time.perf_counter() - t0, draws=draws)
