@@ -2,7 +2,8 @@
 
 Per shipped scenario (``scenarios/*.toml``), in this process:
 
-1. the roadmap is built from nothing (its build time; nothing read from the cache);
+1. the roadmap is built from nothing on ``--jobs`` processes (its build time; nothing read from
+   the cache);
 2. ``--goals`` random goals are drawn (seeded, uniformly from the joint box, kept when valid for
    the search's checker: limits, elastic stability, the map's valid region, obstacles) and
    planned one after another from the current configuration with ``Planner.plan_to``: goal,
@@ -18,7 +19,7 @@ after.
 
 Usage::
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_roadmap.py [--goals 20] [--results benchmarks/results/roadmap.json]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_roadmap.py [--goals 20] [--jobs 2] [--results benchmarks/results/roadmap.json]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_roadmap.py scenarios/obstacles.toml --goals 5
 """
 
@@ -80,12 +81,12 @@ def single_query(planner, q0, q1) -> tuple[float, float]:
     return float(np.nanmax(bounds.position)), time.perf_counter() - t0
 
 
-def run(path: Path, n_goals: int, seed: int, compare: bool) -> dict:
+def run(path: Path, n_goals: int, seed: int, compare: bool, jobs: int) -> dict:
     from ctrplan.errors import CtrplanError
     from ctrplan.pipeline.interactive import Planner
 
     t0 = time.perf_counter()
-    planner = Planner.from_scenario(path, store=False)
+    planner = Planner.from_scenario(path, store=False, n_jobs=jobs)
     setup_s = time.perf_counter() - t0
     rm = planner.roadmap
     goals = random_goals(planner, n_goals, seed)
@@ -137,12 +138,13 @@ def main(argv=None) -> int:
     ap.add_argument("--goals", type=int, default=20, help="random goals per scenario")
     ap.add_argument("--seed", type=int, default=2026, help="seed of the random goals")
     ap.add_argument("--no-compare", action="store_true", help="skip the single-query plans")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes that build the roadmap")
     ap.add_argument("--results", type=Path, help="write the figures to this JSON file")
     args = ap.parse_args(argv)
     paths = [Path(p).resolve() for p in args.scenarios] or sorted((REPO / "scenarios").glob("*.toml"))
     start_load = os.getloadavg()
     print(f"load average before: {start_load}")
-    results = [run(p, args.goals, args.seed, not args.no_compare) for p in paths]
+    results = [run(p, args.goals, args.seed, not args.no_compare, args.jobs) for p in paths]
     end_load = os.getloadavg()
     print(f"load average after: {end_load}")
     print("\nscenario       joints  roadmap (states / motions / build s)  query s: mean / median / p90 / max   "
@@ -160,7 +162,7 @@ def main(argv=None) -> int:
         doc = {"command": "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_roadmap.py " + " ".join(argv or sys.argv[1:]),
                "commit": commit, "date": datetime.date.today().isoformat(), "cores": os.cpu_count(),
                "cpu": platform.processor() or platform.machine(), "python": platform.python_version(),
-               "load_average_start": start_load, "load_average_end": end_load, "goals": args.goals,
+               "load_average_start": start_load, "load_average_end": end_load, "goals": args.goals, "jobs": args.jobs,
                "seed": args.seed, "scenarios": results}
         args.results.parent.mkdir(parents=True, exist_ok=True)
         args.results.write_text(json.dumps(doc, indent=1) + "\n")

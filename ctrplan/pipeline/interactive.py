@@ -41,7 +41,8 @@ logger = logging.getLogger(__package__)
 
 
 def load_roadmap(setup, field, checker, joint_space, *, n_nodes: int | None = None, neighbours: int | None = None,
-                 seed: int | None = None, cache_dir: str | os.PathLike | None = None, store: bool = True):
+                 seed: int | None = None, cache_dir: str | os.PathLike | None = None, store: bool = True,
+                 n_jobs: int = 1):
     """The roadmap of a scenario's robot, map and obstacles: read from the cache, else built (and
     stored).
 
@@ -64,6 +65,8 @@ def load_roadmap(setup, field, checker, joint_space, *, n_nodes: int | None = No
         Default :data:`~ctrplan.planning.roadmap.ROADMAP_CACHE_DIR`.
     store : bool, keyword-only
         Read and write the cache.
+    n_jobs : int, keyword-only
+        Processes that build it (:func:`~ctrplan.planning.roadmap.build_roadmap`).
 
     Returns
     -------
@@ -94,7 +97,7 @@ def load_roadmap(setup, field, checker, joint_space, *, n_nodes: int | None = No
             logger.warning(f"{exc}; building the roadmap again")
     logger.log(progress_level(), f"roadmap: {n} states, {k} neighbours each (built once for this robot, map and "
                                  f"obstacles)")
-    roadmap = build_roadmap(checker, joint_space, field, n_nodes=n, neighbours=k, seed=seed, key=key)
+    roadmap = build_roadmap(checker, joint_space, field, n_nodes=n, neighbours=k, seed=seed, key=key, n_jobs=n_jobs)
     logger.log(progress_level(), f"roadmap: {roadmap.n_nodes} states, {roadmap.n_edges} motions in "
                                  f"{roadmap.build_seconds:.1f} s")
     if path is not None:
@@ -166,6 +169,8 @@ class Planner:
         :data:`~ctrplan.planning.roadmap.ROADMAP_CACHE_DIR`); None with ``store=False``.
     store : bool, keyword-only
         Read and write the roadmap in ``cache_dir``.
+    n_jobs : int, keyword-only
+        Processes that build the roadmap (the result does not depend on it).
 
     Attributes
     ----------
@@ -184,7 +189,8 @@ class Planner:
     """
 
     def __init__(self, setup, field, *, n_nodes: int | None = None, neighbours: int | None = None,
-                 seed: int | None = None, cache_dir: str | os.PathLike | None = None, store: bool = True):
+                 seed: int | None = None, cache_dir: str | os.PathLike | None = None, store: bool = True,
+                 n_jobs: int = 1):
         from ..planning import JointStateSpace
         from ..planning.roadmap import motion_terms
         from ..planning.route import route_checks
@@ -204,7 +210,7 @@ class Planner:
                                        "(collision, elastic instability or outside the bound map's valid region)")
         self.roadmap, self.roadmap_source, self.roadmap_path = load_roadmap(
             setup, field, self.checks.search, self.joint_space, n_nodes=n_nodes, neighbours=neighbours, seed=seed,
-            cache_dir=cache_dir, store=store)
+            cache_dir=cache_dir, store=store, n_jobs=n_jobs)
 
     @classmethod
     def from_scenario(cls, scenario, *, bound_map=None, n_jobs: int = 1, **kwargs) -> "Planner":
@@ -217,7 +223,7 @@ class Planner:
             Default: the shipped or cached map of the scenario's robot, else its preview map
             (computed, :func:`ctrplan.pipeline.load_bound_map`).
         n_jobs : int, keyword-only
-            Worker processes for a map that must be computed.
+            Worker processes for a map that must be computed and for the roadmap.
         **kwargs
             As :class:`Planner`.
 
@@ -239,7 +245,7 @@ class Planner:
         sc = scenario if hasattr(scenario, "robot") else load_scenario(scenario)
         setup = setup_plan(sc)
         field = bound_map if bound_map is not None else load_bound_map(setup, n_jobs).field
-        return cls(setup, field, **kwargs)
+        return cls(setup, field, n_jobs=n_jobs, **kwargs)
 
     def resolve(self, goal, *, seed: int = 1) -> np.ndarray:
         """A goal as a valid joint vector [rad or m].

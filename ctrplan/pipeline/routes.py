@@ -224,7 +224,8 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
     use_roadmap : bool, keyword-only
         Plan the legs of both plans through the scenario's roadmap
         (:func:`~ctrplan.pipeline.interactive.load_roadmap`, read from the cache or built here
-        first; the bound-aware legs with the bound weight, the bound-blind ones with weight 0).
+        first on ``n_jobs`` processes; the bound-aware legs with the bound weight, the bound-blind
+        ones with weight 0).
     echo : callable, optional, keyword-only
         Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
         higher; configure :mod:`logging` instead (logger ``ctrplan``).
@@ -255,7 +256,7 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
 
         js = JointStateSpace(setup.robot)
         checker = route_checks(setup.robot, list(setup.obstacles), field, setup.check_settings, joint_space=js).search
-        roadmap, source, path = load_roadmap(setup, field, checker, js)
+        roadmap, source, path = load_roadmap(setup, field, checker, js, n_jobs=n_jobs)
         info = {"states": roadmap.n_nodes, "motions": roadmap.n_edges, "source": source,
                 "file": None if path is None else str(path), "time_s": time.perf_counter() - t0}
         jobs = {m: replace(job, roadmap=roadmap) for m, job in jobs.items()}

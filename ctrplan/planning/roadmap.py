@@ -466,9 +466,25 @@ def _sample_valid(checker, joint_space, n_nodes: int, rng) -> tuple[np.ndarray, 
     return nodes, draws
 
 
+# The checker, motion terms, states and candidate pairs of the build under way, read by the forked
+# workers of :func:`_edges_of` (they inherit it; the checker's collision objects do not pickle).
+_BUILD: dict = {}
+
+
+def _edges_of(start: int, stop: int) -> list:
+    """``(i, j, L, I, I_reverse)`` of the valid motions among candidate pairs ``start:stop`` of the
+    build under way (:data:`_BUILD`)."""
+    checker, terms, nodes, pairs = _BUILD["checker"], _BUILD["terms"], _BUILD["nodes"], _BUILD["pairs"]
+    out = []
+    for i, j in pairs[start:stop]:
+        if checker.check_motion(nodes[i], nodes[j]):
+            out.append((i, j) + terms(nodes[i], nodes[j]) + (terms(nodes[j], nodes[i])[1],))
+    return out
+
+
 def build_roadmap(checker, joint_space, field, *, n_nodes: int | None = None,
                   neighbours: int | None = None, seed: int = 1, sample_spacing: float = DEFAULT_SAMPLE_SPACING,
-                  key: str = "", progress=None) -> Roadmap:
+                  key: str = "", n_jobs: int = 1) -> Roadmap:
     """Build a roadmap (module docstring).
 
     Parameters
@@ -487,8 +503,10 @@ def build_roadmap(checker, joint_space, field, *, n_nodes: int | None = None,
         Bound samples along a motion at most this far apart [m].
     key : str, keyword-only
         :func:`roadmap_key`, stored with it.
-    progress : callable, optional, keyword-only
-        ``progress(done, total)`` while edges are checked.
+    n_jobs : int, keyword-only
+        Processes that check the candidate motions and integrate their bounds (this one and
+        ``n_jobs - 1`` forked workers, :class:`ctrplan.parallel.Executor`); the roadmap does not
+        depend on it.
 
     Returns
     -------
@@ -499,6 +517,8 @@ def build_roadmap(checker, joint_space, field, *, n_nodes: int | None = None,
     UnreachableGoalError
         Fewer than two valid states found in ``200 n_nodes`` draws.
     """
+    from ..parallel import Executor
+
     t0 = time.perf_counter()
     d = joint_space.n_joints
     n_nodes = DEFAULT_NODES_PER_JOINT * d if n_nodes is None else int(n_nodes)
@@ -520,13 +540,20 @@ def build_roadmap(checker, joint_space, field, *, n_nodes: int | None = None,
             for j in row.tolist():
                 pairs.add((min(i, j), max(i, j)))
     pairs = sorted(pairs)
-    edges, values = [], []
-    for m, (i, j) in enumerate(pairs):
-        if checker.check_motion(nodes[i], nodes[j]):
-            edges.append((i, j))
-            values.append(terms(nodes[i], nodes[j]) + (terms(nodes[j], nodes[i])[1],))
-        if progress is not None and (m % 500 == 0 or m == len(pairs) - 1):
-            progress(m + 1, len(pairs))
+    _BUILD.update(checker=checker, terms=terms, nodes=nodes, pairs=pairs)
+    try:
+        chunks = max(1, int(n_jobs))   # one here (first), one per worker
+        bounds = np.linspace(0, len(pairs), chunks + 1).astype(int)
+        found = {}
+        with Executor(int(n_jobs), fork=True) as ex:
+            for tag, rows in ex.run(_edges_of, [(c, (int(a), int(b))) for c, (a, b) in
+                                                enumerate(zip(bounds[:-1], bounds[1:]))], first_here=True):
+                found[tag] = rows
+    finally:
+        _BUILD.clear()
+    rows = [r for c in sorted(found) for r in found[c]]
+    edges = [r[:2] for r in rows]
+    values = [r[2:] for r in rows]
     settings = {"n_nodes": int(n_nodes), "neighbours": int(k), "seed": int(seed), "sample_spacing": float(sample_spacing)}
     values = np.array(values, dtype=float).reshape(-1, 3)
     return Roadmap(nodes=nodes, edges=np.array(edges, dtype=np.int64).reshape(-1, 2), length=values[:, 0],
