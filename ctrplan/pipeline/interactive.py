@@ -3,7 +3,8 @@ once (:class:`Planner`).
 
 For a robot, its bound map and a fixed set of obstacles, the roadmap of
 :mod:`ctrplan.planning.roadmap` (valid states joined by valid straight motions, each costing its
-length plus the weighted integral of the friction bound) is built once and stored in the cache,
+length plus the weighted integral of the bound along the motion as executed, rotations first) is
+built once and stored in the cache,
 keyed by the robot file, the map, the obstacles' geometry and the settings. Each
 :meth:`Planner.plan_to` then does what ``ctrplan plan`` does after its search, for one goal:
 
@@ -120,7 +121,9 @@ class GoalPlan:
     trajectory : Trajectory or None
         The drive trajectory; None without a ``[drive]`` table.
     cost : float
-        Search cost of the path before ordering, ``sum L + w integral(b) dl`` [m].
+        Cost of the path the search returned [m]: through the roadmap ``sum L + w I`` over its
+        motions as executed (:func:`ctrplan.planning.roadmap.motion_terms`); by the single-query
+        planner, its objective (``L + w integral(b) dl`` along straight segments).
     via : str
         ``"roadmap"`` or ``"search"`` (the scenario's single-query planner, when the roadmap did
         not join the start and the goal).
@@ -166,7 +169,7 @@ class Planner:
         Sampling seed (default the scenario's planner seed).
     cache_dir : path, optional, keyword-only
         Where roadmaps are stored and looked up (default
-        :data:`~ctrplan.planning.roadmap.ROADMAP_CACHE_DIR`); None with ``store=False``.
+        :data:`~ctrplan.planning.roadmap.ROADMAP_CACHE_DIR`); unused with ``store=False``.
     store : bool, keyword-only
         Read and write the roadmap in ``cache_dir``.
     n_jobs : int, keyword-only
