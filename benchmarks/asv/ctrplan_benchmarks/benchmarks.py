@@ -103,7 +103,7 @@ class RoadmapQuery:
         import ctrplan
 
         if not hasattr(ctrplan, "Planner"):    # a commit before interactive planning
-            return None
+            return ""
         folder = tempfile.mkdtemp(prefix="ctrplan-asv-roadmap-")
         ctrplan.Planner.from_scenario(REPO / "scenarios" / "obstacles.toml", cache_dir=folder)
         return folder
@@ -111,7 +111,7 @@ class RoadmapQuery:
     def setup(self, folder):
         import ctrplan
 
-        if folder is None:
+        if not folder:
             raise NotImplementedError("no ctrplan.Planner in this commit")
         self.planner = ctrplan.Planner.from_scenario(REPO / "scenarios" / "obstacles.toml", cache_dir=folder)
         self.goal = np.array([2.0, 2.0, -0.06])
