@@ -223,7 +223,7 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
         (same result as in series).
     use_roadmap : bool, keyword-only
         Plan the legs of both plans through the scenario's roadmap
-        (:func:`~ctrplan.pipeline.interactive.load_roadmap`, read from the cache or built here
+        (:func:`~ctrplan.pipeline.roadmap.load_roadmap`, read from the cache or built here
         first on ``n_jobs`` processes; the bound-aware legs with the bound weight, the bound-blind
         ones with weight 0).
     echo : callable, optional, keyword-only
@@ -252,7 +252,7 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
     info = None
     if use_roadmap:
         from ..planning.route import route_checks
-        from .interactive import load_roadmap
+        from .roadmap import load_roadmap
 
         js = JointStateSpace(setup.robot)
         checker = route_checks(setup.robot, list(setup.obstacles), field, setup.check_settings, joint_space=js).search
