@@ -179,6 +179,7 @@ def test_joint_array_helpers(tmp_path):
     ('dir = "out"', "dir = 3", "output.dir"),
     ('name = "demo"\n', "", "name"),
     ("iterations = 500", 'iterations = 500\nname = "RRTstr"', "planner.name"),
+    ("iterations = 500", 'iterations = 500\nroadmap = "yes"', "planner.roadmap"),
 ])
 def test_bad_scenarios(tmp_path, old, new, key):
     assert old in GOOD
