@@ -25,10 +25,8 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import re
 import subprocess
 import sys
@@ -37,8 +35,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _records import REPO, figures, run_record
 
-REPO = Path(__file__).resolve().parents[1]
 #: (robot file, scenario) pairs the scaled robots cycle through.
 BASES = (("ha2019-table2-six-joint.toml", "six-joint.toml"),
          ("ha2019-table7-calibrated.toml", "obstacles.toml"),
@@ -153,15 +151,10 @@ def main(argv=None) -> int:
           + (f"; wall s mean {walls.mean():.1f}, median {np.median(walls):.1f}, p90 {np.percentile(walls, 90):.1f}, "
              f"max {walls.max():.1f}" if planned else ""))
     if args.results:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=REPO).stdout.strip()
-        doc = {"command": "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_new_robots.py " + " ".join(argv or sys.argv[1:]),
-               "commit": commit, "date": datetime.date.today().isoformat(), "cores": os.cpu_count(),
-               "cpu": platform.processor() or platform.machine(), "python": platform.python_version(),
-               "load_average_start": start_load, "load_average_end": end_load, "limit_s": args.limit,
-               "planned": len(planned), "robots": len(rows),
-               "wall_s": {"mean": float(walls.mean()), "median": float(np.median(walls)),
-                          "p90": float(np.percentile(walls, 90)), "max": float(walls.max())} if planned else None,
+        doc = {**run_record("OPENBLAS_NUM_THREADS=1 python benchmarks/bench_new_robots.py "
+                            + " ".join(argv or sys.argv[1:]), start_load, end_load),
+               "limit_s": args.limit, "planned": len(planned), "robots": len(rows),
+               "wall_s": {k: figures(walls)[k] for k in ("mean", "median", "p90", "max")} if planned else None,
                "rows": rows}
         args.results.parent.mkdir(parents=True, exist_ok=True)
         args.results.write_text(json.dumps(doc, indent=1) + "\n")

@@ -26,24 +26,14 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-
-REPO = Path(__file__).resolve().parents[1]
-
-
-def figures(x) -> dict:
-    x = np.asarray(x, dtype=float)
-    return {"mean": float(x.mean()), "median": float(np.median(x)), "p90": float(np.percentile(x, 90)),
-            "max": float(x.max()), "min": float(x.min()), "n": int(x.size)}
+from _records import REPO, figures, run_record
 
 
 def random_goals(planner, n: int, seed: int) -> list:
@@ -157,13 +147,9 @@ def main(argv=None) -> int:
               + (f"        {ratio['median']:.3f} / {ratio['max']:.3f}" if ratio else "        -")
               + f"        {r['planned']}/{r['goals']} ({r['via_search']} by search)")
     if args.results:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=REPO).stdout.strip()
-        doc = {"command": "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_roadmap.py " + " ".join(argv or sys.argv[1:]),
-               "commit": commit, "date": datetime.date.today().isoformat(), "cores": os.cpu_count(),
-               "cpu": platform.processor() or platform.machine(), "python": platform.python_version(),
-               "load_average_start": start_load, "load_average_end": end_load, "goals": args.goals, "jobs": args.jobs,
-               "seed": args.seed, "scenarios": results}
+        doc = {**run_record("OPENBLAS_NUM_THREADS=1 python benchmarks/bench_roadmap.py " + " ".join(argv or sys.argv[1:]),
+                            start_load, end_load),
+               "goals": args.goals, "jobs": args.jobs, "seed": args.seed, "scenarios": results}
         args.results.parent.mkdir(parents=True, exist_ok=True)
         args.results.write_text(json.dumps(doc, indent=1) + "\n")
         print(f"wrote {args.results}")
