@@ -196,6 +196,11 @@ class Planner:
         seed : int, keyword-only
             Seed of the inverse kinematics' starts.
 
+        Returns
+        -------
+        ndarray, shape (n_joints,)
+            In robot joint order [rad or m].
+
         Raises
         ------
         UnreachableGoalError

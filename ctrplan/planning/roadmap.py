@@ -210,10 +210,12 @@ class Roadmap:
 
     @property
     def n_nodes(self) -> int:
+        """Number of states, N."""
         return int(self.nodes.shape[0])
 
     @property
     def n_edges(self) -> int:
+        """Number of motions, E (each usable both ways)."""
         return int(self.edges.shape[0])
 
     def cost(self, bound_weight: float, reverse: bool = False) -> np.ndarray:
