@@ -232,21 +232,66 @@ def test_a_named_effect_that_goes_to_zero_with_another_is_dropped_and_a_real_pai
         c = _candidate("backlash", split, against, r)
         return dc_replace(c, effects=("time_offset", "backlash"), reverse=compare(split, reverse_of, r))
 
+    ok = dict(eligible={"backlash": True}, vanishes={"backlash": True})
     tried = {"backlash": fitted(pair, lag, play)}
-    out, second, dropped, replaced, notes = pair_decision("time_offset", tried, ["backlash"], {}, 0.01)
+    out, second, dropped, replaced, notes = pair_decision("time_offset", tried, ["backlash"], {}, 0.01, **ok)
     assert out["backlash"].significant and second is None
     assert (dropped, replaced) == ("time_offset", "backlash"), notes
+    # the lag is dropped only when its joint interval covers 0 and backlash alone may be named
+    for eligible, vanishes, why in ((False, True, "cannot be named"), (True, False, "does not go to zero"),
+                                    (True, None, "not known")):
+        out, second, dropped, replaced, notes = pair_decision(
+            "time_offset", tried, ["backlash"], {}, 0.01, eligible={"backlash": eligible},
+            vanishes={"backlash": vanishes})
+        assert dropped is None and replaced is None and second is None, (eligible, vanishes)
+        assert any(why in n and "time_offset alone stays the final model" in n for n in notes), notes
     both = 0.8 * play                                        # now the lag does add to the backlash
     tried = {"backlash": fitted(both, lag, play)}
-    out, second, dropped, replaced, _ = pair_decision("time_offset", tried, ["backlash"], {}, 0.01)
+    out, second, dropped, replaced, _ = pair_decision("time_offset", tried, ["backlash"], {}, 0.01, **ok)
     assert second == "backlash" and dropped is None
     c = fitted(both, lag, play)
     weak = dc_replace(c, improvement=dc_replace(c.improvement, p_value=0.004))   # below 0.01, above 0.01 / 6
     family = ["backlash", "offplane", "poisson", "friction", "clearance", "gradual_friction"]
-    out, second, dropped, _, _ = pair_decision("time_offset", {"backlash": weak}, family, {}, 0.01)
+    out, second, dropped, _, _ = pair_decision("time_offset", {"backlash": weak}, family, {}, 0.01, **ok)
     assert not out["backlash"].improvement_significant and second is None and dropped is None
-    out, second, _, _, _ = pair_decision("time_offset", {"backlash": weak}, ["backlash"], {}, 0.01)
+    out, second, _, _, _ = pair_decision("time_offset", {"backlash": weak}, ["backlash"], {}, 0.01, **ok)
     assert out["backlash"].improvement_significant and second == "backlash"
+
+
+def test_a_named_effect_goes_to_zero_only_when_each_joint_interval_covers_its_off_value():
+    """The named effect's jointly fitted intervals against the values at which it is off (the
+    robot file's): a time offset whose interval covers 0 vanishes, one that excludes 0 does not,
+    an undefined interval says nothing; a stiffness ratio vanishes at the file's Poisson ratio,
+    not at 0; a friction coefficient, which vanishes at its lower bound 0, vanishes when its
+    interval reaches down to 0; gradual friction carries the friction coefficients it starts from,
+    so it vanishes only when they do too. Catches "goes to zero" read from the value alone, from
+    0 for every parameter, or from a non-significant test instead of the interval."""
+    from ctrplan.discrepancy.estimates import ParameterEstimate
+    from ctrplan.discrepancy.pairs import first_vanishes
+
+    robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")
+
+    def est(name, value, ci):
+        return ParameterEstimate(name=name, unit="-", value=value, stderr=None if ci is None else 1.0, ci=ci,
+                                 typical=None, in_typical_range=True, typical_source=None, check=None,
+                                 at_bound=False, resolution=None, fitted=True)
+
+    backlash = est("backlash_2", 0.01, (0.005, 0.015))       # the second effect's row is not A's
+    assert first_vanishes(robot, "time_offset", [est("time_offset", 0.01, (-0.02, 0.04)), backlash]) is True
+    assert first_vanishes(robot, "time_offset", [est("time_offset", 0.05, (0.02, 0.08)), backlash]) is False
+    assert first_vanishes(robot, "time_offset", [est("time_offset", 0.05, None), backlash]) is None
+    assert first_vanishes(robot, "time_offset", [backlash]) is None
+    nu = robot.tubes[0].poisson_ratio
+    rows = [est(f"poisson_ratio_{i}", nu + 0.01, (nu - 0.02, nu + 0.04)) for i in (1, 2, 3)]
+    assert first_vanishes(robot, "poisson", rows) is True
+    rows[1] = est("poisson_ratio_2", 0.05, (-0.02, 0.1))                 # covers 0, not the file's ratio
+    assert first_vanishes(robot, "poisson", rows) is False
+    mu = [est("mu_1", 0.02, (0.0, 0.05)), est("mu_2", 0.01, (-0.01, 0.03))]
+    assert first_vanishes(robot, "friction", mu) is True
+    assert first_vanishes(robot, "friction", [mu[0], est("mu_2", 0.2, (0.1, 0.3))]) is False
+    angle = est("friction_angle", 0.1, (-0.1, 0.3))
+    assert first_vanishes(robot, "gradual_friction", [angle, *mu]) is True
+    assert first_vanishes(robot, "gradual_friction", [angle, mu[0], est("mu_2", 0.2, (0.1, 0.3))]) is False
 
 
 def test_hull_distance():
@@ -321,3 +366,33 @@ def test_hidden_gradual_friction_on_a_trajectory_is_named_not_backlash(tmp_path)
     assert res["candidates"]["gradual_friction"]["parameters"]["friction_angle"] == pytest.approx(theta, abs=np.deg2rad(5))
     assert "backlash" not in res["named_effects"]
     assert res["ambiguous_with"] != "backlash"
+
+
+def test_a_residual_above_a_noise_that_is_only_a_lower_bound_is_inconclusive():
+    """No effect named, the out-of-fold residual above the noise: "unexplained" (the model misses
+    something) only when the noise is an estimate, "inconclusive" when it is only a lower bound
+    (rests too short to see its correlation), and the sentence says the test is inconclusive and
+    not that the model misses something; below the noise, "noise" either way. Catches a rejection
+    against a lower bound read as evidence of a missing effect."""
+    from dataclasses import replace as dc_replace
+
+    from ctrplan.discrepancy.consistency import NoiseTest
+    from ctrplan.discrepancy.decision import Decision, NoiseCheck, no_effect_case, no_effect_sentence
+    from ctrplan.discrepancy.noise import NoiseEstimate
+
+    test = NoiseTest(statistic=3.0, threshold=1.2, p_value=1e-6, inflation=1.01, n_fitted_effective=900.0,
+                     dof_residual=300.0, dof_noise=40.0, n_samples=400, n_rest_samples_left_out=0, consistent=False,
+                     false_alarm_rate=0.01, noise_lower_bound=False, noise_upper_bound=False)
+    estimate = NoiseEstimate(position_rms_m=0.1e-3, source="rests", description="0.100 mm rms from rests")
+    check = NoiseCheck(noise=estimate, rms_m=0.3e-3, ratio=3.0, test=test)
+    assert no_effect_case(check) == "unexplained"
+    low = dc_replace(check, test=dc_replace(test, noise_lower_bound=True))
+    assert no_effect_case(low) == "inconclusive"
+    decision = Decision(verdict="none", named=None, ambiguous_with=None, eligible=(), holm={}, family=(), best=None,
+                        worse_than={}, why_not={}, comparisons={}, separated_by=None, cautions=(), notes=(), rule="",
+                        no_effect_case="inconclusive")
+    text = no_effect_sentence(decision, low, {})
+    assert "inconclusive" in text and "misses something" not in text.replace("no evidence that the model misses", "")
+    quiet = dc_replace(test, statistic=1.0, consistent=True)
+    assert no_effect_case(dc_replace(low, test=dc_replace(quiet, noise_lower_bound=True))) == "noise"
+    assert no_effect_case(dc_replace(check, test=None)) == "unknown"

@@ -290,15 +290,42 @@ def test_residual_degrees_of_freedom_match_the_variance_of_a_correlated_mean_squ
     assert t.dof_residual == pytest.approx(2.0 / np.var(ms), rel=0.07)
     assert t.dof_residual < 0.3 * 3 * index.size
     assert 0.035 <= np.mean(ms > t.threshold) <= 0.065
-    white = NoiseEstimate(position_rms_m=NOISE_RMS, source="stated")
-    t = noise_test(x[0], index, np.zeros(index.size, int), white, n_parameters=0, n_fitted=1, alpha=0.01)
-    assert t.dof_residual == 3 * index.size and t.dof_noise is None
-    assert t.threshold == pytest.approx(stats.chi2(3 * index.size).ppf(0.99) / (3 * index.size))
+
+
+def test_a_stated_noise_of_unknown_correlation_is_tested_with_conservative_degrees_of_freedom():
+    """A stated noise rms (no rests: its correlation unknown) against 1500 residuals of pure
+    noise of that rms on 300 consecutive record rows. White noise: about 5 % false alarms at
+    alpha 0.05 (2.5-7.5 %) with nearly 3 K degrees of freedom. AR(1) noise at phi 0.8: at most
+    5 % plus binomial slack, where counting 3 K independent squares (the white-noise chi-square
+    threshold) gives more than 15 %. Catches a stated noise tested as white whatever the
+    residual's correlation."""
+    rng = np.random.default_rng(2024)
+    index = np.arange(300)
+    seq = np.zeros(index.size, int)
+    stated = NoiseEstimate(position_rms_m=NOISE_RMS, source="stated")
+    white_threshold = stats.chi2(3 * index.size).ppf(0.95) / (3 * index.size)
+    reps = 1500
+    for phi in (0.0, 0.8):
+        alarms = white_alarms = 0
+        for _ in range(reps):
+            x = _noise(rng, index.size, phi)
+            t = noise_test(x, index, seq, stated, n_parameters=0, n_fitted=1, alpha=0.05)
+            alarms += not t.consistent
+            white_alarms += t.statistic > white_threshold
+            assert t.dof_noise is None and t.residual_lag1 is not None
+        rate = alarms / reps
+        if phi == 0.0:
+            assert 0.025 <= rate <= 0.075, rate
+            assert t.dof_residual > 0.8 * 3 * index.size
+        else:
+            assert rate <= _binomial_upper(0.05, reps), rate
+            assert white_alarms / reps > 0.15, white_alarms
 
 
 def test_noise_test_result_is_frozen_and_its_dict_is_plain_json():
     """``noise_test`` returns a frozen :class:`NoiseTest` whose ``as_dict`` has the keys of the
-    former dict result, in order, with plain Python values (JSON round trip unchanged). Catches a
+    former dict result, in order (then the stated noise's residual lag-1 correlation), with plain
+    Python values (JSON round trip unchanged). Catches a
     numpy scalar or a renamed key reaching ``results.json``."""
     rng = np.random.default_rng(7)
     index = np.arange(200)
@@ -310,8 +337,9 @@ def test_noise_test_result_is_frozen_and_its_dict_is_plain_json():
     d = t.as_dict()
     assert list(d) == ["statistic", "threshold", "p_value", "inflation", "n_fitted_effective", "dof_residual",
                        "dof_noise", "n_samples", "n_rest_samples_left_out", "consistent", "false_alarm_rate",
-                       "noise_lower_bound", "noise_upper_bound"]
-    assert all(type(v) in (float, int, bool) for v in d.values())
+                       "noise_lower_bound", "noise_upper_bound", "residual_lag1"]
+    assert d["residual_lag1"] is None                       # an estimated noise carries its own correlation
+    assert all(type(v) in (float, int, bool) for k, v in d.items() if k != "residual_lag1")
     assert json.loads(json.dumps(d)) == d and d["consistent"] is t.consistent and d["n_samples"] == 200
 
 

@@ -63,6 +63,9 @@ class NoiseTest:
         The noise is a lower bound (a rejection against it is not evidence of a missing effect).
     noise_upper_bound : bool
         The noise is an upper bound.
+    residual_lag1 : float or None
+        For a stated noise (whose correlation is unknown): the residual's lag-1 autocorrelation
+        that sets the conservative degrees of freedom [-]; None for an estimated noise.
     """
 
     statistic: float
@@ -78,6 +81,7 @@ class NoiseTest:
     false_alarm_rate: float
     noise_lower_bound: bool
     noise_upper_bound: bool
+    residual_lag1: float | None = None
 
     def as_dict(self) -> dict:
         """The attributes by name, as plain Python values (JSON-ready)."""
@@ -87,13 +91,31 @@ class NoiseTest:
 def _sum_squared_correlation(index: np.ndarray, sequence: np.ndarray, estimate: NoiseEstimate) -> float:
     """``sum_{i, j} rho(|t_i - t_j|)^2`` over the samples of each sequence (record rows
     ``index``): the denominator of the effective number of independent squares (Bayley &
-    Hammersley 1946). For ``rho(h) = s phi^h`` the cross terms of a sequence sorted by ``t`` are
-    ``2 s^2 sum_j S_j`` with ``S_j = phi^(2 (t_j - t_{j-1})) (S_{j-1} + 1)``, exact in O(K)."""
-    k = index.size
+    Hammersley 1946), for the estimate's fitted correlation."""
     if not estimate.correlated or not estimate.correlation_length:
-        return float(k)
-    s = 1.0 - estimate.nugget_share
-    q2 = np.exp(-2.0 / estimate.correlation_length)            # phi^2
+        return float(index.size)
+    return _sum_squared_ar1(index, sequence, 1.0 - estimate.nugget_share, np.exp(-2.0 / estimate.correlation_length))
+
+
+def _residual_lag1(r: np.ndarray, index: np.ndarray, sequence: np.ndarray) -> float:
+    """Lag-1 autocorrelation of a residual (K, 3), pooled over its components, from the pairs of
+    samples at consecutive record rows of one sequence (each component centred); NaN without
+    such a pair."""
+    order = np.lexsort((index, sequence))
+    x, t, seq = r[order], index[order], sequence[order]
+    pair = (np.diff(t) == 1) & (seq[1:] == seq[:-1])
+    if not np.any(pair):
+        return float("nan")
+    x = x - x.mean(axis=0)
+    den = float(np.sum(x * x))
+    return float(np.sum(x[:-1][pair] * x[1:][pair]) / den) if den > 0 else float("nan")
+
+
+def _sum_squared_ar1(index: np.ndarray, sequence: np.ndarray, s: float, q2: float) -> float:
+    """``sum_{i, j} rho(|t_i - t_j|)^2`` for ``rho(h) = s phi^h`` (``q2 = phi^2``) over the samples
+    of each sequence. The cross terms of a sequence sorted by ``t`` are ``2 s^2 sum_j S_j`` with
+    ``S_j = phi^(2 (t_j - t_{j-1})) (S_{j-1} + 1)``, exact in O(K)."""
+    k = index.size
     total = float(k)
     order = np.lexsort((index, sequence))
     t, seq = index[order].astype(float), sequence[order]
@@ -128,9 +150,15 @@ def noise_test(residual, index, sequence, estimate: NoiseEstimate, *, n_paramete
       fitted values' error with ``p``;
     - denominator: ``sigma_hat^2 / sigma^2``, chi-square over ``estimate.dof``;
 
-    so ``F ~ F(nu_r, dof)`` (chi-square(nu_r) / nu_r when the noise is stated: no estimate, no
-    correlation known, white-noise ``nu_noise = 3 K``). The residual is *not* consistent with
-    noise when F exceeds its ``1 - alpha`` quantile (false-alarm rate ``alpha``).
+    so ``F ~ F(nu_r, dof)``. A stated noise has no estimate (chi-square(nu_r) / nu_r) and no known
+    correlation: white noise (``nu_noise = 3 K``, ``n_eff = n_fitted``) would overstate the
+    degrees of freedom of correlated noise and raise false alarms, so its correlation is taken
+    as an AR(1) at the residual's own lag-1 autocorrelation ``phi`` (pooled over components,
+    from samples at consecutive record rows; clipped to [0, 0.999]) in both ``nu_noise`` and
+    ``n_eff = n_fitted (1 - phi) / (1 + phi)``: under the null that is the noise's correlation, and
+    a missing effect can only raise it, which lowers the degrees of freedom (conservative). The
+    residual is *not* consistent with noise when F exceeds its ``1 - alpha`` quantile (false-alarm
+    rate ``alpha``).
 
     The F distribution needs numerator and denominator independent: the residual's samples that
     are among the rests the noise came from are left out (``leave_out_rests``; their squares
@@ -195,11 +223,22 @@ def noise_test(residual, index, sequence, estimate: NoiseEstimate, *, n_paramete
     r, index, sequence = r[keep], index[keep].astype(np.int64), sequence[keep]
     k = r.shape[0]
     stated = estimate.dof is None
-    factor = 1.0 if (stated or not smooth_regressors) else estimate.long_run_factor()
+    lag1 = None
+    if stated:
+        # the stated noise's correlation is unknown: its squares are counted as correlated as the
+        # residual's own (an AR(1) at the residual's lag-1 autocorrelation), which under the null
+        # is the noise's and under a missing effect only lowers the degrees of freedom
+        lag1 = _residual_lag1(r, index, sequence)
+        phi = float(np.clip(np.nan_to_num(lag1, nan=0.0), 0.0, 0.999))
+        factor = 1.0 if not smooth_regressors else (1.0 + phi) / (1.0 - phi)
+        sum_sq = _sum_squared_ar1(index, sequence, 1.0, phi * phi) if phi > 0 else float(k)
+    else:
+        factor = 1.0 if not smooth_regressors else estimate.long_run_factor()
+        sum_sq = _sum_squared_correlation(index, sequence, estimate)
     n_eff = n_fitted / factor
     extra = n_parameters / n_eff
     inflation = 1.0 + extra
-    nu_noise = 3.0 * k * k / _sum_squared_correlation(index, sequence, estimate)
+    nu_noise = 3.0 * k * k / sum_sq
     # Satterthwaite: noise part (mean sigma^2, nu_noise) plus fitted-value part (sigma^2 p / n_eff, p)
     nu_r = inflation ** 2 / (1.0 / nu_noise + (extra ** 2 / n_parameters if n_parameters else 0.0))
     f = float(np.mean(r * r) / (estimate.variance_m2 * inflation))
@@ -216,4 +255,4 @@ def noise_test(residual, index, sequence, estimate: NoiseEstimate, *, n_paramete
                      dof_noise=None if stated else float(estimate.dof), n_samples=int(k),
                      n_rest_samples_left_out=int(np.count_nonzero(ok & rest)), consistent=bool(f <= threshold),
                      false_alarm_rate=float(alpha), noise_lower_bound=bool(estimate.lower_bound),
-                     noise_upper_bound=bool(estimate.upper_bound))
+                     noise_upper_bound=bool(estimate.upper_bound), residual_lag1=lag1)

@@ -51,7 +51,7 @@ from .split import DataSplit
 from .statistics import Comparison, holm
 
 __all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "check_noise", "name_effect", "cautions",
-           "atypical_caution", "no_effect_sentence", "range_text", "VERDICTS"]
+           "atypical_caution", "no_effect_case", "no_effect_sentence", "range_text", "VERDICTS"]
 
 logger = logging.getLogger(__name__)
 
@@ -148,7 +148,9 @@ class Decision:
         The second of an ambiguous pair.
     no_effect_case : str or None
         When none is named: ``"noise"`` (the residual is consistent with noise),
-        ``"unexplained"`` (it is not) or ``"unknown"`` (the noise is unknown).
+        ``"unexplained"`` (it is not), ``"inconclusive"`` (it is not, but the noise is only a
+        lower bound) or ``"unknown"`` (the noise is unknown)
+        (:func:`no_effect_case`).
     """
 
     verdict: str
@@ -273,6 +275,34 @@ def _separated_by(a: str, b: str) -> str:
     return "; ".join(parts) if parts else "more data of the kinds of motion where they differ"
 
 
+def no_effect_case(noise: NoiseCheck) -> str:
+    """What the noise test says when no effect is named.
+
+    A rejection against a noise that is only a lower bound (rests too short to see its
+    correlation) is no evidence of a missing effect
+    (:class:`~ctrplan.discrepancy.consistency.NoiseTest`): the test is then inconclusive. An
+    acceptance against an upper bound (spread over repeated configurations) still says the
+    residual is no larger than such noise.
+
+    Parameters
+    ----------
+    noise : NoiseCheck
+
+    Returns
+    -------
+    str
+        ``"noise"`` (the residual is consistent with the noise), ``"unexplained"`` (it is not),
+        ``"inconclusive"`` (not consistent with a noise that is only a lower bound) or
+        ``"unknown"`` (no noise known).
+    """
+    test = noise.test
+    if test is None:
+        return "unknown"
+    if test.noise_lower_bound and not test.consistent:
+        return "inconclusive"
+    return "noise" if test.consistent else "unexplained"
+
+
 def no_effect_sentence(decision: Decision, noise: NoiseCheck, candidates: Mapping[str, Candidate]) -> str:
     """Why no effect was named, for the log and the report.
 
@@ -304,6 +334,11 @@ def no_effect_sentence(decision: Decision, noise: NoiseCheck, candidates: Mappin
                 f"{rms_mm:.3f} mm) is consistent with the sensor noise ({description}; F = "
                 f"{test.statistic:.3g} <= {test.threshold:.3g}, false-alarm rate {test.false_alarm_rate:g})"
                 + best_text)
+    if case == "inconclusive":
+        return (f"no candidate is eligible; the out-of-fold residual of the calibrated baseline (rms {rms_mm:.3f} "
+                f"mm) exceeds the sensor noise (F = {test.statistic:.3g} > {test.threshold:.3g}), but that noise is "
+                f"only a lower bound ({description}): the noise test is inconclusive, no evidence that the model "
+                f"misses something" + best_text)
     if case == "unexplained":
         return (f"the out-of-fold residual of the calibrated baseline (rms {rms_mm:.3f} mm, "
                 f"{noise.ratio:.1f} times the sensor noise: {description}) is NOT consistent with noise "
@@ -406,9 +441,7 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
             logger.warning(f"  caution: {line}")
         decision = replace(decision, notes=tuple(notes))
     else:
-        decision = replace(decision, notes=tuple(notes),
-                           no_effect_case=("noise" if noise.consistent else
-                                           "unexplained" if noise.consistent is False else "unknown"))
+        decision = replace(decision, notes=tuple(notes), no_effect_case=no_effect_case(noise))
         logger.log(level, "no effect named: " + no_effect_sentence(decision, noise, judged))
     for line in decision.notes:
         logger.log(level, f"  {line}")

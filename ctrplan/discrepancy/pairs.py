@@ -23,7 +23,7 @@ from .setup import DiscrepancySetup, effect_parameters, reported_parameters
 from .split import DataSplit
 from .statistics import holm
 
-__all__ = ["Combination", "fit_second_effect", "pair_decision"]
+__all__ = ["Combination", "fit_second_effect", "first_vanishes", "pair_decision"]
 
 logger = logging.getLogger(__name__)
 
@@ -139,9 +139,11 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
     effect still add?). A pair is named when it improves on the named effect significantly
     (Holm), no fitted value is at its limit, and the named effect still adds to it significantly
     (``options.significance``); among such pairs the one with the lowest out-of-fold error. When
-    the best significant pair is not better than its second effect alone, the named effect is
-    dropped: it goes to zero when fitted with the second, and the second effect alone is the
-    final model.
+    the best significant pair is not significantly better than its second effect alone, the
+    named effect is dropped only when it goes to zero beside the second (each of its jointly
+    fitted intervals covers the value at which it is off: :func:`first_vanishes`) and the
+    second effect alone is eligible in stage 7; the second effect alone is then the final model.
+    Otherwise the named effect alone stays the final model, with a note of why.
 
     Parameters
     ----------
@@ -211,8 +213,10 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
         c = make_candidate(setup, split, baseline, (named, e), f"{first.label} + {candidates[e].label}", cv, shown_names,
                        first, note)
         tried[e] = replace(c, reverse=compare(split, candidates[e].r, cv.r))
+    eligible = {e: bool(c.eligible) for e, c in candidates.items()}
+    vanishes = {e: first_vanishes(robot, named, c.parameters) for e, c in tried.items()}
     out, second, dropped, replaced, notes = pair_decision(named, tried, family, naming.decision.worse_than,
-                                                          options.significance)
+                                                          options.significance, eligible=eligible, vanishes=vanishes)
     level = progress_level()
     for e, c in out.items():
         imp, rev = c.improvement, c.reverse
@@ -227,7 +231,55 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
                        replaced_by=replaced)
 
 
-def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha: float) -> tuple:
+def first_vanishes(robot, named: str, parameters) -> bool | None:
+    """Whether the named effect goes to zero in a pair: every one of its parameters' jointly
+    fitted interval covers the value at which the effect is off (``Effect.off_values``: e.g. a
+    time offset of 0, the robot file's own stiffness ratio; for a parameter whose effect vanishes
+    at its lower bound, an interval reaching down to that bound).
+
+    Parameters
+    ----------
+    robot : Robot
+        The robot file the workflow started from (its off values).
+    named : str
+        The named effect A.
+    parameters : sequence of ParameterEstimate
+        The pair's development-fit parameter table (A's and the second effect's) [SI].
+
+    Returns
+    -------
+    bool or None
+        True when every fitted parameter of A has an interval covering its off value, False when
+        one interval excludes it, None when an interval is undefined (no finite standard error)
+        or A has no fitted parameter in the table.
+    """
+    effect = REGISTRY[named]
+    off = effect.off_values(robot)
+    specs = {p.name: p for p in effect.parameters(robot)}
+    if effect.after is not None:
+        after = REGISTRY[effect.after]
+        off = {**after.off_values(robot), **off}
+        specs = {**{p.name: p for p in after.parameters(robot)}, **specs}
+    rows = [p for p in parameters if p.name in off and p.fitted]
+    if not rows:
+        return None
+    covers = []
+    for p in rows:
+        if p.ci is None or not all(np.isfinite(p.ci)):
+            return None
+        low, high = p.ci
+        zero = float(off[p.name])
+        spec = specs.get(p.name)
+        if spec is not None and spec.vanishes_at_lower:
+            zero = max(zero, spec.lower)
+            covers.append(low <= zero + 1e-12 * max(1.0, abs(spec.upper - spec.lower)))
+        else:
+            covers.append(low <= zero <= high)
+    return bool(all(covers))
+
+
+def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha: float, *,
+                  eligible: Mapping, vanishes: Mapping) -> tuple:
     """Which pair, if any, replaces the named effect (the rule of :func:`fit_second_effect`).
 
     Parameters
@@ -242,6 +294,11 @@ def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha
     worse_than : mapping of str to sequence of str
         Stage 7's ``{candidate: [candidates significantly better]}``.
     alpha : float
+    eligible : mapping of str to bool
+        Stage 7's eligibility of each candidate alone (significant, not significantly worse than
+        another, no value at its limit): B alone replaces A only when B alone may be named.
+    vanishes : mapping of str to bool or None
+        Second effect B -> :func:`first_vanishes` of A in the pair (None: not known).
 
     Returns
     -------
@@ -251,8 +308,9 @@ def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha
     second : str or None
         B of the named pair: it improves on A significantly and A still improves on B alone.
     dropped, replaced_by : str or None
-        A and B when the best significant pair is no better than B alone (A goes to zero with B)
-        and B alone is not significantly worse than A: B alone is the final model.
+        A and B when the best significant pair is no better than B alone, A's jointly fitted
+        intervals cover the values at which A is off (A goes to zero with B), B alone is eligible
+        and not significantly worse than A: B alone is the final model.
     notes : list of str
     """
     verdict = holm({e: (tried[e].improvement.p_value if e in tried else 1.0) for e in family}, alpha) if family else {}
@@ -269,11 +327,24 @@ def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha
         if rev.p_value < alpha and rev.mean_difference > 0:
             second = best
             notes.append(f"named combination: {out[best].label}")
-        elif named not in worse_than.get(best, ()):
-            dropped, replaced = named, best
-            notes.append(f"{named} adds nothing once {best} is fitted with it (the pair against {best} alone: "
-                         f"p = {rev.p_value:.3g}): {named} is dropped, {best} alone is the final model")
         else:
-            notes.append(f"the pair {out[best].label} improves on {named} alone but not on {best} alone, which is "
-                         f"itself significantly worse than {named}: {named} alone stays the final model")
+            head = (f"the pair {out[best].label} improves on {named} alone but not significantly on {best} alone "
+                    f"(p = {rev.p_value:.3g})")
+            zero = vanishes.get(best)
+            if named in worse_than.get(best, ()):
+                notes.append(f"{head}, which is itself significantly worse than {named}: {named} alone stays the "
+                             f"final model")
+            elif not eligible.get(best, False):
+                notes.append(f"{head}, which alone cannot be named: {named} alone stays the final model")
+            elif zero is None:
+                notes.append(f"{head}; whether {named} goes to zero beside {best} is not known (an interval of its "
+                             f"joint fit is undefined): {named} alone stays the final model")
+            elif not zero:
+                notes.append(f"{head}; {named}'s jointly fitted value does not go to zero (its interval excludes the "
+                             f"value at which it is off): {named} alone stays the final model")
+            else:
+                dropped, replaced = named, best
+                notes.append(f"{head}, and {named}'s jointly fitted interval covers the value at which it is off: "
+                             f"{named} goes to zero once {best} is fitted with it, {named} is dropped, {best} alone "
+                             f"is the final model")
     return out, second, dropped, replaced, notes
