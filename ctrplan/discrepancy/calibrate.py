@@ -26,6 +26,7 @@ from ..mechanics import ModelSettings
 from ..models import MODEL_INFO, check_model
 from .data import MeasuredData
 from ..effects import EffectSet, apply_output_effects, robot_effects
+from .estimates import Uncertainty, covariance
 from .parameters import REGISTRATION, apply_parameters, needs_solve, parameter, read_parameters
 
 __all__ = ["Prediction", "CalibrationResult", "Prior", "predict", "pose_errors", "eq49_residuals", "calibrate",
@@ -121,21 +122,27 @@ class CalibrationResult:
         value sits at an optimizer bound or at the edge of a grid or scan (False: it stopped at its
         evaluation budget, or at a bound or edge: ``at_bound``).
     stderr : ndarray, shape (m,), or None
-        Standard errors of the fitted values, in their units: ``s^2 (J^T J)^-1`` with the Gauss-Newton
-        matrix of Eq. (49) (the norms' curvature included) at the solution and
-        ``s^2 = cost / (n_samples - m)``; inf where the data do not determine the parameter; None
-        when not computed.
+        Standard errors of the fitted values, in their units, from the Gauss-Newton matrix of
+        Eq. (49) (the norms' curvature included) at the solution (:func:`covariance`): clustered
+        over ``n_clusters`` clusters of units, else ``s^2 (J^T J)^-1`` with ``s^2 = cost /
+        (n_samples - m)``; inf where the data do not determine the parameter; NaN where undefined
+        (fewer than two clusters); None when not computed.
     correlation : ndarray, shape (m, m), or None
         Their correlation matrix.
     at_bound : tuple of str
         ``"<name> (<where>)"`` for every fitted value at an optimizer bound (``upper``, or ``lower``
         where the effect does not vanish there) or at the edge of its grid or scan that could not
-        be widened further (it is at the parameter's limit).
+        be widened further (it is at the parameter's limit), or at a bound that was widened when no
+        refit was left (the last widening allowed, or the evaluation budget spent).
     widened : tuple of str
         Bounds, grids or scans widened because the fit ended at them (``"<name> upper to 1.2"``).
     prior_cost : float
         The prior's part of the minimized objective (0 without a prior) [(mm + deg)^2]; ``cost``
         is the data's part alone.
+    n_clusters : int or None
+        G, the clusters ``stderr`` is clustered over (neighbouring units merged); None without
+        clustering. ``dof`` (``G - 1``) sets an interval's t quantile
+        (:func:`~ctrplan.discrepancy.estimates.interval_quantile`).
     """
 
     model: str
@@ -155,6 +162,12 @@ class CalibrationResult:
     at_bound: tuple = ()
     widened: tuple = ()
     prior_cost: float = 0.0
+    n_clusters: int | None = None
+
+    @property
+    def dof(self) -> int | None:
+        """Degrees of freedom of the standard errors' t quantile, ``G - 1``; None without clustering."""
+        return None if self.n_clusters is None else self.n_clusters - 1
 
     def all_parameters(self) -> tuple[tuple, np.ndarray]:
         """Fixed and fitted parameters together: ``(names, values)``."""
@@ -170,7 +183,8 @@ class CalibrationResult:
                 "message": self.message, "converged": bool(self.converged),
                 "stderr": None if self.stderr is None else dict(zip(self.names, map(float, self.stderr))),
                 "correlation": None if self.correlation is None else np.asarray(self.correlation, float).tolist(),
-                "at_bound": list(self.at_bound), "widened": list(self.widened), "prior_cost": float(self.prior_cost)}
+                "at_bound": list(self.at_bound), "widened": list(self.widened), "prior_cost": float(self.prior_cost),
+                "n_clusters": self.n_clusters, "dof": self.dof}
 
     @classmethod
     def from_dict(cls, d: dict) -> "CalibrationResult":
@@ -182,7 +196,8 @@ class CalibrationResult:
                    d["n_failed"], d["evaluations"], d["seconds"], d["message"], d.get("converged", True),
                    None if stderr is None else np.array([stderr[n] for n in names], float),
                    None if d.get("correlation") is None else np.array(d["correlation"], float),
-                   tuple(d.get("at_bound", ())), tuple(d.get("widened", ())), float(d.get("prior_cost", 0.0)))
+                   tuple(d.get("at_bound", ())), tuple(d.get("widened", ())), float(d.get("prior_cost", 0.0)),
+                   d.get("n_clusters"))
 
 
 def predict(robot, names, values, data: MeasuredData, model: str, settings: ModelSettings | None = None,
@@ -338,65 +353,6 @@ def bound_flags(specs, values) -> tuple:
             limit = ", its limit" if p.widened(where) is None else ""
             out.append(f"{p.name} ({where} bound {p.upper if where == 'upper' else p.lower:g} {p.unit}{limit})")
     return tuple(out)
-
-
-def covariance(rows: np.ndarray, residual: np.ndarray, n_samples: int, *, clusters=None,
-               width: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Standard errors (m,) and correlations (m, m) of a least-squares fit from its Gauss-Newton rows.
-
-    Without ``clusters``: ``cov = s^2 (J^T J)^+``, ``s^2 = RSS / (n_samples - m)`` (independent,
-    equal-variance residuals). With ``clusters`` (the unit of each sample): the cluster-robust
-    sandwich ``cov = (J^T J)^+ M (J^T J)^+``, ``M = G / (G - 1) sum_g S_g S_g^T`` with ``S_g`` the
-    sum of ``J_i^T f_i`` over the samples of unit g (Liang & Zeger, Biometrika 73:13, 1986;
-    Cameron & Miller, J. Human Resources 50:317, 2015): samples of a motion are serially
-    correlated, so the errors of one unit are not independent. A direction the rows do not
-    determine (a zero singular value of ``J``) gives an infinite standard error.
-
-    Parameters
-    ----------
-    rows : ndarray, shape (n_samples * width + P, m)
-        Gauss-Newton rows: ``width`` per sample in sample order, then P rows of a prior (which
-        enter ``J^T J`` but not ``M`` or ``RSS``).
-    residual : ndarray, shape (n_samples * width + P,)
-        The residual vector the rows belong to.
-    n_samples : int
-    clusters : array-like, shape (n_samples,), optional
-    width : int
-        Rows per sample.
-
-    Returns
-    -------
-    stderr : ndarray, shape (m,)
-    correlation : ndarray, shape (m, m)
-    """
-    J = np.asarray(rows, float)
-    f = np.asarray(residual, float)
-    m = J.shape[1]
-    n_data = n_samples * width
-    H = J.T @ J
-    w, V = np.linalg.eigh(H)
-    tiny = w <= 1e-12 * max(float(w.max()), 1e-300)
-    inv_w = np.where(tiny, 0.0, 1.0 / np.where(tiny, 1.0, w))
-    Hinv = (V * inv_w) @ V.T
-    if clusters is None:
-        s2 = float(f[:n_data] @ f[:n_data]) / max(n_samples - m, 1)
-        cov = Hinv * s2
-    else:
-        score = np.einsum("kwm,kw->km", J[:n_data].reshape(n_samples, width, m), f[:n_data].reshape(n_samples, width))
-        _, g = np.unique(np.asarray(clusters), return_inverse=True)
-        n_g = int(g.max()) + 1
-        S = np.zeros((n_g, m))
-        np.add.at(S, g.ravel(), score)
-        M = S.T @ S * (n_g / max(n_g - 1, 1))
-        cov = Hinv @ M @ Hinv
-    var = np.diag(cov).copy()
-    undetermined = np.any(np.abs(V[:, tiny]) > 1e-6, axis=1) if tiny.any() else np.zeros(m, bool)
-    se = np.where(undetermined, np.inf, np.sqrt(np.maximum(var, 0.0)))
-    d = np.sqrt(np.maximum(var, 1e-300))
-    corr = cov / np.outer(d, d)
-    corr[undetermined] = np.nan
-    corr[:, undetermined] = np.nan
-    return se, corr
 
 
 class _Objective:
@@ -669,7 +625,9 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
         ``{name: (center, scale)}``: a Gaussian prior on fitted parameters (:class:`Prior`), e.g.
         toward the robot file's tube parameters; names not fitted are ignored.
     clusters : array-like, shape (K,), optional
-        Unit of each sample: the standard errors are clustered over units (:func:`covariance`).
+        Unit of each sample: the standard errors are clustered over units, neighbouring units of
+        one motion merged until their seams are nearly uncorrelated (:func:`covariance`;
+        ``n_clusters`` of the result).
 
     Returns
     -------
@@ -679,8 +637,10 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
         before the budget and no value ended at a bound it could not widen; False otherwise.
         A value that ends at an optimizer bound has the bound widened (``ParameterSpec.widened``,
         up to the parameter's limit, at most :data:`MAX_WIDENINGS` times) and stage 2 continues
-        (``widened``). The message gives both stages' steps and, for stage 2, the further decrease
-        its model still predicts.
+        (``widened``); a bound widened when no refit is left (the last widening allowed, or the
+        budget spent) leaves the value on the old bound, which is reported in ``at_bound``. The
+        message gives both stages' steps and, for stage 2, the further decrease its model still
+        predicts.
 
     Notes
     -----
@@ -775,25 +735,30 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
                             bounds=(lower, upper), x_scale=scale, method="trf", xtol=XTOL, ftol=FTOL)
         steps += sol.nfev
         x1 = sol.x
-        grown = False
+        grown = []   # "<name> (...)" of the values whose bound was widened on this pass
         for j, nm in enumerate(names):
             side = specs[j].at_bound(float(sol.x[j]))
             if side == "upper" or (side == "lower" and not specs[j].vanishes_at_lower):
                 wider = specs[j].widened(side)
                 if wider is not None:
+                    old, new = (specs[j].upper, wider.upper) if side == "upper" else (specs[j].lower, wider.lower)
                     specs[j] = wider
                     lower[j], upper[j] = wider.lower, wider.upper
-                    widened.append(f"{nm} {side} bound to {wider.upper if side == 'upper' else wider.lower:.4g} "
-                                   f"{wider.unit}")
-                    grown = True
+                    widened.append(f"{nm} {side} bound to {new:.4g} {wider.unit}")
+                    grown.append(f"{nm} ({side} bound {old:g} {wider.unit}, widened to {new:.4g} {wider.unit} but "
+                                 f"not refitted")
         if not grown or obj.evaluations >= max_evaluations:
             break
+    # a bound widened on the last pass was not fitted beyond: the value still sits on the old bound
+    why = ("the evaluation budget is spent" if obj.evaluations >= max_evaluations
+           else f"{MAX_WIDENINGS} widenings, the most allowed")
+    unrefitted = tuple(f"{g}: {why})" for g in grown)
     r = obj.residuals(sol.x)
     converged = bool(sol.status > 0 or sol.status == -2)
     left_bic = eq49.bic_left(k)
     how = (f"the predicted further decrease {eq49.remaining:.3g} (mm + deg)^2 changes the BIC by "
            f"{left_bic:.2g} < {BIC_TOLERANCE:g}" if sol.status == -2 else sol.message)
-    at_bound = bound_flags(specs, sol.x)
+    at_bound = bound_flags(specs, sol.x) + unrefitted
     msg = (f"least squares: error components {stage1}, "
            f"then Eq. (49): {how} ({steps} steps, {obj.evaluations} evaluations)"
            + ("" if not widened else f"; widened: {', '.join(widened)}")
@@ -801,16 +766,21 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
                                    f"(predicted further decrease {eq49.remaining:.3g} (mm + deg)^2, "
                                    f"BIC {left_bic:.2g})")
            + (f"; at a bound, not converged: {', '.join(at_bound)}" if at_bound else ""))
-    se, corr = (covariance(sol.jac, sol.fun, k, clusters=clusters, width=eq49.width) if uncertainty
-                else (None, None))
+    unc = (covariance(sol.jac, sol.fun, k, clusters=clusters, width=eq49.width, motion=data.sequence,
+                      position=data.rows) if uncertainty else Uncertainty(None, None))
+    if unc.note:
+        msg += f"; standard errors over {unc.n_clusters} clusters: {unc.note}"
     prior_cost = 0.0 if pr is None else float(np.sum(pr.rows(sol.x) ** 2))
     return CalibrationResult(model, names, sol.x, x0, fixed, float(r @ r), k, int((r == FAILED_RESIDUAL).sum()),
-                             obj.evaluations, time.perf_counter() - t0, msg, converged and not at_bound, se, corr,
-                             at_bound, tuple(widened), prior_cost)
+                             obj.evaluations, time.perf_counter() - t0, msg, converged and not at_bound, unc.stderr,
+                             unc.correlation, at_bound, tuple(widened), prior_cost, unc.n_clusters)
 
 
-def _uncertainty(obj: _Objective, specs, x, clusters=None) -> tuple[np.ndarray, np.ndarray]:
-    """Standard errors and correlations (:func:`covariance`) at ``x`` from one Jacobian of Eq. (49)."""
+def _uncertainty(obj: _Objective, specs, x, clusters=None) -> Uncertainty:
+    """Standard errors and correlations (:func:`covariance`, unpacking as ``stderr, correlation``;
+    ``n_clusters`` for the fit's result) at ``x`` from one Jacobian of Eq. (49), neighbouring units
+    of one motion merged."""
     model = _Eq49Model(obj, [p.hard[0] for p in specs], [p.hard[1] for p in specs])
     rows = model.jac(x)
-    return covariance(rows, model.fun(x), obj.data.n_samples, clusters=clusters, width=model.width)
+    return covariance(rows, model.fun(x), obj.data.n_samples, clusters=clusters, width=model.width,
+                      motion=obj.data.sequence, position=obj.data.rows)

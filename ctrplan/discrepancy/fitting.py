@@ -292,12 +292,14 @@ def scan_fit(robot, data: MeasuredData, model: str, fixed: dict, names, values, 
         edge = tuple(f"{n} (end of its scan at {b:.4g} {p.unit}, its limit)" for n, p in zip(names, specs))
     resolution = float(np.min(np.diff(axis))) if len(axis) > 1 else float("nan")
     trail = ", ".join(f"{v:.4g}: {costs[v]:.4g}" for v in axis)
-    se, corr = _uncertainty(obj, specs, x, clusters) if uncertainty else (None, None)
+    unc = _uncertainty(obj, specs, x, clusters) if uncertainty else None
+    se, corr = (None, None) if unc is None else (unc.stderr, unc.correlation)
     return CalibrationResult(model, names, x, np.zeros(len(names)), dict(fixed), float(r @ r), data.n_samples,
                              int((r == FAILED_RESIDUAL).sum()), obj.evaluations, time.perf_counter() - t0,
                              f"scan of {', '.join(names)} (value: cost) {trail}; best {b:.4g}; resolution "
                              f"{resolution:.4g}" + ("; at the end of the scan, not converged" if edge else ""),
-                             not edge, se, corr, edge, tuple(widened))
+                             not edge, se, corr, edge, tuple(widened),
+                             n_clusters=None if unc is None else unc.n_clusters)
 
 
 # --------------------------------------------------------------------------- cross-validation

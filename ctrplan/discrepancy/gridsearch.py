@@ -167,11 +167,13 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
                  if v >= lim - 1e-9)
     if edge:
         trail.append("at the edge of the grid, not converged: " + ", ".join(edge))
-    se, corr = _uncertainty(obj_all, specs, best_all, clusters) if uncertainty else (None, None)
+    unc = _uncertainty(obj_all, specs, best_all, clusters) if uncertainty else None
+    se, corr = (None, None) if unc is None else (unc.stderr, unc.correlation)
     return CalibrationResult(model, names, best_all, np.zeros(m), dict(fixed), float(r @ r),
                              data.n_samples, int((r == FAILED_RESIDUAL).sum()),
                              obj_sub.evaluations + obj_all.evaluations, time.perf_counter() - t0,
-                             "; ".join(trail), not edge, se, corr, edge, tuple(widened))
+                             "; ".join(trail), not edge, se, corr, edge, tuple(widened),
+                             n_clusters=None if unc is None else unc.n_clusters)
 
 
 def grid_search_friction(robot, data: MeasuredData, fixed: dict, **kwargs) -> CalibrationResult:
