@@ -237,7 +237,9 @@ def robot_files_table(res: dict) -> str:
                      f"{s['mean_mm']:.2f} / {s['p95_mm']:.2f} / {s['max_mm']:.2f} | {p['mean_mm']:.2f} / {p['p95_mm']:.2f} "
                      f"/ {p['max_mm']:.2f} | {f['bound_mean_mm']:.2f} / {f['bound_max_mm']:.2f} | "
                      f"{100 * f['within_bound_plus_0_6_mm']:.1f} % | {c['factor']:.3g} x (b + {c['margin_mm']:.2f} mm), "
-                     f"{c['median_size_mm']:.2f} mm, {100 * c['test_coverage']:.0f} % ({100 * ci[0]:.0f}..{100 * ci[1]:.0f} %), "
+                     f"{c['median_size_mm']:.2f} mm, {100 * c['test_coverage']:.0f} % ("
+                     + ("interval undefined" if ci[0] is None or ci[1] is None else
+                        f"{100 * ci[0]:.0f}..{100 * ci[1]:.0f} %") + "), "
                      f"{c['status']} |")
     lines += ["", "Standard-model mean error [mm] with one file's value(s) put into the other:", "",
               "| parameters | Table II value(s) | Table VII value(s) | Table II file with Table VII values | Table VII file "

@@ -65,8 +65,13 @@ class CalibratedBound(_Table):
         Share of test-split tips the model's bound alone covers.
     failing : bool
         The test coverage is below the target (the calibration fails on the test split).
-    status : {"met", "failing", "conservative"} or None
-        The verdict of the test split.
+    status : {"shown", "not shown", "failed"} or None
+        The verdict of the test split: its coverage interval's lower end at or above the target
+        (less the tolerance), its upper end below it, or neither
+        (:func:`ctrplan.discrepancy.coverage.coverage_status`). Files written before this rule
+        hold "met", "failing" or "conservative", which are read as they are.
+    conservative : bool
+        The test coverage's interval lies above the target by more than the tolerance.
     data_file, data_sha256, date : str
         The measurements it was calibrated on (empty when not recorded).
     """
@@ -83,7 +88,8 @@ class CalibratedBound(_Table):
     test_coverage_high: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     raw_bound_test_coverage: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     failing: bool = False
-    status: Literal["met", "failing", "conservative"] | None = None
+    status: Literal["shown", "not shown", "failed", "met", "failing", "conservative"] | None = None
+    conservative: bool = False
     data_file: str = ""
     data_sha256: str = ""
     date: str = ""

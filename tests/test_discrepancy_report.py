@@ -131,8 +131,10 @@ def _results() -> dict:
                              "method": "t-interval of the paired differences"},
         "bound": {"definition": "e <= b + m", "method": "split-conformal", "target": 0.9, "factor": 1.3,
                   "margin_mm": 1.0, "noise_multiple": 2.0, "noise_rms_mm": 0.5, "n_calibration": 60,
-                  "test": _coverage(48, 0.9, 0.8, 0.97, 12), "raw_test": _coverage(48, 0.7, 0.55, 0.85, 12),
-                  "translation_last": _coverage(30, 0.8, 0.6, 0.95, 8, mm=False), "failing": False, "status": "met"},
+                  "test": _coverage(48, 0.9, 0.86, 0.97, 12), "raw_test": _coverage(48, 0.7, 0.55, 0.85, 12),
+                  "translation_last": _coverage(30, 0.8, 0.6, 0.95, 8, mm=False), "failing": False, "status": "shown",
+                  "conservative": False, "confidence": 0.95, "tolerance": 0.05,
+                  "calibration": {"factor_ci": [1.1, 1.6], "coverage_ci": [0.84, 0.95], "n_units": 40}},
         "updated_model_file": "/data/out/pair-friction.toml", "updated_model": "friction", "reproduced": True,
         "reproduced_samples": 48, "reproduced_position_mean_mm": 1.2, "cautions": [], "seconds": 3600.0,
         "stage_seconds": {"setup": 2.0, "split": 0.5, "baseline": 600.0, "signature_tests": 30.0, "noise_check": 1.5,
@@ -176,6 +178,92 @@ def test_a_translation_last_coverage_over_one_unit_has_an_undefined_interval(mon
     assert json.loads((tmp_path / "results.json").read_text())["bound"]["translation_last"]["ci"] == [None, None]
 
 
+def _bound_verdict(text: str) -> str:
+    """The line of report.md that states the calibrated bound's test coverage and status."""
+    return next(line for line in text.splitlines() if line.startswith("Calibrated bound:"))
+
+
+BOUND_STATUSES = [
+    # (what, test coverage, status, conservative, text of the status line)
+    ("shown", _coverage(48, 0.9, 0.86, 0.97, 12), "shown", False,
+     "coverage of the test split's tips 90 % (95 % interval 86-97 %, 12 units): shown (the interval's lower end "
+     "is at or above the target less 5 points)."),
+    ("not shown", _coverage(48, 0.9, 0.62, 1.0, 5), "not shown", False,
+     "90 % (95 % interval 62-100 %, 5 units): not shown (the interval reaches below the target less 5 points)."),
+    ("failed", _coverage(48, 0.5, 0.42, 0.58, 20), "failed", False,
+     "50 % (95 % interval 42-58 %, 20 units): **failed** (the interval's upper end is below the target less 5 "
+     "points)."),
+    ("one unit", _coverage(10, 0.9, None, None, 1), "not shown", False,
+     "90 % (interval undefined: one unit): not shown (without an interval)."),
+    ("no samples", {**_coverage(0, None, None, None, 0), "ratio": dict.fromkeys(("median", "p90", "p95", "max"))},
+     "not shown", False, "undefined (no samples): not shown (without an interval)."),
+    ("conservative", _coverage(120, 1.0, 1.0, 1.0, 12), "shown", True,
+     "100 % (95 % interval 100-100 %, 12 units): shown (the interval's lower end is at or above the target less 5 "
+     "points); conservative: the interval lies wholly above the target plus 5 points"),
+]
+
+
+@pytest.mark.parametrize("what, test, status, conservative, expected", BOUND_STATUSES,
+                         ids=[b[0] for b in BOUND_STATUSES])
+def test_the_calibrated_bound_is_reported_with_its_interval_and_status(monkeypatch, tmp_path, what, test, status,
+                                                                       conservative, expected):
+    """The calibrated bound's test coverage prints with its interval, level and units, and its
+    status ("shown", "not shown" or "failed", with the rule that gave it); an undefined interval
+    (one unit, no samples) prints "undefined" with its reason, never "nan" or "0 %". Catches a
+    report that prints a status without the interval it rests on, and the former wording ("met")
+    for a coverage whose interval reaches far below the target."""
+    results = _results()
+    results["bound"].update(test=test, status=status, failing=status == "failed", conservative=conservative)
+    line = _bound_verdict(_write(monkeypatch, tmp_path, results))
+    assert expected in line, line
+    assert " met " not in line and not re.search(r"\bnan\b", line)
+
+
+def test_a_results_json_of_the_former_status_rule_still_makes_a_report(monkeypatch, tmp_path):
+    """A results.json written under the former rule (status "met", no confidence, tolerance,
+    conservative flag or factor spread): the report is written, says the status is the earlier
+    version's, and prints no spread line. Catches a report that needs the new keys."""
+    results = _results()
+    for key in ("conservative", "confidence", "tolerance", "calibration"):
+        del results["bound"][key]
+    results["bound"]["status"] = "met"
+    text = _write(monkeypatch, tmp_path, results)
+    assert "(interval 86-97 %, 12 units): met (as judged by an earlier version)." in _bound_verdict(text)
+    assert "resampled development units" not in text and "could not be written" not in text
+
+
+def test_the_factor_spread_is_reported(monkeypatch, tmp_path):
+    """The factor's spread over resampled development units prints with its units, and says the
+    conformal guarantee's assumption. Catches a spread that results.json holds and the report
+    leaves out."""
+    text = _write(monkeypatch, tmp_path, _results())
+    assert ("Over resampled development units (40 units) the factor ranges 1.1-1.6, and a factor calibrated on "
+            "another draw of such units covers 84-95 % of the development tips (the conformal guarantee assumes "
+            "exchangeable scores") in text
+
+
+def test_bound_dict_keeps_the_former_keys_and_adds_the_new_ones():
+    """:func:`~ctrplan.discrepancy.report.bound_dict` of a calibrated bound: the former keys
+    (``failing``, ``status``, ``test`` with ``ci``...) with ``status`` one of the three and
+    ``failing`` True exactly when "failed", plus ``conservative``, ``confidence``, ``tolerance``
+    and ``calibration``; JSON-serializable without NaN. Catches a renamed key that breaks readers
+    of results.json, and a ``failing`` that disagrees with the status."""
+    import numpy as np
+
+    from ctrplan.discrepancy.coverage import calibrate_bound
+
+    cal_e = np.linspace(0.01, 0.99, 99)
+    for covered in (np.arange(200) % 10 < 9, np.arange(200) % 2 == 0, np.arange(200) % 10 < 7):
+        b = calibrate_bound(cal_e, np.ones(99), np.where(covered, 0.5, 0.95), np.ones(200),
+                            np.repeat(np.arange(20), 10), noise_rms=1e-4, cal_units=np.repeat(np.arange(33), 3))
+        d = report.bound_dict(b)
+        assert {"definition", "method", "target", "factor", "margin_mm", "noise_multiple", "noise_rms_mm",
+                "n_calibration", "test", "raw_test", "translation_last", "failing", "status"} <= set(d)
+        assert d["status"] in ("shown", "not shown", "failed") and d["failing"] == (d["status"] == "failed")
+        assert d["confidence"] == 0.95 and d["tolerance"] == 0.05 and d["calibration"]["n_units"] == 33
+        assert d["test"]["ci"] == list(b.test.ci) and "NaN" not in json.dumps(d)
+
+
 UNDEFINED_FIGURES = [
     # (what, path in results.json, value, text of report.md)
     ("test split mean over one unit", "test_split/figures/after/mean_mm", _interval(1.2, NAN, NAN, 1),
@@ -191,7 +279,10 @@ UNDEFINED_FIGURES = [
     ("parameter of a failed fit", "candidates/friction/parameter_table/0",
      _parameter("mu_1", None, "-", None), "| friction (Coulomb, along the motion) | mu_1 = undefined |"),
     ("NaN parameter and standard error", "candidates/friction/parameter_table/0",
-     _parameter("mu_1", NAN, "-", NAN), "mu_1 = undefined (not determined by the data) |"),
+     _parameter("mu_1", NAN, "-", NAN), "mu_1 = undefined (standard error undefined (fewer than two clusters of "
+                                        "units)) |"),
+    ("infinite standard error", "candidates/friction/parameter_table/0",
+     _parameter("mu_1", 0.2, "-", float("inf")), "mu_1 = 0.2 (not determined by the data) |"),
     ("signature test p-value missing", "signature_tests/friction/p_value", None, "| friction | 0.800 | undefined |"),
     ("noise ratio missing", "noise/ratio", None, "1.900 mm = undefined x the noise"),
     ("prior choice mean missing", "baseline/prior_choices/1/mean_position_m", None,
@@ -205,6 +296,11 @@ UNDEFINED_FIGURES = [
      "-0.80 (interval undefined: one unit) mm"),
     ("calibrated coverage over one unit", "bound/test", _coverage(10, 0.9, None, None, 1),
      "| 10 | 90 % (interval undefined: one unit) |"),
+    ("calibrated coverage over two units", "bound/test", _coverage(20, 0.9, None, None, 2),
+     "| 20 | 90 % (interval undefined: 2 units, fewer than 3) |"),
+    ("factor spread over two units", "bound/calibration", {"factor_ci": [None, None], "coverage_ci": [None, None],
+                                                           "n_units": 2},
+     "the factor's spread is undefined (2 units, fewer than 3)."),
     ("raw coverage without samples", "bound/raw_test",
      {"n": 0, "covered": None, "ci": [None, None], "n_units": 0,
       "ratio": {"median": None, "p90": None, "p95": None, "max": None}, "bound_median_m": None,
@@ -299,8 +395,9 @@ def test_the_report_is_written_again_from_results_json(monkeypatch, tmp_path):
 
 def test_a_results_json_without_the_no_effect_sentence_still_makes_a_report(monkeypatch, tmp_path):
     """A results.json of a run that named nothing, written before it held the sentence: the
-    verdict is said from the decision and the noise check. Catches a report that reads the run's
-    objects for it."""
+    verdict is said from the decision and the noise check, an inconclusive noise test (a noise that
+    is only a lower bound) without "the model misses something". Catches a report that reads the
+    run's objects for it."""
     results = _results()
     results.pop("no_effect_sentence")
     _set(results, "decision", {**results["decision"], "verdict": "none", "named": None, "best": "offplane",
@@ -310,6 +407,11 @@ def test_a_results_json_without_the_no_effect_sentence_still_makes_a_report(monk
     assert ("**No effect named.** the out-of-fold residual of the calibrated baseline (rms 1.900 mm) is NOT consistent "
             "with noise: the model misses something that no candidate explains; the best explanation is off-plane "
             "precurvature, not named: its improvement is not significant (Holm).") in text
+    _set(results, "decision", {**results["decision"], "no_effect_case": "inconclusive"})
+    text = _write(monkeypatch, tmp_path, results)
+    assert ("**No effect named.** no candidate is eligible; the out-of-fold residual of the calibrated baseline (rms "
+            "1.900 mm) exceeds the sensor noise, but that noise is only a lower bound: the noise test is "
+            "inconclusive") in text
 
 
 def test_plots_that_cannot_be_made_leave_a_note(monkeypatch, tmp_path, caplog):

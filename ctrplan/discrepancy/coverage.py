@@ -16,14 +16,44 @@ the scores ``s = e / (b + m)`` of calibration samples (the final model's out-of-
 development samples; ``m`` from the development samples' noise): the ``ceil((n + 1) t)``-th smallest of n
 scores for a target coverage ``t`` (Vovk et al. 2005; Lei et al., JASA 113:1094, 2018). This is
 split-conformal prediction itself; a conformal library (``mapie``) wraps scikit-learn regressors,
-and here the "regressor" is the mechanics, so the plain finite-sample quantile is used. The
-guarantee assumes exchangeable samples: the samples of a motion are serially correlated, so the
-coverage is checked on the untouched test split with a t-interval over its units
-(:func:`~ctrplan.discrepancy.statistics.ratio_interval` of the per-unit counts): a calibrated
-bound whose test coverage falls short of its target by more than :data:`COVERAGE_TOLERANCE` (and
-whose interval excludes the target) is reported as **failing**; one that exceeds it by as much is
-**conservative** (wider than it needs to be, e.g. calibrated on out-of-fold errors of models fitted
-on less data than the final one).
+and here the "regressor" is the mechanics, so the plain finite-sample quantile is used.
+
+**What the guarantee assumes.** The conformal guarantee (coverage at least ``t`` on a new sample)
+assumes that calibration and new scores are exchangeable. The scores here are the final model's
+out-of-fold errors along a continuous motion: serially correlated, so a development set of
+~1,000 samples holds far fewer independent observations, and the coverage a factor attains on
+new data wanders more about ``t`` than the exchangeable theory says. Two figures show how much:
+
+- on the development samples, a cluster bootstrap over their units (time blocks): the factor
+  recomputed on each resample of units, its interval, and the interval of the share of all
+  development scores each recomputed factor covers (how far the coverage of a factor calibrated
+  on another draw of such blocks may fall from ``t``; :func:`factor_spread`);
+- on the untouched test split, the share of measured tips the calibrated bound covers, with a
+  cluster-bootstrap interval over the test units (:func:`coverage_figures`), and a status
+  (:func:`coverage_status`, :data:`COVERAGE_STATUSES`): **shown** when the interval's lower end
+  is at or above ``t - COVERAGE_TOLERANCE``, **failed** when its upper end is below it, **not
+  shown** otherwise (also when the interval is undefined: fewer than :data:`MIN_UNITS` units, no
+  test sample). A bound whose interval lies wholly above ``t + COVERAGE_TOLERANCE`` is also
+  flagged **conservative** (wider than it needs to be, e.g. calibrated on out-of-fold errors of
+  models fitted on less data than the final one). The rule compares with ``t - COVERAGE_TOLERANCE``
+  rather than ``t``: a bound calibrated to exactly ``t`` has its point estimate near ``t`` and its
+  interval reaching below it, so a lower end asked to reach ``t`` itself would leave every
+  well-calibrated bound "not shown". The point estimate takes no part in the status.
+
+**The interval.** Units, not samples, are the independent observations: the covered share is
+the ratio ``sum_u N_u / sum_u D_u`` of per-unit covered counts and sample counts, and each of
+:data:`~ctrplan.discrepancy.options.BOOTSTRAP_RESAMPLES` resamples draws U units with replacement
+(the cluster bootstrap; Davison & Hinkley, *Bootstrap Methods and their Application*, CUP 1997,
+Sec. 3.8). The interval is the BCa interval (Efron, JASA 82:171, 1987: bias correction from the
+resamples, acceleration from the leave-one-unit-out jackknife), at the level
+:data:`~ctrplan.discrepancy.options.CONFIDENCE` expanded for few units: its normal quantile
+``z`` replaced by ``sqrt(U / (U - 1)) t_(U-1)`` (the expanded percentile interval of Hesterberg,
+Am. Stat. 69:371, 2015). Measured on AR(1) errors (lag-one correlation 0.9) in 12
+independent blocks of 40 samples at a true coverage of 90 %, the 95 % interval holds the truth in
+94 % of 400 draws (90 % without the expansion; over 5 to 8 units, 82-92 %), its misses mostly
+above the truth (5 %); the same interval over samples taken as independent holds it in 49 %.
+Over units that all share one value (every tip of every unit covered) the resamples have no
+spread and the interval shrinks to that value.
 """
 
 from __future__ import annotations
@@ -35,15 +65,18 @@ from types import MappingProxyType
 from typing import Mapping
 
 import numpy as np
+from scipy import stats
 
 from .._log import progress_level
 from ..parallel import Executor
 from .logtext import figure, interval
-from .options import CONFIDENCE, ENVELOPE_NOISE_FACTOR
-from .statistics import mean_interval
+from .options import BOOTSTRAP_RESAMPLES, CONFIDENCE, ENVELOPE_NOISE_FACTOR
+from .statistics import unit_sums
 
-__all__ = ["NOISE_MULTIPLE", "DEFAULT_TARGET", "COVERAGE_TOLERANCE", "BoundValues", "bound_values", "Coverage",
-           "coverage_figures", "conformal_factor", "BoundCalibration", "calibrate_bound", "BOUND_DEFINITION"]
+__all__ = ["NOISE_MULTIPLE", "DEFAULT_TARGET", "COVERAGE_TOLERANCE", "MIN_UNITS", "COVERAGE_STATUSES",
+           "INTERVAL_METHOD", "BoundValues", "bound_values", "Coverage", "coverage_figures", "coverage_status",
+           "conformal_factor", "FactorSpread", "factor_spread", "BoundCalibration", "calibrate_bound",
+           "BOUND_DEFINITION"]
 
 logger = logging.getLogger(__name__)
 
@@ -52,9 +85,23 @@ logger = logging.getLogger(__name__)
 NOISE_MULTIPLE = ENVELOPE_NOISE_FACTOR
 #: Default share of measured tips the calibrated bound is to cover.
 DEFAULT_TARGET = 0.9
-#: A calibrated bound fails when its test coverage misses the target by more than this (and the
-#: target is outside the coverage's interval).
+#: Shortfall of the coverage from its target that still counts as meeting it [-]: the status
+#: compares the interval's ends with ``target - COVERAGE_TOLERANCE`` (a bound calibrated to
+#: exactly its target has a point estimate near it and an interval reaching below it, so the
+#: target itself could never be shown).
 COVERAGE_TOLERANCE = 0.05
+#: Fewest units over which a coverage has an interval: the bootstrap over one or two units has
+#: no spread worth a name.
+MIN_UNITS = 3
+#: The statuses of a calibrated bound's test coverage (:func:`coverage_status`), one line each.
+COVERAGE_STATUSES = MappingProxyType({
+    "shown": "the coverage interval's lower end is at or above the target less the tolerance",
+    "failed": "the coverage interval's upper end is below the target less the tolerance",
+    "not shown": "the coverage interval reaches across the target less the tolerance, or is undefined",
+})
+#: How the coverage intervals are computed (printed with them).
+INTERVAL_METHOD = (f"cluster bootstrap over units ({BOOTSTRAP_RESAMPLES} resamples), BCa with the level expanded "
+                   f"for few units; undefined over fewer than {MIN_UNITS} units")
 #: The definition printed next to every coverage figure.
 BOUND_DEFINITION = ("bound b: largest tip distance of the 2^(n-1) bounding friction solutions from the standard "
                     "model's tip (Ha et al. 2019, Sec. III) of the calibrated robot; translation-last bound: the "
@@ -153,8 +200,9 @@ class Coverage:
     covered : float or None
         Share of them with ``e <= b + m`` [-]; None without samples.
     ci : tuple of (float or None, float or None)
-        Its t-interval over units at :data:`~ctrplan.discrepancy.options.CONFIDENCE`, clipped to
-        [0, 1] [-]; an end is None where it is not finite (fewer than two units, no samples).
+        Its cluster-bootstrap interval over units (module docstring) at the level
+        :func:`coverage_figures` was given, within [0, 1] [-]; (None, None) over fewer than
+        :data:`MIN_UNITS` units or without samples.
     n_units : int
         Units of the interval.
     ratio : mapping of str to float or None
@@ -199,9 +247,67 @@ def _quantiles(x) -> dict:
             "max": float(np.max(x))}
 
 
-def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> Coverage:
-    """Share of samples with ``error <= bound + margin``, with a t-interval over units, and the
-    distribution of ``error / (bound + margin)``.
+def _expanded_alpha(n_units: int, confidence: float) -> float:
+    """The two-sided ``alpha`` whose normal quantile is ``sqrt(U / (U - 1)) t_(U-1)`` at ``confidence``
+    (Hesterberg 2015): below ``1 - confidence`` for few units, equal to it for many."""
+    z = np.sqrt(n_units / (n_units - 1)) * stats.t.ppf(0.5 + confidence / 2, n_units - 1)
+    return float(2.0 * stats.norm.sf(z))
+
+
+def _unit_draws(n_units: int, rng: np.random.Generator, resamples: int) -> np.ndarray:
+    """How often each of ``n_units`` units is drawn in each of ``resamples`` resamples of as many
+    units with replacement: int array, shape (resamples, n_units), rows summing to ``n_units``."""
+    idx = rng.integers(0, n_units, size=(resamples, n_units)) + n_units * np.arange(resamples)[:, None]
+    return np.bincount(idx.ravel(), minlength=resamples * n_units).reshape(resamples, n_units)
+
+
+def _ratio_bootstrap(num: np.ndarray, den: np.ndarray, rng: np.random.Generator, confidence: float,
+                     resamples: int) -> tuple[float, float]:
+    """Cluster-bootstrap BCa interval, level expanded for few units, of ``sum(num) / sum(den)``.
+
+    Parameters
+    ----------
+    num, den : ndarray, shape (U,)
+        Per-unit sums (covered samples, samples); ``den > 0``, U >= 2.
+    rng : numpy.random.Generator
+    confidence : float
+    resamples : int
+
+    Returns
+    -------
+    tuple of float
+        (low, high), in the unit of ``num / den``.
+    """
+    n_units = num.size
+    theta = float(num.sum() / den.sum())
+    draws = _unit_draws(n_units, rng, resamples).astype(float)
+    boot = (draws @ num) / (draws @ den)
+    if boot.max() == boot.min():                     # every unit the same share: no spread
+        return theta, theta
+    alpha = _expanded_alpha(n_units, confidence)
+    # bias correction from the mid-rank of theta among the resamples (counts are whole numbers,
+    # so equal shares are equal floats)
+    below = (np.count_nonzero(boot < theta) + 0.5 * np.count_nonzero(boot == theta)) / resamples
+    z0 = stats.norm.ppf(np.clip(below, 0.5 / resamples, 1.0 - 0.5 / resamples))
+    # acceleration from the leave-one-unit-out jackknife (Efron 1987)
+    jack = (num.sum() - num) / (den.sum() - den)
+    d = jack.mean() - jack
+    ss = float(np.sum(d * d))
+    accel = float(np.sum(d ** 3) / (6.0 * ss ** 1.5)) if ss > 0 else 0.0
+    z = stats.norm.ppf([alpha / 2, 1.0 - alpha / 2]) + z0
+    denom = 1.0 - accel * z
+    probs = np.where(denom > 0, stats.norm.cdf(z0 + z / np.where(denom > 0, denom, 1.0)), [0.0, 1.0])
+    low, high = np.quantile(boot, probs)
+    return float(low), float(high)
+
+
+def coverage_figures(error, bound, margin: float, units, *, seed: int = 0, confidence: float = CONFIDENCE,
+                     resamples: int = BOOTSTRAP_RESAMPLES) -> Coverage:
+    """Share of samples with ``error <= bound + margin``, with a cluster-bootstrap interval over
+    units, and the distribution of ``error / (bound + margin)``.
+
+    The interval resamples units, not samples (module docstring): samples of one time block are
+    serially correlated, and an interval over samples taken as independent is far too narrow.
 
     Parameters
     ----------
@@ -210,13 +316,18 @@ def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> Co
     margin : float
         Noise margin [m].
     units : array-like of int, shape (K,)
-        Units of the interval (time blocks, configuration groups).
+        Units of the interval (time blocks, configuration groups), the independent observations.
     seed : int
-        Unused (kept for callers).
+        Seed of the resampling.
+    confidence : float
+        Level of the interval, in (0, 1).
+    resamples : int
+        Bootstrap resamples.
 
     Returns
     -------
     Coverage
+        ``ci`` (None, None) without samples or over fewer than :data:`MIN_UNITS` units.
     """
     e = np.asarray(error, float)
     b = np.asarray(bound, float)
@@ -227,16 +338,52 @@ def coverage_figures(error, bound, margin: float, units, *, seed: int = 0) -> Co
         return Coverage(n=0, covered=None, ci=(None, None), n_units=0, ratio=_quantiles([]), bound_median_m=None,
                         error_median_m=None)
     inside = (e <= b + margin).astype(float)
-    share = mean_interval(inside, u, confidence=CONFIDENCE)
-    ci = tuple(None if not np.isfinite(x) else float(np.clip(x, 0.0, 1.0)) for x in share.ci)
-    return Coverage(n=int(e.size), covered=float(inside.mean()), ci=ci, n_units=int(share.n_units),
+    num, den, _ = unit_sums(inside, u)
+    ci = (None, None)
+    if num.size >= MIN_UNITS:
+        ci = _ratio_bootstrap(num, den, np.random.default_rng(seed), confidence, resamples)
+    return Coverage(n=int(e.size), covered=float(inside.mean()), ci=ci, n_units=int(num.size),
                     ratio=_quantiles(e / (b + margin)), bound_median_m=float(np.median(b)),
                     error_median_m=float(np.median(e)))
+
+
+def coverage_status(low: float | None, high: float | None, target: float,
+                    tolerance: float = COVERAGE_TOLERANCE) -> str:
+    """The status of a coverage with interval ``(low, high)`` against ``target``
+    (:data:`COVERAGE_STATUSES`).
+
+    The point estimate takes no part: a coverage at its target whose interval reaches far below
+    it is not shown. The comparison is with ``target - tolerance``, the least coverage that
+    counts as meeting the target (:data:`COVERAGE_TOLERANCE`).
+
+    Parameters
+    ----------
+    low, high : float or None
+        Ends of the coverage's interval [-]; None where it is undefined.
+    target : float
+        Target coverage [-].
+    tolerance : float
+        [-].
+
+    Returns
+    -------
+    {"shown", "failed", "not shown"}
+        ``"shown"``: ``low >= target - tolerance``; ``"failed"``: ``high < target - tolerance``;
+        ``"not shown"`` otherwise, and where an end is None.
+    """
+    if low is None or high is None:
+        return "not shown"
+    floor = target - tolerance
+    return "shown" if low >= floor else "failed" if high < floor else "not shown"
 
 
 def conformal_factor(error, bound, margin: float, target: float = DEFAULT_TARGET) -> float:
     """The split-conformal factor ``c``: the ``ceil((n + 1) target)``-th smallest of the n scores
     ``error / (bound + margin)`` (inf when that exceeds n).
+
+    The finite-sample guarantee (a new sample's score is at most ``c`` with probability at least
+    ``target``) assumes exchangeable scores; :func:`factor_spread` shows what serial correlation
+    does to it.
 
     Parameters
     ----------
@@ -267,6 +414,97 @@ def conformal_factor(error, bound, margin: float, target: float = DEFAULT_TARGET
     return float("inf") if rank > n or n == 0 else float(s[rank - 1])
 
 
+def _finite_or_none(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+@dataclass(frozen=True)
+class FactorSpread:
+    """How the conformal factor moves over resampled calibration units (:func:`factor_spread`).
+
+    Attributes
+    ----------
+    factor_ci : tuple of (float or None, float or None)
+        Interval of the factor recomputed on resamples of the units [-]; an end is None where it
+        is infinite (a resample too small for the rank) or undefined (fewer than
+        :data:`MIN_UNITS` units).
+    coverage_ci : tuple of (float or None, float or None)
+        Interval of the share of all calibration scores the recomputed factors cover [-]: where
+        the coverage of a factor calibrated on another draw of such units may lie.
+    n_units : int
+        Calibration units.
+    """
+
+    factor_ci: tuple[float | None, float | None]
+    coverage_ci: tuple[float | None, float | None]
+    n_units: int
+
+    def as_dict(self) -> dict:
+        """``{"factor_ci": [low, high], "coverage_ci": [low, high], "n_units"}`` (plain Python types)."""
+        return {"factor_ci": list(self.factor_ci), "coverage_ci": list(self.coverage_ci), "n_units": self.n_units}
+
+
+def factor_spread(error, bound, margin: float, units, target: float = DEFAULT_TARGET, *, seed: int = 0,
+                  confidence: float = CONFIDENCE, resamples: int = BOOTSTRAP_RESAMPLES) -> FactorSpread:
+    """The conformal factor (:func:`conformal_factor`) recomputed on cluster-bootstrap resamples of
+    the calibration units, and the share of all calibration scores each covers.
+
+    The spread of that share is the bootstrap's picture of how far the coverage of a factor
+    calibrated on serially correlated scores may fall from ``target``: the exchangeable theory
+    puts it within about ``sqrt(t (1 - t) / n)`` of ``t``; scores correlated within units move it
+    by about as much as ``n`` / (samples per unit) independent scores would. Percentile intervals
+    at ``confidence``, expanded for few units as in :func:`coverage_figures`. Measured on AR(1)
+    scores (lag-one correlation 0.9) in 10 blocks of 40 samples, the 95 % interval of the covered
+    share holds the coverage the factor attains on new samples in 94.5 % of 200 draws; over
+    samples taken as independent, in 50 %.
+
+    Parameters
+    ----------
+    error, bound : array-like, shape (n,)
+        Calibration samples [m] (non-finite ones left out).
+    margin : float
+        [m].
+    units : array-like, shape (n,)
+        Units of the calibration samples (time blocks).
+    target : float
+        In (0, 1).
+    seed : int
+    confidence : float
+    resamples : int
+
+    Returns
+    -------
+    FactorSpread
+        Undefined ends over fewer than :data:`MIN_UNITS` units.
+    """
+    e = np.asarray(error, float)
+    b = np.asarray(bound, float)
+    u = np.asarray(units)
+    ok = np.isfinite(e) & np.isfinite(b) & (b + margin > 0)
+    s = e[ok] / (b[ok] + margin)
+    order = np.argsort(s, kind="stable")
+    s = s[order]
+    ids, inv = np.unique(u[ok][order], return_inverse=True)
+    n_units = int(ids.size)
+    if n_units < MIN_UNITS:
+        return FactorSpread(factor_ci=(None, None), coverage_ci=(None, None), n_units=n_units)
+    draws = _unit_draws(n_units, np.random.default_rng(seed), resamples).astype(np.int32)
+    cum = np.cumsum(draws[:, inv.ravel()], axis=1, dtype=np.int32)      # (resamples, n) in score order
+    total = cum[:, -1]
+    rank = np.ceil((total + 1) * target).astype(np.int64)
+    finite = rank <= total
+    at = np.argmax(cum >= rank[:, None], axis=1)
+    factor = np.where(finite, s[at], np.inf)
+    covered = np.where(finite, np.searchsorted(s, s[at], side="right") / s.size, 1.0)
+    alpha = _expanded_alpha(n_units, confidence)
+    probs = [alpha / 2, 1.0 - alpha / 2]
+    f_lo, f_hi = np.quantile(factor, probs, method="inverted_cdf")
+    c_lo, c_hi = np.quantile(covered, probs, method="inverted_cdf")
+    return FactorSpread(factor_ci=(_finite_or_none(f_lo), _finite_or_none(f_hi)),
+                        coverage_ci=(float(c_lo), float(c_hi)), n_units=n_units)
+
+
 @dataclass(frozen=True, eq=False)
 class BoundCalibration:
     """A calibrated bound ``factor (b + margin)`` and how it did on the test split.
@@ -275,7 +513,7 @@ class BoundCalibration:
     ----------
     method : str
     target : float
-        Share of measured tips it is to cover.
+        Share of measured tips it is to cover [-].
     factor : float
         The conformal factor ``c`` [-].
     margin_m : float
@@ -292,11 +530,18 @@ class BoundCalibration:
         The translation-last bound's coverage on the test samples after a final translation of
         every pair (None without such samples).
     failing : bool
-        The test coverage falls short of the target by more than :data:`COVERAGE_TOLERANCE` and its
-        interval excludes it (an interval without finite ends, e.g. of a single unit, excludes
-        nothing: the tolerance decides alone).
-    status : {"met", "failing", "conservative"}
-        ``"conservative"``: the coverage exceeds the target by as much.
+        True exactly when ``status`` is ``"failed"``.
+    status : {"shown", "not shown", "failed"}
+        :func:`coverage_status` of ``test`` against ``target`` (:data:`COVERAGE_STATUSES`).
+    conservative : bool
+        The test coverage's interval lies wholly above ``target + tolerance``: the bound is wider
+        than it needs to be.
+    calibration : FactorSpread or None
+        The factor's spread over resampled calibration units (None without their units).
+    confidence : float
+        Level of the intervals [-].
+    tolerance : float
+        :data:`COVERAGE_TOLERANCE` the status was judged with [-].
     """
 
     method: str
@@ -310,24 +555,36 @@ class BoundCalibration:
     raw_test: Coverage
     translation_last: Coverage | None
     failing: bool
-    status: str = "met"
+    status: str = "not shown"
+    conservative: bool = False
+    calibration: FactorSpread | None = None
+    confidence: float = CONFIDENCE
+    tolerance: float = COVERAGE_TOLERANCE
 
     def file_table(self, data_file: str, data_sha256: str) -> dict:
-        """The robot file's ``[bound_calibration]`` table (SI; unknown figures left out)."""
+        """The robot file's ``[bound_calibration]`` table (SI; unknown figures left out), as
+        :class:`ctrplan.calibration.CalibratedBound` reads it."""
         table = {"method": self.method, "target_coverage": self.target, "factor": self.factor,
                 "noise_margin_m": self.margin_m, "noise_multiple": self.noise_multiple,
                 "calibration_samples": self.n_calibration, "test_samples": self.test.n,
                 "test_coverage": self.test.covered, "test_coverage_low": self.test.ci[0],
                 "test_coverage_high": self.test.ci[1], "raw_bound_test_coverage": self.raw_test.covered,
-                "failing": self.failing, "status": self.status, "data_file": data_file, "data_sha256": data_sha256,
+                "failing": self.failing, "status": self.status, "conservative": bool(self.conservative),
+                "data_file": data_file, "data_sha256": data_sha256,
                 "date": datetime.date.today().isoformat()}
         return {k: v for k, v in table.items() if not (isinstance(v, float) and not np.isfinite(v))}
 
 
 def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *, noise_rms: float,
                     target: float = DEFAULT_TARGET, test_translation_last=None, test_released=None,
-                    seed: int = 0) -> BoundCalibration:
+                    cal_units=None, seed: int = 0) -> BoundCalibration:
     """Calibrate the bound on calibration samples and check it on test samples.
+
+    The factor is :func:`conformal_factor`; its guarantee assumes exchangeable scores, which
+    serially correlated out-of-fold errors are not, so the coverage is checked on the test split
+    with a cluster-bootstrap interval over its units (:func:`coverage_figures`) and judged by
+    :func:`coverage_status` (with ``cal_units``, :func:`factor_spread` shows the factor's spread
+    as well).
 
     Parameters
     ----------
@@ -340,19 +597,29 @@ def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *,
     noise_rms : float
         Sensor rms position noise [m] (0 if unknown).
     target : float
+        In (0, 1).
     test_translation_last : array-like, shape (K,), optional
         Translation-last bound at the test samples [m].
     test_released : array-like of bool, shape (K,), optional
         Test samples after a final translation of every pair.
+    cal_units : array-like, shape (n,), optional
+        Units of the calibration samples.
     seed : int
+        Seed of the bootstrap resampling.
 
     Returns
     -------
     BoundCalibration
+
+    Raises
+    ------
+    ValueError
+        ``target`` outside (0, 1).
     """
     margin = NOISE_MULTIPLE * float(noise_rms)
     factor = conformal_factor(cal_error, cal_bound, margin, target)
     n_cal = int(np.sum(np.isfinite(np.asarray(cal_error, float)) & np.isfinite(np.asarray(cal_bound, float))))
+    spread = None if cal_units is None else factor_spread(cal_error, cal_bound, margin, cal_units, target, seed=seed)
     tb = np.asarray(test_bound, float)
     te = np.asarray(test_error, float)
     calibrated = factor * (tb + margin) - margin if np.isfinite(factor) else np.full_like(tb, np.inf)
@@ -364,17 +631,16 @@ def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *,
         rel = np.asarray(test_released, bool)
         tl = coverage_figures(te[rel], np.asarray(test_translation_last, float)[rel], margin,
                               np.asarray(test_units)[rel], seed=seed)
-    cov, (low, high) = test.covered, test.ci
-    # an interval without finite ends (a single unit) excludes nothing: the tolerance decides alone
-    in_interval = low is not None and high is not None and low <= target <= high
-    outside = cov is None or (abs(cov - target) > COVERAGE_TOLERANCE and not in_interval)
-    failing = bool(outside and (cov is None or cov < target))
-    status = "failing" if failing else "conservative" if outside else "met"
+    low, high = test.ci
+    status = coverage_status(low, high, target)
+    conservative = low is not None and low > target + COVERAGE_TOLERANCE
     method = (f"split-conformal: factor = the ceil((n + 1) x {target:g})-th smallest of e / (b + m) over {n_cal} "
-              f"out-of-fold calibration samples; calibrated bound = factor x (b + m)")
+              f"out-of-fold calibration samples; calibrated bound = factor x (b + m); test coverage interval: "
+              f"{INTERVAL_METHOD}")
     return BoundCalibration(method=method, target=target, factor=factor, margin_m=margin,
                             noise_multiple=NOISE_MULTIPLE, noise_rms_m=float(noise_rms), n_calibration=n_cal,
-                            test=test, raw_test=raw, translation_last=tl, failing=failing, status=status)
+                            test=test, raw_test=raw, translation_last=tl, failing=status == "failed", status=status,
+                            conservative=conservative, calibration=spread)
 
 
 def _stored_bounds(setup, stage: str, robot, alpha, beta, n_jobs: int) -> BoundValues:
@@ -463,16 +729,17 @@ def check_bound(setup, split, final, test_errors, final_params: dict, noise, opt
     cal = calibrate_bound(np.where(cal_b.ok, cal_e, np.nan), cal_b.position,
                           np.where(test_b.ok, test_e, np.nan), test_b.position, split.units[test_rows],
                           noise_rms=sigma, target=options.bound_target,
-                          test_translation_last=test_b.translation_last, test_released=released, seed=options.seed)
+                          test_translation_last=test_b.translation_last, test_released=released,
+                          cal_units=split.units[cal_rows], seed=options.seed)
     logger.log(progress_level(), _bound_line(robot.friction_coefficients, cal))
     return cal
 
 
 def _bound_line(mu, cal: BoundCalibration) -> str:
     """The log line of :func:`check_bound` (mm, %): the raw bound's coverage of the test split's
-    measured tips, the calibrated factor and its coverage with its interval; a share over no
-    sample, a ratio without samples and an interval over one unit print as "undefined" (never
-    as 0 %).
+    measured tips, the calibrated factor and its coverage with its interval and status; a share
+    over no sample, a ratio without samples and an interval over fewer than :data:`MIN_UNITS`
+    units print as "undefined" (never as 0 %).
 
     Parameters
     ----------
@@ -485,8 +752,10 @@ def _bound_line(mu, cal: BoundCalibration) -> str:
     str
     """
     raw, t = cal.raw_test, cal.test
+    status = cal.status + (", conservative" if cal.conservative else "")
     return (f"friction bound (mu = {', '.join(f'{m:g}' for m in mu)}) on the test split: "
             f"{figure(raw.covered, '.0f', 100, ' %')} of {raw.n} measured tips within b + {cal.margin_m * 1e3:.2f} mm "
             f"(median e / (b + m) {figure(raw.ratio['median'], '.2f')}); calibrated bound = "
             f"{cal.factor:.3g} x (b + m) covers {figure(t.covered, '.0f', 100, ' %')} (interval "
-            f"{interval(t.ci[0], t.ci[1], '.0f', 100, ' %')}, target {100 * cal.target:.0f} %: {cal.status})")
+            f"{interval(t.ci[0], t.ci[1], '.0f', 100, ' %')}, target {100 * cal.target:.0f} %: {status}; "
+            f"{t.n_units} units)")

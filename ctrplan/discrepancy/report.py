@@ -27,12 +27,13 @@ from ..effects import REGISTRY
 from ..errors import DataFileError
 from ..io.atomic import atomic_write_text
 from ..io.ros2 import describe_bag_summary
-from .coverage import BOUND_DEFINITION
+from .coverage import BOUND_DEFINITION, COVERAGE_TOLERANCE, MIN_UNITS
 from .decision import no_effect_sentence
 from .envelope import PREDICTION_DESCRIPTION
 from .estimates import display_value
 from .evaluation import ErrorFigures
 from .logtext import UNDEFINED  # how the report prints a figure the data leave undefined (null or NaN)
+from .options import CONFIDENCE
 from .provenance import provenance
 
 __all__ = ["write_report", "write_report_from_results", "report_markdown", "results_dict", "candidate_dict",
@@ -127,16 +128,83 @@ def _pct(cmp: dict) -> str:
     return f"{100 * value:.0f} % {_interval_text(lo, hi, 100, 0, why, ' %')}"
 
 
+def _coverage_reason(d) -> str | None:
+    """Why a :class:`~ctrplan.discrepancy.coverage.Coverage` dict's interval is undefined: none,
+    no samples, or too few units for the bootstrap (fewer than
+    :data:`~ctrplan.discrepancy.coverage.MIN_UNITS`)."""
+    if not d.get("n"):
+        return "no samples"
+    n = _number(d.get("n_units"))
+    if n is None or n >= MIN_UNITS:
+        return None
+    return "no units" if n < 1 else "one unit" if n < 2 else f"{n:.0f} units, fewer than {MIN_UNITS}"
+
+
 def _share(d) -> str:
     """A :class:`~ctrplan.discrepancy.coverage.Coverage` dict's covered share in % with its
-    interval (ends None over one unit)."""
+    interval (ends None over fewer than :data:`~ctrplan.discrepancy.coverage.MIN_UNITS` units)."""
     d = d or {}
-    why = _count_reason(d.get("n_units"), "unit")
+    why = _coverage_reason(d)
     value = _number(d.get("covered"))
     if value is None:
         return _undefined("no samples" if not d.get("n") else why)
     lo, hi = _ends(d.get("ci"))
     return f"{100 * value:.0f} % {_interval_text(lo, hi, 100, 0, why, ' %')}"
+
+
+def _coverage_verdict(b: dict) -> str:
+    """The calibrated bound's test coverage with its interval, units and status, e.g.
+    ``89 % (95 % interval 81-95 %, 12 units): shown (...)``; an undefined interval says why."""
+    d = b.get("test") or {}
+    confidence = _number(b.get("confidence"))
+    level = "" if confidence is None else f"{100 * confidence:.0f} % "
+    tolerance = _number(b.get("tolerance"))
+    floor = f"the target less {100 * (COVERAGE_TOLERANCE if tolerance is None else tolerance):.0f} points"
+    value = _number(d.get("covered"))
+    lo, hi = _ends(d.get("ci"))
+    why = _coverage_reason(d)
+    units = _number(d.get("n_units"))
+    if value is None:
+        text = _undefined(why)
+    elif lo is None:
+        text = f"{100 * value:.0f} % (interval {UNDEFINED}{': ' + why if why else ''})"
+    else:
+        text = (f"{100 * value:.0f} % ({level}interval {100 * lo:.0f}-{100 * hi:.0f} %, {_num(units, '.0f')} "
+                f"units)")
+    status = b.get("status")
+    if status == "shown":
+        text += f": shown (the interval's lower end is at or above {floor})"
+    elif status == "failed":
+        text += f": **failed** (the interval's upper end is below {floor})"
+    elif status == "not shown":
+        text += (f": not shown (the interval reaches below {floor})" if lo is not None else
+                 ": not shown (without an interval)")
+    else:
+        text += f": {status} (as judged by an earlier version)" if status else ": status not recorded"
+    if b.get("conservative"):
+        text += (f"; conservative: the interval lies wholly above the target plus "
+                 f"{100 * (COVERAGE_TOLERANCE if tolerance is None else tolerance):.0f} points (the bound is wider "
+                 "than it needs to be)")
+    return text
+
+
+def _factor_spread_text(b: dict) -> str | None:
+    """The factor's spread over resampled development units, or None where results.json has none."""
+    c = b.get("calibration")
+    if not c:
+        return None
+    n = _number(c.get("n_units"))
+    why = _coverage_reason({"n": 1, "n_units": n})
+    ends = list(c.get("factor_ci") or [None, None])
+    f_lo, f_hi = _number(ends[0]), _number(ends[-1])
+    c_lo, c_hi = _ends(c.get("coverage_ci"))
+    if why or f_lo is None or c_lo is None:
+        return f"Over resampled development units the factor's spread is {_undefined(why or 'no finite factor')}."
+    factor = f"{f_lo:.3g}-{'inf' if f_hi is None else format(f_hi, '.3g')}"
+    return (f"Over resampled development units ({n:.0f} units) the factor ranges {factor}, and a factor "
+            f"calibrated on another draw of such units covers {100 * c_lo:.0f}-{100 * c_hi:.0f} % of the "
+            f"development tips (the conformal guarantee assumes exchangeable scores; out-of-fold errors along a "
+            f"motion are serially correlated).")
 
 
 def _value(row) -> str:
@@ -146,7 +214,9 @@ def _value(row) -> str:
     se = row.get("stderr")
     if se is not None:
         se = _number(se)
-        if se is None or not math.isfinite(se):
+        if se is None:
+            text += f" (standard error {_undefined('fewer than two clusters of units')})"
+        elif not math.isfinite(se):
             text += " (not determined by the data)"
         else:
             s = np.rad2deg(se) if row["unit"] == "rad" else se * 1e3 if row["unit"] == "m" else se
@@ -243,7 +313,10 @@ def _no_effect_text(results: dict) -> str:
     text = {"noise": f"no candidate is eligible, and the out-of-fold residual of the calibrated baseline ({rms}) is "
                      f"consistent with the sensor noise",
             "unexplained": f"the out-of-fold residual of the calibrated baseline ({rms}) is NOT consistent with noise: "
-                           f"the model misses something that no candidate explains"}.get(
+                           f"the model misses something that no candidate explains",
+            "inconclusive": f"no candidate is eligible; the out-of-fold residual of the calibrated baseline ({rms}) "
+                            f"exceeds the sensor noise, but that noise is only a lower bound: the noise test is "
+                            f"inconclusive, no evidence that the model misses something"}.get(
         case, f"no candidate is eligible; whether the out-of-fold residual ({rms}) is noise cannot be said")
     best = d.get("best")
     if best and best in (results.get("candidates") or {}):
@@ -486,10 +559,11 @@ def _bound_lines(results: dict) -> list[str]:
         margin = _number(b.get("margin_mm")) or 0.0
         return _fmt(None if median is None else median * 1e3 + margin, reason="no samples" if not d.get("n") else None)
 
-    status = b.get("status", "met")
+    confidence = _number(b.get("confidence"))
+    level = f"{100 * (CONFIDENCE if confidence is None else confidence):.0f} %"
     lines = ["## The friction bound against the measured tips (test split)", "", f"Definition: {b['definition']} "
              f"(m = {_num(b.get('margin_mm'), '.2f')} mm from {_num(b.get('noise_rms_mm'), '.3f')} mm rms noise).", "",
-             "| bound | samples | covered (95 % interval) | e / (b + m): median / p90 / max | median size [mm] |",
+             f"| bound | samples | covered ({level} interval) | e / (b + m): median / p90 / max | median size [mm] |",
              "|---|---|---|---|---|",
              f"| friction bound b + m | {raw['n']} | {_share(raw)} | {ratio(raw)} | {size(raw)} |",
              f"| calibrated bound {_num(b.get('factor'), '.3g')} x (b + m) | {cal['n']} | {_share(cal)} | "
@@ -498,11 +572,11 @@ def _bound_lines(results: dict) -> list[str]:
         lines.append(f"| translation-last bound + m (after a final translation of every pair) | {tl['n']} | "
                      f"{_share(tl)} | {ratio(tl)} | {size(tl)} |")
     target = _number(b.get("target"))
-    lines += ["", f"Calibrated bound: {b['method']}; target {_num(None if target is None else 100 * target, '.0f')} %: "
-                  + {"failing": "**FAILING** on the test split (its coverage falls short of the target).",
-                     "conservative": "conservative on the test split (its coverage exceeds the target by more than "
-                                     "5 points).",
-                     "met": "met on the test split within its interval or 5 points."}.get(status, f"{status}."), ""]
+    lines += ["", f"Calibrated bound: {b['method']}; target {_num(None if target is None else 100 * target, '.0f')} %; "
+                  f"coverage of the test split's tips {_coverage_verdict(b)}.", ""]
+    spread = _factor_spread_text(b)
+    if spread:
+        lines += [spread, ""]
     return lines
 
 
@@ -772,13 +846,17 @@ def _coverage_dict(c, *, error_median: bool) -> dict:
 
 def bound_dict(b) -> dict:
     """A :class:`~ctrplan.discrepancy.coverage.BoundCalibration` as ``results.json`` stores it (mm
-    where the key says so)."""
+    where the key says so): ``status`` one of "shown", "not shown", "failed", ``failing`` True
+    exactly when "failed", ``conservative``, the intervals' ``confidence`` and the status's
+    ``tolerance``, and ``calibration`` the factor's spread (``{"factor_ci", "coverage_ci",
+    "n_units"}``, null without it)."""
     return {"definition": BOUND_DEFINITION, "method": b.method, "target": b.target, "factor": b.factor,
             "margin_mm": b.margin_m * 1e3, "noise_multiple": b.noise_multiple, "noise_rms_mm": b.noise_rms_m * 1e3,
             "n_calibration": b.n_calibration, "test": _coverage_dict(b.test, error_median=True),
             "raw_test": _coverage_dict(b.raw_test, error_median=False),
             "translation_last": None if b.translation_last is None else b.translation_last.as_dict(),
-            "failing": b.failing, "status": b.status}
+            "failing": b.failing, "status": b.status, "conservative": b.conservative, "confidence": b.confidence,
+            "tolerance": b.tolerance, "calibration": None if b.calibration is None else b.calibration.as_dict()}
 
 
 def _envelope_dict(env) -> dict:

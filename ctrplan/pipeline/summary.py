@@ -148,7 +148,9 @@ def _bound_calibration(cal: CalibratedBound | None, weight: float) -> dict:
                      + ("-" if cov is None else f"{100 * cov:.0f} %") + f" coverage of measured tips (target "
                      f"{100 * cal.target_coverage:.0f} %) on {cal.data_file or 'unnamed data'}"
                      + ("; FAILING its target on the test split" if cal.failing else
-                        "; conservative on the test split" if cal.status == "conservative" else ""))}
+                        "; conservative on the test split" if (cal.conservative or cal.status == "conservative")
+                        else "; its coverage is not shown on the test split (its interval reaches below the "
+                             "target)" if cal.status == "not shown" else ""))}
 
 
 def plan_summary(run) -> dict:
