@@ -1,40 +1,167 @@
 """Statistics of the discrepancy workflow's decisions (ctrplan.discrepancy.statistics and .split),
 checked against what each claims, by simulation independent of the mechanics: the corrected
-comparison of cross-validated models (size where folds share a fitted model, power, the
-statistic itself), Holm's rule, intervals over units on serially correlated data, and the
-split's bookkeeping and buffers. The noise estimate and test are in test_discrepancy_noise.py."""
+comparison of cross-validated models (its size at the workflow's levels, 0.05, 0.01 and
+0.01 / 7, where folds share a fitted model or their training data, by exact binomial tests
+that fail the uncorrected comparison; its power; the statistic itself), Holm's rule, intervals
+over units on serially correlated data, and the split's bookkeeping and buffers. The noise
+estimate and test are in test_discrepancy_noise.py."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import stats
+from scipy import signal, stats
 
 from ctrplan.discrepancy.data import MeasuredData
 from ctrplan.discrepancy.split import choose_buffer, make_split, near_rows, residual_autocorrelation
-from ctrplan.discrepancy.statistics import cv_comparison, holm, mean_interval, ratio_interval, shrink_interval
+from ctrplan.discrepancy.statistics import (CORRECTED_METHOD, UNCORRECTED_METHOD, cv_comparison, holm, mean_interval,
+                                            ratio_interval, shrink_interval)
 from ctrplan.errors import DataFileError
 from ctrplan.history import MotionRecord
 
 
-def _binomial_upper(rate: float, n: int, z: float = 4.0) -> float:
-    """A rejection count's upper limit at ``z`` standard deviations (a test that fails only when
-    the rate is really off)."""
-    return rate + z * np.sqrt(rate * (1 - rate) / n)
-
-
 # --------------------------------------------------------------------------- cross-validated comparison
+#: A rejection count fails its size check when the exact one-sided binomial test against the
+#: nominal level gives p below this (a test of true size fails it at most once in 1000 runs).
+SIZE_CHECK_P = 1e-3
+#: The workflow's smallest level: options.significance 0.01, Holm over about 7 candidates.
+SMALLEST_LEVEL = 0.01 / 7
+
+
+def _too_many(count: int, n: int, alpha: float) -> bool:
+    """``count`` rejections in ``n`` records are significantly more than ``alpha n`` (exact
+    one-sided binomial test at :data:`SIZE_CHECK_P`)."""
+    return stats.binomtest(int(count), n, alpha, alternative="greater").pvalue < SIZE_CHECK_P
+
+
+def _detection_power(n: int, alpha: float, factor: float = 2.0) -> float:
+    """Probability that :func:`_too_many` fails a test of true size ``factor * alpha`` with ``n``
+    records."""
+    k = int(stats.binom.isf(SIZE_CHECK_P, n, alpha))
+    while stats.binom.sf(k - 1, n, alpha) >= SIZE_CHECK_P:        # smallest failing count
+        k += 1
+    return float(stats.binom.sf(k - 1, n, factor * alpha))
+
+
+def _ar1(rng, reps: int, n: int, phi: float) -> np.ndarray:
+    """``reps`` stationary AR(1) records of ``n`` samples, unit variance, shape (reps, n)."""
+    w = rng.normal(0.0, np.sqrt(1 - phi ** 2), (reps, n))
+    w[:, 0] = rng.normal(0.0, 1.0, reps)
+    return signal.lfilter([1.0], [1.0, -phi], w, axis=1)
+
+
+def _block_folds(blocks: int, per_block: int, n_folds: int = 10) -> np.ndarray:
+    """Fold of each of ``blocks * per_block`` samples: time blocks dealt to folds by
+    ``GroupKFold``, as the workflow's split deals them, shape (blocks * per_block,)."""
+    from sklearn.model_selection import GroupKFold
+
+    units = np.repeat(np.arange(blocks), per_block)
+    fold = np.zeros(units.size, int)
+    for k, (_, val) in enumerate(GroupKFold(n_folds).split(units, groups=units)):
+        fold[val] = k
+    return fold
+
+
+def _standardized(x: np.ndarray) -> np.ndarray:
+    """Each row to mean 0, standard deviation 1."""
+    x = x - x.mean(axis=1, keepdims=True)
+    return x / x.std(axis=1, keepdims=True)
+
+
+def _slow_regressor(rng, kind: str, reps: int, n: int) -> np.ndarray:
+    """A slowly varying regressor, shape (reps, n), standardized: ``"walk"`` a random walk (a
+    drifting signature), ``"switch"`` a square wave of random period (100 to 300 samples) with
+    jittered switching times (a dead band's signature, switching at the reversals)."""
+    if kind == "walk":
+        return _standardized(np.cumsum(rng.normal(size=(reps, n)), axis=1))
+    t = np.arange(n) / rng.uniform(100, 300, (reps, 1)) + rng.uniform(0, 1, (reps, 1))
+    return _standardized(np.sign(np.sin(2 * np.pi * t) + 0.3 * _ar1(rng, reps, n, 0.99)))
+
+
+def _out_of_fold_errors(x: np.ndarray, y: np.ndarray, fold: np.ndarray) -> np.ndarray:
+    """``|y - x beta_(-f)|`` at every sample of fold f, ``beta_(-f)`` the least-squares fit on the
+    other folds (all folds and records at once, from the per-fold normal equations).
+
+    Parameters
+    ----------
+    x : ndarray, shape (R, K, P)
+    y : ndarray, shape (R, K)
+    fold : ndarray of int, shape (K,)
+
+    Returns
+    -------
+    ndarray, shape (R, K)
+    """
+    gram = np.einsum("rkp,rkq->rpq", x, x)
+    moment = np.einsum("rkp,rk->rp", x, y)
+    beta = np.empty((x.shape[0], fold.max() + 1, x.shape[2]))
+    for f in range(fold.max() + 1):
+        val = fold == f
+        g = gram - np.einsum("rkp,rkq->rpq", x[:, val], x[:, val])
+        m = moment - np.einsum("rkp,rk->rp", x[:, val], y[:, val])
+        beta[:, f] = np.linalg.solve(g, m[..., None])[..., 0]
+    return np.abs(y - np.einsum("rkp,rkp->rk", x, beta[:, fold]))
+
+
+def _shared_fit_records(rng, reps: int, null: str, *, phi: float, kind: str, blocks: int = 40, per_block: int = 25,
+                        effect: float = 0.0, batch: int = 1000):
+    """Out-of-fold errors of two least-squares models on ``reps`` serially correlated records of
+    ``blocks`` time blocks of ``per_block`` samples, 10 folds, each fold's models fitted on the
+    other nine (so the folds' fitted coefficients are correlated through the data they share).
+
+    ``null="nested"``: truth ``y = x1 + effect z + e``, a the baseline ``[1, x1]``, b the
+    candidate ``[1, x1, z]`` with one extra, slowly varying regressor ``z`` (``kind``);
+    ``effect = 0`` is the null "b is not better". ``null="non-nested"``: truth
+    ``y = x0 + x1 + e``, a ``[1, x0]`` and b ``[1, x1]``, both regressors of ``kind``: two models
+    equally good. ``e`` is AR(1) of unit variance at ``phi``; ``x1`` in the nested case a random
+    walk.
+
+    Returns
+    -------
+    err_a, err_b : ndarray, shape (reps, blocks * per_block)
+    fold : ndarray of int, shape (blocks * per_block,)
+    """
+    fold = _block_folds(blocks, per_block)
+    n = fold.size
+    err_a, err_b = [], []
+    for start in range(0, reps, batch):
+        r = min(batch, reps - start)
+        e = _ar1(rng, r, n, phi)
+        one = np.ones((r, n))
+        if null == "nested":
+            x1 = _slow_regressor(rng, "walk", r, n)
+            z = _slow_regressor(rng, kind, r, n)
+            y = x1 + effect * z + e
+            a, b = np.stack([one, x1], -1), np.stack([one, x1, z], -1)
+        else:
+            x0, x1 = _slow_regressor(rng, kind, r, n), _slow_regressor(rng, kind, r, n)
+            y = x0 + x1 + e
+            a, b = np.stack([one, x0], -1), np.stack([one, x1], -1)
+        err_a.append(_out_of_fold_errors(a, y, fold))
+        err_b.append(_out_of_fold_errors(b, y, fold))
+    return np.concatenate(err_a), np.concatenate(err_b), fold
+
+
+def _rejections(err_a, err_b, fold, levels, *, corrected: bool | None = None) -> dict:
+    """:func:`cv_comparison` of every record (with its default, as the workflow calls it, unless
+    ``corrected`` is given): ``{"b": counts, "a": counts}``, the number of records where "b is
+    better" (``p_value``) and "a is better" (``p_worse``) is rejected at each of ``levels``,
+    shape (len(levels),)."""
+    how = {} if corrected is None else {"corrected": corrected}
+    p = np.array([[c.p_value, c.p_worse] for c in
+                  (cv_comparison(ea, eb, fold, **how) for ea, eb in zip(err_a, err_b))])
+    levels = np.asarray(levels)[:, None]
+    return {"b": np.sum(p[:, 0] < levels, axis=1), "a": np.sum(p[:, 1] < levels, axis=1)}
+
+
 def _fold_errors(rng, n_folds=10, units_per_fold=4, per_unit=10, fit_scatter=0.6, shift=0.0, phi=0.8):
     """Out-of-fold errors of two models with equal expected error (plus ``shift`` in favour of
     b) on a motion of ``n_folds x units_per_fold`` blocks: serially correlated noise shared by
-    both, and per fold one fitted offset per model (the fit of a fold errs the same way at
-    every sample it validates). Returns (err_a, err_b, fold, units)."""
+    both, and per fold one fitted offset per model, independent between folds (the fit of a fold
+    errs the same way at every sample it validates). Returns (err_a, err_b, fold, units)."""
     n_units = n_folds * units_per_fold
     k = n_units * per_unit
-    eps = np.zeros(k)
-    w = rng.normal(0, np.sqrt(1 - phi ** 2), k)
-    for i in range(1, k):
-        eps[i] = phi * eps[i - 1] + w[i]
+    eps = _ar1(rng, 1, k, phi)[0]
     units = np.repeat(np.arange(n_units), per_unit)
     fold = units % n_folds                              # blocks dealt round-robin, as GroupKFold does
     off_a = rng.normal(0, fit_scatter, n_folds)[fold]
@@ -44,23 +171,32 @@ def _fold_errors(rng, n_folds=10, units_per_fold=4, per_unit=10, fit_scatter=0.6
     return err_a, err_b, fold, units
 
 
+def test_size_checks_detect_twice_the_nominal_rate():
+    """The record counts of the size checks below detect a true rejection rate of twice the
+    nominal level with power > 0.9 (3000 records at 0.05 and 0.01, 20000 at 0.01 / 7), while a
+    test of nominal size fails them once in 1000 runs. Catches size checks too small to fail."""
+    assert _detection_power(3000, 0.05) > 0.9 and _detection_power(3000, 0.01) > 0.9
+    assert _detection_power(20000, SMALLEST_LEVEL) > 0.9
+    assert _detection_power(3000, SMALLEST_LEVEL) < 0.5          # why the smallest level needs more
+
+
 def test_fold_comparison_holds_its_size_where_a_test_over_units_does_not():
     """Two models with the same expected error, each fold validated by one fitted model whose
-    error is shared by all its samples: the t test clustered by fold rejects "b is better" in at
-    most its stated 5 % of 500 seeds (plus binomial slack), where a t test over units (treating
-    the units of one fold as independent) rejects far more often. Catches a comparison that
-    treats samples or units validated by one fit as independent observations."""
+    error is shared by all its samples: the test clustered by fold rejects "b is better" at 5 %
+    in 600 seeds no more often than the exact binomial test allows (power 0.94 against 10 %),
+    where a t test over units (treating the units of one fold as independent) rejects far more
+    often. Catches a comparison that treats samples or units validated by one fit as
+    independent observations."""
     rng = np.random.default_rng(20031)
-    reps, alpha = 500, 0.05
-    corrected = naive = 0
+    reps, alpha = 600, 0.05
+    clustered = naive = 0
     for _ in range(reps):
         a, b, fold, units = _fold_errors(rng)
-        out = cv_comparison(a, b, fold)
-        corrected += out.p_value < alpha
+        clustered += cv_comparison(a, b, fold).p_value < alpha
         d = np.array([np.mean((a - b)[units == u]) for u in np.unique(units)])
         naive += stats.t.sf(d.mean() / (d.std(ddof=1) / np.sqrt(d.size)), d.size - 1) < alpha
-    assert corrected / reps <= _binomial_upper(alpha, reps), corrected
-    assert naive / reps > 2 * alpha, naive
+    assert not _too_many(clustered, reps, alpha), clustered
+    assert _too_many(naive, reps, alpha), naive
 
 
 def test_fold_comparison_finds_a_real_improvement_and_its_interval_covers_it():
@@ -82,61 +218,103 @@ def test_fold_comparison_finds_a_real_improvement_and_its_interval_covers_it():
     assert covered / reps >= 0.9, covered
 
 
-def test_fold_comparison_is_the_clustered_t_statistic_of_log_ratios():
+def test_fold_comparison_finds_a_real_extra_effect_when_the_folds_share_their_training_data():
+    """A candidate with one extra, dead-band-like regressor whose true coefficient is 1.2 (the
+    noise's standard deviation 1, AR(1) at phi = 0.8), fitted without each of 10 folds: the
+    corrected test finds it at the workflow's smallest level 0.01 / 7 in at least 80 % of 300
+    records, and never finds the baseline better. Catches a correction that inflates the
+    variance so much that a real effect is no longer named."""
+    rng = np.random.default_rng(8123)
+    a, b, fold = _shared_fit_records(rng, 300, "nested", phi=0.8, kind="switch", effect=1.2)
+    hits = _rejections(a, b, fold, [SMALLEST_LEVEL])
+    assert hits["b"][0] / 300 >= 0.8, hits
+    assert hits["a"][0] == 0, hits
+
+
+@pytest.mark.parametrize("null, kind", [("non-nested", "switch"), ("nested", "switch"), ("nested", "walk")])
+def test_fold_comparison_holds_its_size_when_the_folds_share_their_training_data(null, kind):
+    """Nulls of the workflow, each fold's least-squares models fitted on the other nine folds of a
+    serially correlated record (AR(1), phi = 0.9, 40 blocks of 25 samples), so that the folds'
+    fitted coefficients are correlated through the training data they share: two non-nested
+    models equally good (both sides tested), or a candidate with one extra slowly varying
+    regressor of true coefficient 0 against its baseline ("candidate better" tested). In 3000
+    records the rejections at 0.05 and at 0.01 pass the exact binomial test against the level
+    (which detects twice the level with power > 0.9; the workflow's smallest level is checked in
+    the slow test below). In the non-nested case the uncorrected test fails the same check.
+    Catches a comparison whose level depends on folds being fitted on independent data (a
+    variance of s^2 / F), a one-sided test pointing the wrong way (the nested candidate is
+    worse out of fold), and a simulation too easy to tell the two apart."""
+    rng = np.random.default_rng({"non-nested": 4242, "nested": 4343}[null] + len(kind))
+    reps, levels = 3000, (0.05, 0.01)
+    a, b, fold = _shared_fit_records(rng, reps, null, phi=0.9, kind=kind)
+    sides = ("b", "a") if null == "non-nested" else ("b",)
+    hits = _rejections(a, b, fold, levels)
+    for side in sides:
+        for alpha, count in zip(levels, hits[side]):
+            assert not _too_many(count, reps, alpha), (side, alpha, count)
+    if null == "non-nested":
+        plain = _rejections(a, b, fold, levels, corrected=False)
+        for side in sides:
+            assert all(_too_many(count, reps, alpha) for alpha, count in zip(levels, plain[side])), (side, plain)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("null, kind", [("non-nested", "switch"), ("non-nested", "walk"), ("nested", "switch"),
+                                        ("nested", "walk")])
+def test_fold_comparison_holds_its_size_at_the_workflows_smallest_level(null, kind):
+    """As the test above at the levels 0.05, 0.01 and 0.01 / 7 (the smallest Holm level of the
+    workflow: significance 0.01 over about 7 candidates), with 20000 records (twice the
+    smallest level detected with power 0.92). In the non-nested case the uncorrected test fails
+    the same check at every level. Catches a test whose level holds at 5 % but not in the far
+    tail the workflow decides in (a t with too many degrees of freedom, a variance that is too
+    small)."""
+    rng = np.random.default_rng({"non-nested": 5151, "nested": 5252}[null] + len(kind))
+    reps, levels = 20000, (0.05, 0.01, SMALLEST_LEVEL)
+    a, b, fold = _shared_fit_records(rng, reps, null, phi=0.9, kind=kind)
+    sides = ("b", "a") if null == "non-nested" else ("b",)
+    hits = _rejections(a, b, fold, levels)
+    for side in sides:
+        for alpha, count in zip(levels, hits[side]):
+            assert not _too_many(count, reps, alpha), (side, alpha, count)
+    if null == "non-nested":
+        plain = _rejections(a, b, fold, levels, corrected=False)
+        for side in sides:
+            assert all(_too_many(count, reps, alpha) for alpha, count in zip(levels, plain[side])), (side, plain)
+
+
+def test_fold_comparison_is_the_corrected_t_statistic_of_log_ratios():
     """Four folds of 10 samples, model a's fold means 2, 4, 6, 12 against b's 1: log ratios ln 2,
-    ln 4, ln 6, ln 12, their mean over their standard error, t with 3 degrees of freedom; the
-    mean difference 5 with its t-interval over the folds."""
+    ln 4, ln 6, ln 12; their mean over its standard error s sqrt(1/4 + 10/30) (the Nadeau-Bengio
+    term n_validation / n_training = 1/3), t with 3 degrees of freedom; the mean difference 5
+    with its t-interval of the same variance; without the correction s / 2. A fifth fold of NaN
+    errors is left out, and a NaN sample in fold 0 leaves it 9 samples (term the mean of
+    9/30, 10/29, 10/29, 10/29). Catches a wrong variance factor, training counts that include
+    non-finite samples, and a method label that does not say which test was done."""
     a = np.repeat([2.0, 4.0, 6.0, 12.0], 10)
     fold = np.repeat(np.arange(4), 10)
-    out = cv_comparison(a, np.ones(40), fold)
     logs = np.log([2.0, 4.0, 6.0, 12.0])
-    se = np.std(logs, ddof=1) / 2.0
-    assert out.ratio == pytest.approx(np.exp(logs.mean()))
-    assert out.reduction == pytest.approx(1 - np.exp(-logs.mean()))
-    assert out.se == pytest.approx(se)
-    assert out.p_value == pytest.approx(stats.t.sf(logs.mean() / se, 3))
-    assert out.mean_difference == pytest.approx(5.0)
-    assert out.ci[1] - 5.0 == pytest.approx(stats.t.ppf(0.975, 3) * np.std([1, 3, 5, 11], ddof=1) / 2.0)
-    assert out.dof == 3 and out.positive_folds == 4
-
-
-def test_fold_comparison_holds_its_size_when_the_folds_share_their_training_data():
-    """Two least-squares models as good as each other (each misses one of two equally strong,
-    slowly varying regressors of the truth), fitted without each of 10 folds of a serially
-    correlated record, so that the folds' fitted coefficients are correlated through the
-    training data they share: "b is better" is rejected at 5 % in at most 5 % of 300 seeds (plus
-    binomial slack), and so is "a is better". Catches a comparison whose level depends on folds
-    being fitted on independent data."""
-    from sklearn.model_selection import GroupKFold
-
-    rng = np.random.default_rng(4242)
-    reps, alpha = 300, 0.05
-    hits = {"b": 0, "a": 0}
-    n, blocks = 1000, 40
-    units = np.arange(n) // (n // blocks)
-    for _ in range(reps):
-        x = np.cumsum(rng.normal(size=(n, 2)), axis=0)
-        x = (x - x.mean(axis=0)) / x.std(axis=0)
-        e = np.zeros(n)
-        w = rng.normal(0, 0.6, n)
-        for i in range(1, n):
-            e[i] = 0.8 * e[i - 1] + w[i]
-        y = x[:, 0] + x[:, 1] + e
-        fold = np.zeros(n, int)
-        for k, (_, val) in enumerate(GroupKFold(10).split(x, groups=units)):
-            fold[val] = k
-        err = np.zeros((2, n))
-        for k in range(10):
-            train, val = fold != k, fold == k
-            for m in (0, 1):
-                X = np.column_stack([np.ones(n), x[:, m]])
-                coef = np.linalg.lstsq(X[train], y[train], rcond=None)[0]
-                err[m, val] = np.abs(y[val] - X[val] @ coef)
-        out = cv_comparison(err[0], err[1], fold)
-        hits["b"] += out.p_value < alpha
-        hits["a"] += out.p_worse < alpha
-    for side, count in hits.items():
-        assert count / reps <= _binomial_upper(alpha, reps), (side, count)
+    for corrected, factor in ((True, 1 / 4 + 1 / 3), (False, 1 / 4)):
+        out = cv_comparison(np.append(a, [np.nan] * 3), np.ones(43), np.append(fold, [4] * 3), corrected=corrected)
+        se = np.std(logs, ddof=1) * np.sqrt(factor)
+        assert out.ratio == pytest.approx(np.exp(logs.mean()))
+        assert out.reduction == pytest.approx(1 - np.exp(-logs.mean()))
+        assert out.se == pytest.approx(se)
+        assert out.t == pytest.approx(logs.mean() / se)
+        assert out.p_value == pytest.approx(stats.t.sf(logs.mean() / se, 3))
+        assert out.p_worse == pytest.approx(stats.t.cdf(logs.mean() / se, 3))
+        assert out.ratio_ci[1] == pytest.approx(np.exp(logs.mean() + stats.t.ppf(0.975, 3) * se))
+        assert out.mean_difference == pytest.approx(5.0)
+        half = stats.t.ppf(0.975, 3) * np.std([1, 3, 5, 11], ddof=1) * np.sqrt(factor)
+        assert out.ci[1] - 5.0 == pytest.approx(half)
+        assert out.dof == 3 and out.positive_folds == 4 and out.n_folds == 4 and out.n_samples == 40
+        assert out.validation_to_training == pytest.approx(factor - 1 / 4)
+        assert out.as_dict()["validation_to_training"] == out.validation_to_training
+    assert out.method == UNCORRECTED_METHOD and "not corrected" in out.method
+    assert cv_comparison(a, np.ones(40), fold).method == CORRECTED_METHOD and "Nadeau-Bengio" in CORRECTED_METHOD
+    a[0] = np.nan
+    out = cv_comparison(a, np.ones(40), fold)
+    assert out.n_samples == 39
+    assert out.validation_to_training == pytest.approx(np.mean([9 / 30, 10 / 29, 10 / 29, 10 / 29]))
 
 
 def test_holm_steps_down_and_stops_at_the_first_failure():
