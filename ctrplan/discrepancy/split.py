@@ -17,6 +17,13 @@ fits that are judged there (hv-block cross-validation: Burman, Chow & Nolan, Bio
 81(2):351, 1994; Racine, J. Econometrics 99:39, 2000). ``h`` is the lag at which the residuals'
 autocorrelation has fallen to :data:`BUFFER_AUTOCORRELATION` (:func:`choose_buffer`), at most
 half a block.
+
+The buffer is chosen from the residuals of a fit on the development data (the pilot fit), so
+after the test split is fixed and before any fold is fitted. When the autocorrelation needs a
+buffer longer than half a block, the development stretches between test blocks are re-cut into
+fewer, longer blocks and the folds dealt again, as long as the folds keep
+:data:`MIN_UNITS_PER_FOLD` units each and every fit more samples than parameters
+(:func:`lengthen_blocks`); the test split keeps its blocks and rows.
 """
 
 from __future__ import annotations
@@ -31,8 +38,9 @@ from ..errors import DataFileError
 from .data import MeasuredData
 
 __all__ = ["DataSplit", "make_split", "split_samples", "configurations_repeat", "sample_units", "subsample",
-           "choose_buffer", "residual_autocorrelation", "near_rows", "MIN_BLOCK_SAMPLES", "MAX_BLOCKS",
-           "MIN_TEST_UNITS", "MAX_FOLDS", "MIN_UNITS_PER_FOLD", "BUFFER_AUTOCORRELATION"]
+           "choose_buffer", "lengthen_blocks", "choose_blocks", "residual_autocorrelation", "near_rows",
+           "MIN_BLOCK_SAMPLES", "MAX_BLOCKS", "MIN_TEST_UNITS", "MAX_FOLDS", "MIN_UNITS_PER_FOLD",
+           "BUFFER_AUTOCORRELATION"]
 
 logger = logging.getLogger(__name__)
 
@@ -114,6 +122,42 @@ def sample_units(data: MeasuredData, n_blocks: int | None = None) -> tuple[np.nd
         units[idx] = s * 1_000_000 + np.arange(idx.size) // block
     _, units = np.unique(units, return_inverse=True)
     return units.ravel(), "time block", block
+
+
+def _development_runs(data: MeasuredData, test_rows: np.ndarray) -> list:
+    """The stretches of consecutive development samples of each sequence (between test blocks
+    and the sequence's ends): a list of index arrays into ``data``, in record order."""
+    _, q = np.unique(data.sequence, return_inverse=True)
+    q = q.ravel()
+    runs = []
+    for s in np.unique(q):
+        idx = np.flatnonzero(q == s)
+        dev = np.concatenate([[0], (~test_rows[idx]).astype(np.int8), [0]])
+        edges = np.flatnonzero(np.diff(dev))
+        runs.extend(idx[a:b] for a, b in zip(edges[::2], edges[1::2]))
+    return runs
+
+
+def _count_blocks(runs: list, length: int) -> int:
+    """Blocks of at least ``length`` samples the stretches ``runs`` are cut into (a shorter
+    stretch is one block)."""
+    return int(sum(max(1, r.size // length) for r in runs))
+
+
+def _recut_development(data: MeasuredData, units: np.ndarray, test_rows: np.ndarray, length: int) -> np.ndarray:
+    """Units, shape (K,), with the test units kept and every development stretch cut into
+    ``max(1, n // length)`` blocks of equal length (``n`` its samples); numbered in record order
+    of their first sample."""
+    n = units.size
+    first = np.full(int(units.max()) + 1, n, dtype=np.int64)
+    np.minimum.at(first, units, np.arange(n))
+    key = first[units]
+    for run in _development_runs(data, test_rows):
+        m = max(1, run.size // length)
+        sub = np.arange(run.size) * m // run.size
+        key[run] = run[np.searchsorted(sub, sub)]
+    _, out = np.unique(key, return_inverse=True)
+    return out.ravel()
 
 
 def subsample(data: MeasuredData, rows: np.ndarray, limit: int, seed: int) -> np.ndarray:
@@ -244,6 +288,138 @@ def choose_buffer(residual, data: MeasuredData, block_samples: int | None) -> tu
                  f"{acf[min(cap + 1, acf.size - 1)]:.2f} at lag {cap + 1} (lag 1: {acf[1]:.2f})")
 
 
+def lengthen_blocks(split: "DataSplit", residual, *, test_fraction: float = 0.2, n_blocks: int | None = None,
+                    n_folds: int | None = None, min_fit_samples: int = 1) -> "DataSplit":
+    """The split with its buffer, the development blocks lengthened when the residuals'
+    autocorrelation needs a buffer longer than half a block.
+
+    The buffer ``h`` the residuals need is the one of :func:`choose_buffer` without its cap. When
+    ``h`` exceeds half a block, the stretches of development samples between test blocks are
+    re-cut into blocks of at least ``2 h`` samples and the folds dealt again (:func:`make_split`
+    with ``development_block``), so that ``h`` is at most half a block. That is done only while
+    the blocks stay within the stretches, at least :data:`MIN_UNITS_PER_FOLD` development units
+    per fold remain (``n_folds`` folds, else two) and every fit (all development samples, each
+    fold) keeps ``min_fit_samples`` calibration samples outside the buffers; else the buffer is
+    the longest that keeps them (half such a block), and ``buffer_note`` says how far the
+    autocorrelation still is from :data:`BUFFER_AUTOCORRELATION`. The test split keeps its
+    blocks and rows: it was chosen before the residuals, which come from a fit that never saw it.
+
+    Parameters
+    ----------
+    split : DataSplit
+        Made by :func:`make_split` with the arguments below; its buffer is replaced.
+    residual : array-like, shape (N, 3)
+        Residual vectors at the N development samples of ``split``, in order [m] (of a fit on the
+        development data, e.g. the pilot fit; rows with NaN are left out).
+    test_fraction, n_blocks, n_folds
+        The arguments ``split`` was made with. Blocks asked for (``n_blocks``) are not lengthened.
+    min_fit_samples : int
+        Calibration samples every fit keeps at least when the blocks are lengthened.
+
+    Returns
+    -------
+    DataSplit
+        With ``buffer``, ``buffer_note`` and ``buffer_autocorrelation``; when lengthened, with the
+        development units re-cut, the folds dealt again and ``block_samples`` the development
+        blocks' length.
+
+    Raises
+    ------
+    ValueError
+        ``residual`` not of shape (N, 3), or arguments that do not give back ``split``'s test
+        split.
+    """
+    dev_data = split.data.take(split.dev_rows)
+    residual = np.asarray(residual, float)
+    if residual.shape != (dev_data.n_samples, 3):
+        raise ValueError(f"residual must have shape ({dev_data.n_samples}, 3) (the development samples), "
+                         f"got {residual.shape}")
+    block = split.block_samples
+    if not block:
+        return split.with_buffer(*choose_buffer(residual, dev_data, None))
+    runs = _development_runs(split.data, split.test_rows)
+    longest = max(max((r.size for r in runs), default=0), block)
+    acf = residual_autocorrelation(residual, dev_data, longest // 2 + 1)
+    below = np.flatnonzero(np.nan_to_num(acf[1:], nan=0.0) <= BUFFER_AUTOCORRELATION)
+    needed = int(below[0]) if below.size else None     # buffer reaching the threshold; None: none within a stretch
+    if needed is not None and needed <= block // 2:
+        buffer, why = choose_buffer(residual, dev_data, block)
+        return split.with_buffer(buffer, why, acf[buffer + 1])
+    min_units = MIN_UNITS_PER_FOLD * (n_folds if n_folds is not None else 2)
+
+    def lengthened(h: int) -> DataSplit | None:
+        """The split re-cut for a buffer of ``h`` samples, or None when it breaks a minimum."""
+        if _count_blocks(runs, 2 * h) < min_units:
+            return None
+        new = make_split(split.data, test_fraction=test_fraction, n_blocks=n_blocks, n_folds=n_folds,
+                         max_fit_samples=split.max_fit_samples, seed=split.seed, development_block=2 * h)
+        if not np.array_equal(new.test_rows, split.test_rows):
+            raise ValueError("test_fraction, n_blocks and n_folds must be the ones the split was made with "
+                             "(they give another test split)")
+        new = new.with_buffer(h, "")
+        fits = min(int(new.calibration_rows(k).sum()) for k in [None, *range(new.n_folds)])
+        return new if fits >= min_fit_samples else None
+
+    # the longest buffer in (block // 2, top] whose split keeps the minimums (bisection: a longer
+    # buffer only removes samples from the fits and units from the folds)
+    top = longest // 2 if needed is None else min(needed, longest // 2)
+    best, lo, hi = None, block // 2, top
+    if n_blocks is None and top > block // 2:
+        best = lengthened(top)
+        lo = top if best is not None else lo
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            found = lengthened(mid)
+            lo, hi, best = (mid, hi, found) if found is not None else (lo, mid, best)
+    if best is None:
+        buffer, why = choose_buffer(residual, dev_data, block)
+        why += (" (blocks as asked, not lengthened)" if n_blocks is not None else
+                f" (longer blocks would cut across test blocks, or leave fewer than {min_units} development "
+                f"units or {min_fit_samples} calibration sample{'s' if min_fit_samples != 1 else ''} in a fit)")
+        return split.with_buffer(buffer, why, acf[buffer + 1])
+    buffer = best.buffer
+    grown = f"development blocks lengthened from {block} to at least {best.block_samples} samples"
+    if buffer == needed:
+        why = (f"{buffer} samples: the residuals' autocorrelation falls to {BUFFER_AUTOCORRELATION:g} at lag "
+               f"{buffer + 1} (lag 1: {acf[1]:.2f}); {grown} so that it is at most half a block")
+    else:
+        why = (f"{buffer} samples (half a block, the most allowed): the residuals' autocorrelation is still "
+               f"{acf[buffer + 1]:.2f} at lag {buffer + 1} (lag 1: {acf[1]:.2f}); {grown}, the longest within the "
+               f"stretches between test blocks that leave {min_units} development units and "
+               f"{min_fit_samples} calibration sample{'s' if min_fit_samples != 1 else ''} in every fit")
+    return best.with_buffer(buffer, why, acf[buffer + 1])
+
+
+def choose_blocks(setup, split: "DataSplit", residual, options) -> "DataSplit":
+    """Stage 3a, after the pilot fit: the buffer and the development blocks' length
+    (:func:`lengthen_blocks`, every fit keeping more samples than the baseline's parameters plus
+    the largest effect's) from the pilot fit's residuals. The pilot fit uses neither the folds
+    nor the buffer, so nothing fitted before is redone.
+
+    Parameters
+    ----------
+    setup : DiscrepancySetup
+    split : DataSplit
+        Of :func:`split_samples`.
+    residual : array-like, shape (N, 3)
+        The pilot fit's residual vectors at the N development samples of ``split`` [m] (the
+        baseline fitted on the development samples without a prior,
+        :func:`~ctrplan.discrepancy.baseline.pilot_fit`).
+    options : DiscrepancyOptions
+        The ones ``split`` was made with.
+
+    Returns
+    -------
+    DataSplit
+        With the buffer; with longer development blocks and the folds dealt again when lengthened.
+    """
+    out = lengthen_blocks(split, residual, test_fraction=options.test_fraction, n_blocks=options.n_blocks,
+                          n_folds=options.n_folds, min_fit_samples=_fit_minimum(setup) + 1)
+    if out.block_samples != split.block_samples:
+        logger.log(progress_level(), f"  blocks: {out.how}; buffer: {out.buffer_note}")
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class DataSplit:
     """Stage 2: which samples are used for what.
@@ -256,7 +432,8 @@ class DataSplit:
         Unit of every sample (never cut by the split).
     unit_kind : {"time block", "configuration group"}
     block_samples : int or None
-        Samples per time block.
+        Samples per development time block (at least; a shorter stretch between test blocks is
+        one block). The test split's blocks keep the length they were chosen with (``how``).
     test_rows : ndarray of bool, shape (K,)
         The untouched test split.
     fold : ndarray of int, shape (K,)
@@ -270,6 +447,10 @@ class DataSplit:
         test); 0 until :meth:`with_buffer`.
     buffer_note : str
         Why that many.
+    buffer_autocorrelation : float
+        The residuals' autocorrelation at lag ``buffer + 1``, the nearest samples a fit keeps to
+        the blocks it is judged on [-]; NaN when not known (configuration groups, no buffer
+        chosen from residuals).
     data : MeasuredData
         The samples (for the buffers' record positions).
     """
@@ -286,6 +467,7 @@ class DataSplit:
     data: MeasuredData
     buffer: int = 0
     buffer_note: str = "not yet chosen"
+    buffer_autocorrelation: float = float("nan")
 
     @property
     def dev_rows(self) -> np.ndarray:
@@ -308,9 +490,10 @@ class DataSplit:
     def n_dev_units(self) -> int:
         return int(np.unique(self.units[self.dev_rows]).size)
 
-    def with_buffer(self, buffer: int, note: str) -> "DataSplit":
-        """The same split with a buffer of ``buffer`` samples (:func:`choose_buffer`)."""
-        return replace(self, buffer=int(buffer), buffer_note=note)
+    def with_buffer(self, buffer: int, note: str, autocorrelation: float = float("nan")) -> "DataSplit":
+        """The same split with a buffer of ``buffer`` samples (:func:`choose_buffer`) and the
+        residuals' ``autocorrelation`` at lag ``buffer + 1``."""
+        return replace(self, buffer=int(buffer), buffer_note=note, buffer_autocorrelation=float(autocorrelation))
 
     def calibration_rows(self, k: int | None = None) -> np.ndarray:
         """Rows fold ``k``'s model may be fitted on, shape (K,) bool: every development fold but
@@ -342,11 +525,14 @@ class DataSplit:
                 "fit_samples": [int(self.fit_rows(self.data, k).sum()) for k in [None, *range(self.n_folds)]],
                 "max_fit_samples": self.max_fit_samples, "buffer_samples": self.buffer,
                 "buffer_note": self.buffer_note,
+                "buffer_autocorrelation": (None if not np.isfinite(self.buffer_autocorrelation)
+                                           else float(self.buffer_autocorrelation)),
                 "development_first_last": [int(np.flatnonzero(dev)[0]), int(np.flatnonzero(dev)[-1])]}
 
 
 def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int | None = None,
-               n_folds: int | None = None, max_fit_samples: int = 300, seed: int = 0) -> DataSplit:
+               n_folds: int | None = None, max_fit_samples: int = 300, seed: int = 0,
+               development_block: int | None = None) -> DataSplit:
     """Hold back a test split and deal the rest into cross-validation folds, whole units at a time.
 
     Parameters
@@ -366,6 +552,11 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
     max_fit_samples : int
         Samples a fit uses at most.
     seed : int
+    development_block : int, optional
+        For time blocks longer than the ones the test split is chosen with: every stretch of
+        development samples between test blocks is cut into blocks of at least this many
+        samples (a shorter stretch is one block) before the folds are dealt; the test split is
+        the one chosen without it (:func:`lengthen_blocks`).
 
     Returns
     -------
@@ -375,7 +566,7 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
     Raises
     ------
     DataFileError
-        Fewer units than the test split and two folds need.
+        Fewer units than the test split and two folds need (also after ``development_block``).
     ValueError
         Options out of range.
     """
@@ -401,6 +592,14 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
     else:
         test_ids = rng.choice(ids, size=n_test, replace=False)
     test = np.isin(units, test_ids)
+    recut = kind == "time block" and development_block is not None and development_block > block
+    if recut:
+        units = _recut_development(data, units, test, int(development_block))
+        n_dev_units = int(np.unique(units[~test]).size)
+        folds = n_folds if n_folds is not None else min(MAX_FOLDS, n_dev_units // MIN_UNITS_PER_FOLD)
+        if folds < 2 or n_dev_units < folds:
+            raise DataFileError(f"{data.file}: development blocks of at least {development_block} samples leave "
+                                f"{n_dev_units} development units, too few for {max(folds, 2)} cross-validation folds")
     fold = np.full(data.n_samples, -1, dtype=int)
     dev_idx = np.flatnonzero(~test)
     for k, (_, val) in enumerate(GroupKFold(n_splits=folds).split(dev_idx, groups=units[dev_idx])):
@@ -414,10 +613,21 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
                  f"{MAX_FOLDS} at most, with at least {MIN_UNITS_PER_FOLD} development units each")
     how = (f"{ids.size} {kind}s" + (f" of {block} samples" if block else "") + why_blocks
            + f"; test split: {test_ids.size} units ({int(test.sum())} samples; {why_test}) held back before any fit; "
-             f"development: {ids.size - test_ids.size} units ({dev_idx.size} samples) in {folds} cross-validation "
-             f"folds (GroupKFold; {why_folds}){note}")
+             f"development: {n_dev_units} units ({dev_idx.size} samples"
+           + (f"; the stretches between test blocks re-cut into blocks of at least {int(development_block)} "
+              f"samples, a shorter stretch whole" if recut else "")
+           + f") in {folds} cross-validation folds (GroupKFold; {why_folds}){note}")
+    block = int(development_block) if recut else block
     return DataSplit(how=how, units=units, unit_kind=kind, block_samples=block, test_rows=test, fold=fold,
                      n_folds=folds, max_fit_samples=max_fit_samples, seed=seed, data=data)
+
+
+def _fit_minimum(setup) -> int:
+    """The baseline's parameters plus the largest effect's: a fit needs more samples."""
+    from .setup import effect_parameters
+
+    largest = max((len(effect_parameters(setup.robot, e, setup.data)) for e in setup.effects), default=0)
+    return len(setup.base_names) + largest
 
 
 def split_samples(setup, options) -> DataSplit:
@@ -439,14 +649,11 @@ def split_samples(setup, options) -> DataSplit:
         Too few units, or no more samples per fit than the baseline's parameters plus the
         largest effect's.
     """
-    from .setup import effect_parameters
-
-    data, robot = setup.data, setup.robot
+    data = setup.data
     split = make_split(data, test_fraction=options.test_fraction, n_blocks=options.n_blocks, n_folds=options.n_folds,
                        max_fit_samples=options.max_calibration_samples, seed=options.seed)
     n_fit = min(int(split.fit_rows(data, k).sum()) for k in range(split.n_folds))
-    largest = max((len(effect_parameters(robot, e, data)) for e in setup.effects), default=0)
-    if n_fit <= len(setup.base_names) + largest:
+    if n_fit <= _fit_minimum(setup):
         raise DataFileError(f"{data.file}: {n_fit} calibration samples per fold are not more than the "
                             f"{len(setup.base_names)} baseline parameters plus the largest effect's; give more samples")
     logger.log(progress_level(), f"data: {data.n_samples} samples ({data.frame} frame) from {data.file}; {split.how}")

@@ -58,6 +58,7 @@ from .baseline import Baseline, calibrate_baseline, pilot_fit
 from .coverage import BoundCalibration, check_bound
 from .decision import Naming, NoiseCheck, check_noise, name_effect
 from .envelope import HistoryPrediction, predict_with_history
+from .evaluation import evaluate_rows
 from .fitting import CrossValidated, fit_candidates, refit_contact_baseline
 from .options import DiscrepancyOptions
 from .output import (PredictionCheck, Reproduction, TestSplit, UpdatedModel, check_reproduction, evaluate_test_split,
@@ -65,7 +66,7 @@ from .output import (PredictionCheck, Reproduction, TestSplit, UpdatedModel, che
 from .pairs import Combination, fit_second_effect
 from .setup import DiscrepancySetup, load_inputs
 from .signatures import diagnose_residuals
-from .split import DataSplit, split_samples
+from .split import DataSplit, choose_blocks, split_samples
 
 __all__ = ["run_discrepancy", "DiscrepancyOptions", "DiscrepancyResult", "STAGES", "CANDIDATE_STAGE"]
 
@@ -300,7 +301,11 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     with clock.stage("split"):
         split = split_samples(setup, options)
     with clock.stage("baseline"):
-        split, scale, _ = pilot_fit(setup, split, options)
+        split, scale, pilot = pilot_fit(setup, split, options)
+        # the pilot's residuals at the development samples (stored by pilot_fit, read back)
+        residual = evaluate_rows(setup, split.dev_rows, "pilot-residual", "standard",
+                                 dict(zip(*pilot.all_parameters())), n_jobs=options.n_jobs).residual_base
+        split = choose_blocks(setup, split, residual, options)
         baseline = calibrate_baseline(setup, split, options, progress, residual_scale=scale)
     with clock.stage("signature_tests"):
         tests = diagnose_residuals(setup, split, baseline, options)
