@@ -33,22 +33,58 @@ processes), else one after the other here. ``--run-first`` runs the cases of the
 before the others (the cases themselves do not change): until all planned cases are finished,
 the results file holds a chosen subset, and the docs table names its seeds.
 
-Outcomes: **right** (the named effects are the truth), **partly right** (of two hidden effects,
-one is named and nothing else), **ambiguous with truth** (the truth is one of an ambiguous pair),
-**wrong** (a named effect, or both of an ambiguous pair, not in the truth; any name on a control),
-**nothing**. A name that carries a caution counts like any other. Rates with Clopper-Pearson
-intervals (two-sided 90 %, whose upper end is the one-sided 95 % bound). Targets: wrong names
-below 5 %, the interval's upper end below 15 %; the truth named (right, partly right) or in the
-ambiguous pair in at least 85 % of the cases whose hidden effects are all above 30 % of their
-typical range.
+What the truth and the reference share with the code under test: the robot description
+(``ctrplan.robot``: its dataclasses, joint vector and configuration), the robot files' reader
+(``ctrplan.io.robot_file``), and, in the reference solvers, the arc-length grid
+(``ctrplan.mechanics.grid``), the rotation helpers (``ctrplan.mechanics._lie``), the discrete tube
+chain's kinematics (``ctrplan.mechanics.discrete``, contact model), the solution and settings
+records (``ctrplan.mechanics.results``), ``ctrplan.constants`` and ``ctrplan.errors``
+(``tests/reference/bound_reference.py``, which the synthesizer does not use, also takes
+``ctrplan.mechanics.bound``). What they do not share: the solvers themselves (``ctrplan.mechanics``
+standard and contact solves), ``ctrplan.history``, ``ctrplan.effects`` and
+``ctrplan.discrepancy``: the truth robot (:func:`_truth_robot`) changes the tube fields itself
+rather than through the parameters the workflow fits. Only the drawing of a case
+(:func:`plan_case`) reads the effect registry's typical ranges and the workflow's list of
+baseline parameters, to choose sizes and which tube parameters are off.
+
+Outcomes (:func:`outcome`; a name that carries a caution counts like any other):
+
+- **right**: verdict "named", the named effects are exactly the hidden ones, and every value the
+  written robot file holds for them is within 3 standard errors of the true value or within 20 %
+  of it (an effect that follows another, gradual friction after friction, is checked on the other
+  one's parameters too, against their hidden values);
+- **right name, value off**: the names are the truth but a written value is outside both;
+- **partly right**: of two hidden effects, exactly one is named and nothing else;
+- **ambiguous**: an ambiguous verdict whose written effect is in the truth (never counted as
+  found);
+- **wrong**: a named effect not in the truth, any name on a control, or an ambiguous verdict whose
+  written effect is not in the truth;
+- **nothing**: verdict "none".
+
+The standard errors are those of the final model's development fit (the named effect's table,
+or the named pair's); where one is missing or not finite, only the 20 % rule applies. Every
+recorded case is scored again by the present rules when the results file is written
+(``--results-only`` does only that); a case recorded without standard errors is judged by the
+20 % rule alone. The results file's ``provenance`` holds ``sweep_code_sha256``
+(:func:`sweep_code_digest`: this file and the reference synthesizer) beside the digest of the
+code under test.
+
+Every outcome's rate has a two-sided 90 % Clopper-Pearson interval. Targets, each ``met`` true,
+false or null (no such cases) in the results file: wrong names (controls included) below 5 % and
+the interval's upper end below 10 %; the truth named alone (right, or right name with a value off)
+in at least 80 % of the clear one-effect cases; both effects named in at least half of the clear
+two-effect cases. A case is clear when every hidden effect is above 30 % of its typical range
+(:data:`CLEAR_SIZE`).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import itertools
 import json
 import logging
+import math
 import os
 import sys
 import time
@@ -76,10 +112,25 @@ MISSPECIFICATION = (0.05, 0.15)
 NOISE_M = 0.5e-3
 AR1 = (0.0, 0.6, 0.85)
 SAMPLES = 500
-OUTCOMES = ("right", "partly right", "ambiguous with truth", "wrong", "nothing")
+OUTCOMES = ("right", "right name, value off", "partly right", "ambiguous", "wrong", "nothing")
+#: Outcomes in which the hidden effects are named, alone, with an unambiguous verdict.
+NAMED_ALONE = ("right", "right name, value off")
 #: Cases whose hidden effects are all above this share of their typical range count for the
-#: target on finding the truth.
+#: targets on finding the truth.
 CLEAR_SIZE = 0.3
+#: A written value is right within this many standard errors of the true value ...
+VALUE_STDERRS = 3.0
+#: ... or within this share of it.
+VALUE_SHARE = 0.2
+#: Targets: wrong names below this rate, and the upper end of their 90 % interval below the next.
+WRONG_RATE_BELOW = 0.05
+WRONG_UPPER_BELOW = 0.10
+#: The truth named alone in at least this share of the clear one-effect cases ...
+ONE_NAMED_AT_LEAST = 0.8
+#: ... and both effects named in at least this share of the clear two-effect cases.
+BOTH_NAMED_AT_LEAST = 0.5
+#: Level of the two-sided Clopper-Pearson intervals of the rates.
+CI_LEVEL = 0.90
 
 
 def _draw_size(spec, share, rng) -> float:
@@ -139,37 +190,180 @@ def plan_case(seed: int, index: int) -> dict:
             "size_shares": shares, "tube_errors": errors, "ar1": float(rng.choice(AR1)), "noise_m": NOISE_M}
 
 
-def _truth_robot(plan: dict):
-    import numpy as np
+def _curved(sections) -> list:
+    """Indices of the curved sections (a section is straight when both precurvatures are 0)."""
+    return [j for j, sec in enumerate(sections) if sec.precurvature[0] != 0.0 or sec.precurvature[1] != 0.0]
 
-    from ctrplan.discrepancy.parameters import apply_parameters, read_parameters
+
+def _truth_robot(plan: dict):
+    """The base file's robot with its friction coefficients at 0, and the truth: that robot with
+    the plan's tube-parameter errors, the hidden off-plane precurvatures and friction coefficients.
+
+    Made from the robot description alone, changing the tube fields directly (no
+    ``ctrplan.discrepancy`` and no ``ctrplan.effects``, whose parameters the workflow fits):
+
+    - ``precurvature_y_i`` (error e): the in-plane precurvature ``u_y`` of the first curved
+      section of tube i becomes ``u_y (1 + e)``; every other curved section of the tube is scaled
+      by the same factor (the new value over the old one, in that order of operations);
+    - ``k_xy_relative_i`` (error e): tube i's bending stiffness relative to tube 1,
+      ``k_xy_i / k_xy_1``, becomes ``(k_xy_i / k_xy_1) (1 + e)``; tube 1 keeps its ``k_xy``;
+    - hidden ``offplane`` ``precurvature_x_i``: the off-plane precurvature ``u_x`` of every curved
+      section of tube i;
+    - hidden ``friction`` ``mu_k``: the friction coefficient of pair k.
+
+    Parameters
+    ----------
+    plan : dict
+        :func:`plan_case`'s plan (``robot``, ``tube_errors``, ``hidden``).
+
+    Returns
+    -------
+    base, truth : ctrplan.robot.Robot
+        The base (precurvatures [1/m], stiffnesses [N m^2]) and the truth.
+
+    Raises
+    ------
+    ValueError
+        A tube-parameter name other than ``precurvature_y_i`` and ``k_xy_relative_i``.
+    """
+    import dataclasses
+
     from ctrplan.io.robot_file import load_robot
+    from ctrplan.robot import Section
 
     robot = load_robot(ROBOTS[plan["robot"]])
     robot = robot.replace(friction_coefficients=(0.0,) * (robot.n_tubes - 1))
-    names = tuple(plan["tube_errors"])
-    values = read_parameters(robot, names) * (1.0 + np.array([plan["tube_errors"][n] for n in names]))
-    truth = apply_parameters(robot, names, values)
-    if "offplane" in plan["hidden"]:
-        off = plan["hidden"]["offplane"]
-        truth = apply_parameters(truth, tuple(off), tuple(off.values()))
+    tubes = list(robot.tubes)
+    k_ref = robot.tubes[0].k_xy
+    for name, error in plan["tube_errors"].items():
+        kind, _, number = name.rpartition("_")
+        i = int(number) - 1
+        if kind == "precurvature_y":
+            old = robot.tubes[i].sections[_curved(robot.tubes[i].sections)[0]].precurvature[1]
+            new = old * (1.0 + error)
+            secs = list(tubes[i].sections)
+            for j in _curved(secs):
+                x, y = secs[j].precurvature
+                secs[j] = Section(secs[j].length, (x, y * new / old if old != 0.0 else new))
+            tubes[i] = dataclasses.replace(tubes[i], sections=tuple(secs))
+        elif kind == "k_xy_relative":
+            tubes[i] = dataclasses.replace(tubes[i], k_xy=robot.tubes[i].k_xy / k_ref * (1.0 + error) * k_ref)
+        else:
+            raise ValueError(f"tube parameter {name!r}: expected precurvature_y_i or k_xy_relative_i")
+    for name, value in plan["hidden"].get("offplane", {}).items():
+        i = int(name.rpartition("_")[2]) - 1
+        secs = list(tubes[i].sections)
+        for j in _curved(secs):
+            secs[j] = Section(secs[j].length, (float(value), secs[j].precurvature[1]))
+        tubes[i] = dataclasses.replace(tubes[i], sections=tuple(secs))
+    truth = robot.replace(tubes=tuple(tubes))
     if "friction" in plan["hidden"]:
         mu = plan["hidden"]["friction"]
         truth = truth.replace(friction_coefficients=tuple(mu[f"mu_{k + 1}"] for k in range(robot.n_tubes - 1)))
     return robot, truth
 
 
-def outcome(truth: list, res: dict) -> str:
-    """One of :data:`OUTCOMES` for a run's results."""
-    named = set(res["named_effects"])
-    if res["verdict"] == "none":
+def true_values(plan: dict, effect: str) -> dict:
+    """``{parameter: value}`` [SI] of a hidden effect: its own, and those of the effect it follows
+    (``Effect.after``: gradual friction reports the friction coefficients, whose truth is the
+    hidden friction's)."""
+    from ctrplan.effects import REGISTRY
+
+    values = dict(plan["hidden"].get(effect, {}))
+    after = getattr(REGISTRY.get(effect), "after", None)
+    if after:
+        values.update(plan["hidden"].get(after, {}))
+    return values
+
+
+def final_parameter_table(res: dict) -> list:
+    """The rows (``name``, ``value``, ``stderr`` [SI]) of the development-fit parameter table of
+    the model a run ends with: the named effect's candidate, or the named pair
+    (``res["combination"]["tried"][second]``); empty when nothing is named."""
+    named = res["named_effects"]
+    if len(named) == 1:
+        return res["candidates"][named[0]]["parameter_table"]
+    if len(named) == 2:
+        comb = res["combination"]
+        return comb["tried"][comb["named"]]["parameter_table"]
+    return []
+
+
+def written_stderr(res: dict, written: dict | None) -> dict:
+    """``{effect: {parameter: standard error or None}}`` of the written values: the final model's
+    development fit's (:func:`final_parameter_table`), None where the table has none."""
+    rows = {r["name"]: r.get("stderr") for r in final_parameter_table(res)}
+    return {e: {p: rows.get(p) for p in values} for e, values in (written or {}).items()}
+
+
+def value_check(plan: dict, named: list, written: dict | None, stderr: dict | None) -> dict:
+    """Each true parameter of the named effects that are hidden, against its written value:
+    ``{parameter: {"true", "written", "stderr", "within_3_se", "within_20_pct"}}``.
+
+    A value within ``VALUE_STDERRS`` standard errors or within ``VALUE_SHARE`` of the true value
+    passes; a missing or non-finite standard error leaves only the share rule, and a value the
+    robot file does not hold (or a missing file) fails both.
+    """
+    out = {}
+    for e in named:
+        if e not in plan["truth"]:
+            continue
+        for p, true in true_values(plan, e).items():
+            w = ((written or {}).get(e) or {}).get(p)
+            se = ((stderr or {}).get(e) or {}).get(p)
+            finite = se is not None and math.isfinite(se)
+            out[p] = {"true": true, "written": w, "stderr": se,
+                      "within_3_se": w is not None and finite and abs(w - true) <= VALUE_STDERRS * se,
+                      "within_20_pct": w is not None and abs(w - true) <= VALUE_SHARE * abs(true)}
+    return out
+
+
+def outcome(truth: list, verdict: str, named_effects: list, named_effect: str | None, check: dict) -> str:
+    """One of :data:`OUTCOMES` (module docstring) for a run's verdict.
+
+    Parameters
+    ----------
+    truth : list of str
+        The hidden effects (empty for a control).
+    verdict : {"named", "ambiguous", "none"}
+    named_effects : list of str
+        The effects of the final model.
+    named_effect : str or None
+        The written effect of the verdict (the first of an ambiguous verdict).
+    check : dict
+        :func:`value_check` of the named effects.
+    """
+    if verdict == "none":
         return "nothing"
-    if res["verdict"] == "ambiguous":
-        pair = {res["named_effect"], res["ambiguous_with"]}
-        return "ambiguous with truth" if pair & set(truth) else "wrong"
-    if not truth or not named <= set(truth):
+    if not truth:
         return "wrong"
-    return "right" if named == set(truth) else "partly right"
+    if verdict == "ambiguous":
+        return "ambiguous" if named_effect in truth else "wrong"
+    named = set(named_effects)
+    if not named or not named <= set(truth):
+        return "wrong"
+    if named == set(truth):
+        ok = all(c["within_3_se"] or c["within_20_pct"] for c in check.values())
+        return "right" if ok else "right name, value off"
+    return "partly right" if len(truth) == 2 and len(named) == 1 else "wrong"
+
+
+def score_run(plan: dict, res: dict, written: dict | None) -> dict:
+    """``{"outcome", "written_stderr", "value_check"}`` of a run's results ``res``
+    (:func:`ctrplan.discrepancy.report.results_dict`) on the case ``plan`` whose written robot
+    file holds ``written`` (:func:`written_values`)."""
+    stderr = written_stderr(res, written)
+    check = value_check(plan, res["named_effects"], written, stderr)
+    return {"outcome": outcome(plan["truth"], res["verdict"], res["named_effects"], res["named_effect"], check),
+            "written_stderr": stderr, "value_check": check}
+
+
+def rescore(case: dict) -> dict:
+    """A recorded case (a line of ``cases.jsonl``) scored by the present rules: ``outcome`` and
+    ``value_check`` replaced; a case recorded without ``written_stderr`` has only the share rule."""
+    check = value_check(case, case["named_effects"], case["written"], case.get("written_stderr"))
+    return {**case, "value_check": check,
+            "outcome": outcome(case["truth"], case["verdict"], case["named_effects"], case["named"], check)}
 
 
 def synthesize_case(seed: int, index: int, out: str) -> tuple:
@@ -211,7 +405,8 @@ def synthesize_case(seed: int, index: int, out: str) -> tuple:
 def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
     """Case ``index`` (seeded by ``seed``): its data (:func:`synthesize_case`), then the workflow
     on it; the case's line of ``cases.jsonl`` (``seconds`` counts the data's making where this
-    call made it, ``synth_seconds``)."""
+    call made it, ``synth_seconds``; ``outcome``, ``written_stderr`` and ``value_check`` as
+    :func:`score_run` gives them)."""
     from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 
     t0 = time.perf_counter()
@@ -232,9 +427,11 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
         log.close()
     final = res["named_effects"]
     fitted = {e: res["candidates"][e]["parameters"] for e in final if e in res["candidates"]}
+    written = written_values(res["updated_model_file"], final, fitted)
+    scored = score_run(plan, res, written)
     return {**plan, "verdict": res["verdict"], "named": res["named_effect"], "ambiguous_with": res["ambiguous_with"],
-            "named_effects": final, "outcome": outcome(plan["truth"], res), "fitted": fitted,
-            "written": written_values(res["updated_model_file"], final, fitted),
+            "named_effects": final, "outcome": scored["outcome"], "fitted": fitted, "written": written,
+            "written_stderr": scored["written_stderr"], "value_check": scored["value_check"],
             "cautions": res["decision"].get("cautions", []), "noise_consistent": res["noise"]["consistent"],
             "noise_mm": res["noise"]["noise_rms_mm"],
             "test_mean_mm": {k: res["test_split"]["figures"][k]["mean_mm"]["value"] for k in ("file", "before", "after")},
@@ -272,24 +469,60 @@ def clopper_pearson(k: int, n: int, level: float = 0.90) -> list:
     return [float(ci.low), float(ci.high)]
 
 
+def _rate(k: int, n: int) -> dict:
+    """``{"count", "cases", "rate", "ci90"}`` of k successes in n (rate and interval None for n = 0)."""
+    return {"count": k, "cases": n, "rate": k / n if n else None, "ci90": clopper_pearson(k, n, CI_LEVEL)}
+
+
+def _clear(case: dict) -> bool:
+    """Every hidden effect of the case is above ``CLEAR_SIZE`` of its typical range."""
+    return bool(case["truth"]) and min(case["size_shares"].values()) > CLEAR_SIZE
+
+
 def summarize(cases: list) -> dict:
-    """Counts per outcome (all cases, per robot, per kind) and the rates of the targets."""
+    """Counts of every outcome (all cases, by robot, by kind, by truth), the rate of every outcome
+    with its 90 % Clopper-Pearson interval, and the targets (module docstring) with ``met``: true,
+    false, or None when there are no cases to judge it by."""
     def counts(sub):
         return {o: sum(c["outcome"] == o for c in sub) for o in OUTCOMES}
 
-    clear = [c for c in cases if c["truth"] and min(c["size_shares"].values()) > CLEAR_SIZE]
-    found = sum(c["outcome"] in ("right", "partly right", "ambiguous with truth") for c in clear)
-    wrong = sum(c["outcome"] == "wrong" for c in cases)
-    return {"cases": len(cases), "by_outcome": counts(cases),
+    def label(c):
+        return "+".join(c["truth"]) or "none"
+
+    n = len(cases)
+    truths = list(("none",) + EFFECTS) + sorted({label(c) for c in cases} - {"none", *EFFECTS})
+    wrong = _rate(sum(c["outcome"] == "wrong" for c in cases), n)
+    one = [c for c in cases if c["kind"] == "one" and _clear(c)]
+    two = [c for c in cases if c["kind"] == "two" and _clear(c)]
+    one_named = _rate(sum(c["outcome"] in NAMED_ALONE for c in one), len(one))
+    both_named = _rate(sum(c["outcome"] in NAMED_ALONE for c in two), len(two))
+    return {"cases": n, "by_outcome": counts(cases),
             "by_robot": {r: counts([c for c in cases if c["robot"] == r]) for r in ROBOTS},
             "by_kind": {k: counts([c for c in cases if c["kind"] == k]) for k in KINDS},
-            "by_truth": {e: counts([c for c in cases if c["truth"] == [e]]) for e in ("none",) + EFFECTS},
-            "wrong": wrong, "wrong_rate": wrong / len(cases) if cases else None,
-            "wrong_ci90": clopper_pearson(wrong, len(cases)),
-            "clear_cases": len(clear), "clear_found": found,
-            "clear_found_rate": found / len(clear) if clear else None,
-            "clear_found_ci90": clopper_pearson(found, len(clear)),
-            "targets": {"wrong_rate_below": 0.05, "wrong_upper_below": 0.15, "clear_found_at_least": 0.85}}
+            "by_truth": {t: counts([c for c in cases if label(c) == t]) for t in truths},
+            "rates": {o: _rate(sum(c["outcome"] == o for c in cases), n) for o in OUTCOMES},
+            "clear_size": CLEAR_SIZE, "value_rule": {"stderrs": VALUE_STDERRS, "share": VALUE_SHARE},
+            "targets": {
+                "wrong": {**wrong, "rate_below": WRONG_RATE_BELOW, "upper_below": WRONG_UPPER_BELOW,
+                          "met": None if not n else wrong["rate"] < WRONG_RATE_BELOW
+                          and wrong["ci90"][1] < WRONG_UPPER_BELOW},
+                "clear_one_named": {**one_named, "at_least": ONE_NAMED_AT_LEAST,
+                                    "met": None if not one else one_named["rate"] >= ONE_NAMED_AT_LEAST},
+                "clear_two_both_named": {**both_named, "at_least": BOTH_NAMED_AT_LEAST,
+                                         "met": None if not two else both_named["rate"] >= BOTH_NAMED_AT_LEAST}}}
+
+
+def sweep_code_digest() -> str:
+    """SHA-256 (hex) of the code of this benchmark and of every ``tests/reference/*.py``: their
+    paths (relative to the repository) and :func:`ctrplan.discrepancy.provenance.code_digest`,
+    sorted by path (docstrings, comments and layout do not count)."""
+    from ctrplan.discrepancy.provenance import code_digest
+
+    paths = [Path(__file__).resolve(), *(ROOT / "tests" / "reference").glob("*.py")]
+    h = hashlib.sha256()
+    for rel, path in sorted((p.relative_to(ROOT).as_posix(), p) for p in paths):
+        h.update(rel.encode() + b"\0" + code_digest(path.read_text(), rel).encode() + b"\0")
+    return h.hexdigest()
 
 
 def main(argv=None):
@@ -305,7 +538,8 @@ def main(argv=None):
     ap.add_argument("--synthesize-only", action="store_true",
                     help="make the data of the planned cases not made yet, run no workflow, write no results")
     ap.add_argument("--results-only", action="store_true",
-                    help="rewrite the results file from the finished cases without running any")
+                    help="rewrite the results file from the finished cases, rescored by the present rules, "
+                         "without running any")
     args = ap.parse_args(argv)
     from ctrplan.discrepancy.provenance import provenance
 
@@ -320,7 +554,7 @@ def main(argv=None):
                 if "written" not in c:   # a case recorded before the written values were: read its file
                     files = sorted((out / f"case-{c['seed']}" / "report").glob("*.toml"))
                     c["written"] = written_values(files[-1], c["named_effects"], c["fitted"]) if files else None
-                done[c["seed"]] = c
+                done[c["seed"]] = rescore(c)
     seeds = [args.first_seed + k for k in range(args.cases)]
     unknown = sorted(set(args.run_first) - set(seeds))
     if unknown:
@@ -344,7 +578,8 @@ def main(argv=None):
             "summary": summarize(cases),
             "case_seconds": {"total": sum(c["seconds"] for c in cases),
                              "median": sorted(c["seconds"] for c in cases)[len(cases) // 2]},
-            "provenance": {**provenance(), "cases_source_sha256": sorted({c["source_sha256"] for c in cases})},
+            "provenance": {**provenance(), "sweep_code_sha256": sweep_code_digest(),
+                           "cases_source_sha256": sorted({c["source_sha256"] for c in cases})},
             "cases": cases}, indent=1) + "\n")
         return cases
 
@@ -354,7 +589,7 @@ def main(argv=None):
             fh.write(json.dumps(case) + "\n")
         write_results()
         print(f"  {case['seed']} {case['robot']:11s} truth {','.join(case['truth']) or 'none':28s} -> "
-              f"{case['outcome']:20s} ({case['verdict']}: {','.join(case['named_effects']) or '-'}"
+              f"{case['outcome']:21s} ({case['verdict']}: {','.join(case['named_effects']) or '-'}"
               + (f" or {case['ambiguous_with']}" if case["ambiguous_with"] else "") + f"); {case['seconds']:.0f} s",
               flush=True)
 
@@ -379,8 +614,7 @@ def main(argv=None):
     cases = write_results()
     summary = summarize(cases)
     wall = time.perf_counter() - t0
-    print(json.dumps({k: summary[k] for k in ("by_outcome", "wrong", "wrong_ci90", "clear_cases", "clear_found",
-                                              "clear_found_ci90")}, indent=1))
+    print(json.dumps({k: summary[k] for k in ("by_outcome", "rates", "targets")}, indent=1))
     print(f"{wall:.0f} s this run, {sum(c['seconds'] for c in cases):.0f} s of cases in all; load average "
           f"{os.getloadavg()[0]:.2f}")
     print(f"wrote {results}")

@@ -36,7 +36,7 @@ SOURCES = {"sweep-table": RESULTS / "discrepancy-sweep.json", "ha-table": RESULT
 #: The page each table is in.
 DOCS = {"sweep-table": DOC, "ha-table": DOC, "robot-files-table": DOC,
         "discretization-table": ROOT / "docs" / "mechanics.md", "speed-table": ROOT / "docs" / "mechanics.md"}
-OUTCOMES = ("right", "partly right", "ambiguous with truth", "wrong", "nothing")
+OUTCOMES = ("right", "right name, value off", "partly right", "ambiguous", "wrong", "nothing")
 KIND_LABELS = {"control": "controls (no effect)", "one": "one effect", "two": "two effects"}
 
 
@@ -60,7 +60,8 @@ def _ci90(ci) -> str:
 
 
 def sweep_table(res: dict) -> str:
-    """Outcome rates with Clopper-Pearson intervals, by robot, kind and truth; the cases."""
+    """Outcome counts by kind, robot and truth, their rates with 90 % Clopper-Pearson intervals,
+    the targets met or not, and the cases with their written values against the truth."""
     s = res["summary"]
     n = s["cases"]
     planned = res.get("cases_planned", n)
@@ -71,22 +72,30 @@ def sweep_table(res: dict) -> str:
              f"a case).", "",
              "| cases | " + " | ".join(OUTCOMES) + " |", "|---|" + "---|" * len(OUTCOMES)]
     lines.append("| all | " + " | ".join(str(s["by_outcome"][o]) for o in OUTCOMES) + " |")
+    lines.append("| rate (90 % interval) | " + " | ".join(
+        f"{100 * s['rates'][o]['rate']:.0f} % ({_ci90(s['rates'][o]['ci90'])})" if n else "-" for o in OUTCOMES) + " |")
     for k, row in s["by_kind"].items():
         lines.append(f"| {KIND_LABELS[k]} | " + " | ".join(str(row[o]) for o in OUTCOMES) + " |")
     for r, row in s["by_robot"].items():
         lines.append(f"| {r} | " + " | ".join(str(row[o]) for o in OUTCOMES) + " |")
     for t, row in s["by_truth"].items():
         if sum(row.values()):
-            lines.append(f"| one effect: {t} |" if t != "none" else "| control |")
-            lines[-1] += " " + " | ".join(str(row[o]) for o in OUTCOMES) + " |"
-    lines += ["", f"Wrong names (a named effect not in the truth, an ambiguous pair without it, any name on a "
-                  f"control): {s['wrong']} of {n} ({100 * s['wrong_rate']:.1f} %, 90 % Clopper-Pearson interval "
-                  f"{_ci90(s['wrong_ci90'])}; target below 5 %, upper end below 15 %). Truth named or in the "
-                  f"ambiguous pair where every hidden effect is above 30 % of its typical range: {s['clear_found']} of "
-                  f"{s['clear_cases']} ({100 * (s['clear_found_rate'] or 0):.0f} %, {_ci90(s['clear_found_ci90'])}; "
-                  f"target at least 85 %).", "",
-              "| seed | robot | truth (size, share of the typical range) | noise | verdict | written to the robot file |",
-              "|---|---|---|---|---|---|"]
+            lines.append(f"| {_truth_label(t)} | " + " | ".join(str(row[o]) for o in OUTCOMES) + " |")
+    t = s["targets"]
+    rule = s["value_rule"]
+    w, one, two = t["wrong"], t["clear_one_named"], t["clear_two_both_named"]
+    clear = f"every hidden effect above {100 * s['clear_size']:.0f} % of its typical range"
+    lines += ["", f"A written value is right within {rule['stderrs']:g} standard errors (of the final model's "
+                  f"development fit) or {100 * rule['share']:.0f} % of the true value. Targets:", "",
+              f"- wrong names (a named effect not in the truth, an ambiguous verdict whose written effect is not in it, "
+              f"any name on a control): {_share(w)}; target below {100 * w['rate_below']:.0f} %, interval's upper end "
+              f"below {100 * w['upper_below']:.0f} %: {_met(w['met'])};",
+              f"- the truth named alone (right, or right name with a value off) in the one-effect cases with {clear}: "
+              f"{_share(one)}; target at least {100 * one['at_least']:.0f} %: {_met(one['met'])};",
+              f"- both effects named (right, or right names with a value off) in the two-effect cases with {clear}: "
+              f"{_share(two)}; target at least {100 * two['at_least']:.0f} %: {_met(two['met'])}.", "",
+              "| seed | robot | truth (size, share of the typical range) | noise | verdict | written to the robot file "
+              "(against the truth) |", "|---|---|---|---|---|---|"]
     for c in res["cases"]:
         hidden = "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["hidden"].values() for k, v in e.items()) or "-"
         shares = ", ".join(f"{e} {100 * v:.0f} %" for e, v in c["size_shares"].items())
@@ -96,12 +105,44 @@ def sweep_table(res: dict) -> str:
                                                                           if c["ambiguous_with"] else ""))
         if c.get("cautions"):
             verdict += " (caution)"
+        checks = c.get("value_check", {})
         written = ("(its robot file is missing)" if c["written"] is None else
-                   "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["written"].values() for k, v in e.items())
-                   or "-")
+                   "; ".join(f"{k} = {_value('', v, _unit(k))}" + _against(checks.get(k))
+                             for e in c["written"].values() for k, v in e.items()) or "-")
         lines.append(f"| {c['seed']} | {c['robot']} | {hidden}" + (f" ({shares})" if shares else "")
                      + f" | {noise} | {verdict} | {written} |")
     return "\n".join(lines)
+
+
+def _truth_label(truth: str) -> str:
+    """A row label of the sweep's ``by_truth`` key: ``"none"``, an effect, or ``"a+b"``."""
+    if truth == "none":
+        return "control"
+    effects = truth.split("+")
+    return f"one effect: {truth}" if len(effects) == 1 else "two effects: " + " + ".join(effects)
+
+
+def _share(rate: dict) -> str:
+    """``"3 of 12 (25 %, 90 % interval 7..52 %)"`` of a sweep target's figures."""
+    if not rate["cases"]:
+        return "no such cases"
+    return (f"{rate['count']} of {rate['cases']} ({100 * rate['rate']:.0f} %, 90 % Clopper-Pearson interval "
+            f"{_ci90(rate['ci90'])})")
+
+
+def _met(met) -> str:
+    return "not judged (no such cases)" if met is None else "**met**" if met else "**not met**"
+
+
+def _against(check) -> str:
+    """A written value's check against the truth: its relative error, and in standard errors
+    where the fit gave one."""
+    if not check or check["written"] is None:
+        return ""
+    diff = check["written"] - check["true"]
+    se = check["stderr"]
+    in_se = f", {abs(diff) / se:.1f} se" if se is not None and np.isfinite(se) and se > 0 else ""
+    return f" ({100 * diff / abs(check['true']):+.1f} %{in_se})"
 
 
 def _seed_ranges(seeds) -> str:

@@ -2,7 +2,8 @@
 files come from the data they name and from the code at hand: catches figures in the docs edited by
 hand or left behind by a newer run, a results file made from another version of the measured data,
 and one made by code that has changed since (its digest of the discrepancy, effects, history and
-mechanics sources, or the mechanics version)."""
+mechanics sources, or the mechanics version), or, for the sweep, by other scoring or reference
+synthesizer code."""
 
 from __future__ import annotations
 
@@ -74,6 +75,22 @@ def test_quoted_results_come_from_the_present_code(name):
         f"{name} was made by other code than the present (run its benchmark again, then benchmarks/docs_tables.py)")
     if "cases" in stored:
         assert {c["source_sha256"] for c in stored["cases"]} == {digest}
+
+
+def test_sweep_results_come_from_the_present_sweep_code():
+    """The sweep's results file records the digest of the benchmark that scored it and of the
+    reference synthesizer that made its data (``sweep_code_sha256``), and it is the present
+    code's: catches outcomes scored by rules that have changed since, or data from another
+    synthesizer, quoted as today's."""
+    spec = importlib.util.spec_from_file_location("bench_discrepancy_sweep",
+                                                  ROOT / "benchmarks" / "bench_discrepancy_sweep.py")
+    sweep = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sweep)
+    stored = json.loads((ROOT / "benchmarks" / "results" / "discrepancy-sweep.json").read_text())
+    assert stored.get("provenance", {}).get("sweep_code_sha256") == sweep.sweep_code_digest(), (
+        "discrepancy-sweep.json was scored or synthesized by other sweep code than the present: rescore it with "
+        "python benchmarks/bench_discrepancy_sweep.py --results-only (a change of the scoring), or run the sweep "
+        "again (a change of the reference synthesizer or of the cases), then benchmarks/docs_tables.py")
 
 
 @pytest.mark.skipif(not HA_DATA.exists(), reason=f"measured data not present at {HA_DATA} (not redistributable; "
