@@ -151,7 +151,9 @@ def test_the_best_explanation_wins_whatever_its_typical_range():
     than the backlash: backlash is named, with a caution that gives the value, the typical range
     with its source and what to check; the time offset is never named, and the note says it is
     significantly worse. Catches a typical range used as a gate (the backlash refused and a time
-    offset named in its place) and a rule that compares candidates only with the baseline."""
+    offset named in its place), a rule that compares candidates only with the baseline, and
+    candidates compared with each other without the correction for the folds' shared training
+    data (whose size fails there, tests/test_discrepancy_statistics.py)."""
     rng = np.random.default_rng(20261)
     units = np.repeat(np.arange(40), 10)
     split = _split(units)
@@ -172,6 +174,12 @@ def test_the_best_explanation_wins_whatever_its_typical_range():
     assert "check the couplings of the drive" in d.cautions[0]
     assert any("time offset" in n and "significantly higher than drive backlash" in n for n in d.notes)
     assert json.loads(json.dumps(d.as_dict())) == d.as_dict()           # plain JSON, no typed object left
+    # a candidate against the baseline it extends: uncorrected; two candidates: corrected (and labelled so)
+    from ctrplan.discrepancy.statistics import CORRECTED_METHOD, UNCORRECTED_METHOD
+
+    assert naming.candidates["backlash"].improvement.method == UNCORRECTED_METHOD
+    assert d.comparisons["backlash vs time_offset"].method == CORRECTED_METHOD
+    assert d.comparisons["backlash vs time_offset"].validation_to_training > 0
 
 
 def test_naming_rule_says_ambiguous_for_a_tie_and_leaves_a_best_fit_at_its_limit_unnamed():

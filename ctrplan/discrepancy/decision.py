@@ -1,8 +1,11 @@
 """Stages 5 and 7 of the discrepancy workflow: the sensor noise, and what is named.
 
 **Naming rule: the best explanation wins.** Every candidate's out-of-fold errors are compared
-with the baseline's and with every other candidate's by the corrected resampled t test over the
-cross-validation folds (:func:`~ctrplan.discrepancy.statistics.cv_comparison`). A candidate is
+with the baseline's (a t test of the folds' log ratios, which holds its level for a model
+against one it contains) and with every other candidate's (the corrected resampled t test: two
+models of which neither contains the other) over the cross-validation folds
+(:func:`~ctrplan.discrepancy.fitting.compare`,
+:func:`~ctrplan.discrepancy.statistics.cv_comparison`). A candidate is
 *eligible* when
 
 - its improvement over the baseline is significant at the family-wise level
@@ -380,7 +383,7 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
             if a == b:
                 continue
             # positive: b better than a
-            cmp = comparisons[f"{b} vs {a}"] = compare(split, candidates[a].r, candidates[b].r)
+            cmp = comparisons[f"{b} vs {a}"] = compare(split, candidates[a].r, candidates[b].r, nested=False)
             if cmp.p_worse < alpha and cmp.mean_difference < 0:
                 worse_than[b].append(a)
     why_not: dict = {}
@@ -408,9 +411,10 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
         worse_than=MappingProxyType({e: tuple(v) for e, v in worse_than.items()}),
         why_not=MappingProxyType({e: tuple(r) for e, r in why_not.items() if r}),
         comparisons=MappingProxyType(comparisons), separated_by=None, cautions=(), notes=(),
-        rule=(f"out-of-fold improvement over the baseline significant at {alpha} (corrected resampled t test "
-              f"over {split.n_folds} folds, Holm over the {len(names)} candidates tried), no other "
-              f"candidate significantly better (one-sided at {alpha}), no value at its limit; the lowest "
+        rule=(f"out-of-fold improvement over the baseline significant at {alpha} (t test of the log ratios over "
+              f"{split.n_folds} folds, Holm over the {len(names)} candidates tried), no other candidate "
+              f"significantly better (corrected resampled t test, one-sided at {alpha}), no value at its limit; "
+              f"the lowest "
               f"out-of-fold error wins; ambiguous when another such candidate remains"))
     level = progress_level()
     if eligible:

@@ -233,10 +233,20 @@ def contained(a: str, b: str) -> bool:
     return a in REGISTRY[b].contains or b in REGISTRY[a].contains
 
 
-def compare(split: DataSplit, err_a, err_b) -> Comparison:
+def compare(split: DataSplit, err_a, err_b, *, nested: bool = True) -> Comparison:
     """:func:`~ctrplan.discrepancy.statistics.cv_comparison` of two models' out-of-fold errors at
-    the development samples (positive: b is better)."""
-    return cv_comparison(err_a, err_b, split.fold[split.dev_rows], confidence=CONFIDENCE)
+    the development samples (positive: b is better).
+
+    ``nested``: b contains a (b is a with parameters added: a candidate against the baseline, a
+    pair against either of its effects). Such a comparison is not corrected for the training
+    data the folds share, because simulation shows it holds its level without the correction
+    (a useless extra parameter only raises b's out-of-fold error); two models of which neither
+    contains the other (two candidates) are compared with the corrected resampled t test, whose
+    uncorrected form exceeds its level there (both measured in
+    :func:`~ctrplan.discrepancy.statistics.cv_comparison`'s notes and
+    tests/test_discrepancy_statistics.py).
+    """
+    return cv_comparison(err_a, err_b, split.fold[split.dev_rows], confidence=CONFIDENCE, corrected=not nested)
 
 
 def _extend_scan(values: tuple, spec, end: str) -> tuple:

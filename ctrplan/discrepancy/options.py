@@ -39,9 +39,12 @@ ENVELOPE_NOISE_FACTOR = 1.62
 #: start as the development fit, buffers, a prior toward the robot file's tube parameters, bounds
 #: widened where a fit ends at them, pairs fitted jointly, a smooth time-shift interpolant; 7 =
 #: contact solves of a fit started from the fit's previous evaluation at the same sample, to
-#: the tighter tolerances of :data:`~ctrplan.discrepancy.simulate.WARM_OUTER_TOL`. Stages
+#: the tighter tolerances of :data:`~ctrplan.discrepancy.simulate.WARM_OUTER_TOL`; 8 = standard
+#: errors over clusters of neighbouring blocks with t intervals, values left on a bound widened
+#: without a refit flagged, blocks lengthened where the residuals' correlation needs a longer
+#: buffer, comparisons of two candidates corrected for the folds' shared training data. Stages
 #: written by an earlier version are redone.
-FIT_VERSION = 7
+FIT_VERSION = 8
 
 
 @dataclass(frozen=True)

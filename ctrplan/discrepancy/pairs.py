@@ -172,7 +172,7 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
     first = candidates[named]
     first_names = reported_parameters(robot, named, data)
     rule = (f"out-of-fold Eq. (49) improvement over {first.label} alone significant at {options.significance} "
-            f"(corrected resampled t test over the folds, Holm over the family of pairs), no value at its limit, and "
+            f"(t test of the log ratios over the folds, Holm over the family of pairs), no value at its limit, and "
             f"{first.label} still improving on the second effect alone at {options.significance}")
     not_tried, family, pool = {}, [], []
     for e, c in candidates.items():

@@ -366,7 +366,8 @@ def _split_lines(results: dict) -> list[str]:
             f"{s['max_fit_samples']}).",
             f"- Buffer: {s['buffer_note']}; left out of every fit on each side of the blocks it is judged on "
             f"(validation and test).",
-            "- Chosen once on the development samples and reused by every fold: the buffer and the prior's scale "
+            "- Chosen once on the development samples and reused by every fold: the buffer, the development "
+            "blocks' length and the prior's scale "
             "(from the pilot fit), and the prior's strength (by the baseline's out-of-fold error); everything else "
             "each fold fit does again from the same cold start.",
             f"- Test split: {s['n_test']} samples in {s['n_test_units']} units (units "

@@ -11,7 +11,9 @@ mm + deg of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906):
    (development) in blocked cross-validation folds;
 3. :func:`~ctrplan.discrepancy.baseline.pilot_fit` and
    :func:`~ctrplan.discrepancy.baseline.calibrate_baseline`: a pilot fit on the development samples
-   chooses the buffer around validation and test blocks and the prior's scale; then the standard
+   chooses the buffer around validation and test blocks, the development blocks' length
+   (:func:`~ctrplan.discrepancy.split.choose_blocks`: longer blocks, dealt into the folds again,
+   where the buffer needs more than half a block) and the prior's scale; then the standard
    model by least squares on Eq. (49) with a prior toward the robot file's tube parameters whose
    strength the out-of-fold error chooses, on the development samples and without each fold;
 4. :func:`~ctrplan.discrepancy.signatures.diagnose_residuals`: each effect's signature test on the
