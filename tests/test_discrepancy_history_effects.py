@@ -404,3 +404,28 @@ def test_a_residual_above_a_noise_that_is_only_a_lower_bound_is_inconclusive():
     quiet = dc_replace(test, statistic=1.0, consistent=True)
     assert no_effect_case(dc_replace(low, test=dc_replace(quiet, noise_lower_bound=True))) == "noise"
     assert no_effect_case(dc_replace(check, test=None)) == "unknown"
+
+
+def test_a_candidate_that_contains_another_is_named_only_when_it_improves_on_it():
+    """Friction and gradual friction both eligible, gradual friction's out-of-fold error a hair
+    lower (its angle at 0: the same model): friction, the simpler, is named, with a note, and no
+    ambiguity. When gradual friction improves on friction significantly, it is named. Catches a
+    coin flip between nested candidates decided by the last digits of their errors (the sweep's
+    case 2010 named gradual friction with an angle of 6e-8 deg for a hidden plain friction)."""
+    rng = np.random.default_rng(77)
+    units = np.repeat(np.arange(40), 10)
+    split = _split(units)
+    scale = 1.0 + 0.5 * rng.random(40)[units]
+    base = 5.0 * scale + rng.normal(0, 0.2, 400)
+    fric = np.abs(rng.normal(0.5, 0.1, 400))
+    twin = np.abs(fric + rng.normal(-0.002, 0.02, 400))             # a hair lower on average
+    cands = {"friction": _candidate("friction", split, base, fric),
+             "gradual_friction": _candidate("gradual_friction", split, base, twin)}
+    naming = _naming(cands, split)
+    d = naming.decision
+    assert naming.candidates["gradual_friction"].eligible and naming.candidates["friction"].eligible
+    assert d.verdict == "named" and d.named == "friction" and d.ambiguous_with is None, d
+    assert any("contains torsional friction" in n and "simpler" in n for n in d.notes), d.notes
+    cands["gradual_friction"] = _candidate("gradual_friction", split, base, 0.6 * fric)
+    d = _naming(cands, split).decision
+    assert d.verdict == "named" and d.named == "gradual_friction", d

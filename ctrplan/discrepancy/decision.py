@@ -414,13 +414,26 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
         rule=(f"out-of-fold improvement over the baseline significant at {alpha} (t test of the log ratios over "
               f"{split.n_folds} folds, Holm over the {len(names)} candidates tried), no other candidate "
               f"significantly better (corrected resampled t test, one-sided at {alpha}), no value at its limit; "
-              f"the lowest "
-              f"out-of-fold error wins; ambiguous when another such candidate remains"))
+              f"the lowest out-of-fold error wins, unless it contains another such candidate on which it does not "
+              f"improve significantly (then the simpler one); ambiguous when another such candidate remains"))
     level = progress_level()
     if eligible:
         named = eligible[0]
+        # parsimony between nested candidates: one that contains another eligible one (gradual
+        # friction contains friction) is named only when it improves on it significantly
+        for simpler in eligible[1:]:
+            if simpler not in REGISTRY[named].contains:
+                continue
+            gain = compare(split, judged[simpler].r, judged[named].r)
+            comparisons[f"{named} vs {simpler} (nested)"] = gain
+            if not (gain.p_value < alpha and gain.mean_difference > 0):
+                notes.append(f"{judged[named].label} contains {judged[simpler].label} and does not improve on it "
+                             f"significantly (out-of-fold Eq. (49) error lower by {100 * gain.reduction:.0f} %, "
+                             f"p = {gain.p_value:.2g}): the simpler {judged[simpler].label} is named")
+                named = simpler
+                break
         decision = replace(decision, verdict="named", named=named)
-        rivals = [e for e in eligible[1:] if not contained(e, named)]
+        rivals = [e for e in eligible if e != named and not contained(e, named)]
         if rivals:
             second = rivals[0]
             diff = comparisons[f"{named} vs {second}"]
