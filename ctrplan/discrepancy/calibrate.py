@@ -614,19 +614,18 @@ class _Eq49Model:
     forward difference (:data:`DIFF_STEP`) of the components, or with ``scale`` given a rank-one
     update of the last one after a step its model predicted well (:class:`_Jacobians`); a
     Jacobian whose model says the fit may stop (:meth:`bic_left` below :data:`BIC_TOLERANCE`) is
-    always a forward difference, so every stopping decision is read from an exact one. A failed
+    always a forward difference, so the stopping rule is read from an exact one. A failed
     sample has value :data:`FAILED_RESIDUAL` and zero rows. A :class:`Prior` appends its rows
     after the samples'.
     """
 
-    def __init__(self, obj: _Objective, lower, upper, prior: "Prior | None" = None, scale=None,
-                 n_samples: int | None = None):
+    def __init__(self, obj: _Objective, lower, upper, prior: "Prior | None" = None, scale=None):
         self.obj, self.lower, self.upper = obj, np.asarray(lower, float), np.asarray(upper, float)
         self.width = 4 if obj.data.tangent is None else 7
         self.prior = prior
         self.jacobians = _Jacobians(obj, lower, upper, np.ones(self.lower.size) if scale is None else scale,
                                     0 if scale is None else MAX_JACOBIAN_UPDATES)
-        self.n_samples = obj.data.n_samples if n_samples is None else n_samples
+        self.n_samples = obj.data.n_samples
         self._last = None   # (f, rows, x) of the last Jacobian
         #: Decrease of the cost to the minimum of the model at the last Jacobian [(mm + deg)^2],
         #: and the cost there.
@@ -888,10 +887,6 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
         left = max(2, max_evaluations - obj.evaluations)
         sol = least_squares(eq49.fun, np.clip(x1, lower, upper), jac=eq49.jac, max_nfev=left, callback=settled,
                             bounds=(lower, upper), x_scale=scale, method="trf", xtol=XTOL, ftol=FTOL)
-        if not (eq49.jacobians.is_exact and np.array_equal(eq49.jacobians.x, sol.x)):
-            # stopped on an updated Jacobian (a tolerance or the budget): the standard errors and
-            # the decrease still predicted are read from an exact one
-            sol.jac = eq49.exact_rows(sol.x)
         steps += sol.nfev
         n_exact += eq49.jacobians.n_exact
         n_updated += eq49.jacobians.n_updated
@@ -914,6 +909,11 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     why = ("the evaluation budget is spent" if obj.evaluations >= max_evaluations
            else f"{MAX_WIDENINGS} widenings, the most allowed")
     unrefitted = tuple(f"{g}: {why})" for g in grown)
+    if uncertainty and not (eq49.jacobians.is_exact and np.array_equal(eq49.jacobians.x, sol.x)):
+        # stopped on an updated Jacobian (by a tolerance or the budget): the standard errors and
+        # the decrease still predicted are read from a forward difference
+        sol.jac = eq49.exact_rows(sol.x)
+        n_exact += 1
     r = obj.residuals(sol.x)
     converged = bool(sol.status > 0 or (sol.status == -2 and not budget_stop))
     left_bic = eq49.bic_left(k)
