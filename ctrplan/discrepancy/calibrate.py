@@ -60,6 +60,16 @@ NORM_FLOOR = 1e-3
 #: Smallest cosine of the tangent error in the model's ``d angle / d sin(angle)`` (errors near
 #: 90 deg are failures of the fit, not its working range).
 COS_FLOOR = 0.1
+#: Jacobians of the error components between exact ones (:class:`_Jacobians`): at most this many
+#: rank-one (Broyden) updates of the mechanical columns follow a forward-difference Jacobian. An
+#: update costs no model evaluation where a forward difference costs one per mechanical
+#: parameter; a step its model predicted poorly, a change of the failed samples, and every
+#: Jacobian a stopping decision or a standard error is read from get an exact one.
+MAX_JACOBIAN_UPDATES = 5
+#: A Jacobian is recomputed by forward differences when the step just taken achieved less than
+#: this fraction of the decrease its Gauss-Newton model predicted (the trust region's own
+#: threshold of a poor step, Nocedal & Wright 2006, Algorithm 4.1).
+POOR_STEP_RATIO = 0.25
 #: A fit that ends at an optimizer bound has the bound widened (``ParameterSpec.widened``, up to
 #: the parameter's limit) and is continued, at most this many times.
 MAX_WIDENINGS = 6
@@ -491,6 +501,99 @@ class Prior:
         return J
 
 
+class _Jacobians:
+    """Jacobians ``J_c`` of the error components of :meth:`_Objective.pose_components`, shape
+    (K, w, m) (w = 3 position components [mm], and 3 tangent ones [deg] with tangents), exact or
+    updated.
+
+    :meth:`exact` takes forward differences (:data:`DIFF_STEP`, the step of
+    ``scipy.optimize.least_squares``'s ``"2-point"`` scheme): one model evaluation per mechanical
+    parameter. :meth:`updated` moves the last Jacobian to a new point by Broyden's rank-one
+    update of its mechanical columns in the parameters' scaled units (the secant condition
+    ``J_new dx = c(x_new) - c(x_old)`` along the step; Broyden 1965, Dennis & Schnabel 1996,
+    Sec. 8.1), which costs no model evaluation; the registration columns, which re-use the
+    cached mechanics, are always forward differences. It falls back to :meth:`exact` after
+    :data:`MAX_JACOBIAN_UPDATES` updates, when the set of failed samples changed, or when the
+    step moved no mechanical parameter.
+    """
+
+    def __init__(self, obj: "_Objective", lower, upper, scale, max_updates: int | None = None):
+        self.obj, self.lower, self.upper = obj, np.asarray(lower, float), np.asarray(upper, float)
+        self.scale = np.asarray(scale, float)
+        m = self.lower.size
+        n_fixed = len(obj.fixed)
+        self.mech = np.array([n_fixed + j in set(obj.mech) for j in range(m)], dtype=bool)
+        self.max_updates = MAX_JACOBIAN_UPDATES if max_updates is None else int(max_updates)
+        self.x = self.c = self.cos = self.ok = self.jc = None
+        self.is_exact = False
+        self.updates = 0
+        self.n_exact = self.n_updated = 0
+
+    def components(self, x):
+        """``(c, cos_angle, ok)`` at ``x``: components (K, w), cosines (K,), ok flags (K,)."""
+        dp, t, c, ok = self.obj.pose_components(x)
+        return (dp if t is None else np.concatenate([dp, t], axis=1)), c, ok
+
+    def _differences(self, x, c0, columns, jc) -> None:
+        for j in columns:
+            step = DIFF_STEP * max(1.0, abs(x[j])) * (1.0 if x[j] >= 0 else -1.0)
+            if not self.lower[j] <= x[j] + step <= self.upper[j]:
+                step = -step
+            xs = x.copy()
+            xs[j] += step
+            cj, _, okj = self.components(xs)
+            jc[:, :, j] = np.where(okj[:, None], (cj - c0) / step, 0.0)
+
+    def _store(self, x, c, cos, ok, jc, exact: bool):
+        jc[~ok] = 0.0
+        self.x, self.c, self.cos, self.ok, self.jc, self.is_exact = x.copy(), c, cos, ok, jc, exact
+        return c, cos, ok, jc
+
+    def exact(self, x):
+        """Forward-difference Jacobian at ``x``; returns ``(c, cos, ok, J_c)``."""
+        x = np.asarray(x, float)
+        c0, cos0, ok0 = self.components(x)
+        jc = np.zeros((c0.shape[0], c0.shape[1], x.size))
+        self._differences(x, c0, range(x.size), jc)
+        self.updates = 0
+        self.n_exact += 1
+        return self._store(x, c0, cos0, ok0, jc, True)
+
+    def updated(self, x):
+        """The last Jacobian moved to ``x`` by a rank-one update (or :meth:`exact` where it
+        must be); returns ``(c, cos, ok, J_c)``."""
+        x = np.asarray(x, float)
+        if self.jc is None or self.updates >= self.max_updates:
+            return self.exact(x)
+        c1, cos1, ok1 = self.components(x)
+        dx = x - self.x
+        s = np.where(self.mech, dx / self.scale, 0.0)
+        ss = float(s @ s)
+        if not np.array_equal(ok1, self.ok) or ss == 0.0:
+            return self.exact(x)
+        jc = self.jc.copy()
+        y = c1 - self.c - jc @ dx
+        jc[:, :, self.mech] += y[:, :, None] * (s[self.mech] / self.scale[self.mech])[None, None, :] / ss
+        self._differences(x, c1, np.flatnonzero(~self.mech), jc)
+        self.updates += 1
+        self.n_updated += 1
+        return self._store(x, c1, cos1, ok1, jc, False)
+
+    def note(self) -> str:
+        """``"<n> forward-difference Jacobians, <m> rank-one updates"``."""
+        return f"{self.n_exact} forward-difference Jacobians, {self.n_updated} rank-one updates"
+
+
+def _poor_step(f_old, rows_old, x_old, f_new, x_new) -> bool:
+    """The step ``x_old -> x_new`` achieved less than :data:`POOR_STEP_RATIO` of the decrease of
+    ``|f|^2`` that the linear model ``f_old + rows_old dx`` predicted (or the model predicted none)."""
+    dx = np.asarray(x_new, float) - np.asarray(x_old, float)
+    before = float(f_old @ f_old)
+    predicted = before - float(np.sum((f_old + rows_old @ dx) ** 2))
+    actual = before - float(f_new @ f_new)
+    return not (predicted > 0.0 and actual >= POOR_STEP_RATIO * predicted)
+
+
 class _Eq49Model:
     """Eq. (49) as a least-squares problem whose Gauss-Newton model keeps the curvature of its norms.
 
@@ -508,14 +611,22 @@ class _Eq49Model:
 
     Their sum of squares is the Eq. (49) cost, their ``J^T f`` its half gradient and their
     ``J^T J`` half the Hessian of the cost up to the components' own curvature. ``J_c`` is a
-    forward difference (:data:`DIFF_STEP`) of the components; a failed sample has value
-    :data:`FAILED_RESIDUAL` and zero rows. A :class:`Prior` appends its rows after the samples'.
+    forward difference (:data:`DIFF_STEP`) of the components, or with ``scale`` given a rank-one
+    update of the last one after a step its model predicted well (:class:`_Jacobians`); a
+    Jacobian whose model says the fit may stop (:meth:`bic_left` below :data:`BIC_TOLERANCE`) is
+    always a forward difference, so the stopping rule is read from an exact one. A failed
+    sample has value :data:`FAILED_RESIDUAL` and zero rows. A :class:`Prior` appends its rows
+    after the samples'.
     """
 
-    def __init__(self, obj: _Objective, lower, upper, prior: "Prior | None" = None):
+    def __init__(self, obj: _Objective, lower, upper, prior: "Prior | None" = None, scale=None):
         self.obj, self.lower, self.upper = obj, np.asarray(lower, float), np.asarray(upper, float)
         self.width = 4 if obj.data.tangent is None else 7
         self.prior = prior
+        self.jacobians = _Jacobians(obj, lower, upper, np.ones(self.lower.size) if scale is None else scale,
+                                    0 if scale is None else MAX_JACOBIAN_UPDATES)
+        self.n_samples = obj.data.n_samples
+        self._last = None   # (f, rows, x) of the last Jacobian
         #: Decrease of the cost to the minimum of the model at the last Jacobian [(mm + deg)^2],
         #: and the cost there.
         self.remaining, self.cost = np.inf, np.nan
@@ -535,24 +646,36 @@ class _Eq49Model:
         rows[:, 0] = h
         return rows.ravel() if self.prior is None else np.concatenate([rows.ravel(), self.prior.rows(x)])
 
-    def _components(self, x):
-        dp, t, c, ok = self.obj.pose_components(x)
-        return (dp if t is None else np.concatenate([dp, t], axis=1)), c, ok
-
     def jac(self, x):
         x = np.asarray(x, float)
-        c0, cos0, ok0 = self._components(x)
+        jacobians = self.jacobians
+        f_new = self.fun(x) if jacobians.max_updates and self._last is not None else None
+        if f_new is not None and not _poor_step(*self._last, f_new, x) and not self._small_step(self._last[0], f_new):
+            rows = self._rows(x, *jacobians.updated(x))
+            if jacobians.is_exact or self.bic_left(self.n_samples) >= BIC_TOLERANCE:
+                self._last = (self._f, rows, x.copy())
+                return rows
+        rows = self._rows(x, *jacobians.exact(x))
+        self._last = (self._f, rows, x.copy())
+        return rows
+
+    def _small_step(self, f_old, f_new) -> bool:
+        """The step lowered the BIC by less than :data:`BIC_TOLERANCE`: the fit is at the scale
+        of its stopping rule, where the next Jacobian is to be exact."""
+        before, after = float(f_old @ f_old), float(f_new @ f_new)
+        return not (after > 0.0 and self.n_samples * np.log(before / after) >= BIC_TOLERANCE)
+
+    def exact_rows(self, x):
+        """The rows at ``x`` from a forward-difference Jacobian (:meth:`jac` without updates)."""
+        x = np.asarray(x, float)
+        rows = self._rows(x, *self.jacobians.exact(x))
+        self._last = (self._f, rows, x.copy())
+        return rows
+
+    def _rows(self, x, c0, cos0, ok0, jc):
+        """Rows of the generalized Gauss-Newton model at ``x`` from the components ``c0``, their
+        cosines, ok flags and Jacobian ``jc``; sets :attr:`remaining`, :attr:`cost`."""
         k, m = c0.shape[0], x.size
-        jc = np.zeros((k, c0.shape[1], m))
-        for j in range(m):
-            step = DIFF_STEP * max(1.0, abs(x[j])) * (1.0 if x[j] >= 0 else -1.0)
-            if not self.lower[j] <= x[j] + step <= self.upper[j]:
-                step = -step
-            xs = x.copy()
-            xs[j] += step
-            cj, _, okj = self._components(xs)
-            jc[:, :, j] = np.where(okj[:, None], (cj - c0) / step, 0.0)
-        jc[~ok0] = 0.0
         h = self.obj.residuals(x)
         dp, jdp = c0[:, :3], jc[:, :3]
         size_p = np.maximum(np.linalg.norm(dp, axis=1), NORM_FLOOR)
@@ -584,6 +707,7 @@ class _Eq49Model:
         s, *_ = np.linalg.lstsq(rows / col, -f, rcond=None)
         self.cost = float(f @ f)
         self.remaining = self.cost - float(np.sum((f + (rows / col) @ s) ** 2))
+        self._f = f
         return rows
 
 
@@ -712,28 +836,60 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     else:
         comp = obj.component_residuals if pr is None else (
             lambda x: np.concatenate([obj.component_residuals(x), pr.rows(x)]))
-        first = least_squares(comp, x0, max_nfev=max(2, max_evaluations // (2 * per_step)), bounds=(lower, upper),
-                              x_scale=scale, diff_step=DIFF_STEP, method="trf", xtol=XTOL, ftol=FTOL)
+        first_jacobians = _Jacobians(obj, lower, upper, scale)
+        last = []
+
+        def comp_jac(x):
+            """Jacobian of the components (with the prior's rows): a rank-one update after a step
+            its model predicted well, else forward differences (:class:`_Jacobians`)."""
+            x = np.asarray(x, float)
+            f = comp(x)
+            poor = not last or _poor_step(*last[-1], f, x)
+            jc = (first_jacobians.exact(x) if poor else first_jacobians.updated(x))[3]
+            rows = jc.reshape(-1, x.size)
+            if pr is not None:
+                rows = np.concatenate([rows, pr.jacobian(x.size)])
+            last[:] = [(f, rows, x.copy())]
+            return rows
+
+        half = max(2 * per_step, max_evaluations // 2)
+
+        def spent(intermediate_result):
+            """Stop (``StopIteration``: status -2) when stage 1 has used half the budget."""
+            if obj.evaluations >= half:
+                raise StopIteration
+
+        first = least_squares(comp, x0, jac=comp_jac, max_nfev=half, callback=spent,
+                              bounds=(lower, upper), x_scale=scale, method="trf", xtol=XTOL, ftol=FTOL)
         x1 = first.x if np.isfinite(first.cost) else x0
-        stage1 = f"{first.nfev} steps ({'converged' if first.status > 0 else 'budget'})"
+        stage1 = (f"{first.nfev} steps ({'converged' if first.status > 0 else 'budget'}; "
+                  f"{first_jacobians.note()})")
         if not objective(x1) <= objective(x0):
             x1 = x0   # the component fit's optimum is worse for Eq. (49): start stage 2 where we began
     # stage 2: Eq. (49) itself, with the rest of the budget, its Gauss-Newton model keeping the
     # curvature of the norms; stopped when the decrease the model still predicts is negligible.
     # A value that ends at an optimizer bound has the bound widened and stage 2 goes on from there.
-    widened, steps = [], 0
+    widened, steps, n_exact, n_updated = [], 0, 0, 0
     for _ in range(MAX_WIDENINGS + 1):
-        eq49 = _Eq49Model(obj, lower, upper, pr)
+        eq49 = _Eq49Model(obj, lower, upper, pr, scale=scale)
+
+        budget_stop = []
 
         def settled(intermediate_result, eq49=eq49):
-            """Stop (``StopIteration``: status -2) when the predicted further decrease is negligible."""
+            """Stop (``StopIteration``: status -2) when the predicted further decrease is negligible,
+            or when the evaluation budget is spent."""
             if eq49.bic_left(k) < BIC_TOLERANCE:
                 raise StopIteration
+            if obj.evaluations >= max_evaluations:
+                budget_stop.append(True)
+                raise StopIteration
 
-        left = max(2, (max_evaluations - obj.evaluations) // per_step)
+        left = max(2, max_evaluations - obj.evaluations)
         sol = least_squares(eq49.fun, np.clip(x1, lower, upper), jac=eq49.jac, max_nfev=left, callback=settled,
                             bounds=(lower, upper), x_scale=scale, method="trf", xtol=XTOL, ftol=FTOL)
         steps += sol.nfev
+        n_exact += eq49.jacobians.n_exact
+        n_updated += eq49.jacobians.n_updated
         x1 = sol.x
         grown = []   # "<name> (...)" of the values whose bound was widened on this pass
         for j, nm in enumerate(names):
@@ -753,14 +909,21 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     why = ("the evaluation budget is spent" if obj.evaluations >= max_evaluations
            else f"{MAX_WIDENINGS} widenings, the most allowed")
     unrefitted = tuple(f"{g}: {why})" for g in grown)
+    if uncertainty and not (eq49.jacobians.is_exact and np.array_equal(eq49.jacobians.x, sol.x)):
+        # stopped on an updated Jacobian (by a tolerance or the budget): the standard errors and
+        # the decrease still predicted are read from a forward difference
+        sol.jac = eq49.exact_rows(sol.x)
+        n_exact += 1
     r = obj.residuals(sol.x)
-    converged = bool(sol.status > 0 or sol.status == -2)
+    converged = bool(sol.status > 0 or (sol.status == -2 and not budget_stop))
     left_bic = eq49.bic_left(k)
     how = (f"the predicted further decrease {eq49.remaining:.3g} (mm + deg)^2 changes the BIC by "
-           f"{left_bic:.2g} < {BIC_TOLERANCE:g}" if sol.status == -2 else sol.message)
+           f"{left_bic:.2g} < {BIC_TOLERANCE:g}" if sol.status == -2 and not budget_stop
+           else "the evaluation budget is spent" if budget_stop else sol.message)
     at_bound = bound_flags(specs, sol.x) + unrefitted
     msg = (f"least squares: error components {stage1}, "
-           f"then Eq. (49): {how} ({steps} steps, {obj.evaluations} evaluations)"
+           f"then Eq. (49): {how} ({steps} steps, {n_exact} forward-difference Jacobians, {n_updated} rank-one "
+           f"updates; {obj.evaluations} evaluations)"
            + ("" if not widened else f"; widened: {', '.join(widened)}")
            + ("" if converged else f"; NOT converged: stopped at the budget of {max_evaluations} evaluations "
                                    f"(predicted further decrease {eq49.remaining:.3g} (mm + deg)^2, "

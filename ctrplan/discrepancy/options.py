@@ -42,9 +42,11 @@ ENVELOPE_NOISE_FACTOR = 1.62
 #: the tighter tolerances of :data:`~ctrplan.discrepancy.simulate.WARM_OUTER_TOL`; 8 = standard
 #: errors over clusters of neighbouring blocks with t intervals, values left on a bound widened
 #: without a refit flagged, blocks lengthened where the residuals' correlation needs a longer
-#: buffer, comparisons of two candidates corrected for the folds' shared training data. Stages
-#: written by an earlier version are redone.
-FIT_VERSION = 8
+#: buffer, comparisons of two candidates corrected for the folds' shared training data; 9 =
+#: Jacobians of both least-squares stages moved by rank-one updates between forward differences,
+#: the evaluation budget counted in model evaluations. Stages written by an earlier version are
+#: redone.
+FIT_VERSION = 9
 
 
 @dataclass(frozen=True)
