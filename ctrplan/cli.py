@@ -618,6 +618,92 @@ def _report_failed(result, out_dir, exc: Exception) -> None:
                  f"{result.updated_model_file} is written; {retry}")
 
 
+@main.command()
+@click.option("--result", "result_dir", required=True, type=click.Path(exists=True, file_okay=False),
+              help="Output folder of `ctrplan discrepancy` (its results.json gives the hypotheses, the noise, the robot "
+                   "file and the data).")
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
+              help="Output folder (trajectory.csv, trajectory_bag/, samples.csv, design.json, separation.png, design.md).")
+@click.option("--hypotheses", default=None,
+              help="Candidates to separate or determine, comma-separated (effects, 'baseline', or 'first+second' for a "
+                   "pair the run tried; default: the ambiguous pair, else the named model).")
+@click.option("--parameters", default=None,
+              help="With one hypothesis: the parameters to determine, comma-separated (default: those the recorded "
+                   "data left undetermined).")
+@click.option("--robot", "robot_path", default=None, type=click.Path(exists=True, dir_okay=False),
+              help="Robot model file the result was fitted to (default: the result's).")
+@click.option("--data", "data_path", default=None, type=click.Path(exists=True),
+              help="The recorded data (default: the result's).")
+@click.option("--scenario", "scenario_path", default=None, type=click.Path(exists=True, dir_okay=False),
+              help="Scenario file whose obstacles the motion stays clear of, whose [drive] limits it keeps and whose "
+                   "start it begins at (default: no obstacles, the drive the recorded motion shows, the robot's home).")
+@click.option("--duration", type=float, default=None, help="Budget [s] (default: the recorded trajectory's duration).")
+@click.option("--rest", type=float, default=1.0, show_default=True, help="Rest after each motion primitive [s].")
+@click.option("--noise-position-mm", "noise_mm", type=float, default=None,
+              help="Sensor noise per tip coordinate [mm] (default: the result's estimate).")
+@click.option("--random-motions", type=int, default=3, show_default=True,
+              help="Random motions of the same budget the design is compared with.")
+@click.option("--no-bag", is_flag=True, help="Do not write the ROS 2 bag.")
+@click.option("--jobs", type=int, default=1, show_default=True, help="Worker processes of the model evaluations.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random motions.")
+def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, scenario_path, duration, rest, noise_mm,
+           random_motions, no_bag, jobs, seed):
+    """Plan the measured trajectory that best settles what a discrepancy run left open.
+
+    Two or more hypotheses: the motion that best separates them, each refitted to the others'
+    predictions (T-optimality). One: the motion that best determines its parameters (Ds-optimality).
+    The motion is made of primitives the effects respond to, stays inside the joint limits, stable and
+    clear of the scenario's obstacles, and is time-parameterized within the drive limits (ruckig).
+    """
+    from .design import DesignInputError, design_experiment, read_results, result_hypotheses
+    from .design._output import write_design
+    from .discrepancy import load_measured_data
+    from .io.robot_file import load_robot
+
+    results = read_results(result_dir)
+    where = str(Path(result_dir) / "results.json")
+
+    def locate(given, key):
+        if given is not None:
+            return given
+        value = results.get(key)
+        for base in (Path.cwd(), Path(result_dir).resolve().parent):
+            if value and (base / value).exists():
+                return str(base / value)
+        raise DesignInputError(f"{where}: {key} {value!r} not found; give --{key.split('_')[0]}")
+
+    robot_path = locate(robot_path, "robot_file")
+    data_path = locate(data_path, "data_file")
+    robot = load_robot(robot_path)
+    data = load_measured_data(data_path, robot, frame=results.get("frame"))
+    keys = [k.strip() for k in hypotheses.split(",") if k.strip()] if hypotheses else None
+    hyps = result_hypotheses(results, keys, where=where)
+    noise = ((results.get("noise") or {}).get("noise") or {})
+    if noise_mm is not None:
+        if not (noise_mm > 0 and noise_mm < float("inf")):
+            raise DesignInputError(f"option --noise-position-mm {noise_mm!r}: must be > 0 mm")
+        sigma, lag1 = noise_mm * 1e-3, None
+    else:
+        sigma, lag1 = noise.get("position_rms_m"), noise.get("lag1_correlation")
+        if not sigma:
+            raise DesignInputError(f"{where}: no sensor noise estimate; give --noise-position-mm")
+    drive = obstacles = start = None
+    if scenario_path is not None:
+        from .io.scenario import load_scenario
+
+        sc = load_scenario(scenario_path)
+        drive, obstacles, start = sc.drive, sc.obstacles, sc.start
+    interest = [p.strip() for p in parameters.split(",") if p.strip()] if parameters else None
+    if duration is not None and not duration > 0:
+        raise DesignInputError(f"option --duration {duration!r}: must be > 0 s")
+    res = design_experiment(robot, data, hyps, noise_position=sigma, noise_lag1=lag1, drive=drive,
+                            obstacles=obstacles or (), start=start, duration=duration, interest=interest, rest=rest,
+                            n_random=random_motions, seed=seed, n_jobs=jobs)
+    command = "ctrplan design " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    paths = write_design(res, robot, out_dir, command=command, bag=not no_bag)
+    logger.info(f"design: {res.duration:.1f} s, {len(res.primitives)} primitives; report: {paths['markdown']}")
+
+
 @main.command("discrepancy-report")
 @click.argument("out_dir", type=click.Path(exists=True, file_okay=False))
 def discrepancy_report(out_dir):

@@ -220,6 +220,19 @@ def _path_csv(rows: Sequence[Mapping[str, Any]], names: list[str]) -> str:
     return buf.getvalue()
 
 
+def write_trajectory_csv(path, traj: Trajectory) -> None:
+    """Write ``traj`` as ``trajectory.csv`` is written by ``ctrplan plan``: a column ``t`` [s], then per
+    joint its position, velocity and acceleration (``<joint>``, ``<joint>_vel``, ``<joint>_acc``)
+    [rad or m, per s, per s^2], one row per control period.
+
+    Parameters
+    ----------
+    path : str or path-like
+    traj : Trajectory
+    """
+    atomic_write_text(path, _trajectory_csv(traj))
+
+
 def _trajectory_csv(traj: Trajectory) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")

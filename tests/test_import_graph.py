@@ -31,6 +31,7 @@ LAYERS = (
     ("plots", "report"),
     ("view",),                                 # the interactive view draws with plots' helpers
     ("discrepancy", "pipeline"),               # pipeline: a subpackage, one module per stage and the report
+    ("design",),                               # experiment design from a discrepancy run's results
     ("api",),                                  # plan_scenario: the pipeline's results as arrays
     ("studies", "testing"),                    # many scenarios; assertions on plans for pytest suites
     ("cli",),                                  # command line

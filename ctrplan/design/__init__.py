@@ -1,0 +1,22 @@
+"""Experiment design: the measured trajectory that best settles what a discrepancy run left open.
+
+From the hypotheses a ``ctrplan discrepancy`` result leaves open (an ambiguous pair, or the named
+model with parameters the data did not determine), plan a motion, safe to run, that separates the
+hypotheses (T-optimality) or determines the parameters (Ds-optimality), and write it ready to run
+(``ctrplan design``).
+
+- :mod:`._hypotheses`: hypotheses from a result (:func:`result_hypotheses`);
+- :mod:`._criteria`: sensitivities of the hypotheses' predicted tips and the criteria;
+- :mod:`._motions`: motion primitives, their feasibility, their jerk-limited trajectory;
+- :mod:`._design`: the greedy search (:func:`design_experiment`);
+- :mod:`._output`: the output folder (:func:`write_design`).
+"""
+
+from ._hypotheses import DesignInputError, Hypothesis, read_results, result_hypotheses
+from ._criteria import Information, Sensitivities, information, noise_weight, sensitivities
+from ._motions import Primitive, motion_data, primitives, sample, trajectory
+from ._design import DesignResult, design_experiment, drive_from_data
+
+__all__ = ["DesignInputError", "Hypothesis", "read_results", "result_hypotheses", "Information", "Sensitivities",
+           "information", "noise_weight", "sensitivities", "Primitive", "motion_data", "primitives", "sample",
+           "trajectory", "DesignResult", "design_experiment", "drive_from_data"]

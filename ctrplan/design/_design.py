@@ -1,0 +1,418 @@
+"""The experiment design: a motion, safe to run, that best separates the open hypotheses or best
+determines the uncertain parameters, found by a budgeted greedy search over primitives.
+
+The search is the sequential (greedy) construction of optimum-design practice (Atkinson, Donev &
+Tobias 2007, ch. 12; Fedorov 1972): from the start configuration, the feasible primitive
+(:mod:`._motions`) with the largest gain of the criterion (:mod:`._criteria`) per second of motion
+is appended, until the budget is spent or no primitive adds. A primitive's samples depend on the
+motion before them (history effects), so each is evaluated after the motion chosen so far; the
+samples already chosen do not change when a primitive is appended (every effect acts on the past
+of the motion), which makes the gains exact sums.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from ..io.scenario import DriveLimits
+from ..robot import ROTATION
+from ._criteria import (Information, ds_criterion, information, noise_weight, prior_precision, sensitivities)
+from ._hypotheses import DesignInputError
+from ._motions import feasible, joint_configurations, motion_data, primitives, sample, trajectory
+
+logger = logging.getLogger(__name__)
+
+#: Recorded samples the hypotheses are differentiated at, at most (evenly spaced; their sums are
+#: scaled to the whole recording).
+MAX_RECORDED_SAMPLES = 300
+#: Significance level of the predicted power [-] (the discrepancy workflow's default).
+POWER_LEVEL = 0.01
+#: Control rate of a drive derived from the recorded motion [Hz].
+DEFAULT_CONTROL_RATE = 250.0
+#: Drive limits of joints the recorded motion did not move (the shipped scenarios' values):
+#: velocity, acceleration, jerk for rotations [rad/s^k] and translations [m/s^k].
+FALLBACK_DRIVE = {ROTATION: (1.0, 4.0, 40.0), "translation": (0.01, 0.04, 0.4)}
+#: Spacing of the states checked along a primitive's segments [m of the planner's weighted joint
+#: metric; 0.025 rad of rotation]: finer than the planner's (0.1 rad), since the regions of several
+#: equilibria near a relative rotation of pi can be narrower than that.
+CHECK_RESOLUTION = 5e-4
+#: The search aims at about this many primitives in a budget: a reversal is cycled up to the
+#: budget / TARGET_STEPS (fewer, longer steps; each step costs an evaluation of every candidate).
+TARGET_STEPS = 20
+
+
+@dataclass(frozen=True, eq=False)
+class DesignResult:
+    """A designed experiment and what it is predicted to show.
+
+    Attributes
+    ----------
+    mode : {"separate", "parameters"}
+        Separating two or more hypotheses (T-optimality) or determining parameters of one
+        (Ds-optimality).
+    hypotheses : tuple of Hypothesis
+    interest : tuple of str
+        Parameters of interest (``"parameters"`` mode).
+    primitives : tuple of Primitive
+        The designed motion, in order.
+    trajectory : Trajectory
+        Its jerk-limited trajectory at the drive's control rate.
+    time : ndarray, shape (K,)
+        Sensor sample times of the designed motion [s].
+    joints : ndarray, shape (K, n_joints)
+        Joint values at those times [rad or m].
+    tips : ndarray, shape (H, K, 3)
+        Each hypothesis's predicted tip positions there, in the data's frame [m].
+    separation : dict
+        ``"recorded"``, ``"designed"`` (recorded and designed together), ``"repeated"`` (the
+        recording and a repetition of the same duration as the design) and ``"random"`` (recorded
+        and each random motion of the same budget): ``{"a>b": T}`` per ordered pair [-], the
+        expected evidence for a against b refitted. Empty in parameters mode.
+    stderr : dict
+        Parameters mode: the same four keys, ``{parameter: predicted standard error}`` [SI].
+    power : dict
+        Separate mode: the same keys, the smallest predicted power over the pairs of a 1-degree-of-
+        freedom likelihood-ratio test at level :data:`POWER_LEVEL`.
+    noise_position : float
+        Sensor noise per coordinate used [m].
+    noise_inflation : float
+        AR(1) variance inflation used [-].
+    budget : float
+        Duration allowed [s].
+    seconds : dict
+        Wall time by stage [s].
+    evaluations : int
+        Model evaluations.
+    """
+
+    mode: str
+    hypotheses: tuple
+    interest: tuple
+    primitives: tuple
+    trajectory: object
+    time: np.ndarray
+    joints: np.ndarray
+    tips: np.ndarray
+    separation: dict
+    stderr: dict
+    power: dict
+    noise_position: float
+    noise_inflation: float
+    budget: float
+    seconds: dict = field(default_factory=dict)
+    evaluations: int = 0
+
+    @property
+    def duration(self) -> float:
+        """Duration of the designed motion [s]."""
+        return self.trajectory.duration
+
+
+def drive_from_data(robot, data, control_rate_hz: float = DEFAULT_CONTROL_RATE) -> DriveLimits:
+    """Drive limits the recorded motion shows: per joint the 99th percentile of its speed and of
+    its acceleration along the record, jerk ten times the acceleration per second (the shipped
+    scenarios' ratio); joints the record does not move get :data:`FALLBACK_DRIVE`.
+
+    Raises
+    ------
+    DesignInputError
+        Data without sample times.
+    """
+    rec = data.record
+    if rec.time is None:
+        raise DesignInputError(f"{data.file}: no sample times; give the drive limits (a scenario's [drive])")
+    q = np.array([robot.joint_vector(a, b) for a, b in zip(rec.alpha, rec.beta)])
+    vel, acc, jerk = [], [], []
+    seq = rec.sequence if rec.sequence is not None else np.zeros(len(q), int)
+    for i, j in enumerate(robot.joints):
+        v_all, a_all = [], []
+        for s in np.unique(seq):
+            m = seq == s
+            t, x = rec.time[m], q[m, i]
+            if len(t) < 3:
+                continue
+            v = np.diff(x) / np.diff(t)
+            a = np.diff(v) / np.diff(t[1:])
+            v_all.append(np.abs(v))
+            a_all.append(np.abs(a))
+        v99 = float(np.percentile(np.concatenate(v_all), 99)) if v_all else 0.0
+        a99 = float(np.percentile(np.concatenate(a_all), 99)) if a_all else 0.0
+        fv, fa, fj = FALLBACK_DRIVE[j.kind]
+        if v99 > 0 and a99 > 0:
+            vel.append(v99)
+            acc.append(a99)
+            jerk.append(10.0 * a99)
+        else:
+            vel.append(fv)
+            acc.append(fa)
+            jerk.append(fj)
+    return DriveLimits(control_rate_hz, np.array(vel), np.array(acc), np.array(jerk), tuple(robot.joint_names))
+
+
+def _period(data) -> float:
+    if data.time is None:
+        raise DesignInputError(f"{data.file}: no sample times; the sensor's sample rate is needed")
+    d = np.diff(data.record.time)
+    d = d[d > 0]
+    if not d.size:
+        raise DesignInputError(f"{data.file}: sample times do not increase")
+    return float(np.median(d))
+
+
+def _pair_name(hyps, a, b) -> str:
+    return f"{hyps[a].key}>{hyps[b].key}"
+
+
+class _Evaluator:
+    """Evaluates motions for the hypotheses and keeps the work counters."""
+
+    def __init__(self, robot, hyps, weight, settings, n_jobs):
+        self.robot, self.hyps, self.weight, self.settings, self.n_jobs = robot, hyps, weight, settings, n_jobs
+        self.evaluations = 0
+
+    def sens(self, data):
+        out = [sensitivities(self.robot, h, data, self.settings, n_jobs=self.n_jobs) for h in self.hyps]
+        self.evaluations += sum(s.evaluations for s in out)
+        return out
+
+    def info(self, data) -> Information:
+        return information(self.sens(data), self.weight)
+
+
+def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_lag1: float | None = None,
+                      drive: DriveLimits | None = None, obstacles=(), start=None, duration: float | None = None,
+                      interest=None, settings=None, rest: float = 1.0, n_random: int = 3, seed: int = 0,
+                      n_jobs: int = 1) -> DesignResult:
+    """Design the next measured trajectory.
+
+    Parameters
+    ----------
+    robot : Robot
+        The robot file the hypotheses were fitted to.
+    data : MeasuredData
+        The recorded trajectory (:func:`ctrplan.discrepancy.load_measured_data`).
+    hypotheses : sequence of Hypothesis
+        Two or more: the motion separates them (T-optimality). One: the motion determines its
+        parameters of interest (Ds-optimality).
+    noise_position : float
+        Sensor noise per tip coordinate [m], > 0.
+    noise_lag1 : float, optional
+        Lag-one autocorrelation of the noise (AR(1) inflation of :func:`noise_weight`).
+    drive : DriveLimits, optional
+        Default :func:`drive_from_data`.
+    obstacles : sequence of Obstacle
+        Scenario obstacles the robot must stay clear of.
+    start : array-like, shape (n_joints,), optional
+        Start configuration [rad or m]; default the robot's home.
+    duration : float, optional
+        Budget [s]; default the recorded trajectory's duration.
+    interest : sequence of str, optional
+        Parameters mode: the parameters to determine; default those the recorded data left
+        undetermined (:meth:`Hypothesis.undetermined`), else every free one.
+    settings : ModelSettings, optional
+    rest : float
+        Rest after each primitive [s].
+    n_random : int
+        Random motions of the same budget to compare with.
+    seed : int
+        Seed of the random motions.
+    n_jobs : int
+        Worker processes of the model evaluations.
+
+    Returns
+    -------
+    DesignResult
+
+    Raises
+    ------
+    DesignInputError
+        No hypothesis, a parameter of interest the hypothesis does not fit, data without times, a
+        start that is not valid (outside the limits, unstable, in collision), or no feasible
+        primitive from the start.
+    """
+    from ..planning.collision import CollisionChecker
+    from ..planning.planners import ValidityChecker
+    from ..planning.validity import BatchValidityChecker
+
+    t_all = time.perf_counter()
+    hyps = tuple(hypotheses)
+    if not hyps:
+        raise DesignInputError("no hypothesis to design for")
+    mode = "separate" if len(hyps) > 1 else "parameters"
+    weight, inflation = noise_weight(noise_position, noise_lag1)
+    period = _period(data)
+    drive = drive or drive_from_data(robot, data)
+    rec_t = data.record.time
+    budget = float(duration) if duration is not None else float(rec_t[-1] - rec_t[0])
+    if not budget > 0:
+        raise DesignInputError(f"duration {budget!r} s: must be > 0")
+    q0 = (np.asarray(start, float) if start is not None
+          else robot.joint_vector(robot.home_alpha, robot.home_beta))
+    collision = CollisionChecker(obstacles) if obstacles else None
+    # candidates pass the planner's compiled checker (limits, convergence, determinant test, collisions);
+    # a primitive is appended only after the states along it, checked one by one with the multistart
+    # search for other equilibria, pass too: a measured motion must not pass where the tubes can snap
+    quick = BatchValidityChecker(robot, collision, settings, check_stability=True)
+    checker = BatchValidityChecker(robot, reference=ValidityChecker(robot, collision, settings=settings,
+                                                                    check_stability=True),
+                                   resolution=CHECK_RESOLUTION)
+    if not checker(q0):
+        raise DesignInputError(f"start {dict(zip(robot.joint_names, np.round(q0, 6).tolist()))} is outside the joint "
+                               f"limits, unstable or in collision")
+    interest_idx = ()
+    prior = None
+    if mode == "parameters":
+        h = hyps[0]
+        interest = tuple(interest) if interest else (h.undetermined(robot) or h.free)
+        bad = [n for n in interest if n not in h.free]
+        if bad:
+            raise DesignInputError(f"parameter(s) {', '.join(bad)} not fitted by {h.label}; it fits "
+                                   f"{', '.join(h.free)}")
+        interest_idx = tuple(h.free.index(n) for n in interest)
+        prior = prior_precision(robot, h.free)
+    else:
+        interest = ()
+    ev = _Evaluator(robot, hyps, weight, settings, n_jobs)
+    seconds = {}
+
+    # the recorded trajectory's information (a subsample standing for every sample)
+    t0 = time.perf_counter()
+    K = data.n_samples
+    rows = np.unique(np.linspace(0, K - 1, min(K, MAX_RECORDED_SAMPLES)).round().astype(int))
+    recorded = ev.info(data.take(rows))
+    recorded = recorded.scaled(K / max(recorded.n_samples, 1)) if recorded.n_samples else recorded
+    seconds["recorded"] = time.perf_counter() - t0
+
+    def value(info: Information) -> float:
+        if mode == "separate":
+            return min(info.separation().values())
+        return -ds_criterion(info, 0, interest_idx, prior)
+
+    target = budget / TARGET_STEPS
+
+    class _Prefix:
+        """The motion chosen so far: its primitives and its sensor samples (joint arrays)."""
+
+        def __init__(self):
+            self.prims, self.q, self.t_done = [], q0, 0.0
+            self.t = np.zeros(0)
+            self.alpha = np.zeros((0, robot.n_tubes))
+            self.beta = np.zeros((0, robot.n_tubes))
+
+        def candidates(self):
+            return [p for p in primitives(robot, self.q, rest, drive=drive, min_duration=target)
+                    if feasible(quick, p)]
+
+        def piece(self, prim):
+            """The samples ``prim`` adds after this prefix, or None past the budget."""
+            traj = trajectory(robot, [prim], drive)
+            if self.t_done + traj.duration > budget + 1e-9:
+                return None
+            k0 = int(np.floor(self.t_done / period + 1e-9)) + (1 if self.prims else 0)
+            ts = np.arange(k0, int(np.floor((self.t_done + traj.duration) / period + 1e-9)) + 1) * period
+            if not ts.size:
+                return None
+            local = np.clip(ts - self.t_done, 0.0, traj.duration)
+            qs = np.column_stack([np.interp(local, traj.t, traj.position[:, i]) for i in range(traj.n_joints)])
+            a, b = joint_configurations(robot, qs)
+            return traj.duration, ts, a, b
+
+        def evaluate(self, piece) -> Information:
+            _, ts, a, b = piece
+            n0 = len(self.t)
+            d = motion_data(robot, np.concatenate([self.t, ts]), None, frame=data.frame,
+                            rows=np.arange(n0, n0 + len(ts)), history=False,
+                            configurations=(np.vstack([self.alpha, a]), np.vstack([self.beta, b])))
+            return ev.info(d)
+
+        def append(self, prim, piece):
+            dur, ts, a, b = piece
+            self.prims.append(prim)
+            self.q, self.t_done = prim.end, self.t_done + dur
+            self.t = np.concatenate([self.t, ts])
+            self.alpha, self.beta = np.vstack([self.alpha, a]), np.vstack([self.beta, b])
+
+    # greedy search
+    t0 = time.perf_counter()
+    prefix, info = _Prefix(), recorded
+    current = value(recorded)
+    while True:
+        ranked = []
+        for prim in prefix.candidates():
+            piece = prefix.piece(prim)
+            if piece is None:
+                continue
+            new_info = info + prefix.evaluate(piece)
+            gain = (value(new_info) - current) / max(piece[0], 1e-9)
+            ranked.append((gain, len(ranked), prim, piece, new_info))
+        ranked.sort(key=lambda r: (-r[0], r[1]))
+        best = next((r for r in ranked if r[0] > 0 and feasible(checker, r[2])), None)
+        if best is None:
+            break
+        _, _, prim, piece, info = best
+        prefix.append(prim, piece)
+        current = value(info)
+        logger.info(f"design: {prim.describe(robot.joint_names)} ({prefix.t_done:.1f} of {budget:.1f} s)")
+    chosen = prefix.prims
+    if not chosen:
+        raise DesignInputError("no feasible primitive from the start adds to the criterion within the budget "
+                               f"of {budget:.3g} s")
+    seconds["search"] = time.perf_counter() - t0
+
+    # the designed motion evaluated whole (one continuous sequence, as it will be run)
+    t0 = time.perf_counter()
+    traj = trajectory(robot, chosen, drive)
+    ts, qs = sample(traj, period)
+    d = motion_data(robot, ts, qs, frame=data.frame)
+    sens = ev.sens(d)
+    designed = recorded + information(sens, weight)
+    tips = np.stack([s.tip for s in sens])
+    seconds["designed"] = time.perf_counter() - t0
+
+    # the same budget spent at random, or on repeating the recording
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    randoms = []
+    for _ in range(n_random):
+        walk, rinfo = _Prefix(), recorded
+        while True:
+            options = walk.candidates()
+            rng.shuffle(options)
+            prim = next((p for p in options if feasible(checker, p)), None)
+            if prim is None:
+                break
+            piece = walk.piece(prim)
+            if piece is None:
+                break
+            rinfo = rinfo + walk.evaluate(piece)
+            walk.append(prim, piece)
+        randoms.append(rinfo)
+    rec_duration = float(rec_t[-1] - rec_t[0])
+    repeated = recorded.scaled(1.0 + traj.duration / rec_duration) if rec_duration > 0 else recorded
+    seconds["comparison"] = time.perf_counter() - t0
+
+    cases = {"recorded": [recorded], "designed": [designed], "repeated": [repeated], "random": randoms}
+    separation, power, stderr = {}, {}, {}
+    crit = stats.chi2.ppf(1 - POWER_LEVEL, 1)
+    for key, infos in cases.items():
+        if mode == "separate":
+            seps = [{_pair_name(hyps, a, b): t for (a, b), t in i.separation().items()} for i in infos]
+            separation[key] = seps if key == "random" else seps[0]
+            pw = [min(float(stats.ncx2.sf(crit, 1, max(t, 1e-12))) for t in s.values()) for s in seps]
+            power[key] = pw if key == "random" else pw[0]
+        else:
+            ses = []
+            for i in infos:
+                cov = i.covariance(0, prior)
+                ses.append({n: float(np.sqrt(cov[j, j])) for n, j in zip(interest, interest_idx)})
+            stderr[key] = ses if key == "random" else ses[0]
+    seconds["total"] = time.perf_counter() - t_all
+    return DesignResult(mode=mode, hypotheses=hyps, interest=tuple(interest), primitives=tuple(chosen),
+                        trajectory=traj, time=ts, joints=qs, tips=tips, separation=separation, stderr=stderr,
+                        power=power, noise_position=float(noise_position), noise_inflation=float(inflation),
+                        budget=budget, seconds=seconds, evaluations=ev.evaluations)
