@@ -475,9 +475,11 @@ def bag_info(bag_path, robot_path, **bag_options):
 @main.command()
 @click.option("--robot", "robot_path", required=True, type=click.Path(exists=True, dir_okay=False),
               help="Robot model file with the candidate effects switched off (TOML, SI units).")
-@click.option("--data", "data_path", required=True, type=click.Path(exists=True),
+@click.option("--data", "data_paths", required=True, multiple=True, type=click.Path(exists=True),
               help="Measured data: CSV in the project schema (SI units), a ROS 2 bag (rosbag2 folder, .mcap or "
-                   ".db3 file), or Ha's whitespace trajectory format (any other file).")
+                   ".db3 file), or Ha's whitespace trajectory format (any other file). Given more than once: "
+                   "several recordings of the same robot, analysed together as separate motions (combined "
+                   "into <out>/recordings.csv).")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Report folder (report.md, results.json, PNG plots, updated model file).")
 @click.option("--fit", default=None,
@@ -526,7 +528,7 @@ def bag_info(bag_path, robot_path, **bag_options):
 @click.option("--jobs", type=int, default=None, help="Worker processes (default: all cores).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--no-progress", is_flag=True, help="Hide progress bars.")
-def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, reference_mu, envelope_samples, frame,
+def discrepancy(robot_path, data_paths, out_dir, fit, effects, noise_mm, reference_mu, envelope_samples, frame,
                 test_fraction, folds, blocks, prior_strengths, max_calibration_samples, max_contact_samples, bound_target,
                 bound_samples, significance, permutations, ds, jobs, seed, no_progress, **bag_options):
     """Find where model and measurement disagree, name the missing effect, add it, show the gap shrink.
@@ -570,7 +572,13 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
         raise PhysicalParameterError(f"option --bound-samples {bound_samples!r}: must be >= 0")
     from .io.ros2 import BagSelection
 
-    bag = _bag_selection(data_path, **bag_options)
+    bag = BagSelection()
+    for data_path in data_paths:
+        bag = _bag_selection(data_path, **bag_options)
+    if len(data_paths) > 1:
+        data_path, frame = _combine_recordings(robot_path, data_paths, frame, bag, out_dir)
+    else:
+        data_path = data_paths[0]
     ref_mu = None
     if reference_mu is not None:
         from .discrepancy.synth import parse_values
@@ -596,6 +604,60 @@ def discrepancy(robot_path, data_path, out_dir, fit, effects, noise_mm, referenc
         _report_failed(result, out_dir, exc)
         raise SystemExit(1) from None
     logger.info(f"report: {paths['markdown']}")
+
+
+def _combine_recordings(robot_path, data_paths, frame, bag, out_dir) -> tuple[str, str]:
+    """Several recordings as one table of separate motions: ``<out>/recordings.csv`` (each recording's
+    motions keep their own ids, offset past the previous recording's; its ``eta_*`` columns and
+    tangents kept where every recording has them). Returns the table's path and the frame.
+
+    Raises
+    ------
+    DataFileError
+        A recording that does not load, or recordings in different frames without ``--frame``.
+    """
+    import numpy as np
+    import pandas as pd
+
+    from .discrepancy import load_measured_data
+    from .errors import DataFileError
+    from .io.atomic import atomic_write_text
+    from .io.robot_file import load_robot
+
+    robot = load_robot(robot_path)
+    from .io.ros2 import BagSelection
+
+    loaded = [load_measured_data(p, robot, frame=frame, bag=bag if bag != BagSelection() else None)
+              for p in data_paths]
+    frames = {d.frame for d in loaded}
+    if len(frames) > 1:
+        raise DataFileError(f"options --data {', '.join(map(str, data_paths))}: recordings in different frames "
+                            f"({', '.join(f'{d.file}: {d.frame}' for d in loaded)}); give --frame")
+    n = robot.n_tubes
+    tables, offset = [], 0
+    tangents = all(d.tangent is not None for d in loaded)
+    for d in loaded:
+        rec = d.record
+        cols = {"time": d.time if d.time is not None else np.arange(d.n_samples, dtype=float),
+                "sequence": d.sequence - d.sequence.min() + offset}
+        cols.update({f"alpha_{i + 1}": d.alpha[:, i] for i in range(n)})
+        cols.update({f"beta_{i + 1}": d.beta[:, i] for i in range(n)})
+        cols.update({f"tip_{c}": d.tip[:, a] for a, c in enumerate("xyz")})
+        if tangents:
+            cols.update({f"tangent_{c}": d.tangent[:, a] for a, c in enumerate("xyz")})
+        cols.update({f"eta_{k + 1}": d.given_eta[d.rows, k] for k in range(n - 1)})
+        if rec.alpha.shape[0] != d.n_samples:
+            raise DataFileError(f"{d.file}: {rec.alpha.shape[0] - d.n_samples} recorded rows are not samples; "
+                                f"combine such recordings by hand")
+        tables.append(pd.DataFrame(cols))
+        offset = int(cols["sequence"].max()) + 1
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "recordings.csv"
+    atomic_write_text(path, pd.concat(tables, ignore_index=True).to_csv(index=False))
+    logger.info(f"data: {len(loaded)} recordings ({', '.join(f'{d.file}: {d.n_samples} samples' for d in loaded)}) "
+                f"combined as separate motions into {path}")
+    return str(path), loaded[0].frame
 
 
 def _report_failed(result, out_dir, exc: Exception) -> None:

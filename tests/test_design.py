@@ -252,3 +252,45 @@ def test_cli_writes_a_trajectory_ready_to_run(tmp_path):
     assert (out / "separation.png").stat().st_size > 0 and (out / "design.md").read_text().startswith("# Designed")
     bad = CliRunner().invoke(main, ["design", "--result", str(folder), "--out", str(out), "--hypotheses", "backlash"])
     assert bad.exit_code != 0 and "no fitted candidate 'backlash'" in str(bad.exception)
+
+
+def test_several_recordings_are_combined_as_separate_motions(tmp_path, monkeypatch):
+    """`ctrplan discrepancy --data A --data B`: one table whose motions keep their ids past the previous
+    recording's, with every row and value; recordings in different frames need --frame."""
+    import pandas as pd
+
+    from ctrplan.cli import _combine_recordings
+    from ctrplan.errors import DataFileError
+    from ctrplan.io.ros2 import BagSelection
+
+    robot = load_robot(PAIR)
+    paths = []
+    for k, end in enumerate((1.0, -1.5)):
+        d = _sweep(robot, [[0.0], [end]])
+        tips = predict(robot, (), [], d, "standard").tip
+        frame = pd.DataFrame({"time": d.time, "sequence": 0, "alpha_1": 0.0, "alpha_2": d.alpha[:, 1],
+                              "beta_1": 0.0, "beta_2": d.beta[:, 1], "tip_x": tips[:, 0], "tip_y": tips[:, 1],
+                              "tip_z": tips[:, 2]})
+        if k == 1:
+            frame["sequence"] = np.repeat([0, 1], [10, len(frame) - 10])
+        paths.append(tmp_path / f"r{k}.csv")
+        frame.to_csv(paths[-1], index=False)
+    path, frame = _combine_recordings(PAIR, paths, None, BagSelection(), tmp_path / "out")
+    table = pd.read_csv(path)
+    sizes = [len(pd.read_csv(p)) for p in paths]
+    assert frame == "robot" and len(table) == sum(sizes)
+    assert table["sequence"].tolist() == [0] * sizes[0] + [1] * 10 + [2] * (sizes[1] - 10)
+    assert np.allclose(table["alpha_2"].iloc[sizes[0]:], pd.read_csv(paths[1])["alpha_2"])
+    import dataclasses
+
+    import ctrplan.discrepancy as disc
+
+    real = disc.load_measured_data
+
+    def second_in_tracker_frame(p, robot, frame=None, bag=None):
+        d = real(p, robot, frame=frame, bag=bag)
+        return d if str(p) == str(paths[0]) else dataclasses.replace(d, frame="tracker")
+
+    monkeypatch.setattr(disc, "load_measured_data", second_in_tracker_frame)
+    with pytest.raises(DataFileError, match="different frames"):
+        _combine_recordings(PAIR, paths, None, BagSelection(), tmp_path / "out2")

@@ -105,7 +105,7 @@ def _plot(result, path: Path) -> None:
         for h, tips in zip(hyps[1:], result.tips[1:]):
             d2 = np.nansum((tips - ref) ** 2, axis=1) * w
             axes[1].plot(t, np.cumsum(d2), label=f"{h.label} vs {hyps[0].label}")
-        axes[1].set_ylabel("accumulated squared distance\n/ noise variance [-]")
+        axes[1].set_ylabel("accumulated squared distance\nbefore refit / noise variance [-]")
         axes[1].legend(fontsize=8)
     else:
         q = result.joints
