@@ -37,6 +37,8 @@ DEFAULT_CONTROL_RATE = 250.0
 #: Drive limits of joints the recorded motion did not move (the shipped scenarios' values):
 #: velocity, acceleration, jerk for rotations [rad/s^k] and translations [m/s^k].
 FALLBACK_DRIVE = {ROTATION: (1.0, 4.0, 40.0), "translation": (0.01, 0.04, 0.4)}
+#: Predicted correlation [-] from which a parameter is reported as confounded with another.
+CONFOUNDED_CORRELATION = 0.9
 #: Spacing of the states checked along a primitive's segments [m of the planner's weighted joint
 #: metric; 0.025 rad of rotation]: finer than the planner's (0.1 rad), since the regions of several
 #: equilibria near a relative rotation of pi can be narrower than that.
@@ -88,6 +90,12 @@ class DesignResult:
         Wall time by stage [s].
     evaluations : int
         Model evaluations.
+    random_primitives : tuple of tuple of Primitive
+        The random motions compared with.
+    confounded : dict
+        Parameters mode: per parameter of interest, the other free parameters whose predicted
+        correlation with it after the design is at least :data:`CONFOUNDED_CORRELATION` in magnitude
+        (``{name: correlation}``): what keeps it undetermined when the design cannot shrink it.
     """
 
     mode: str
@@ -106,6 +114,8 @@ class DesignResult:
     budget: float
     seconds: dict = field(default_factory=dict)
     evaluations: int = 0
+    random_primitives: tuple = ()
+    confounded: dict = field(default_factory=dict)
 
     @property
     def duration(self) -> float:
@@ -212,8 +222,9 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     duration : float, optional
         Budget [s]; default the recorded trajectory's duration.
     interest : sequence of str, optional
-        Parameters mode: the parameters to determine; default those the recorded data left
-        undetermined (:meth:`Hypothesis.undetermined`), else every free one.
+        Parameters mode: the parameters to determine; default the hypothesis's own effect
+        parameters the recorded data left undetermined (:meth:`Hypothesis.undetermined`), else every
+        undetermined one, else its effect parameters, else every free one.
     settings : ModelSettings, optional
     rest : float
         Rest after each primitive [s].
@@ -268,7 +279,9 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     prior = None
     if mode == "parameters":
         h = hyps[0]
-        interest = tuple(interest) if interest else (h.undetermined(robot) or h.free)
+        if not interest:
+            own, loose = h.effect_parameters(robot), h.undetermined(robot)
+            interest = tuple(n for n in loose if n in own) or loose or own or h.free
         bad = [n for n in interest if n not in h.free]
         if bad:
             raise DesignInputError(f"parameter(s) {', '.join(bad)} not fitted by {h.label}; it fits "
@@ -377,7 +390,7 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     # the same budget spent at random, or on repeating the recording
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
-    randoms = []
+    randoms, random_walks = [], []
     for _ in range(n_random):
         walk, rinfo = _Prefix(), recorded
         while True:
@@ -392,6 +405,7 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
             rinfo = rinfo + walk.evaluate(piece)
             walk.append(prim, piece)
         randoms.append(rinfo)
+        random_walks.append(tuple(walk.prims))
     rec_duration = float(rec_t[-1] - rec_t[0])
     repeated = recorded.scaled(1.0 + traj.duration / rec_duration) if rec_duration > 0 else recorded
     seconds["comparison"] = time.perf_counter() - t0
@@ -411,8 +425,18 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
                 cov = i.covariance(0, prior)
                 ses.append({n: float(np.sqrt(cov[j, j])) for n, j in zip(interest, interest_idx)})
             stderr[key] = ses if key == "random" else ses[0]
+    confounded = {}
+    if mode == "parameters":
+        cov = designed.covariance(0, prior)
+        sd = np.sqrt(np.diag(cov))
+        corr = cov / np.outer(sd, sd)
+        free = hyps[0].free
+        for n, j in zip(interest, interest_idx):
+            confounded[n] = {free[k]: float(corr[j, k]) for k in np.argsort(-np.abs(corr[j]))
+                             if k != j and abs(corr[j, k]) >= CONFOUNDED_CORRELATION}
     seconds["total"] = time.perf_counter() - t_all
     return DesignResult(mode=mode, hypotheses=hyps, interest=tuple(interest), primitives=tuple(chosen),
                         trajectory=traj, time=ts, joints=qs, tips=tips, separation=separation, stderr=stderr,
                         power=power, noise_position=float(noise_position), noise_inflation=float(inflation),
-                        budget=budget, seconds=seconds, evaluations=ev.evaluations)
+                        budget=budget, seconds=seconds, evaluations=ev.evaluations,
+                        random_primitives=tuple(random_walks), confounded=confounded)

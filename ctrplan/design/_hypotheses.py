@@ -69,6 +69,19 @@ class Hypothesis:
         """The value of parameter ``name`` (SI)."""
         return float(self.values[self.names.index(name)])
 
+    def effect_parameters(self, robot) -> tuple:
+        """Free parameters of the hypothesis's own effects (not the baseline's tube parameters, nor a
+        registration the baseline fits unless the registration is the effect)."""
+        from ..effects import effect_of_parameter
+
+        own = set(self.key.split("+"))
+        out = []
+        for n in self.free:
+            e = effect_of_parameter(robot, n)
+            if e is not None and e.name in own:
+                out.append(n)
+        return tuple(out)
+
     def undetermined(self, robot=None) -> tuple:
         """Free parameters the recorded data left undetermined or poorly determined: a standard
         error that is infinite, or whose 95 % interval is wider than the parameter's typical range

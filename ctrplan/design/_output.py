@@ -57,6 +57,7 @@ def design_dict(result, robot, *, command: str = "") -> dict:
         "duration_s": result.duration, "budget_s": result.budget, "n_samples": int(len(result.time)),
         "primitives": [p.describe(robot.joint_names) for p in result.primitives],
         "separation": result.separation, "power": result.power, "stderr": result.stderr,
+        "confounded": result.confounded,
         "noise_position_m": result.noise_position, "noise_inflation": result.noise_inflation,
         "evaluations": result.evaluations, "seconds": result.seconds, "command": command,
         "joint_names": list(robot.joint_names),
@@ -146,6 +147,11 @@ def _markdown(d: dict) -> str:
             lines.append(f"| {n} | {se:.3g} | {d['stderr']['designed'][n]:.3g} | {d['stderr']['repeated'][n]:.3g} | "
                          f"{np.median(rnd) if rnd else float('nan'):.3g} |")
         lines += ["", "Predicted standard errors, SI units (prior-limited where the recorded data determine nothing)."]
+        for n, others in d.get("confounded", {}).items():
+            if others:
+                lines.append(f"- `{n}`: predicted correlation after the design with " +
+                             ", ".join(f"`{k}` {v:+.2f}" for k, v in others.items()) +
+                             " (what keeps it undetermined where the design does not shrink its standard error).")
     lines += ["", f"{d['evaluations']} model evaluations; " +
               ", ".join(f"{k} {v:.1f} s" for k, v in d["seconds"].items()) + "."]
     return "\n".join(lines) + "\n"
