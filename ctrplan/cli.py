@@ -706,7 +706,8 @@ def _report_failed(result, out_dir, exc: Exception) -> None:
 @click.option("--random-motions", type=int, default=3, show_default=True,
               help="Random motions of the same budget the design is compared with.")
 @click.option("--no-bag", is_flag=True, help="Do not write the ROS 2 bag.")
-@click.option("--jobs", type=int, default=1, show_default=True, help="Worker processes of the model evaluations.")
+@click.option("--jobs", type=int, default=None,
+              help="Processes the candidate motions are evaluated on (default: all cores).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random motions.")
 def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, scenario_path, duration, rest, noise_mm,
            random_motions, no_bag, jobs, seed):
@@ -760,7 +761,7 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
         raise DesignInputError(f"option --duration {duration!r}: must be > 0 s")
     res = design_experiment(robot, data, hyps, noise_position=sigma, noise_lag1=lag1, drive=drive,
                             obstacles=obstacles or (), start=start, duration=duration, interest=interest, rest=rest,
-                            n_random=random_motions, seed=seed, n_jobs=jobs)
+                            n_random=random_motions, seed=seed, n_jobs=jobs or os.cpu_count() or 1)
     command = "ctrplan design " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     paths = write_design(res, robot, out_dir, command=command, bag=not no_bag)
     logger.info(f"design: {res.duration:.1f} s, {len(res.primitives)} primitives; report: {paths['markdown']}")

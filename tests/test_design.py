@@ -136,6 +136,23 @@ def test_predicted_standard_errors_match_monte_carlo_fits():
     assert realized == pytest.approx(predicted, rel=0.3)
 
 
+def test_candidates_on_two_processes_give_the_same_design():
+    """The candidates of a search step split over two worker processes: the same motion and the same
+    separation as in one process (catches results merged to the wrong candidate)."""
+    robot = load_robot(PAIR)
+    hyps = _pair_hypotheses(robot)
+    recorded = _sweep(robot, [[0.0], [0.5]])
+    drive = DriveLimits(250.0, np.array([1.0]), np.array([4.0]), np.array([40.0]), ("alpha_2",))
+    kw = dict(noise_position=SIGMA, drive=drive, duration=8.0, n_random=1)
+    one = design_experiment(robot, recorded, hyps, n_jobs=1, **kw)
+    two = design_experiment(robot, recorded, hyps, n_jobs=2, **kw)
+    assert [p.describe(robot.joint_names) for p in one.primitives] == \
+        [p.describe(robot.joint_names) for p in two.primitives]
+    for key in ("recorded", "designed", "repeated"):
+        for pair, t in one.separation[key].items():
+            assert two.separation[key][pair] == pytest.approx(t, rel=1e-9)
+
+
 def _three_tube_case(obstacles=()):
     robot = load_robot(THREE)
     base = ("precurvature_y_1", "precurvature_y_2", "precurvature_y_3")
@@ -244,7 +261,7 @@ def test_cli_writes_a_trajectory_ready_to_run(tmp_path):
     assert r.exit_code == 0, r.output
     summary = json.loads((out / "design.json").read_text())
     assert summary["mode"] == "separate" and summary["duration_s"] <= 8.0
-    assert set(summary["separation"]) == {"recorded", "designed", "repeated", "random"}
+    assert set(summary["separation"]) == {"recorded", "designed", "repeated", "random", "designed_alone"}
     samples = pd.read_csv(out / "samples.csv")
     assert {"time", "alpha_2", "tip_x__offplane", "tip_z__registration"} <= set(samples.columns)
     traj = read_joint_trajectory(out / "trajectory_bag")

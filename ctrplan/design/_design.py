@@ -72,11 +72,12 @@ class DesignResult:
         Each hypothesis's predicted tip positions there, in the data's frame [m].
     separation : dict
         ``"recorded"``, ``"designed"`` (recorded and designed together), ``"repeated"`` (the
-        recording and a repetition of the same duration as the design) and ``"random"`` (recorded
-        and each random motion of the same budget): ``{"a>b": T}`` per ordered pair [-], the
-        expected evidence for a against b refitted. Empty in parameters mode.
+        recording and a repetition of the same duration as the design), ``"random"`` (recorded
+        and each random motion of the same budget) and ``"designed_alone"`` (the designed motion
+        without the recording): ``{"a>b": T}`` per ordered pair [-], the expected evidence for a
+        against b refitted. Empty in parameters mode.
     stderr : dict
-        Parameters mode: the same four keys, ``{parameter: predicted standard error}`` [SI].
+        Parameters mode: the same five keys, ``{parameter: predicted standard error}`` [SI].
     power : dict
         Separate mode: the same keys, the smallest predicted power over the pairs of a 1-degree-of-
         freedom likelihood-ratio test at level :data:`POWER_LEVEL`.
@@ -178,11 +179,28 @@ def _pair_name(hyps, a, b) -> str:
     return f"{hyps[a].key}>{hyps[b].key}"
 
 
+def _piece_information(robot, hyps, weight, settings, frame, t, alpha, beta, pieces) -> list:
+    """:class:`Information` of each piece's samples after the motion ``(t, alpha, beta)`` (a task of
+    the candidates' evaluation), with the model evaluations it took."""
+    out = []
+    n0 = len(t)
+    for _, ts, a, b in pieces:
+        d = motion_data(robot, np.concatenate([t, ts]), None, frame=frame, rows=np.arange(n0, n0 + len(ts)),
+                        history=False, configurations=(np.vstack([alpha, a]), np.vstack([beta, b])))
+        sens = [sensitivities(robot, h, d, settings) for h in hyps]
+        out.append((information(sens, weight), sum(s.evaluations for s in sens)))
+    return out
+
+
 class _Evaluator:
-    """Evaluates motions for the hypotheses and keeps the work counters."""
+    """Evaluates motions for the hypotheses (the candidates of a step on ``n_jobs`` processes) and
+    keeps the work counters."""
 
     def __init__(self, robot, hyps, weight, settings, n_jobs):
+        from ..parallel import Executor
+
         self.robot, self.hyps, self.weight, self.settings, self.n_jobs = robot, hyps, weight, settings, n_jobs
+        self.executor = Executor(n_jobs)
         self.evaluations = 0
 
     def sens(self, data):
@@ -192,6 +210,18 @@ class _Evaluator:
 
     def info(self, data) -> Information:
         return information(self.sens(data), self.weight)
+
+    def pieces(self, frame, t, alpha, beta, pieces) -> list:
+        """:func:`_piece_information` of every piece, in order, split over the processes."""
+        chunks = [list(range(k, len(pieces), self.n_jobs)) for k in range(min(self.n_jobs, len(pieces)))]
+        common = (self.robot, self.hyps, self.weight, self.settings, frame, t, alpha, beta)
+        out = [None] * len(pieces)
+        tasks = [(c, (*common, [pieces[i] for i in chunk])) for c, chunk in enumerate(chunks)]
+        for c, results in self.executor.run(_piece_information, tasks, first_here=True):
+            for i, (inf, evaluations) in zip(chunks[c], results):
+                out[i] = inf
+                self.evaluations += evaluations
+        return out
 
 
 def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_lag1: float | None = None,
@@ -233,7 +263,7 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     seed : int
         Seed of the random motions.
     n_jobs : int
-        Worker processes of the model evaluations.
+        Processes the candidates of each search step are evaluated on (:class:`ctrplan.parallel.Executor`).
 
     Returns
     -------
@@ -335,13 +365,9 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
             a, b = joint_configurations(robot, qs)
             return traj.duration, ts, a, b
 
-        def evaluate(self, piece) -> Information:
-            _, ts, a, b = piece
-            n0 = len(self.t)
-            d = motion_data(robot, np.concatenate([self.t, ts]), None, frame=data.frame,
-                            rows=np.arange(n0, n0 + len(ts)), history=False,
-                            configurations=(np.vstack([self.alpha, a]), np.vstack([self.beta, b])))
-            return ev.info(d)
+        def evaluate(self, pieces) -> list:
+            """The :class:`Information` of each piece's samples after this prefix."""
+            return ev.pieces(data.frame, self.t, self.alpha, self.beta, pieces)
 
         def append(self, prim, piece):
             dur, ts, a, b = piece
@@ -356,11 +382,10 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     current = value(recorded)
     while True:
         ranked = []
-        for prim in prefix.candidates():
-            piece = prefix.piece(prim)
-            if piece is None:
-                continue
-            new_info = info + prefix.evaluate(piece)
+        cands = [(prim, prefix.piece(prim)) for prim in prefix.candidates()]
+        cands = [(prim, piece) for prim, piece in cands if piece is not None]
+        for (prim, piece), piece_info in zip(cands, prefix.evaluate([piece for _, piece in cands])):
+            new_info = info + piece_info
             gain = (value(new_info) - current) / max(piece[0], 1e-9)
             ranked.append((gain, len(ranked), prim, piece, new_info))
         ranked.sort(key=lambda r: (-r[0], r[1]))
@@ -383,7 +408,8 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     ts, qs = sample(traj, period)
     d = motion_data(robot, ts, qs, frame=data.frame)
     sens = ev.sens(d)
-    designed = recorded + information(sens, weight)
+    alone = information(sens, weight)
+    designed = recorded + alone
     tips = np.stack([s.tip for s in sens])
     seconds["designed"] = time.perf_counter() - t0
 
@@ -402,7 +428,7 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
             piece = walk.piece(prim)
             if piece is None:
                 break
-            rinfo = rinfo + walk.evaluate(piece)
+            rinfo = rinfo + walk.evaluate([piece])[0]
             walk.append(prim, piece)
         randoms.append(rinfo)
         random_walks.append(tuple(walk.prims))
@@ -410,7 +436,8 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     repeated = recorded.scaled(1.0 + traj.duration / rec_duration) if rec_duration > 0 else recorded
     seconds["comparison"] = time.perf_counter() - t0
 
-    cases = {"recorded": [recorded], "designed": [designed], "repeated": [repeated], "random": randoms}
+    cases = {"recorded": [recorded], "designed": [designed], "repeated": [repeated], "random": randoms,
+             "designed_alone": [alone]}
     separation, power, stderr = {}, {}, {}
     crit = stats.chi2.ppf(1 - POWER_LEVEL, 1)
     for key, infos in cases.items():

@@ -129,23 +129,24 @@ def _markdown(d: dict) -> str:
         lines.append(f"- `{h['key']}`: {h['label']} ({h['model']} model; refit over {len(h['free'])} parameters)")
     lines += ["", "Motion:", ""] + [f"{k + 1}. {p}" for k, p in enumerate(d["primitives"])] + [""]
     if d["mode"] == "separate":
-        lines += ["| pair (true > refitted) | recorded | recorded + designed | recorded + repeated | "
-                  "recorded + random (median) |", "| --- | --- | --- | --- | --- |"]
+        lines += ["| pair (true > refitted) | recorded | designed alone | recorded + designed | recorded + repeated | "
+                  "recorded + random (median) |", "| --- | --- | --- | --- | --- | --- |"]
         for pair, t in d["separation"]["recorded"].items():
             rnd = [r[pair] for r in d["separation"]["random"]]
-            lines.append(f"| {pair} | {t:.3g} | {d['separation']['designed'][pair]:.3g} | "
-                         f"{d['separation']['repeated'][pair]:.3g} | {np.median(rnd) if rnd else float('nan'):.3g} |")
+            lines.append(f"| {pair} | {t:.3g} | {d['separation']['designed_alone'][pair]:.3g} | "
+                         f"{d['separation']['designed'][pair]:.3g} | {d['separation']['repeated'][pair]:.3g} | "
+                         f"{np.median(rnd) if rnd else float('nan'):.3g} |")
         rnd = d["power"]["random"]
         lines += ["", f"Smallest predicted power over the pairs (1-df likelihood-ratio test at 0.01): recorded "
                       f"{d['power']['recorded']:.3f}, designed {d['power']['designed']:.3f}, repeated "
                       f"{d['power']['repeated']:.3f}, random median {np.median(rnd) if rnd else float('nan'):.3f}."]
     else:
-        lines += ["| parameter | recorded | recorded + designed | recorded + repeated | recorded + random (median) |",
-                  "| --- | --- | --- | --- | --- |"]
+        lines += ["| parameter | recorded | designed alone | recorded + designed | recorded + repeated | "
+                  "recorded + random (median) |", "| --- | --- | --- | --- | --- | --- |"]
         for n, se in d["stderr"]["recorded"].items():
             rnd = [r[n] for r in d["stderr"]["random"]]
-            lines.append(f"| {n} | {se:.3g} | {d['stderr']['designed'][n]:.3g} | {d['stderr']['repeated'][n]:.3g} | "
-                         f"{np.median(rnd) if rnd else float('nan'):.3g} |")
+            lines.append(f"| {n} | {se:.3g} | {d['stderr']['designed_alone'][n]:.3g} | {d['stderr']['designed'][n]:.3g} | "
+                         f"{d['stderr']['repeated'][n]:.3g} | {np.median(rnd) if rnd else float('nan'):.3g} |")
         lines += ["", "Predicted standard errors, SI units (prior-limited where the recorded data determine nothing)."]
         for n, others in d.get("confounded", {}).items():
             if others:
