@@ -102,6 +102,20 @@ def test_a_difference_the_refit_can_absorb_gives_no_separation():
     assert info.separation()[(0, 1)] < 1e-6 * c
 
 
+def test_a_parameter_at_its_limit_is_differentiated_backward():
+    """A fitted value at its upper limit (a Poisson ratio of 0.5): the sensitivity is a backward
+    difference that matches the forward one just inside the limit (no value outside the limit is
+    evaluated)."""
+    robot = load_robot(PAIR)
+    names = ("poisson_ratio_2",)
+    d = _sweep(robot, [[0.0], [2.5]])
+    at = sensitivities(robot, Hypothesis("p", "p", "standard", names, np.array([0.5]), names), d)
+    inside = sensitivities(robot, Hypothesis("p", "p", "standard", names, np.array([0.5 - 1e-3 * 0.05]), names), d)
+    assert np.all(np.isfinite(at.jacobian))
+    assert np.abs(at.jacobian).max() > 0
+    assert np.allclose(at.jacobian, inside.jacobian, rtol=1e-2, atol=1e-3 * np.abs(inside.jacobian).max())
+
+
 def test_predicted_standard_errors_match_monte_carlo_fits():
     """Parameters mode: the predicted standard error of the designed motion's fit against the spread
     of 24 least-squares fits to noisy data synthesized along it (white noise), within 30 %."""

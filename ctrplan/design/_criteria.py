@@ -68,7 +68,7 @@ class Sensitivities:
 
 def sensitivities(robot, hyp, data, settings=None, *, n_jobs: int = 1) -> Sensitivities:
     """Predicted tips of hypothesis ``hyp`` at ``data``'s samples and their forward-difference
-    derivatives with respect to its free parameters.
+    derivatives with respect to its free parameters (backward at a parameter's upper limit).
 
     Parameters that act only on the measurement (registration) are differentiated on the computed
     tips without solving the model again.
@@ -100,7 +100,10 @@ def sensitivities(robot, hyp, data, settings=None, *, n_jobs: int = 1) -> Sensit
     evaluations = 1
     for j, name in enumerate(hyp.free):
         i = names.index(name)
-        h = SENSITIVITY_STEP * parameter(robot, name).scale
+        spec = parameter(robot, name)
+        h = SENSITIVITY_STEP * spec.scale
+        if not spec.within_limit(values[i] + h):
+            h = -h              # a value at its upper limit: a backward difference
         v = values.copy()
         v[i] += h
         if needs_solve(robot, name):
