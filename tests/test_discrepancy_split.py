@@ -236,3 +236,23 @@ def test_the_workflow_step_passes_the_options_and_keeps_every_fit_above_its_para
     assert out.n_folds == 3 and out.buffer == direct.buffer > split.block_samples // 2
     assert out.buffer < lengthen_blocks(split, r[split.dev_rows], n_folds=3).buffer
     assert min(int(out.calibration_rows(k).sum()) for k in [None, *range(out.n_folds)]) > len(base_names)
+
+
+def test_every_fit_keeps_more_samples_than_a_pair_of_effects_has_parameters():
+    """The minimum a lengthening keeps in every fit covers the largest pair of stage 8 (the baseline,
+    off-plane precurvature and the registration on the tube pair: 3 + 2 + 6). Catches a minimum
+    sized for one effect, which left a pair fit 12 samples for 14 parameters and ended a run in a
+    traceback."""
+    from pathlib import Path
+
+    from ctrplan.design import motion_data
+    from ctrplan.discrepancy.split import _fit_minimum
+    from ctrplan.io.robot_file import load_robot
+
+    robot = load_robot(Path(__file__).resolve().parents[1] / "model" / "ha2019-table1-tube-pair.toml")
+    t = np.arange(50) * 0.1
+    data = motion_data(robot, t, np.linspace(0.0, 1.0, 50)[:, None])
+    base = ("precurvature_y_1", "precurvature_y_2", "k_xy_relative_2")
+    setup = SimpleNamespace(robot=robot, data=data, effects=("offplane", "registration", "time_offset"),
+                            base_names=base)
+    assert _fit_minimum(setup) == 3 + 6 + 2

@@ -623,11 +623,12 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
 
 
 def _fit_minimum(setup) -> int:
-    """The baseline's parameters plus the largest effect's: a fit needs more samples."""
+    """The baseline's parameters plus the two largest effects' (a pair of stage 8 fits both with the
+    baseline): every fit of the run needs more samples than that."""
     from .setup import effect_parameters
 
-    largest = max((len(effect_parameters(setup.robot, e, setup.data)) for e in setup.effects), default=0)
-    return len(setup.base_names) + largest
+    sizes = sorted((len(effect_parameters(setup.robot, e, setup.data)) for e in setup.effects), reverse=True)
+    return len(setup.base_names) + sum(sizes[:2])
 
 
 def split_samples(setup, options) -> DataSplit:
@@ -646,8 +647,8 @@ def split_samples(setup, options) -> DataSplit:
     Raises
     ------
     DataFileError
-        Too few units, or no more samples per fit than the baseline's parameters plus the
-        largest effect's.
+        Too few units, or no more samples per fit than the baseline's parameters plus the two
+        largest effects'.
     """
     data = setup.data
     split = make_split(data, test_fraction=options.test_fraction, n_blocks=options.n_blocks, n_folds=options.n_folds,
@@ -655,7 +656,8 @@ def split_samples(setup, options) -> DataSplit:
     n_fit = min(int(split.fit_rows(data, k).sum()) for k in range(split.n_folds))
     if n_fit <= _fit_minimum(setup):
         raise DataFileError(f"{data.file}: {n_fit} calibration samples per fold are not more than the "
-                            f"{len(setup.base_names)} baseline parameters plus the largest effect's; give more samples")
+                            f"{len(setup.base_names)} baseline parameters plus the two largest effects'; give more "
+                            f"samples")
     logger.log(progress_level(), f"data: {data.n_samples} samples ({data.frame} frame) from {data.file}; {split.how}")
     if data.source is not None:
         from ..io.ros2 import describe_bag_summary
