@@ -138,7 +138,8 @@ def run_case(index: int, out: Path, jobs: int) -> dict:
     recorded = folder / "recorded.csv"
     frame, rec_truth = _synthesize(truth_robot, hidden, seed)
     frame.to_csv(recorded, index=False)
-    effects = (truth_e, alt_e)
+    # gradual friction is fitted on top of friction (Effect.after): its run needs both
+    effects = (truth_e, alt_e) + (("friction",) if "gradual_friction" in (truth_e, alt_e) else ())
     first = _discrepancy(model, [recorded], folder / "recorded", effects, jobs, seed)
     hyps = result_hypotheses(first, [truth_e, alt_e])
     data = load_measured_data(recorded, base)
