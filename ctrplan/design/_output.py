@@ -158,7 +158,7 @@ def _markdown(d: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_design(result, robot, out_dir, *, command: str = "", bag: bool = True) -> dict:
+def write_design(result, robot, out_dir, *, command: str = "", bag: bool = True, frame: str = "robot") -> dict:
     """Write the output folder of a design.
 
     Parameters
@@ -171,6 +171,9 @@ def write_design(result, robot, out_dir, *, command: str = "", bag: bool = True)
         The command that made it (recorded in ``design.json``).
     bag : bool
         Write the ROS 2 bag.
+    frame : {"robot", "tracker"}
+        Frame of the predicted tips (the recorded data's): the bag's tip path is in ``ctr_base`` or
+        ``tracker``.
 
     Returns
     -------
@@ -208,6 +211,6 @@ def write_design(result, robot, out_dir, *, command: str = "", bag: bool = True)
         content = PlanBagContent(joint_names=traj.joint_names, t=traj.t, position=traj.position,
                                  velocity=traj.velocity, acceleration=traj.acceleration, tips=tips,
                                  tip_rotations=None, bound_radius=np.full(len(idx), np.nan),
-                                 bound_label="none", frame_id="ctr_base")
+                                 bound_label="none", frame_id="ctr_base" if frame == "robot" else "tracker")
         written["bag"] = write_plan_bag(out / FILES["bag"], content)
     return written
