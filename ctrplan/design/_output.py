@@ -193,8 +193,8 @@ def write_design(result, robot, out_dir, *, command: str = "", bag: bool = True,
     written = {}
     write_trajectory_csv(out / FILES["trajectory"], result.trajectory)
     written["trajectory"] = out / FILES["trajectory"]
-    frame = _samples_frame(result, robot)
-    atomic_write_text(out / FILES["samples"], frame.to_csv(index=False))
+    samples = _samples_frame(result, robot)
+    atomic_write_text(out / FILES["samples"], samples.to_csv(index=False))
     written["samples"] = out / FILES["samples"]
     d = design_dict(result, robot, command=command)
     atomic_write_text(out / FILES["json"], json.dumps(d, indent=2) + "\n")
