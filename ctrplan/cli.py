@@ -624,9 +624,9 @@ def _combine_recordings(robot_path, data_paths, frame, bag, out_dir) -> tuple[st
     from .io.atomic import atomic_write_text
     from .io.robot_file import load_robot
 
-    robot = load_robot(robot_path)
     from .io.ros2 import BagSelection
 
+    robot = load_robot(robot_path)
     loaded = [load_measured_data(p, robot, frame=frame, bag=bag if bag != BagSelection() else None)
               for p in data_paths]
     frames = {d.frame for d in loaded}
@@ -637,7 +637,9 @@ def _combine_recordings(robot_path, data_paths, frame, bag, out_dir) -> tuple[st
     tables, offset = [], 0
     tangents = all(d.tangent is not None for d in loaded)
     for d in loaded:
-        rec = d.record
+        if d.record.alpha.shape[0] != d.n_samples:
+            raise DataFileError(f"{d.file}: {d.record.alpha.shape[0] - d.n_samples} recorded rows are not samples; "
+                                f"combine such recordings by hand")
         cols = {"time": d.time if d.time is not None else np.arange(d.n_samples, dtype=float),
                 "sequence": d.sequence - d.sequence.min() + offset}
         cols.update({f"alpha_{i + 1}": d.alpha[:, i] for i in range(n)})
@@ -646,9 +648,6 @@ def _combine_recordings(robot_path, data_paths, frame, bag, out_dir) -> tuple[st
         if tangents:
             cols.update({f"tangent_{c}": d.tangent[:, a] for a, c in enumerate("xyz")})
         cols.update({f"eta_{k + 1}": d.given_eta[d.rows, k] for k in range(n - 1)})
-        if rec.alpha.shape[0] != d.n_samples:
-            raise DataFileError(f"{d.file}: {rec.alpha.shape[0] - d.n_samples} recorded rows are not samples; "
-                                f"combine such recordings by hand")
         tables.append(pd.DataFrame(cols))
         offset = int(cols["sequence"].max()) + 1
     out = Path(out_dir)

@@ -263,6 +263,12 @@ def _opt(x) -> str:
     return _num(x) if math.isfinite(float(x)) else ""
 
 
+def jsonable(value):
+    """``value`` with numpy scalars and arrays, tuples and paths turned into JSON types (mappings with
+    string keys, lists, bool, int, float, str); non-finite floats become None (written ``null``)."""
+    return _jsonable(value)
+
+
 def _jsonable(value):
     if isinstance(value, Mapping):
         return {str(k): _jsonable(v) for k, v in value.items()}

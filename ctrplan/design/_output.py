@@ -23,24 +23,11 @@ import numpy as np
 import pandas as pd
 
 from ..io.atomic import atomic_write_text
+from ..report import jsonable
 
 #: Output files by role.
 FILES = {"trajectory": "trajectory.csv", "bag": "trajectory_bag", "samples": "samples.csv", "json": "design.json",
          "plot": "separation.png", "markdown": "design.md"}
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return float(x) if np.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
 
 
 def design_dict(result, robot, *, command: str = "") -> dict:
@@ -52,7 +39,7 @@ def design_dict(result, robot, *, command: str = "") -> dict:
                  if result.mode == "separate" else
                  "Ds-optimality: log det of the predicted covariance of the parameters of interest, the other free "
                  "parameters as nuisance, with a weak prior of one typical-range half-width each")
-    return _jsonable({
+    return jsonable({
         "mode": result.mode, "criterion": criterion, "hypotheses": hyps, "interest": list(result.interest),
         "duration_s": result.duration, "budget_s": result.budget, "n_samples": int(len(result.time)),
         "primitives": [p.describe(robot.joint_names) for p in result.primitives],
