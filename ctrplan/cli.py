@@ -761,7 +761,7 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
     res = design_experiment(robot, data, hyps, noise_position=sigma, noise_lag1=lag1, drive=drive,
                             obstacles=obstacles or (), start=start, duration=duration, interest=interest, rest=rest,
                             n_random=random_motions, seed=seed, n_jobs=jobs or os.cpu_count() or 1)
-    command = "ctrplan design " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    command = "ctrplan " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     paths = write_design(res, robot, out_dir, command=command, bag=not no_bag, frame=data.frame)
     logger.info(f"design: {res.duration:.1f} s, {len(res.primitives)} primitives; report: {paths['markdown']}")
 
