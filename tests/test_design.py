@@ -167,6 +167,30 @@ def test_candidates_on_two_processes_give_the_same_design():
             assert two.separation[key][pair] == pytest.approx(t, rel=1e-9)
 
 
+def test_a_piece_after_a_motion_is_evaluated_with_that_motion_as_its_history():
+    """The search scores a candidate piece after the motion before it: for the friction model, whose
+    branch at each sample follows the last rotation direction of each pair (Eqs. (37)-(47) of Ha
+    et al. 2019), the piece's information must equal that of the same samples of the whole motion
+    evaluated at once (the sums the search adds up are the designed motion's). Catches a piece
+    evaluated without the motion before it, which ranks candidates on predictions the designed
+    motion does not have."""
+    from ctrplan.design._design import _piece_information
+
+    robot = load_robot(PAIR)
+    friction = Hypothesis("friction", "torsional friction", "friction", ("mu_1",), np.array([0.2]), free=("mu_1",))
+    whole = _sweep(robot, [[0.0], [2.0], [0.5], [2.5], [1.0]])
+    K, n0 = whole.n_samples, whole.n_samples // 2
+    assert np.any(np.diff(whole.eta[n0:, 0]) != 0), "the piece must reverse a rotation"
+    w = 1.0 / SIGMA ** 2
+    piece = (0.0, whole.time[n0:], whole.alpha[n0:], whole.beta[n0:])
+    [(got, _)] = _piece_information(robot, [friction, friction], w, None, whole.frame, whole.time[:n0],
+                                    whole.alpha[:n0], whole.beta[:n0], [piece])
+    rows = np.arange(n0, K)
+    expected = information([sensitivities(robot, friction, whole.take(rows))] * 2, w)
+    assert got.n_samples == expected.n_samples == K - n0
+    np.testing.assert_allclose(got.fisher[0], expected.fisher[0], rtol=1e-9)
+
+
 def _three_tube_case(obstacles=()):
     robot = load_robot(THREE)
     base = ("precurvature_y_1", "precurvature_y_2", "precurvature_y_3")
