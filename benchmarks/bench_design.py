@@ -7,13 +7,17 @@ recording confuses with it (the alternative):
 - drive backlash against torsional friction;
 - a tracker lag (``time_offset``) against gradually developing friction.
 
-Per case: a 40-s recording (400 samples at 10 Hz) is synthesized with the truth, and
-``ctrplan discrepancy`` fits both candidates (``--effects truth,alternative``); from its
-``results.json`` ``ctrplan.design`` plans a motion of the same 40 s that separates the two fitted
-hypotheses. The truth is then synthesized along three motions of that budget: the designed one,
-a random one (random primitives within the same limits, drawn by the design's own comparison) and
-a repetition of the recording (new noise), and ``ctrplan discrepancy`` runs on the recording and
-each of them together (``--data`` twice). A run names the truth when its verdict names the truth
+Per case: a 20-s pilot recording (200 samples at 10 Hz) of tube rotations at the home insertion
+(the reference synthesizer's seeded motion with its translation steps removed) is synthesized with
+the truth. Such a recording leaves each pair open: what the registry's ``separated_by`` names for
+them (translations after rotations, tips near and far from the base, rests and passes at several
+speeds) is missing or scarce in it. ``ctrplan discrepancy`` fits both candidates
+(``--effects truth,alternative``); from its ``results.json`` ``ctrplan.design`` plans a follow-up
+motion of :data:`BUDGET_S` (three times the pilot) that separates the two fitted hypotheses. The
+truth is then synthesized along three follow-ups of that budget: the designed motion, a random one
+(random primitives within the same limits, drawn by the design's own comparison) and three
+repetitions of the pilot (new noise each), and ``ctrplan discrepancy`` runs on the pilot and each
+follow-up together (``--data`` once per recording). A run names the truth when its verdict names the truth
 alone.
 
 The data are made by the reference synthesizer of ``tests/reference`` (independent of the code
@@ -62,8 +66,11 @@ CASES = (
     ("pair", "offplane", "registration", {"offplane": {"precurvature_x_1": -0.8, "precurvature_x_2": 0.8}}, 109),
     ("three-tube", "time_offset", "gradual_friction", {"time_offset": {"time_offset": 0.12}}, 110),
 )
-SAMPLES = 400
+SAMPLES = 200
 RATE_HZ = 10.0
+#: Budget of the follow-up experiment [s]: three times the pilot recording.
+BUDGET_S = 3 * SAMPLES / RATE_HZ
+REPEATS = 3
 NOISE_M = 0.5e-3
 
 
@@ -83,6 +90,18 @@ def _synthesize(truth_robot, hidden: dict, seed: int, motion=None):
     with mock.patch.object(sr, "reference_motion", lambda robot, **_: motion):
         return sr.synthesize_reference(truth_robot, samples=len(motion.times), rate_hz=RATE_HZ, seed=seed,
                                        noise_position_rms=NOISE_M, **kw)
+
+
+def _pilot_motion(truth_robot, seed: int):
+    """The reference synthesizer's seeded motion of SAMPLES samples with every translation step
+    removed: rotations of the tubes at the home insertion."""
+    import dataclasses
+
+    import reference.synth_reference as sr
+
+    m = sr.reference_motion(truth_robot, samples=SAMPLES, rate_hz=RATE_HZ, seed=seed)
+    steps = np.where(m.rotation[None, :], m.steps, 0.0)
+    return dataclasses.replace(m, steps=steps)
 
 
 def _reference_motion(robot, traj, sample_times):
@@ -116,6 +135,15 @@ def _discrepancy(model, data_files, out, effects, jobs, seed) -> dict:
     return json.loads((Path(out) / "results.json").read_text())
 
 
+def _comparison(res: dict, truth: str, alternative: str) -> dict | None:
+    """The run's out-of-fold comparison of the truth against the alternative: the ratio of their
+    folds' mean errors (alternative over truth), its interval, the one-sided p-value, the folds."""
+    c = ((res.get("decision") or {}).get("comparisons") or {}).get(f"{truth} vs {alternative}")
+    if not c:
+        return None
+    return {k: c.get(k) for k in ("ratio", "ratio_ci", "p_value", "n_folds", "positive_folds")}
+
+
 def _named_right(res: dict, truth: str) -> bool:
     return res.get("verdict") == "named" and list(res.get("named_effects") or []) == [truth]
 
@@ -136,7 +164,7 @@ def run_case(index: int, out: Path, jobs: int) -> dict:
     model = folder / "base.toml"
     model.write_text(robot_to_toml(base, header="design benchmark base file: candidate effects off"))
     recorded = folder / "recorded.csv"
-    frame, rec_truth = _synthesize(truth_robot, hidden, seed)
+    frame, rec_truth = _synthesize(truth_robot, hidden, seed, _pilot_motion(truth_robot, seed))
     frame.to_csv(recorded, index=False)
     # gradual friction is fitted on top of friction (Effect.after): its run needs both
     effects = (truth_e, alt_e) + (("friction",) if "gradual_friction" in (truth_e, alt_e) else ())
@@ -146,9 +174,10 @@ def run_case(index: int, out: Path, jobs: int) -> dict:
     noise = first["noise"]["noise"]
     t1 = time.perf_counter()
     design = design_experiment(base, data, hyps, noise_position=noise["position_rms_m"],
-                               noise_lag1=noise.get("lag1_correlation"), n_random=1, seed=seed, n_jobs=1)
+                               noise_lag1=noise.get("lag1_correlation"), n_random=1, seed=seed, n_jobs=1,
+                               duration=BUDGET_S)
     design_s = time.perf_counter() - t1
-    runs = {}
+    runs, files = {}, {}
     motions = {"designed": design.primitives, "random": design.random_primitives[0]}
     drive = None
     for key, prims in motions.items():
@@ -160,21 +189,28 @@ def run_case(index: int, out: Path, jobs: int) -> dict:
         new, _ = _synthesize(truth_robot, hidden, seed + 1000, _reference_motion(base, traj, times))
         path = folder / f"{key}.csv"
         new.to_csv(path, index=False)
+        files[key] = [path]
         runs[key] = {"duration_s": float(traj.duration), "samples": int(len(new))}
     rep = rec_truth["motion"]
-    new, _ = _synthesize(truth_robot, hidden, seed + 2000, rep)
-    new.to_csv(folder / "repeated.csv", index=False)
-    runs["repeated"] = {"duration_s": float(rep.end_time), "samples": int(len(new))}
+    files["repeated"] = []
+    for r in range(REPEATS):
+        new, _ = _synthesize(truth_robot, hidden, seed + 2000 + r, rep)
+        files["repeated"].append(folder / f"repeated-{r + 1}.csv")
+        new.to_csv(files["repeated"][-1], index=False)
+    runs["repeated"] = {"duration_s": REPEATS * float(rep.end_time), "samples": REPEATS * int(len(new))}
     for key in runs:
-        res = _discrepancy(model, [recorded, folder / f"{key}.csv"], folder / key, effects, jobs, seed)
+        res = _discrepancy(model, [recorded, *files[key]], folder / key, effects, jobs, seed)
         runs[key].update(verdict=res["verdict"], named=res["named_effect"], named_effects=res["named_effects"],
-                         ambiguous_with=res["ambiguous_with"], right=_named_right(res, truth_e))
+                         ambiguous_with=res["ambiguous_with"], right=_named_right(res, truth_e),
+                         comparison=_comparison(res, truth_e, alt_e))
     sep = design.separation
     return {"index": index, "robot": robot_key, "truth": truth_e, "alternative": alt_e, "hidden": hidden,
-            "seed": seed, "recorded": {"verdict": first["verdict"], "named": first["named_effect"],
+            "seed": seed, "budget_s": BUDGET_S,
+            "recorded": {"verdict": first["verdict"], "named": first["named_effect"],
                                        "named_effects": first["named_effects"],
                                        "ambiguous_with": first["ambiguous_with"],
-                                       "right": _named_right(first, truth_e)},
+                                       "right": _named_right(first, truth_e),
+                                       "comparison": _comparison(first, truth_e, alt_e)},
             "predicted_separation": {k: (min(v.values()) if isinstance(v, dict) else [min(x.values()) for x in v])
                                      for k, v in sep.items()},
             "runs": runs, "primitives": [p.describe(base.joint_names) for p in design.primitives],
@@ -192,6 +228,17 @@ def summarize(cases: list) -> dict:
         out[f"{key}_right_interval_90"] = clopper_pearson(k, n, 0.90) if n else None
     out["recorded_right"] = sum(1 for c in cases if c["recorded"]["right"])
     out["recorded_ambiguous"] = sum(1 for c in cases if c["recorded"]["verdict"] == "ambiguous")
+    # the cases the pilot recording left open (not named right by it alone)
+    open_cases = [c for c in cases if not c["recorded"]["right"]]
+    out["n_open"] = len(open_cases)
+    for key in ("designed", "random", "repeated"):
+        k = sum(1 for c in open_cases if c["runs"][key]["right"])
+        out[f"open_{key}_right"] = k
+        out[f"open_{key}_right_interval_90"] = clopper_pearson(k, len(open_cases), 0.90) if open_cases else None
+    for key in ("recorded", "designed", "random", "repeated"):
+        ratios = [(c["recorded"] if key == "recorded" else c["runs"][key]).get("comparison") for c in cases]
+        ratios = [r["ratio"] for r in ratios if r and r.get("ratio") is not None]
+        out[f"{key}_ratio_median"] = float(np.median(ratios)) if ratios else None
     return out
 
 
