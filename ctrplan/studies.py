@@ -213,15 +213,16 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
 
 def _plot(table, path: Path) -> None:
     """Largest exact bound per scenario, bound-aware against bound-blind [mm]."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # the Agg canvas on a bare Figure (as in ctrplan.plots): no pyplot, the user's backend untouched
     import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     names = [Path(s).stem for s in table["scenario"]]
     x = np.arange(len(names))
-    fig, ax = plt.subplots(figsize=(max(4.0, 0.6 * len(names) + 2), 3.2))
+    fig = Figure(figsize=(max(4.0, 0.6 * len(names) + 2), 3.2))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
     aware = table["max_bound_mm"].astype(float).to_numpy()
     blind = table["blind_max_bound_mm"].astype(float).to_numpy()
     ax.bar(x - 0.2, aware, 0.4, label="bound-aware")
@@ -231,4 +232,3 @@ def _plot(table, path: Path) -> None:
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)

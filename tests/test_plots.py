@@ -294,3 +294,37 @@ def test_format_summary_prints_units():
     assert "bound angle: 90 deg" in lines and "duration: 3.5 s" in lines
     assert "n segments: 3" in lines and "planner: RRTstar" in lines
     assert "  control rate: 500 Hz" in lines
+
+
+def test_library_figures_leave_the_users_backend_alone(tmp_path):
+    """Figures are drawn on a bare Agg canvas: a user's matplotlib backend is the same after the
+    library wrote a figure (catches ``matplotlib.use`` inside the library, which switches an
+    interactive session to Agg), and no module of the package imports pyplot or calls
+    ``matplotlib.use``."""
+    import ast
+    from pathlib import Path
+
+    import matplotlib
+    import pandas as pd
+
+    from ctrplan import studies
+
+    table = pd.DataFrame({"scenario": ["a.toml", "b.toml"], "max_bound_mm": [3.1, 4.0],
+                          "blind_max_bound_mm": [4.9, 4.2]})
+    with matplotlib.rc_context({"backend": "svg"}):
+        studies._plot(table, tmp_path / "bounds.png")
+        assert matplotlib.get_backend() == "svg"
+    assert (tmp_path / "bounds.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    offenders = []
+    for path in (Path(studies.__file__).parent).rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                names = [a.name for a in node.names] + ([node.module] if isinstance(node, ast.ImportFrom) else [])
+                if any(n and n.startswith("matplotlib.pyplot") for n in names) or (
+                        isinstance(node, ast.ImportFrom) and node.module == "matplotlib"
+                        and any(a.name == "pyplot" for a in node.names)):
+                    offenders.append(f"{path.name}:{node.lineno} imports pyplot")
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "use"
+                    and isinstance(node.func.value, ast.Name) and node.func.value.id == "matplotlib"):
+                offenders.append(f"{path.name}:{node.lineno} calls matplotlib.use")
+    assert not offenders, offenders

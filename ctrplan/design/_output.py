@@ -70,12 +70,13 @@ def _samples_frame(result, robot) -> pd.DataFrame:
 
 
 def _plot(result, path: Path) -> None:
-    import matplotlib
+    # the Agg canvas on a bare Figure (as in ctrplan.plots): no pyplot, the user's backend untouched
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
+    fig = Figure(figsize=(8, 5.5))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, 1, sharex=True)
     hyps = result.hypotheses
     t = result.time
     ref = result.tips[0]
@@ -104,7 +105,6 @@ def _plot(result, path: Path) -> None:
     axes[1].set_xlabel("time [s] (grey: the drive moves)")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def _markdown(d: dict) -> str:
