@@ -24,7 +24,8 @@ from .io.atomic import atomic_path
 from .obstacles import as_obstacle
 from .trajectory import ROTATION, TRANSLATION, Trajectory
 
-__all__ = ["plot_robot_shapes", "plot_bound_along_path", "plot_joint_trajectories", "plot_xy"]
+__all__ = ["plot_robot_shapes", "plot_bound_along_path", "plot_joint_trajectories", "plot_xy", "new_figure",
+           "save_figure"]
 
 M_TO_MM = 1e3
 DPI = 120
@@ -70,7 +71,7 @@ def plot_robot_shapes(path, shapes: Sequence, obstacles: Sequence = (), friction
         A shape or tip array with the wrong shape, or an obstacle of an unknown type or with a bad
         key (the message starts with ``obstacle k``, k 0-based).
     """
-    fig = _figure((7.5, 6.5))
+    fig = new_figure((7.5, 6.5))
     ax = fig.add_subplot(projection="3d")
     pts_mm = []
     colors = matplotlib.colormaps["viridis"](np.linspace(0.0, 1.0, max(len(shapes), 1)))
@@ -99,7 +100,7 @@ def plot_robot_shapes(path, shapes: Sequence, obstacles: Sequence = (), friction
         ax.set_title(title)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="upper left", fontsize="small")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _points(values, label: str) -> np.ndarray:
@@ -207,7 +208,7 @@ def plot_bound_along_path(path, s_path: Sequence, bound_mm: Sequence, translatio
                          f"motions (and given_last_mm), got {len(s_path)}, {len(bound_mm)}, "
                          f"{len(translation_last_mm)}, {len(motions)}"
                          + ("" if given_last_mm is None else f", {len(given_last_mm)}"))
-    fig = _figure((5.5 * n_plans, 4.0))
+    fig = new_figure((5.5 * n_plans, 4.0))
     axes = fig.subplots(1, n_plans, sharey=True, squeeze=False)
     for j, ax in enumerate(axes[0]):
         s = np.asarray(s_path[j], dtype=float)
@@ -244,7 +245,7 @@ def plot_bound_along_path(path, s_path: Sequence, bound_mm: Sequence, translatio
     axes[0, -1].legend(handles=list(handles.values()) + _phase_handles(), fontsize="small")
     if title:
         fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # ---------------------------------------------------------------------------------- trajectory
@@ -280,7 +281,7 @@ def plot_joint_trajectories(path, traj: Trajectory, joint_names: Sequence[str] |
     kinds = list(traj.joint_kinds if joint_kinds is None else joint_kinds)
     if len(names) != n or len(kinds) != n:
         raise ValueError(f"need {n} joint names and kinds, got {len(names)} and {len(kinds)}")
-    fig = _figure((12, 2.2 * n + 0.8))
+    fig = new_figure((12, 2.2 * n + 0.8))
     axes = fig.subplots(n, 3, sharex=True, squeeze=False)
     phases = [(s.t_start, s.t_end, s.motion) for s in traj.segments]
     for i in range(n):
@@ -297,7 +298,7 @@ def plot_joint_trajectories(path, traj: Trajectory, joint_names: Sequence[str] |
         axes[-1, col].set_xlabel("time t [s]")
     axes[0, -1].legend(handles=_phase_handles(), fontsize="small", loc="upper right")
     fig.suptitle(title or f"joint trajectories, duration {traj.duration:.3f} s")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_xy(path, x, ys, *, xlabel: str, ylabel: str, labels: Sequence[str] | None = None,
@@ -330,7 +331,7 @@ def plot_xy(path, x, ys, *, xlabel: str, ylabel: str, labels: Sequence[str] | No
     ys = np.atleast_2d(np.asarray(ys, dtype=float))
     if ys.shape[1] != x.size:
         raise ValueError(f"ys needs shape ({x.size},) or (M, {x.size}), got {ys.shape}")
-    fig = _figure((6.5, 4.0))
+    fig = new_figure((6.5, 4.0))
     ax = fig.subplots()
     for m, y in enumerate(ys):
         ax.plot(x, y, style, label=None if labels is None else labels[m])
@@ -341,7 +342,7 @@ def plot_xy(path, x, ys, *, xlabel: str, ylabel: str, labels: Sequence[str] | No
         ax.legend(fontsize="small")
     if title:
         ax.set_title(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # ---------------------------------------------------------------------------------- helpers
@@ -355,17 +356,49 @@ def _phase_handles():
     return [Patch(color=c, alpha=3 * PHASE_ALPHA, label=f"{m} phase") for m, c in PHASE_COLORS.items()]
 
 
-def _figure(size) -> Figure:
-    """A figure attached to an Agg canvas (not registered with pyplot, so nothing to close)."""
+def new_figure(size) -> Figure:
+    """A figure attached to an Agg canvas: not registered with pyplot (nothing to close) and the
+    user's matplotlib backend untouched.
+
+    Parameters
+    ----------
+    size : tuple of float, length 2
+        Width and height [inch].
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     fig = Figure(figsize=size)
     FigureCanvasAgg(fig)
     return fig
 
 
-def _save(fig, path) -> Path:
-    """Write ``fig`` as PNG atomically."""
+def save_figure(fig, path) -> Path:
+    """Write ``fig`` as PNG at :data:`DPI` (tight layout), atomically: an interrupted write leaves
+    the previous file.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        From :func:`new_figure`.
+    path : str or os.PathLike
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    OSError
+        The folder cannot be written.
+    """
     path = Path(path)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=DPI)
     return path
+
+
+_figure, _save = new_figure, save_figure          # the names ctrplan.discrepancy.report imports

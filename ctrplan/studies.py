@@ -213,15 +213,13 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
 
 def _plot(table, path: Path) -> None:
     """Largest exact bound per scenario, bound-aware against bound-blind [mm]."""
-    # the Agg canvas on a bare Figure (as in ctrplan.plots): no pyplot, the user's backend untouched
     import numpy as np
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+
+    from .plots import new_figure, save_figure
 
     names = [Path(s).stem for s in table["scenario"]]
     x = np.arange(len(names))
-    fig = Figure(figsize=(max(4.0, 0.6 * len(names) + 2), 3.2))
-    FigureCanvasAgg(fig)
+    fig = new_figure((max(4.0, 0.6 * len(names) + 2), 3.2))
     ax = fig.subplots()
     aware = table["max_bound_mm"].astype(float).to_numpy()
     blind = table["blind_max_bound_mm"].astype(float).to_numpy()
@@ -230,5 +228,4 @@ def _plot(table, path: Path) -> None:
     ax.set_xticks(x, names, rotation=45, ha="right")
     ax.set_ylabel("largest exact bound at the waypoints [mm]")
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path)

@@ -42,15 +42,15 @@ def _shapes():
 
 @pytest.fixture
 def figures(monkeypatch):
-    """The matplotlib Figures the plot functions write, in order (``plots._save`` still writes)."""
+    """The matplotlib Figures the plot functions write, in order (``plots.save_figure`` still writes)."""
     captured = []
-    save = plots._save
+    save = plots.save_figure
 
     def spy(fig, path):
         captured.append(fig)
         return save(fig, path)
 
-    monkeypatch.setattr(plots, "_save", spy)
+    monkeypatch.setattr(plots, "save_figure", spy)
     return captured
 
 
@@ -299,7 +299,7 @@ def test_format_summary_prints_units():
 def test_library_figures_leave_the_users_backend_alone(tmp_path):
     """Figures are drawn on a bare Agg canvas: a user's matplotlib backend is the same after the
     library wrote a figure (catches ``matplotlib.use`` inside the library, which switches an
-    interactive session to Agg), and no module of the package imports pyplot or calls
+    interactive figure window to Agg), and no module of the package imports pyplot or calls
     ``matplotlib.use``."""
     import ast
     from pathlib import Path

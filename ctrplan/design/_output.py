@@ -70,12 +70,9 @@ def _samples_frame(result, robot) -> pd.DataFrame:
 
 
 def _plot(result, path: Path) -> None:
-    # the Agg canvas on a bare Figure (as in ctrplan.plots): no pyplot, the user's backend untouched
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from ..plots import new_figure, save_figure
 
-    fig = Figure(figsize=(8, 5.5))
-    FigureCanvasAgg(fig)
+    fig = new_figure((8, 5.5))
     axes = fig.subplots(2, 1, sharex=True)
     hyps = result.hypotheses
     t = result.time
@@ -103,8 +100,7 @@ def _plot(result, path: Path) -> None:
         axes[1].set_ylabel("joint [rad or m]")
         axes[1].legend(fontsize=8)
     axes[1].set_xlabel("time [s] (grey: the drive moves)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path)
 
 
 def _markdown(d: dict) -> str:
