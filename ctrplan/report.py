@@ -45,7 +45,7 @@ from .io.atomic import atomic_write_text
 from .trajectory import START, Trajectory
 
 __all__ = ["PATH_FILE", "TRAJECTORY_FILE", "SUMMARY_FILE", "BOUND_KINDS", "path_columns",
-           "write_plan_outputs", "format_summary"]
+           "write_plan_outputs", "write_trajectory_csv", "format_summary", "jsonable"]
 
 #: File name of the ordered waypoints.
 PATH_FILE = "path.csv"
@@ -149,7 +149,7 @@ def write_plan_outputs(out_dir, ordered_path_rows: Sequence[Mapping[str, Any]],
         data.setdefault("duration_s", trajectory.duration)
         data.setdefault("n_waypoints", int(trajectory.waypoints.shape[0]))
         data.setdefault("n_segments", len(trajectory.segments))
-    atomic_write_text(out / SUMMARY_FILE, json.dumps(_jsonable(data), indent=2) + "\n")
+    atomic_write_text(out / SUMMARY_FILE, json.dumps(jsonable(data), indent=2) + "\n")
     written[SUMMARY_FILE] = out / SUMMARY_FILE
     return written
 
@@ -264,16 +264,23 @@ def _opt(x) -> str:
 
 
 def jsonable(value):
-    """``value`` with numpy scalars and arrays, tuples and paths turned into JSON types (mappings with
-    string keys, lists, bool, int, float, str); non-finite floats become None (written ``null``)."""
-    return _jsonable(value)
+    """``value`` with numpy scalars and arrays, tuples and paths turned into JSON types.
 
+    Parameters
+    ----------
+    value : any
+        Nested mappings, sequences, numpy arrays and scalars, paths, and JSON types.
 
-def _jsonable(value):
+    Returns
+    -------
+    object
+        Mappings with string keys, lists, bool, int, float, str and None; a non-finite float
+        becomes None (written ``null``); an object of another type is returned as it is.
+    """
     if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple, np.ndarray)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     if isinstance(value, (int, np.integer)):
