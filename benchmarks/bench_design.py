@@ -17,8 +17,8 @@ motion of :data:`BUDGET_S` (three times the pilot) that separates the two fitted
 truth is then synthesized along three follow-ups of that budget: the designed motion, a random one
 (random primitives within the same limits, drawn by the design's own comparison) and three
 repetitions of the pilot (new noise each), and ``ctrplan discrepancy`` runs on the pilot and each
-follow-up together (``--data`` once per recording). A run names the truth when its verdict names the truth
-alone.
+follow-up together (``--data`` once per recording). A run names the truth when its verdict names
+the truth alone.
 
 The data are made by the reference synthesizer of ``tests/reference`` (independent of the code
 that fits), along the given motions: its ``reference_motion`` is replaced by the designed, random
