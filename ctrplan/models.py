@@ -1,6 +1,7 @@
 """The registry of mechanics models: the one list of model names the package accepts.
 
-A name here is what ``ctrplan evaluate --model``, a robot file's ``model`` key, the batch
+The models are entries of :data:`MODEL_REGISTRY` (a :class:`ctrplan.registry.Registry`). A
+name here is what ``ctrplan evaluate --model``, a robot file's ``model`` key, the batch
 evaluator and the discrepancy simulator accept. Each entry says in one line what the model is and
 which part of Ha, Fagogenis & Dupont, "Modeling Tube Clearance and Bounding the Effect of Friction
 in Concentric Tube Robot Kinematics", IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906, it
@@ -12,9 +13,10 @@ This module imports nothing heavy, so that the command line can build its option
 from __future__ import annotations
 
 from dataclasses import dataclass
-from types import MappingProxyType
 
-__all__ = ["ModelInfo", "MODEL_INFO", "MODELS", "check_model"]
+from .registry import Registry, UnknownNameError
+
+__all__ = ["ModelInfo", "MODEL_REGISTRY", "MODEL_INFO", "MODELS", "check_model"]
 
 
 @dataclass(frozen=True)
@@ -48,17 +50,28 @@ class ModelInfo:
     friction: bool
 
 
-#: The mechanics models, by name, in the order the package lists them (read-only mapping).
-MODEL_INFO = MappingProxyType({
-    "standard": ModelInfo("standard", "zero clearance between the tubes, torsionally compliant, no friction",
-                          "Section II-A", "solve_standard", contact=False, friction=False),
-    "clearance": ModelInfo("clearance", "tubes move inside each other's clearance, contact forces, no friction",
-                           "Sections II-B to II-E, Appendices A and B", "solve_clearance",
-                           contact=True, friction=False),
-    "friction": ModelInfo("friction", "clearance model with maximal torsional friction in given directions eta",
-                          "Section III, Eqs. (37)-(43)", "solve_friction",
-                          contact=True, friction=True),
-})
+def _check_entry(name: str, info) -> None:
+    """A registry entry must be a :class:`ModelInfo` of the same name."""
+    if not isinstance(info, ModelInfo) or info.name != name:
+        raise TypeError(f"a mechanics model entry must be a ModelInfo named {name!r}, got {info!r}")
+    if info.friction and not info.contact:
+        raise ValueError(f"mechanics model {name!r}: friction needs the contact solve (contact=True)")
+
+
+#: The mechanics models by name, in the order the package lists them.
+MODEL_REGISTRY: Registry[ModelInfo] = Registry("mechanics model", check=_check_entry)
+for _info in (
+        ModelInfo("standard", "zero clearance between the tubes, torsionally compliant, no friction",
+                  "Section II-A", "solve_standard", contact=False, friction=False),
+        ModelInfo("clearance", "tubes move inside each other's clearance, contact forces, no friction",
+                  "Sections II-B to II-E, Appendices A and B", "solve_clearance", contact=True, friction=False),
+        ModelInfo("friction", "clearance model with maximal torsional friction in given directions eta",
+                  "Section III, Eqs. (37)-(43)", "solve_friction", contact=True, friction=True)):
+    MODEL_REGISTRY.register(_info.name, _info)
+del _info
+
+#: A live read-only view of :data:`MODEL_REGISTRY`: ``{name: ModelInfo}``.
+MODEL_INFO = MODEL_REGISTRY.view
 
 #: Names of the mechanics models, in registry order: ``("standard", "clearance", "friction")``.
 MODELS: tuple[str, ...] = tuple(MODEL_INFO)
@@ -79,9 +92,10 @@ def check_model(model: str) -> str:
 
     Raises
     ------
-    ValueError
-        ``model`` is not one of :data:`MODELS`; the message lists them.
+    UnknownNameError
+        ``model`` is not registered (a :class:`ValueError`; the message lists the registered
+        models).
     """
-    if model not in MODEL_INFO:
-        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    if model not in MODEL_REGISTRY:
+        raise UnknownNameError(MODEL_REGISTRY.kind, model, MODEL_REGISTRY.names())
     return model

@@ -15,6 +15,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "ctrplan"
 #: Layers of the package's components, lowest first. A module may import from its own component
 #: and from components of lower layers only (never from another component of its own layer).
 LAYERS = (
+    ("registry",),                             # the one registry type (imports nothing of the package)
     ("errors", "constants", "models", "planner_info",  # planner_info: names only, no OMPL
      "_log"),                                  # logging helpers (levels, the deprecated echo)
     ("parallel", "cache"),                     # the one executor (this process, local workers or Dask);

@@ -195,7 +195,7 @@ def test_registering_checks_the_class(cylinder_type):
     with pytest.raises(TypeError):
         register_obstacle_type(dict)
     assert set(OBSTACLE_TYPES) == {"sphere", "capsule", "box", "mesh", "triangles", "cylinder"}
-    with pytest.raises(KeyError, match="no obstacle type 'cone'"):
+    with pytest.raises(KeyError, match="unknown obstacle type 'cone'; registered: sphere"):
         unregister_obstacle_type("cone")
 
 

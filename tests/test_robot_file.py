@@ -265,7 +265,7 @@ def test_robot_to_toml_round_trips_every_shipped_model_with_model_and_registrati
         assert back == robot, path.name
         assert back.metadata["model"] == "friction"
         assert back.metadata["tracker_registration"] == reg
-    with pytest.raises(ValueError, match="model must be one of"):
+    with pytest.raises(ValueError, match="unknown mechanics model .magic.; registered: standard, clearance, friction"):
         robot_to_toml(robot, model="magic")
 
 

@@ -17,13 +17,13 @@ from pathlib import Path
 from typing import Annotated, Literal, Mapping, Union
 
 import numpy as np
-from pydantic import AfterValidator, Field
+from pydantic import AfterValidator, ConfigDict, Field
 
 from ..calibration import RobotCalibration
 from ..coordinates import map_coordinates
 from ..errors import JointLimitError, ModelFileError
 from ..obstacles import OBSTACLE_TYPES, Box, Capsule, Mesh, Sphere  # noqa: F401 (the built-in types, also here)
-from ..planner_info import check_planner
+from ..planner_info import PLANNER_REGISTRY, check_planner, check_planner_options
 from ..robot import Robot
 from .robot_file import MAX_METRES, _load_robot_file, _Strict, parse_toml, read_text, validate_document
 
@@ -64,6 +64,9 @@ DEFAULT_BOUND_WEIGHT = 1000.0
 
 
 class _PlannerDoc(_Strict):
+    # keys beyond these are the named planner's declared parameters, checked against its
+    # registry entry once the table is read (scenario_from_toml_text)
+    model_config = ConfigDict(extra="allow")
     name: Annotated[str, AfterValidator(check_planner)] = "RRTstar"
     iterations: Annotated[int, Field(ge=1)] = 3000
     time_limit_s: Positive | None = None
@@ -214,6 +217,10 @@ class PlannerSettings:
         and obstacles, stored in the cache; a leg it does not join is planned by ``name``); None
         (the default): when the scenario has two goals or more and its bound map is complete
         (not a preview map, which the plan refines).
+    parameters : mapping of str to value
+        The named planner's other declared parameters
+        (:class:`ctrplan.planner_info.PlannerParameter`) given as keys of ``[planner]``, e.g.
+        ``goal_bias`` of the RRT* family; checked against the declaration when the file loads.
     """
 
     name: str = "RRTstar"
@@ -226,6 +233,7 @@ class PlannerSettings:
     final_motion: str = "translation-last"
     aim_with: str = "auto"
     roadmap: bool | None = None
+    parameters: Mapping = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -414,6 +422,34 @@ def load_scenario(path: str | os.PathLike) -> Scenario:
     return scenario_from_toml_text(read_text(path), file=str(path), base_dir=path.resolve().parent)
 
 
+def _planner_parameters(p: _PlannerDoc, file: str) -> dict:
+    """The ``[planner]`` keys that are the named planner's parameters, checked against what it
+    declares (:func:`ctrplan.planner_info.check_planner_options`); returns the ones beyond
+    ``range`` and ``rewire_factor``.
+
+    Raises
+    ------
+    ModelFileError
+        A key the planner does not declare (``range`` on BITstar, a misspelt key), or a value of
+        the wrong type or outside the declared limits; naming the file and ``planner.<key>``.
+    """
+    extra = dict(p.model_extra or {})
+    declared = PLANNER_REGISTRY[p.name].parameters
+    for key, value in {"range": p.range, "rewire_factor": p.rewire_factor, **extra}.items():
+        if value is None:
+            continue
+        if key not in declared:
+            keys = ", ".join(k for k in _PlannerDoc.model_fields)
+            raise ModelFileError(file, f"planner.{key}",
+                                 f"not a key of [planner] ({keys}) nor a parameter that planner {p.name} declares "
+                                 f"({', '.join(declared) or 'none'}); got {value!r}")
+        try:
+            check_planner_options(p.name, {key: value})
+        except ValueError as exc:
+            raise ModelFileError(file, f"planner.{key}", str(exc)) from None
+    return extra
+
+
 def scenario_from_toml_text(text: str, file: str = "<memory>",
                             base_dir: str | os.PathLike | None = None) -> Scenario:
     """Build a :class:`Scenario` from TOML text.
@@ -453,10 +489,11 @@ def scenario_from_toml_text(text: str, file: str = "<memory>",
             goals.append(TaskGoal(tip_position=_frozen_array(g.tip_position_m), tolerance=g.tolerance_m))
 
     p = doc.planner
+    extra = _planner_parameters(p, file)
     planner = PlannerSettings(name=p.name, iterations=p.iterations, time_limit=p.time_limit_s,
                               seed=p.seed, bound_weight=p.bound_weight, range=p.range,
                               rewire_factor=p.rewire_factor, final_motion=p.final_motion, aim_with=p.aim_with,
-                              roadmap=p.roadmap)
+                              roadmap=p.roadmap, parameters=extra)
 
     bf = doc.bound_field
     if bf.resolution is not None:

@@ -53,11 +53,12 @@ when an obstacle is first checked or drawn, not with this package.
 
 from ._base import (DRAWING_RESOLUTION, Obstacle, PositiveFloat, Vector3, convex_triangles, rotation_from_rpy,
                     rotation_z_to)
-from ._registry import OBSTACLE_TYPES, as_obstacle, obstacle_from_dict, register_obstacle_type, unregister_obstacle_type
+from ._registry import (OBSTACLE_REGISTRY, OBSTACLE_TYPES, as_obstacle, obstacle_from_dict, register_obstacle_type,
+                        unregister_obstacle_type)
 from ._builtin import Box, Capsule, Mesh, Sphere, Triangles
 
 __all__ = [
-    "Obstacle", "OBSTACLE_TYPES", "register_obstacle_type", "unregister_obstacle_type", "obstacle_from_dict",
+    "Obstacle", "OBSTACLE_REGISTRY", "OBSTACLE_TYPES", "register_obstacle_type", "unregister_obstacle_type", "obstacle_from_dict",
     "as_obstacle",
     "Sphere", "Capsule", "Box", "Mesh", "Triangles",
     "Vector3", "PositiveFloat", "DRAWING_RESOLUTION", "rotation_from_rpy", "rotation_z_to", "convex_triangles",

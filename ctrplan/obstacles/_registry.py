@@ -1,4 +1,5 @@
-"""The registry of obstacle types: ``type`` name -> class, and the conversions that use it."""
+"""The registry of obstacle types (a :class:`ctrplan.registry.Registry`): ``type`` name -> class,
+and the conversions that use it."""
 
 from __future__ import annotations
 
@@ -8,16 +9,33 @@ from typing import Mapping
 
 import pydantic
 
+from ..registry import Registry
 from ._base import Obstacle
 
-__all__ = ["OBSTACLE_TYPES", "register_obstacle_type", "unregister_obstacle_type", "obstacle_from_dict",
-           "as_obstacle"]
+__all__ = ["OBSTACLE_REGISTRY", "OBSTACLE_TYPES", "register_obstacle_type", "unregister_obstacle_type",
+           "obstacle_from_dict", "as_obstacle"]
+
+
+def _check_class(name: str, cls) -> None:
+    """A registry entry: a concrete :class:`Obstacle` subclass whose ``type`` field is ``name``."""
+    if not (isinstance(cls, type) and issubclass(cls, Obstacle)):
+        raise TypeError(f"an obstacle type must be a subclass of ctrplan.obstacles.Obstacle, got {cls!r}")
+    if inspect.isabstract(cls):
+        missing = ", ".join(sorted(cls.__abstractmethods__))
+        raise TypeError(f"{cls.__name__} does not implement {missing}")
+    if _type_name(cls) != name:
+        raise ValueError(f"obstacle type {cls.__name__} is named {_type_name(cls)!r} by its type field, not {name!r}")
+
 
 #: The obstacle types, ``{type name: Obstacle subclass}`` in registration order (the built-in
 #: ``sphere``, ``capsule``, ``box``, ``mesh``, ``triangles`` first). Scenario files, dicts, the
-#: collision checker and the drawings look types up here; change it only through
-#: :func:`register_obstacle_type` and :func:`unregister_obstacle_type`.
-OBSTACLE_TYPES: dict[str, type[Obstacle]] = {}
+#: collision checker and the drawings look types up here. :func:`register_obstacle_type` adds a
+#: class under the name of its ``type`` field (``OBSTACLE_REGISTRY.registered(name, cls)`` for a
+#: block).
+OBSTACLE_REGISTRY: Registry[type[Obstacle]] = Registry("obstacle type", check=_check_class)
+
+#: A live read-only view of :data:`OBSTACLE_REGISTRY`: ``{type name: class}``.
+OBSTACLE_TYPES = OBSTACLE_REGISTRY.view
 
 
 def _type_name(cls) -> str:
@@ -62,18 +80,11 @@ def register_obstacle_type(cls: type[Obstacle], *, replace: bool = False) -> typ
     """
     if not (isinstance(cls, type) and issubclass(cls, Obstacle)):
         raise TypeError(f"an obstacle type must be a subclass of ctrplan.obstacles.Obstacle, got {cls!r}")
-    if inspect.isabstract(cls):
-        missing = ", ".join(sorted(cls.__abstractmethods__))
-        raise TypeError(f"{cls.__name__} does not implement {missing}")
-    name = _type_name(cls)
-    if name in OBSTACLE_TYPES and not replace and OBSTACLE_TYPES[name] is not cls:
-        raise ValueError(f"obstacle type {name!r} is already registered ({OBSTACLE_TYPES[name].__name__})")
-    OBSTACLE_TYPES[name] = cls
-    return cls
+    return OBSTACLE_REGISTRY.register(_type_name(cls), cls, replace=replace)
 
 
 def unregister_obstacle_type(name: str) -> None:
-    """Remove an obstacle type from :data:`OBSTACLE_TYPES`.
+    """Remove an obstacle type from :data:`OBSTACLE_REGISTRY`.
 
     Parameters
     ----------
@@ -82,12 +93,11 @@ def unregister_obstacle_type(name: str) -> None:
 
     Raises
     ------
-    KeyError
-        No type of that name is registered.
+    ctrplan.registry.UnknownNameError
+        No type of that name is registered (a :class:`KeyError`; the message lists the
+        registered ones).
     """
-    if name not in OBSTACLE_TYPES:
-        raise KeyError(f"no obstacle type {name!r}; registered: {', '.join(OBSTACLE_TYPES)}")
-    del OBSTACLE_TYPES[name]
+    OBSTACLE_REGISTRY.unregister(name)
 
 
 def obstacle_from_dict(d: Mapping) -> Obstacle:

@@ -246,7 +246,7 @@ class Planner:
         from ..mechanics import evaluate_bound
         from ..planning import BoundCostObjective, bounds_given_last_motion
         from ..planning.history import end_with
-        from ..planning.route import DEFAULT_REWIRE_FACTOR, plan_route
+        from ..planning.route import plan_route
         from .drive import time_parameterize
 
         t_all = time.perf_counter()
@@ -260,8 +260,8 @@ class Planner:
         route = plan_route(robot, q0, [q1], checks, BoundCostObjective.factory(self.field, bound_weight=self.bound_weight),
                            planner=p.name, iterations=p.iterations, seed=p.seed, time_limit=p.time_limit,
                            range_=p.range, joint_space=js,
-                           rewire_factor=p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR,
-                           roadmap=(self.roadmap, self.terms, self.bound_weight))
+                           rewire_factor=p.rewire_factor,
+                           planner_options=p.parameters, roadmap=(self.roadmap, self.terms, self.bound_weight))
         leg = route.legs[0]
         via = "roadmap" if leg.planner == "roadmap" else "search"
         if via == "search":

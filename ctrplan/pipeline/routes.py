@@ -17,7 +17,7 @@ from ..errors import CtrplanError
 from ..mechanics import ModelSettings
 from ..planning import BoundCostObjective, JointStateSpace
 from ..planning.history import end_with, goal_indices
-from ..planning.route import DEFAULT_REWIRE_FACTOR, plan_route, route_checks
+from ..planning.route import plan_route, route_checks
 from .goals import AimedGoals
 from .path_bounds import PathBounds, bounds_along_path
 from .prediction import WaypointPredictions, predict_waypoints
@@ -134,8 +134,8 @@ def _plan_mode(job: _PlanJob) -> RoutePlan:
                        BoundCostObjective.factory(field, bound_weight=job.weight), planner=p.name,
                        iterations=job.iterations, seed=p.seed, time_limit=p.time_limit, range_=p.range,
                        joint_space=joint_space,
-                       rewire_factor=p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR,
-                       roadmap=roadmap)
+                       rewire_factor=p.rewire_factor,
+                       planner_options=p.parameters, roadmap=roadmap)
     ordered = route.ordered
     # the motion reaching each goal ends as the scenario asks (swap its last two phases if needed
     # and if the swapped phases pass the final check)

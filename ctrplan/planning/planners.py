@@ -13,23 +13,43 @@ Only planners known to work with Python callbacks in OMPL 2.0.1 are registered (
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 from ompl import base as ob, geometric as og, util as ou
 
 from ..errors import CtrplanError, UnreachableGoalError
-from ..planner_info import PLANNER_INFO, check_planner
+from ..planner_info import PLANNER_REGISTRY, check_planner_options
 from .space import JointStateSpace
 from .validity import DEFAULT_VALIDITY_RESOLUTION, use_motion_validator
 
 __all__ = ["PLANNERS", "PlanResult", "ValidityChecker", "plan", "DEFAULT_ITERATIONS",
            "DEFAULT_VALIDITY_RESOLUTION"]
 
-# Planner registry (names and descriptions in ctrplan.planner_info): name -> constructor taking an
-# ob.SpaceInformation. BITstar segfaulted with a *time-based* termination condition in a probe
-# (OMPL 2.0.1 wheels); plan() always terminates it on an iteration count, which ran fine.
-PLANNERS = {name: getattr(og, info.ompl_class) for name, info in PLANNER_INFO.items()}
+
+class _Allocators(Mapping):
+    """``{name: allocator}`` over :data:`ctrplan.planner_info.PLANNER_REGISTRY`, read live: the
+    allocator takes an ``ob.SpaceInformation`` and returns the planner (the entry's ``make``, or
+    its class of ``ompl.geometric``)."""
+
+    def __getitem__(self, name):
+        info = PLANNER_REGISTRY[name]
+        return info.make if info.make is not None else getattr(og, info.ompl_class)
+
+    def __iter__(self):
+        return iter(PLANNER_REGISTRY)
+
+    def __len__(self):
+        return len(PLANNER_REGISTRY)
+
+
+#: The registered planners' allocators by name (a live read-only mapping over
+#: :data:`ctrplan.planner_info.PLANNER_REGISTRY`, which users extend with
+#: :func:`ctrplan.planner_info.register_planner`). BITstar segfaulted with a *time-based*
+#: termination condition in a probe (OMPL 2.0.1 wheels); :func:`plan` always terminates it on an
+#: iteration count, which ran fine.
+PLANNERS: Mapping = _Allocators()
 
 # Default planner iterations (RRT* finds a first solution on the paper's 3-joint space within a
 # few hundred iterations; more iterations only improve the cost).
@@ -183,7 +203,8 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
          iterations: int = DEFAULT_ITERATIONS, time_limit: float | None = None, seed: int = 1, *,
          joint_space: JointStateSpace | None = None, validity_resolution: float = DEFAULT_VALIDITY_RESOLUTION,
          range_: float | None = None, goal_bias: float | None = None, rewire_factor: float | None = None,
-         shortcut_rounds: int = DEFAULT_SHORTCUT_ROUNDS, quiet: bool = True) -> PlanResult:
+         options: Mapping | None = None, shortcut_rounds: int = DEFAULT_SHORTCUT_ROUNDS,
+         quiet: bool = True) -> PlanResult:
     """Plan a valid, low-cost joint-space path from ``start_q`` to ``goal_q``.
 
     Parameters
@@ -203,7 +224,7 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
         ``joint_space`` (then ``joint_space`` must be passed and its space information is
         re-used).
     planner : str
-        Key of :data:`PLANNERS`.
+        A registered planner (:data:`ctrplan.planner_info.PLANNER_REGISTRY`).
     iterations : int
         Planner iterations (termination condition, reproducible).
     time_limit : float, optional
@@ -216,14 +237,19 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
         Spacing of validity checks along motions [m of the weighted metric] (a
         ``BatchValidityChecker`` uses its own ``resolution``).
     range_ : float, optional
-        Planner's maximum motion length [m of the metric] (RRT* family only).
+        The planner's parameter ``range``: maximum motion length [m of the metric] (declared by
+        the RRT* family).
     goal_bias : float, optional
-        Goal sampling probability (RRT* family only).
+        The planner's parameter ``goal_bias``: goal sampling probability (RRT* family).
     rewire_factor : float, optional
-        RRT* family: OMPL's ``setRewireFactor``, the factor on the k-nearest neighbour count
-        ``k = factor * 2^(d+1) e (1 + 1/d) log(n)`` (d the state dimension) whose motions a new
-        state is connected and rewired through (OMPL's default 1.1: on three joints every node of
-        a 1000-node tree is a neighbour; each costs a motion-cost evaluation).
+        The planner's parameter ``rewire_factor``: OMPL's ``setRewireFactor``, the factor on the
+        k-nearest neighbour count ``k = factor * 2^(d+1) e (1 + 1/d) log(n)`` (d the state
+        dimension) whose motions a new state is connected and rewired through (OMPL's default
+        1.1: on three joints every node of a 1000-node tree is a neighbour; each costs a
+        motion-cost evaluation). Declared by the four built-in planners.
+    options : mapping of str to value, optional, keyword-only
+        Other parameters the planner declares (:class:`ctrplan.planner_info.PlannerParameter`),
+        by name; None values count as not given.
     shortcut_rounds : int, keyword-only
         Rounds of cost-aware ``partialShortcutPath``; 0 disables.
     quiet : bool, keyword-only
@@ -236,11 +262,18 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
     Raises
     ------
     ValueError
-        Unknown planner name or bad arguments.
+        Unknown planner name (:class:`ctrplan.registry.UnknownNameError`), a parameter the
+        planner does not declare, a parameter value of the wrong type or outside its limits,
+        or bad arguments.
     UnreachableGoalError
         Start or goal invalid, or no exact solution within the iterations.
     """
-    check_planner(planner)
+    given = {"range": range_, "goal_bias": goal_bias, "rewire_factor": rewire_factor}
+    for key, value in dict(options or {}).items():
+        if given.get(key) is not None and value is not None:
+            raise ValueError(f"planner parameter {key!r} given twice (as a keyword and in options)")
+        given[key] = value if value is not None else given.get(key)
+    parameters = check_planner_options(planner, given)
     if int(iterations) < 1:
         raise ValueError(f"iterations must be >= 1, got {iterations!r}")
     if int(seed) <= 0:
@@ -250,13 +283,13 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
         ou.setLogLevel(ou.LOG_WARN)
     try:
         return _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, time_limit, seed,
-                     joint_space, validity_resolution, range_, goal_bias, shortcut_rounds, rewire_factor)
+                     joint_space, validity_resolution, parameters, shortcut_rounds)
     finally:
         ou.setLogLevel(level)
 
 
 def _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, time_limit, seed,
-          joint_space, validity_resolution, range_, goal_bias, shortcut_rounds, rewire_factor=None):
+          joint_space, validity_resolution, parameters, shortcut_rounds):
     _set_seed(seed)
     prebuilt = isinstance(objective, ob.OptimizationObjective)
     if prebuilt and joint_space is None:
@@ -288,12 +321,9 @@ def _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, t
     pdef.setStartAndGoalStates(start, goal)
     pdef.setOptimizationObjective(obj)
     pl = PLANNERS[planner](si)
-    if range_ is not None and hasattr(pl, "setRange"):
-        pl.setRange(float(range_))
-    if goal_bias is not None and hasattr(pl, "setGoalBias"):
-        pl.setGoalBias(float(goal_bias))
-    if rewire_factor is not None and hasattr(pl, "setRewireFactor"):
-        pl.setRewireFactor(float(rewire_factor))
+    declared = PLANNER_REGISTRY[planner].parameters
+    for key, value in parameters.items():
+        declared[key].apply(pl, value)
     pl.setProblemDefinition(pdef)
     pl.setup()
 

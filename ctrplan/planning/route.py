@@ -26,6 +26,7 @@ from dataclasses import dataclass, field as dc_field
 
 import numpy as np
 
+from ..planner_info import PLANNER_REGISTRY
 from .collision import CollisionChecker
 from .ordering import OrderedPath, order_path
 from .planners import DEFAULT_ITERATIONS, PlanResult, plan
@@ -173,7 +174,7 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
                iterations: int = DEFAULT_ITERATIONS, seed: int = 1, time_limit: float | None = None,
                range_: float | None = None, joint_space=None,
                repair_iterations: int = DEFAULT_REPAIR_ITERATIONS,
-               rewire_factor: float | None = DEFAULT_REWIRE_FACTOR, roadmap=None) -> Route:
+               rewire_factor: float | None = None, planner_options=None, roadmap=None) -> Route:
     """Plan start -> goals, order into rotate-then-translate phases and check every phase.
 
     Parameters
@@ -190,7 +191,10 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
     planner, iterations, seed, time_limit, range_
         As :func:`~ctrplan.planning.plan`; leg k uses ``seed + k``.
     rewire_factor : float or None, keyword-only
-        RRT* family (:func:`~ctrplan.planning.plan`); None: OMPL's default.
+        Declared by the built-in planners (:func:`~ctrplan.planning.plan`); None:
+        :data:`DEFAULT_REWIRE_FACTOR` where the planner declares it, else not set.
+    planner_options : mapping of str to value, optional, keyword-only
+        The planner's other declared parameters (``options`` of :func:`~ctrplan.planning.plan`).
     joint_space : JointStateSpace, optional, keyword-only
     repair_iterations : int, keyword-only
         Planner iterations of a repair.
@@ -210,6 +214,8 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
         A leg has no path within the budget, or a segment fails the final check and cannot be
         bisected or repaired (the message names the segment and what failed).
     """
+    if rewire_factor is None and "rewire_factor" in PLANNER_REGISTRY[planner].parameters:
+        rewire_factor = DEFAULT_REWIRE_FACTOR
     js = joint_space if joint_space is not None else checks.search.joint_space
     legs: list[PlanResult] = []
     q_prev = np.asarray(start_q, dtype=float)
@@ -221,7 +227,7 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
         if res is None:
             res = plan(robot, q_prev, q_goal, checks.search, objective, planner=planner, iterations=iterations,
                        time_limit=time_limit, seed=seed + gi, joint_space=js, range_=range_,
-                       rewire_factor=rewire_factor)
+                       rewire_factor=rewire_factor, options=planner_options)
         legs.append(res)
         wp = np.array(res.waypoints)
         offset = waypoints[-1] - wp[0]   # continue from where the previous leg ended (unwrapped angles)
@@ -231,7 +237,8 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
 
     def repair(a, b):
         res = plan(robot, a, b, checks.repair_search, objective, planner=planner, iterations=repair_iterations,
-                   seed=seed + 1000 + len(repairs), joint_space=js, range_=range_, rewire_factor=rewire_factor)
+                   seed=seed + 1000 + len(repairs), joint_space=js, range_=range_, rewire_factor=rewire_factor,
+                   options=planner_options)
         repairs.append(res)
         return res.waypoints
 

@@ -1,0 +1,131 @@
+"""The worked examples of ``docs/architecture.md`` run as written: the planner and the obstacle
+type it registers are used by a scenario file that plans with both, and the refusals the page
+quotes happen.
+
+Each example registers into the package's registries; the tests remove what they registered
+(so that other tests see the built-in entries only).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ctrplan
+from _maps import constant_field
+from ctrplan.errors import ModelFileError
+from ctrplan.io.robot_file import load_robot
+from ctrplan.io.scenario import load_scenario
+from ctrplan.obstacles import OBSTACLE_REGISTRY
+from ctrplan.planner_info import PLANNER_REGISTRY
+from ctrplan.planning import JointStateSpace
+from ctrplan.planning.route import route_checks
+from ctrplan.mechanics import ModelSettings
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGE = ROOT / "docs" / "architecture.md"
+TABLE7 = ROOT / "model" / "ha2019-table7-calibrated.toml"
+# the post of the page's example sits across the tip's path from START to GOAL
+START = {"alpha_2": 0.0, "alpha_3": 0.0, "beta_3": -0.05}
+GOAL = {"alpha_2": 0.8, "alpha_3": 0.0, "beta_3": -0.05}
+
+
+def _section(title: str) -> str:
+    text = PAGE.read_text()
+    start = text.index(f"### {title}\n")
+    end = text.find("\n## ", start)
+    nxt = text.find("\n### ", start + 1)
+    return text[start:min(x for x in (end, nxt, len(text)) if x > 0)]
+
+
+def _blocks(title: str, lang: str) -> list[str]:
+    return re.findall(rf"```{lang}\n(.*?)```", _section(title), flags=re.S)
+
+
+@pytest.fixture
+def examples():
+    """The page's planner and obstacle type, registered by running its code blocks; removed after."""
+    names = {}
+    try:
+        for title, registry, name in (("A planner", PLANNER_REGISTRY, "RadiusRRTstar"),
+                                      ("An obstacle type", OBSTACLE_REGISTRY, "post")):
+            (code,) = _blocks(title, "python")
+            namespace = {}
+            exec(compile(code, str(PAGE), "exec", dont_inherit=True), namespace)
+            assert name in registry
+            names[name] = namespace
+        yield names
+    finally:
+        for registry, name in ((PLANNER_REGISTRY, "RadiusRRTstar"), (OBSTACLE_REGISTRY, "post")):
+            if name in registry:
+                registry.unregister(name)
+
+
+def _q(q: dict) -> str:
+    return "{" + ", ".join(f"{k} = {v}" for k, v in q.items()) + "}"
+
+
+def _scenario(tmp_path: Path, planner_table: str) -> Path:
+    (obstacle,) = _blocks("An obstacle type", "toml")
+    text = f"""
+name = "architecture"
+robot = "{TABLE7.as_posix()}"
+[start]
+q = {_q(START)}
+[[goals]]
+type = "joint"
+q = {_q(GOAL)}
+{obstacle}
+{planner_table}
+iterations = 300
+seed = 2
+[bound_field]
+resolution = [4, 4, 3]
+[drive]
+control_rate_hz = 250.0
+max_velocity = {{alpha_2 = 1.0, alpha_3 = 1.0, beta_3 = 0.01}}
+max_acceleration = {{alpha_2 = 4.0, alpha_3 = 4.0, beta_3 = 0.04}}
+max_jerk = {{alpha_2 = 40.0, alpha_3 = 40.0, beta_3 = 0.4}}
+"""
+    path = tmp_path / "architecture.toml"
+    path.write_text(text)
+    return path
+
+
+def test_the_page_s_planner_and_obstacle_plan_a_scenario(tmp_path, monkeypatch, examples):
+    """The scenario of the page's two TOML snippets loads the post as the page's class and plans
+    every leg with the page's planner, around the post: its straight motion is refused by the
+    collision check (so the route is not the straight one by accident), and the plan's final
+    check passed every phase."""
+    monkeypatch.chdir(tmp_path)
+    (planner_table,) = _blocks("A planner", "toml")
+    sc = load_scenario(_scenario(tmp_path, planner_table))
+    post = sc.obstacles[0]
+    assert type(post) is examples["post"]["Post"] and sc.planner.name == "RadiusRRTstar"
+    js = JointStateSpace(sc.robot)
+    checks = route_checks(sc.robot, list(sc.obstacles), None, ModelSettings(ds=3e-3), joint_space=js)
+    q0, q1 = np.array(list(START.values())), np.array(list(GOAL.values()))
+    assert not checks.search.check_motion(q0, q1)
+    run = ctrplan.plan(sc, bound_map=constant_field(sc.robot), compare_blind=False).run
+    aware = run.plans.aware
+    assert {leg.planner for leg in aware.legs} == {"RadiusRRTstar"}
+    np.testing.assert_allclose(js.difference(aware.ordered.q[-1], q1), 0.0, atol=1e-9)
+    for a, b in zip(aware.ordered.q[:-1], aware.ordered.q[1:]):
+        assert checks.final.check(a, b), (a, b)
+
+
+@pytest.mark.parametrize("line, key, text", [
+    ("goal_bias = 0.1", "planner.goal_bias",
+     "nor a parameter that planner RadiusRRTstar declares (range)"),
+    ("range = -1.0", "planner.range", "greater than 0; got -1.0"),
+])
+def test_the_refusals_the_page_quotes(tmp_path, examples, line, key, text):
+    (planner_table,) = _blocks("A planner", "toml")
+    table = re.sub(r"range = .*", line, planner_table) if line.startswith("range") else planner_table + line + "\n"
+    path = _scenario(tmp_path, table)
+    with pytest.raises(ModelFileError) as info:
+        load_scenario(path)
+    assert (info.value.file, info.value.key) == (str(path), key) and text in str(info.value)
