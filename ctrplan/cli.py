@@ -718,7 +718,7 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
     clear of the scenario's obstacles, and is time-parameterized within the drive limits (ruckig).
     """
     from .design import DesignInputError, design_experiment, read_results, result_hypotheses
-    from .design._output import write_design
+    from .design import write_design
     from .discrepancy import load_measured_data
     from .io.robot_file import load_robot
 

@@ -25,7 +25,7 @@ from .obstacles import as_obstacle
 from .trajectory import ROTATION, TRANSLATION, Trajectory
 
 __all__ = ["plot_robot_shapes", "plot_bound_along_path", "plot_joint_trajectories", "plot_xy", "new_figure",
-           "save_figure"]
+           "save_figure", "obstacle_triangles"]
 
 M_TO_MM = 1e3
 DPI = 120
@@ -114,15 +114,36 @@ def _points(values, label: str) -> np.ndarray:
 
 def _draw_obstacle(ax, obstacle, k: int) -> np.ndarray:
     """Draw one obstacle (its triangles, in mm); return its vertices [m], shape (V, 3)."""
-    verts, faces = _obstacle_triangles(obstacle, k, SPHERE_RESOLUTION)
+    verts, faces = obstacle_triangles(obstacle, k, SPHERE_RESOLUTION)
     ax.add_collection3d(Poly3DCollection(verts[faces] * M_TO_MM, facecolors=OBSTACLE_COLOR, linewidths=0.0,
                                          alpha=OBSTACLE_ALPHA, shade=True))
     return verts
 
 
-def _obstacle_triangles(obstacle, k: int, resolution: int) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`~ctrplan.obstacles.Obstacle.triangles` of an obstacle or obstacle dict: vertices
-    (V, 3) [m] and faces (F, 3); any problem is a ValueError starting with ``obstacle k``."""
+def obstacle_triangles(obstacle, k: int, resolution: int) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles of an obstacle or obstacle dict as both drawings use them
+    (:meth:`~ctrplan.obstacles.Obstacle.triangles`).
+
+    Parameters
+    ----------
+    obstacle : Obstacle or mapping
+    k : int
+        Its number in the list drawn (1-based), for messages.
+    resolution : int
+        Segments of a round outline.
+
+    Returns
+    -------
+    vertices : ndarray, shape (V, 3)
+        [m], base frame.
+    faces : ndarray of int, shape (F, 3)
+
+    Raises
+    ------
+    ValueError
+        Any problem (unknown type, bad key, triangles of the wrong shape); the message starts
+        with ``obstacle k``.
+    """
     try:
         verts, faces = as_obstacle(obstacle).triangles(resolution)
     except (ValueError, TypeError, AttributeError) as exc:

@@ -217,9 +217,9 @@ def obstacle_triangles(obstacle, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
         Unknown obstacle type, a bad key, a missing mesh file, or triangles of the wrong shape;
         the message starts with ``obstacle k``.
     """
-    from .plots import _obstacle_triangles
+    from .plots import obstacle_triangles
 
-    return _obstacle_triangles(obstacle, k, SPHERE_RESOLUTION)
+    return obstacle_triangles(obstacle, k, SPHERE_RESOLUTION)
 
 
 def _obstacle_kind(obstacle) -> str:

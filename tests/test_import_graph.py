@@ -154,3 +154,63 @@ def test_the_graph_reader_sees_relative_and_function_level_imports(tmp_path, mon
     monkeypatch.setattr(__import__(__name__), "PACKAGE", pkg)
     modules = _modules()
     assert "ctrplan.boundmap.grid" in _graph(modules)["ctrplan.io.scenario"]
+
+
+#: Imports of a private name across components that are still there: (importing module,
+#: imported module). Each is a name the other component should make public; the list may only
+#: shrink.
+PRIVATE_IMPORTS_LEFT = {
+    ("ctrplan.planning.validity", "ctrplan.mechanics._standard_bodies"),   # StandardBodies, _solve_packed
+    ("ctrplan.batch", "ctrplan.mechanics._lie"),                           # angle_between
+    ("ctrplan.discrepancy.report", "ctrplan.plots"),                       # _figure, _save
+}
+
+
+def _private_imports(modules: dict) -> set:
+    """(importing module, imported module, name) of every ``from X import Y`` that reaches into
+    another component through a private module (a path part starting with ``_``) or a private
+    name."""
+    out = set()
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if (not target.startswith("ctrplan") or _component(target) == _component(name)
+                    or _component(target) == "_log"):   # the package's own logging helpers
+                continue
+            private_module = any(part.startswith("_") for part in target.split("."))
+            for alias in node.names:
+                if private_module or (alias.name.startswith("_") and f"{target}.{alias.name}" not in modules):
+                    out.add((name, target, alias.name))
+    return out
+
+
+def test_no_component_imports_another_s_private_names():
+    """A name one component uses from another is public and documented there (catches a new
+    reach into a private module or name, e.g. planning importing obstacles._base's tolerance)."""
+    found = _private_imports(_modules())
+    new = sorted(f"{a} imports {n} from {b}" for a, b, n in found if (a, b) not in PRIVATE_IMPORTS_LEFT)
+    assert not new, "\n".join(new)
+    gone = PRIVATE_IMPORTS_LEFT - {(a, b) for a, b, _ in found}
+    assert not gone, f"no longer private imports, remove from PRIVATE_IMPORTS_LEFT: {sorted(gone)}"
+
+
+#: Public class names defined in two modules that are still there (name: modules); may only shrink.
+DUPLICATE_CLASSES_LEFT = {"Prediction": {"ctrplan.mechanics.prediction", "ctrplan.discrepancy.calibrate"}}
+
+
+def test_no_public_class_name_is_defined_twice():
+    """One concept, one name: catches a second PlanResult, JointGoal or TaskGoal."""
+    where = collections.defaultdict(set)
+    for name, path in _modules().items():
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
+                where[node.name].add(name)
+    twice = {c: m for c, m in where.items() if len(m) > 1}
+    assert twice == DUPLICATE_CLASSES_LEFT, twice

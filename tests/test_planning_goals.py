@@ -3,7 +3,7 @@ import pytest
 
 from ctrplan.errors import UnreachableGoalError
 from ctrplan.boundmap import compute_field
-from ctrplan.planning import TaskSpaceGoal, resolve_goal
+from ctrplan.planning import TaskGoal, resolve_goal
 from test_planning_helpers import fake_robot, fake_solve_standard, fake_tip
 
 
@@ -20,7 +20,7 @@ def test_ik_finds_both_elbows_and_picks_lowest_bound():
                                diagnostics=SimpleNamespace(converged=True, unstable=False))
 
     field = compute_field(robot, bound, (24, 8, 3), progress=False)
-    sol = resolve_goal(TaskSpaceGoal(tuple(target), 1e-4), robot, lambda q: True, field=field,
+    sol = resolve_goal(TaskGoal(target, 1e-4), robot, lambda q: True, field=field,
                        solve_standard=fake_solve_standard, seed=0)
     assert sol.tip_error < 1e-4
     np.testing.assert_allclose(fake_tip(*robot.configuration(sol.q)), target, atol=1e-4)
@@ -71,10 +71,51 @@ def test_tie_in_bound_and_residual_goes_to_the_solution_found_first():
                                diagnostics=SimpleNamespace(converged=True, unstable=False))
 
     field = compute_field(robot, flat, (12, 6, 3), progress=False)
-    sol = resolve_goal(TaskSpaceGoal(tuple(target), 1e-3), robot, lambda q: True, field=field,
+    sol = resolve_goal(TaskGoal(target, 1e-3), robot, lambda q: True, field=field,
                        solve_standard=fake_solve_standard, seed=0)
     assert len(sol.candidates) >= 2
     np.testing.assert_array_equal(sol.candidate_bounds, sol.candidate_bounds[0])
     assert np.all(sol.candidate_errors < 1e-6)
     assert np.argmin(sol.candidate_errors) != 0   # the smaller residual is not the first found
     np.testing.assert_array_equal(sol.q, sol.candidates[0])
+
+
+def test_one_goal_type_pair_for_scenarios_and_planning():
+    """The scenario loader and the planning package share JointGoal and TaskGoal (catches a
+    second goal type drifting from the first); the types store read-only float arrays and refuse
+    malformed values; dicts in scenario-file form and bare joint vectors become them."""
+    import ctrplan.io.scenario as scenario
+    import ctrplan.planning as planning
+
+    assert planning.JointGoal is scenario.JointGoal and planning.TaskGoal is scenario.TaskGoal
+    g = planning.TaskGoal([0.01, 0.0, 0.2])
+    assert g.tolerance == 1e-3 and g.tip_position.dtype == float and not g.tip_position.flags.writeable
+    with pytest.raises(ValueError, match="tip_position must be 3 finite numbers"):
+        planning.TaskGoal([0.01, 0.2])
+    with pytest.raises(ValueError, match="tolerance must be a finite distance > 0"):
+        planning.TaskGoal([0.01, 0.0, 0.2], 0.0)
+    with pytest.raises(ValueError, match="finite joint values"):
+        planning.JointGoal([0.1, float("nan")])
+    t = planning.as_goal({"tip_position_m": [0.01, 0.0, 0.2], "tolerance_m": 2e-3})
+    assert isinstance(t, planning.TaskGoal) and t.tolerance == 2e-3
+    j = planning.as_goal([0.1, 0.2, -0.05])
+    assert isinstance(j, planning.JointGoal) and j.q.tolist() == [0.1, 0.2, -0.05]
+    assert planning.as_goal({"q": [0.1]}).q.tolist() == [0.1]
+    with pytest.raises(ValueError, match="needs 'q'"):
+        planning.as_goal({"tip": [0, 0, 0]})
+
+
+def test_the_former_names_warn_and_give_the_one_types():
+    """ctrplan.planning.PlanResult and TaskSpaceGoal still resolve, with a DeprecationWarning,
+    to SearchResult and to a TaskGoal made from the old keywords (catches scripts broken by the
+    renaming without a word)."""
+    import ctrplan.planning as planning
+
+    with pytest.warns(DeprecationWarning, match="use ctrplan.planning.SearchResult"):
+        assert planning.PlanResult is planning.SearchResult
+    with pytest.warns(DeprecationWarning, match=r"use ctrplan.planning.TaskGoal\(tip_position, tolerance\)"):
+        make = planning.TaskSpaceGoal
+    g = make(tip_position_m=(0.01, 0.0, 0.2), tolerance_m=2e-3)
+    assert isinstance(g, planning.TaskGoal) and g.tolerance == 2e-3
+    with pytest.raises(AttributeError):
+        planning.NoSuchName

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import atomic_savez
-from ._interp import cell_corners, multilinear
+from .interp import cell_corners, multilinear
 from ..coordinates import MapCoordinates
 from .identity import BoundMapMismatchError
 
@@ -193,7 +193,7 @@ class BoundField:
         """Arrays of the compiled interpolation of one quantity, for compiled callers:
         ``(matrix (d, n_joints), offset (d,), axes, start, size, periodic, strides, values, valid,
         column, eps)`` with the joint-to-map coordinates first (identity without ``coordinates``);
-        the rest are what ``ctrplan.boundmap._interp.locate`` and ``corner_sum`` take besides
+        the rest are what ``ctrplan.boundmap.interp.locate`` and ``corner_sum`` take besides
         the point and its cell."""
         if quantity not in QUANTITIES:
             raise ValueError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")

@@ -16,7 +16,8 @@ from ._hypotheses import DesignInputError, Hypothesis, read_results, result_hypo
 from ._criteria import Information, Sensitivities, information, noise_weight, sensitivities
 from ._motions import Primitive, motion_data, primitives, sample, trajectory
 from ._design import DesignResult, design_experiment, drive_from_data
+from ._output import write_design
 
 __all__ = ["DesignInputError", "Hypothesis", "read_results", "result_hypotheses", "Information", "Sensitivities",
            "information", "noise_weight", "sensitivities", "Primitive", "motion_data", "primitives", "sample",
-           "trajectory", "DesignResult", "design_experiment", "drive_from_data"]
+           "trajectory", "DesignResult", "design_experiment", "drive_from_data", "write_design"]

@@ -149,31 +149,61 @@ def _frozen_array(values, dtype=float) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class JointGoal:
-    """Reach a joint configuration.
+    """Reach a joint configuration: the one joint-goal type of the package (scenario files,
+    :func:`ctrplan.planning.resolve_goal`, :class:`ctrplan.Planner`).
 
     Attributes
     ----------
     q : ndarray, shape (n_joints,)
-        Joint values in robot joint order [rad or m].
+        Joint values in robot joint order [rad or m] (stored as a read-only float array).
+
+    Raises
+    ------
+    ValueError
+        ``q`` is not a flat vector of finite numbers.
     """
 
     q: np.ndarray
 
+    def __post_init__(self):
+        q = np.array(self.q, dtype=float).reshape(-1)
+        if q.size == 0 or not np.all(np.isfinite(q)):
+            raise ValueError(f"a joint goal needs finite joint values [rad or m], got {self.q!r}")
+        q.setflags(write=False)
+        object.__setattr__(self, "q", q)
+
 
 @dataclass(frozen=True, eq=False)
 class TaskGoal:
-    """Bring the tip within ``tolerance`` of a position.
+    """Bring the tip within ``tolerance`` of a position: the one task-space goal type of the
+    package (scenario files, :func:`ctrplan.planning.resolve_goal`, :class:`ctrplan.Planner`).
 
     Attributes
     ----------
     tip_position : ndarray, shape (3,)
-        Target tip position in the robot base frame [m].
+        Target tip position in the robot base frame [m] (stored as a read-only float array).
     tolerance : float
-        Allowed distance from the target [m].
+        Allowed distance from the target [m] (default 1 mm).
+
+    Raises
+    ------
+    ValueError
+        ``tip_position`` is not 3 finite numbers, or ``tolerance`` is not finite and positive.
     """
 
     tip_position: np.ndarray
-    tolerance: float
+    tolerance: float = 1e-3
+
+    def __post_init__(self):
+        p = np.array(self.tip_position, dtype=float).reshape(-1)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise ValueError(f"tip_position must be 3 finite numbers [m], got {self.tip_position!r}")
+        tol = float(self.tolerance)
+        if not np.isfinite(tol) or tol <= 0.0:
+            raise ValueError(f"tolerance must be a finite distance > 0 [m], got {self.tolerance!r}")
+        p.setflags(write=False)
+        object.__setattr__(self, "tip_position", p)
+        object.__setattr__(self, "tolerance", tol)
 
 
 @dataclass(frozen=True)

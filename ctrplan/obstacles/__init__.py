@@ -51,7 +51,7 @@ trimesh) and :class:`Triangles` (a mesh given inline). python-fcl, trimesh and s
 when an obstacle is first checked or drawn, not with this package.
 """
 
-from ._base import (DRAWING_RESOLUTION, Obstacle, PositiveFloat, Vector3, convex_triangles, rotation_from_rpy,
+from ._base import (AXIS_PARALLEL_TOL, DRAWING_RESOLUTION, Obstacle, PositiveFloat, Vector3, convex_triangles, rotation_from_rpy,
                     rotation_z_to)
 from ._registry import (OBSTACLE_REGISTRY, OBSTACLE_TYPES, as_obstacle, obstacle_from_dict, register_obstacle_type,
                         unregister_obstacle_type)
@@ -61,5 +61,5 @@ __all__ = [
     "Obstacle", "OBSTACLE_REGISTRY", "OBSTACLE_TYPES", "register_obstacle_type", "unregister_obstacle_type", "obstacle_from_dict",
     "as_obstacle",
     "Sphere", "Capsule", "Box", "Mesh", "Triangles",
-    "Vector3", "PositiveFloat", "DRAWING_RESOLUTION", "rotation_from_rpy", "rotation_z_to", "convex_triangles",
+    "Vector3", "PositiveFloat", "DRAWING_RESOLUTION", "AXIS_PARALLEL_TOL", "rotation_from_rpy", "rotation_z_to", "convex_triangles",
 ]

@@ -17,7 +17,7 @@ DRAWING_RESOLUTION = 24
 
 # A direction within this of +-z (cosine distance) gets the identity or the half-turn about x
 # in rotation_z_to (and in ctrplan.planning.collision._capsule_poses, which imports it).
-_AXIS_PARALLEL_TOL = 1e-12
+AXIS_PARALLEL_TOL = 1e-12
 
 
 def _as_list(value):
@@ -199,9 +199,9 @@ def rotation_z_to(direction) -> np.ndarray:
     d = np.asarray(direction, dtype=float)
     d = d / np.linalg.norm(d)
     c = float(np.dot(z, d))
-    if c > 1.0 - _AXIS_PARALLEL_TOL:
+    if c > 1.0 - AXIS_PARALLEL_TOL:
         return np.eye(3)
-    if c < -1.0 + _AXIS_PARALLEL_TOL:
+    if c < -1.0 + AXIS_PARALLEL_TOL:
         return np.diag([1.0, -1.0, -1.0])
     v = np.cross(z, d)
     vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])

@@ -190,7 +190,7 @@ class Planner:
 
         Parameters
         ----------
-        goal : array-like of shape (n_joints,), dict, JointGoal or TaskSpaceGoal
+        goal : array-like of shape (n_joints,), dict, JointGoal or TaskGoal
             A joint vector (robot joint order), ``{joint name: value}``, or a tip position with
             a tolerance (``{"tip_position_m": [x, y, z], "tolerance_m": t}`` [m]).
         seed : int, keyword-only

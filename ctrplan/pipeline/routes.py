@@ -34,7 +34,7 @@ class RoutePlan:
 
     Attributes
     ----------
-    legs : list of ctrplan.planning.planners.PlanResult
+    legs : list of ctrplan.planning.planners.SearchResult
         One planner result per leg (start -> goal 1 -> goal 2 ...).
     ordered : OrderedPath
         The ordered path (pure rotation and pure translation phases) [rad or m].

@@ -10,7 +10,7 @@ Building blocks (each usable on its own in an OMPL setup, see ``docs/planning.md
 - :class:`BoundField` (from :mod:`ctrplan.boundmap`): the friction bound of Ha, Fagogenis &
   Dupont 2019 (doi:10.1109/TRO.2018.2878906) precomputed on a grid and interpolated.
 - :class:`BoundCostObjective`: ``ob.OptimizationObjective`` = length + weight x integral of bound.
-- :func:`plan` with :data:`PLANNERS`, :class:`ValidityChecker`, :class:`PlanResult`.
+- :func:`plan` with :data:`PLANNERS`, :class:`ValidityChecker`, :class:`SearchResult`.
 - :func:`order_path` (rotate, then translate) and :func:`bounds_given_last_motion`.
 - :func:`resolve_goal` for joint or tip-position goals; :func:`compensate_goal` aims a tip-position
   goal with the tip predicted for the motion that reaches it (compensated targeting).
@@ -25,11 +25,11 @@ Building blocks (each usable on its own in an OMPL setup, see ``docs/planning.md
 from ..boundmap import (QUANTITIES, BoundField, BoundFieldKeyError, InterpolationError, field_key,
                         interpolation_error)
 from .collision import CollisionChecker, CollisionReport
-from .goals import CompensatedGoal, GoalSolution, JointGoal, TaskSpaceGoal, compensate_goal, resolve_goal
+from .goals import CompensatedGoal, GoalSolution, JointGoal, TaskGoal, as_goal, compensate_goal, resolve_goal
 from .history import DEFAULT_FINAL_MOTION, FINAL_MOTIONS, approach_history, end_with, goal_indices, path_history
 from .objective import DEFAULT_BOUND_WEIGHT, BoundCostObjective
 from .ordering import LastMotionBounds, OrderedPath, OrderedWaypoint, bounds_given_last_motion, order_path
-from .planners import PLANNERS, PlanResult, ValidityChecker, plan
+from .planners import PLANNERS, SearchResult, ValidityChecker, plan
 from .route import Route, RouteChecks, plan_route, route_checks
 from .space import DEFAULT_METERS_PER_RADIAN, JointStateSpace, unwrap_path, wrap_angle
 from .validity import BatchMotionValidator, BatchValidityChecker, use_motion_validator
@@ -40,11 +40,29 @@ __all__ = [
     "CollisionChecker", "CollisionReport",
     "BoundField", "BoundFieldKeyError", "InterpolationError", "QUANTITIES", "field_key", "interpolation_error",
     "BoundCostObjective", "DEFAULT_BOUND_WEIGHT",
-    "PLANNERS", "PlanResult", "ValidityChecker", "plan",
+    "PLANNERS", "SearchResult", "ValidityChecker", "plan",
     "OrderedPath", "OrderedWaypoint", "LastMotionBounds", "order_path", "bounds_given_last_motion",
-    "JointGoal", "TaskSpaceGoal", "GoalSolution", "resolve_goal", "CompensatedGoal", "compensate_goal",
+    "JointGoal", "TaskGoal", "as_goal", "GoalSolution", "resolve_goal", "CompensatedGoal", "compensate_goal",
     "path_history", "approach_history", "end_with", "goal_indices", "FINAL_MOTIONS",
     "DEFAULT_FINAL_MOTION",
     "BatchValidityChecker", "BatchMotionValidator", "use_motion_validator", "MotionVerifier", "MotionCheck",
     "Route", "RouteChecks", "plan_route", "route_checks",
 ]
+
+# Names this package had before each concept got one name: PlanResult (now SearchResult, distinct
+# from the user-facing ctrplan.PlanResult) and TaskSpaceGoal (now TaskGoal, the scenario's type).
+_DEPRECATED = {"PlanResult": ("SearchResult", "SearchResult"),
+               "TaskSpaceGoal": ("TaskGoal(tip_position, tolerance)", "_task_space_goal")}
+
+
+def __getattr__(name):
+    if name in _DEPRECATED:
+        import warnings
+
+        from . import goals, planners
+
+        use, attr = _DEPRECATED[name]
+        warnings.warn(f"ctrplan.planning.{name} is deprecated: use ctrplan.planning.{use}", DeprecationWarning,
+                      stacklevel=2)
+        return getattr(planners, attr, None) or getattr(goals, attr)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

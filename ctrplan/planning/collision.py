@@ -24,7 +24,7 @@ from numba import njit
 
 from ..obstacles import as_obstacle, rotation_z_to
 # the tolerance of rotation_z_to, so that _capsule_poses builds the same poses as it does
-from ..obstacles._base import _AXIS_PARALLEL_TOL
+from ..obstacles import AXIS_PARALLEL_TOL
 
 __all__ = ["CollisionChecker", "CollisionReport", "AABB_MARGIN"]
 
@@ -158,9 +158,9 @@ def _capsule_poses(cap_a, cap_b, ncap, length, rot, center):
             u0 = d0 / L
             u1 = d1 / L
             c = d2 / L
-            if c > 1.0 - _AXIS_PARALLEL_TOL:
+            if c > 1.0 - AXIS_PARALLEL_TOL:
                 continue
-            if c < -1.0 + _AXIS_PARALLEL_TOL:
+            if c < -1.0 + AXIS_PARALLEL_TOL:
                 rot[k, j, 1, 1] = -1.0
                 rot[k, j, 2, 2] = -1.0
                 continue

@@ -18,15 +18,17 @@ is on the target, instead of the standard model's tip.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import CtrplanError, UnreachableGoalError
+from ..io.scenario import JointGoal, TaskGoal
 from .space import wrap_angle
 
-__all__ = ["JointGoal", "TaskSpaceGoal", "GoalSolution", "resolve_goal", "DEFAULT_IK_STARTS_PER_JOINT",
+__all__ = ["JointGoal", "TaskGoal", "GoalSolution", "resolve_goal", "DEFAULT_IK_STARTS_PER_JOINT",
            "DEFAULT_IK_MAX_STARTS", "CompensatedGoal", "compensate_goal"]
 
 # Coarse start grid: nodes per joint (3 joints -> 27 starts, ~1-3 s with a ~1 ms model).
@@ -49,19 +51,11 @@ _BOUND_RESOLUTION = 1e-9
 _RESIDUAL_RESOLUTION = 1e-3
 
 
-@dataclass(frozen=True)
-class JointGoal:
-    """Goal given directly as a joint vector ``q`` (shape (n_joints,)) [rad or m]."""
-
-    q: tuple
-
-
-@dataclass(frozen=True)
-class TaskSpaceGoal:
-    """Goal given as a tip position ``tip_position_m`` (shape (3,)) [m] within ``tolerance_m`` [m]."""
-
-    tip_position_m: tuple
-    tolerance_m: float = 1e-3
+def _task_space_goal(tip_position_m, tolerance_m: float = 1e-3) -> TaskGoal:
+    """``TaskGoal(tip_position_m, tolerance_m)``: what the deprecated name
+    ``ctrplan.planning.TaskSpaceGoal`` makes (its keywords were ``tip_position_m`` and
+    ``tolerance_m``) [m]."""
+    return TaskGoal(tip_position_m, tolerance_m)
 
 
 @dataclass
@@ -118,6 +112,40 @@ def _start_grid(robot, n_per_joint, rng):
     return np.clip(starts + jitter, robot.joint_lower, robot.joint_upper)
 
 
+def as_goal(goal) -> JointGoal | TaskGoal:
+    """A goal as a :class:`JointGoal` or a :class:`TaskGoal`.
+
+    Parameters
+    ----------
+    goal : JointGoal, TaskGoal, mapping, object, or array-like of shape (n_joints,)
+        Mappings as a scenario file's goal tables: ``{"q": [...]}`` [rad or m], or
+        ``{"tip_position_m": [x, y, z], "tolerance_m": t}`` [m] (tolerance default 1 mm);
+        another object with ``tip_position`` and ``tolerance``, or with ``q``, as those fields.
+
+    Returns
+    -------
+    JointGoal or TaskGoal
+
+    Raises
+    ------
+    ValueError
+        A mapping with neither ``q`` nor ``tip_position_m``, or values the goal types refuse.
+    """
+    if isinstance(goal, (JointGoal, TaskGoal)):
+        return goal
+    if isinstance(goal, Mapping):
+        if "tip_position_m" in goal:
+            return TaskGoal(goal["tip_position_m"], goal.get("tolerance_m", 1e-3))
+        if "q" in goal:
+            return JointGoal(goal["q"])
+        raise ValueError(f"a goal mapping needs 'q' [rad or m] or 'tip_position_m' [m], got keys {sorted(goal)}")
+    if hasattr(goal, "tip_position") and hasattr(goal, "tolerance"):
+        return TaskGoal(goal.tip_position, goal.tolerance)
+    if hasattr(goal, "q"):
+        return JointGoal(goal.q)
+    return JointGoal(goal)
+
+
 def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None, settings=None, *,
                  starts_per_joint: int = DEFAULT_IK_STARTS_PER_JOINT, seed: int = 0,
                  max_nfev: int = 60, max_starts: int = DEFAULT_IK_MAX_STARTS) -> GoalSolution:
@@ -125,10 +153,9 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
 
     Parameters
     ----------
-    goal : JointGoal, TaskSpaceGoal, array-like of shape (n_joints,), dict, or scenario goal
-        Dicts: ``{"q": [...]}`` or ``{"tip_position_m": [...], "tolerance_m": ...}``; objects
-        with ``tip_position`` [m] and ``tolerance`` [m] (``ctrplan.io.scenario.TaskGoal``) or
-        with ``q`` (``ctrplan.io.scenario.JointGoal``) are accepted too.
+    goal : JointGoal, TaskGoal, array-like of shape (n_joints,), dict or object
+        As :func:`as_goal`: a joint vector [rad or m] is a :class:`JointGoal`; dicts as in a
+        scenario file: ``{"q": [...]}`` or ``{"tip_position_m": [...], "tolerance_m": ...}`` [m].
     robot : Robot
     validity_fn : callable, optional
         ``validity_fn(q) -> bool``; invalid IK solutions are discarded.
@@ -163,14 +190,7 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
     ValueError
         Malformed goal.
     """
-    if isinstance(goal, dict):
-        goal = TaskSpaceGoal(**goal) if "tip_position_m" in goal else JointGoal(**goal)
-    elif hasattr(goal, "tip_position") and hasattr(goal, "tolerance"):  # ctrplan.io.scenario.TaskGoal
-        goal = TaskSpaceGoal(tuple(np.asarray(goal.tip_position, dtype=float)), float(goal.tolerance))
-    elif not isinstance(goal, JointGoal) and hasattr(goal, "q"):  # ctrplan.io.scenario.JointGoal
-        goal = JointGoal(tuple(np.asarray(goal.q, dtype=float)))
-    if not isinstance(goal, (JointGoal, TaskSpaceGoal)):
-        goal = JointGoal(tuple(np.asarray(goal, dtype=float).reshape(-1)))
+    goal = as_goal(goal)
     if isinstance(goal, JointGoal):
         q = np.asarray(goal.q, dtype=float).reshape(-1)
         if q.shape != (len(robot.joints),):
@@ -180,12 +200,7 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
         b = float(field(q)) if field is not None else float("nan")
         return GoalSolution(q, 0.0, b, q[None, :], np.zeros(1), np.array([b]))
 
-    target = np.asarray(goal.tip_position_m, dtype=float).reshape(-1)
-    if target.shape != (3,) or not np.all(np.isfinite(target)):
-        raise ValueError(f"tip_position_m must be 3 finite numbers [m], got {goal.tip_position_m!r}")
-    tol = float(goal.tolerance_m)
-    if not np.isfinite(tol) or tol <= 0.0:
-        raise ValueError(f"tolerance_m must be > 0 m, got {goal.tolerance_m!r}")
+    target, tol = np.asarray(goal.tip_position, dtype=float), float(goal.tolerance)
     if solve_standard is None:
         from ..mechanics import solve_standard  # noqa: PLC0415
     periodic = np.array([j.periodic for j in robot.joints])

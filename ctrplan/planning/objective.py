@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 from ompl import base as ob
 
-from ..boundmap._interp import corner_sum, locate
+from ..boundmap.interp import corner_sum, locate
 
 
 __all__ = ["BoundCostObjective", "motion_cost_kernel", "DEFAULT_BOUND_WEIGHT", "DEFAULT_SAMPLE_SPACING"]
@@ -53,7 +53,7 @@ def _segment_cost(q0, q1, periodic, weights, is_rotation, spacing, weight, penal
     the straight motion (short way round periodic joints), then L + w * trapezoid integral of the
     map's bound at m + 1 equally spaced samples, m = ceil(L / spacing); invalid or non-finite
     values count as ``penalty``. The interpolation is that of the map
-    (:mod:`ctrplan.boundmap._interp`), with the work arrays allocated once per motion. Returns
+    (:mod:`ctrplan.boundmap.interp`), with the work arrays allocated once per motion. Returns
     (cost, number of bound samples)."""
     n = q0.shape[0]
     dq = np.empty(n)

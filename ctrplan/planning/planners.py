@@ -24,7 +24,7 @@ from ..planner_info import PLANNER_REGISTRY, check_planner_options
 from .space import JointStateSpace
 from .validity import DEFAULT_VALIDITY_RESOLUTION, use_motion_validator
 
-__all__ = ["PLANNERS", "PlanResult", "ValidityChecker", "plan", "DEFAULT_ITERATIONS",
+__all__ = ["PLANNERS", "SearchResult", "ValidityChecker", "plan", "DEFAULT_ITERATIONS",
            "DEFAULT_VALIDITY_RESOLUTION"]
 
 
@@ -137,8 +137,9 @@ class ValidityChecker:
 
 
 @dataclass
-class PlanResult:
-    """Outcome of :func:`plan`.
+class SearchResult:
+    """Outcome of one planner search (:func:`plan`): one leg's path and the planner's counters.
+    The user-facing result of planning a scenario is :class:`ctrplan.PlanResult`.
 
     Attributes
     ----------
@@ -204,7 +205,7 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
          joint_space: JointStateSpace | None = None, validity_resolution: float = DEFAULT_VALIDITY_RESOLUTION,
          range_: float | None = None, goal_bias: float | None = None, rewire_factor: float | None = None,
          options: Mapping | None = None, shortcut_rounds: int = DEFAULT_SHORTCUT_ROUNDS,
-         quiet: bool = True) -> PlanResult:
+         quiet: bool = True) -> SearchResult:
     """Plan a valid, low-cost joint-space path from ``start_q`` to ``goal_q``.
 
     Parameters
@@ -257,7 +258,7 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
 
     Returns
     -------
-    PlanResult
+    SearchResult
 
     Raises
     ------
@@ -361,7 +362,7 @@ def _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, t
     w += np.where(js.periodic, start_q - w[0], 0.0)[None, :]
     w[0] = start_q
     w[-1] = np.where(js.periodic, w[-1], goal_q)
-    return PlanResult(waypoints=w, cost=cost, cost_before_simplification=cost0, solved=True,
+    return SearchResult(waypoints=w, cost=cost, cost_before_simplification=cost0, solved=True,
                       approximate=bool(pdef.hasApproximateSolution()), planner=planner,
                       iterations=int(pl.numIterations()), n_vertices=n_vertices, solve_time=solve_time,
                       simplify_time=simplify_time, seed=int(seed), status=str(status),

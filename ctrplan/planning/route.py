@@ -29,7 +29,7 @@ import numpy as np
 from ..planner_info import PLANNER_REGISTRY
 from .collision import CollisionChecker
 from .ordering import OrderedPath, order_path
-from .planners import DEFAULT_ITERATIONS, PlanResult, plan
+from .planners import DEFAULT_ITERATIONS, SearchResult, plan
 from .validity import BatchValidityChecker
 from .verify import DEFAULT_MAX_BODY_STEP, DEFAULT_VERIFY_RESOLUTION, MotionVerifier
 
@@ -157,11 +157,11 @@ class Route:
 
     Attributes
     ----------
-    legs : list of PlanResult
+    legs : list of SearchResult
         One per goal, as planned (before ordering).
     ordered : OrderedPath
         The whole route in rotation and translation phases, every phase checked.
-    repairs : list of PlanResult
+    repairs : list of SearchResult
         The re-planned segments.
     """
 
@@ -201,7 +201,7 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
     roadmap : tuple, optional, keyword-only
         ``(Roadmap, terms, bound_weight)``: each leg is the cheapest path through the roadmap
         (:meth:`~ctrplan.planning.roadmap.Roadmap.query` with ``terms`` and the weight [1/m]; its
-        :class:`PlanResult` has ``planner == "roadmap"``); a leg the roadmap does not join is
+        :class:`SearchResult` has ``planner == "roadmap"``); a leg the roadmap does not join is
         planned by ``planner``.
 
     Returns
@@ -217,7 +217,7 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
     if rewire_factor is None and "rewire_factor" in PLANNER_REGISTRY[planner].parameters:
         rewire_factor = DEFAULT_REWIRE_FACTOR
     js = joint_space if joint_space is not None else checks.search.joint_space
-    legs: list[PlanResult] = []
+    legs: list[SearchResult] = []
     q_prev = np.asarray(start_q, dtype=float)
     waypoints = [q_prev]
     for gi, q_goal in enumerate(goals_q):
@@ -233,7 +233,7 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
         offset = waypoints[-1] - wp[0]   # continue from where the previous leg ended (unwrapped angles)
         waypoints.extend(list(wp[1:] + offset))
         q_prev = waypoints[-1]
-    repairs: list[PlanResult] = []
+    repairs: list[SearchResult] = []
 
     def repair(a, b):
         res = plan(robot, a, b, checks.repair_search, objective, planner=planner, iterations=repair_iterations,
@@ -248,8 +248,8 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
 
 
 
-def _roadmap_leg(roadmap, q0, q1, checker, joint_space, seed: int) -> PlanResult | None:
-    """A leg through the roadmap as a :class:`PlanResult`, or None when the roadmap does not join
+def _roadmap_leg(roadmap, q0, q1, checker, joint_space, seed: int) -> SearchResult | None:
+    """A leg through the roadmap as a :class:`SearchResult`, or None when the roadmap does not join
     its ends (the caller then plans it by search)."""
     from ..errors import UnreachableGoalError
 
@@ -264,7 +264,7 @@ def _roadmap_leg(roadmap, q0, q1, checker, joint_space, seed: int) -> PlanResult
     # continuous angles from the leg's start, as the planners return them
     wp = np.asarray(q0, dtype=float) + np.cumsum(
         np.vstack([np.zeros(wp.shape[1]), joint_space.difference(wp[:-1], wp[1:])]), axis=0)
-    return PlanResult(waypoints=wp, cost=path.cost, cost_before_simplification=path.cost_before_shortcut, solved=True,
+    return SearchResult(waypoints=wp, cost=path.cost, cost_before_simplification=path.cost_before_shortcut, solved=True,
                       approximate=False, planner="roadmap", iterations=0, n_vertices=rm.n_nodes,
                       solve_time=path.seconds, simplify_time=0.0, seed=seed, status="Exact solution",
                       extra={"roadmap_states_on_path": path.roadmap_states, "motions_checked": path.motions_checked})
