@@ -137,7 +137,8 @@ def run_one(index: int, robot_text: str, scenario: Path, limit: float, jobs: int
             ["plan", str(sc), "--out", str(tmp / "out"), "--no-full-map", "--jobs", str(jobs)]
         t0 = time.perf_counter()
         try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp, timeout=limit)
+            proc = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp, timeout=limit,
+                                  env=dict(os.environ, CTRPLAN_CACHE_DIR=str(tmp / ".cache")))   # empty cache
             wall = time.perf_counter() - t0
         except subprocess.TimeoutExpired:
             return {"status": "failed", "wall_s": limit, "reason": f"no plan within {limit:.0f} s"}

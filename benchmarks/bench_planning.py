@@ -53,7 +53,8 @@ def run_scenario(path: Path, out: Path, blind: bool) -> tuple[float, dict, list]
     cmd = ([str(entry)] if entry.exists() else [sys.executable, "-c", "from ctrplan.cli import run; run()"]) + \
         ["plan", str(path), "--out", str(out)] + ([] if blind else ["--no-blind"])
     t = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO)
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO,
+                          env=dict(os.environ, CTRPLAN_CACHE_DIR=str(REPO / ".cache")))
     wall = time.perf_counter() - t
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stderr[-2000:]}")

@@ -162,6 +162,7 @@ def main(argv=None) -> int:
     robot_file = _new_robot(args.out, args.scale)
     scenario = _scenario(args.out, robot_file)
     os.chdir(args.out)                  # the map cache (.cache/boundmaps) starts empty here
+    os.environ["CTRPLAN_CACHE_DIR"] = str(Path(args.out).resolve() / ".cache")
     load0 = os.getloadavg()
     print(f"robot {robot_file.name}, scenario {scenario.name}, {args.jobs} workers; load average {load0}")
     from bench_speed import _commit, _cpu

@@ -13,6 +13,11 @@ SHA-256 over canonical JSON (:func:`content_key`: sorted keys, values that are n
 Users of the rule: :func:`ctrplan.batch.job_key` (checkpoints of ``ctrplan evaluate``),
 :func:`ctrplan.studies.input_key` (a study's finished scenarios),
 :func:`ctrplan.boundmap.field_key` (bound maps).
+
+What is stored to be reused across runs (bound maps computed for a robot file, roadmaps) goes to
+one folder, :func:`cache_dir`: the environment variable ``CTRPLAN_CACHE_DIR`` when set, else the
+user's cache folder (``platformdirs.user_cache_path("ctrplan")``, e.g. ``~/.cache/ctrplan`` on
+Linux), not a folder that follows the working directory unless the variable asks for one.
 """
 
 from __future__ import annotations
@@ -23,7 +28,37 @@ import os
 from pathlib import Path
 from typing import Any, Mapping
 
-__all__ = ["content_key", "file_hash", "mechanics_version"]
+__all__ = ["content_key", "file_hash", "mechanics_version", "cache_dir", "CACHE_ENV"]
+
+#: The environment variable that names the cache folder (:func:`cache_dir`).
+CACHE_ENV = "CTRPLAN_CACHE_DIR"
+
+
+def cache_dir(kind: str | None = None) -> Path:
+    """The folder where ctrplan keeps what it reuses across runs, read at call time.
+
+    Parameters
+    ----------
+    kind : str, optional
+        A subfolder: ``"boundmaps"``, ``"roadmaps"``.
+
+    Returns
+    -------
+    pathlib.Path
+        ``$CTRPLAN_CACHE_DIR`` when the variable is set and not empty (a relative value is
+        relative to the working directory at the time of the call: ``CTRPLAN_CACHE_DIR=.cache``
+        keeps a cache per working folder, as the test suite does), else the user's cache folder
+        for ctrplan (``platformdirs.user_cache_path("ctrplan")``); joined with ``kind``. Not
+        created here: writers create it.
+    """
+    given = os.environ.get(CACHE_ENV, "").strip()
+    if given:
+        root = Path(given).expanduser().absolute()
+    else:
+        import platformdirs
+
+        root = platformdirs.user_cache_path("ctrplan")
+    return root / kind if kind else root
 
 
 def mechanics_version() -> str:

@@ -245,9 +245,9 @@ def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_ou
               help="The map: a chunked zarr store DIR.zarr or FILE.npz (exported when its store is complete). "
                    "Default: boundmaps/<robot>-<key>.<format> next to the robot file.")
 @click.option("--format", "fmt", type=click.Choice(["zarr", "npz"]), default="zarr", show_default=True,
-              help="Suffix of the default --out; an .npz map is computed through a store in .cache/boundmaps/.")
+              help="Suffix of the default --out; an .npz map is computed through a store in boundmaps/ of the cache folder ($CTRPLAN_CACHE_DIR, else the user cache folder).")
 @click.option("--store", "--cache-dir", "store_path", type=click.Path(file_okay=False), default=None,
-              help="Chunk store of an .npz output (default: .cache/boundmaps/<robot>-<key>.zarr).")
+              help="Chunk store of an .npz output (default: boundmaps/<robot>-<key>.zarr in the cache folder).")
 @click.option("--jobs", type=int, default=None,
               help="Local worker processes (default: all cores; 1 computes in this process).")
 @click.option("--scheduler", default=None,

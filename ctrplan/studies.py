@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from ._log import deprecated_echo, details
 from .cache import content_key, file_hash, mechanics_version
+from .errors import CtrplanError
 
 if TYPE_CHECKING:
     from .pipeline import PlanComparison, PlanRecord
@@ -71,16 +72,26 @@ def scenario_files(paths: Sequence[str | os.PathLike]) -> list[Path]:
 
 
 def input_key(scenario: Path, iterations: int | None, compare_blind: bool) -> str:
-    """Key of a scenario's outputs (:mod:`ctrplan.cache`): the scenario and robot files' bytes,
-    the options and the mechanics version (a malformed scenario gives a key without its robot)."""
+    """Key of a scenario's outputs (:mod:`ctrplan.cache`): the bytes of the scenario file and of
+    every file it reads (the robot file, and the files its obstacles are read from:
+    :meth:`ctrplan.obstacles.Obstacle.input_files`), the options and the mechanics version.
+
+    A scenario that does not load (:class:`~ctrplan.errors.CtrplanError`, ``OSError``,
+    ``ValueError``: the planning run reports it as its row) is keyed by its own bytes and the
+    options; any other exception is raised.
+    """
     payload = {"scenario": file_hash(scenario), "iterations": iterations, "compare_blind": compare_blind,
                "mechanics": mechanics_version()}
-    try:
-        from .io.scenario import load_scenario
+    from .io.scenario import load_scenario
 
-        payload["robot"] = file_hash(load_scenario(scenario).robot_file)
-    except Exception:                                    # noqa: BLE001 - the planning run reports it
-        pass
+    try:
+        sc = load_scenario(scenario)
+    except (CtrplanError, OSError, ValueError):
+        return content_key(payload)
+    payload["robot"] = file_hash(sc.robot_file)
+    files = sorted({str(f) for o in sc.obstacles for f in o.input_files()})
+    if files:
+        payload["obstacle_files"] = {f: file_hash(f) for f in files}
     return content_key(payload)
 
 

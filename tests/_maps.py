@@ -29,8 +29,8 @@ def constant_field(robot, resolution=(4, 4, 3), key: str = "synthetic") -> Bound
 def cache_constant_field(robot_file: Path, resolution=(4, 4, 3), ds: float = 0.004,
                          placement: str = "uniform") -> Path:
     """Save the constant field as the cached map of ``robot_file`` for a scenario's ``[bound_field]``
-    (``resolution``, ``ds_m``, ``placement``), under ``.cache/`` of the working folder; returns its
-    path."""
+    (``resolution``, ``ds_m``, ``placement``), in the cache folder (``.cache/`` of the working
+    folder in the tests: tests/conftest.py); returns its path."""
     robot_file = Path(robot_file)
     robot = load_robot(robot_file)
     key = map_identity(robot, ModelSettings(ds=ds), MapSpec(tuple(resolution), placement), evaluate_bound,

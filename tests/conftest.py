@@ -13,6 +13,10 @@ _CHILD_VARIABLE = "CTRPLAN_TEST_IN_CHILD"
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# Stored maps and roadmaps go to .cache of the working folder (ctrplan.cache.cache_dir reads a
+# relative value at each call): a test that works in tmp_path starts with an empty cache, and
+# no test reads or writes the user's cache folder.
+os.environ["CTRPLAN_CACHE_DIR"] = ".cache"
 
 try:  # also applies when numpy was imported before this file
     from threadpoolctl import threadpool_limits

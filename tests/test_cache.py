@@ -63,3 +63,53 @@ def test_the_shipped_maps_are_found_under_their_scenarios_keys(scenario, tmp_pat
     ident = map_identity(setup.robot, setup.settings, setup.spec, evaluate_bound, Path(path).read_text())
     shipped, _ = map_paths(path, ident.key)
     assert shipped.with_suffix(".npz").exists(), f"{shipped.with_suffix('.npz')} (key {ident.key[:12]})"
+
+
+def test_the_cache_folder_is_the_variable_s_else_the_user_s(tmp_path, monkeypatch):
+    """The cache folder does not follow the working directory unless CTRPLAN_CACHE_DIR asks
+    for it (catches a default left at ./.cache, or a folder read once at import)."""
+    import platformdirs
+
+    from ctrplan.boundmap.files import cache_folder
+    from ctrplan.cache import CACHE_ENV, cache_dir
+
+    monkeypatch.delenv(CACHE_ENV, raising=False)
+    monkeypatch.chdir(tmp_path)
+    assert cache_dir() == platformdirs.user_cache_path("ctrplan")
+    assert cache_folder() == platformdirs.user_cache_path("ctrplan") / "boundmaps"
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "store"))
+    assert cache_dir("roadmaps") == tmp_path / "store" / "roadmaps"
+    monkeypatch.setenv(CACHE_ENV, ".cache")
+    (tmp_path / "a").mkdir()
+    monkeypatch.chdir(tmp_path / "a")
+    assert cache_dir() == tmp_path / "a" / ".cache"          # relative: read at each call
+
+
+def test_a_study_s_key_sees_the_obstacle_files_and_keeps_unexpected_errors(tmp_path, monkeypatch):
+    """A scenario's stored plan is keyed by its mesh file's bytes too (catches a study that
+    reuses a plan around a mesh edited since); a scenario that does not load is keyed by its
+    own bytes, and an error the loader does not document is raised, not swallowed."""
+    import ctrplan.io.scenario as scenario_module
+
+    meshes = REPO / "scenarios" / "meshes"
+    for f in meshes.iterdir():
+        (tmp_path / f.name).write_bytes(f.read_bytes())
+    text = (REPO / "scenarios" / "obstacles.toml").read_text()
+    text = text.replace('robot = "../model/', f'robot = "{(REPO / "model").as_posix()}/')
+    text = text.replace('file = "meshes/', 'file = "')
+    sc = tmp_path / "obstacles.toml"
+    sc.write_text(text)
+    first = input_key(sc, None, True)
+    (mesh,) = [tmp_path / f.name for f in meshes.iterdir() if f.suffix.lower() == ".stl"]
+    mesh.write_bytes(mesh.read_bytes() + b"\n")
+    assert input_key(sc, None, True) != first
+    broken = tmp_path / "broken.toml"
+    broken.write_text("name = 3\n")
+    assert len(input_key(broken, None, True)) == 64
+
+    def explode(path):
+        raise RuntimeError("a bug in the loader")
+
+    monkeypatch.setattr(scenario_module, "load_scenario", explode)
+    with pytest.raises(RuntimeError, match="a bug in the loader"):
+        input_key(sc, None, True)

@@ -4,7 +4,8 @@ one (``ctrplan boundmap``, and ``ctrplan plan`` when no map matches).
 A map of robot file ``model/<robot>.toml`` with key ``<key>`` is looked for as
 
 - ``model/boundmaps/<robot>-<key[:12]>.npz`` or ``.zarr`` (shipped with the repository), then
-- ``.cache/boundmaps/<robot>-<key[:12]>.zarr`` or ``.npz`` (computed earlier on this machine).
+- ``<cache>/boundmaps/<robot>-<key[:12]>.zarr`` or ``.npz`` (computed earlier on this machine;
+  :func:`cache_folder`, in :func:`ctrplan.cache.cache_dir`).
 
 The key (:func:`~ctrplan.boundmap.identity.field_key`) covers the robot file's text, the model
 settings, the grid spec, the evaluator and the mechanics version, so an edited robot file, other
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .._log import deprecated_echo, progress_level
+from ..cache import cache_dir
 from .axes import MapSpec
 from .compute import DEFAULT_CHUNK_SIZE, compute_bound_map_store
 from ..coordinates import map_coordinates
@@ -29,7 +31,7 @@ from .identity import BoundFieldKeyError, BoundMapMismatchError, map_identity
 from .store import STORE_SUFFIX, IncompleteBoundMapError, load_bound_map
 
 __all__ = ["DEFAULT_ROTATION_NODES", "DEFAULT_TRANSLATION_NODES", "default_spec", "map_paths", "map_file",
-           "compute_bound_map", "find_bound_map", "load_or_compute_bound_map", "CACHE_DIR"]
+           "compute_bound_map", "find_bound_map", "load_or_compute_bound_map", "cache_folder"]
 
 # Default grid nodes per periodic rotation and per translation coordinate (uniform): the
 # original default of ctrplan (median interpolation error 0.08 mm on the Table VII robot, but
@@ -39,9 +41,11 @@ DEFAULT_TRANSLATION_NODES = 6
 
 logger = logging.getLogger(__name__)
 
-# Maps computed by `ctrplan plan` for robots without a shipped map (relative to the working
-# directory).
-CACHE_DIR = Path(".cache") / "boundmaps"
+
+def cache_folder() -> Path:
+    """Where ``ctrplan plan`` keeps the maps it computed for robots without a shipped map:
+    ``boundmaps`` in :func:`ctrplan.cache.cache_dir` (read at call time)."""
+    return cache_dir("boundmaps")
 
 
 def default_spec(robot) -> MapSpec:
@@ -79,12 +83,12 @@ def map_paths(robot_path, key: str) -> tuple[Path, Path]:
     Returns
     -------
     shipped, cached : Path
-        ``<robot dir>/boundmaps/<robot>-<key12>`` and ``.cache/boundmaps/<robot>-<key12>``,
-        without suffix (``.npz`` or ``.zarr`` is added by the caller).
+        ``<robot dir>/boundmaps/<robot>-<key12>`` and ``<cache>/boundmaps/<robot>-<key12>``
+        (:func:`cache_folder`), without suffix (``.npz`` or ``.zarr`` is added by the caller).
     """
     robot_path = Path(robot_path)
     shipped = robot_path.parent / "boundmaps" / f"{robot_path.stem}-{key[:12]}"
-    cache = CACHE_DIR / f"{robot_path.stem}-{key[:12]}"
+    cache = cache_folder() / f"{robot_path.stem}-{key[:12]}"
     return shipped, cache
 
 
@@ -196,7 +200,7 @@ def _stale_maps(robot_path, ident) -> list[str]:
     """Why other maps of the same robot file do not match this run (one line each)."""
     robot_path = Path(robot_path)
     lines = []
-    for folder in (robot_path.parent / "boundmaps", CACHE_DIR):
+    for folder in (robot_path.parent / "boundmaps", cache_folder()):
         for path in sorted(folder.glob(f"{robot_path.stem}-*")):
             if path.suffix not in (".npz", STORE_SUFFIX) or path.name.endswith(f"{ident.key[:12]}{path.suffix}"):
                 continue

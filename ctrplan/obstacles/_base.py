@@ -121,6 +121,19 @@ class Obstacle(BaseModel):
             Vertex indices of each triangle.
         """
 
+    def input_files(self) -> tuple[str, ...]:
+        """The files the obstacle is read from (none for a shape given by its keys).
+
+        Stored plans of a scenario are keyed by these files' bytes besides the scenario's and
+        the robot file's (:func:`ctrplan.studies.input_key`); a type that reads a file returns it.
+
+        Returns
+        -------
+        tuple of str
+            Paths, as the obstacle resolved them.
+        """
+        return ()
+
     def as_dict(self) -> dict:
         """Plain dict with the scenario file's keys, ``type`` included (JSON types: lists, str).
 

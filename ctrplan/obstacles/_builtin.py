@@ -227,6 +227,10 @@ class Mesh(Obstacle):
         d.setdefault("scale", 1.0)
         return cls.model_validate(d)
 
+    def input_files(self) -> tuple[str, ...]:
+        """``(file,)``: the mesh file (:meth:`Obstacle.input_files`)."""
+        return (str(self.file),)
+
     @cached_property
     def _placed(self) -> tuple[np.ndarray, np.ndarray]:
         import trimesh

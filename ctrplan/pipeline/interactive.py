@@ -103,8 +103,8 @@ class Planner:
     seed : int, optional, keyword-only
         Sampling seed (default the scenario's planner seed).
     cache_dir : path, optional, keyword-only
-        Where roadmaps are stored and looked up (default
-        :data:`~ctrplan.planning.roadmap.ROADMAP_CACHE_DIR`); unused with ``store=False``.
+        Where roadmaps are stored and looked up (default ``roadmaps`` in
+        :func:`ctrplan.cache.cache_dir`); unused with ``store=False``.
     store : bool, keyword-only
         Read and write the roadmap in ``cache_dir``.
     n_jobs : int, keyword-only

@@ -40,7 +40,7 @@ def load_roadmap(setup, field, checker, joint_space, *, n_nodes: int | None = No
     seed : int, optional, keyword-only
         Default the scenario's planner seed.
     cache_dir : path, optional, keyword-only
-        Default :data:`~ctrplan.planning.roadmap.ROADMAP_CACHE_DIR`.
+        Default ``roadmaps`` in :func:`ctrplan.cache.cache_dir`.
     store : bool, keyword-only
         Read and write the cache.
     n_jobs : int, keyword-only
@@ -52,8 +52,8 @@ def load_roadmap(setup, field, checker, joint_space, *, n_nodes: int | None = No
         The roadmap, ``"cache"`` or ``"built"``, and its file.
     """
     from ..boundmap.identity import settings_dict
-    from ..cache import file_hash, mechanics_version
-    from ..planning.roadmap import (DEFAULT_NODES_PER_JOINT, ROADMAP_CACHE_DIR, Roadmap, build_roadmap,
+    from ..cache import cache_dir as cache_dir_default, file_hash, mechanics_version
+    from ..planning.roadmap import (DEFAULT_NODES_PER_JOINT, Roadmap, build_roadmap,
                                     obstacles_digest, prm_star_neighbours, roadmap_key)
 
     sc = setup.scenario
@@ -64,7 +64,7 @@ def load_roadmap(setup, field, checker, joint_space, *, n_nodes: int | None = No
     key = roadmap_key(file_hash(sc.robot_file) if sc.robot_file else "", field.key, obstacles_digest(setup.obstacles),
                       {"settings": settings_dict(checker.settings), "resolution": checker.resolution},
                       {"n_nodes": n, "neighbours": k, "seed": seed}, mechanics_version())
-    folder = Path(cache_dir) if cache_dir is not None else ROADMAP_CACHE_DIR
+    folder = Path(cache_dir) if cache_dir is not None else cache_dir_default("roadmaps")
     path = folder / f"{Path(sc.robot_file).stem if sc.robot_file else 'robot'}-{key[:12]}.npz" if store else None
     if path is not None and path.exists():
         try:

@@ -51,7 +51,7 @@ from .objective import DEFAULT_SAMPLE_SPACING, _segment_cost, motion_cost_kernel
 from .space import wrap_angle
 
 __all__ = ["Roadmap", "RoadmapPath", "build_roadmap", "roadmap_key", "obstacles_digest", "motion_terms",
-           "prm_star_neighbours", "ROADMAP_FORMAT", "DEFAULT_NODES_PER_JOINT", "ROADMAP_CACHE_DIR"]
+           "prm_star_neighbours", "ROADMAP_FORMAT", "DEFAULT_NODES_PER_JOINT"]
 
 #: Version of the stored roadmap layout (part of its key).
 ROADMAP_FORMAT = 2
@@ -59,8 +59,6 @@ ROADMAP_FORMAT = 2
 #: Default roadmap size: this many valid states per joint.
 DEFAULT_NODES_PER_JOINT = 500
 
-#: Folder of stored roadmaps (beside the bound maps' ``.cache/boundmaps``).
-ROADMAP_CACHE_DIR = Path(".cache") / "roadmaps"
 
 # States drawn per validity batch while sampling, and the most draws per requested state.
 _SAMPLE_BATCH = 512
