@@ -36,7 +36,9 @@ import csv
 import io
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
@@ -45,7 +47,8 @@ from .io.atomic import atomic_write_text
 from .trajectory import START, Trajectory
 
 __all__ = ["PATH_FILE", "TRAJECTORY_FILE", "SUMMARY_FILE", "BOUND_KINDS", "path_columns",
-           "write_plan_outputs", "write_trajectory_csv", "format_summary", "jsonable"]
+           "write_plan_outputs", "write_trajectory_csv", "format_summary", "jsonable", "PlanFolder",
+           "read_plan_folder"]
 
 #: File name of the ordered waypoints.
 PATH_FILE = "path.csv"
@@ -75,6 +78,118 @@ _SUMMARY_UNITS = (
     ("_m", "mm", 1e3),
     ("_s", "s", 1.0),
 )
+
+
+@dataclass(frozen=True, eq=False)
+class PlanFolder:
+    """A plan's output folder read back (:func:`read_plan_folder`), in SI units.
+
+    Attributes
+    ----------
+    folder : pathlib.Path
+    joint_names : tuple of str
+        From ``path.csv``'s columns, in robot joint order.
+    q : ndarray, shape (K, n_joints)
+        Ordered waypoints [rad or m].
+    motion : tuple of str, length K
+        ``"start"``, ``"rotation"`` or ``"translation"``: the motion that reaches each waypoint.
+    tip_position : ndarray, shape (K, 3)
+        Standard-model tip at each waypoint [m].
+    bound_position_m : ndarray, shape (K,)
+        Exact bound given the last motion [m] (NaN where empty).
+    bound_kind : tuple of str, length K
+        ``"friction"`` or ``"translation_last"``.
+    goal_waypoints : tuple of int
+        Waypoint index of each goal (``summary.json``'s ``goal_prediction``).
+    final_motion : str
+        How the motion reaching each goal ends (``summary.json``), ``""`` if not recorded.
+    scenario_file : str or None
+        The scenario the plan was made from (``summary.json``), None if not recorded.
+    trajectory : dict of str to ndarray, or None
+        ``t`` (T,) [s], ``position``, ``velocity``, ``acceleration`` (T, n_joints) [rad or m per
+        s^k] from ``trajectory.csv``; None without that file.
+    summary : mapping
+        ``summary.json`` as written (report units in its keys' suffixes), read-only.
+    """
+
+    folder: Path
+    joint_names: tuple
+    q: np.ndarray
+    motion: tuple
+    tip_position: np.ndarray
+    bound_position_m: np.ndarray
+    bound_kind: tuple
+    goal_waypoints: tuple
+    final_motion: str
+    scenario_file: str | None
+    trajectory: Mapping[str, np.ndarray] | None
+    summary: Mapping[str, Any]
+
+
+def read_plan_folder(out_dir) -> PlanFolder:
+    """Read a plan's output folder (``path.csv``, ``trajectory.csv`` if written, ``summary.json``)
+    back into a :class:`PlanFolder`: the one reader of the files :func:`write_plan_outputs`
+    writes.
+
+    Parameters
+    ----------
+    out_dir : str or path-like
+        A folder written by :func:`ctrplan.plan` (``out_dir``) or ``ctrplan plan``.
+
+    Returns
+    -------
+    PlanFolder
+
+    Raises
+    ------
+    FileNotFoundError
+        No ``summary.json`` (the run did not finish: it is written last) or no ``path.csv``.
+    ValueError
+        A file that is not what :func:`write_plan_outputs` writes (naming the file and what is
+        missing).
+    """
+    out = Path(out_dir)
+    summary_path, path_path = out / SUMMARY_FILE, out / PATH_FILE
+    if not summary_path.is_file():
+        raise FileNotFoundError(f"{summary_path}: no summary (a plan's folder has it once its run finished)")
+    try:
+        summary = json.loads(summary_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{summary_path}: not JSON ({exc})") from None
+    with open(path_path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        header = list(reader.fieldnames or [])
+        rows = list(reader)
+    if header[:2] != ["waypoint", "motion"] or "tip_x" not in header:
+        raise ValueError(f"{path_path}: not a plan's path.csv (columns {header[:4]}...)")
+    names = tuple(header[2:header.index("tip_x")])
+
+    def column(key, convert=float):
+        return [convert(r[key]) if r[key] != "" else math.nan for r in rows]
+
+    traj = None
+    if (out / TRAJECTORY_FILE).is_file():
+        table = np.genfromtxt(out / TRAJECTORY_FILE, delimiter=",", names=True)
+        try:
+            traj = MappingProxyType({
+                "t": np.atleast_1d(table["t"]),
+                "position": np.column_stack([np.atleast_1d(table[n]) for n in names]),
+                "velocity": np.column_stack([np.atleast_1d(table[f"{n}_vel"]) for n in names]),
+                "acceleration": np.column_stack([np.atleast_1d(table[f"{n}_acc"]) for n in names])})
+        except ValueError as exc:
+            raise ValueError(f"{out / TRAJECTORY_FILE}: a column is missing ({exc})") from None
+    goals = summary.get("goal_prediction") or {}
+    try:
+        goal_waypoints = tuple(int(goals[f"goal_{k + 1}"]["waypoint"]) for k in range(len(goals)))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{summary_path}: goal_prediction without a waypoint per goal ({exc})") from None
+    q = np.array([column(n) for n in names], dtype=float).T.reshape(len(rows), len(names))
+    return PlanFolder(folder=out, joint_names=names, q=q, motion=tuple(r["motion"] for r in rows),
+                      tip_position=np.array([column(c) for c in _TIP_COLUMNS], dtype=float).T.reshape(len(rows), 3),
+                      bound_position_m=np.array(column("bound_position_m"), dtype=float),
+                      bound_kind=tuple(r.get("bound_kind", "") for r in rows), goal_waypoints=goal_waypoints,
+                      final_motion=str(summary.get("final_motion", "")), scenario_file=summary.get("scenario_file"),
+                      trajectory=traj, summary=MappingProxyType(summary))
 
 
 def path_columns(joint_names: Sequence[str]) -> list[str]:

@@ -19,12 +19,9 @@ and the limit in mm and degrees.
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -88,30 +85,20 @@ def _plan(result_or_dir) -> _Plan:
     if not isinstance(result_or_dir, (str, os.PathLike)):
         raise TypeError(f"expected a PlanResult or an output folder, got {type(result_or_dir).__name__}")
     from .io.scenario import load_scenario
-    from .report import PATH_FILE, SUMMARY_FILE, TRAJECTORY_FILE
+    from .report import SUMMARY_FILE, read_plan_folder
 
-    out = Path(result_or_dir)
-    summary = json.loads((out / SUMMARY_FILE).read_text())
-    if "scenario_file" not in summary:
-        raise ValueError(f"{out / SUMMARY_FILE}: no 'scenario_file' (written by ctrplan plan since it names "
+    folder = read_plan_folder(result_or_dir)
+    if folder.scenario_file is None:
+        raise ValueError(f"{folder.folder / SUMMARY_FILE}: no 'scenario_file' (written by ctrplan plan since it names "
                          "the scenario); plan again or pass a PlanResult")
-    sc = load_scenario(summary["scenario_file"])
-    names = sc.robot.joint_names
-    with open(out / PATH_FILE, newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    traj = None
-    if (out / TRAJECTORY_FILE).exists():
-        table = np.genfromtxt(out / TRAJECTORY_FILE, delimiter=",", names=True)
-        traj = {"t": np.atleast_1d(table["t"]),
-                "position": np.column_stack([np.atleast_1d(table[n]) for n in names]),
-                "velocity": np.column_stack([np.atleast_1d(table[f"{n}_vel"]) for n in names]),
-                "acceleration": np.column_stack([np.atleast_1d(table[f"{n}_acc"]) for n in names])}
-    goals = summary.get("goal_prediction", {})
-    return _Plan(label=str(out), scenario=sc, robot=sc.robot, settings=_settings(sc),
-                 q=np.array([[float(r[n]) for n in names] for r in rows]), motion=[r["motion"] for r in rows],
-                 bound_position_m=np.array([float(r["bound_position_m"] or "nan") for r in rows]),
-                 goal_waypoints=tuple(int(goals[f"goal_{k + 1}"]["waypoint"]) for k in range(len(goals))),
-                 final_motion=summary.get("final_motion", ""), traj=traj)
+    sc = load_scenario(folder.scenario_file)
+    if folder.joint_names != tuple(sc.robot.joint_names):
+        raise ValueError(f"{folder.folder}: path.csv's joints {folder.joint_names} are not the robot's "
+                         f"{tuple(sc.robot.joint_names)} ({folder.scenario_file})")
+    return _Plan(label=str(folder.folder), scenario=sc, robot=sc.robot, settings=_settings(sc), q=folder.q,
+                 motion=list(folder.motion), bound_position_m=folder.bound_position_m,
+                 goal_waypoints=folder.goal_waypoints, final_motion=folder.final_motion,
+                 traj=None if folder.trajectory is None else dict(folder.trajectory))
 
 
 def _unit(kind: str) -> tuple[str, float]:

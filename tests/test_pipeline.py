@@ -367,6 +367,29 @@ def test_short_plan_outputs_are_ordered_at_rest_and_complete(tmp_path, monkeypat
     planned = [float(r["planned_bound_m"]) for r in rows]
     np.testing.assert_allclose(planned, [5e-4 if r["motion"] == "translation" else 1e-3 for r in rows], rtol=1e-12)
     np.testing.assert_array_equal(result.run.waypoints.planned_bound_m, planned)
+    # the folder read back (the one reader of these files) is the result
+    from ctrplan.report import read_plan_folder
+
+    folder = read_plan_folder(out)
+    assert folder.joint_names == tuple(result.joint_names) and folder.motion == tuple(result.motion)
+    np.testing.assert_array_equal(folder.q, result.q)
+    np.testing.assert_array_equal(folder.bound_position_m, result.bound_position_m)
+    assert folder.goal_waypoints == tuple(result.goal_waypoints) and folder.scenario_file == str(sc.resolve())
+    np.testing.assert_allclose(folder.trajectory["position"], result.trajectory.position, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(folder.trajectory["t"], result.trajectory.t, rtol=0, atol=1e-15)
+
+
+def test_reading_a_plan_folder_names_what_is_wrong(tmp_path):
+    """An unfinished run (no summary.json) and a path.csv of another kind are refused naming the
+    file (catches a reader that returns empty arrays for a folder it cannot read)."""
+    from ctrplan.report import read_plan_folder
+
+    with pytest.raises(FileNotFoundError, match="summary.json: no summary"):
+        read_plan_folder(tmp_path)
+    (tmp_path / "summary.json").write_text("{}")
+    (tmp_path / "path.csv").write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="path.csv: not a plan's path.csv"):
+        read_plan_folder(tmp_path)
 
 
 def test_plans_in_parallel_equal_plans_in_series(tmp_path, monkeypatch, field):
