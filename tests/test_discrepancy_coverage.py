@@ -21,7 +21,8 @@ from ctrplan.discrepancy import coverage
 from ctrplan.discrepancy.coverage import Coverage, calibrate_bound, conformal_factor, coverage_figures
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.io.robot_file import load_robot, load_robot_calibration, robot_to_toml
-from ctrplan.pipeline import aim_decision
+from ctrplan.pipeline import AimReason, aim_decision
+from ctrplan.pipeline.wording import aim_reason
 from reference.synth_reference import synthesize_reference
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -344,5 +345,6 @@ def test_measurements_of_another_effect_refuse_the_prediction_and_widen_the_boun
     assert not pc["history_beats_standard"], pc
     assert robot.metadata["prediction_validation"]["history_beats_standard"] is False
     decision = aim_decision(load_robot_calibration(res["updated_model_file"]).prediction)
-    assert not decision.use_history and "does not beat" in decision.reason
+    assert not decision.use_history and decision.why is AimReason.DOES_NOT_BEAT_STANDARD
+    assert "does not beat" in aim_reason(decision)
     assert res["bound"]["factor"] > 1.0

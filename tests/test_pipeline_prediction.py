@@ -167,7 +167,7 @@ def test_auto_aims_with_the_standard_model_when_the_prediction_is_not_validated(
     summary, rows = _run(tmp_path, monkeypatch, sc)
     g = summary["goal_prediction"]["goal_1"]
     assert summary["aiming"]["model"] == "standard model" and not summary["aiming"]["use_history"]
-    assert "[prediction_validation]" in summary["aiming"]["reason"]
+    assert "[prediction_validation]" in summary["aiming"]["reason"] and summary["aiming"]["why"] == "not_validated"
     assert g["aimed_with"] == "standard model" and "compensation_used" not in g
     assert g["measured_error_of_aiming_model_mean_mm"] is None and "not measured" in g["expected_real_miss_note"]
     np.testing.assert_allclose(summary["goals"][0]["q_planned"], summary["goals"][0]["q"], atol=0)
@@ -214,3 +214,34 @@ def test_the_effective_bound_weight_ranks_paths_as_the_calibrated_bound_does():
     np.testing.assert_allclose((1 + w * c * m) * L + w * c * I, (1 + w * c * m) * (L + w_eff * I), rtol=1e-12)
     assert pipeline.effective_bound_weight(cal, 0.0) == 0.0
     assert pipeline.effective_bound_weight(None, w) == w
+
+
+def test_the_aim_decision_is_an_enum_and_numbers_worded_by_the_report_layer():
+    """Each way of choosing the aiming model gives its AimReason and the measured errors of the
+    model chosen; the sentence comes from ctrplan.pipeline.wording with those numbers in mm
+    (catches a decision that carries only prose, or a sentence that names the wrong model's
+    figures)."""
+    from ctrplan.calibration import PredictionValidation
+    from ctrplan.pipeline import AimReason, aim_decision
+    from ctrplan.pipeline.wording import aim_reason
+
+    better = PredictionValidation(standard_mean_m=1.52e-3, standard_max_m=3.4e-3, history_mean_m=0.91e-3,
+                                  history_max_m=2.1e-3, history_beats_standard=True, difference_mean_m=-0.61e-3,
+                                  difference_low_m=-0.8e-3, difference_high_m=-0.42e-3, test_samples=200,
+                                  data_file="run.csv")
+    worse = better.model_copy(update={"history_beats_standard": False})
+    cases = [(None, "auto", AimReason.NOT_VALIDATED, False), (better, "auto", AimReason.BEATS_STANDARD, True),
+             (worse, "auto", AimReason.DOES_NOT_BEAT_STANDARD, False), (None, "history", AimReason.ASKED_HISTORY, True),
+             (better, "standard", AimReason.ASKED_STANDARD, False)]
+    for pv, aim_with, why, use in cases:
+        d = aim_decision(pv, aim_with)
+        assert (d.why, d.use_history) == (why, use), (aim_with, pv is None)
+        if pv is not None:
+            assert d.measured_mean_m == (pv.history_mean_m if use else pv.standard_mean_m)
+    text = aim_reason(aim_decision(better))
+    assert "mean 0.91 / max 2.10 mm against the standard model's 1.52 / 3.40 mm" in text
+    assert "95 % interval -0.80..-0.42 mm" in text and "run.csv, 200 test samples" in text
+    assert aim_reason(aim_decision(worse)).endswith("it does not beat the standard model")
+    assert aim_reason(aim_decision(None, "history")).endswith("not validated on measurements")
+    with pytest.raises(ValueError, match="aim_with must be"):
+        aim_decision(None, "maybe")

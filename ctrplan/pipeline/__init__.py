@@ -50,7 +50,7 @@ one goal, in a fraction of a second) -> :class:`GoalPlan`.
 from .bound_map import GIVEN, BoundMapStage, complete_bound_map, given_bound_map, load_bound_map
 from .drive import time_parameterize
 from .evaluation import GoalOutcome, PlanComparison, RouteMetrics, compare_plans, goal_outcomes, route_metrics
-from .goals import (AimDecision, AimedGoals, GoalCheckCounts, ResolvedGoals, aim_decision, aim_goals, check_start,
+from .goals import (AimDecision, AimReason, AimedGoals, GoalCheckCounts, ResolvedGoals, aim_decision, aim_goals, check_start,
                     resolve_goals)
 from .interactive import GoalPlan, Planner
 from .path_bounds import PATH_SAMPLE_SPACING, PathBounds, bounds_along_path
@@ -69,7 +69,7 @@ __all__ = [
     # stage 2
     "BoundMapStage", "load_bound_map", "complete_bound_map", "given_bound_map", "GIVEN",
     # stages 3 and 4
-    "check_start", "GoalCheckCounts", "ResolvedGoals", "resolve_goals", "AimDecision", "aim_decision", "AimedGoals",
+    "check_start", "GoalCheckCounts", "ResolvedGoals", "resolve_goals", "AimDecision", "AimReason", "aim_decision", "AimedGoals",
     "aim_goals",
     # stage 5
     "RoutePlan", "Plans", "plan_routes", "effective_bound_weight", "PathBounds", "bounds_along_path",

@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
+from enum import Enum
 from types import MappingProxyType
 from typing import Mapping
 
@@ -21,8 +22,9 @@ from ..planning.goals import compensate_goal
 from ..planning.history import approach_history, approach_rows
 from ..planning.route import route_checks
 from .setup import PlanSetup
+from .wording import aim_reason
 
-__all__ = ["ResolvedGoals", "AimDecision", "AimedGoals", "GoalCheckCounts", "check_start", "resolve_goals",
+__all__ = ["ResolvedGoals", "AimReason", "AimDecision", "AimedGoals", "GoalCheckCounts", "check_start", "resolve_goals",
            "aim_decision", "aim_goals"]
 
 logger = logging.getLogger(__package__)
@@ -46,6 +48,23 @@ class ResolvedGoals:
     time_s: float
 
 
+class AimReason(str, Enum):
+    """Why task-space goals are aimed with the model :class:`AimDecision` names (its value is
+    what ``summary.json`` records as ``aiming.why``; :func:`ctrplan.pipeline.wording.aim_reason`
+    words it)."""
+
+    #: ``[planner] aim_with = "history"``.
+    ASKED_HISTORY = "asked_history"
+    #: ``[planner] aim_with = "standard"``.
+    ASKED_STANDARD = "asked_standard"
+    #: ``"auto"`` and the robot file has no ``[prediction_validation]``.
+    NOT_VALIDATED = "not_validated"
+    #: ``"auto"`` and the history-aware prediction beat the standard model on measurements.
+    BEATS_STANDARD = "beats_standard"
+    #: ``"auto"`` and it did not.
+    DOES_NOT_BEAT_STANDARD = "does_not_beat_standard"
+
+
 @dataclass(frozen=True)
 class AimDecision:
     """Which model task-space goals are aimed with, and why (:func:`aim_decision`).
@@ -56,8 +75,8 @@ class AimDecision:
         ``"history-aware prediction"`` or ``"standard model"``.
     use_history : bool
         Whether task-space goals are compensated with the history-aware prediction.
-    reason : str
-        Why (the option, or the measured errors of the robot file's ``[prediction_validation]``).
+    why : AimReason
+        Why; the numbers behind it are in ``validation``.
     measured_mean_m, measured_max_m : float or None
         Mean and largest measured tip error of the model aimed with [m]; None when not measured.
     validation : PredictionValidation or None
@@ -66,7 +85,7 @@ class AimDecision:
 
     model: str
     use_history: bool
-    reason: str
+    why: AimReason
     measured_mean_m: float | None = None
     measured_max_m: float | None = None
     validation: PredictionValidation | None = None
@@ -232,28 +251,17 @@ def aim_decision(validation: PredictionValidation | None, aim_with: str = "auto"
     if aim_with not in ("auto", "history", "standard"):
         raise ValueError(f"aim_with must be 'auto', 'history' or 'standard', got {aim_with!r}")
     pv = validation
-    figures = ""
-    if pv is not None:
-        figures = (f"on measurements ({pv.data_file or 'unnamed data'}, {pv.test_samples} test samples) "
-                   f"the history-aware prediction's tip error is mean {pv.history_mean_m * 1e3:.2f} / max "
-                   f"{pv.history_max_m * 1e3:.2f} mm against the standard model's {pv.standard_mean_m * 1e3:.2f}"
-                   f" / {pv.standard_max_m * 1e3:.2f} mm")
-        if pv.difference_low_m is not None:
-            figures += (f" (mean difference {pv.difference_mean_m * 1e3:+.2f} mm, 95 % interval "
-                        f"{pv.difference_low_m * 1e3:+.2f}..{pv.difference_high_m * 1e3:+.2f} mm)")
     if aim_with == "history":
-        use, reason = True, "[planner] aim_with = \"history\"" + (f"; {figures}" if figures else
-                                                                   "; not validated on measurements")
+        use, why = True, AimReason.ASKED_HISTORY
     elif aim_with == "standard":
-        use, reason = False, "[planner] aim_with = \"standard\""
+        use, why = False, AimReason.ASKED_STANDARD
     elif pv is None:
-        use, reason = False, ("the robot file has no [prediction_validation]: the history-aware prediction is not "
-                              "validated on measurements (ctrplan discrepancy writes it)")
+        use, why = False, AimReason.NOT_VALIDATED
     else:
         use = bool(pv.history_beats_standard)
-        reason = figures + ("" if use else ": it does not beat the standard model")
+        why = AimReason.BEATS_STANDARD if use else AimReason.DOES_NOT_BEAT_STANDARD
     side = "history" if use else "standard"
-    return AimDecision(model="history-aware prediction" if use else "standard model", use_history=use, reason=reason,
+    return AimDecision(model="history-aware prediction" if use else "standard model", use_history=use, why=why,
                        measured_mean_m=None if pv is None else getattr(pv, f"{side}_mean_m"),
                        measured_max_m=None if pv is None else getattr(pv, f"{side}_max_m"), validation=pv)
 
@@ -293,7 +301,7 @@ def aim_goals(setup: PlanSetup, resolved: ResolvedGoals, validity, echo=None) ->
     errors = {}
     aim = aim_decision(sc.calibration.prediction, sc.planner.aim_with)
     if any(isinstance(doc, TaskGoal) for doc in sc.goals):
-        logger.log(progress_level(), f"aiming task-space goals with the {aim.model}: {aim.reason}")
+        logger.log(progress_level(), f"aiming task-space goals with the {aim.model}: {aim_reason(aim)}")
     for k, (doc, g) in enumerate(zip(sc.goals, resolved.goals)):
         c = None
         if isinstance(doc, TaskGoal) and aim.use_history:

@@ -22,6 +22,7 @@ from ..effects import REGISTRY, robot_effects
 from ..io.scenario import TaskGoal
 from .evaluation import PlanComparison, RouteMetrics
 from .goals import AimDecision, _eta_text
+from .wording import aim_reason
 from .routes import RoutePlan, effective_bound_weight
 
 __all__ = ["COMPARED", "plan_summary", "PlanRecord", "read_plan_record"]
@@ -75,7 +76,7 @@ def _route_summary(r: RoutePlan, m: RouteMetrics) -> dict:
 
 def _aiming(aim: AimDecision) -> dict:
     """``summary.json["aiming"]``: the model goals are aimed with, why, and its measured error."""
-    return {"model": aim.model, "use_history": aim.use_history, "reason": aim.reason,
+    return {"model": aim.model, "use_history": aim.use_history, "why": aim.why.value, "reason": aim_reason(aim),
             "measured_mean_mm": _mm(aim.measured_mean_m), "measured_max_mm": _mm(aim.measured_max_m)}
 
 
@@ -91,7 +92,7 @@ def _goal_prediction(run) -> dict:
                  "planned_eta": _eta_text(g.planned_eta), "planned_cases": ";".join(g.planned_cases),
                  "predicted_offset_at_goal_mm": g.predicted_offset_m * 1e3}
         if isinstance(doc, TaskGoal):
-            entry.update({"aimed_with": aim.model, "aim_reason": aim.reason,
+            entry.update({"aimed_with": aim.model, "aim_reason": aim_reason(aim),
                           "measured_error_of_aiming_model_mean_mm": _mm(aim.measured_mean_m),
                           "measured_error_of_aiming_model_max_mm": _mm(aim.measured_max_m),
                           "expected_real_miss_note": (
