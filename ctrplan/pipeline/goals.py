@@ -17,7 +17,7 @@ from .._log import deprecated_echo, progress_level
 from ..calibration import PredictionValidation
 from ..errors import CtrplanError, UnreachableGoalError
 from ..io.scenario import TaskGoal
-from ..planning import JointStateSpace, resolve_goal
+from ..planning import resolve_goal
 from ..planning.goals import compensate_goal
 from ..planning.history import approach_history, approach_rows
 from ..planning.route import route_checks
@@ -178,7 +178,7 @@ def check_start(setup: PlanSetup, field):
     """
     sc = setup.scenario
     validity = route_checks(setup.robot, list(setup.obstacles), field, setup.check_settings,
-                            joint_space=JointStateSpace(setup.robot)).search
+                            joint_space=setup.joint_space).search
     if not validity(sc.start):
         raise UnreachableGoalError(f"{sc.file}: start configuration {sc.joint_dict(sc.start)} is invalid "
                                    "(collision, elastic instability or outside the bound map's valid region)")

@@ -34,7 +34,6 @@ from .._log import progress_level
 from ..boundmap import (BoundField, ExactSamples, cell_nodes, evaluate_nodes, map_paths, refined_field, subdivided,
                         with_nodes)
 from ..io.atomic import atomic_savez
-from ..planning import JointStateSpace
 from .bound_map import GIVEN, BoundMapStage
 from .goals import AimedGoals
 from .path_bounds import bounds_along_path
@@ -313,7 +312,7 @@ def refine_plans(setup: PlanSetup, state: Refinement, aimed: AimedGoals, plans: 
     if plans.blind is not None:
         blind = plans.blind
         routes["bound_blind"] = replace(blind, bounds=bounds_along_path(
-            blind.ordered, setup.robot, read, setup.settings, JointStateSpace(setup.robot),
+            blind.ordered, setup.robot, read, setup.settings, setup.joint_space,
             exact=blind.bounds.exact))
     seconds = time.perf_counter() - t0
     refinement = MapRefinement(rounds=tuple(history), samples=state.samples, field=read,

@@ -254,7 +254,7 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
         from ..planning.route import route_checks
         from .roadmap import load_roadmap
 
-        js = JointStateSpace(setup.robot)
+        js = setup.joint_space
         checker = route_checks(setup.robot, list(setup.obstacles), field, setup.check_settings, joint_space=js).search
         roadmap, source, path = load_roadmap(setup, field, checker, js, n_jobs=n_jobs)
         info = {"states": roadmap.n_nodes, "motions": roadmap.n_edges, "source": source,

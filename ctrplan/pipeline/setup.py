@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import logging
 import os
 from dataclasses import dataclass
@@ -90,6 +92,22 @@ class PlanSetup:
     def robot(self) -> Robot:
         """The scenario's :class:`~ctrplan.robot.Robot`."""
         return self.scenario.robot
+
+    @functools.cached_property
+    def joint_space(self):
+        """The robot's :class:`~ctrplan.planning.JointStateSpace`, built once per plan and process
+        (its OMPL objects do not pickle: a copy of the setup in another process builds its own)."""
+        from ..planning import JointStateSpace
+
+        return JointStateSpace(self.robot)
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state.pop("joint_space", None)
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
 
     @property
     def calibration(self) -> RobotCalibration:
