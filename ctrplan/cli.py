@@ -225,9 +225,9 @@ def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_ou
         return
     from .studies import plan_many
 
-    table = plan_many(scenario_paths, out_dir or "out/scenarios", n_jobs=jobs or 1, scheduler=scheduler,
+    study = plan_many(scenario_paths, out_dir or "out/scenarios", n_jobs=jobs or 1, scheduler=scheduler,
                       iterations=iterations, compare_blind=not no_blind, progress=_progress())
-    if (table["status"] == "failed").any():
+    if study.n_failed:
         raise SystemExit(1)
 
 

@@ -24,8 +24,12 @@ records here; its cautions stay WARNING.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import time
+import warnings
+from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
@@ -36,17 +40,109 @@ from .errors import CtrplanError
 if TYPE_CHECKING:
     from .pipeline import PlanComparison, PlanRecord
 
-__all__ = ["scenario_files", "plan_many", "input_key", "TABLE_FILE", "PLOT_FILE", "COLUMNS"]
+__all__ = ["scenario_files", "plan_many", "input_key", "StudyStatus", "StudyRow", "StudyResult", "TABLE_FILE",
+           "PLOT_FILE", "COLUMNS"]
 
 #: File name of the table across scenarios, in the output folder.
 TABLE_FILE = "scenarios.csv"
 #: File name of its figure.
 PLOT_FILE = "scenarios.png"
-#: Columns of the table across scenarios (units in their suffixes).
+#: Columns of the table across scenarios, ``scenarios.csv`` (units in their suffixes: the report's
+#: mm for bounds).
 COLUMNS = ("scenario", "status", "reason", "time_s", "cost", "joint_path_length_m", "max_bound_mm", "final_bound_mm",
            "blind_max_bound_mm", "repairs", "failures", "output_dir")
 
 logger = logging.getLogger(__name__)
+
+
+class StudyStatus(StrEnum):
+    """What became of a scenario of a study."""
+
+    #: Planned in this run.
+    PLANNED = "planned"
+    #: A complete run of its folder for the same inputs was read back.
+    REUSED = "reused"
+    #: Its planning raised; ``StudyRow.error`` says what.
+    FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class StudyRow:
+    """One scenario of a study, in SI units (the bound-aware plan's figures; None where it failed).
+
+    Attributes
+    ----------
+    scenario : pathlib.Path
+    status : StudyStatus
+    error : str
+        The first line of the exception a failed scenario raised (``Type: message``); "" otherwise.
+    time_s : float or None
+        Its planning time, or the recorded one of a reused run [s].
+    cost : float or None
+        The planner's cost of the bound-aware path (path length + weight x integral of the bound).
+    joint_path_length_m, max_bound_m, final_bound_m : float or None
+        Joint-path length [m of the weighted metric]; largest and final exact bound at the
+        waypoints [m].
+    blind_max_bound_m : float or None
+        The bound-blind plan's largest exact bound [m] (None when not planned).
+    repairs, failures : int or None
+        The final check's repairs and failing phases.
+    output_dir : pathlib.Path
+    """
+
+    scenario: Path
+    status: StudyStatus
+    error: str
+    time_s: float | None
+    output_dir: Path
+    cost: float | None = None
+    joint_path_length_m: float | None = None
+    max_bound_m: float | None = None
+    final_bound_m: float | None = None
+    blind_max_bound_m: float | None = None
+    repairs: int | None = None
+    failures: int | None = None
+
+    def report_row(self) -> dict:
+        """The row of ``scenarios.csv`` (:data:`COLUMNS`; bounds in mm)."""
+        mm = (lambda x: None if x is None else x * 1e3)
+        return {"scenario": str(self.scenario), "status": self.status.value, "reason": self.error,
+                "time_s": self.time_s, "cost": self.cost, "joint_path_length_m": self.joint_path_length_m,
+                "max_bound_mm": mm(self.max_bound_m), "final_bound_mm": mm(self.final_bound_m),
+                "blind_max_bound_mm": mm(self.blind_max_bound_m), "repairs": self.repairs, "failures": self.failures,
+                "output_dir": str(self.output_dir)}
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """The scenarios of a study (:func:`plan_many`), in the order given.
+
+    Attributes
+    ----------
+    rows : tuple of StudyRow
+    table_file, plot_file : pathlib.Path
+        ``scenarios.csv`` (the rows in report units) and ``scenarios.png``.
+    """
+
+    rows: tuple
+    table_file: Path
+    plot_file: Path
+
+    @property
+    def n_failed(self) -> int:
+        """Scenarios whose planning failed."""
+        return sum(r.status is StudyStatus.FAILED for r in self.rows)
+
+    def to_frame(self):
+        """The rows as a pandas DataFrame, in SI units (the fields of :class:`StudyRow`)."""
+        import pandas as pd
+
+        return pd.DataFrame([{f: getattr(r, f) for f in StudyRow.__dataclass_fields__} for r in self.rows])
+
+    def __getitem__(self, column):
+        warnings.warn("indexing plan_many's result as the report table is deprecated: use .rows (SI), "
+                      ".to_frame() or the table file", DeprecationWarning, stacklevel=2)
+        return _report_table(self.rows)[column]
 
 
 def scenario_files(paths: Sequence[str | os.PathLike]) -> list[Path]:
@@ -95,21 +191,26 @@ def input_key(scenario: Path, iterations: int | None, compare_blind: bool) -> st
     return content_key(payload)
 
 
-def _row(scenario: Path, status: str, comparison: PlanComparison | None, seconds: float | None, out: Path,
-         reason: str = "") -> dict:
-    """A row of the table across scenarios (its report units: bounds in mm)."""
-    row = dict.fromkeys(COLUMNS)
-    row.update(scenario=str(scenario), status=status, reason=reason, time_s=seconds, output_dir=str(out))
-    if comparison is not None:
-        a, b = comparison.aware, comparison.blind
-        row.update(cost=a.cost, joint_path_length_m=a.joint_path_length_m, max_bound_mm=a.max_bound_at_waypoints_m * 1e3,
-                   final_bound_mm=a.final_bound_m * 1e3,
-                   blind_max_bound_mm=None if b is None else b.max_bound_at_waypoints_m * 1e3,
-                   repairs=a.repairs, failures=len(a.failures))
-    return row
+def _row(scenario: Path, status: StudyStatus, comparison: PlanComparison | None, seconds: float | None, out: Path,
+         error: str = "") -> StudyRow:
+    """A scenario's row from its plans' comparison (SI)."""
+    if comparison is None:
+        return StudyRow(scenario=Path(scenario), status=status, error=error, time_s=seconds, output_dir=Path(out))
+    a, b = comparison.aware, comparison.blind
+    return StudyRow(scenario=Path(scenario), status=status, error=error, time_s=seconds, output_dir=Path(out),
+                    cost=a.cost, joint_path_length_m=a.joint_path_length_m, max_bound_m=a.max_bound_at_waypoints_m,
+                    final_bound_m=a.final_bound_m, blind_max_bound_m=None if b is None else b.max_bound_at_waypoints_m,
+                    repairs=a.repairs, failures=len(a.failures))
 
 
-def _plan_one(scenario: Path, out: Path, key: str, iterations, compare_blind: bool, progress: bool = False) -> dict:
+def _report_table(rows):
+    """``scenarios.csv``'s table (:data:`COLUMNS`, report units)."""
+    import pandas as pd
+
+    return pd.DataFrame([r.report_row() for r in rows], columns=list(COLUMNS))
+
+
+def _plan_one(scenario: Path, out: Path, key: str, iterations, compare_blind: bool, progress: bool = False) -> StudyRow:
     """Plan one scenario (in this process or on a worker), its progress lines as DEBUG records; a
     failure becomes a row."""
     from .api import plan_scenario
@@ -122,15 +223,15 @@ def _plan_one(scenario: Path, out: Path, key: str, iterations, compare_blind: bo
                                    progress=progress)
     except Exception as exc:                             # noqa: BLE001 - reported, the others go on
         reason = (f"{type(exc).__name__}: {exc}".splitlines() or [type(exc).__name__])[0]
-        return _row(scenario, "failed", None, time.perf_counter() - t0, out, reason)
+        return _row(scenario, StudyStatus.FAILED, None, time.perf_counter() - t0, out, reason)
     (out / "inputs.sha256").write_text(key + "\n")
-    return _row(scenario, "planned", result.run.comparison, time.perf_counter() - t0, out)
+    return _row(scenario, StudyStatus.PLANNED, result.run.comparison, time.perf_counter() - t0, out)
 
 
-def _log_row(scenario, row: dict) -> None:
+def _log_row(scenario, row: StudyRow) -> None:
     """One line per planned scenario: INFO, WARNING if it failed."""
-    level = logging.WARNING if row["status"] == "failed" else logging.INFO
-    logger.log(level, f"{scenario}: {row['status']} in {row['time_s']:.1f} s {row['reason']}".rstrip())
+    level = logging.WARNING if row.status is StudyStatus.FAILED else logging.INFO
+    logger.log(level, f"{scenario}: {row.status.value} in {row.time_s:.1f} s {row.error}".rstrip())
 
 
 def _reusable(out: Path, key: str) -> PlanRecord | None:
@@ -175,9 +276,9 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
 
     Returns
     -------
-    pandas.DataFrame
-        One row per scenario, columns :data:`COLUMNS` (``time_s`` [s], ``joint_path_length_m``
-        [m], bounds [mm]).
+    StudyResult
+        One :class:`StudyRow` per scenario, in SI units; ``scenarios.csv`` holds the same rows in
+        report units (:data:`COLUMNS`: bounds in mm).
 
     Raises
     ------
@@ -186,8 +287,6 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
     ValueError
         Two scenarios with the same file stem (their folders would collide).
     """
-    import pandas as pd
-
     files = scenario_files(scenarios)
     stems = [f.stem for f in files]
     dup = {s for s in stems if stems.count(s) > 1}
@@ -200,7 +299,7 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
         out, key = root / f.stem, input_key(f, iterations, compare_blind)
         done = _reusable(out, key)
         if done is not None:
-            rows[f] = _row(f, "reused", done.comparison, done.time_s, out)
+            rows[f] = _row(f, StudyStatus.REUSED, done.comparison, done.time_s, out)
             logger.info(f"{f}: complete outputs for the same inputs in {out}, reused")
         else:
             todo.append((f, out, key))
@@ -211,29 +310,29 @@ def plan_many(scenarios: Sequence[str | os.PathLike], out_dir: str | os.PathLike
         for f, row in ex.run(_plan_one, [(f, (f, out, key, iterations, compare_blind, progress)) for f, out, key in todo]):
             rows[f] = row
             _log_row(f, row)
-    table = pd.DataFrame([rows[f] for f in files], columns=list(COLUMNS))
+    result = StudyResult(rows=tuple(rows[f] for f in files), table_file=root / TABLE_FILE, plot_file=root / PLOT_FILE)
     from .io.atomic import atomic_write_text
 
-    atomic_write_text(root / TABLE_FILE, table.to_csv(index=False))
-    _plot(table, root / PLOT_FILE)
-    ok = int((table["status"] != "failed").sum())
-    logger.info(f"{len(files)} scenarios: {ok} planned or reused, {len(files) - ok} failed; "
-                f"{time.perf_counter() - t0:.1f} s; table {root / TABLE_FILE}")
-    return table
+    atomic_write_text(result.table_file, _report_table(result.rows).to_csv(index=False))
+    _plot(result.rows, result.plot_file)
+    logger.info(f"{len(files)} scenarios: {len(files) - result.n_failed} planned or reused, {result.n_failed} failed; "
+                f"{time.perf_counter() - t0:.1f} s; table {result.table_file}")
+    return result
 
 
-def _plot(table, path: Path) -> None:
+def _plot(rows, path: Path) -> None:
     """Largest exact bound per scenario, bound-aware against bound-blind [mm]."""
     import numpy as np
 
     from .plots import new_figure, save_figure
 
-    names = [Path(s).stem for s in table["scenario"]]
+    names = [r.scenario.stem for r in rows]
     x = np.arange(len(names))
     fig = new_figure((max(4.0, 0.6 * len(names) + 2), 3.2))
     ax = fig.subplots()
-    aware = table["max_bound_mm"].astype(float).to_numpy()
-    blind = table["blind_max_bound_mm"].astype(float).to_numpy()
+    mm = (lambda v: math.nan if v is None else v * 1e3)
+    aware = np.array([mm(r.max_bound_m) for r in rows])
+    blind = np.array([mm(r.blind_max_bound_m) for r in rows])
     ax.bar(x - 0.2, aware, 0.4, label="bound-aware")
     ax.bar(x + 0.2, blind, 0.4, label="bound-blind")
     ax.set_xticks(x, names, rotation=45, ha="right")

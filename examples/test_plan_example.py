@@ -16,7 +16,7 @@ SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "task-target.toml
 
 def test_task_target_plan(tmp_path):
     result = ctrplan.plan_scenario(SCENARIO, tmp_path / "out", iterations=60, compare_blind=False)
-    assert result.summary["goal_prediction"]["goal_1"]["waypoint"] == len(result.q) - 1
+    assert result.goal_waypoints == (len(result.q) - 1,)                    # the goal is the last waypoint
     # exact bound below 15 mm at the waypoints and every 30 deg / 10 mm between them [m, rad]
     assert_bound_below(result, 0.015, resolution=(math.radians(30.0), 0.01))
     assert_rotations_before_translations(result)

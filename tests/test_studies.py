@@ -10,7 +10,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from ctrplan.studies import COLUMNS, TABLE_FILE, plan_many
+from ctrplan.studies import COLUMNS, TABLE_FILE, StudyStatus, plan_many
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -40,22 +40,30 @@ def study(tmp_path_factory):
 
 def test_a_table_across_scenarios_with_a_failure_reported(study, monkeypatch):
     """Three scenarios in a folder, one naming a robot file that does not exist: two are planned,
-    the third is a row with status "failed" and the reason naming the missing file; the table on
-    disk is the returned one, with every column. Catches a batch that stops at the first failure
-    and a table that loses a scenario."""
+    the third is a row with status "failed" and the error naming the missing file; the rows are in
+    SI and the table on disk is the same rows in report units (bounds in mm), with every column.
+    Catches a batch that stops at the first failure, a table that loses a scenario, and a unit
+    slip between the result and the file."""
     tmp, a, b, broken = study
     monkeypatch.chdir(tmp)
-    table = plan_many([tmp / "scenarios"], tmp / "out", iterations=60, compare_blind=True)
-    assert list(table.columns) == list(COLUMNS) and len(table) == 3
-    by = {Path(s).stem: r for s, r in zip(table["scenario"], table.to_dict("records"))}
-    assert by["broken"]["status"] == "failed" and "no-such-robot.toml" in by["broken"]["reason"]
+    study_result = plan_many([tmp / "scenarios"], tmp / "out", iterations=60, compare_blind=True)
+    assert len(study_result.rows) == 3 and study_result.n_failed == 1
+    by = {r.scenario.stem: r for r in study_result.rows}
+    assert by["broken"].status is StudyStatus.FAILED and "no-such-robot.toml" in by["broken"].error
     for name in ("task-target-1", "task-target-2"):
         r = by[name]
-        assert r["status"] == "planned" and r["max_bound_mm"] > 0 and r["failures"] == 0
-        assert r["blind_max_bound_mm"] > 0 and (tmp / "out" / name / "summary.json").exists()
+        assert r.status is StudyStatus.PLANNED and 0 < r.max_bound_m < 0.05 and r.failures == 0
+        assert 0 < r.blind_max_bound_m < 0.05 and (tmp / "out" / name / "summary.json").exists()
     on_disk = pd.read_csv(tmp / "out" / TABLE_FILE)
-    assert list(on_disk["status"]) == list(table["status"])
-    assert (tmp / "out" / "scenarios.png").stat().st_size > 1000
+    assert list(on_disk.columns) == list(COLUMNS)
+    assert list(on_disk["status"]) == [r.status.value for r in study_result.rows]
+    planned = on_disk[on_disk["status"] == "planned"]
+    assert list(planned["max_bound_mm"]) == pytest.approx(
+        [r.max_bound_m * 1e3 for r in study_result.rows if r.status is StudyStatus.PLANNED], rel=1e-12)
+    assert list(study_result.to_frame()["max_bound_m"].dropna()) == pytest.approx(list(planned["max_bound_mm"] / 1e3))
+    with pytest.warns(DeprecationWarning, match="use .rows"):
+        assert list(study_result["status"]) == list(on_disk["status"])
+    assert study_result.plot_file.stat().st_size > 1000
 
 
 def test_a_rerun_reuses_complete_outputs_and_redoes_a_changed_scenario(study, monkeypatch):
@@ -66,12 +74,11 @@ def test_a_rerun_reuses_complete_outputs_and_redoes_a_changed_scenario(study, mo
     monkeypatch.chdir(tmp)
     first = pd.read_csv(tmp / "out" / TABLE_FILE)
     b.write_text(re.sub(r"(?m)^seed = .*$", "seed = 7", b.read_text()))
-    table = plan_many([a, b], tmp / "out", iterations=60, compare_blind=True)
-    status = dict(zip((Path(s).stem for s in table["scenario"]), table["status"]))
-    assert status == {"task-target-1": "reused", "task-target-2": "planned"}
-    reused = table[table["status"] == "reused"].iloc[0]
+    rows = plan_many([a, b], tmp / "out", iterations=60, compare_blind=True).rows
+    assert {r.scenario.stem: r.status.value for r in rows} == {"task-target-1": "reused", "task-target-2": "planned"}
+    (reused,) = [r for r in rows if r.status is StudyStatus.REUSED]
     before = first[first["scenario"] == str(a)].iloc[0]
-    assert reused["max_bound_mm"] == pytest.approx(before["max_bound_mm"], rel=1e-12)
+    assert reused.max_bound_m * 1e3 == pytest.approx(before["max_bound_mm"], rel=1e-12)
 
 
 def test_dask_workers_give_the_same_plans(study, tmp_path, monkeypatch):
@@ -79,11 +86,11 @@ def test_dask_workers_give_the_same_plans(study, tmp_path, monkeypatch):
     this process (the plans are seeded). Catches workers that plan with other inputs."""
     tmp, a, b, _ = study
     monkeypatch.chdir(tmp)
-    serial = plan_many([a, b], tmp_path / "serial", iterations=60, compare_blind=False)
-    spread = plan_many([a, b], tmp_path / "dask", n_jobs=2, iterations=60, compare_blind=False)
-    assert list(spread["status"]) == ["planned", "planned"]
-    for col in ("cost", "max_bound_mm", "final_bound_mm", "joint_path_length_m"):
-        assert list(spread[col]) == pytest.approx(list(serial[col]), rel=1e-9), col
+    serial = plan_many([a, b], tmp_path / "serial", iterations=60, compare_blind=False).rows
+    spread = plan_many([a, b], tmp_path / "dask", n_jobs=2, iterations=60, compare_blind=False).rows
+    assert [r.status for r in spread] == [StudyStatus.PLANNED, StudyStatus.PLANNED]
+    for col in ("cost", "max_bound_m", "final_bound_m", "joint_path_length_m"):
+        assert [getattr(r, col) for r in spread] == pytest.approx([getattr(r, col) for r in serial], rel=1e-9), col
 
 
 def test_the_plan_command_takes_several_scenarios_and_fails_when_one_fails(study, tmp_path, monkeypatch):
