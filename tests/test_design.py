@@ -191,6 +191,37 @@ def test_a_piece_after_a_motion_is_evaluated_with_that_motion_as_its_history():
     np.testing.assert_allclose(got.fisher[0], expected.fisher[0], rtol=1e-9)
 
 
+def test_a_thinned_piece_stands_for_the_whole_piece():
+    """The search scores a candidate piece on at most PIECE_SAMPLES of its samples and scales the
+    sums to all of them: on a 71-sample piece that reverses a rotation under the friction model,
+    that is within 25 % of the sums over every sample (measured: 0.82 and 0.99 of the two Fisher
+    informations, 0.90 and 0.97 of the two separations: the friction coefficient's sensitivity
+    changes abruptly at the reversals), and far off without the scaling (catches a thinned piece
+    that is not scaled, or scaled by the wrong count)."""
+    from ctrplan.design._design import PIECE_SAMPLES, _piece_information, _thinned
+
+    robot = load_robot(PAIR)
+    friction = Hypothesis("friction", "torsional friction", "friction", ("mu_1",), np.array([0.2]), free=("mu_1",))
+    clearance = Hypothesis("standard", "no friction", "standard", ("precurvature_y_1",), np.array([6.8]),
+                           free=("precurvature_y_1",))
+    whole = _sweep(robot, [[0.0], [2.0], [0.5], [2.5], [1.0]])
+    n0 = whole.n_samples // 2
+    piece = (0.0, whole.time[n0:], whole.alpha[n0:], whole.beta[n0:])
+    thin, factor = _thinned(piece)
+    assert thin[1].size == PIECE_SAMPLES < piece[1].size and thin[1][0] == piece[1][0] and thin[1][-1] == piece[1][-1]
+    assert factor == pytest.approx(piece[1].size / PIECE_SAMPLES)
+    w = 1.0 / SIGMA ** 2
+    history = (whole.frame, whole.time[:n0], whole.alpha[:n0], whole.beta[:n0])
+    [(full, _), (part, _)] = _piece_information(robot, [friction, clearance], w, None, *history, [piece, thin])
+    scaled = part.scaled(factor)
+    assert scaled.n_samples == full.n_samples
+    for h in (0, 1):
+        np.testing.assert_allclose(scaled.fisher[h], full.fisher[h], rtol=0.25)
+    for k in full.pairs:
+        assert scaled.separation()[k] == pytest.approx(full.separation()[k], rel=0.25)
+        assert part.separation()[k] < 0.5 * full.separation()[k]
+
+
 def _three_tube_case(obstacles=()):
     robot = load_robot(THREE)
     base = ("precurvature_y_1", "precurvature_y_2", "precurvature_y_3")
