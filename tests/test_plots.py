@@ -305,14 +305,14 @@ def test_library_figures_leave_the_users_backend_alone(tmp_path):
     from pathlib import Path
 
     import matplotlib
-    import pandas as pd
 
     from ctrplan import studies
 
-    table = pd.DataFrame({"scenario": ["a.toml", "b.toml"], "max_bound_mm": [3.1, 4.0],
-                          "blind_max_bound_mm": [4.9, 4.2]})
+    rows = [studies.StudyRow(Path(name), studies.StudyStatus.PLANNED, "", 1.0, tmp_path, max_bound_m=a,
+                             blind_max_bound_m=b) for name, a, b in (("a.toml", 3.1e-3, 4.9e-3),
+                                                                     ("b.toml", 4.0e-3, 4.2e-3))]
     with matplotlib.rc_context({"backend": "svg"}):
-        studies._plot(table, tmp_path / "bounds.png")
+        studies._plot(rows, tmp_path / "bounds.png")
         assert matplotlib.get_backend() == "svg"
     assert (tmp_path / "bounds.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     offenders = []

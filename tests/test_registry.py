@@ -195,7 +195,7 @@ max_jerk = {{alpha_2 = 40.0, alpha_3 = 40.0, beta_3 = 0.4}}
 
 @pytest.mark.parametrize("table, key, text", [
     ('name = "BITstar"\nrange = 0.1', "planner.range",
-     "nor a parameter that planner BITstar declares (rewire_factor); got 0.1"),
+     "planner BITstar does not declare a parameter 'range' (its parameters: rewire_factor); got 0.1"),
     ('name = "RRTstar"\niteration = 10', "planner.iteration",
      "not a key of [planner] (name, iterations, "),
     ('name = "RRTstar"\ngoal_bias = 1.5', "planner.goal_bias", "goal_bias must be in [0, 1], got 1.5"),

@@ -469,10 +469,14 @@ def _planner_parameters(p: _PlannerDoc, file: str) -> dict:
         if value is None:
             continue
         if key not in declared:
+            known = ", ".join(declared) or "none"
+            if key in _PlannerDoc.model_fields:
+                raise ModelFileError(file, f"planner.{key}", f"planner {p.name} does not declare a parameter {key!r} "
+                                                              f"(its parameters: {known}); got {value!r}")
             keys = ", ".join(k for k in _PlannerDoc.model_fields)
             raise ModelFileError(file, f"planner.{key}",
                                  f"not a key of [planner] ({keys}) nor a parameter that planner {p.name} declares "
-                                 f"({', '.join(declared) or 'none'}); got {value!r}")
+                                 f"({known}); got {value!r}")
         try:
             check_planner_options(p.name, {key: value})
         except ValueError as exc:
