@@ -17,7 +17,6 @@ import pytest
 import ctrplan
 from _maps import constant_field
 from ctrplan.errors import ModelFileError
-from ctrplan.io.robot_file import load_robot
 from ctrplan.io.scenario import load_scenario
 from ctrplan.obstacles import OBSTACLE_REGISTRY
 from ctrplan.planner_info import PLANNER_REGISTRY
