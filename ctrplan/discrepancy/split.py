@@ -393,7 +393,7 @@ def lengthen_blocks(split: "DataSplit", residual, *, test_fraction: float = 0.2,
 def choose_blocks(setup, split: "DataSplit", residual, options) -> "DataSplit":
     """Stage 3a, after the pilot fit: the buffer and the development blocks' length
     (:func:`lengthen_blocks`, every fit keeping more samples than the baseline's parameters plus
-    the largest effect's) from the pilot fit's residuals. The pilot fit uses neither the folds
+    the two largest effects', :func:`_fit_minimum`) from the pilot fit's residuals. The pilot fit uses neither the folds
     nor the buffer, so nothing fitted before is redone.
 
     Parameters
