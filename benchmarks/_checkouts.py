@@ -1,5 +1,5 @@
 """Another commit of this repository beside the current checkout, for side-by-side benchmarks
-(bound_ab_timing.py, first_run_ab_timing.py): a temporary git worktree, and the environment that
+(bench_contact_fit.py): a temporary git worktree, and the environment that
 makes a child process import ``ctrplan`` from a given checkout with its own numba cache."""
 
 from __future__ import annotations

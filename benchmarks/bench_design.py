@@ -20,7 +20,7 @@ repetitions of the pilot (new noise each), and ``ctrplan discrepancy`` runs on t
 follow-up together (``--data`` once per recording). A run names the truth when its verdict names
 the truth alone.
 
-The data are made by the reference synthesizer of ``tests/reference`` (independent of the code
+The data are made by the reference synthesizer of ``tests/ctrplan_reference`` (independent of the code
 that fits), along the given motions: its ``reference_motion`` is replaced by the designed, random
 or recorded motion (each segment a minimum-jerk move with the duration ruckig gave it). The truth
 robots are built by ``bench_discrepancy_sweep._truth_robot`` (no ``ctrplan.discrepancy`` or
@@ -48,8 +48,6 @@ from unittest import mock
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "benchmarks"))
-sys.path.insert(0, str(ROOT / "tests"))
 
 #: The cases: robot, truth, alternative, hidden values (SI), seed. Two robots (the Table I tube pair
 #: and the Table VII three-tube robot), three confusable pairs.
@@ -77,7 +75,7 @@ NOISE_M = 0.5e-3
 def _synthesize(truth_robot, hidden: dict, seed: int, motion=None):
     """The reference synthesizer's record of ``truth_robot`` with ``hidden`` (along ``motion`` when
     given, else its own seeded motion of SAMPLES samples)."""
-    import reference.synth_reference as sr
+    import ctrplan_reference.synth_reference as sr
 
     kw = {}
     if "backlash" in hidden:
@@ -97,7 +95,7 @@ def _pilot_motion(truth_robot, seed: int):
     removed: rotations of the tubes at the home insertion."""
     import dataclasses
 
-    import reference.synth_reference as sr
+    import ctrplan_reference.synth_reference as sr
 
     m = sr.reference_motion(truth_robot, samples=SAMPLES, rate_hz=RATE_HZ, seed=seed)
     steps = np.where(m.rotation[None, :], m.steps, 0.0)
@@ -107,7 +105,7 @@ def _pilot_motion(truth_robot, seed: int):
 def _reference_motion(robot, traj, sample_times):
     """The reference synthesizer's motion object for a ruckig trajectory: one minimum-jerk move per
     segment, with its start and duration."""
-    from reference.synth_reference import ReferenceMotion
+    from ctrplan_reference.synth_reference import ReferenceMotion
 
     segs = traj.segments
     return ReferenceMotion(joint_names=tuple(robot.joint_names),

@@ -2,7 +2,7 @@
 hard synthetic cases made independently of the code that fits them.
 
 Every case is a continuous trajectory of 500 samples at 10 Hz made by the reference synthesizer of
-``tests/reference`` (an analytic motion, the history rules written again from their definitions,
+``tests/ctrplan_reference`` (an analytic motion, the history rules written again from their definitions,
 the frozen reference solvers; none of it imports ``ctrplan.history``, ``ctrplan.effects`` or
 ``ctrplan.discrepancy``), on one of three robots: the Table I tube pair (most cases), the
 three-tube robot of Table VII and the path-history pair of Table V (Ha, Fagogenis & Dupont, IEEE
@@ -39,7 +39,7 @@ What the truth and the reference share with the code under test: the robot descr
 (``ctrplan.mechanics.grid``), the rotation helpers (``ctrplan.mechanics._lie``), the discrete tube
 chain's kinematics (``ctrplan.mechanics.discrete``, contact model), the solution and settings
 records (``ctrplan.mechanics.results``), ``ctrplan.constants`` and ``ctrplan.errors``
-(``tests/reference/bound_reference.py``, which the synthesizer does not use, also takes
+(``tests/ctrplan_reference/bound_reference.py``, which the synthesizer does not use, also takes
 ``ctrplan.mechanics.bound``). What they do not share: the solvers themselves (``ctrplan.mechanics``
 standard and contact solves), ``ctrplan.history``, ``ctrplan.effects`` and
 ``ctrplan.discrepancy``: the truth robot (:func:`_truth_robot`) changes the tube fields itself
@@ -370,8 +370,7 @@ def synthesize_case(seed: int, index: int, out: str) -> tuple:
     """The base file and the data of case ``index`` (seeded by ``seed``; reference synthesizer) in
     its folder under ``out``, the data made unless an earlier run made it: ``(plan, base file,
     data file, seconds spent making the data)``."""
-    sys.path.insert(0, str(ROOT / "tests"))
-    from reference.synth_reference import synthesize_reference
+    from ctrplan_reference.synth_reference import synthesize_reference
 
     from ctrplan.io.robot_file import robot_to_toml
 
@@ -513,12 +512,12 @@ def summarize(cases: list) -> dict:
 
 
 def sweep_code_digest() -> str:
-    """SHA-256 (hex) of the code of this benchmark and of every ``tests/reference/*.py``: their
+    """SHA-256 (hex) of the code of this benchmark and of every ``tests/ctrplan_reference/*.py``: their
     paths (relative to the repository) and :func:`ctrplan.discrepancy.provenance.code_digest`,
     sorted by path (docstrings, comments and layout do not count)."""
     from ctrplan.discrepancy.provenance import code_digest
 
-    paths = [Path(__file__).resolve(), *(ROOT / "tests" / "reference").glob("*.py")]
+    paths = [Path(__file__).resolve(), *(ROOT / "tests" / "ctrplan_reference").glob("*.py")]
     h = hashlib.sha256()
     for rel, path in sorted((p.relative_to(ROOT).as_posix(), p) for p in paths):
         h.update(rel.encode() + b"\0" + code_digest(path.read_text(), rel).encode() + b"\0")

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -27,7 +26,6 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests"))
 
 
 def _stats(times):
@@ -36,7 +34,7 @@ def _stats(times):
 
 
 def _write(path, storage, n_joints, n_poses, robot):
-    from _bags import ORIGIN_NS, joint_state, pose_stamped, quaternions_with_z_axis, write_bag
+    from ctrplan_reference.bags import ORIGIN_NS, joint_state, pose_stamped, quaternions_with_z_axis, write_bag
 
     rng = np.random.default_rng(0)
     duration = n_joints / 1000.0

@@ -4,7 +4,7 @@
    (Table II robot, one thread) of: the standard model with and without the multistart
    stability search, the clearance model, one friction solution and the full bound
    (``evaluate_bound``), next to the paper's Table VIII MATLAB times, and the ratio to the frozen
-   slow reference implementation in tests/reference (on every ``--ref-every``-th configuration).
+   slow reference implementation in tests/ctrplan_reference (on every ``--ref-every``-th configuration).
 2. Batch throughput of the standard model (``solve_standard_batch``) [configurations/s], on one
    thread and on all cores.
 3. Discretization convergence: tip-position error [mm] against a step four times finer for the
@@ -53,15 +53,13 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "benchmarks"))
-sys.path.insert(0, str(ROOT / "tests"))
 
 from ctrplan.io.robot_file import load_robot  # noqa: E402
 from ctrplan.mechanics import MECHANICS_VERSION  # noqa: E402
 from ctrplan.mechanics import (ModelSettings, evaluate_bound, solve_clearance, solve_friction,  # noqa: E402
                                solve_standard, solve_standard_batch)
-from paper_section_4d import PAPER_TIMES_S, grid_4x4x4, grid_8x8x8  # noqa: E402
-from reference import bound_reference, contact_reference, standard_reference  # noqa: E402
+from ctrplan_reference.paper_grids import PAPER_TIMES_S, grid_4x4x4, grid_8x8x8  # noqa: E402
+from ctrplan_reference import bound_reference, contact_reference, standard_reference  # noqa: E402
 
 
 def _t(fn, *a, **k):

@@ -43,7 +43,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -53,9 +52,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from paper_section_4d import grid_4x4x4, grid_8x8x8  # noqa: E402
+from ctrplan_reference.paper_grids import grid_4x4x4, grid_8x8x8  # noqa: E402
 
 from ctrplan.cache import content_key, file_hash  # noqa: E402
 from ctrplan.constants import MECHANICS_VERSION  # noqa: E402

@@ -23,7 +23,7 @@ from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.io.robot_file import load_robot, load_robot_calibration, robot_to_toml
 from ctrplan.pipeline import AimReason, aim_decision
 from ctrplan.pipeline.wording import aim_reason
-from reference.synth_reference import synthesize_reference
+from ctrplan_reference.synth_reference import synthesize_reference
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"

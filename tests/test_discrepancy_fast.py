@@ -1,5 +1,5 @@
 """Hidden-effect cases of the default run: the whole discrepancy workflow on records made by code
-independent of the code that fits them (``tests/reference``: an analytic motion of the Table I
+independent of the code that fits them (``tests/ctrplan_reference``: an analytic motion of the Table I
 tube pair, 400 samples at 10 Hz, the history rules written again from their definitions, the
 frozen reference solvers), with one effect hidden and the base file without it: drive backlash
 and a tracker lag each beyond its typical range, torsional friction, and noise correlated in time
@@ -23,7 +23,7 @@ from ctrplan.discrepancy.parameters import apply_parameters, read_parameters
 from ctrplan.discrepancy.report import write_report
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.io.robot_file import load_robot, robot_to_toml
-from reference.synth_reference import synthesize_reference
+from ctrplan_reference.synth_reference import synthesize_reference
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
@@ -137,7 +137,7 @@ def test_the_lag_case_recorded_as_a_ros2_bag_gives_the_csv_verdict(lag_case):
     a stamp origin that differs between the streams, and joint names matched by position."""
     import pandas as pd
 
-    from _bags import measured_run
+    from ctrplan_reference.bags import measured_run
     from ctrplan.io.ros2 import BagSelection
 
     res_csv, data, made, tmp = lag_case

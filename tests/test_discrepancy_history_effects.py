@@ -313,9 +313,9 @@ def test_hull_distance():
 # --------------------------------------------------------------------------- hidden effects (slow)
 def _trajectory_case(tmp_path, *, seed, samples=800, candidates=None, jobs=2, **hidden):
     """Table VII robot, continuous trajectory of 80 s made by the independent reference
-    synthesizer (``tests/reference``) with the ``hidden`` effects (its keywords), 0.5 mm / 0.3 deg
+    synthesizer (``tests/ctrplan_reference``) with the ``hidden`` effects (its keywords), 0.5 mm / 0.3 deg
     noise; the workflow starts from the model with friction off, with the default split."""
-    from reference.synth_reference import synthesize_reference
+    from ctrplan_reference.synth_reference import synthesize_reference
 
     robot = load_robot(TABLE7).replace(friction_coefficients=(0.0, 0.0))
     model = tmp_path / "model.toml"

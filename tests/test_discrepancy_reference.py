@@ -1,7 +1,7 @@
 """The discrepancy workflow's fitting path against data made independently of it.
 
-Reference records come from ``tests/reference/synth_reference.py``: an analytic motion, the
-history rules written again from their definitions (``tests/reference/history_reference.py``)
+Reference records come from ``tests/ctrplan_reference/synth_reference.py``: an analytic motion, the
+history rules written again from their definitions (``tests/ctrplan_reference/history_reference.py``)
 and the frozen reference solvers, none of which imports ``ctrplan.history``,
 ``ctrplan.effects`` or ``ctrplan.discrepancy``. The fitting path
 (:func:`ctrplan.discrepancy.calibrate.predict` on the record loaded by
@@ -31,9 +31,9 @@ from ctrplan.discrepancy.data import load_measured_data
 from ctrplan.history._state import HistoryState
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings
-from reference import standard_reference
-from reference.history_reference import applied_friction, pair_history
-from reference.synth_reference import synthesize_reference
+from ctrplan_reference import standard_reference
+from ctrplan_reference.history_reference import applied_friction, pair_history
+from ctrplan_reference.synth_reference import synthesize_reference
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"

@@ -2,7 +2,7 @@
 out-of-fold errors come from fits that never saw their samples, their buffers or a fit that did;
 no fit sees the test split; the stage key is stable; the report alone converts to mm.
 
-The stages run on a record made independently of the fitting code (``tests/reference``: the
+The stages run on a record made independently of the fitting code (``tests/ctrplan_reference``: the
 Table I tube pair, 500 samples of a continuous motion at 10 Hz, a tracker lag of 0.15 s evaluated
 exactly on the analytic motion, seen in a tracker frame, 0.5 mm / 0.3 deg noise), with only the
 time offset tried and 5 folds, so the module takes well under a minute. ``test_discrepancy_fast`` and
@@ -24,7 +24,7 @@ from ctrplan.discrepancy.consistency import NoiseTest
 from ctrplan.discrepancy.noise import estimate_noise
 from ctrplan.discrepancy.workflow import DiscrepancyOptions
 from ctrplan.io.robot_file import load_robot, robot_to_toml
-from reference.synth_reference import synthesize_reference
+from ctrplan_reference.synth_reference import synthesize_reference
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"

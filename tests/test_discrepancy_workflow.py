@@ -57,8 +57,8 @@ def _synth(robot, effects, path, grid, seed=0, settings=COARSE, noise=Noise()):
 
 
 def _reference_grid(truth, path, grid, seed=0, ds=6e-3, **kwargs):
-    """The paper's protocol made independently of the code under test (``tests/reference``)."""
-    from reference.synth_reference import synthesize_reference_grid
+    """The paper's protocol made independently of the code under test (``tests/ctrplan_reference``)."""
+    from ctrplan_reference.synth_reference import synthesize_reference_grid
 
     frame, _ = synthesize_reference_grid(truth, grid=grid, seed=seed, ds=ds, **kwargs)
     frame.to_csv(path, index=False)

@@ -2,7 +2,7 @@
 
 They run in a folder holding the repository's ``model`` and ``scenarios`` and a recorded run
 ``run_bag`` of the Table II robot (its joints under the drive's own names, as the page's
-``--joint-names`` maps them; poses from the reference synthesizer of ``tests/reference``, a
+``--joint-names`` maps them; poses from the reference synthesizer of ``tests/ctrplan_reference``, a
 0.1 s tracker lag hidden). The discrepancy command takes minutes and is marked slow; the others
 are in the default run.
 """
@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 
-from _bags import measured_run
+from ctrplan_reference.bags import measured_run
 from ctrplan import cli
 from ctrplan.io.robot_file import load_robot
-from reference.synth_reference import synthesize_reference
+from ctrplan_reference.synth_reference import synthesize_reference
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "ros2.md"

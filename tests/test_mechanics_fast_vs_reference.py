@@ -1,4 +1,4 @@
-"""The fast mechanics path (ctrplan.mechanics) against the frozen slow reference (tests/reference).
+"""The fast mechanics path (ctrplan.mechanics) against the frozen slow reference (tests/ctrplan_reference).
 
 The reference modules are verbatim copies of the solvers before the speed work. On
 seeded random configurations of the Table II robot (the paper's Section IV-D set-up, default
@@ -15,7 +15,7 @@ import pytest
 
 from ctrplan.mechanics import (ModelSettings, evaluate_bound, solve_clearance, solve_friction,
                                solve_standard)
-from reference import bound_reference, contact_reference, standard_reference
+from ctrplan_reference import bound_reference, contact_reference, standard_reference
 
 from _robots import table1_pair, table2_robot
 

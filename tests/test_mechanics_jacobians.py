@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from ctrplan.mechanics import ModelSettings, chain_jacobians, forward_kinematics, solve_standard
 from ctrplan.mechanics._lie import (d_left_jacobian_ez, exp_so3, left_jacobian_so3, skew)
-from reference.contact_reference import _Setup
+from ctrplan_reference.contact_reference import _Setup
 from ctrplan.mechanics.discrete import TubeChain
 
 from _robots import table2_robot

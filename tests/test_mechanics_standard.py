@@ -373,7 +373,7 @@ def test_coarse_grid_multistart_finds_what_the_fine_search_finds(a2, a3, e):
     candidates) fails on the multistable rows, one that invents branches on the unique rows.
     Single solver and batch both."""
     from ctrplan.mechanics import solve_standard_batch
-    from reference import standard_reference
+    from ctrplan_reference import standard_reference
 
     robot = table2_robot()
     alpha = np.radians([0.0, a2, a3])

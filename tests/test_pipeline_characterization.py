@@ -1,6 +1,6 @@
 """What ``ctrplan plan`` reports, pinned: the printed lines, ``summary.json`` and ``path.csv`` of two
 cheap runs compared with the reference recorded from the code before the pipeline's stages passed
-typed results (``tests/reference/plan_characterization.json``).
+typed results (``tests/data/plan_characterization.json``).
 
 Each run plans a task-space goal and then a joint goal on the Table VII robot (60 RRT* iterations,
 seed 1, no roadmap, bound-aware and bound-blind, with a drive) against a constant synthetic bound map (1 mm
@@ -31,7 +31,7 @@ from _maps import cache_constant_field
 
 REPO = Path(__file__).resolve().parents[1]
 TABLE7 = REPO / "model" / "ha2019-table7-calibrated.toml"
-REFERENCE = Path(__file__).resolve().parent / "reference" / "plan_characterization.json"
+REFERENCE = Path(__file__).resolve().parent / "data" / "plan_characterization.json"
 
 CALIBRATION = """
 [bound_calibration]

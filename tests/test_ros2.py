@@ -1,7 +1,7 @@
 """ROS 2 bags in and out (:mod:`ctrplan.io.ros2`).
 
-Bags are written by ``rosbags`` itself (``tests/_bags.py``), in both storages, from an analytic
-motion (``tests/reference``), so the expected joint values at any stamp are known exactly.
+Bags are written by ``rosbags`` itself (``tests/ctrplan_reference/bags.py``), in both storages, from an analytic
+motion (``tests/ctrplan_reference``), so the expected joint values at any stamp are known exactly.
 Reading: the joints at the pose stamps (the time-offset effect's interpolant), pauses, dropped
 poses, ``/tf`` child frames, empty stamps, and each malformed bag as a clear error that names the
 bag, the topic and what was found, with nothing written. Writing: the exported trajectory read
@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from _bags import (ORIGIN_NS, T, joint_state, measured_run, pose_stamped, quaternions_with_z_axis, transform_stamped,
+from ctrplan_reference.bags import (ORIGIN_NS, T, joint_state, measured_run, pose_stamped, quaternions_with_z_axis, transform_stamped,
                    write_bag)
 from ctrplan import cli
 from ctrplan.errors import DataFileError
@@ -28,7 +28,7 @@ from ctrplan.history import MotionRecord, joints_at
 from ctrplan.io.robot_file import load_robot
 from ctrplan.io.ros2 import (BagSelection, bag_topics, read_bag_measurements, read_joint_trajectory,
                              trajectory_yaml, write_plan_bag, PlanBagContent)
-from reference.synth_reference import reference_motion
+from ctrplan_reference.synth_reference import reference_motion
 from test_pipeline import _scenario, cached_map  # noqa: F401 (fixture)
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,7 +1,7 @@
 """Driver of the compiled clearance / friction solver (see ``_contact_kernels`` for the maths).
 
 Same algorithm and stopping rules as the reference implementation kept in
-tests/reference/contact_reference.py: outer re-linearization with Anderson mixing (Section II-E of
+tests/ctrplan_reference/contact_reference.py: outer re-linearization with Anderson mixing (Section II-E of
 Ha, Fagogenis & Dupont 2019), semismooth Newton on the complementarity conditions with the
 active-set Woodbury reduction of Appendix A, friction as in Section III. The Newton method's
 residual differs from the reference's on loaded contacts (the natural residual min(a, b) instead

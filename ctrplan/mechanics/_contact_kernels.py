@@ -1,6 +1,6 @@
 """Compiled kernels of the clearance and friction solvers (numba, ``cache=True``).
 
-The same mathematics as the slow reference (tests/reference/contact_reference.py), organised so
+The same mathematics as the slow reference (tests/ctrplan_reference/contact_reference.py), organised so
 that nothing of size (number of contacts) x (number of curvature unknowns) is ever formed:
 
 **Chains on one flat array.** The n tubes' nodes are stored one after the other (tube t owns

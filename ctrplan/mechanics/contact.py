@@ -35,7 +35,7 @@ The work is done by compiled kernels (``_contact_kernels``, driven by ``_contact
 never form the dense constraint Jacobian: the compliance blocks W_ce come from per-node prefix
 sums of the chain Jacobian factors, only for the contacts the Newton method touches, and the
 generalized forces A^T phi from suffix sums. The slow original is kept as
-tests/reference/contact_reference.py, and the fast path is tested against it.
+tests/ctrplan_reference/contact_reference.py, and the fast path is tested against it.
 """
 
 from __future__ import annotations

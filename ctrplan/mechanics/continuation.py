@@ -15,7 +15,7 @@ sensitivity grows like 1 / sqrt(mu_c - mu).
 Measured on the 8x8x8 grid (Table II robot, mu = 0.2): the four configurations whose
 bound does not converge end their branches at mu = 0.179-0.197, within 0.001 of the same at
 ds = 3 and 1.5 mm, and equal between mirror-image configurations (docs/mechanics.md, Sec. 5;
-``benchmarks/check_friction_branches.py``).
+``tests/test_mechanics_grid_solutions.py``).
 """
 
 from __future__ import annotations

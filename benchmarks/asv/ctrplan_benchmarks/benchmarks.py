@@ -121,6 +121,51 @@ class RoadmapQuery:
         self.planner.plan_to(self.goal, move=False)
 
 
+class ValidityCheck:
+    """The planner's validity check of 200 seeded random states of the obstacles scenario (its
+    robot, obstacles and bound map; the standard model without the multistart search, as the
+    pipeline checks): one state per call through the per-state reference ``ValidityChecker``, and
+    all of them in one call of the compiled ``BatchValidityChecker``. Fresh checkers (empty state
+    caches) for every sample."""
+
+    timeout = 600
+    number = 1
+    repeat = (3, 10, 60.0)
+
+    def setup(self):
+        from ctrplan.boundmap import load_or_compute_bound_map
+        from ctrplan.io.scenario import load_scenario
+        from ctrplan.mechanics import ModelSettings
+        from ctrplan.pipeline import map_spec
+        from ctrplan.planning import CollisionChecker, JointStateSpace, ValidityChecker
+        from ctrplan.planning.route import DEFAULT_COLLISION_SEGMENT
+        from ctrplan.planning.validity import BatchValidityChecker
+
+        sc = load_scenario(REPO / "scenarios" / "obstacles.toml")
+        robot = sc.robot
+        settings = ModelSettings(ds=sc.bound_field.ds) if sc.bound_field.ds else ModelSettings()
+        field = load_or_compute_bound_map(sc.robot_file, robot, map_spec(sc), settings, n_jobs=1)[0]
+        settings = settings.replace(multistart=0)
+        collision = CollisionChecker([o.as_dict() for o in sc.obstacles], segment_length=DEFAULT_COLLISION_SEGMENT)
+        self.single = ValidityChecker(robot, collision=collision, field=field, settings=settings)
+        self.batch = BatchValidityChecker(robot, collision=collision, field=field, settings=settings,
+                                          joint_space=JointStateSpace(robot))
+        rng = np.random.default_rng(0)
+        lo, hi = robot.joint_lower, robot.joint_upper
+        self.states = lo + (hi - lo) * rng.random((200, lo.size))
+        warm = lo + (hi - lo) * rng.random((2, lo.size))     # imports, compiled kernels, first fcl objects
+        for q in warm:
+            self.single(q)
+        self.batch.check(warm)
+
+    def time_per_state_checker(self):
+        for q in self.states:
+            self.single(q)
+
+    def time_batch_checker(self):
+        self.batch.check(self.states)
+
+
 class Discrepancy:
     """The discrepancy workflow on a small case with a hidden tracker lag."""
 
