@@ -1,6 +1,7 @@
 """The worked examples of ``docs/architecture.md`` run as written: the planner and the obstacle
-type it registers are used by a scenario file that plans with both, and the refusals the page
-quotes happen.
+type it registers are used by a scenario file that plans with both, the refusals the page
+quotes happen, and the effect it registers is hidden in synthetic data and named by the
+discrepancy workflow.
 
 Each example registers into the package's registries; the tests remove what they registered
 (so that other tests see the built-in entries only).
@@ -27,6 +28,7 @@ from ctrplan.mechanics import ModelSettings
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "architecture.md"
 TABLE7 = ROOT / "model" / "ha2019-table7-calibrated.toml"
+PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
 # the post of the page's example sits across the tip's path from START to GOAL
 START = {"alpha_2": 0.0, "alpha_3": 0.0, "beta_3": -0.05}
 GOAL = {"alpha_2": 0.8, "alpha_3": 0.0, "beta_3": -0.05}
@@ -128,3 +130,40 @@ def test_the_refusals_the_page_quotes(tmp_path, examples, line, key, text):
     with pytest.raises(ModelFileError) as info:
         load_scenario(path)
     assert (info.value.file, info.value.key) == (str(path), key) and text in str(info.value)
+
+
+def test_the_page_s_effect_is_hidden_by_synthesize_and_named_by_the_workflow(tmp_path):
+    """The page's effect, registered by its code block and nowhere else: a constant offset of the
+    measured tip along z (3 mm) hidden in a 500-sample trajectory of the Table I tube pair by
+    synthesize, competing with the built-in backlash and time offset. The workflow tests its
+    signature, fits it, names it with its size within 0.5 mm, writes it into the updated robot
+    file's [effects] table and reproduces the errors from that file. Catches any place that still
+    lists the effects by name instead of iterating the registry."""
+    from ctrplan.discrepancy import Noise, synthesize, write_synth
+    from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
+    from ctrplan.effects import REGISTRY, unregister
+    from ctrplan.io.robot_file import load_robot, robot_to_toml
+
+    (code,) = _blocks("An effect", "python")
+    try:
+        exec(compile(code, str(PAGE), "exec", dont_inherit=True), {})
+        assert "tip_offset_z" in REGISTRY
+        robot = load_robot(PAIR).replace(friction_coefficients=(0.0,))
+        model = tmp_path / "pair.toml"
+        model.write_text(robot_to_toml(robot))
+        data = tmp_path / "toy.csv"
+        write_synth(data, synthesize(robot, {"tip_offset_z": {"tip_offset_z": 0.003}}, protocol="trajectory",
+                                     samples=500, noise=Noise(position_rms=0.5e-3, angle_rms=0.005), seed=37,
+                                     settings=ModelSettings(ds=6e-3)))
+        opts = DiscrepancyOptions(effects=("backlash", "time_offset", "tip_offset_z"), ds=6e-3, n_permutations=199,
+                                  max_evaluations=200, n_folds=5, prior_strengths=(0.03, float("inf")), n_jobs=1)
+        res = run_discrepancy(model, data, tmp_path / "out", opts, progress=False).to_dict()
+        assert res["named_effect"] == "tip_offset_z", res["decision"]
+        assert res["candidates"]["tip_offset_z"]["parameters"]["tip_offset_z"] == pytest.approx(0.003, abs=5e-4)
+        assert res["signature_tests"]["tip_offset_z"]["p_value"] < 0.01
+        written = load_robot(res["updated_model_file"])
+        assert dict(written.effects)["tip_offset_z"][0][0] == "tip_offset_z"
+        assert res["reproduced"]
+    finally:
+        if "tip_offset_z" in REGISTRY:
+            unregister("tip_offset_z")

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.effects import (REGISTRY, Effect, EffectSet, ParameterSpec, apply_output_effects, apply_robot_effects,
-                             history_state, model_of, registered, robot_effects)
+from ctrplan.effects import (REGISTRY, EffectSet, ParameterSpec, apply_output_effects, apply_robot_effects,
+                             history_state, model_of, robot_effects)
 from ctrplan.errors import ModelFileError, PhysicalParameterError
 from ctrplan.history import MotionRecord, play
 from ctrplan.io.robot_file import load_robot, robot_from_toml_text, robot_to_toml
@@ -160,48 +160,3 @@ def test_synth_options_come_from_the_registry():
     out = CliRunner().invoke(main, ["synth", "--help"]).output
     for e in REGISTRY.values():
         assert e.synth_option in out, e.name
-
-
-# --------------------------------------------------------------------------- one place for a new effect
-def _tip_offset(robot):
-    return (ParameterSpec("tip_offset_z", "tip_offset_z", 0, "m", -0.05, 0.05, 1e-3, (-0.02, 0.02),
-                          "a tracker coil mounted off the tip: at most 20 mm"),)
-
-
-TOY = Effect(
-    name="tip_offset_z", label="tip offset along z", model="standard", parameters=_tip_offset,
-    description="the measured point sits a constant distance along the base frame's z from the tip",
-    apply_output=lambda tip, tangent, v: (np.asarray(tip, float) + [0.0, 0.0, v.get("tip_offset_z", 0.0)], tangent),
-    signature=lambda ctx: ctx.rigid_test("tip_offset_z"), synth_option="--tip-offset-z-m",
-    synth_help="Offset of the measured point along z [m].", plan="not used: it concerns the tracker")
-
-
-def test_an_effect_registered_at_run_time_is_hidden_by_synth_and_named_by_the_workflow(tmp_path):
-    """A constant offset of the measured tip along z (3 mm), registered here and nowhere else,
-    hidden in a 500-sample trajectory of the Table I tube pair by synthesize, competing with the
-    built-in backlash and time offset: the workflow tests its signature, fits it, names it with
-    its size within 0.5 mm, writes it into the updated robot file's [effects] table and
-    reproduces the errors from that file. Catches any place that still lists the effects by
-    name instead of iterating the registry."""
-    from ctrplan.discrepancy import Noise, synthesize, write_synth
-    from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
-    from ctrplan.mechanics import ModelSettings
-
-    with registered(TOY):
-        robot = load_robot(PAIR).replace(friction_coefficients=(0.0,))
-        model = tmp_path / "pair.toml"
-        model.write_text(robot_to_toml(robot))
-        data = tmp_path / "toy.csv"
-        write_synth(data, synthesize(robot, {"tip_offset_z": {"tip_offset_z": 0.003}}, protocol="trajectory",
-                                     samples=500, noise=Noise(position_rms=0.5e-3, angle_rms=0.005), seed=37,
-                                     settings=ModelSettings(ds=6e-3)))
-        opts = DiscrepancyOptions(effects=("backlash", "time_offset", "tip_offset_z"), ds=6e-3, n_permutations=199,
-                                  max_evaluations=200, n_folds=5, prior_strengths=(0.03, float("inf")), n_jobs=1)
-        res = run_discrepancy(model, data, tmp_path / "out", opts, progress=False).to_dict()
-        assert res["named_effect"] == "tip_offset_z", res["decision"]
-        assert res["candidates"]["tip_offset_z"]["parameters"]["tip_offset_z"] == pytest.approx(0.003, abs=5e-4)
-        assert res["signature_tests"]["tip_offset_z"]["p_value"] < 0.01
-        written = load_robot(res["updated_model_file"])
-        assert dict(written.effects)["tip_offset_z"][0][0] == "tip_offset_z"
-        assert res["reproduced"]
-    assert "tip_offset_z" not in REGISTRY
