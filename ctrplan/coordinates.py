@@ -31,13 +31,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .choices import JointKind
+
 
 __all__ = ["MapCoordinates", "map_coordinates", "ROTATION_COORDINATE", "TRANSLATION_COORDINATE"]
 
 #: Kind of a map coordinate that is a relative base rotation [rad] (``MapCoordinates.kinds``).
-ROTATION_COORDINATE = "rotation"
+ROTATION_COORDINATE = JointKind.ROTATION
 #: Kind of a map coordinate that is a relative base translation [m] (``MapCoordinates.kinds``).
-TRANSLATION_COORDINATE = "translation"
+TRANSLATION_COORDINATE = JointKind.TRANSLATION
 
 # Coefficients of the affine joint -> configuration map smaller than this are zero (they are
 # sums of 0 and +-1 entries, so anything else is rounding).

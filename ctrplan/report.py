@@ -43,8 +43,9 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from .choices import BoundKind, MotionKind
 from .io.atomic import atomic_write_text
-from .trajectory import START, Trajectory
+from .trajectory import Trajectory
 
 __all__ = ["PATH_FILE", "TRAJECTORY_FILE", "SUMMARY_FILE", "BOUND_KINDS", "path_columns",
            "write_plan_outputs", "write_trajectory_csv", "format_summary", "jsonable", "PlanFolder",
@@ -58,8 +59,8 @@ TRAJECTORY_FILE = "trajectory.csv"
 SUMMARY_FILE = "summary.json"
 #: Values of the ``bound_kind`` column of ``path.csv``: the friction bound, or the
 #: translation-last bound (the waypoint is reached by a translation).
-BOUND_KINDS = ("friction", "translation_last")
-_MOTIONS = (START, "rotation", "translation")
+BOUND_KINDS = tuple(BoundKind)
+_MOTIONS = tuple(MotionKind)
 _TIP_COLUMNS = ("tip_x", "tip_y", "tip_z")
 _BOUND_COLUMNS = ("bound_position_m", "calibrated_bound_m", "planned_bound_m", "bound_angle_rad", "bound_kind")
 _PREDICTION_COLUMNS = ("predicted_tip_x", "predicted_tip_y", "predicted_tip_z", "predicted_offset_m",

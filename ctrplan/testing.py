@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from .choices import JointKind, MotionKind
 from .api import PlanResult
 from .errors import CtrplanError
 
@@ -103,7 +104,7 @@ def _plan(result_or_dir) -> _Plan:
 
 def _unit(kind: str) -> tuple[str, float]:
     """Report unit and factor from SI of a joint kind: degrees for rotations, mm for translations."""
-    return ("deg", math.degrees(1.0)) if kind == "rotation" else ("mm", 1e3)
+    return ("deg", math.degrees(1.0)) if kind == JointKind.ROTATION else ("mm", 1e3)
 
 
 def _unwrapped(p: _Plan) -> np.ndarray:
@@ -125,8 +126,8 @@ def _between(p: _Plan, resolution):
     q = _unwrapped(p)
     for k in range(1, len(q)):
         d = np.abs(q[k] - q[k - 1])
-        n = max(1, math.ceil(max(np.max(d[kinds == "rotation"], initial=0.0) / step_rad,
-                                 np.max(d[kinds == "translation"], initial=0.0) / step_m)))
+        n = max(1, math.ceil(max(np.max(d[kinds == JointKind.ROTATION], initial=0.0) / step_rad,
+                                 np.max(d[kinds == JointKind.TRANSLATION], initial=0.0) / step_m)))
         for j in range(1, n):
             yield k, j / n, q[k - 1] + (q[k] - q[k - 1]) * (j / n)
 
@@ -179,7 +180,7 @@ def assert_bound_below(result_or_dir, limit_m: float, *, between: bool = True,
             except CtrplanError as exc:
                 bad.append((math.nan, f"{where}: {exc}"))
                 continue
-            b = res.translation_last_position if p.motion[k] == "translation" else res.position
+            b = res.translation_last_position if p.motion[k] == MotionKind.TRANSLATION else res.position
             if not b < limit_m:
                 bad.append((b, where))
     if bad:
@@ -221,11 +222,11 @@ def assert_rotations_before_translations(result_or_dir) -> None:
     kinds = np.array([j.kind for j in p.robot.joints])
     names = p.robot.joint_names
     q = _unwrapped(p)
-    if not p.motion or p.motion[0] != "start":
+    if not p.motion or p.motion[0] != MotionKind.START:
         raise AssertionError(f"{p.label}: waypoint 0 has motion {p.motion[0] if p.motion else None!r}, not 'start'")
     for k in range(1, len(q)):
         m = p.motion[k]
-        if m not in ("rotation", "translation"):
+        if m not in (MotionKind.ROTATION, MotionKind.TRANSLATION):
             raise AssertionError(f"{p.label}: waypoint {k} has motion {m!r}, not 'rotation' or 'translation'")
         d = q[k] - q[k - 1]
         moved = np.abs(d) > WAYPOINT_TOL
@@ -239,7 +240,7 @@ def assert_rotations_before_translations(result_or_dir) -> None:
                                  f"{kinds[i]} joint {names[i]} by {d[i] * f:.4g} {unit} (limit 0 {unit})")
     start = 0
     for g, gi in enumerate(p.goal_waypoints):
-        if gi - 1 > start and p.motion[gi] == "rotation" and p.motion[gi - 1] == "translation":
+        if gi - 1 > start and p.motion[gi] == MotionKind.ROTATION and p.motion[gi - 1] == MotionKind.TRANSLATION:
             rot = np.flatnonzero(np.abs(q[gi] - q[gi - 1]) > WAYPOINT_TOL)
             turned = ", ".join(f"{names[i]} {math.degrees(q[gi, i] - q[gi - 1, i]):.4g} deg" for i in rot)
             raise AssertionError(

@@ -33,6 +33,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import ruckig
 
+from .choices import MotionKind
 from .errors import JointLimitError
 
 __all__ = [
@@ -48,11 +49,11 @@ __all__ = [
 ]
 
 #: Motion of a phase that changes rotations only (the ``motion`` column of ``path.csv``).
-ROTATION = "rotation"
+ROTATION = MotionKind.ROTATION
 #: Motion of a phase that changes translations only.
-TRANSLATION = "translation"
+TRANSLATION = MotionKind.TRANSLATION
 #: Motion of the start waypoint, reached by no phase.
-START = "start"
+START = MotionKind.START
 _UNITS = {ROTATION: "rad", TRANSLATION: "m"}
 
 # A joint outside the moving group may differ between consecutive waypoints by at most this much

@@ -16,7 +16,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "ctrplan"
 #: and from components of lower layers only (never from another component of its own layer).
 LAYERS = (
     ("registry",),                             # the one registry type (imports nothing of the package)
-    ("errors", "constants", "models", "planner_info",  # planner_info: names only, no OMPL
+    ("errors", "constants", "choices", "models", "planner_info",  # planner_info: names only, no OMPL
      "_log"),                                  # logging helpers (levels, the deprecated echo)
     ("parallel", "cache"),                     # the one executor (this process, local workers or Dask);
                                                # the one rule of keys of stored results

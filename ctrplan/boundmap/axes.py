@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..choices import JointKind
+
 __all__ = ["MapSpec", "PLACEMENTS", "uniform_axis", "place_nodes", "pilot_design", "DEFAULT_PILOT_LINES",
            "DEFAULT_PILOT_STEP_M", "DEFAULT_PILOT_STEP_RAD"]
 
@@ -170,7 +172,7 @@ def pilot_design(coords, robot, spec: MapSpec, k: int):
         Map coordinates of every pilot sample (L = ``spec.pilot_lines``).
     """
     lo, hi = coords.lower[k], coords.upper[k]
-    step = spec.pilot_step_m if coords.kinds[k] == "translation" else spec.pilot_step_rad
+    step = spec.pilot_step_m if coords.kinds[k] == JointKind.TRANSLATION else spec.pilot_step_rad
     m = max(2, int(np.ceil((hi - lo) / step - 1e-9)) + 1)
     x = np.linspace(lo, hi, m)
     rng = np.random.default_rng([int(spec.pilot_seed), int(k)])

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..choices import JointKind, MapSource
 from .._log import deprecated_echo, progress_level
 from ..cache import cache_dir
 from .axes import MapSpec
@@ -66,7 +67,7 @@ def default_spec(robot) -> MapSpec:
         The robot has no joints.
     """
     coords = map_coordinates(robot)
-    return MapSpec(tuple(DEFAULT_ROTATION_NODES if k == "rotation" else DEFAULT_TRANSLATION_NODES
+    return MapSpec(tuple(DEFAULT_ROTATION_NODES if k == JointKind.ROTATION else DEFAULT_TRANSLATION_NODES
                          for k in coords.kinds))
 
 
@@ -215,8 +216,8 @@ def _stale_maps(robot_path, ident) -> list[str]:
 def _read_existing(robot_path: Path, ident) -> tuple | None:
     """The complete shipped or cached map of ``ident`` as (field, source), else None."""
     shipped, cache = map_paths(robot_path, ident.key)
-    for path, source in ((map_file(shipped, ".npz"), "shipped"), (map_file(shipped, STORE_SUFFIX), "shipped"),
-                         (map_file(cache, STORE_SUFFIX), "cache"), (map_file(cache, ".npz"), "cache")):
+    for path, source in ((map_file(shipped, ".npz"), MapSource.SHIPPED), (map_file(shipped, STORE_SUFFIX), MapSource.SHIPPED),
+                         (map_file(cache, STORE_SUFFIX), MapSource.CACHE), (map_file(cache, ".npz"), MapSource.CACHE)):
         if path.exists():
             try:
                 field = load_bound_map(path, key=ident.key)
@@ -248,7 +249,7 @@ def find_bound_map(robot_path, robot, spec, settings, *, evaluator=None) -> tupl
     Returns
     -------
     tuple or None
-        ``(field, source)`` with source ``"shipped"`` or ``"cache"``; None when there is no
+        ``(field, source)`` with source :class:`~ctrplan.choices.MapSource` ``SHIPPED`` or ``CACHE``; None when there is no
         complete map (an interrupted computation is not one).
     """
     if evaluator is None:
@@ -289,7 +290,7 @@ def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1
     -------
     field : BoundField
     source : str
-        ``"shipped"``, ``"cache"`` or ``"computed"``.
+        A :class:`~ctrplan.choices.MapSource`: ``"shipped"``, ``"cache"`` or ``"computed"``.
     seconds : float
         Wall time spent loading or computing [s].
 
@@ -316,4 +317,4 @@ def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1
     store.parent.mkdir(parents=True, exist_ok=True)
     run = compute_bound_map_store(robot, evaluator, spec, settings, store, n_jobs, scheduler=scheduler,
                                   robot_file_text=text, metadata={"robot_file": robot_path.name}, progress=progress)
-    return run.field, "computed", time.perf_counter() - t0
+    return run.field, MapSource.COMPUTED, time.perf_counter() - t0

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from ..choices import JointKind
 from ..io.scenario import DriveLimits
-from ..robot import ROTATION
 from ._criteria import (Information, ds_criterion, information, noise_weight, prior_precision, sensitivities)
 from ._hypotheses import DesignInputError
 from ._motions import feasible, joint_configurations, motion_data, primitives, sample, trajectory
@@ -36,7 +36,7 @@ POWER_LEVEL = 0.01
 DEFAULT_CONTROL_RATE = 250.0
 #: Drive limits of joints the recorded motion did not move (the shipped scenarios' values):
 #: velocity, acceleration, jerk for rotations [rad/s^k] and translations [m/s^k].
-FALLBACK_DRIVE = {ROTATION: (1.0, 4.0, 40.0), "translation": (0.01, 0.04, 0.4)}
+FALLBACK_DRIVE = {JointKind.ROTATION: (1.0, 4.0, 40.0), JointKind.TRANSLATION: (0.01, 0.04, 0.4)}
 #: Predicted correlation [-] from which a parameter is reported as confounded with another.
 CONFOUNDED_CORRELATION = 0.9
 #: Spacing of the states checked along a primitive's segments [m of the planner's weighted joint

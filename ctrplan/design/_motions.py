@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..choices import MotionKind
 from ..history import MotionRecord, motion_state
 from ..robot import ROTATION, TRANSLATION
 from ..trajectory import Trajectory, time_parameterize
@@ -211,7 +212,7 @@ def trajectory(robot, prims, drive) -> Trajectory:
             raise ValueError("primitives do not join: one starts where the previous did not end")
         f = prim.speed
         for a, b, motion in zip(prim.waypoints[:-1], prim.waypoints[1:], prim.motions):
-            piece = time_parameterize(np.vstack([a, b]), ["start", motion], kinds, drive.max_velocity * f,
+            piece = time_parameterize(np.vstack([a, b]), [MotionKind.START, motion], kinds, drive.max_velocity * f,
                                       drive.max_acceleration * f ** 2, drive.max_jerk * f ** 3,
                                       drive.control_rate_hz, lower, upper, [False] * n, joint_names=names)
             s = piece.segments[0]

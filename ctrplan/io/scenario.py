@@ -19,6 +19,7 @@ from typing import Annotated, Literal, Mapping, Union
 import numpy as np
 from pydantic import AfterValidator, ConfigDict, Field
 
+from ..choices import AimWith, FinalMotion, FirstPlan, JointKind, MapPlacement
 from ..calibration import RobotCalibration
 from ..coordinates import map_coordinates
 from ..errors import JointLimitError, ModelFileError
@@ -43,6 +44,10 @@ Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
 # --------------------------------------------------------------------------- file schema
+# A key whose value is one of a string enum's members (ctrplan.choices): the file's string becomes
+# the member (the documents are otherwise strict: no coercion of numbers or strings)
+_CHOICE = Field(strict=False)
+
 class _QDoc(_Strict):
     q: dict[str, float]
 
@@ -74,16 +79,16 @@ class _PlannerDoc(_Strict):
     bound_weight: Annotated[float, Field(ge=0.0)] = DEFAULT_BOUND_WEIGHT
     range: Positive | None = None
     rewire_factor: Positive | None = None
-    final_motion: Literal["translation-last", "rotation-last"] = "translation-last"
-    aim_with: Literal["auto", "history", "standard"] = "auto"
+    final_motion: Annotated[FinalMotion, _CHOICE] = FinalMotion.TRANSLATION_LAST
+    aim_with: Annotated[AimWith, _CHOICE] = AimWith.AUTO
     roadmap: bool | None = None
 
 
 class _BoundFieldDoc(_Strict):
     resolution: list[Annotated[int, Field(ge=2)]] | None = None
-    placement: Literal["uniform", "adaptive"] = "uniform"
+    placement: Annotated[MapPlacement, _CHOICE] = MapPlacement.UNIFORM
     ds_m: Positive | None = None
-    first_plan: Literal["preview", "full"] = "preview"
+    first_plan: Annotated[FirstPlan, _CHOICE] = FirstPlan.PREVIEW
     refine_rounds: Annotated[int, Field(ge=0)] | None = None
     refine_tolerance_m: Positive = 0.25e-3
 
@@ -230,13 +235,13 @@ class PlannerSettings:
     rewire_factor : float or None
         RRT* family: OMPL's rewire factor on the k-nearest neighbour count; None for ctrplan's
         default (``ctrplan.planning.route.DEFAULT_REWIRE_FACTOR``).
-    final_motion : {"translation-last", "rotation-last"}
+    final_motion : FinalMotion
         How the motion reaching each goal ends (default ``"translation-last"``): a final
         translation releases the friction-induced twist (clearance model), a final rotation
         leaves the friction solution of its direction (Section V-B of Ha et al. 2019). Task-space
         goals are aimed for the tip predicted after that motion
         (:func:`ctrplan.planning.goals.compensate_goal`).
-    aim_with : {"auto", "history", "standard"}
+    aim_with : AimWith
         The model task-space goals are aimed with (default ``"auto"``): ``"history"`` the
         history-aware prediction (compensated goals), ``"standard"`` the standard model,
         ``"auto"`` the history-aware prediction only where the robot file's
@@ -260,8 +265,8 @@ class PlannerSettings:
     bound_weight: float = DEFAULT_BOUND_WEIGHT
     range: float | None = None
     rewire_factor: float | None = None
-    final_motion: str = "translation-last"
-    aim_with: str = "auto"
+    final_motion: FinalMotion = FinalMotion.TRANSLATION_LAST
+    aim_with: AimWith = AimWith.AUTO
     roadmap: bool | None = None
     parameters: Mapping = field(default_factory=dict)
 
@@ -276,11 +281,11 @@ class BoundFieldSettings:
         Grid nodes per map coordinate (base rotations, then translations, of tubes 2..n
         relative to tube 1 that the joints change; ``ctrplan.coordinates.map_coordinates``); None
         for the default.
-    placement : {"uniform", "adaptive"}
+    placement : MapPlacement
         Node placement along bounded coordinates (``ctrplan.boundmap.MapSpec``).
     ds : float or None
         Arc-length step of the mechanics [m]; None for the default.
-    first_plan : {"preview", "full"}
+    first_plan : FirstPlan
         For a robot whose map is neither shipped nor cached: plan first with a coarse preview map
         refined where the plan goes (``"preview"``; ``ctrplan plan`` then computes the full map),
         or compute the full map first (``"full"``).
@@ -293,9 +298,9 @@ class BoundFieldSettings:
     """
 
     resolution: tuple[int, ...] | None = None
-    placement: str = "uniform"
+    placement: MapPlacement = MapPlacement.UNIFORM
     ds: float | None = None
-    first_plan: str = "preview"
+    first_plan: FirstPlan = FirstPlan.PREVIEW
     refine_rounds: int | None = None
     refine_tolerance: float = 0.25e-3
 
@@ -583,7 +588,7 @@ def _joint_values(robot: Robot, mapping: Mapping[str, float], file: str, key: st
     q = _named(robot, mapping, file, key)
     for j, v in zip(robot.joints, q):
         if not j.periodic and not (j.lower <= v <= j.upper):
-            unit = "rad" if j.kind == "rotation" else "m"
+            unit = "rad" if j.kind == JointKind.ROTATION else "m"
             raise ModelFileError(file, f"{key}.{j.name}",
                                  f"{float(v):.6g} {unit} is outside the joint limits [{float(j.lower):.6g}, "
                                  f"{float(j.upper):.6g}] {unit}")

@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
+from ..choices import FirstPlan, MapSource
 from .._log import deprecated_echo, progress_level
 from ..boundmap import BoundField, find_bound_map, load_or_compute_bound_map, preview_spec
 from ..coordinates import map_coordinates
@@ -16,7 +17,7 @@ from .setup import PlanSetup
 __all__ = ["BoundMapStage", "load_bound_map", "complete_bound_map", "given_bound_map", "GIVEN"]
 
 #: ``BoundMapStage.source`` of a map handed to the plan (:func:`given_bound_map`).
-GIVEN = "given"
+GIVEN = MapSource.GIVEN
 
 logger = logging.getLogger(__package__)
 
@@ -77,7 +78,7 @@ def load_bound_map(setup: PlanSetup, n_jobs: int = 1, echo=None, *, progress: bo
         A store to resume was made for another robot, spec or mechanics version.
     """
     robot_file = setup.scenario.robot_file
-    if setup.scenario.bound_field.first_plan == "preview":
+    if setup.scenario.bound_field.first_plan == FirstPlan.PREVIEW:
         t0 = time.perf_counter()
         found = find_bound_map(robot_file, setup.robot, setup.spec, setup.settings)
         if found is None:

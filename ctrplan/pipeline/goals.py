@@ -13,6 +13,7 @@ from typing import Mapping
 
 import numpy as np
 
+from ..choices import AimWith
 from .._log import deprecated_echo, progress_level
 from ..calibration import PredictionValidation
 from ..errors import CtrplanError, UnreachableGoalError
@@ -237,7 +238,8 @@ def aim_decision(validation: PredictionValidation | None, aim_with: str = "auto"
     ----------
     validation : PredictionValidation or None
         The robot file's ``[prediction_validation]`` (``Scenario.calibration.prediction``).
-    aim_with : {"auto", "history", "standard"}
+    aim_with : AimWith or str
+        ``"auto"``, ``"history"`` or ``"standard"``.
 
     Returns
     -------
@@ -248,12 +250,12 @@ def aim_decision(validation: PredictionValidation | None, aim_with: str = "auto"
     ValueError
         ``aim_with`` not one of the three.
     """
-    if aim_with not in ("auto", "history", "standard"):
-        raise ValueError(f"aim_with must be 'auto', 'history' or 'standard', got {aim_with!r}")
+    if aim_with not in tuple(AimWith):
+        raise ValueError(f"aim_with must be one of {', '.join(AimWith)}, got {aim_with!r}")
     pv = validation
-    if aim_with == "history":
+    if aim_with == AimWith.HISTORY:
         use, why = True, AimReason.ASKED_HISTORY
-    elif aim_with == "standard":
+    elif aim_with == AimWith.STANDARD:
         use, why = False, AimReason.ASKED_STANDARD
     elif pv is None:
         use, why = False, AimReason.NOT_VALIDATED

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ..choices import MotionKind
 from ..mechanics import evaluate_bound
 from ..planning import bounds_given_last_motion
 
@@ -99,10 +100,10 @@ def bounds_along_path(ordered, robot, field, settings, joint_space, *, exact=Non
     tlast = np.asarray(field(qd, "translation_last_position"))
     # along a rotation phase the friction bound applies; along (and after) a translation, the
     # translation-last bound (Section V-B)
-    given_last = np.where(np.array(md) == "translation", tlast, friction)
+    given_last = np.where(np.array(md) == MotionKind.TRANSLATION, tlast, friction)
     # the map's value of the quantity the exact report gives at each waypoint
     motions = np.array(ordered.motions)
-    planned = np.where(motions == "translation", field(ordered.q, "translation_last_position"),
+    planned = np.where(motions == MotionKind.TRANSLATION, field(ordered.q, "translation_last_position"),
                        field(ordered.q, "position"))
     return PathBounds(dense_q=qd, dense_s=sd, dense_motion=md, dense_friction=friction,
                       dense_translation_last=tlast, dense_given_last=given_last, planned=planned,

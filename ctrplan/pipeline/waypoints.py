@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..choices import BoundKind, MotionKind
 from ..calibration import CalibratedBound
 from .routes import RoutePlan
 
@@ -119,7 +120,8 @@ def waypoint_table(plan: RoutePlan, calibration: CalibratedBound | None = None) 
         bound_position_m=_frozen(exact.position, float),
         calibrated_bound_m=_frozen(calibrated_bound(calibration, exact.position)),
         planned_bound_m=_frozen(plan.bounds.planned, float), bound_angle_rad=_frozen(exact.angle, float),
-        bound_kind=_frozen(["translation_last" if m == "translation" else "friction" for m in motions]),
+        bound_kind=_frozen([BoundKind.TRANSLATION_LAST if m == MotionKind.TRANSLATION else BoundKind.FRICTION
+                            for m in motions]),
         predicted_tip=_frozen(np.reshape(pred.tip, (-1, 3)), float),
         predicted_offset_m=_frozen(pred.offset, float), prediction_eta=_frozen(pred.eta_used, int),
         prediction_cases=tuple(pred.cases))

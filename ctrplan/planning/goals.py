@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..choices import JointKind
 from ..errors import CtrplanError, UnreachableGoalError
 from ..io.scenario import JointGoal, TaskGoal
 from .space import wrap_angle
@@ -226,7 +227,7 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
     starts = _starts(robot, int(starts_per_joint), int(max_starts), rng)
     for q0 in starts:
         res = least_squares(residual, q0, bounds=(lo, hi), method="trf", max_nfev=max_nfev,
-                            x_scale=np.where([j.kind == "rotation" for j in robot.joints], 1.0, 0.01))
+                            x_scale=np.where([j.kind == JointKind.ROTATION for j in robot.joints], 1.0, 0.01))
         q = np.where(periodic, wrap_angle(res.x), res.x)
         err = float(np.linalg.norm(residual(q)))
         if err < best_err:
@@ -421,7 +422,7 @@ def compensate_goal(target, robot, q_standard, state, settings=None, *, toleranc
     if q0.shape != (nj,):
         raise ValueError(f"q_standard needs {nj} values ({', '.join(robot.joint_names)}), got {q0.shape}")
     periodic = np.array([j.periodic for j in robot.joints])
-    rot = np.array([j.kind == "rotation" for j in robot.joints])
+    rot = np.array([j.kind == JointKind.ROTATION for j in robot.joints])
     lo = np.where(periodic, -np.inf, robot.joint_lower)
     hi = np.where(periodic, np.inf, robot.joint_upper)
     scale = np.where(rot, 1.0, _TRANSLATION_SCALE)

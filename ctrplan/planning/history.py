@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..choices import FinalMotion, JointKind, MotionKind
 from ..effects import history_state
 from ..errors import UnreachableGoalError
 from ..history import HistoryState, MotionRecord, PairState
@@ -34,9 +35,9 @@ from .space import wrap_angle
 __all__ = ["path_history", "approach_history", "approach_rows", "end_with", "goal_indices", "FINAL_MOTIONS", "DEFAULT_FINAL_MOTION"]
 
 # Final motions a scenario may ask for ([planner] final_motion) and the motion kind each ends with.
-FINAL_MOTIONS = {"translation-last": "translation", "rotation-last": "rotation"}
+FINAL_MOTIONS = {f: f.last for f in FinalMotion}
 #: Final motion of a scenario that does not name one.
-DEFAULT_FINAL_MOTION = "translation-last"
+DEFAULT_FINAL_MOTION = FinalMotion.TRANSLATION_LAST
 
 
 def _record(robot, q) -> MotionRecord:
@@ -98,10 +99,10 @@ def approach_rows(robot, q_from, q_to, final_motion: str = DEFAULT_FINAL_MOTION)
     if a.shape != (nj,) or b.shape != (nj,):
         raise ValueError(f"q_from and q_to need {nj} values, got {a.shape} and {b.shape}")
     periodic = np.array([j.periodic for j in robot.joints])
-    rot = np.array([j.kind == "rotation" for j in robot.joints])
+    rot = np.array([j.kind == JointKind.ROTATION for j in robot.joints])
     d = np.where(periodic, wrap_angle(b - a), b - a)
     end = a + d
-    mid = a + np.where(rot, d, 0.0) if final_motion == "translation-last" else a + np.where(rot, 0.0, d)
+    mid = a + np.where(rot, d, 0.0) if final_motion == FinalMotion.TRANSLATION_LAST else a + np.where(rot, 0.0, d)
     return np.array([a, mid, end])
 
 
@@ -186,7 +187,7 @@ def end_with(ordered: OrderedPath, index: int, final_motion: str, motion_check=N
     if not 1 <= index < len(ordered):
         raise ValueError(f"index must be in [1, {len(ordered) - 1}], got {index}")
     want = FINAL_MOTIONS[final_motion]
-    other = "rotation" if want == "translation" else "translation"
+    other = MotionKind.ROTATION if want == MotionKind.TRANSLATION else MotionKind.TRANSLATION
     wps = ordered.waypoints
     if wps[index].motion == want:
         return ordered, "already"

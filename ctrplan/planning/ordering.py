@@ -25,13 +25,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..choices import MotionKind
 from ..errors import UnreachableGoalError
 from .space import JointStateSpace, unwrap_path
 
 __all__ = ["OrderedWaypoint", "OrderedPath", "LastMotionBounds", "order_path", "bounds_given_last_motion",
            "MOTIONS"]
 
-MOTIONS = ("start", "rotation", "translation")
+MOTIONS = tuple(MotionKind)
 
 # Joint changes at or below this are "no motion" [rad or m].
 NO_MOTION_TOL = 1e-12
@@ -186,7 +187,7 @@ def order_path(waypoints, robot, validity_fn=None, *, joint_space: JointStateSpa
     js = joint_space if joint_space is not None else JointStateSpace(robot)
     w = unwrap_path(np.atleast_2d(np.asarray(waypoints, dtype=float)), robot)
     rot = js.is_rotation
-    out = [OrderedWaypoint("start", w[0].copy())]
+    out = [OrderedWaypoint(MotionKind.START, w[0].copy())]
     result = OrderedPath(out)
 
     def check(p, q):
@@ -205,9 +206,9 @@ def order_path(waypoints, robot, validity_fn=None, *, joint_space: JointStateSpa
         mid = a + np.where(rot, d, 0.0)
         phases = []
         if np.any(np.abs(d[rot]) > NO_MOTION_TOL):
-            phases.append(("rotation", a, mid))
+            phases.append((MotionKind.ROTATION, a, mid))
         if np.any(np.abs(d[~rot]) > NO_MOTION_TOL):
-            phases.append(("translation", mid, b))
+            phases.append((MotionKind.TRANSLATION, mid, b))
         reason = ""
         for kind, p, q in phases:
             ok, reason = check(p, q)
@@ -282,7 +283,7 @@ def bounds_given_last_motion(ordered: OrderedPath, robot, evaluator, settings=No
             results.append(None)
             continue
         results.append(res)
-        if wp.motion == "translation":
+        if wp.motion == MotionKind.TRANSLATION:
             pos[i], ang[i] = res.translation_last_position, res.translation_last_angle
         else:
             pos[i], ang[i] = res.position, res.angle

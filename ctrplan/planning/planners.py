@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from ompl import base as ob, geometric as og, util as ou
 
+from ..choices import JointKind
 from ..errors import CtrplanError, UnreachableGoalError
 from ..planner_info import PLANNER_REGISTRY, check_planner_options
 from .space import JointStateSpace
@@ -374,5 +375,5 @@ def _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, t
 def _fmt_q(robot, q) -> str:
     parts = []
     for j, v in zip(robot.joints, np.asarray(q, dtype=float)):
-        parts.append(f"{j.name}={v:.4g} rad" if j.kind == "rotation" else f"{j.name}={v * 1e3:.4g} mm")
+        parts.append(f"{j.name}={v:.4g} rad" if j.kind == JointKind.ROTATION else f"{j.name}={v * 1e3:.4g} mm")
     return "(" + ", ".join(parts) + ")"

@@ -1,0 +1,91 @@
+"""The choices of ctrplan's files and functions, as string enums.
+
+Each choice is a :class:`enum.StrEnum`: a member *is* the string written in files and on the
+command line (``JointKind.ROTATION == "rotation"``, ``json.dumps`` writes ``"rotation"``), so the
+file formats are those of the strings, and code that compares, hashes or formats a member gets
+the string's result. Functions accept either the member or its string; loaders turn a file's
+string into the member and refuse any other with the choices listed.
+
+This module imports nothing from the package, so that every layer can use it.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+__all__ = ["JointKind", "MotionKind", "FinalMotion", "BoundKind", "AimWith", "MapPlacement", "FirstPlan",
+           "MapSource"]
+
+
+class JointKind(StrEnum):
+    """What a joint moves: a tube base's rotation alpha [rad] or its translation beta [m]; also
+    the kind of a bound-map coordinate (a relative rotation or translation)."""
+
+    ROTATION = "rotation"
+    TRANSLATION = "translation"
+
+
+class MotionKind(StrEnum):
+    """The motion that reaches a waypoint of an ordered path: the start, a rotation phase (the
+    rotation joints move, the translations hold) or a translation phase."""
+
+    START = "start"
+    ROTATION = "rotation"
+    TRANSLATION = "translation"
+
+
+class FinalMotion(StrEnum):
+    """How the motion that reaches a goal ends (``[planner] final_motion``): with its translations
+    (rotations first, the paper's order: the final translation releases most friction-induced
+    twist, Section V-B of Ha et al. 2019) or with its rotations."""
+
+    TRANSLATION_LAST = "translation-last"
+    ROTATION_LAST = "rotation-last"
+
+    @property
+    def last(self) -> MotionKind:
+        """The phase that ends the motion."""
+        return MotionKind.TRANSLATION if self is FinalMotion.TRANSLATION_LAST else MotionKind.ROTATION
+
+
+class BoundKind(StrEnum):
+    """Which error bound holds at a waypoint: the friction bound (after a rotation or at the
+    start; Section III of Ha et al. 2019) or the smaller bound after a final translation."""
+
+    FRICTION = "friction"
+    TRANSLATION_LAST = "translation_last"
+
+
+class AimWith(StrEnum):
+    """How task-space goals are aimed (``[goal_prediction] aim_with``): by the robot file's
+    validation (``auto``), always with the history-aware prediction, or with the standard model."""
+
+    AUTO = "auto"
+    HISTORY = "history"
+    STANDARD = "standard"
+
+
+class MapPlacement(StrEnum):
+    """Where a bound map puts its nodes along each coordinate: evenly, or denser where the bound
+    bends (pilot lines)."""
+
+    UNIFORM = "uniform"
+    ADAPTIVE = "adaptive"
+
+
+class FirstPlan(StrEnum):
+    """What a robot without a map plans with first (``[bound_field] first_plan``): the preview map
+    refined where the plan goes, or the full map."""
+
+    PREVIEW = "preview"
+    FULL = "full"
+
+
+class MapSource(StrEnum):
+    """Where a plan's bound map came from: shipped beside the robot file, the cache folder,
+    computed for this plan, or given by the caller."""
+
+    SHIPPED = "shipped"
+    CACHE = "cache"
+    COMPUTED = "computed"
+    GIVEN = "given"
