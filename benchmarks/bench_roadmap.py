@@ -54,18 +54,16 @@ def single_query(planner, q0, q1) -> tuple[float, float]:
     """(largest exact bound at the ordered waypoints given the last motion [m], seconds) of the
     scenario's single-query plan from ``q0`` to ``q1``."""
     from ctrplan.mechanics import evaluate_bound
-    from ctrplan.planning import BoundCostObjective, bounds_given_last_motion
+    from ctrplan.planning import BoundCostObjective, SearchSettings, bounds_given_last_motion
     from ctrplan.planning.history import end_with
-    from ctrplan.planning.route import DEFAULT_REWIRE_FACTOR, plan_route
+    from ctrplan.planning.route import plan_route
 
     sc = planner.setup.scenario
     p = sc.planner
     t0 = time.perf_counter()
     route = plan_route(planner.robot, q0, [q1], planner.checks,
-                       BoundCostObjective.factory(planner.field, bound_weight=planner.bound_weight), planner=p.name,
-                       iterations=p.iterations, seed=p.seed, time_limit=p.time_limit, range_=p.range,
-                       joint_space=planner.joint_space,
-                       rewire_factor=p.rewire_factor if p.rewire_factor is not None else DEFAULT_REWIRE_FACTOR)
+                       BoundCostObjective.factory(planner.field, bound_weight=planner.bound_weight),
+                       SearchSettings.from_scenario(p), joint_space=planner.joint_space)
     ordered, _ = end_with(route.ordered, len(route.ordered.q) - 1, p.final_motion, planner.checks.final.check)
     bounds = bounds_given_last_motion(ordered, planner.robot, evaluate_bound, planner.setup.settings)
     return float(np.nanmax(bounds.position)), time.perf_counter() - t0

@@ -246,6 +246,7 @@ class Planner:
         from ..mechanics import evaluate_bound
         from ..planning import BoundCostObjective, bounds_given_last_motion
         from ..planning.history import end_with
+        from ..planning import SearchSettings
         from ..planning.route import plan_route
         from .drive import time_parameterize
 
@@ -258,10 +259,8 @@ class Planner:
         p = sc.planner
         t0 = time.perf_counter()
         route = plan_route(robot, q0, [q1], checks, BoundCostObjective.factory(self.field, bound_weight=self.bound_weight),
-                           planner=p.name, iterations=p.iterations, seed=p.seed, time_limit=p.time_limit,
-                           range_=p.range, joint_space=js,
-                           rewire_factor=p.rewire_factor,
-                           planner_options=p.parameters, roadmap=(self.roadmap, self.terms, self.bound_weight))
+                           SearchSettings.from_scenario(p), joint_space=js,
+                           roadmap=(self.roadmap, self.terms, self.bound_weight))
         leg = route.legs[0]
         via = "roadmap" if leg.planner == "roadmap" else "search"
         if via == "search":

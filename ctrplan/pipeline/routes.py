@@ -15,7 +15,7 @@ import numpy as np
 from .._log import deprecated_echo, progress_level
 from ..errors import CtrplanError
 from ..mechanics import ModelSettings
-from ..planning import BoundCostObjective, JointStateSpace
+from ..planning import BoundCostObjective, JointStateSpace, SearchSettings
 from ..planning.history import end_with, goal_indices
 from ..planning.route import plan_route, route_checks
 from .goals import AimedGoals
@@ -130,12 +130,9 @@ def _plan_mode(job: _PlanJob) -> RoutePlan:
 
         roadmap = (job.roadmap, motion_terms(joint_space, field), job.weight)
     t0 = time.perf_counter()
-    route = plan_route(robot, job.start, job.goals, checks,
-                       BoundCostObjective.factory(field, bound_weight=job.weight), planner=p.name,
-                       iterations=job.iterations, seed=p.seed, time_limit=p.time_limit, range_=p.range,
-                       joint_space=joint_space,
-                       rewire_factor=p.rewire_factor,
-                       planner_options=p.parameters, roadmap=roadmap)
+    route = plan_route(robot, job.start, job.goals, checks, BoundCostObjective.factory(field, bound_weight=job.weight),
+                       SearchSettings.from_scenario(p, iterations=job.iterations), joint_space=joint_space,
+                       roadmap=roadmap)
     ordered = route.ordered
     # the motion reaching each goal ends as the scenario asks (swap its last two phases if needed
     # and if the swapped phases pass the final check)

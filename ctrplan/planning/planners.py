@@ -25,7 +25,7 @@ from ..planner_info import PLANNER_REGISTRY, check_planner_options
 from .space import JointStateSpace
 from .validity import DEFAULT_VALIDITY_RESOLUTION, use_motion_validator
 
-__all__ = ["PLANNERS", "SearchResult", "ValidityChecker", "plan", "DEFAULT_ITERATIONS",
+__all__ = ["PLANNERS", "SearchResult", "SearchSettings", "ValidityChecker", "plan", "DEFAULT_ITERATIONS",
            "DEFAULT_VALIDITY_RESOLUTION"]
 
 
@@ -201,12 +201,104 @@ def _path_to_numpy(joint_space, path) -> np.ndarray:
     return np.array([joint_space.to_numpy(path.getState(i)) for i in range(path.getStateCount())])
 
 
-def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar",
-         iterations: int = DEFAULT_ITERATIONS, time_limit: float | None = None, seed: int = 1, *,
-         joint_space: JointStateSpace | None = None, validity_resolution: float = DEFAULT_VALIDITY_RESOLUTION,
-         range_: float | None = None, goal_bias: float | None = None, rewire_factor: float | None = None,
-         options: Mapping | None = None, shortcut_rounds: int = DEFAULT_SHORTCUT_ROUNDS,
-         quiet: bool = True) -> SearchResult:
+#: Planner parameters that :func:`plan` and :func:`~ctrplan.planning.plan_route` also take as keywords,
+#: by their keyword (``range`` is a builtin, hence ``range_``).
+_PARAMETER_KEYWORDS = {"range_": "range", "goal_bias": "goal_bias", "rewire_factor": "rewire_factor"}
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """How one planner search runs: which planner, its budget, its seed and its parameters.
+
+    Attributes
+    ----------
+    planner : str
+        A registered planner (:data:`ctrplan.planner_info.PLANNER_REGISTRY`).
+    iterations : int
+        Planner iterations (termination condition, reproducible); >= 1.
+    time_limit : float or None
+        Additional wall-time limit [s]; runs stopped by it are not reproducible.
+    seed : int
+        OMPL RNG seed (> 0), set before any planner or sampler is created.
+    options : mapping of str to value
+        Parameters the planner declares (:class:`ctrplan.planner_info.PlannerParameter`), by name
+        (``range``: maximum motion length [m of the weighted joint metric]; ``goal_bias``; and
+        ``rewire_factor``: OMPL's ``setRewireFactor``, the factor on the k-nearest neighbour count
+        ``k = factor * 2^(d+1) e (1 + 1/d) log(n)`` whose motions a new state is connected and
+        rewired through); None values count as not given.
+    validity_resolution : float
+        Spacing of validity checks along motions [m of the weighted metric] (a
+        ``BatchValidityChecker`` uses its own ``resolution``).
+    shortcut_rounds : int
+        Rounds of cost-aware ``partialShortcutPath``; 0 disables.
+    """
+
+    planner: str = "RRTstar"
+    iterations: int = DEFAULT_ITERATIONS
+    time_limit: float | None = None
+    seed: int = 1
+    options: Mapping = field(default_factory=dict)
+    validity_resolution: float = DEFAULT_VALIDITY_RESOLUTION
+    shortcut_rounds: int = DEFAULT_SHORTCUT_ROUNDS
+
+    def replace(self, **changes) -> "SearchSettings":
+        """A copy with ``changes`` (field names)."""
+        import dataclasses
+
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def of(cls, settings: "SearchSettings | None" = None, **keywords) -> "SearchSettings":
+        """``settings`` (default: the defaults) with keyword values on top.
+
+        Parameters
+        ----------
+        settings : SearchSettings, optional
+        **keywords
+            Field names, and the planner parameters ``range_``, ``goal_bias`` and
+            ``rewire_factor`` (added to ``options``); None values count as not given.
+
+        Raises
+        ------
+        TypeError
+            A keyword that is neither.
+        ValueError
+            A planner parameter given both as a keyword and in ``options``.
+        """
+        base = cls() if settings is None else settings
+        if not isinstance(base, cls):
+            raise TypeError(f"settings must be a SearchSettings, got {type(base).__name__} ({base!r})")
+        names = set(cls.__dataclass_fields__)
+        unknown = sorted(set(keywords) - names - set(_PARAMETER_KEYWORDS))
+        if unknown:
+            raise TypeError(f"unknown search keyword(s) {', '.join(unknown)}; known: "
+                            f"{', '.join(sorted(names | set(_PARAMETER_KEYWORDS)))}")
+        fields = {k: v for k, v in keywords.items() if k in names}
+        options = dict(base.options)
+        options.update({k: v for k, v in dict(fields.pop("options", None) or {}).items() if v is not None})
+        for keyword, name in _PARAMETER_KEYWORDS.items():
+            value = keywords.get(keyword)
+            if value is None:
+                continue
+            if options.get(name) is not None and options[name] != value:
+                raise ValueError(f"planner parameter {name!r} given twice (as a keyword and in options)")
+            options[name] = value
+        return base.replace(**fields, options=options)
+
+    @classmethod
+    def from_scenario(cls, planner_settings, **changes) -> "SearchSettings":
+        """The search of a scenario's ``[planner]`` table (:class:`ctrplan.io.scenario.PlannerSettings`:
+        name, iterations, time limit, seed, ``range``, ``rewire_factor`` and the planner's other
+        declared parameters), with ``changes`` (keywords of :meth:`of`) on top."""
+        p = planner_settings
+        options = {"range": p.range, "rewire_factor": p.rewire_factor, **dict(p.parameters)}
+        base = cls(planner=p.name, iterations=p.iterations, time_limit=p.time_limit, seed=p.seed,
+                   options={k: v for k, v in options.items() if v is not None})
+        return cls.of(base, **changes)
+
+
+def plan(robot, start_q, goal_q, validity_fn, objective, settings: SearchSettings | None = None, *,
+         joint_space: JointStateSpace | None = None, quiet: bool = True, **keywords) -> SearchResult:
     """Plan a valid, low-cost joint-space path from ``start_q`` to ``goal_q``.
 
     Parameters
@@ -216,7 +308,7 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
         Joint vectors in robot joint order [rad or m].
     validity_fn : callable
         ``validity_fn(q (n_joints,)) -> bool`` (e.g. a :class:`ValidityChecker`); wrapped so OMPL
-        receives a real ``bool``. Checked along motions every ``validity_resolution``. A
+        receives a real ``bool``. Checked along motions every ``settings.validity_resolution``. A
         :class:`~ctrplan.planning.validity.BatchValidityChecker` also checks OMPL's motions,
         all states of a motion in a few compiled calls
         (:func:`~ctrplan.planning.validity.use_motion_validator`), at its own ``resolution``.
@@ -225,37 +317,17 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
         ``BoundCostObjective.factory(field)``), or an objective already built on
         ``joint_space`` (then ``joint_space`` must be passed and its space information is
         re-used).
-    planner : str
-        A registered planner (:data:`ctrplan.planner_info.PLANNER_REGISTRY`).
-    iterations : int
-        Planner iterations (termination condition, reproducible).
-    time_limit : float, optional
-        Additional wall-time limit [s]; runs stopped by it are not reproducible.
-    seed : int
-        OMPL RNG seed (> 0), set before any planner or sampler is created.
-    joint_space : JointStateSpace, optional
+    settings : SearchSettings, optional
+        Planner, iterations, time limit, seed, the planner's parameters, validity resolution,
+        shortcut rounds (default: :class:`SearchSettings` ``()``).
+    joint_space : JointStateSpace, optional, keyword-only
         Default ``JointStateSpace(robot)``.
-    validity_resolution : float, keyword-only
-        Spacing of validity checks along motions [m of the weighted metric] (a
-        ``BatchValidityChecker`` uses its own ``resolution``).
-    range_ : float, optional
-        The planner's parameter ``range``: maximum motion length [m of the metric] (declared by
-        the RRT* family).
-    goal_bias : float, optional
-        The planner's parameter ``goal_bias``: goal sampling probability (RRT* family).
-    rewire_factor : float, optional
-        The planner's parameter ``rewire_factor``: OMPL's ``setRewireFactor``, the factor on the
-        k-nearest neighbour count ``k = factor * 2^(d+1) e (1 + 1/d) log(n)`` (d the state
-        dimension) whose motions a new state is connected and rewired through (OMPL's default
-        1.1: on three joints every node of a 1000-node tree is a neighbour; each costs a
-        motion-cost evaluation). Declared by the four built-in planners.
-    options : mapping of str to value, optional, keyword-only
-        Other parameters the planner declares (:class:`ctrplan.planner_info.PlannerParameter`),
-        by name; None values count as not given.
-    shortcut_rounds : int, keyword-only
-        Rounds of cost-aware ``partialShortcutPath``; 0 disables.
     quiet : bool, keyword-only
         Raise OMPL's log level to warnings during this call (restored afterwards).
+    **keywords
+        Fields of :class:`SearchSettings` on top of ``settings`` (``iterations=300, seed=3``), and
+        the planner parameters ``range_``, ``goal_bias``, ``rewire_factor``
+        (:meth:`SearchSettings.of`).
 
     Returns
     -------
@@ -263,6 +335,8 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
 
     Raises
     ------
+    TypeError
+        A keyword that is neither a field of :class:`SearchSettings` nor a planner parameter.
     ValueError
         Unknown planner name (:class:`ctrplan.registry.UnknownNameError`), a parameter the
         planner does not declare, a parameter value of the wrong type or outside its limits,
@@ -270,22 +344,18 @@ def plan(robot, start_q, goal_q, validity_fn, objective, planner: str = "RRTstar
     UnreachableGoalError
         Start or goal invalid, or no exact solution within the iterations.
     """
-    given = {"range": range_, "goal_bias": goal_bias, "rewire_factor": rewire_factor}
-    for key, value in dict(options or {}).items():
-        if given.get(key) is not None and value is not None:
-            raise ValueError(f"planner parameter {key!r} given twice (as a keyword and in options)")
-        given[key] = value if value is not None else given.get(key)
-    parameters = check_planner_options(planner, given)
-    if int(iterations) < 1:
-        raise ValueError(f"iterations must be >= 1, got {iterations!r}")
-    if int(seed) <= 0:
-        raise ValueError(f"seed must be a positive integer (OMPL treats 0 as 'random'), got {seed!r}")
+    s = SearchSettings.of(settings, **keywords)
+    parameters = check_planner_options(s.planner, s.options)
+    if int(s.iterations) < 1:
+        raise ValueError(f"iterations must be >= 1, got {s.iterations!r}")
+    if int(s.seed) <= 0:
+        raise ValueError(f"seed must be a positive integer (OMPL treats 0 as 'random'), got {s.seed!r}")
     level = ou.getLogLevel()
     if quiet:
         ou.setLogLevel(ou.LOG_WARN)
     try:
-        return _plan(robot, start_q, goal_q, validity_fn, objective, planner, iterations, time_limit, seed,
-                     joint_space, validity_resolution, parameters, shortcut_rounds)
+        return _plan(robot, start_q, goal_q, validity_fn, objective, s.planner, s.iterations, s.time_limit, s.seed,
+                     joint_space, s.validity_resolution, parameters, s.shortcut_rounds)
     finally:
         ou.setLogLevel(level)
 

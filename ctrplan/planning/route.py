@@ -29,7 +29,7 @@ import numpy as np
 from ..planner_info import PLANNER_REGISTRY
 from .collision import CollisionChecker
 from .ordering import OrderedPath, order_path
-from .planners import DEFAULT_ITERATIONS, SearchResult, plan
+from .planners import SearchResult, SearchSettings, plan
 from .validity import BatchValidityChecker
 from .verify import DEFAULT_MAX_BODY_STEP, DEFAULT_VERIFY_RESOLUTION, MotionVerifier
 
@@ -170,11 +170,9 @@ class Route:
     repairs: list = dc_field(default_factory=list)
 
 
-def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, planner: str = "RRTstar",
-               iterations: int = DEFAULT_ITERATIONS, seed: int = 1, time_limit: float | None = None,
-               range_: float | None = None, joint_space=None,
-               repair_iterations: int = DEFAULT_REPAIR_ITERATIONS,
-               rewire_factor: float | None = None, planner_options=None, roadmap=None) -> Route:
+def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, settings: SearchSettings | None = None, *,
+               joint_space=None, repair_iterations: int = DEFAULT_REPAIR_ITERATIONS, roadmap=None,
+               **keywords) -> Route:
     """Plan start -> goals, order into rotate-then-translate phases and check every phase.
 
     Parameters
@@ -188,13 +186,10 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
     objective : callable
         ``objective(si, joint_space) -> ob.OptimizationObjective``, e.g.
         ``BoundCostObjective.factory(field, bound_weight=w)``.
-    planner, iterations, seed, time_limit, range_
-        As :func:`~ctrplan.planning.plan`; leg k uses ``seed + k``.
-    rewire_factor : float or None, keyword-only
-        Declared by the built-in planners (:func:`~ctrplan.planning.plan`); None:
-        :data:`DEFAULT_REWIRE_FACTOR` where the planner declares it, else not set.
-    planner_options : mapping of str to value, optional, keyword-only
-        The planner's other declared parameters (``options`` of :func:`~ctrplan.planning.plan`).
+    settings : SearchSettings, optional
+        The search of each leg (:func:`~ctrplan.planning.plan`); leg k uses ``seed + k``. Its
+        ``rewire_factor``, when not given and the planner declares it, is
+        :data:`DEFAULT_REWIRE_FACTOR`.
     joint_space : JointStateSpace, optional, keyword-only
     repair_iterations : int, keyword-only
         Planner iterations of a repair.
@@ -202,7 +197,10 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
         ``(Roadmap, terms, bound_weight)``: each leg is the cheapest path through the roadmap
         (:meth:`~ctrplan.planning.roadmap.Roadmap.query` with ``terms`` and the weight [1/m]; its
         :class:`SearchResult` has ``planner == "roadmap"``); a leg the roadmap does not join is
-        planned by ``planner``.
+        planned by ``settings.planner``.
+    **keywords
+        Fields of :class:`SearchSettings` on top of ``settings``, and the planner parameters
+        ``range_``, ``goal_bias``, ``rewire_factor`` (:meth:`SearchSettings.of`).
 
     Returns
     -------
@@ -210,12 +208,15 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
 
     Raises
     ------
+    TypeError
+        A keyword that is neither a field of :class:`SearchSettings` nor a planner parameter.
     UnreachableGoalError
         A leg has no path within the budget, or a segment fails the final check and cannot be
         bisected or repaired (the message names the segment and what failed).
     """
-    if rewire_factor is None and "rewire_factor" in PLANNER_REGISTRY[planner].parameters:
-        rewire_factor = DEFAULT_REWIRE_FACTOR
+    search = SearchSettings.of(settings, **keywords)
+    if search.options.get("rewire_factor") is None and "rewire_factor" in PLANNER_REGISTRY[search.planner].parameters:
+        search = search.replace(options={**search.options, "rewire_factor": DEFAULT_REWIRE_FACTOR})
     js = joint_space if joint_space is not None else checks.search.joint_space
     legs: list[SearchResult] = []
     q_prev = np.asarray(start_q, dtype=float)
@@ -223,11 +224,10 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
     for gi, q_goal in enumerate(goals_q):
         res = None
         if roadmap is not None:
-            res = _roadmap_leg(roadmap, q_prev, q_goal, checks.search, js, seed + gi)
+            res = _roadmap_leg(roadmap, q_prev, q_goal, checks.search, js, search.seed + gi)
         if res is None:
-            res = plan(robot, q_prev, q_goal, checks.search, objective, planner=planner, iterations=iterations,
-                       time_limit=time_limit, seed=seed + gi, joint_space=js, range_=range_,
-                       rewire_factor=rewire_factor, options=planner_options)
+            res = plan(robot, q_prev, q_goal, checks.search, objective, search.replace(seed=search.seed + gi),
+                       joint_space=js)
         legs.append(res)
         wp = np.array(res.waypoints)
         offset = waypoints[-1] - wp[0]   # continue from where the previous leg ended (unwrapped angles)
@@ -236,9 +236,10 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, *, plann
     repairs: list[SearchResult] = []
 
     def repair(a, b):
-        res = plan(robot, a, b, checks.repair_search, objective, planner=planner, iterations=repair_iterations,
-                   seed=seed + 1000 + len(repairs), joint_space=js, range_=range_, rewire_factor=rewire_factor,
-                   options=planner_options)
+        res = plan(robot, a, b, checks.repair_search, objective,
+                   search.replace(iterations=repair_iterations, seed=search.seed + 1000 + len(repairs),
+                                  time_limit=None),
+                   joint_space=js)
         repairs.append(res)
         return res.waypoints
 
