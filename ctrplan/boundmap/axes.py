@@ -28,13 +28,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..choices import JointKind
+from ..choices import JointKind, MapPlacement
 
 __all__ = ["MapSpec", "PLACEMENTS", "uniform_axis", "place_nodes", "pilot_design", "DEFAULT_PILOT_LINES",
            "DEFAULT_PILOT_STEP_M", "DEFAULT_PILOT_STEP_RAD"]
 
 #: Node placements along a bounded coordinate (``MapSpec.placement``).
-PLACEMENTS = ("uniform", "adaptive")
+PLACEMENTS = tuple(MapPlacement)
 
 # Pilot lines per adaptive coordinate: enough different positions of the other coordinates for
 # the kinks of the bound (whose positions move with them) to show, few enough that the pilots
@@ -62,8 +62,9 @@ class MapSpec:
     resolution : tuple of int, shape (d,)
         Nodes per map coordinate (>= 2), in the order of
         :attr:`~ctrplan.coordinates.MapCoordinates.names`.
-    placement : {"uniform", "adaptive"}
-        Node placement along bounded coordinates (periodic ones are always uniform).
+    placement : MapPlacement or str
+        Node placement along bounded coordinates, ``"uniform"`` or ``"adaptive"`` (periodic ones
+        are always uniform); stored as the member.
     pilot_lines : int, keyword-only
         Pilot lines per adaptive coordinate.
     pilot_step_m, pilot_step_rad : float, keyword-only
@@ -78,7 +79,7 @@ class MapSpec:
     """
 
     resolution: tuple
-    placement: str = "uniform"
+    placement: MapPlacement = MapPlacement.UNIFORM
     pilot_lines: int = DEFAULT_PILOT_LINES
     pilot_step_m: float = DEFAULT_PILOT_STEP_M
     pilot_step_rad: float = DEFAULT_PILOT_STEP_RAD
@@ -90,7 +91,8 @@ class MapSpec:
         if any(n < 2 for n in res):
             raise ValueError(f"resolution must be >= 2 nodes per map coordinate, got {self.resolution!r}")
         if self.placement not in PLACEMENTS:
-            raise ValueError(f"placement must be one of {PLACEMENTS}, got {self.placement!r}")
+            raise ValueError(f"placement must be one of {', '.join(PLACEMENTS)}, got {self.placement!r}")
+        object.__setattr__(self, "placement", MapPlacement(self.placement))
         if int(self.pilot_lines) < 1 or not self.pilot_step_m > 0 or not self.pilot_step_rad > 0:
             raise ValueError(f"pilot settings must be positive: lines {self.pilot_lines!r}, "
                              f"steps {self.pilot_step_m!r} m, {self.pilot_step_rad!r} rad")
@@ -114,15 +116,15 @@ class MapSpec:
 
     def as_dict(self) -> dict:
         """JSON-ready (part of a map's identity)."""
-        d = {"resolution": list(self.resolution), "placement": self.placement}
-        if self.placement == "adaptive":
+        d = {"resolution": list(self.resolution), "placement": self.placement.value}
+        if self.placement == MapPlacement.ADAPTIVE:
             d.update(pilot_lines=int(self.pilot_lines), pilot_step_m=float(self.pilot_step_m),
                      pilot_step_rad=float(self.pilot_step_rad), pilot_seed=int(self.pilot_seed))
         return d
 
     def adaptive(self, coords) -> list[int]:
         """Indices of the coordinates whose nodes come from pilot lines."""
-        if self.placement != "adaptive":
+        if self.placement != MapPlacement.ADAPTIVE:
             return []
         return [k for k in range(coords.dim) if not coords.periodic[k]]
 
