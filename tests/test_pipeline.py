@@ -139,9 +139,9 @@ radius_m = 0.004
 def test_no_path_within_budget_fails_without_outputs(tmp_path, monkeypatch, capsys, cached_map):
     calls = []
 
-    def no_plan(robot, start_q, goal_q, *args, **kwargs):
-        calls.append(kwargs.get("iterations"))
-        raise UnreachableGoalError(f"RRTstar found no exact path in {kwargs.get('iterations')} iterations")
+    def no_plan(robot, start_q, goals_q, checks, objective, settings, **kwargs):
+        calls.append(settings.iterations)
+        raise UnreachableGoalError(f"RRTstar found no exact path in {settings.iterations} iterations")
 
     monkeypatch.setattr(pipeline.routes, "plan_route", no_plan)
     sc = _scenario(tmp_path, "{alpha_2 = 2.0, alpha_3 = 2.0, beta_3 = -0.06}")
