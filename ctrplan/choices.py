@@ -57,7 +57,7 @@ class BoundKind(StrEnum):
 
 
 class AimWith(StrEnum):
-    """How task-space goals are aimed (``[goal_prediction] aim_with``): by the robot file's
+    """How task-space goals are aimed (``[planner] aim_with``): by the robot file's
     validation (``auto``), always with the history-aware prediction, or with the standard model."""
 
     AUTO = "auto"

@@ -3,7 +3,7 @@ import pytest
 
 from ctrplan.errors import UnreachableGoalError
 from ctrplan.boundmap import compute_field
-from ctrplan.planning import (PLANNERS, BoundCostObjective, JointStateSpace, ValidityChecker,
+from ctrplan.planning import (PLANNERS, BoundCostObjective, JointStateSpace, SearchSettings, ValidityChecker,
                               order_path, plan)
 from test_planning_helpers import fake_bound, fake_robot, fake_solve_standard
 
@@ -224,3 +224,40 @@ def test_motion_cost_equals_a_hand_computation_on_a_linear_bound():
         path = np.array([c[0][0] for c in cases[:1]] + [[0.3, -0.2, -0.05], [1.0, -0.2, -0.05]])
         leg2 = m_per_rad * 0.7 * (1 + w * b(-0.05))
         assert objective.path_cost(path) == pytest.approx(cases[0][1] + leg2, rel=1e-12)
+
+
+def test_search_settings_and_keywords_run_the_same_search(setup):
+    """One search given as a SearchSettings and as keywords (planner parameters among them) is the
+    same search: same waypoints and cost (catches a field of the settings that does not reach the
+    planner, e.g. a range or a seed dropped on the way). A seed changed on top of the settings
+    changes the search."""
+    robot, field = setup
+    valid = ValidityChecker(robot, check_stability=False)
+    aware = BoundCostObjective.factory(field, bound_weight=1000.0)
+    settings = SearchSettings(planner="RRTstar", iterations=200, seed=5, options={"range": 0.3, "goal_bias": 0.2})
+    a = plan(robot, START, GOAL, valid, aware, settings)
+    b = plan(robot, START, GOAL, valid, aware, planner="RRTstar", iterations=200, seed=5, range_=0.3, goal_bias=0.2)
+    np.testing.assert_array_equal(a.waypoints, b.waypoints)
+    assert a.cost == b.cost and a.iterations == 200
+    c = plan(robot, START, GOAL, valid, aware, settings, seed=6)
+    assert c.cost != a.cost or not np.array_equal(c.waypoints, a.waypoints)
+
+
+def test_search_settings_merge_and_refuse():
+    """Keywords go on top of the settings (a planner parameter replaces the settings' value); the
+    same parameter twice in one call, or an unknown keyword, is refused; a scenario's [planner]
+    table gives its name, budget, seed, range, rewire factor and other declared parameters."""
+    from ctrplan.io.scenario import PlannerSettings
+
+    base = SearchSettings(iterations=50, options={"range": 0.5})
+    assert SearchSettings.of(base, range_=0.3, seed=4) == SearchSettings(iterations=50, seed=4, options={"range": 0.3})
+    assert SearchSettings.of(base, options={"goal_bias": None}).options == {"range": 0.5}
+    with pytest.raises(ValueError, match="'range' given twice"):
+        SearchSettings.of(base, options={"range": 0.2}, range_=0.3)
+    with pytest.raises(TypeError, match="unknown search keyword.*iteration;"):
+        SearchSettings.of(base, iteration=10)
+    p = PlannerSettings(name="RRTstar", iterations=120, time_limit=2.0, seed=9, range=0.4, rewire_factor=0.2,
+                        parameters={"goal_bias": 0.1})
+    s = SearchSettings.from_scenario(p, iterations=7)
+    assert (s.planner, s.iterations, s.time_limit, s.seed) == ("RRTstar", 7, 2.0, 9)
+    assert s.options == {"range": 0.4, "rewire_factor": 0.2, "goal_bias": 0.1}

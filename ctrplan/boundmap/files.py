@@ -216,7 +216,8 @@ def _stale_maps(robot_path, ident) -> list[str]:
 def _read_existing(robot_path: Path, ident) -> tuple | None:
     """The complete shipped or cached map of ``ident`` as (field, source), else None."""
     shipped, cache = map_paths(robot_path, ident.key)
-    for path, source in ((map_file(shipped, ".npz"), MapSource.SHIPPED), (map_file(shipped, STORE_SUFFIX), MapSource.SHIPPED),
+    for path, source in ((map_file(shipped, ".npz"), MapSource.SHIPPED),
+                         (map_file(shipped, STORE_SUFFIX), MapSource.SHIPPED),
                          (map_file(cache, STORE_SUFFIX), MapSource.CACHE), (map_file(cache, ".npz"), MapSource.CACHE)):
         if path.exists():
             try:
@@ -249,8 +250,8 @@ def find_bound_map(robot_path, robot, spec, settings, *, evaluator=None) -> tupl
     Returns
     -------
     tuple or None
-        ``(field, source)`` with source :class:`~ctrplan.choices.MapSource` ``SHIPPED`` or ``CACHE``; None when there is no
-        complete map (an interrupted computation is not one).
+        ``(field, source)`` with source :class:`~ctrplan.choices.MapSource` ``SHIPPED`` or
+        ``CACHE``; None when there is no complete map (an interrupted computation is not one).
     """
     if evaluator is None:
         from ..mechanics import evaluate_bound as evaluator
@@ -289,7 +290,7 @@ def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1
     Returns
     -------
     field : BoundField
-    source : str
+    source : MapSource
         A :class:`~ctrplan.choices.MapSource`: ``"shipped"``, ``"cache"`` or ``"computed"``.
     seconds : float
         Wall time spent loading or computing [s].

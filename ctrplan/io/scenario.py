@@ -48,6 +48,7 @@ Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 # the member (the documents are otherwise strict: no coercion of numbers or strings)
 _CHOICE = Field(strict=False)
 
+
 class _QDoc(_Strict):
     q: dict[str, float]
 

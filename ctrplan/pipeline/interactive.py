@@ -244,9 +244,8 @@ class Planner:
             The drive trajectory violates a drive limit.
         """
         from ..mechanics import evaluate_bound
-        from ..planning import BoundCostObjective, bounds_given_last_motion
+        from ..planning import BoundCostObjective, SearchSettings, bounds_given_last_motion
         from ..planning.history import end_with
-        from ..planning import SearchSettings
         from ..planning.route import plan_route
         from .drive import time_parameterize
 

@@ -255,15 +255,17 @@ class SearchSettings:
         ----------
         settings : SearchSettings, optional
         **keywords
-            Field names, and the planner parameters ``range_``, ``goal_bias`` and
-            ``rewire_factor`` (added to ``options``); None values count as not given.
+            Field names (a field keyword replaces the field; ``options`` entries are added to
+            the settings' options), and the planner parameters ``range_``, ``goal_bias`` and
+            ``rewire_factor`` (added to ``options``). A planner parameter whose value is None
+            counts as not given.
 
         Raises
         ------
         TypeError
             A keyword that is neither.
         ValueError
-            A planner parameter given both as a keyword and in ``options``.
+            A planner parameter given twice in one call, as a keyword and in ``options``.
         """
         base = cls() if settings is None else settings
         if not isinstance(base, cls):
@@ -274,16 +276,15 @@ class SearchSettings:
             raise TypeError(f"unknown search keyword(s) {', '.join(unknown)}; known: "
                             f"{', '.join(sorted(names | set(_PARAMETER_KEYWORDS)))}")
         fields = {k: v for k, v in keywords.items() if k in names}
-        options = dict(base.options)
-        options.update({k: v for k, v in dict(fields.pop("options", None) or {}).items() if v is not None})
+        given = {k: v for k, v in dict(fields.pop("options", None) or {}).items() if v is not None}
         for keyword, name in _PARAMETER_KEYWORDS.items():
             value = keywords.get(keyword)
             if value is None:
                 continue
-            if options.get(name) is not None and options[name] != value:
+            if given.get(name, value) != value:
                 raise ValueError(f"planner parameter {name!r} given twice (as a keyword and in options)")
-            options[name] = value
-        return base.replace(**fields, options=options)
+            given[name] = value
+        return base.replace(**fields, options={**base.options, **given})
 
     @classmethod
     def from_scenario(cls, planner_settings, **changes) -> "SearchSettings":
