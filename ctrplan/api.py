@@ -289,8 +289,10 @@ def write_plan_ros2(result: PlanResult, out: str | os.PathLike, *, storage: str 
         A plan with a drive trajectory (the scenario's ``[drive]`` table).
     out : str or path-like
         Bag folder to create (replaced only if it is a plan bag written by ctrplan).
-    storage : {"mcap", "sqlite3"}
-    distro : {"humble", "jazzy"}
+    storage : BagStorage or str
+        ``"mcap"`` or ``"sqlite3"``.
+    distro : RosDistro or str
+        ``"humble"`` or ``"jazzy"``.
         Message definitions of the bag.
     frame_id : str
         Frame of the tip path and the spheres (the robot's base frame).

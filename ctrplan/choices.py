@@ -14,7 +14,7 @@ from __future__ import annotations
 from enum import StrEnum
 
 __all__ = ["JointKind", "MotionKind", "FinalMotion", "BoundKind", "AimWith", "MapPlacement", "FirstPlan",
-           "MapSource"]
+           "MapSource", "BagStorage", "RosDistro", "TangentAxis"]
 
 
 class JointKind(StrEnum):
@@ -89,3 +89,27 @@ class MapSource(StrEnum):
     CACHE = "cache"
     COMPUTED = "computed"
     GIVEN = "given"
+
+
+class BagStorage(StrEnum):
+    """The storage plugin of a written ROS 2 bag."""
+
+    MCAP = "mcap"
+    SQLITE3 = "sqlite3"
+
+
+class RosDistro(StrEnum):
+    """The ROS 2 distribution whose message definitions a written bag carries (``rosbags``
+    typestores)."""
+
+    HUMBLE = "humble"
+    JAZZY = "jazzy"
+
+
+class TangentAxis(StrEnum):
+    """The axis of a tracker pose's orientation that is the tip tangent; ``none``: positions only."""
+
+    X = "x"
+    Y = "y"
+    Z = "z"
+    NONE = "none"

@@ -24,10 +24,16 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 import click  # noqa: E402
 
+from .choices import BagStorage, MapPlacement, RosDistro, TangentAxis
 from .errors import CtrplanError, JointLimitError  # noqa: E402
 from .models import MODEL_INFO, MODELS  # noqa: E402
 
 # By name, not __name__: the same logger when run as ``python -m ctrplan.cli``.
+def _choice(choices) -> click.Choice:
+    """The strings of a :mod:`ctrplan.choices` enum as a click choice (click would list the names)."""
+    return click.Choice([m.value for m in choices])
+
+
 logger = logging.getLogger("ctrplan.cli")
 
 
@@ -170,8 +176,8 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
 @click.option("--ros2", "ros2_out", type=click.Path(file_okay=False), default=None,
               help="One scenario: also write the plan as a ROS 2 bag in this folder (joint trajectory, tip path, "
                    "bound spheres) and joint_trajectory.yaml for `ros2 topic pub` in the output folder.")
-@click.option("--ros2-storage", type=click.Choice(["mcap", "sqlite3"]), default="mcap", show_default=True)
-@click.option("--ros2-distro", type=click.Choice(["humble", "jazzy"]), default="jazzy", show_default=True,
+@click.option("--ros2-storage", type=_choice(BagStorage), default=BagStorage.MCAP.value, show_default=True)
+@click.option("--ros2-distro", type=_choice(RosDistro), default=RosDistro.JAZZY.value, show_default=True,
               help="Message definitions written into the bag (visualization_msgs/msg/Marker differs).")
 @click.option("--ros2-frame", default="ctr_base", show_default=True,
               help="frame_id of the tip path and the bound spheres (the robot's base frame).")
@@ -237,7 +243,7 @@ def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_ou
               help="Grid nodes per map coordinate, comma-separated in the order the command prints (base "
                    "rotations, then translations, of tubes 2..n relative to tube 1; e.g. 16,16,14). One "
                    "number applies to all. Default 16 per rotation, 6 per translation.")
-@click.option("--placement", type=click.Choice(["uniform", "adaptive"]), default="uniform", show_default=True,
+@click.option("--placement", type=_choice(MapPlacement), default=MapPlacement.UNIFORM.value, show_default=True,
               help="Nodes of bounded coordinates: uniform, or placed where pilot lines of the exact bound "
                    "show it bends (docs/boundmaps.md).")
 @click.option("--ds", type=float, default=None, help="Arc-length step [m] (default 0.003).")
@@ -425,7 +431,7 @@ def _bag_options(f):
         click.option("--max-joint-gap", type=float, default=5.0, show_default=True,
                      help="Bag: a pause in the joint stream longer than this many median joint periods starts a "
                           "new continuous motion."),
-        click.option("--tangent-axis", type=click.Choice(["x", "y", "z", "none"]), default="z", show_default=True,
+        click.option("--tangent-axis", type=_choice(TangentAxis), default=TangentAxis.Z.value, show_default=True,
                      help="Bag: axis of the pose orientation that is the tip tangent (none: positions only)."),
     ]):
         f = option(f)

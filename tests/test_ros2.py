@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from ctrplan_reference.bags import (ORIGIN_NS, T, joint_state, measured_run, pose_stamped, quaternions_with_z_axis, transform_stamped,
-                   write_bag)
+from ctrplan_reference.bags import (ORIGIN_NS, T, joint_state, measured_run, pose_stamped, quaternions_with_z_axis,
+                                    transform_stamped, write_bag)
 from ctrplan import cli
 from ctrplan.errors import DataFileError
 from ctrplan.history import MotionRecord, joints_at

@@ -36,6 +36,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from ..choices import BagStorage, RosDistro, TangentAxis
 from ..errors import DataFileError
 
 __all__ = ["BagSelection", "BagMeasurements", "PlanBagContent", "is_bag", "bag_topics", "read_bag_measurements",
@@ -50,7 +51,7 @@ POSE_TYPES = (POSE_STAMPED, TRANSFORM_STAMPED, TF_MESSAGE)
 JOINT_TRAJECTORY = "trajectory_msgs/msg/JointTrajectory"
 
 #: ROS 2 distributions whose message definitions a written bag can carry (``rosbags`` typestores).
-DISTROS = ("humble", "jazzy")
+DISTROS = tuple(RosDistro)
 #: Topics of a written plan bag.
 PLAN_TOPICS = {"trajectory": "/ctrplan/joint_trajectory", "joint_states": "/ctrplan/planned_joint_states",
                "path": "/ctrplan/tip_path", "bound": "/ctrplan/bound_markers"}
@@ -77,8 +78,9 @@ class BagSelection:
     max_gap_periods : float
         A pause in the joint stream longer than this many of its median periods starts a new
         continuous motion [-].
-    tangent_axis : {"x", "y", "z", "none"}
-        Axis of the pose's orientation that is the tip tangent; ``"none"``: positions only.
+    tangent_axis : TangentAxis or str
+        Axis of the pose's orientation that is the tip tangent (``"x"``, ``"y"``, ``"z"``);
+        ``"none"``: positions only. Stored as the member.
     """
 
     joint_topic: str | None = None
@@ -86,14 +88,15 @@ class BagSelection:
     child_frame: str | None = None
     joint_names: tuple = ()
     max_gap_periods: float = 5.0
-    tangent_axis: str = "z"
+    tangent_axis: TangentAxis = TangentAxis.Z
 
     def __post_init__(self):
         object.__setattr__(self, "joint_names", tuple((str(a), str(b)) for a, b in self.joint_names))
         if not (self.max_gap_periods > 1.0 and math.isfinite(self.max_gap_periods)):
             raise ValueError(f"max_gap_periods must be a finite number > 1, got {self.max_gap_periods!r}")
-        if self.tangent_axis not in (*_AXES, "none"):
-            raise ValueError(f"tangent_axis must be one of x, y, z, none; got {self.tangent_axis!r}")
+        if self.tangent_axis not in tuple(TangentAxis):
+            raise ValueError(f"tangent_axis must be one of {', '.join(TangentAxis)}; got {self.tangent_axis!r}")
+        object.__setattr__(self, "tangent_axis", TangentAxis(self.tangent_axis))
 
     @classmethod
     def parse_joint_names(cls, text: str | None) -> tuple:
@@ -148,7 +151,7 @@ def is_bag(path) -> bool:
 def _typestore(distro: str = "humble"):
     from rosbags.typesys import Stores, get_typestore
 
-    return get_typestore({"humble": Stores.ROS2_HUMBLE, "jazzy": Stores.ROS2_JAZZY}[distro])
+    return get_typestore({RosDistro.HUMBLE: Stores.ROS2_HUMBLE, RosDistro.JAZZY: Stores.ROS2_JAZZY}[distro])
 
 
 def _open(path):
@@ -381,7 +384,8 @@ def read_bag_measurements(path, robot, selection: BagSelection = BagSelection())
         j_ns, q, names_seen, j_record = _read_joints(bag, reader, jconns, jt["topic"], joints, bag_names)
         p_ns, tip, quat, parents, child, p_record = _read_poses(bag, reader, pconns, pt["topic"], pt["type"],
                                                                 sel.child_frame)
-        storage = ("mcap" if Path(path).suffix == ".mcap" or any(Path(path).glob("*.mcap")) else "sqlite3")
+        storage = (BagStorage.MCAP if Path(path).suffix == ".mcap" or any(Path(path).glob("*.mcap"))
+                   else BagStorage.SQLITE3)
     finally:
         reader.close()
     if j_ns.size < 2:
@@ -435,7 +439,7 @@ def read_bag_measurements(path, robot, selection: BagSelection = BagSelection())
     cautions = []
     tangent_note = None
     norms = np.linalg.norm(quat, axis=1)
-    if sel.tangent_axis == "none":
+    if sel.tangent_axis == TangentAxis.NONE:
         tangent_note = "not read (--tangent-axis none)"
     elif np.all(norms < 1e-6):
         tangent_note = "not given (every orientation is a zero quaternion)"
@@ -607,8 +611,10 @@ def write_plan_bag(out, content: PlanBagContent, *, storage: str = "mcap", distr
         Bag folder to create. An existing folder is replaced only if it is a bag written here
         (its metadata says so); anything else there is an error, so no data is lost.
     content : PlanBagContent
-    storage : {"mcap", "sqlite3"}
-    distro : {"humble", "jazzy"}
+    storage : BagStorage or str
+        ``"mcap"`` or ``"sqlite3"``.
+    distro : RosDistro or str
+        ``"humble"`` or ``"jazzy"``.
         Message definitions written with the messages (``visualization_msgs/msg/Marker`` differs
         between them). The metadata is rosbag2 format version 8.
     start_ns : int, optional
@@ -628,8 +634,8 @@ def write_plan_bag(out, content: PlanBagContent, *, storage: str = "mcap", distr
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    if storage not in ("mcap", "sqlite3"):
-        raise ValueError(f"storage must be 'mcap' or 'sqlite3', got {storage!r}")
+    if storage not in tuple(BagStorage):
+        raise ValueError(f"storage must be one of {', '.join(BagStorage)}, got {storage!r}")
     if distro not in DISTROS:
         raise ValueError(f"distro must be one of {', '.join(DISTROS)}, got {distro!r}")
     _check_content(content)
@@ -673,7 +679,7 @@ def write_plan_bag(out, content: PlanBagContent, *, storage: str = "mcap", distr
         shutil.rmtree(scratch)
     scratch.mkdir(parents=True)
     tmp = scratch / out.name
-    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    plugin = StoragePlugin.MCAP if storage == BagStorage.MCAP else StoragePlugin.SQLITE3
     with Writer(tmp, version=8, storage_plugin=plugin) as w:
         w.set_custom_data(_MARKER, json.dumps({"writer": "ctrplan", "distro": distro}))
         ct = w.add_connection(PLAN_TOPICS["trajectory"], JOINT_TRAJECTORY, typestore=ts)
