@@ -237,3 +237,29 @@ def test_default_bound_weight_matches_the_planning_objective():
     from ctrplan.planning.objective import DEFAULT_BOUND_WEIGHT as OBJECTIVE_DEFAULT
 
     assert DEFAULT_BOUND_WEIGHT == OBJECTIVE_DEFAULT
+
+
+@pytest.mark.parametrize("table, key, value, member", [
+    ("planner", "final_motion", "rotation-last", "FinalMotion.ROTATION_LAST"),
+    ("planner", "aim_with", "history", "AimWith.HISTORY"),
+    ("bound_field", "placement", "adaptive", "MapPlacement.ADAPTIVE"),
+    ("bound_field", "first_plan", "full", "FirstPlan.FULL"),
+])
+def test_a_choice_loads_as_its_enum_member_and_a_wrong_one_lists_the_choices(tmp_path, table, key, value, member):
+    """A choice key of a scenario file becomes the member of its ctrplan.choices enum, which is
+    its string (files and JSON keep the string); a value that is none of the choices is a one-line
+    error naming the file, the key and the choices. Catches a loader that keeps a bare string
+    (no check) or one that accepts a misspelt choice."""
+    import json
+
+    from ctrplan import choices
+
+    text = GOOD.replace(f"[{table}]\n", f'[{table}]\n{key} = "{value}"\n')
+    sc = load_scenario(_write(tmp_path, text))
+    got = getattr(getattr(sc, "planner" if table == "planner" else "bound_field"), key)
+    enum_name, name = member.split(".")
+    assert got is getattr(getattr(choices, enum_name), name)
+    assert got == value and json.dumps({key: got}) == json.dumps({key: value}) and f"{got}" == value
+    err = _error(tmp_path, text.replace(f'{key} = "{value}"', f'{key} = "{value}x"'))
+    assert err.key == f"{table}.{key}"
+    assert all(f"'{m.value}'" in str(err) for m in getattr(choices, enum_name)), str(err)
