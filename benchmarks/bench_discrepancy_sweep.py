@@ -25,9 +25,9 @@ Each case is a folder under ``--out`` (the workflow's log in ``workflow.log``; i
 after an interruption) and a line of ``cases.jsonl`` there; finished cases are not run again. The
 results file is rewritten after every case with the cases finished so far (``cases`` of
 ``cases_planned``). ``--synthesize-only`` makes every case's data (``data.csv`` in its folder; the
-reference synthesizer takes up to half an hour for a three-tube case) and stops, so that another
-process or machine can make the data while the cases run; a case whose data exists does not make
-it again.
+reference synthesizer takes up to half an hour for a three-tube case), the cases on ``--jobs``
+processes at once (or on the ``--scheduler``'s workers), and stops, so that another process or
+machine can make the data while the cases run; a case whose data exists does not make it again.
 With ``--scheduler`` the cases run on the Dask workers of that cluster (each with ``--jobs``
 processes), else one after the other here. ``--run-first`` runs the cases of the given seeds
 before the others (the cases themselves do not change): until all planned cases are finished,
@@ -593,9 +593,12 @@ def main(argv=None):
               flush=True)
 
     if args.synthesize_only:
-        for s in todo:
-            t = synthesize_case(s, s - args.first_seed, str(out))[3]
-            print(f"  {s} data made in {t:.0f} s", flush=True)
+        from ctrplan.parallel import Executor
+
+        # each case's data on its own process (--jobs of them, the reference synthesizer is serial)
+        with Executor(n_jobs=args.jobs, scheduler=args.scheduler) as ex:
+            for s, made in ex.run(synthesize_case, [(s, (s, s - args.first_seed, str(out))) for s in todo]):
+                print(f"  {s} data made in {made[3]:.0f} s", flush=True)
         return 0
     if args.results_only:
         todo = []
