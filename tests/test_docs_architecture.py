@@ -17,6 +17,7 @@ import pytest
 
 import ctrplan
 from _maps import constant_field
+from _scenarios import write_scenario
 from ctrplan.errors import ModelFileError
 from ctrplan.io.scenario import load_scenario
 from ctrplan.obstacles import OBSTACLE_REGISTRY
@@ -27,7 +28,6 @@ from ctrplan.mechanics import ModelSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "architecture.md"
-TABLE7 = ROOT / "model" / "ha2019-table7-calibrated.toml"
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
 # the post of the page's example sits across the tip's path from START to GOAL
 START = {"alpha_2": 0.0, "alpha_3": 0.0, "beta_3": -0.05}
@@ -70,30 +70,11 @@ def _q(q: dict) -> str:
 
 
 def _scenario(tmp_path: Path, planner_table: str) -> Path:
+    """The page's obstacle and ``[planner]`` table (its header dropped) in a scenario from START to GOAL."""
     (obstacle,) = _blocks("An obstacle type", "toml")
-    text = f"""
-name = "architecture"
-robot = "{TABLE7.as_posix()}"
-[start]
-q = {_q(START)}
-[[goals]]
-type = "joint"
-q = {_q(GOAL)}
-{obstacle}
-{planner_table}
-iterations = 300
-seed = 2
-[bound_field]
-resolution = [4, 4, 3]
-[drive]
-control_rate_hz = 250.0
-max_velocity = {{alpha_2 = 1.0, alpha_3 = 1.0, beta_3 = 0.01}}
-max_acceleration = {{alpha_2 = 4.0, alpha_3 = 4.0, beta_3 = 0.04}}
-max_jerk = {{alpha_2 = 40.0, alpha_3 = 40.0, beta_3 = 0.4}}
-"""
-    path = tmp_path / "architecture.toml"
-    path.write_text(text)
-    return path
+    body = planner_table.removeprefix("[planner]\n")
+    return write_scenario(tmp_path, _q(GOAL), name="architecture", start_q=_q(START), obstacles=obstacle,
+                          planner=body + "iterations = 300\nseed = 2")
 
 
 def test_the_page_s_planner_and_obstacle_plan_a_scenario(tmp_path, monkeypatch, examples):

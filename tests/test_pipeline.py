@@ -25,6 +25,7 @@ import pytest
 
 import ctrplan
 from _maps import cache_constant_field, constant_field
+from _scenarios import write_scenario
 from ctrplan import cli, pipeline
 from ctrplan.errors import UnreachableGoalError
 from ctrplan.io.robot_file import load_robot
@@ -34,40 +35,10 @@ REPO = Path(__file__).resolve().parents[1]
 TABLE7 = REPO / "model" / "ha2019-table7-calibrated.toml"
 SCENARIOS = REPO / "scenarios"
 
-DRIVE = """
-[drive]
-control_rate_hz = 250.0
-max_velocity = {alpha_2 = 1.0, alpha_3 = 1.0, beta_3 = 0.01}
-max_acceleration = {alpha_2 = 4.0, alpha_3 = 4.0, beta_3 = 0.04}
-max_jerk = {alpha_2 = 40.0, alpha_3 = 40.0, beta_3 = 0.4}
-"""
-
-
 def _scenario(tmp_path: Path, goal_q: str, obstacles: str = "", name: str = "probe") -> Path:
-    text = f"""
-name = "{name}"
-robot = "{TABLE7.as_posix()}"
-
-[start]
-q = {{alpha_2 = 0.0, alpha_3 = 0.0, beta_3 = -0.07}}
-
-[[goals]]
-type = "joint"
-q = {goal_q}
-{obstacles}
-[planner]
-name = "RRTstar"
-iterations = 5
-seed = 1
-bound_weight = 500.0
-
-[bound_field]
-resolution = [4, 4, 3]
-ds_m = 0.004
-{DRIVE}"""
-    path = tmp_path / f"{name}.toml"
-    path.write_text(text)
-    return path
+    return write_scenario(tmp_path, goal_q, name=name, obstacles=obstacles,
+                          planner='name = "RRTstar"\niterations = 5\nseed = 1\nbound_weight = 500.0',
+                          bound_field="resolution = [4, 4, 3]\nds_m = 0.004")
 
 
 @pytest.fixture

@@ -16,6 +16,7 @@ from ompl import geometric as og
 
 import ctrplan
 from _maps import constant_field
+from _scenarios import write_scenario
 from ctrplan.errors import ModelFileError
 from ctrplan.io.robot_file import load_robot
 from ctrplan.io.scenario import load_scenario
@@ -170,27 +171,7 @@ def test_a_registered_planner_plans_with_its_declared_parameters():
 
 
 def _scenario(tmp_path, planner_table: str) -> Path:
-    text = f"""
-name = "probe"
-robot = "{TABLE7.as_posix()}"
-[start]
-q = {{alpha_2 = 0.0, alpha_3 = 0.0, beta_3 = -0.07}}
-[[goals]]
-type = "joint"
-q = {{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}}
-[planner]
-{planner_table}
-[bound_field]
-resolution = [4, 4, 3]
-[drive]
-control_rate_hz = 250.0
-max_velocity = {{alpha_2 = 1.0, alpha_3 = 1.0, beta_3 = 0.01}}
-max_acceleration = {{alpha_2 = 4.0, alpha_3 = 4.0, beta_3 = 0.04}}
-max_jerk = {{alpha_2 = 40.0, alpha_3 = 40.0, beta_3 = 0.4}}
-"""
-    path = tmp_path / "probe.toml"
-    path.write_text(text)
-    return path
+    return write_scenario(tmp_path, "{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}", planner=planner_table)
 
 
 @pytest.mark.parametrize("table, key, text", [
