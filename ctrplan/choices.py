@@ -14,7 +14,7 @@ from __future__ import annotations
 from enum import StrEnum
 
 __all__ = ["JointKind", "MotionKind", "FinalMotion", "BoundKind", "AimWith", "MapPlacement", "FirstPlan",
-           "MapSource", "BagStorage", "RosDistro", "TangentAxis"]
+           "MapSource", "BagStorage", "RosDistro", "TangentAxis", "DesignMode", "PoseFrame"]
 
 
 class JointKind(StrEnum):
@@ -113,3 +113,19 @@ class TangentAxis(StrEnum):
     Y = "y"
     Z = "z"
     NONE = "none"
+
+
+class DesignMode(StrEnum):
+    """What a designed experiment is for: separating two or more hypotheses (T-optimality) or
+    determining the parameters of one (Ds-optimality)."""
+
+    SEPARATE = "separate"
+    PARAMETERS = "parameters"
+
+
+class PoseFrame(StrEnum):
+    """The frame tip poses are given in: the robot's base frame, or the tracker's (through the
+    robot file's tracker registration)."""
+
+    ROBOT = "robot"
+    TRACKER = "tracker"

@@ -24,7 +24,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 import click  # noqa: E402
 
-from .choices import BagStorage, MapPlacement, RosDistro, TangentAxis
+from .choices import BagStorage, MapPlacement, PoseFrame, RosDistro, TangentAxis
 from .errors import CtrplanError, JointLimitError  # noqa: E402
 from .models import MODEL_INFO, MODELS  # noqa: E402
 
@@ -503,7 +503,7 @@ def bag_info(bag_path, robot_path, **bag_options):
 @click.option("--envelope-samples", type=int, default=0, show_default=True,
               help="Held-out samples at which to evaluate the friction envelope (all bounding solutions) "
                    "for the coverage figures; 0 skips it.")
-@click.option("--frame", type=click.Choice(["robot", "tracker"]), default=None,
+@click.option("--frame", type=_choice(PoseFrame), default=None,
               help="Frame of the measured poses (default: tracker for Ha's format and bags, robot for CSV); "
                    "tracker fits a rigid registration.")
 @_bag_options

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from ..choices import JointKind
+from ..choices import DesignMode, JointKind
 from ..io.scenario import DriveLimits
 from ._criteria import (Information, ds_criterion, information, noise_weight, prior_precision, sensitivities)
 from ._hypotheses import DesignInputError
@@ -59,7 +59,7 @@ class DesignResult:
 
     Attributes
     ----------
-    mode : {"separate", "parameters"}
+    mode : DesignMode
         Separating two or more hypotheses (T-optimality) or determining parameters of one
         (Ds-optimality).
     hypotheses : tuple of Hypothesis
@@ -104,7 +104,7 @@ class DesignResult:
         (``{name: correlation}``): what keeps it undetermined when the design cannot shrink it.
     """
 
-    mode: str
+    mode: DesignMode
     hypotheses: tuple
     interest: tuple
     primitives: tuple
@@ -297,7 +297,7 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     hyps = tuple(hypotheses)
     if not hyps:
         raise DesignInputError("no hypothesis to design for")
-    mode = "separate" if len(hyps) > 1 else "parameters"
+    mode = DesignMode.SEPARATE if len(hyps) > 1 else DesignMode.PARAMETERS
     weight, inflation = noise_weight(noise_position, noise_lag1)
     period = _period(data)
     drive = drive or drive_from_data(robot, data)
@@ -320,7 +320,7 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
                                f"limits, unstable or in collision")
     interest_idx = ()
     prior = None
-    if mode == "parameters":
+    if mode == DesignMode.PARAMETERS:
         h = hyps[0]
         if not interest:
             own, loose = h.effect_parameters(robot), h.undetermined(robot)
@@ -345,7 +345,7 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     seconds["recorded"] = time.perf_counter() - t0
 
     def value(info: Information) -> float:
-        if mode == "separate":
+        if mode == DesignMode.SEPARATE:
             return min(info.separation().values())
         return -ds_criterion(info, 0, interest_idx, prior)
 
@@ -459,7 +459,7 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     separation, power, stderr = {}, {}, {}
     crit = stats.chi2.ppf(1 - POWER_LEVEL, 1)
     for key, infos in cases.items():
-        if mode == "separate":
+        if mode == DesignMode.SEPARATE:
             seps = [{_pair_name(hyps, a, b): t for (a, b), t in i.separation().items()} for i in infos]
             separation[key] = seps if key == "random" else seps[0]
             pw = [min(float(stats.ncx2.sf(crit, 1, max(t, 1e-12))) for t in s.values()) for s in seps]
@@ -471,7 +471,7 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
                 ses.append({n: float(np.sqrt(cov[j, j])) for n, j in zip(interest, interest_idx)})
             stderr[key] = ses if key == "random" else ses[0]
     confounded = {}
-    if mode == "parameters":
+    if mode == DesignMode.PARAMETERS:
         cov = designed.covariance(0, prior)
         sd = np.sqrt(np.diag(cov))
         corr = cov / np.outer(sd, sd)

@@ -277,8 +277,9 @@ def motion_data(robot, t, q, *, frame: str = "robot", file: str = "<designed mot
         Sample times [s], increasing.
     q : array-like, shape (K, n_joints), or None
         Joint values [rad or m]; None with ``configurations``.
-    frame : {"robot", "tracker"}
-        Frame the predictions are given in (a tracker frame applies the hypotheses' registration).
+    frame : PoseFrame or str
+        ``"robot"`` or ``"tracker"``: the frame the predictions are given in (a tracker frame
+        applies the hypotheses' registration).
     file : str
         Name for messages.
     rows : array-like of int, optional

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..choices import DesignMode, PoseFrame
 from ..io.atomic import atomic_write_text
 from ..report import jsonable
 
@@ -36,7 +37,7 @@ def design_dict(result, robot, *, command: str = "") -> dict:
              "free": list(h.free), "stderr": h.stderr} for h in result.hypotheses]
     criterion = ("T-optimality: the smallest over ordered pairs of the expected evidence for one hypothesis "
                  "against the other refitted to its predictions (linearized), in units of the noise"
-                 if result.mode == "separate" else
+                 if result.mode == DesignMode.SEPARATE else
                  "Ds-optimality: log det of the predicted covariance of the parameters of interest, the other free "
                  "parameters as nuisance, with a weak prior of one typical-range half-width each")
     return jsonable({
@@ -86,7 +87,7 @@ def _plot(result, path: Path) -> None:
     for seg in result.trajectory.segments:
         for ax in axes:
             ax.axvspan(seg.t_start, seg.t_end, color="0.92", lw=0)
-    if result.mode == "separate":
+    if result.mode == DesignMode.SEPARATE:
         w = 1.0 / (result.noise_position ** 2 * result.noise_inflation)
         for h, tips in zip(hyps[1:], result.tips[1:]):
             d2 = np.nansum((tips - ref) ** 2, axis=1) * w
@@ -111,7 +112,7 @@ def _markdown(d: dict) -> str:
     for h in d["hypotheses"]:
         lines.append(f"- `{h['key']}`: {h['label']} ({h['model']} model; refit over {len(h['free'])} parameters)")
     lines += ["", "Motion:", ""] + [f"{k + 1}. {p}" for k, p in enumerate(d["primitives"])] + [""]
-    if d["mode"] == "separate":
+    if d["mode"] == DesignMode.SEPARATE:
         lines += ["| pair (true > refitted) | recorded | designed alone | recorded + designed | recorded + repeated | "
                   "recorded + random (median) |", "| --- | --- | --- | --- | --- | --- |"]
         for pair, t in d["separation"]["recorded"].items():
@@ -154,7 +155,8 @@ def write_design(result, robot, out_dir, *, command: str = "", bag: bool = True,
         The command that made it (recorded in ``design.json``).
     bag : bool
         Write the ROS 2 bag.
-    frame : {"robot", "tracker"}
+    frame : PoseFrame or str
+        ``"robot"`` or ``"tracker"``.
         Frame of the predicted tips (the recorded data's): the bag's tip path is in ``ctr_base`` or
         ``tracker``.
 
@@ -194,6 +196,6 @@ def write_design(result, robot, out_dir, *, command: str = "", bag: bool = True,
         content = PlanBagContent(joint_names=traj.joint_names, t=traj.t, position=traj.position,
                                  velocity=traj.velocity, acceleration=traj.acceleration, tips=tips,
                                  tip_rotations=None, bound_radius=np.full(len(idx), np.nan),
-                                 bound_label="none", frame_id="ctr_base" if frame == "robot" else "tracker")
+                                 bound_label="none", frame_id="ctr_base" if frame == PoseFrame.ROBOT else "tracker")
         written["bag"] = write_plan_bag(out / FILES["bag"], content)
     return written
