@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 from ctrplan.io.robot_file import load_robot  # noqa: E402
 from ctrplan.mechanics import ModelSettings, all_eta, solve_clearance, solve_friction, solve_standard  # noqa: E402
 from ctrplan.mechanics._lie import angle_between  # noqa: E402
-from ctrplan_reference.paper_grids import PAPER_TIMES_S, grid_4x4x4  # noqa: E402,F401
+from ctrplan_reference.paper_grids import PAPER_TIMES_S, grid_4x4x4  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 def main(argv=None):

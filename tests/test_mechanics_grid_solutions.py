@@ -42,12 +42,12 @@ def _grid(robot, which):
     return grid_8x8x8()
 
 
-def _classify(robot, configs, settings=None):
+def _classify(robot, configs):
     """Each friction solve of each configuration whose standard solution is stable and whose
     clearance solve converged: ``(index, eta, kind, distance of the direct tip from the branch's end
     [m])``, kind one of "on branch", "off branch", "fold", "solver failure"; and the number of
     configurations skipped."""
-    settings = settings or ModelSettings()
+    settings = ModelSettings()
     out, skipped = [], 0
     for i, (alpha, beta) in enumerate(configs):
         b = evaluate_bound(robot, alpha, beta, settings)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
+
 from ..choices import FirstPlan, MapSource
 from .._log import deprecated_echo, progress_level
 from ..boundmap import BoundField, find_bound_map, load_or_compute_bound_map, preview_spec

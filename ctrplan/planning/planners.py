@@ -12,6 +12,7 @@ Only planners known to work with Python callbacks in OMPL 2.0.1 are registered (
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -243,8 +244,6 @@ class SearchSettings:
 
     def replace(self, **changes) -> "SearchSettings":
         """A copy with ``changes`` (field names)."""
-        import dataclasses
-
         return dataclasses.replace(self, **changes)
 
     @classmethod
@@ -288,9 +287,25 @@ class SearchSettings:
 
     @classmethod
     def from_scenario(cls, planner_settings, **changes) -> "SearchSettings":
-        """The search of a scenario's ``[planner]`` table (:class:`ctrplan.io.scenario.PlannerSettings`:
-        name, iterations, time limit, seed, ``range``, ``rewire_factor`` and the planner's other
-        declared parameters), with ``changes`` (keywords of :meth:`of`) on top."""
+        """The search of a scenario's ``[planner]`` table, with ``changes`` on top.
+
+        Parameters
+        ----------
+        planner_settings : ctrplan.io.scenario.PlannerSettings
+            Its name, iterations, time limit [s], seed, ``range`` [m of the weighted joint metric],
+            ``rewire_factor`` and the planner's other declared parameters.
+        **changes
+            Keywords of :meth:`of`.
+
+        Returns
+        -------
+        SearchSettings
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`of`.
+        """
         p = planner_settings
         options = {"range": p.range, "rewire_factor": p.rewire_factor, **dict(p.parameters)}
         base = cls(planner=p.name, iterations=p.iterations, time_limit=p.time_limit, seed=p.seed,
