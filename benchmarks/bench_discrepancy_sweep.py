@@ -350,7 +350,7 @@ def outcome(truth: list, verdict: str, named_effects: list, named_effect: str | 
 
 def score_run(plan: dict, res: dict, written: dict | None) -> dict:
     """``{"outcome", "written_stderr", "value_check"}`` of a run's results ``res``
-    (:func:`ctrplan.discrepancy.report.results_dict`) on the case ``plan`` whose written robot
+    (:func:`ctrplan.discrepancy.results.results_dict`) on the case ``plan`` whose written robot
     file holds ``written`` (:func:`written_values`)."""
     stderr = written_stderr(res, written)
     check = value_check(plan, res["named_effects"], written, stderr)

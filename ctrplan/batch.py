@@ -20,8 +20,7 @@ import pandas as pd
 
 from .cache import content_key, mechanics_version
 from .errors import CtrplanError
-from .mechanics import ModelSettings, solve_standard, solve_standard_batch
-from .mechanics._lie import angle_between
+from .mechanics import ModelSettings, angle_between, solve_standard, solve_standard_batch
 from .models import MODEL_INFO, MODELS, check_model  # the one registry of models
 
 __all__ = ["MODELS", "evaluate_configuration", "evaluate_table", "job_key"]
@@ -86,7 +85,10 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
     robot : Robot
     alpha, beta : array-like, shape (n,)
         Base rotations [rad] and translations [m].
-    model : {"standard", "clearance", "friction"}
+    model : str
+        A registered mechanics model (:data:`ctrplan.models.MODEL_REGISTRY`: ``"standard"``,
+        ``"clearance"``, ``"friction"`` or one registered by the user), solved by its entry's
+        ``solve`` on top of the standard solve.
     settings : ModelSettings, optional
     eta : array-like of int, shape (n - 1,), optional
         Friction directions (+1 CCW, -1 CW). For the friction model: None or any zero entry
@@ -111,34 +113,35 @@ def evaluate_configuration(robot, alpha, beta, model: str, settings: ModelSettin
     ValueError
         Unknown model name.
     """
-    check_model(model)
+    info = MODEL_INFO[check_model(model)]
     settings = settings or ModelSettings()
     alpha = np.asarray(alpha, dtype=float)
     beta = np.asarray(beta, dtype=float)
     try:
         std = solve_standard(robot, alpha, beta, settings)
-        if not MODEL_INFO[model].contact:
-            return [_row(alpha, beta, None, std, _status(std.diagnostics), std.diagnostics.message, model)]
-        # the contact models are imported here, not at the top: a standard-model run does not
-        # import them (ctrplan.mechanics imports them lazily; about 40 ms)
-        from .mechanics import all_eta, evaluate_bound, solve_clearance, solve_friction
-        if not MODEL_INFO[model].friction:
-            cl = solve_clearance(robot, alpha, beta, settings, standard=std)
+        if not info.contact:
+            sol = info.solve(robot, alpha, beta, settings, standard=std)
+            return [_row(alpha, beta, None, sol, _status(sol.diagnostics), sol.diagnostics.message, model)]
+        if not info.friction:
+            cl = info.solve(robot, alpha, beta, settings, standard=std)
             row = _row(alpha, beta, None, cl, _status(cl.diagnostics), cl.diagnostics.message, model)
             row["translation_last_tip_m"] = float(np.linalg.norm(cl.tip_position - std.tip_position))
             row["translation_last_tangent_rad"] = float(angle_between(cl.tip_tangent, std.tip_tangent))
             return [row]
         given = eta is not None and np.all(np.isin(np.asarray(eta), (-1, 1)))
         if given:
-            cl = solve_clearance(robot, alpha, beta, settings, standard=std)
-            fr = solve_friction(robot, alpha, beta, np.asarray(eta, dtype=int), settings, standard=std,
-                                warm_start=cl)
+            # the frictionless solution first: a friction solve started from it converges in a few steps
+            cl = info.solve(robot, alpha, beta, settings, standard=std)
+            fr = info.solve(robot, alpha, beta, settings, eta=np.asarray(eta, dtype=int), standard=std, warm_start=cl)
             message = _friction_message(fr, explain_failures, robot, alpha, beta, np.asarray(eta, dtype=int),
                                         settings, std, cl)
             row = _row(alpha, beta, np.asarray(eta, dtype=int), fr, _status(fr.diagnostics), message, model)
             row["translation_last_tip_m"] = float(np.linalg.norm(cl.tip_position - std.tip_position))
             row["translation_last_tangent_rad"] = float(angle_between(cl.tip_tangent, std.tip_tangent))
             return [row]
+        # the bound over every direction (Section III), imported here: a standard-model run does not
+        # import the contact kernels (ctrplan.mechanics imports them lazily; about 40 ms)
+        from .mechanics import all_eta, evaluate_bound
         b = evaluate_bound(robot, alpha, beta, settings, standard=std)
         rows = []
         for e in all_eta(robot.n_tubes):
@@ -241,7 +244,7 @@ def _chunk_task(robot, alpha, beta, model, settings, eta, indices, n_threads=1, 
     """Evaluate the configurations ``alpha``, ``beta`` (m, n) of the 1-based rows ``indices``;
     returns (indices, list of m lists of rows), or for the standard model (indices, columns) with
     the columns of :func:`_standard_columns`."""
-    if not MODEL_INFO[model].contact:
+    if MODEL_INFO[model].standard_only:
         return indices, _standard_columns(robot, alpha, beta, settings, indices, n_threads)
     rows = []
     for k, index in enumerate(indices):

@@ -8,11 +8,15 @@ SHA-256 over canonical JSON (:func:`content_key`: sorted keys, values that are n
   bag, by its files' names and bytes),
 - the options that change the result (and none that do not, such as the number of workers),
 - the version of the mechanics (:data:`ctrplan.constants.MECHANICS_VERSION`), so that a result of
-  older mechanics is computed again rather than reused.
+  older mechanics is computed again rather than reused, and any other version or method that can
+  move the figures (the discrepancy fits' ``FIT_VERSION``; the noise estimate's method, which
+  depends on the installed scipy).
 
+Every key is the full digest (64 hex digits); file names that show a key may show its first 12.
 Users of the rule: :func:`ctrplan.batch.job_key` (checkpoints of ``ctrplan evaluate``),
 :func:`ctrplan.studies.input_key` (a study's finished scenarios),
-:func:`ctrplan.boundmap.field_key` (bound maps).
+:func:`ctrplan.boundmap.field_key` (bound maps), :func:`ctrplan.discrepancy.stages.stage_key`
+(finished stages of a discrepancy run).
 
 What is stored to be reused across runs (bound maps computed for a robot file, roadmaps) goes to
 one folder, :func:`cache_dir`: the environment variable ``CTRPLAN_CACHE_DIR`` when set, else the

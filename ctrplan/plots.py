@@ -422,4 +422,3 @@ def save_figure(fig, path) -> Path:
     return path
 
 
-_figure, _save = new_figure, save_figure          # the names ctrplan.discrepancy.report imports

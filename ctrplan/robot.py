@@ -20,12 +20,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .choices import JointKind
 from .errors import JointLimitError, PhysicalParameterError
 
 __all__ = ["Section", "Tube", "Joint", "TranslationLink", "Robot"]
 
-ROTATION = "rotation"
-TRANSLATION = "translation"
+ROTATION = JointKind.ROTATION
+TRANSLATION = JointKind.TRANSLATION
 
 # Tolerances of the configuration tests (check_configuration, configurations_possible) [m]: an
 # inner base may lie this far in front of its outer base, a curved section start this far behind
@@ -146,8 +147,9 @@ class Joint:
 
     Parameters
     ----------
-    kind : {"rotation", "translation"}
-        Base rotation alpha [rad] or base translation beta [m].
+    kind : JointKind or str
+        Base rotation alpha [rad] or base translation beta [m]; a string ``"rotation"`` or
+        ``"translation"`` is stored as its :class:`~ctrplan.choices.JointKind` member.
     tube : int
         Zero-based tube index (tube 1 is 0).
     lower, upper : float
@@ -155,14 +157,16 @@ class Joint:
         unbounded (periodic).
     """
 
-    kind: str
+    kind: JointKind
     tube: int
     lower: float
     upper: float
 
     def __post_init__(self):
-        if self.kind not in (ROTATION, TRANSLATION):
-            raise PhysicalParameterError(f"joint kind must be 'rotation' or 'translation', got {self.kind!r}")
+        try:
+            object.__setattr__(self, "kind", JointKind(self.kind))
+        except ValueError:
+            raise PhysicalParameterError(f"joint kind must be 'rotation' or 'translation', got {self.kind!r}") from None
         if not self.lower < self.upper:
             raise PhysicalParameterError(
                 f"{self.name}: lower limit {self.lower!r} must be below upper limit {self.upper!r}")

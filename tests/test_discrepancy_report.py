@@ -1,7 +1,7 @@
 """The discrepancy report (``ctrplan.discrepancy.report``) formats ``results.json`` alone, never
 stops at a figure the data leave undefined, and can be written again from the report folder.
 
-The results are built here in the form :func:`~ctrplan.discrepancy.report.results_dict` gives
+The results are built here in the form :func:`~ctrplan.discrepancy.results.results_dict` gives
 them (a named friction effect on 240 samples, with every section of the report), and each test
 sets some of its figures to what the workflow writes when the data cannot define them: an
 interval over one unit (ends None or NaN), a mean over no samples, a comparison over one fold,
@@ -24,6 +24,7 @@ from click.testing import CliRunner
 
 from ctrplan import cli
 from ctrplan.discrepancy import report
+from ctrplan.discrepancy import results as results_json
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
@@ -243,7 +244,7 @@ def test_the_factor_spread_is_reported(monkeypatch, tmp_path):
 
 
 def test_bound_dict_keeps_the_former_keys_and_adds_the_new_ones():
-    """:func:`~ctrplan.discrepancy.report.bound_dict` of a calibrated bound: the former keys
+    """:func:`~ctrplan.discrepancy.results.bound_dict` of a calibrated bound: the former keys
     (``failing``, ``status``, ``test`` with ``ci``...) with ``status`` one of the three and
     ``failing`` True exactly when "failed", plus ``conservative``, ``confidence``, ``tolerance``
     and ``calibration``; JSON-serializable without NaN. Catches a renamed key that breaks readers
@@ -256,7 +257,7 @@ def test_bound_dict_keeps_the_former_keys_and_adds_the_new_ones():
     for covered in (np.arange(200) % 10 < 9, np.arange(200) % 2 == 0, np.arange(200) % 10 < 7):
         b = calibrate_bound(cal_e, np.ones(99), np.where(covered, 0.5, 0.95), np.ones(200),
                             np.repeat(np.arange(20), 10), noise_rms=1e-4, cal_units=np.repeat(np.arange(33), 3))
-        d = report.bound_dict(b)
+        d = results_json.bound_dict(b)
         assert {"definition", "method", "target", "factor", "margin_mm", "noise_multiple", "noise_rms_mm",
                 "n_calibration", "test", "raw_test", "translation_last", "failing", "status"} <= set(d)
         assert d["status"] in ("shown", "not shown", "failed") and d["failing"] == (d["status"] == "failed")

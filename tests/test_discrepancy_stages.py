@@ -19,7 +19,9 @@ import pytest
 
 from ctrplan.discrepancy import (baseline as baseline_stage, decision, fitting, options, report, setup as setup_stage,
                                  signatures, split as split_stage, stages)
-from ctrplan.discrepancy.calibrate import CalibrationResult, pose_errors, predict
+from ctrplan.discrepancy import results as results_json
+from ctrplan.discrepancy.calibrate import CalibrationResult
+from ctrplan.discrepancy.predictions import pose_errors, predict
 from ctrplan.discrepancy.consistency import NoiseTest
 from ctrplan.discrepancy.noise import estimate_noise
 from ctrplan.discrepancy.workflow import DiscrepancyOptions
@@ -127,7 +129,7 @@ def test_time_offset_candidate_is_fitted_in_seconds_and_its_errors_are_in_metres
     noise = decision.check_noise(setup, split, baseline, OPTIONS)
     naming = decision.name_effect(split, candidates, tests, noise, OPTIONS)
     assert naming.named == "time_offset" and naming.candidates["time_offset"].eligible
-    written = report.candidate_dict(naming.candidates["time_offset"])
+    written = results_json.candidate_dict(naming.candidates["time_offset"])
     assert written["parameters"]["time_offset"] == pytest.approx(LAG_S, abs=0.01)          # s stays s
     assert written["out_of_fold"]["position_mean_mm"] == pytest.approx(1e3 * cand_mean, rel=1e-12)
     se = dict(zip(c.fit.names, c.fit.stderr))["time_offset"]
@@ -144,7 +146,7 @@ def test_noise_check_is_in_metres_and_the_report_form_in_millimetres():
                      false_alarm_rate=0.01, noise_lower_bound=False, noise_upper_bound=False)
     check = decision.NoiseCheck(noise=stated, rms_m=1e-3, ratio=1.25, test=test)
     assert check.rms == pytest.approx(0.8e-3, rel=1e-12)
-    d = report.noise_dict(check)
+    d = results_json.noise_dict(check)
     assert d["rms_mm"] == pytest.approx(1.0, rel=1e-12) and d["noise_rms_mm"] == pytest.approx(0.8, rel=1e-12)
     assert d["test"]["statistic"] == 1.55 and d["noise"]["position_rms_m"] == pytest.approx(0.8e-3, rel=1e-12)
     assert check.consistent is False

@@ -109,7 +109,7 @@ def test_a_prediction_row_without_a_finite_error_logs_undefined_and_is_carried(m
     lines = [m for m in caplog.messages if "prediction:" in m]
     assert "mean 1.000, p95 1.000, max 1.000 mm (3 samples)" in lines[0]
     assert lines[1].endswith("mean, p95 and max undefined (no finite error of 3)") and _no_nan(lines[1])
-    from ctrplan.discrepancy.report import _prediction_dict
+    from ctrplan.discrepancy.results import _prediction_dict
 
     assert _prediction_dict(pred)["rows"][1] == {"label": pred.rows[1][0], "n": 0, "mean_mm": None,
                                                  "p95_mm": None, "max_mm": None}

@@ -1,7 +1,8 @@
 """The worked examples of ``docs/architecture.md`` run as written: the planner and the obstacle
 type it registers are used by a scenario file that plans with both, the refusals the page
-quotes happen, and the effect it registers is hidden in synthetic data and named by the
-discrepancy workflow.
+quotes happen, the mechanics model it registers is solved by name by the batch evaluator, the
+discrepancy simulator and a robot file, with the physics the page states, and the effect it
+registers is hidden in synthetic data and named by the discrepancy workflow.
 
 Each example registers into the package's registries; the tests remove what they registered
 (so that other tests see the built-in entries only).
@@ -111,6 +112,55 @@ def test_the_refusals_the_page_quotes(tmp_path, examples, line, key, text):
     with pytest.raises(ModelFileError) as info:
         load_scenario(path)
     assert (info.value.file, info.value.key) == (str(path), key) and text in str(info.value)
+
+
+def test_the_page_s_mechanics_model_is_solved_by_name_with_the_physics_it_states():
+    """The page's torsionally rigid model, registered by its code block: with the Table I pair's
+    precurvatures aligned or opposed no twist arises, so its tip is the standard model's; a
+    quarter turn apart the standard model twists by several rad at the base and the rigid one
+    does not (catches a solve that is not called, or called with the wrong robot). The batch
+    evaluator, the simulator along a motion and a robot file's ``model`` key take it by name."""
+    from ctrplan.batch import evaluate_configuration
+    from ctrplan.discrepancy.simulate import simulate
+    from ctrplan.io.robot_file import load_robot, robot_from_toml_text
+    from ctrplan.mechanics import solve_standard
+    from ctrplan.models import MODEL_REGISTRY
+
+    (code,) = _blocks("A mechanics model", "python")
+    try:
+        namespace = {}
+        exec(compile(code, str(PAGE), "exec", dont_inherit=True), namespace)
+        robot = load_robot(PAIR)
+        settings = ModelSettings()
+        tips = {}
+        for rel in (0.0, np.pi / 2, np.pi):
+            alpha, beta = robot.configuration([rel])
+            (row,) = evaluate_configuration(robot, alpha, beta, "rigid-torsion", settings)
+            assert row["status"] == "ok" and row["model"] == "rigid-torsion"
+            std = solve_standard(robot, alpha, beta, settings)
+            rigid = namespace["torsionally_rigid"](robot, alpha, beta, settings, standard=std)
+            tip = np.array([row["tip_x"], row["tip_y"], row["tip_z"]])   # [m]
+            np.testing.assert_array_equal(tip, rigid.tip_position)
+            tips[rel] = (tip, std)
+        for rel in (0.0, np.pi):
+            np.testing.assert_allclose(tips[rel][0], tips[rel][1].tip_position, atol=1e-9)
+        tip, std = tips[np.pi / 2]
+        alpha, beta = robot.configuration([np.pi / 2])
+        rigid = namespace["torsionally_rigid"](robot, alpha, beta, settings, standard=std)
+        assert np.abs(std.base_torsion).max() > 1.0 and np.abs(rigid.base_torsion).max() < 1e-5
+        assert 5e-3 < np.linalg.norm(tip - std.tip_position) < 12e-3
+        # along a motion, followed sample to sample, as the discrepancy workflow evaluates it
+        rel = np.linspace(0.0, np.pi / 2, 5)
+        alpha = np.column_stack([np.zeros(5), rel])
+        beta = np.tile(robot.configuration([0.0])[1], (5, 1))
+        sim = simulate(robot, alpha, beta, model="rigid-torsion", sequence=np.zeros(5, int), settings=settings)
+        assert sim.ok.all()
+        np.testing.assert_allclose(sim.tip[-1], tip, atol=1e-9)
+        text = PAIR.read_text()
+        assert robot_from_toml_text('model = "rigid-torsion"\n' + text, file="t.toml").metadata["model"] == "rigid-torsion"
+    finally:
+        if "rigid-torsion" in MODEL_REGISTRY:
+            MODEL_REGISTRY.unregister("rigid-torsion")
 
 
 def test_the_page_s_effect_is_hidden_by_synthesize_and_named_by_the_workflow(tmp_path):

@@ -44,10 +44,14 @@ def test_every_entry_is_complete_and_its_typical_range_lies_inside_its_bounds():
             assert lo > p.lower or p.vanishes_at_lower, p
     with pytest.raises(ValueError, match="strictly inside"):
         ParameterSpec("x_1", "x", 0, "-", -1.0, 1.0, 0.1, (-1.0, 0.5))
-    with pytest.raises(ValueError, match="already registered"):
-        from ctrplan.effects import register
+    import dataclasses
 
-        register(REGISTRY["backlash"])
+    from ctrplan.effects import register
+
+    with pytest.raises(ValueError, match="effect 'backlash' is already registered"):
+        register(dataclasses.replace(REGISTRY["backlash"], label="another backlash"))
+    with pytest.raises(TypeError, match="fit must be a FitStrategy"):
+        dataclasses.replace(REGISTRY["backlash"], fit="nested")
 
 
 def test_robot_effects_change_the_robot_and_nothing_else():

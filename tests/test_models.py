@@ -12,13 +12,33 @@ from ctrplan.models import MODEL_INFO, MODELS, check_model
 TABLE7 = Path(__file__).resolve().parents[1] / "model" / "ha2019-table7-calibrated.toml"
 
 
-def test_every_registered_model_names_a_solver_and_a_paper_section():
+def test_every_registered_model_holds_its_solver_and_a_paper_section():
     assert MODELS == ("standard", "clearance", "friction")
     for name in MODELS:
         info = MODEL_INFO[name]
         assert info.name == name
-        assert callable(getattr(mechanics, info.solver)), info.solver
+        assert callable(info.solve)
         assert info.source.startswith("Section") and info.description
+
+
+def test_the_entries_solve_as_the_mechanics_functions_they_stand_for():
+    """Each built-in entry's ``solve`` gives what the mechanics function of its section gives, bit
+    for bit (catches an entry wired to the wrong solver or dropping eta)."""
+    from ctrplan.io.robot_file import load_robot
+
+    robot = load_robot(TABLE7)
+    alpha, beta = robot.configuration([1.2, -2.0, -0.07])   # alpha_2, alpha_3 [rad], beta_3 [m]
+    settings = mechanics.ModelSettings()
+    std = mechanics.solve_standard(robot, alpha, beta, settings)
+    assert MODEL_INFO["standard"].solve(robot, alpha, beta, settings, standard=std) is std
+    cl = mechanics.solve_clearance(robot, alpha, beta, settings, standard=std)
+    got = MODEL_INFO["clearance"].solve(robot, alpha, beta, settings, standard=std)
+    assert (got.tip_position == cl.tip_position).all() and (got.tip_tangent == cl.tip_tangent).all()
+    eta = [1, -1]
+    fr = mechanics.solve_friction(robot, alpha, beta, eta, settings, standard=std, warm_start=cl)
+    got = MODEL_INFO["friction"].solve(robot, alpha, beta, settings, standard=std, eta=eta, warm_start=cl)
+    assert (got.tip_position == fr.tip_position).all()
+    assert abs(got.tip_position - cl.tip_position).max() > 1e-6, "eta did not reach the friction solve"
 
 
 @pytest.mark.parametrize("name", MODELS)
@@ -61,12 +81,8 @@ def test_registry_says_what_each_model_needs():
     # the contact models need the clearances and contact solve; only friction takes eta and mu
     assert [MODEL_INFO[m].contact for m in MODELS] == [False, True, True]
     assert [MODEL_INFO[m].friction for m in MODELS] == [False, False, True]
-    # a friction solver's signature takes eta; the others do not
-    import inspect
-
-    for m in MODELS:
-        params = inspect.signature(getattr(mechanics, MODEL_INFO[m].solver)).parameters
-        assert ("eta" in params) == MODEL_INFO[m].friction, m
+    # only the standard model's solution is the standard solve (the batched standard solver's rows)
+    assert [MODEL_INFO[m].standard_only for m in MODELS] == [True, False, False]
 
 
 def test_batch_rejects_an_unregistered_model_before_solving():

@@ -20,7 +20,7 @@ from _scenarios import write_scenario
 from ctrplan.errors import ModelFileError
 from ctrplan.io.robot_file import load_robot
 from ctrplan.io.scenario import load_scenario
-from ctrplan.models import MODEL_REGISTRY, ModelInfo, check_model
+from ctrplan.models import MODEL_REGISTRY, ModelInfo, check_model, contact_solution, standard_solution
 from ctrplan.obstacles import OBSTACLE_REGISTRY, OBSTACLE_TYPES, Sphere
 from ctrplan.planner_info import (PLANNER_REGISTRY, PlannerInfo, PlannerParameter, check_planner_options,
                                   register_planner)
@@ -101,14 +101,16 @@ def test_the_packages_registries_share_the_type_and_refuse_malformed_entries():
     with pytest.raises(ValueError, match="unknown mechanics model 'magic'; registered: standard, clearance, friction"):
         check_model("magic")
     with pytest.raises(ValueError, match="friction needs the contact solve"):
-        MODEL_REGISTRY.register("sticky", ModelInfo("sticky", "x", "y", "solve_friction", contact=False, friction=True))
+        MODEL_REGISTRY.register("sticky", ModelInfo("sticky", "x", "y", contact_solution, contact=False, friction=True))
+    with pytest.raises(TypeError, match="solve must be a function, got 'solve_friction'"):
+        MODEL_REGISTRY.register("named", ModelInfo("named", "x", "y", "solve_friction", contact=True, friction=True))
     with pytest.raises(TypeError, match="ModelInfo named 'other'"):
-        MODEL_REGISTRY.register("other", ModelInfo("standard", "x", "y", "solve_standard", False, False))
+        MODEL_REGISTRY.register("other", ModelInfo("standard", "x", "y", standard_solution, False, False))
     with pytest.raises(ValueError, match="exactly one of ompl_class"):
         register_planner(PlannerInfo("Nothing", "makes nothing"))
     with pytest.raises(ValueError, match="is named 'sphere' by its type field, not 'ball'"):
         OBSTACLE_REGISTRY.register("ball", Sphere)
-    assert "sticky" not in MODEL_REGISTRY and "Nothing" not in PLANNER_REGISTRY and "ball" not in OBSTACLE_REGISTRY
+    assert "sticky" not in MODEL_REGISTRY and "named" not in MODEL_REGISTRY and "Nothing" not in PLANNER_REGISTRY and "ball" not in OBSTACLE_REGISTRY
 
 
 # ------------------------------------------------------------------------------ planner parameters

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..discrepancy.calibrate import predict
+from ..discrepancy.predictions import predict
 from ..discrepancy.parameters import apply_parameters, needs_solve, parameter
 from ..effects import EffectSet, apply_output_effects, robot_effects
 

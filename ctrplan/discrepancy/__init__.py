@@ -23,7 +23,8 @@
 
 from .simulate import Simulation, simulate
 from .synth import Noise, SynthResult, synthesize, truth_path, write_synth
-from .calibrate import CalibrationResult, calibrate, pose_errors, predict
+from .predictions import pose_errors, predict
+from .calibrate import CalibrationResult, calibrate
 from .gridsearch import grid_search
 from .data import MeasuredData, load_measured_data
 from .split import DataSplit, make_split

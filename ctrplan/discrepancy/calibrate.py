@@ -1,7 +1,7 @@
 """Model calibration on measured tip poses (Section V-C of Ha, Fagogenis & Dupont 2019).
 
-- :func:`predict`: a model's tip poses along the data's motion history, in the data's frame;
-- :func:`pose_errors`: tip position and tangent errors;
+- a model's tip poses along the data's motion history and their errors:
+  :mod:`ctrplan.discrepancy.predictions`;
 - :func:`calibrate`: least squares on the weighted sum of Eq. (49), ``|dp| / 1 mm + angle / 1 deg``
   per sample (1 deg of tangent error weighs as 1 mm of position error), over the chosen
   parameters (:mod:`ctrplan.discrepancy.parameters`), including the rigid registration of a
@@ -19,7 +19,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from ..errors import CtrplanError
 from ..mechanics import ModelSettings
@@ -27,18 +26,12 @@ from ..models import MODEL_INFO, check_model
 from .data import MeasuredData
 from ..effects import EffectSet, apply_output_effects, robot_effects
 from .estimates import Uncertainty, covariance
-from .parameters import REGISTRATION, apply_parameters, needs_solve, parameter, read_parameters
+from .parameters import REGISTRATION, needs_solve, parameter, read_parameters
+from .predictions import (ANGLE_UNIT, FAILED_RESIDUAL, POSITION_UNIT, SamplePredictions, eq49_residuals,
+                          kabsch_registration, pose_errors, predict)
 
-__all__ = ["Prediction", "CalibrationResult", "Prior", "predict", "pose_errors", "eq49_residuals", "calibrate",
-           "kabsch_registration", "information_criterion", "covariance"]
+__all__ = ["CalibrationResult", "Prior", "calibrate", "information_criterion", "covariance"]
 
-#: Eq. (49) weighting: this many metres of position error weigh as ...
-POSITION_UNIT = 1e-3
-#: ... this many radians of tangent error (1 mm : 1 deg).
-ANGLE_UNIT = np.pi / 180.0
-#: Eq. (49) residual given to a sample whose model solve failed (50 mm + 0 deg); keeps the
-#: least-squares problem defined without letting failures dominate.
-FAILED_RESIDUAL = 50.0
 #: Relative finite-difference step of the least-squares Jacobian (solver tolerances are ~1e-9).
 DIFF_STEP = 1e-4
 #: Stopping tolerances of both least-squares stages (``scipy.optimize.least_squares``): relative
@@ -73,35 +66,6 @@ POOR_STEP_RATIO = 0.25
 #: A fit that ends at an optimizer bound has the bound widened (``ParameterSpec.widened``, up to
 #: the parameter's limit) and is continued, at most this many times.
 MAX_WIDENINGS = 6
-
-
-@dataclass(frozen=True, eq=False)
-class Prediction:
-    """Model tip poses at the data's samples.
-
-    Attributes
-    ----------
-    tip : ndarray, shape (K, 3)
-        [m], in the data's frame (registration applied).
-    tangent : ndarray, shape (K, 3)
-        Unit tangents, in the data's frame.
-    tip_base : ndarray, shape (K, 3)
-        [m], in the robot base frame.
-    tangent_base : ndarray, shape (K, 3)
-        Unit tangents in the robot base frame.
-    ok : ndarray of bool, shape (K,)
-    message : list of str
-    seconds : float
-        Wall time of the model evaluation.
-    """
-
-    tip: np.ndarray
-    tangent: np.ndarray
-    tip_base: np.ndarray
-    tangent_base: np.ndarray
-    ok: np.ndarray
-    message: list
-    seconds: float
 
 
 @dataclass
@@ -210,127 +174,6 @@ class CalibrationResult:
                    d.get("n_clusters"))
 
 
-def predict(robot, names, values, data: MeasuredData, model: str, settings: ModelSettings | None = None,
-            *, n_jobs: int = 1, progress: bool = False, warm_starts=None) -> Prediction:
-    """Evaluate a model with the given parameters at every sample of ``data``.
-
-    The named effects are applied where they act (:mod:`ctrplan.effects`): the mechanical ones
-    to the robot, the history ones to the whole recorded motion (drive backlash, tracker time
-    offset, gradual friction; :meth:`MeasuredData.state`), the output ones (registration) to the
-    computed tip poses. Each sequence is followed in order (each sample solved from the previous
-    one; :func:`ctrplan.discrepancy.simulate.simulate`) with the friction the history state
-    applies.
-
-    Parameters
-    ----------
-    robot : Robot
-    names : sequence of str
-        Parameters to set (baseline parameters, :mod:`ctrplan.discrepancy.parameters`, and effect
-        parameters, :mod:`ctrplan.effects`), registration included.
-    values : array-like, shape (m,)
-        In the parameters' units (SI).
-    data : MeasuredData
-    model : {"standard", "clearance", "friction"}
-    settings : ModelSettings, optional
-    n_jobs : int
-    progress : bool
-    warm_starts : WarmStarts, optional
-        Contact solutions of earlier evaluations of the same samples to start from
-        (:class:`ctrplan.discrepancy.simulate.WarmStarts`).
-
-    Returns
-    -------
-    Prediction
-        Tips (K, 3) [m] in the data's frame and in the robot base frame, tangents, ok flags.
-
-    Raises
-    ------
-    ParameterError, PhysicalParameterError
-        Parameter values that give an impossible robot.
-    ValueError
-        A time offset on data without times; an unknown model.
-    """
-    from .simulate import simulate
-
-    t0 = time.perf_counter()
-    friction = MODEL_INFO[check_model(model)].friction
-    names = tuple(names)
-    values = np.asarray(values, float)
-    robot_p = apply_parameters(robot, names, values)
-    effects, _ = EffectSet.from_parameters(robot, names, values)
-    state = data.state(robot_p, effects)
-    eta, mu = state.applied(robot_p.friction_coefficients)
-    sim = simulate(robot_p, state.alpha, state.beta, model=model, eta=eta if friction else None,
-                   mu=mu if friction else None, sequence=data.sequence, settings=settings, n_jobs=n_jobs,
-                   progress=progress, warm_starts=warm_starts)
-    tip_base = np.asarray(sim.tip, float)
-    tip, tangent = apply_output_effects(tip_base, sim.tangent, robot_effects(robot_p).merged(effects))
-    return Prediction(tip=tip, tangent=tangent, tip_base=tip_base, tangent_base=np.asarray(sim.tangent, float),
-                      ok=np.asarray(sim.ok, bool), message=list(sim.message), seconds=time.perf_counter() - t0)
-
-
-def pose_errors(pred: Prediction, data: MeasuredData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Tip position and tangent errors of a prediction.
-
-    Returns
-    -------
-    position : ndarray, shape (K,)
-        ``|p_measured - p_model|`` [m]; NaN where the model failed.
-    angle : ndarray, shape (K,)
-        Angle between measured and model tangents [rad]; NaN where failed or not measured.
-    vector : ndarray, shape (K, 3)
-        ``p_measured - p_model`` [m] in the data's frame; NaN where failed.
-    """
-    vec = data.tip - pred.tip
-    vec[~pred.ok] = np.nan
-    pos = np.linalg.norm(vec, axis=1)
-    if data.tangent is None:
-        ang = np.full(pos.shape, np.nan)
-    else:
-        c = np.einsum("ij,ij->i", data.tangent / np.linalg.norm(data.tangent, axis=1, keepdims=True),
-                      pred.tangent / np.linalg.norm(pred.tangent, axis=1, keepdims=True))
-        ang = np.arccos(np.clip(c, -1.0, 1.0))
-        ang[~pred.ok] = np.nan
-    return pos, ang, vec
-
-
-def eq49_residuals(position, angle) -> np.ndarray:
-    """Per-sample residual of Eq. (49): ``|dp| / 1 mm + angle / 1 deg`` (angle term dropped where
-    the tangent is not measured); :data:`FAILED_RESIDUAL` where the model failed.
-
-    Parameters
-    ----------
-    position : ndarray, shape (K,) [m]
-    angle : ndarray, shape (K,) [rad]
-
-    Returns
-    -------
-    ndarray, shape (K,) [mm + deg]
-    """
-    r = position / POSITION_UNIT + np.nan_to_num(angle / ANGLE_UNIT, nan=0.0)
-    return np.where(np.isfinite(position), r, FAILED_RESIDUAL)
-
-
-def kabsch_registration(model_tip, measured_tip) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares rigid registration ``measured ~ R model + t`` (Kabsch / Umeyama, no scale).
-
-    Parameters
-    ----------
-    model_tip, measured_tip : ndarray, shape (K, 3) [m]
-        Rows with NaN are ignored.
-
-    Returns
-    -------
-    rotation_vector : ndarray, shape (3,) [rad]
-    translation : ndarray, shape (3,) [m]
-    """
-    ok = np.all(np.isfinite(model_tip), axis=1) & np.all(np.isfinite(measured_tip), axis=1)
-    a, b = measured_tip[ok], model_tip[ok]
-    ca, cb = a.mean(axis=0), b.mean(axis=0)
-    rot, _ = Rotation.align_vectors(a - ca, b - cb)
-    return rot.as_rotvec(), ca - rot.as_matrix() @ cb
-
-
 def information_criterion(cost: float, n_samples: int, n_params: int) -> float:
     """Bayesian information criterion of a least-squares fit with Gaussian residuals,
     ``N ln(RSS / N) + k ln N`` (Schwarz 1978).
@@ -396,7 +239,7 @@ class _Objective:
     def full(self, x):
         return np.concatenate([np.asarray(list(self.fixed.values()), float), np.asarray(x, float)])
 
-    def prediction(self, x) -> Prediction:
+    def prediction(self, x) -> SamplePredictions:
         v = self.full(x)
         key = tuple(np.round(v[self.mech], 15))
         base = self._cache.get(key)
@@ -411,7 +254,7 @@ class _Objective:
         out_names = [nm for k, nm in enumerate(self.all_names) if k not in set(self.mech)]
         effects, _ = EffectSet.from_parameters(self.robot, out_names, [v[self.all_names.index(nm)] for nm in out_names])
         tip, tangent = apply_output_effects(base.tip_base, base.tangent_base, robot_effects(self.robot).merged(effects))
-        return Prediction(tip=tip, tangent=tangent, tip_base=base.tip_base, tangent_base=base.tangent_base,
+        return SamplePredictions(tip=tip, tangent=tangent, tip_base=base.tip_base, tangent_base=base.tangent_base,
                           ok=base.ok, message=base.message, seconds=base.seconds)
 
     def residuals(self, x):

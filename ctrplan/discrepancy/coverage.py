@@ -661,12 +661,12 @@ def _stored_bounds(setup, stage: str, robot, alpha, beta, n_jobs: int) -> BoundV
 def _bound_tag(robot, effects) -> str:
     """Tag of the stored bounds of ``robot`` (the written robot: every tube and pair parameter, as
     its robot file states it) with the history ``effects`` (:class:`ctrplan.effects.EffectSet`)
-    and the running mechanics (:func:`ctrplan.cache.content_key`): 12 hexadecimal digits."""
+    and the running mechanics (:func:`ctrplan.cache.content_key`): 64 hexadecimal digits."""
     from ..cache import content_key, mechanics_version
     from ..io.robot_file import robot_to_toml
 
     return content_key({"robot": robot_to_toml(robot), "effects": effects.to_dict(),
-                        "mechanics_version": mechanics_version()})[:12]
+                        "mechanics_version": mechanics_version()})
 
 
 def check_bound(setup, split, final, test_errors, final_params: dict, noise, options) -> BoundCalibration:

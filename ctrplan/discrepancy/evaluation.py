@@ -11,7 +11,7 @@ import numpy as np
 
 from .._log import progress_level
 from ..effects import EffectSet, registration_transform
-from .calibrate import pose_errors, predict
+from .predictions import pose_errors, predict
 
 logger = logging.getLogger(__name__)
 

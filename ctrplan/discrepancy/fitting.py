@@ -15,17 +15,17 @@ out-of-fold error, :func:`~ctrplan.discrepancy.baseline.calibrate_baseline`). Th
 :mod:`~ctrplan.discrepancy.baseline`, a second effect fitted with the named one in
 :mod:`~ctrplan.discrepancy.pairs`.
 
-How each candidate is fitted is its registry entry's ``fit`` (:data:`ctrplan.effects.FIT_STRATEGIES`),
-dispatched through :data:`FITTERS`:
+How each candidate is fitted is its registry entry's ``fit``, a :class:`ctrplan.effects.FitStrategy`
+called with a :class:`FitContext` (the fit's samples, its starting fits and the solvers):
 
-- ``"nested"``: its parameters refitted together with the baseline's, started from the effect
+- ``NESTED``: its parameters refitted together with the baseline's, started from the effect
   switched off or, with a start scan (``Effect.scan``), from the best scanned value refined alone
   with the baseline held;
-- ``"grid"``: a grid search of its parameters with the tube parameters refitted with the
+- ``GRID``: a grid search of its parameters with the tube parameters refitted with the
   clearance model (the paper's friction calibration, Section V-C and Table VII of Ha et al. 2019),
   then refitted together with the baseline's parameters;
-- ``"none"``: nothing to fit: evaluated with the clearance-model tube parameters;
-- ``"scan"``: a 1-D scan of its parameters on top of the fit of the effect it follows.
+- ``NO_FIT``: nothing to fit: evaluated with the clearance-model tube parameters;
+- ``SCAN``: a 1-D scan of its parameters on top of the fit of the effect it follows.
 
 A scan or grid whose best point is at its end is extended there, and a least-squares value at an
 optimizer bound has the bound widened, up to the parameter's limit (``ParameterSpec.limit``);
@@ -44,19 +44,19 @@ from .._log import progress_level
 from ..effects import REGISTRY
 from ..models import MODEL_INFO, MODELS
 from ..parallel import Executor
-from .calibrate import FAILED_RESIDUAL, CalibrationResult, _Objective, _uncertainty, calibrate, eq49_residuals, \
-    information_criterion
+from .calibrate import CalibrationResult, _Objective, _uncertainty, calibrate, information_criterion
 from .data import MeasuredData
 from .estimates import atypical_values, display_value, parameter_table
 from .evaluation import ErrorFigures, Errors, out_of_fold
 from .gridsearch import grid_search
 from .options import CONFIDENCE, DiscrepancyOptions
 from .parameters import parameter, read_parameters
+from .predictions import FAILED_RESIDUAL, eq49_residuals
 from .setup import DiscrepancySetup, effect_parameters, reported_parameters
 from .split import DataSplit, subsample
 from .statistics import Comparison, cv_comparison
 
-__all__ = ["CrossValidated", "Candidate", "FITTERS", "cross_validate", "refit_contact_baseline", "fit_candidates",
+__all__ = ["CrossValidated", "Candidate", "FitContext", "cross_validate", "refit_contact_baseline", "fit_candidates",
            "scan_fit", "combined_model", "needs_contact_baseline", "contained", "compare", "run_fits", "fit_rows", "stage_name",
            "make_candidate"]
 
@@ -225,7 +225,7 @@ def combined_model(*effects: str) -> str:
 def needs_contact_baseline(effect: str) -> bool:
     """The effect's fit starts from the clearance-model refit of the tube parameters."""
     e = REGISTRY[effect]
-    return e.fit in ("grid", "none") or (e.after is not None and needs_contact_baseline(e.after))
+    return e.fit.from_contact_baseline or (e.after is not None and needs_contact_baseline(e.after))
 
 
 def contained(a: str, b: str) -> bool:
@@ -446,90 +446,109 @@ def refit_contact_baseline(setup: DiscrepancySetup, split: DataSplit, baseline, 
     return cv
 
 
-def _fit_nested(ctx) -> CalibrationResult:
-    """Its parameters with the baseline's, from the effect switched off (or a start scan)."""
-    setup, entry, base, options, extra = ctx["setup"], ctx["entry"], ctx["base"], ctx["options"], ctx["extra"]
-    robot, fit_data, settings, n_jobs = setup.robot, ctx["fit_data"], setup.settings, ctx["n_jobs"]
-    base_all = dict(zip(*base.all_parameters()))
-    names = tuple(base.names) + extra
-    init = np.concatenate([base.values, read_parameters(robot, extra)])
-    before = []
-    if entry.scan is not None and extra:
-        # best of a 1-D scan, then the effect's own parameters alone with the baseline held
-        # (a few parameters: cheap steps), then everything together
-        best = scan_fit(robot, fit_data, entry.model, base_all, extra, entry.scan, settings, n_jobs, uncertainty=False)
-        alone = calibrate(robot, fit_data, entry.model, extra, fixed=base_all, initial=best.values,
-                          settings=settings, n_jobs=n_jobs, max_evaluations=options.max_evaluations,
-                          uncertainty=False)
-        init[len(base.names):] = alone.values
-        before = [best, alone]
-    fit = calibrate(robot, fit_data, entry.model, names, fixed=base.fixed, initial=init, settings=settings,
-                    n_jobs=n_jobs, max_evaluations=options.max_evaluations, uncertainty=ctx["k"] is None,
-                    prior=ctx["prior"], clusters=ctx["units"])
-    # the result's time and work include the start scan's and the effect's own fit
-    return replace(fit, seconds=fit.seconds + sum(f.seconds for f in before),
-                   evaluations=fit.evaluations + sum(f.evaluations for f in before))
+@dataclass(frozen=True)
+class FitContext:
+    """What a fit strategy (:class:`ctrplan.effects.FitStrategy`) fits one candidate from: the
+    fit's samples, its starting fits and the solvers, bound to them.
 
-
-def _refine_contact(ctx, start: CalibrationResult, names: tuple) -> CalibrationResult:
-    """A contact-model candidate's parameters ``names``, started from its grid or scan
-    (``start``), refitted together with the baseline's parameters with its own model.
-
-    The grid and the scan only place the coefficients: they run on tube parameters fitted with the
-    clearance model, which absorb part of the friction. Refitting everything together, as the
-    standard-model candidates are (:func:`_fit_nested`), sizes the coefficients continuously and
-    leaves no misfit for a second effect to take up in place of the first. The baseline's prior is
-    kept; a value at the limit of its grid or scan stays reported at bound.
+    Attributes
+    ----------
+    setup : DiscrepancySetup
+    entry : Effect
+        The candidate's registry entry.
+    k : int or None
+        The fold left out (None: the development fit).
+    extra : tuple of str
+        The effect's fitted parameters on these data.
+    options : DiscrepancyOptions
+    n_jobs : int
+    fit_data : MeasuredData
+        The fit's samples.
+    units : ndarray of int or None
+        Their clusters for the standard errors.
+    base : CalibrationResult
+        The baseline's fit of the same samples.
+    prior : object
+        The baseline's prior.
+    contact : dict or None
+        The clearance-model refit of the tube parameters on the same samples (stage 6a).
+    after : dict or None
+        The fitted parameters of the effect this one follows (``Effect.after``) on the same samples.
     """
-    setup, options, k = ctx["setup"], ctx["options"], ctx["k"]
-    base = ctx["base"]
-    values = dict(zip(*start.all_parameters()))
-    fitted = tuple(base.names) + tuple(n for n in names if n not in base.names)
-    fixed = {n: v for n, v in values.items() if n not in fitted}
-    init = [values[n] if n in values else read_parameters(setup.robot, (n,))[0] for n in fitted]
-    fit = calibrate(setup.robot, ctx["fit_data"], start.model, fitted, fixed=fixed, initial=init,
-                    settings=setup.settings, n_jobs=ctx["n_jobs"], max_evaluations=options.max_contact_evaluations,
-                    uncertainty=k is None, warm=True, prior=ctx["prior"], clusters=ctx["units"])
-    return replace(fit, message=f"{start.message}; then refitted with the baseline's parameters: {fit.message}",
-                   seconds=start.seconds + fit.seconds, evaluations=start.evaluations + fit.evaluations,
-                   at_bound=tuple(sorted(set(fit.at_bound) | set(start.at_bound))),
-                   widened=tuple(start.widened) + tuple(fit.widened), converged=fit.converged and start.converged)
 
+    setup: DiscrepancySetup
+    entry: object
+    k: int | None
+    extra: tuple
+    options: DiscrepancyOptions
+    n_jobs: int
+    fit_data: MeasuredData
+    units: object
+    base: CalibrationResult
+    prior: object
+    contact: dict | None
+    after: dict | None
 
-def _fit_grid(ctx) -> CalibrationResult:
-    """A grid search of its parameters on the clearance-model tube parameters, then those
-    parameters refitted together with the baseline's (:func:`_refine_contact`)."""
-    setup, options = ctx["setup"], ctx["options"]
-    g = grid_search(setup.robot, ctx["fit_data"], ctx["contact"], ctx["extra"], ctx["entry"].model,
-                    settings=setup.settings, n_jobs=ctx["n_jobs"], coarse=options.friction_grid,
-                    search_samples=options.friction_search_samples, seed=options.seed,
-                    uncertainty=False, clusters=ctx["units"])
-    return _refine_contact(ctx, g, tuple(ctx["extra"]))
+    def calibrate(self, model: str, names, **keywords) -> CalibrationResult:
+        """:func:`~ctrplan.discrepancy.calibrate.calibrate` of the robot on the fit's samples with
+        the setup's solver settings and ``n_jobs``; other arguments as there."""
+        return calibrate(self.setup.robot, self.fit_data, model, names, settings=self.setup.settings,
+                         n_jobs=self.n_jobs, **keywords)
 
+    def scan(self, model: str, fixed, names, values, uncertainty: bool, clusters=None) -> CalibrationResult:
+        """:func:`scan_fit` of ``names`` over ``values`` on the fit's samples."""
+        return scan_fit(self.setup.robot, self.fit_data, model, fixed, names, values, self.setup.settings,
+                        self.n_jobs, uncertainty=uncertainty, clusters=clusters)
 
-def _fit_none(ctx) -> CalibrationResult:
-    """Nothing to fit: evaluated with the clearance-model tube parameters."""
-    setup = ctx["setup"]
-    return calibrate(setup.robot, ctx["fit_data"], ctx["entry"].model, (), fixed=ctx["contact"],
-                     settings=setup.settings, n_jobs=ctx["n_jobs"])
+    def grid(self, fixed, names, model: str, uncertainty: bool, clusters=None) -> CalibrationResult:
+        """:func:`~ctrplan.discrepancy.gridsearch.grid_search` of ``names`` on the fit's samples
+        with the options' grid, search samples and seed."""
+        o = self.options
+        return grid_search(self.setup.robot, self.fit_data, fixed, names, model, settings=self.setup.settings,
+                           n_jobs=self.n_jobs, coarse=o.friction_grid, search_samples=o.friction_search_samples,
+                           seed=o.seed, uncertainty=uncertainty, clusters=clusters)
 
+    def refine_contact(self, start: CalibrationResult, names: tuple) -> CalibrationResult:
+        """A contact-model candidate's parameters ``names``, started from its grid or scan
+        (``start``), refitted together with the baseline's parameters with its own model.
 
-def _fit_scan(ctx) -> CalibrationResult:
-    """A 1-D scan on top of the fit of the effect it follows; with a contact model, then its
-    parameters and those of the effect it follows refitted together with the baseline's
-    (:func:`_refine_contact`)."""
-    setup, entry = ctx["setup"], ctx["entry"]
-    contact = MODEL_INFO[entry.model].contact
-    s = scan_fit(setup.robot, ctx["fit_data"], entry.model, ctx["after"], ctx["extra"], entry.scan,
-                 setup.settings, ctx["n_jobs"], uncertainty=ctx["k"] is None and not contact, clusters=ctx["units"])
-    if not contact:
-        return s
-    followed = effect_parameters(setup.robot, entry.after, setup.data)
-    return _refine_contact(ctx, s, tuple(followed) + tuple(ctx["extra"]))
+        The grid and the scan only place the coefficients: they run on tube parameters fitted
+        with the clearance model, which absorb part of the friction. Refitting everything
+        together, as the standard-model candidates are, sizes the coefficients continuously and
+        leaves no misfit for a second effect to take up in place of the first. The baseline's
+        prior is kept; a value at the limit of its grid or scan stays reported at bound.
+        """
+        base = self.base
+        values = dict(zip(*start.all_parameters()))
+        fitted = tuple(base.names) + tuple(n for n in names if n not in base.names)
+        fixed = {n: v for n, v in values.items() if n not in fitted}
+        init = [values[n] if n in values else read_parameters(self.setup.robot, (n,))[0] for n in fitted]
+        fit = self.calibrate(start.model, fitted, fixed=fixed, initial=init,
+                             max_evaluations=self.options.max_contact_evaluations, uncertainty=self.k is None,
+                             warm=True, prior=self.prior, clusters=self.units)
+        return replace(fit, message=f"{start.message}; then refitted with the baseline's parameters: {fit.message}",
+                       seconds=start.seconds + fit.seconds, evaluations=start.evaluations + fit.evaluations,
+                       at_bound=tuple(sorted(set(fit.at_bound) | set(start.at_bound))),
+                       widened=tuple(start.widened) + tuple(fit.widened), converged=fit.converged and start.converged)
 
+    def read_parameters(self, names) -> np.ndarray:
+        """The robot file's values of ``names`` (SI)."""
+        return read_parameters(self.setup.robot, names)
 
-#: Fitting strategy of an effect entry (``Effect.fit``) -> the function that fits it.
-FITTERS = {"nested": _fit_nested, "grid": _fit_grid, "none": _fit_none, "scan": _fit_scan}
+    def effect_parameters(self, effect: str) -> tuple:
+        """The parameters the workflow fits for ``effect`` on the setup's data."""
+        return effect_parameters(self.setup.robot, effect, self.setup.data)
+
+    @staticmethod
+    def needs_contact(model: str) -> bool:
+        """The mechanics model ``model`` needs the contact solve."""
+        return MODEL_INFO[model].contact
+
+    @staticmethod
+    def with_work(fit: CalibrationResult, before) -> CalibrationResult:
+        """``fit`` with the time and evaluations of the fits ``before`` it added."""
+        return replace(fit, seconds=fit.seconds + sum(f.seconds for f in before),
+                       evaluations=fit.evaluations + sum(f.evaluations for f in before))
 
 
 def _fit_note(effect: str, c: CrossValidated, base, contact: CrossValidated | None, options) -> str:
@@ -550,7 +569,7 @@ def _fit_note(effect: str, c: CrossValidated, base, contact: CrossValidated | No
     fit, bfit = c.fit, base.fit
     base_mean, cand_mean = float(np.nanmean(base.oof.position)), float(np.nanmean(c.oof.position))
     if fit.cost > bfit.cost * (1 + 1e-9):
-        if REGISTRY[effect].fit == "nested":
+        if REGISTRY[effect].fit.contains_baseline:
             notes.append(f"it fits the calibration data worse than the baseline (cost {fit.cost:.4g} against "
                          f"{bfit.cost:.4g}) although it contains the baseline: the fit failed")
         else:
@@ -586,17 +605,17 @@ def make_candidate(setup, split, baseline, effects, label, cv, shown_names, refe
         fit_note=note)
 
 
-def _context(setup, split, baseline, contact, candidates, entry, extra, options, k, n_jobs) -> dict:
+def _context(setup, split, baseline, contact, candidates, entry, extra, options, k, n_jobs) -> FitContext:
     fit_data, units = fit_rows(setup, split, k, options.max_contact_samples if MODEL_INFO[entry.model].contact else None)
-    return {"setup": setup, "entry": entry, "k": k, "extra": extra, "options": options, "n_jobs": n_jobs,
-            "fit_data": fit_data, "units": units, "base": baseline.cv.fold_fit(k), "prior": baseline.prior,
-            "contact": None if contact is None else contact.fold_params(k),
-            "after": None if entry.after is None else candidates[entry.after].cv.fold_params(k)}
+    return FitContext(setup=setup, entry=entry, k=k, extra=extra, options=options, n_jobs=n_jobs,
+                      fit_data=fit_data, units=units, base=baseline.cv.fold_fit(k), prior=baseline.prior,
+                      contact=None if contact is None else contact.fold_params(k),
+                      after=None if entry.after is None else candidates[entry.after].cv.fold_params(k))
 
 
 def fit_candidates(setup: DiscrepancySetup, split: DataSplit, baseline, contact: CrossValidated | None,
                    options: DiscrepancyOptions, progress: bool = False) -> dict:
-    """Stage 6b: switch each candidate effect on, fit it by its entry's strategy (:data:`FITTERS`)
+    """Stage 6b: switch each candidate effect on, fit it by its entry's strategy (``Effect.fit``)
     on the development samples and without each fold (each fold from its own baseline), and
     compare its out-of-fold errors with the baseline's
     (:func:`~ctrplan.discrepancy.statistics.cv_comparison`). Fits finished by an earlier run are
@@ -628,8 +647,8 @@ def fit_candidates(setup: DiscrepancySetup, split: DataSplit, baseline, contact:
                                      f"({entry.model} model) ...")
 
         def fit_one(k, n_jobs, entry=entry, extra=extra):
-            return FITTERS[entry.fit](_context(setup, split, baseline, contact, candidates, entry, extra, options, k,
-                                               n_jobs))
+            return entry.fit.fit(_context(setup, split, baseline, contact, candidates, entry, extra, options, k,
+                                          n_jobs))
 
         cv = cross_validate(setup, split, options, e, entry.model, fit_one, progress=progress)
         c = make_candidate(setup, split, baseline, (e,), entry.label, cv, reported_parameters(robot, e, data), baseline,

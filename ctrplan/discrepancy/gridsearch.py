@@ -19,9 +19,10 @@ import numpy as np
 
 from ..mechanics import ModelSettings
 from ..models import check_model
-from .calibrate import FAILED_RESIDUAL, CalibrationResult, _Objective, _uncertainty
+from .calibrate import CalibrationResult, _Objective, _uncertainty
 from .data import MeasuredData
 from .parameters import parameter
+from .predictions import FAILED_RESIDUAL
 
 __all__ = ["grid_search", "grid_search_friction"]
 

@@ -76,10 +76,15 @@ try:                                    # scipy >= 1.15
 except ImportError:                     # older scipy: the grid's best correlation length
     find_minimum = None
 
+#: How the correlation length is placed with the installed scipy: ``"find_minimum"`` (scipy >=
+#: 1.15, ``scipy.optimize.elementwise.find_minimum`` between grid points) or ``"grid"`` (the
+#: grid's best point). It enters the stage key (:func:`ctrplan.discrepancy.stages.stage_key`).
+CORRELATION_LENGTH_METHOD = "grid" if find_minimum is None else "find_minimum"
+
 from .data import MeasuredData
 from .options import MIN_REST_PAIRS
 
-__all__ = ["NoiseEstimate", "estimate_noise", "NOISE_SOURCES"]
+__all__ = ["NoiseEstimate", "estimate_noise", "NOISE_SOURCES", "CORRELATION_LENGTH_METHOD"]
 
 #: Where a noise value comes from (None: unknown).
 NOISE_SOURCES = ("rests", "stated", "repeated configurations")

@@ -14,7 +14,7 @@ from .._log import progress_level
 from ..effects import REGISTRY, EffectSet, robot_effects
 from ..io.atomic import atomic_write_text
 from .baseline import Baseline
-from .calibrate import pose_errors, predict
+from .predictions import pose_errors, predict
 from .data import MeasuredData
 from .decision import Naming, atypical_caution, cautions
 from .estimates import display_value

@@ -73,7 +73,7 @@ def _fit_pair(ctx) -> CalibrationResult:
     clearance model with the named effect's own parameters in place, the second effect by its own
     strategy (its grid, or its parameters alone from its single fit of the same samples), then
     every effect parameter and the baseline's parameters refitted together with the contact model,
-    as a contact candidate alone is (:func:`ctrplan.discrepancy.fitting._refine_contact`); every
+    as a contact candidate alone is (:meth:`ctrplan.discrepancy.fitting.FitContext.refine_contact`); every
     value is fitted with the other effect present.
     """
     setup, options, k, n_jobs = ctx["setup"], ctx["options"], ctx["k"], ctx["n_jobs"]
@@ -104,7 +104,7 @@ def _fit_pair(ctx) -> CalibrationResult:
                      settings=settings, n_jobs=n_jobs, max_evaluations=budget, uncertainty=False, warm=True,
                      prior=ctx["prior"])
     params = {**held, **dict(zip(base_names, tube.values))}
-    if entry.fit == "grid":
+    if entry.fit.pair_grid:
         g = grid_search(robot, fit_data, params, extra, model, settings=settings, n_jobs=n_jobs,
                         coarse=options.friction_grid, search_samples=options.friction_search_samples, seed=options.seed,
                         uncertainty=False)
@@ -185,7 +185,7 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
         if entry.after is not None and entry.after != named:
             not_tried[e] = f"it is fitted on top of {REGISTRY[entry.after].label}, a third effect"
             continue
-        if not tuple(n for n in reported_parameters(robot, e, data) if n not in first.params) and entry.fit != "none":
+        if not tuple(n for n in reported_parameters(robot, e, data) if n not in first.params) and entry.fit.adds_parameters:
             not_tried[e] = f"it adds no parameter to {first.label}"
             continue
         family.append(e)

@@ -18,8 +18,8 @@ import numpy as np
 
 from ..errors import CtrplanError
 from ..history import MotionRecord, motion_state, sequence_segments
-from ..mechanics import ModelSettings, solve_contact, solve_standard
-from ..models import MODEL_INFO, MODELS, check_model  # the one registry of models
+from ..mechanics import ModelSettings, solve_standard
+from ..models import MODEL_INFO, MODELS, check_model, standard_solution  # the one registry of models
 from ..parallel import Executor
 
 __all__ = ["MODELS", "Simulation", "simulate", "WarmStarts", "WARM_OUTER_TOL"]
@@ -193,12 +193,13 @@ def _no_results(m, n):
             np.full((m, n), np.nan), dict(n_standard=0, n_contact=0, n_warm=0, n_reused=0))
 
 
-def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, contact, settings, check_stability, stored=None):
+def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, solve, contact, settings, check_stability, stored=None):
     """Solve rows in order (one task; pure, runs in a worker).
 
     alpha, beta (m, n); guess (m, n) with NaN rows for "none"; follow (m,) bool: start from
     the previous row's base torsion (same branch) instead of ``guess``; eta (m, n - 1) in
-    {-1, +1} and mu (m, n - 1) (all mu 0: clearance model); contact: solve the contact model;
+    {-1, +1} and mu (m, n - 1) (all mu 0: clearance model); solve: the model's
+    :attr:`ctrplan.models.ModelInfo.solve`; contact: it is a contact model (warm starts, reuse);
     stored: None, or the :class:`WarmStarts` entries of these rows (``{key: start}``), whose
     contact solves then start from them and whose solutions are returned as new entries.
     """
@@ -238,8 +239,10 @@ def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, contact, settings, c
                     torsion[k] = np.nan
                 continue
             prev_std, prev_start = std, start
-            sol = std
-            if contact:
+            if not contact:
+                sol = solve(robot, a, b, settings, standard=std)
+                counts["n_reused"] += reused
+            else:
                 if prev_cont is not None and key == prev_key:
                     sol = prev_cont
                     counts["n_reused"] += 1
@@ -252,8 +255,8 @@ def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, contact, settings, c
                         own = WarmStarts.key(a, b, eta[k] if friction else None)
                         start = stored.get(own) or (stored.get(WarmStarts.key(a, b)) if friction else None)
                         if start is not None:
-                            sol = solve_contact(robot, a, b, settings, eta=eta[k] if friction else None,
-                                                mu=mu[k] if friction else None, standard=std, warm_start=start)
+                            sol = solve(robot, a, b, settings, eta=eta[k] if friction else None,
+                                        mu=mu[k] if friction else None, standard=std, warm_start=start)
                             counts["n_contact"] += 1
                             counts["n_warm"] += 1
                             if not sol.diagnostics.converged:
@@ -265,22 +268,19 @@ def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, contact, settings, c
                             # wander for its whole iteration budget; started from the clearance
                             # solution at the same configuration it converges in a few steps (as in
                             # evaluate_bound)
-                            warm = solve_contact(robot, a, b, settings, standard=std)
+                            warm = solve(robot, a, b, settings, standard=std)
                             counts["n_contact"] += 1
                             if not warm.diagnostics.converged:
                                 warm = None
                             elif new is not None:
                                 new.append((WarmStarts.key(a, b), _start_of(warm)))
-                        sol = solve_contact(robot, a, b, settings, eta=eta[k] if friction else None,
-                                            mu=mu[k] if friction else None, standard=std,
-                                            warm_start=warm)
+                        sol = solve(robot, a, b, settings, eta=eta[k] if friction else None,
+                                    mu=mu[k] if friction else None, standard=std, warm_start=warm)
                         counts["n_contact"] += 1
                         counts["n_warm"] += warm is not None
                     if new is not None and sol.diagnostics.converged:
                         new.append((WarmStarts.key(a, b, eta[k] if friction else None), _start_of(sol)))
                     prev_cont, prev_key = sol, key
-            elif reused:
-                counts["n_reused"] += 1
             ok[k] = sol.diagnostics.ok
             msg[k] = sol.diagnostics.message
             tip[k] = sol.tip_position
@@ -332,7 +332,7 @@ def _solve_task(single_thread, *args):
         return _solve_rows(*args)
 
 
-def _run(tasks, alpha, beta, guess, follow, eta, mu, contact, robot, settings, check_stability,
+def _run(tasks, alpha, beta, guess, follow, eta, mu, solve, contact, robot, settings, check_stability,
          n_jobs, progress, desc, K, warm_starts=None):
     """Run tasks (each an index array in processing order) and scatter results to rows, in task
     order (the results arrive in order of completion). With ``warm_starts`` (a
@@ -349,8 +349,8 @@ def _run(tasks, alpha, beta, guess, follow, eta, mu, contact, robot, settings, c
         keys += [WarmStarts.key(alpha[k], beta[k]) for k in idx]
         return {key: warm_starts.get(key) for key in keys if warm_starts.get(key) is not None}
 
-    jobs = [(t, (workers > 1, robot, alpha[idx], beta[idx], guess[idx], follow[idx], eta[idx], mu[idx], contact,
-                 settings, check_stability, stored(idx))) for t, idx in enumerate(tasks)]
+    jobs = [(t, (workers > 1, robot, alpha[idx], beta[idx], guess[idx], follow[idx], eta[idx], mu[idx], solve,
+                 contact, settings, check_stability, stored(idx))) for t, idx in enumerate(tasks)]
     results = [None] * len(tasks)
     from tqdm.auto import tqdm
 
@@ -381,10 +381,14 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, mu=None, sequence=None
     alpha, beta : array-like, shape (K, n)
         Base rotations [rad] and translations [m] the tubes reach (after history effects:
         :attr:`ctrplan.history.HistoryState.alpha`).
-    model : {"standard", "clearance", "friction"}
-        Zero-clearance model (Section II-A), clearance model (Sections II-B to II-E) or
-        maximal torsional friction model with the robot's friction coefficients (Section III)
-        of Ha, Fagogenis & Dupont 2019.
+    model : str
+        A registered mechanics model (:data:`ctrplan.models.MODEL_REGISTRY`), solved by its
+        entry's ``solve`` on top of the followed standard solution: zero-clearance model
+        (``"standard"``, Section II-A), clearance model (``"clearance"``, Sections II-B to II-E)
+        or maximal torsional friction model with the robot's friction coefficients
+        (``"friction"``, Section III) of Ha, Fagogenis & Dupont 2019, or one registered by the
+        user (with ``n_jobs`` > 1 its ``solve`` goes to the worker processes, which must be able
+        to unpickle it).
     eta : array-like of int, shape (K, n - 1), optional
         Friction direction applied per pair and sample (+1, -1; 0: the pair carries no friction
         there), Eq. (38). Friction model only; default: the state of
@@ -506,8 +510,8 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, mu=None, sequence=None
         # stage 1: standard model along each sequence (branch following)
         tasks = [np.concatenate(t) for t in _tasks_from_groups(groups, 8 * size if contact else size)]
         tip, tan, ok, msg, torsion, c = _run(
-            tasks, alpha, beta, guess, follow, eta_solve, mu_used, False, robot, settings,
-            check_stability, n_jobs, progress and not contact, "standard model", K)
+            tasks, alpha, beta, guess, follow, eta_solve, mu_used, standard_solution if contact else info.solve, False,
+            robot, settings, check_stability, n_jobs, progress and not contact, "standard model", K)
         for name in counts:
             counts[name] += c[name]
         if contact:
@@ -520,7 +524,7 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, mu=None, sequence=None
     if contact or groups is None:
         tasks = _chunks(order, alpha, beta, size) if order.size else []
         tip2, tan2, ok2, msg2, torsion2, c = _run(
-            tasks, alpha, beta, guess, follow, eta_solve, mu_used, contact, robot, settings,
+            tasks, alpha, beta, guess, follow, eta_solve, mu_used, info.solve, contact, robot, settings,
             check_stability, n_jobs, progress, f"{model} model", K, warm_starts)
         for name in counts:
             counts[name] += c[name]

@@ -12,6 +12,7 @@ import numpy as np
 from ..cache import content_key, file_hash, mechanics_version
 from ..effects import REGISTRY
 from ..io.atomic import atomic_write_text
+from .noise import CORRELATION_LENGTH_METHOD
 from .options import FIT_VERSION, DiscrepancyOptions
 
 __all__ = ["StageStore", "stage_key"]
@@ -81,7 +82,8 @@ def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
     permutations and level, the stated noise, the envelope, the reference friction, the bound's
     samples and target); :data:`~ctrplan.discrepancy.options.FIT_VERSION` and
     :data:`ctrplan.constants.MECHANICS_VERSION` enter it so that stages of an earlier fitting
-    procedure or of other mechanics are not reused.
+    procedure or of other mechanics are not reused, and so does the method the installed scipy
+    gives the noise estimate (:data:`~ctrplan.discrepancy.noise.CORRELATION_LENGTH_METHOD`).
 
     Parameters
     ----------
@@ -92,9 +94,10 @@ def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
     Returns
     -------
     str
-        12 hexadecimal digits of a SHA-256.
+        A SHA-256, 64 hexadecimal digits (:func:`ctrplan.cache.content_key`).
     """
     keyed = {f.name: getattr(options, f.name) for f in fields(options) if f.metadata.get("stage_key", True)}
     keyed["effects"] = sorted(options.effects if options.effects is not None else REGISTRY)
     return content_key({"robot_sha256": file_hash(robot_path), "data_sha256": file_hash(data_path), "options": keyed,
-                        "fit_version": FIT_VERSION, "mechanics_version": mechanics_version()})[:12]
+                        "fit_version": FIT_VERSION, "mechanics_version": mechanics_version(),
+                        "correlation_length_method": CORRELATION_LENGTH_METHOD})

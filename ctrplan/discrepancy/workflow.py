@@ -192,9 +192,9 @@ class DiscrepancyResult:
         return self.updated.path
 
     def to_dict(self) -> dict:
-        """The results as ``results.json`` stores them (:func:`ctrplan.discrepancy.report.results_dict`;
+        """The results as ``results.json`` stores them (:func:`ctrplan.discrepancy.results.results_dict`;
         report units where a key ends ``_mm`` or ``_deg``)."""
-        from .report import results_dict
+        from .results import results_dict
 
         return results_dict(self)
 

@@ -5,7 +5,8 @@ typical ranges and optimizer bounds (:class:`ParameterSpec`), the mechanics mode
 how it changes the robot, the motion (:mod:`ctrplan.history`) or the measurement, its
 signature test, its ``ctrplan synth`` option, how the discrepancy workflow fits it, and what
 planning does with it. The CLI, ``synth``, the parameter tables, the workflow and the report
-iterate :data:`REGISTRY`; adding an effect is one :func:`register` call.
+iterate :data:`REGISTRY` (the read-only view of :data:`EFFECT_REGISTRY`, a
+:class:`ctrplan.registry.Registry`); adding an effect is one :func:`register` call.
 
 Built in (``_builtin``): torsional friction, clearance, off-plane precurvature, Poisson ratio,
 registration (Ha, Fagogenis & Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906),
@@ -16,7 +17,8 @@ drive backlash, tracker time offset and gradually developing friction.
 in its ``[effects]`` table (:func:`effects_from_file`).
 """
 
-from ._registry import (FIT_STRATEGIES, MODEL_ORDER, REGISTRY, STORES, Effect, ParameterSpec, effect_names,
+from ._fit import FIT_STRATEGIES, GRID, NESTED, NO_FIT, SCAN, FitStrategy
+from ._registry import (EFFECT_REGISTRY, REGISTRY, STORES, Effect, ParameterSpec, effect_names,
                         effect_of_parameter, get, parameter_spec, register, registered, unregister)
 from . import _builtin  # noqa: F401  (registers the built-in effects)
 from ._builtin import (BACKLASH_SCAN, FRICTION_ANGLE_REFERENCE, FRICTION_ANGLE_SCAN, TIME_OFFSET_SCAN,
@@ -25,8 +27,8 @@ from ._builtin import (BACKLASH_SCAN, FRICTION_ANGLE_REFERENCE, FRICTION_ANGLE_S
 from ._values import (EffectSet, apply_output_effects, apply_robot_effects, effects_from_file, effects_to_file,
                       file_key, history_operators, history_state, model_of, robot_effects)
 
-__all__ = ["Effect", "ParameterSpec", "REGISTRY", "MODEL_ORDER", "FIT_STRATEGIES", "STORES", "register",
-           "unregister", "registered", "get", "effect_names", "effect_of_parameter", "parameter_spec",
+__all__ = ["Effect", "ParameterSpec", "EFFECT_REGISTRY", "REGISTRY", "FitStrategy", "FIT_STRATEGIES", "NESTED",
+           "GRID", "NO_FIT", "SCAN", "STORES", "register", "unregister", "registered", "get", "effect_names", "effect_of_parameter", "parameter_spec",
            "EffectSet", "robot_effects", "apply_robot_effects", "history_operators", "history_state",
            "apply_output_effects", "model_of", "file_key", "effects_from_file", "effects_to_file",
            "BACKLASH_SCAN", "TIME_OFFSET_SCAN", "FRICTION_ANGLE_SCAN", "FRICTION_ANGLE_REFERENCE",

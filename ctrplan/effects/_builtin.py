@@ -14,6 +14,7 @@ import numpy as np
 
 from ..history import HistoryOperator, play, time_shift
 from ..robot import ROTATION, Section
+from ._fit import GRID, NO_FIT, SCAN
 from ._registry import Effect, ParameterSpec, register
 
 __all__ = ["BACKLASH_SCAN", "TIME_OFFSET_SCAN", "FRICTION_ANGLE_SCAN", "FRICTION_ANGLE_REFERENCE",
@@ -194,7 +195,7 @@ register(Effect(
     present=lambda robot: any(mu > 0 for mu in robot.friction_coefficients),
     signature=lambda ctx: ctx.direction_test("friction"),
     synth_option="--mu", synth_help="Friction coefficient per tube pair, e.g. 0.22,0.12.",
-    fit="grid", requires=_contact_requirement, contains=("clearance",),
+    fit=GRID, requires=_contact_requirement, contains=("clearance",),
     plan="the friction coefficients of the robot file: the bound, the prediction and compensated targeting",
     separated_by="a translation after a rotation (it releases friction, not a dead band or a lag) and the same "
                  "configuration approached from both directions"))
@@ -230,7 +231,7 @@ register(Effect(
     if _has_clearance(robot) else {},
     signature=_clearance_signature, synth_option="--clearance-m",
     synth_help="Radial clearance per pair [m] (default: from the tube diameters).",
-    fit="none", requires=_contact_requirement,
+    fit=NO_FIT, requires=_contact_requirement,
     plan="the tube diameters of the robot file: the clearance model of the bound and the prediction",
     separated_by="translations that change which curved sections overlap"))
 
@@ -474,7 +475,7 @@ register(Effect(
     friction_angle=lambda v: float(v.get("friction_angle", 0.0)), active=lambda v: v.get("friction_angle", 0) > 0,
     signature=_gradual_signature, synth_option="--friction-angle-rad",
     synth_help="Relative rotation over which friction develops after a reversal [rad] (needs --mu).",
-    needs_motion=True, scan=FRICTION_ANGLE_SCAN, fit="scan", after="friction",
+    needs_motion=True, scan=FRICTION_ANGLE_SCAN, fit=SCAN, after="friction",
     requires=lambda robot, data: _contact_requirement(robot) or _motion_requirement(data),
     contains=("friction", "clearance"),
     plan="used: the friction state follows the rotation amounts the plan makes (prediction and compensated "

@@ -2,25 +2,18 @@
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
-__all__ = ["ParameterSpec", "Effect", "REGISTRY", "MODEL_ORDER", "FIT_STRATEGIES", "STORES", "register",
+from ..models import MODEL_REGISTRY
+from ..registry import Registry
+from ._fit import NESTED, FitStrategy
+
+__all__ = ["ParameterSpec", "Effect", "EFFECT_REGISTRY", "REGISTRY", "STORES", "register",
            "unregister", "registered", "get", "effect_names", "effect_of_parameter", "parameter_spec"]
 
-#: Mechanics models from the least to the most complete; an effect set is evaluated with the
-#: most complete model any of its effects needs.
-MODEL_ORDER = ("standard", "clearance", "friction")
-#: How the discrepancy workflow fits an effect (``Effect.fit``):
-#: ``"nested"``: its parameters refitted with the baseline's, started from the effect switched off
-#: (or from the best point of ``Effect.scan``); ``"grid"``: a grid search of its parameters with the
-#: tube parameters refitted once with the clearance model (the paper's friction calibration);
-#: ``"none"``: nothing to fit, evaluated with the clearance-model tube parameters;
-#: ``"scan"``: a 1-D scan of its parameters on top of the fit of ``Effect.after``.
-FIT_STRATEGIES = ("nested", "grid", "none", "scan")
 #: Where a robot file keeps an effect's values: ``"robot"``: in the tube and pair tables (the effect
 #: changes the robot itself); ``"effects"``: in the ``[effects]`` table; ``"registration"``: in
 #: ``[tracker_registration]``.
@@ -157,8 +150,8 @@ class Effect:
         Key of the registry (``--effects`` of ``ctrplan discrepancy``).
     label : str
         Human-readable name for reports.
-    model : {"standard", "clearance", "friction"}
-        The mechanics model it needs.
+    model : str
+        The mechanics model it needs (a name of :data:`ctrplan.models.MODEL_REGISTRY`).
     parameters : callable
         ``parameters(robot) -> tuple of ParameterSpec``: every parameter the effect can carry on
         this robot (the order of its ``ctrplan synth`` option's values).
@@ -199,10 +192,11 @@ class Effect:
         Only data with motion between samples can show it (``ctrplan synth --protocol
         trajectory``).
     scan : tuple of float, optional
-        Start scan of a nested fit or the values of a ``"scan"`` fit (every fitted parameter set
+        Start scan of a nested fit or the values of a ``SCAN`` fit (every fitted parameter set
         to each value in turn), in the parameters' unit.
-    fit : str
-        :data:`FIT_STRATEGIES`.
+    fit : FitStrategy
+        How the discrepancy workflow fits it: ``ctrplan.effects.NESTED`` (the default), ``GRID``,
+        ``NO_FIT``, ``SCAN``, or a strategy of one's own.
     after : str, optional
         The effect whose fit this one starts from and whose fitted parameters it carries (gradual
         friction after friction).
@@ -237,7 +231,7 @@ class Effect:
     synth_help: str = ""
     needs_motion: bool = False
     scan: tuple | None = None
-    fit: str = "nested"
+    fit: FitStrategy = NESTED
     after: str | None = None
     requires: Callable | None = None
     contains: tuple = ()
@@ -245,13 +239,15 @@ class Effect:
     separated_by: str = ""
 
     def __post_init__(self):
-        if self.model not in MODEL_ORDER:
-            raise ValueError(f"effect {self.name!r}: model must be one of {MODEL_ORDER}, got {self.model!r}")
-        if self.fit not in FIT_STRATEGIES:
-            raise ValueError(f"effect {self.name!r}: fit must be one of {FIT_STRATEGIES}, got {self.fit!r}")
+        if self.model not in MODEL_REGISTRY:
+            raise ValueError(f"effect {self.name!r}: model must be a registered mechanics model "
+                             f"({', '.join(MODEL_REGISTRY.names())}), got {self.model!r}")
+        if not isinstance(self.fit, FitStrategy):
+            raise TypeError(f"effect {self.name!r}: fit must be a FitStrategy (ctrplan.effects.NESTED, GRID, "
+                            f"NO_FIT, SCAN or one's own), got {self.fit!r}")
         if self.store not in STORES:
             raise ValueError(f"effect {self.name!r}: store must be one of {STORES}, got {self.store!r}")
-        if self.fit == "scan" and (self.scan is None or self.after is None):
+        if self.fit.needs_scan and (self.scan is None or self.after is None):
             raise ValueError(f"effect {self.name!r}: a scan fit needs scan values and the effect it follows")
 
     @property
@@ -289,40 +285,54 @@ class Effect:
         return None if self.requires is None else self.requires(robot, data)
 
 
-#: The registered effects, in the order the workflow tries them (an effect with ``after``
-#: comes after that effect).
-REGISTRY: dict[str, Effect] = {}
+def _check_effect(name: str, effect) -> None:
+    """A registry entry must be an :class:`Effect` of the same name whose ``after`` is registered."""
+    if not isinstance(effect, Effect) or effect.name != name:
+        raise TypeError(f"an effect entry must be an Effect named {name!r}, got {effect!r}")
+    if effect.after is not None and effect.after not in EFFECT_REGISTRY:
+        raise ValueError(f"effect {name!r} follows {effect.after!r}, which is not registered")
+
+
+#: The effects by name (a :class:`ctrplan.registry.Registry`), in the order the workflow tries
+#: them (an effect with ``after`` comes after that effect).
+EFFECT_REGISTRY: Registry[Effect] = Registry("effect", check=_check_effect)
+#: A live read-only view of :data:`EFFECT_REGISTRY`: ``{name: Effect}``.
+REGISTRY = EFFECT_REGISTRY.view
 
 
 def register(effect: Effect, *, replace: bool = False) -> Effect:
-    """Add an effect to the registry (appended at the end of the order).
+    """Add an effect to :data:`EFFECT_REGISTRY` under its name (at the end of the order).
 
     Raises
     ------
+    TypeError
+        ``effect`` is not an :class:`Effect`.
     ValueError
-        A name that is taken (unless ``replace``), or ``after`` naming an unknown effect.
+        A name that is taken by another effect (unless ``replace``), or ``after`` naming an
+        unknown effect.
     """
-    if effect.name in REGISTRY and not replace:
-        raise ValueError(f"effect {effect.name!r} is already registered")
-    if effect.after is not None and effect.after not in REGISTRY:
-        raise ValueError(f"effect {effect.name!r} follows {effect.after!r}, which is not registered")
-    REGISTRY[effect.name] = effect
-    return effect
+    if not isinstance(effect, Effect):
+        raise TypeError(f"an effect entry must be an Effect, got {effect!r}")
+    return EFFECT_REGISTRY.register(effect.name, effect, replace=replace)
 
 
-def unregister(name: str) -> None:
-    """Remove an effect (KeyError if absent)."""
-    del REGISTRY[name]
+def unregister(name: str) -> Effect:
+    """Remove the effect ``name`` and return it.
+
+    Raises
+    ------
+    ctrplan.registry.UnknownNameError
+        No effect of that name (a :class:`KeyError`).
+    """
+    return EFFECT_REGISTRY.unregister(name)
 
 
-@contextlib.contextmanager
-def registered(effect: Effect) -> Iterator[Effect]:
-    """Register ``effect`` for the duration of a ``with`` block (tests, experiments)."""
-    register(effect)
-    try:
-        yield effect
-    finally:
-        REGISTRY.pop(effect.name, None)
+def registered(effect: Effect, *, replace: bool = False):
+    """Register ``effect`` for the length of a ``with`` block, then restore the registry
+    (tests, notebooks). Errors as :func:`register`."""
+    if not isinstance(effect, Effect):
+        raise TypeError(f"an effect entry must be an Effect, got {effect!r}")
+    return EFFECT_REGISTRY.registered(effect.name, effect, replace=replace)
 
 
 def get(name: str) -> Effect:
@@ -330,13 +340,10 @@ def get(name: str) -> Effect:
 
     Raises
     ------
-    KeyError
-        With the registered names.
+    ctrplan.registry.UnknownNameError
+        A :class:`KeyError` whose message lists the registered names.
     """
-    try:
-        return REGISTRY[name]
-    except KeyError:
-        raise KeyError(f"unknown effect {name!r}; registered: {', '.join(REGISTRY)}") from None
+    return EFFECT_REGISTRY.get(name)
 
 
 def effect_names() -> tuple:

@@ -8,7 +8,8 @@ import numpy as np
 
 from ..errors import ModelFileError, PhysicalParameterError
 from ..history import HistoryState, MotionRecord, apply_history
-from ._registry import MODEL_ORDER, REGISTRY, effect_of_parameter, get
+from ..models import MODEL_REGISTRY
+from ._registry import REGISTRY, effect_of_parameter, get
 
 __all__ = ["EffectSet", "robot_effects", "apply_robot_effects", "history_operators", "history_state",
            "apply_output_effects", "model_of", "file_key", "effects_from_file", "effects_to_file"]
@@ -245,10 +246,11 @@ def apply_output_effects(tip, tangent, effects: Mapping):
 
 
 def model_of(effects: Mapping, base: str = "standard") -> str:
-    """The most complete mechanics model the active effects (and ``base``) need."""
+    """The most complete mechanics model the active effects (and ``base``) need: the last of
+    them in the order of :data:`ctrplan.models.MODEL_REGISTRY` (least to most complete)."""
     es = EffectSet(effects)
     models = [base] + [REGISTRY[n].model for n in es.active()]
-    return max(models, key=MODEL_ORDER.index)
+    return max(models, key=MODEL_REGISTRY.names().index)
 
 
 # --------------------------------------------------------------------------- robot files

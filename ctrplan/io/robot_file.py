@@ -19,12 +19,12 @@ from pathlib import Path
 from typing import Annotated
 
 import pydantic
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 from ..cache import file_hash
 from ..calibration import CalibratedBound, PredictionValidation, RobotCalibration
 from ..errors import ModelFileError, PhysicalParameterError
-from ..models import MODELS, check_model
+from ..models import MODEL_REGISTRY, MODELS, check_model
 from ..robot import ROTATION, TRANSLATION, Joint, Robot, Section, TranslationLink, Tube
 
 __all__ = ["load_robot", "load_robot_calibration", "robot_from_toml_text", "robot_from_document",
@@ -113,12 +113,23 @@ class EffectsSourceDoc(_Strict):
     cautions: list[str] = []
 
 
+def _registered_model(name: str) -> str:
+    """``name`` if it is a registered mechanics model (read at load time: a model registered by
+    the user is accepted)."""
+    if name not in MODEL_REGISTRY:
+        names = [repr(n) for n in MODEL_REGISTRY.names()]
+        listed = ", ".join(names[:-1]) + " or " + names[-1] if len(names) > 1 else names[0]
+        raise ValueError(f"should be a registered mechanics model: {listed}; got {name!r}")
+    return name
+
+
 class RobotDocument(_Strict):
     """Schema of a robot model file (see ``docs/file-formats.md``)."""
 
     name: Annotated[str, Field(min_length=1)]
     source: str = ""
-    model: typing.Literal[MODELS] | None = None   # ctrplan.models: the model the parameters were calibrated for
+    # the model the parameters were calibrated for: a name of the model registry (ctrplan.models)
+    model: Annotated[str, AfterValidator(_registered_model)] | None = None
     tracker_registration: RegistrationDoc | None = None
     k_xy_reference_N_m2: PositiveFloat | None = None
     tubes: Annotated[list[TubeDoc], Field(min_length=1)]

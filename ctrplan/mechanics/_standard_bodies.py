@@ -106,7 +106,7 @@ class StandardBodies:
 @njit(cache=True)
 def _body_counts(alpha, beta, valid, tubes, opts, counts):
     """Body points of each possible configuration (grid nodes with s >= max(beta) - tol), to
-    size the padded outputs exactly when the capacity bound of :func:`_solve_packed` did not
+    size the padded outputs exactly when the capacity bound of :func:`solve_standard_bodies_packed` did not
     hold; writes ``counts`` (K,) and returns their maximum. ``alpha``, ``beta`` (K, n) [rad],
     [m]; ``valid`` (K,) bool; ``tubes`` a ``BatchTubes``, ``opts`` a ``BatchOptions``
     (``_standard_batch``)."""
@@ -234,7 +234,7 @@ def solve_standard_bodies(robot, alpha, beta, settings: ModelSettings | None = N
     """
     settings = settings or ModelSettings()
     alpha, beta = configuration_arrays(robot, alpha, beta)
-    return _solve_packed(pack_robot(robot), alpha, beta, robot.configurations_possible(alpha, beta), settings)
+    return solve_standard_bodies_packed(pack_robot(robot), alpha, beta, robot.configurations_possible(alpha, beta), settings)
 
 
 
@@ -247,10 +247,27 @@ def _body_capacity(lengths, nbrk, settings) -> int:
     return int(np.max(lengths) / (min(settings.refine_ratio, 1.0) * settings.ds)) + 3 * int(np.sum(nbrk)) + 4
 
 
-def _solve_packed(packed, alpha, beta, valid, settings) -> StandardBodies:
-    """:func:`solve_standard_bodies` on a :class:`PackedRobot` ``packed``, for contiguous
-    ``alpha``, ``beta`` (K, n) whose possible configurations are flagged in ``valid`` (K,) (for
-    callers that pack the robot once and have checked the configurations already)."""
+def solve_standard_bodies_packed(packed, alpha, beta, valid, settings) -> StandardBodies:
+    """:func:`solve_standard_bodies` on a robot packed once by
+    :func:`ctrplan.mechanics.packed.pack_robot`, for callers that check many batches of one robot
+    (the planner's validity checker) and have checked the configurations already.
+
+    Parameters
+    ----------
+    packed : PackedRobot
+        ``pack_robot(robot)``.
+    alpha, beta : ndarray, shape (K, n), C-contiguous
+        Base rotations [rad] and translations [m].
+    valid : ndarray of bool, shape (K,)
+        The configurations that are possible (``Robot.configurations_possible``); the others
+        are not solved.
+    settings : ModelSettings
+
+    Returns
+    -------
+    StandardBodies
+        As :func:`solve_standard_bodies`.
+    """
     tubes = BatchTubes(packed.lengths, packed.breaks, packed.n_breaks, packed.precurvature, packed.k_xy,
                        packed.stiffness_ratio)
     opts = BatchOptions(ds=float(settings.ds), merge_tol=float(GRID_MERGE_TOL),

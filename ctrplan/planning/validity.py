@@ -304,7 +304,7 @@ class BatchValidityChecker:
         """Standard-model bodies of (alpha, beta) (k, n); a batch whose compiled solve raises
         is redone one configuration at a time, and configurations that raise are invalid (as
         in ``ValidityChecker``). Returns (StandardBodies, failed (k,) bool)."""
-        from ..mechanics._standard_bodies import StandardBodies, _solve_packed  # noqa: PLC0415
+        from ..mechanics import StandardBodies, solve_standard_bodies_packed  # noqa: PLC0415
         from ..mechanics.packed import pack_robot  # noqa: PLC0415
 
         if self._packed is None:
@@ -314,13 +314,13 @@ class BatchValidityChecker:
         beta = np.ascontiguousarray(beta)
         possible = np.ones(k, dtype=bool)   # checked by configurations_possible before
         try:
-            return _solve_packed(self._packed, alpha, beta, possible, self.settings), np.zeros(k, dtype=bool)
+            return solve_standard_bodies_packed(self._packed, alpha, beta, possible, self.settings), np.zeros(k, dtype=bool)
         except _MODEL_ERRORS:
             pass
         parts, failed = [], np.zeros(k, dtype=bool)
         for i in range(k):
             try:
-                parts.append(_solve_packed(self._packed, alpha[i:i + 1], beta[i:i + 1], possible[i:i + 1],
+                parts.append(solve_standard_bodies_packed(self._packed, alpha[i:i + 1], beta[i:i + 1], possible[i:i + 1],
                                            self.settings))
             except _MODEL_ERRORS:
                 failed[i] = True
