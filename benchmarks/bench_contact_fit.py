@@ -9,7 +9,7 @@ file, Ha, Fagogenis & Dupont 2019), with the code of each checkout,
   registration for data in a tracker frame) fitted with the clearance model (as the workflow's
   contact-baseline refit), from the file's values;
 - ``grid``: the friction coefficients by the coarse grid and its refinements
-  (:func:`ctrplan.discrepancy.gridsearch.grid_search_friction`, the friction candidate's first
+  (:func:`ctrplan.discrepancy.fits.gridsearch.grid_search_friction`, the friction candidate's first
   step);
 - ``refine``: the tube parameters and the friction coefficients together with the friction model
   from the grid's point (the candidate's second step),
@@ -49,9 +49,9 @@ root, robot_file, data_file, samples = sys.argv[1], sys.argv[2], sys.argv[3], in
 if not ctrplan.__file__.startswith(root):
     raise RuntimeError(f"ctrplan imported from {ctrplan.__file__}, not from {root}")
 from ctrplan.io.robot_file import load_robot
-from ctrplan.discrepancy.data import load_measured_data
-from ctrplan.discrepancy.calibrate import calibrate
-from ctrplan.discrepancy.gridsearch import grid_search_friction
+from ctrplan.discrepancy.measured.data import load_measured_data
+from ctrplan.discrepancy.fits.calibrate import calibrate
+from ctrplan.discrepancy.fits.gridsearch import grid_search_friction
 from ctrplan.discrepancy.options import DiscrepancyOptions
 from ctrplan.discrepancy.setup import default_baseline_parameters
 opts = DiscrepancyOptions()

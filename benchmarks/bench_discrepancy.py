@@ -37,7 +37,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     from ctrplan.discrepancy import synthesize, write_synth
-    from ctrplan.discrepancy.report import write_report
+    from ctrplan.discrepancy.outputs.report import write_report
     from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
     from ctrplan.io.robot_file import load_robot, robot_to_toml
 

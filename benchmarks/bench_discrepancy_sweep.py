@@ -145,7 +145,7 @@ def plan_case(seed: int, index: int) -> dict:
     and as a share of the typical range), tube-parameter errors, noise."""
     import numpy as np
 
-    from ctrplan.discrepancy.parameters import parameter
+    from ctrplan.discrepancy.fits.parameters import parameter
     from ctrplan.effects import REGISTRY
     from ctrplan.io.robot_file import load_robot
 
@@ -350,7 +350,7 @@ def outcome(truth: list, verdict: str, named_effects: list, named_effect: str | 
 
 def score_run(plan: dict, res: dict, written: dict | None) -> dict:
     """``{"outcome", "written_stderr", "value_check"}`` of a run's results ``res``
-    (:func:`ctrplan.discrepancy.results.results_dict`) on the case ``plan`` whose written robot
+    (:func:`ctrplan.discrepancy.outputs.results.results_dict`) on the case ``plan`` whose written robot
     file holds ``written`` (:func:`written_values`)."""
     stderr = written_stderr(res, written)
     check = value_check(plan, res["named_effects"], written, stderr)
@@ -443,7 +443,7 @@ def written_values(model_file, named, fitted) -> dict:
     """``{effect: {parameter: value}}`` of the named effects as the written robot file holds them
     (fitted jointly where two are named); the registration, which a robot file does not hold, as
     ``fitted`` gives it (each named effect fitted alone)."""
-    from ctrplan.discrepancy.parameters import read_parameters
+    from ctrplan.discrepancy.fits.parameters import read_parameters
     from ctrplan.discrepancy.setup import reported_parameters
     from ctrplan.io.robot_file import load_robot
 

@@ -56,7 +56,7 @@ def _registered_errors(data, tip_base, rows):
     import numpy as np
     from scipy.spatial.transform import Rotation
 
-    from ctrplan.discrepancy.predictions import kabsch_registration
+    from ctrplan.discrepancy.fits.predictions import kabsch_registration
 
     rv, t = kabsch_registration(tip_base[:REGISTRATION_ROWS], data.tip[:REGISTRATION_ROWS])
     tip = Rotation.from_rotvec(rv).apply(tip_base) + t
@@ -66,10 +66,10 @@ def _registered_errors(data, tip_base, rows):
 def evaluate_file(path: Path, data_path: Path, ds: float, n_jobs: int) -> dict:
     import numpy as np
 
-    from ctrplan.discrepancy.predictions import predict
-    from ctrplan.discrepancy.coverage import NOISE_MULTIPLE, bound_values, calibrate_bound
-    from ctrplan.discrepancy.data import load_measured_data
-    from ctrplan.discrepancy.noise import estimate_noise
+    from ctrplan.discrepancy.fits.predictions import predict
+    from ctrplan.discrepancy.verdict.coverage import NOISE_MULTIPLE, bound_values, calibrate_bound
+    from ctrplan.discrepancy.measured.data import load_measured_data
+    from ctrplan.discrepancy.measured.noise import estimate_noise
     from ctrplan.io.robot_file import load_robot
     from ctrplan.mechanics import ModelSettings
 
@@ -114,9 +114,9 @@ def swaps(data_path: Path, ds: float) -> list:
     """Standard-model error after putting one file's value(s) into the other."""
     import numpy as np
 
-    from ctrplan.discrepancy.predictions import predict
-    from ctrplan.discrepancy.data import load_measured_data
-    from ctrplan.discrepancy.parameters import apply_parameters, read_parameters
+    from ctrplan.discrepancy.fits.predictions import predict
+    from ctrplan.discrepancy.measured.data import load_measured_data
+    from ctrplan.discrepancy.fits.parameters import apply_parameters, read_parameters
     from ctrplan.io.robot_file import load_robot
     from ctrplan.mechanics import ModelSettings
 

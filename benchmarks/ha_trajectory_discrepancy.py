@@ -115,7 +115,7 @@ def main(argv=None):
         print(f"no data at {data}: get jointTipTrajectory_measured_short.txt from github.com/hjhdog1/ConcentricTubes "
               f"and pass --data", file=sys.stderr)
         return 2
-    from ctrplan.discrepancy.report import write_report
+    from ctrplan.discrepancy.outputs.report import write_report
     from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout)

@@ -41,7 +41,7 @@ class CalibratedBound(_Table):
     The calibrated bound of a configuration whose model bound is ``b`` [m] is
     ``factor x (b + noise_margin_m)``: split-conformal on the ratio of measured tip error to bound,
     so that it covers ``target_coverage`` of measured tips
-    (:mod:`ctrplan.discrepancy.coverage`).
+    (:mod:`ctrplan.discrepancy.verdict.coverage`).
 
     Attributes
     ----------
@@ -68,7 +68,7 @@ class CalibratedBound(_Table):
     status : {"shown", "not shown", "failed"} or None
         The verdict of the test split: its coverage interval's lower end at or above the target
         (less the tolerance), its upper end below it, or neither
-        (:func:`ctrplan.discrepancy.coverage.coverage_status`). Files written before this rule
+        (:func:`ctrplan.discrepancy.verdict.coverage.coverage_status`). Files written before this rule
         hold "met", "failing" or "conservative", which are read as they are.
     conservative : bool
         The test coverage's interval lies above the target by more than the tolerance.

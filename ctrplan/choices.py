@@ -14,7 +14,8 @@ from __future__ import annotations
 from enum import StrEnum
 
 __all__ = ["JointKind", "MotionKind", "FinalMotion", "BoundKind", "AimWith", "MapPlacement", "FirstPlan",
-           "MapSource", "BagStorage", "RosDistro", "TangentAxis", "DesignMode", "PoseFrame"]
+           "MapSource", "BagStorage", "RosDistro", "TangentAxis", "DesignMode", "PoseFrame", "Verdict", "NoEffectCase",
+           "SplitUnit", "EffectStore"]
 
 
 class JointKind(StrEnum):
@@ -129,3 +130,40 @@ class PoseFrame(StrEnum):
 
     ROBOT = "robot"
     TRACKER = "tracker"
+
+
+class Verdict(StrEnum):
+    """What the discrepancy workflow concludes: one effect named, two that explain the data
+    equally well (ambiguous), or none."""
+
+    NAMED = "named"
+    AMBIGUOUS = "ambiguous"
+    NONE = "none"
+
+
+class NoEffectCase(StrEnum):
+    """Why the discrepancy workflow named no effect, by its noise test: the residual is
+    consistent with the sensor noise, it is not (unexplained), it is not but the noise is only a
+    lower bound (inconclusive), or no noise is known."""
+
+    NOISE = "noise"
+    UNEXPLAINED = "unexplained"
+    INCONCLUSIVE = "inconclusive"
+    UNKNOWN = "unknown"
+
+
+class SplitUnit(StrEnum):
+    """The units a discrepancy split never cuts: contiguous time blocks of a motion, or groups of
+    samples at one configuration."""
+
+    TIME_BLOCK = "time block"
+    CONFIGURATION_GROUP = "configuration group"
+
+
+class EffectStore(StrEnum):
+    """Where a robot file keeps an effect's values: in the tube and pair tables (the effect
+    changes the robot itself), in the ``[effects]`` table, or in ``[tracker_registration]``."""
+
+    ROBOT = "robot"
+    EFFECTS = "effects"
+    REGISTRATION = "registration"

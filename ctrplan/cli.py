@@ -366,7 +366,7 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
     """
     import numpy as np
 
-    from .discrepancy.synth import Noise, parse_values, synthesize, write_synth
+    from .discrepancy.measured.synth import Noise, parse_values, synthesize, write_synth
     from .effects import REGISTRY, EffectSet
     from .errors import PhysicalParameterError
     from .io.robot_file import file_hash, load_robot
@@ -541,7 +541,7 @@ def discrepancy(robot_path, data_paths, out_dir, fit, effects, noise_mm, referen
 
     Interrupted runs resume from <out>/.stages (finished calibrations and evaluations are kept).
     """
-    from .discrepancy.report import write_report
+    from .discrepancy.outputs.report import write_report
     from .discrepancy.workflow import DiscrepancyOptions, run_discrepancy
     from .effects import REGISTRY
     from .errors import PhysicalParameterError
@@ -587,7 +587,7 @@ def discrepancy(robot_path, data_paths, out_dir, fit, effects, noise_mm, referen
         data_path = data_paths[0]
     ref_mu = None
     if reference_mu is not None:
-        from .discrepancy.synth import parse_values
+        from .discrepancy.measured.synth import parse_values
         from .io.robot_file import load_robot
 
         ref_mu = parse_values("--reference-mu", reference_mu, load_robot(robot_path).n_tubes - 1)
@@ -670,7 +670,7 @@ def _report_failed(result, out_dir, exc: Exception) -> None:
     and the command that writes it (the traceback at DEBUG, ``ctrplan -v``)."""
     import json
 
-    from .discrepancy.report import REWRITE_COMMAND
+    from .discrepancy.outputs.report import REWRITE_COMMAND
 
     logger.debug("the report's traceback:", exc_info=exc)
     path = Path(out_dir) / "results.json"
@@ -780,7 +780,7 @@ def discrepancy_report(out_dir):
     For a run whose report could not be written, or a report to be formatted by the present code.
     The plots are not made again (they need the run's arrays): the report shows those in the folder.
     """
-    from .discrepancy.report import write_report_from_results
+    from .discrepancy.outputs.report import write_report_from_results
 
     paths = write_report_from_results(out_dir)
     logger.info(f"report: {paths['markdown']}")

@@ -10,7 +10,7 @@ themselves are in :mod:`ctrplan.mechanics`.
 
 A model is solved at a configuration on top of the standard model's solution there, the
 linearization point of the contact models (Section II-E): the callers (:mod:`ctrplan.batch`,
-:mod:`ctrplan.discrepancy.simulate`) solve the standard model, with their own branch following,
+:mod:`ctrplan.discrepancy.fits.simulate`) solve the standard model, with their own branch following,
 and pass it to ``solve``. Adding a model is one :meth:`~ctrplan.registry.Registry.register` call
 with a :class:`ModelInfo` (docs/architecture.md has a worked example).
 

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from ctrplan.discrepancy import Noise, synthesize, write_synth
-from ctrplan.discrepancy.data import load_measured_data
+from ctrplan.discrepancy.measured.data import load_measured_data
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings
 
-calibration = importlib.import_module("ctrplan.discrepancy.calibrate")
+calibration = importlib.import_module("ctrplan.discrepancy.fits.calibrate")
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
@@ -67,7 +67,7 @@ def test_budget_stop_says_not_converged(lagged_pair):
 
 
 def _objective(robot, data):
-    from ctrplan.discrepancy.parameters import parameter, read_parameters
+    from ctrplan.discrepancy.fits.parameters import parameter, read_parameters
 
     obj = calibration._Objective(robot, data, "standard", NAMES, {}, COARSE, 1)
     specs = [parameter(robot, n) for n in NAMES]

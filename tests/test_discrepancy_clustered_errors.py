@@ -3,7 +3,7 @@ bound that was widened too late to be refitted.
 
 The coverage test is independent of the mechanics: a straight line fitted by least squares to
 AR(1) noise cut into many short time blocks, its Jacobian handed to
-:func:`ctrplan.discrepancy.estimates.covariance` (the function :func:`calibrate` calls). The
+:func:`ctrplan.discrepancy.fits.estimates.covariance` (the function :func:`calibrate` calls). The
 bound tests fit only a registration translation, which needs one mechanics solve of 12 samples.
 """
 
@@ -19,13 +19,13 @@ from scipy import stats
 from scipy.signal import lfilter
 
 from ctrplan.discrepancy import Noise, synthesize, write_synth
-from ctrplan.discrepancy.data import load_measured_data
-from ctrplan.discrepancy.estimates import covariance, interval_quantile, parameter_table
+from ctrplan.discrepancy.measured.data import load_measured_data
+from ctrplan.discrepancy.fits.estimates import covariance, interval_quantile, parameter_table
 from ctrplan.discrepancy.options import CONFIDENCE
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings
 
-calibration = importlib.import_module("ctrplan.discrepancy.calibrate")
+calibration = importlib.import_module("ctrplan.discrepancy.fits.calibrate")
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"

@@ -1,4 +1,4 @@
-"""The friction bound against measured tips (ctrplan.discrepancy.coverage): the split-conformal
+"""The friction bound against measured tips (ctrplan.discrepancy.verdict.coverage): the split-conformal
 factor's finite-sample coverage, the coverage interval over units (a cluster bootstrap, checked
 by simulation on serially correlated errors) and the status it gives ("shown", "not shown",
 "failed"), the factor's spread over resampled development units, and, through the whole workflow
@@ -17,8 +17,8 @@ import pytest
 from scipy import stats
 from scipy.signal import lfilter
 
-from ctrplan.discrepancy import coverage
-from ctrplan.discrepancy.coverage import Coverage, calibrate_bound, conformal_factor, coverage_figures
+from ctrplan.discrepancy.verdict import coverage
+from ctrplan.discrepancy.verdict.coverage import Coverage, calibrate_bound, conformal_factor, coverage_figures
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.io.robot_file import load_robot, load_robot_calibration, robot_to_toml
 from ctrplan.pipeline import AimReason, aim_decision

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy.parameters import apply_parameters, read_parameters
-from ctrplan.discrepancy.report import write_report
+from ctrplan.discrepancy.fits.parameters import apply_parameters, read_parameters
+from ctrplan.discrepancy.outputs.report import write_report
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from ctrplan_reference.synth_reference import synthesize_reference

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from ctrplan.discrepancy import Noise, synthesize, write_synth
-from ctrplan.discrepancy.envelope import hull_distance
-from ctrplan.discrepancy.estimates import AtypicalValue
-from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, needs_solve, parameter, read_parameters
-from ctrplan.discrepancy.signatures import tip_velocity, vector_signature
+from ctrplan.discrepancy.verdict.envelope import hull_distance
+from ctrplan.discrepancy.fits.estimates import AtypicalValue
+from ctrplan.discrepancy.fits.parameters import ParameterError, apply_parameters, needs_solve, parameter, read_parameters
+from ctrplan.discrepancy.verdict.signatures import tip_velocity, vector_signature
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.effects import EffectSet
 from ctrplan.errors import PhysicalParameterError
@@ -107,8 +107,8 @@ def test_vector_signature_finds_a_planted_lag_and_not_noise():
 
 def _split(units, n_folds=10):
     """A split of development samples only: units dealt round-robin into folds, as GroupKFold does."""
-    from ctrplan.discrepancy.data import MeasuredData
-    from ctrplan.discrepancy.split import DataSplit
+    from ctrplan.discrepancy.measured.data import MeasuredData
+    from ctrplan.discrepancy.measured.split import DataSplit
     from ctrplan.history import MotionRecord
 
     k = units.size
@@ -124,8 +124,8 @@ def _split(units, n_folds=10):
 def _candidate(effect, split, r_base, r, *, atypical=(), at_bound=()):
     """A fitted candidate as the naming rule sees it: its out-of-fold Eq. (49) residuals ``r`` and
     their comparison with the baseline's ``r_base``."""
-    from ctrplan.discrepancy.evaluation import Errors
-    from ctrplan.discrepancy.fitting import Candidate, CrossValidated, compare
+    from ctrplan.discrepancy.fits.evaluation import Errors
+    from ctrplan.discrepancy.fits.fitting import Candidate, CrossValidated, compare
     from ctrplan.effects import REGISTRY
 
     oof = Errors(rows=np.arange(r.size), position=r * 1e-3, angle=np.zeros(r.size), residual_base=np.zeros((r.size, 3)),
@@ -138,8 +138,8 @@ def _candidate(effect, split, r_base, r, *, atypical=(), at_bound=()):
 
 
 def _naming(cands, split):
-    from ctrplan.discrepancy.decision import NoiseCheck, name_effect
-    from ctrplan.discrepancy.noise import estimate_noise
+    from ctrplan.discrepancy.verdict.decision import NoiseCheck, name_effect
+    from ctrplan.discrepancy.measured.noise import estimate_noise
 
     noise = NoiseCheck(noise=estimate_noise(split.data, stated=0.5e-3), rms_m=2e-3, ratio=4.0, test=None)
     return name_effect(split, cands, {}, noise, DiscrepancyOptions())
@@ -175,7 +175,7 @@ def test_the_best_explanation_wins_whatever_its_typical_range():
     assert any("time offset" in n and "significantly higher than drive backlash" in n for n in d.notes)
     assert json.loads(json.dumps(d.as_dict())) == d.as_dict()           # plain JSON, no typed object left
     # a candidate against the baseline it extends: uncorrected; two candidates: corrected (and labelled so)
-    from ctrplan.discrepancy.statistics import CORRECTED_METHOD, UNCORRECTED_METHOD
+    from ctrplan.discrepancy.verdict.statistics import CORRECTED_METHOD, UNCORRECTED_METHOD
 
     assert naming.candidates["backlash"].improvement.method == UNCORRECTED_METHOD
     assert d.comparisons["backlash vs time_offset"].method == CORRECTED_METHOD
@@ -225,8 +225,8 @@ def test_a_named_effect_that_goes_to_zero_with_another_is_dropped_and_a_real_pai
     friction" written though the lag went to zero) and a family that shrinks to the pairs tried."""
     from dataclasses import replace as dc_replace
 
-    from ctrplan.discrepancy.fitting import compare
-    from ctrplan.discrepancy.pairs import pair_decision
+    from ctrplan.discrepancy.fits.fitting import compare
+    from ctrplan.discrepancy.fits.pairs import pair_decision
 
     rng = np.random.default_rng(3)
     units = np.repeat(np.arange(40), 10)
@@ -274,8 +274,8 @@ def test_a_named_effect_goes_to_zero_only_when_each_joint_interval_covers_its_of
     interval reaches down to 0; gradual friction carries the friction coefficients it starts from,
     so it vanishes only when they do too. Catches "goes to zero" read from the value alone, from
     0 for every parameter, or from a non-significant test instead of the interval."""
-    from ctrplan.discrepancy.estimates import ParameterEstimate
-    from ctrplan.discrepancy.pairs import first_vanishes
+    from ctrplan.discrepancy.fits.estimates import ParameterEstimate
+    from ctrplan.discrepancy.fits.pairs import first_vanishes
 
     robot = load_robot(ROOT / "model" / "ha2019-table2-nominal.toml")
 
@@ -384,9 +384,9 @@ def test_a_residual_above_a_noise_that_is_only_a_lower_bound_is_inconclusive():
     against a lower bound read as evidence of a missing effect."""
     from dataclasses import replace as dc_replace
 
-    from ctrplan.discrepancy.consistency import NoiseTest
-    from ctrplan.discrepancy.decision import Decision, NoiseCheck, no_effect_case, no_effect_sentence
-    from ctrplan.discrepancy.noise import NoiseEstimate
+    from ctrplan.discrepancy.verdict.consistency import NoiseTest
+    from ctrplan.discrepancy.verdict.decision import Decision, NoiseCheck, no_effect_case, no_effect_sentence
+    from ctrplan.discrepancy.measured.noise import NoiseEstimate
 
     test = NoiseTest(statistic=3.0, threshold=1.2, p_value=1e-6, inflation=1.01, n_fitted_effective=900.0,
                      dof_residual=300.0, dof_noise=40.0, n_samples=400, n_rest_samples_left_out=0, consistent=False,

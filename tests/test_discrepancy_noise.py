@@ -1,4 +1,4 @@
-"""The sensor noise estimate and the noise test of ctrplan.discrepancy.noise, checked by simulation
+"""The sensor noise estimate and the noise test of ctrplan.discrepancy.measured.noise, checked by simulation
 independent of the mechanics: the rms recovered from rests for white and for time-correlated
 (AR(1)) noise on the rest structures of a 10 Hz trajectory and of Ha's measured trajectory, the
 honesty of the estimate's degrees of freedom, the test's false-alarm rate and power on
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from scipy import signal, stats
 
-from ctrplan.discrepancy.data import MeasuredData
-from ctrplan.discrepancy.consistency import NoiseTest, noise_test
-from ctrplan.discrepancy.noise import NoiseEstimate, _median_constant, estimate_noise
+from ctrplan.discrepancy.measured.data import MeasuredData
+from ctrplan.discrepancy.verdict.consistency import NoiseTest, noise_test
+from ctrplan.discrepancy.measured.noise import NoiseEstimate, _median_constant, estimate_noise
 from ctrplan.history import MotionRecord
 
 #: rms length of the simulated 3-D noise vector [m] (per component 0.5 / sqrt(3) mm).

@@ -4,8 +4,8 @@ Reference records come from ``tests/ctrplan_reference/synth_reference.py``: an a
 history rules written again from their definitions (``tests/ctrplan_reference/history_reference.py``)
 and the frozen reference solvers, none of which imports ``ctrplan.history``,
 ``ctrplan.effects`` or ``ctrplan.discrepancy``. The fitting path
-(:func:`ctrplan.discrepancy.predictions.predict` on the record loaded by
-:func:`ctrplan.discrepancy.data.load_measured_data`) must reproduce them for the same effect
+(:func:`ctrplan.discrepancy.fits.predictions.predict` on the record loaded by
+:func:`ctrplan.discrepancy.measured.data.load_measured_data`) must reproduce them for the same effect
 values. Each test also plants a wrongly-signed operator where the workflow looks it up and
 checks that the same comparison then fails by a wide margin, so a sign or convention error in
 an operator cannot pass.
@@ -26,8 +26,8 @@ import ctrplan.history as history
 import ctrplan.history._apply as history_apply
 import ctrplan.history._operators as history_operators
 import ctrplan.history._state as history_state
-from ctrplan.discrepancy.predictions import pose_errors, predict
-from ctrplan.discrepancy.data import load_measured_data
+from ctrplan.discrepancy.fits.predictions import pose_errors, predict
+from ctrplan.discrepancy.measured.data import load_measured_data
 from ctrplan.history._state import HistoryState
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings

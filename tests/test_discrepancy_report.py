@@ -1,7 +1,7 @@
-"""The discrepancy report (``ctrplan.discrepancy.report``) formats ``results.json`` alone, never
+"""The discrepancy report (``ctrplan.discrepancy.outputs.report``) formats ``results.json`` alone, never
 stops at a figure the data leave undefined, and can be written again from the report folder.
 
-The results are built here in the form :func:`~ctrplan.discrepancy.results.results_dict` gives
+The results are built here in the form :func:`~ctrplan.discrepancy.outputs.results.results_dict` gives
 them (a named friction effect on 240 samples, with every section of the report), and each test
 sets some of its figures to what the workflow writes when the data cannot define them: an
 interval over one unit (ends None or NaN), a mean over no samples, a comparison over one fold,
@@ -23,8 +23,8 @@ import pytest
 from click.testing import CliRunner
 
 from ctrplan import cli
-from ctrplan.discrepancy import report
-from ctrplan.discrepancy import results as results_json
+from ctrplan.discrepancy.outputs import report
+from ctrplan.discrepancy.outputs import results as results_json
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
@@ -32,12 +32,12 @@ NAN = float("nan")
 
 
 def _interval(value, low, high, n_units=12):
-    """An :class:`~ctrplan.discrepancy.statistics.Interval` dict."""
+    """An :class:`~ctrplan.discrepancy.verdict.statistics.Interval` dict."""
     return {"value": value, "se": (high - low) / 4, "ci": [low, high], "dof": n_units - 1, "n_units": n_units}
 
 
 def _comparison(reduction, low, high, p, n_folds=10):
-    """A :class:`~ctrplan.discrepancy.statistics.Comparison` dict (Eq. (49) units)."""
+    """A :class:`~ctrplan.discrepancy.verdict.statistics.Comparison` dict (Eq. (49) units)."""
     return {"n_folds": n_folds, "n_samples": 192, "fold_differences": [0.1] * n_folds,
             "fold_log_ratios": [0.2] * n_folds, "positive_folds": n_folds, "method": "t test of the log ratio",
             "mean_difference": 0.1, "ci": [0.05, 0.15], "ratio": 1 / (1 - reduction),
@@ -46,7 +46,7 @@ def _comparison(reduction, low, high, p, n_folds=10):
 
 
 def _coverage(n, covered, low, high, n_units, bound_median_m=0.004, mm=True):
-    """A :class:`~ctrplan.discrepancy.coverage.Coverage` dict as ``bound_dict`` stores it."""
+    """A :class:`~ctrplan.discrepancy.verdict.coverage.Coverage` dict as ``bound_dict`` stores it."""
     out = {"n": n, "covered": covered, "ci": [low, high], "n_units": n_units,
            "ratio": {"median": 0.6, "p90": 0.9, "p95": 1.0, "max": 1.3}, "bound_median_m": bound_median_m,
            "error_median_m": 0.0021}
@@ -244,14 +244,14 @@ def test_the_factor_spread_is_reported(monkeypatch, tmp_path):
 
 
 def test_bound_dict_keeps_the_former_keys_and_adds_the_new_ones():
-    """:func:`~ctrplan.discrepancy.results.bound_dict` of a calibrated bound: the former keys
+    """:func:`~ctrplan.discrepancy.outputs.results.bound_dict` of a calibrated bound: the former keys
     (``failing``, ``status``, ``test`` with ``ci``...) with ``status`` one of the three and
     ``failing`` True exactly when "failed", plus ``conservative``, ``confidence``, ``tolerance``
     and ``calibration``; JSON-serializable without NaN. Catches a renamed key that breaks readers
     of results.json, and a ``failing`` that disagrees with the status."""
     import numpy as np
 
-    from ctrplan.discrepancy.coverage import calibrate_bound
+    from ctrplan.discrepancy.verdict.coverage import calibrate_bound
 
     cal_e = np.linspace(0.01, 0.99, 99)
     for covered in (np.arange(200) % 10 < 9, np.arange(200) % 2 == 0, np.arange(200) % 10 < 7):
@@ -424,7 +424,7 @@ def test_plots_that_cannot_be_made_leave_a_note(monkeypatch, tmp_path, caplog):
 
     monkeypatch.setattr(report, "results_dict", lambda result: _results())
     monkeypatch.setattr(report, "_plots", broken)
-    with caplog.at_level(logging.WARNING, logger="ctrplan.discrepancy.report"):
+    with caplog.at_level(logging.WARNING, logger="ctrplan.discrepancy.outputs.report"):
         paths = report.write_report(object(), tmp_path)
     assert paths["plots"] == []
     assert json.loads((tmp_path / "results.json").read_text())["plots_error"] == (

@@ -1,4 +1,4 @@
-"""ctrplan.discrepancy.simulate (models along a motion).
+"""ctrplan.discrepancy.fits.simulate (models along a motion).
 
 Branch following of the standard model, the friction/clearance choice per sample from the
 friction applied per pair (Sections III and V-B of Ha, Fagogenis & Dupont 2019,
@@ -122,7 +122,7 @@ def test_friction_history_from_sequence(robot, path):
 def test_failing_sample_is_flagged_not_fatal_and_parallel_equals_serial(robot, path, monkeypatch):
     import importlib
 
-    simulate_module = importlib.import_module("ctrplan.discrepancy.simulate")  # not the function
+    simulate_module = importlib.import_module("ctrplan.discrepancy.fits.simulate")  # not the function
     monkeypatch.setattr(simulate_module, "_MIN_PARALLEL_SECONDS", 0.0)  # use workers even for 6 rows
     alpha, beta = path
     alpha, beta = alpha.copy(), beta.copy()

@@ -1,4 +1,4 @@
-"""The split's blocks and buffer against serially correlated residuals (ctrplan.discrepancy.split),
+"""The split's blocks and buffer against serially correlated residuals (ctrplan.discrepancy.measured.split),
 by simulation independent of the mechanics: AR(1) residuals along a continuous motion of 500
 samples, the autocorrelation at the buffer measured here with numpy, and the distances between
 the rows a fold is fitted on and the rows it is judged on counted here.
@@ -11,9 +11,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy.data import MeasuredData
+from ctrplan.discrepancy.measured.data import MeasuredData
 from ctrplan.discrepancy.options import DiscrepancyOptions
-from ctrplan.discrepancy.split import (BUFFER_AUTOCORRELATION, MIN_TEST_UNITS, MIN_UNITS_PER_FOLD, choose_blocks,
+from ctrplan.discrepancy.measured.split import (BUFFER_AUTOCORRELATION, MIN_TEST_UNITS, MIN_UNITS_PER_FOLD, choose_blocks,
                                        choose_buffer, lengthen_blocks, make_split)
 from ctrplan.history import MotionRecord
 
@@ -246,7 +246,7 @@ def test_every_fit_keeps_more_samples_than_a_pair_of_effects_has_parameters():
     from pathlib import Path
 
     from ctrplan.design import motion_data
-    from ctrplan.discrepancy.split import _fit_minimum
+    from ctrplan.discrepancy.measured.split import _fit_minimum
     from ctrplan.io.robot_file import load_robot
 
     robot = load_robot(Path(__file__).resolve().parents[1] / "model" / "ha2019-table1-tube-pair.toml")

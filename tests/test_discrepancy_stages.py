@@ -17,13 +17,16 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import (baseline as baseline_stage, decision, fitting, options, report, setup as setup_stage,
-                                 signatures, split as split_stage, stages)
-from ctrplan.discrepancy import results as results_json
-from ctrplan.discrepancy.calibrate import CalibrationResult
-from ctrplan.discrepancy.predictions import pose_errors, predict
-from ctrplan.discrepancy.consistency import NoiseTest
-from ctrplan.discrepancy.noise import estimate_noise
+from ctrplan.discrepancy import options, setup as setup_stage, stages
+from ctrplan.discrepancy.fits import baseline as baseline_stage, fitting
+from ctrplan.discrepancy.measured import split as split_stage
+from ctrplan.discrepancy.outputs import report
+from ctrplan.discrepancy.verdict import decision, signatures
+from ctrplan.discrepancy.outputs import results as results_json
+from ctrplan.discrepancy.fits.calibrate import CalibrationResult
+from ctrplan.discrepancy.fits.predictions import pose_errors, predict
+from ctrplan.discrepancy.verdict.consistency import NoiseTest
+from ctrplan.discrepancy.measured.noise import estimate_noise
 from ctrplan.discrepancy.workflow import DiscrepancyOptions
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from ctrplan_reference.synth_reference import synthesize_reference
@@ -156,7 +159,7 @@ def test_noise_check_is_in_metres_and_the_report_form_in_millimetres():
 
 def _toy_data():
     """A record of 20 samples without rests (the noise can only be stated)."""
-    from ctrplan.discrepancy.data import MeasuredData
+    from ctrplan.discrepancy.measured.data import MeasuredData
     from ctrplan.history import MotionRecord
 
     k = 20

@@ -1,4 +1,4 @@
-"""Statistics of the discrepancy workflow's decisions (ctrplan.discrepancy.statistics and .split),
+"""Statistics of the discrepancy workflow's decisions (ctrplan.discrepancy.verdict.statistics and .split),
 checked against what each claims, by simulation independent of the mechanics: the corrected
 comparison of cross-validated models (its size at the workflow's levels, 0.05, 0.01 and
 0.01 / 7, where folds share a fitted model or their training data, by exact binomial tests
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from scipy import signal, stats
 
-from ctrplan.discrepancy.data import MeasuredData
-from ctrplan.discrepancy.split import choose_buffer, make_split, near_rows, residual_autocorrelation
-from ctrplan.discrepancy.statistics import (CORRECTED_METHOD, UNCORRECTED_METHOD, cv_comparison, holm, mean_interval,
+from ctrplan.discrepancy.measured.data import MeasuredData
+from ctrplan.discrepancy.measured.split import choose_buffer, make_split, near_rows, residual_autocorrelation
+from ctrplan.discrepancy.verdict.statistics import (CORRECTED_METHOD, UNCORRECTED_METHOD, cv_comparison, holm, mean_interval,
                                             ratio_interval, shrink_interval)
 from ctrplan.errors import DataFileError
 from ctrplan.history import MotionRecord

@@ -1,4 +1,4 @@
-"""ctrplan.discrepancy.synth and ``ctrplan synth``: measured-like data with hidden effects.
+"""ctrplan.discrepancy.measured.synth and ``ctrplan synth``: measured-like data with hidden effects.
 
 Checks the protocols (the paper's grid with 2^(n-1) approach directions and its calibration
 subset, Section V-C of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906; a continuous
@@ -20,7 +20,7 @@ from click.testing import CliRunner
 from ctrplan import cli
 from ctrplan.effects import EffectSet
 from ctrplan.history import MotionRecord, motion_state
-from ctrplan.discrepancy.synth import (Noise, add_noise, approach_path, paper_protocol, synthesize,
+from ctrplan.discrepancy.measured.synth import (Noise, add_noise, approach_path, paper_protocol, synthesize,
                                        trajectory_protocol, truth_model, truth_path, _reversals)
 from ctrplan.errors import PhysicalParameterError
 from ctrplan.io.robot_file import load_robot

@@ -16,9 +16,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import coverage, envelope, output
-from ctrplan.discrepancy.evaluation import Errors
-from ctrplan.discrepancy.logtext import figure, interval
+from ctrplan.discrepancy.outputs import output
+from ctrplan.discrepancy.verdict import coverage, envelope
+from ctrplan.discrepancy.fits.evaluation import Errors
+from ctrplan.discrepancy.outputs.logtext import figure, interval
 
 NAN = float("nan")
 
@@ -91,7 +92,7 @@ def test_a_prediction_row_without_a_finite_error_logs_undefined_and_is_carried(m
     """Stage 9 where every history-aware evaluation on the test split failed (NaN errors): the
     rows are returned with their NaN errors (results.json then holds null figures) and the log
     says "undefined". Catches ``np.percentile`` of an empty row, which raised IndexError mid-run."""
-    from ctrplan.discrepancy import evaluation
+    from ctrplan.discrepancy.fits import evaluation
 
     assert envelope.evaluate_rows is evaluation.evaluate_rows
     monkeypatch.setattr(envelope, "evaluate_rows",
@@ -109,7 +110,7 @@ def test_a_prediction_row_without_a_finite_error_logs_undefined_and_is_carried(m
     lines = [m for m in caplog.messages if "prediction:" in m]
     assert "mean 1.000, p95 1.000, max 1.000 mm (3 samples)" in lines[0]
     assert lines[1].endswith("mean, p95 and max undefined (no finite error of 3)") and _no_nan(lines[1])
-    from ctrplan.discrepancy.results import _prediction_dict
+    from ctrplan.discrepancy.outputs.results import _prediction_dict
 
     assert _prediction_dict(pred)["rows"][1] == {"label": pred.rows[1][0], "n": 0, "mean_mm": None,
                                                  "p95_mm": None, "max_mm": None}

@@ -1,13 +1,13 @@
 """Contact solves of a fit started from the previous evaluation's solutions
-(:class:`ctrplan.discrepancy.simulate.WarmStarts`).
+(:class:`ctrplan.discrepancy.fits.simulate.WarmStarts`).
 
 What must hold, checked against solves that do not use the store (Sections II-E and III of Ha,
 Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906; Table II robot of tests/_robots.py):
 
 - the same tips, to the solver's tolerance, whatever the store holds;
 - forward differences over a relative parameter step of 1e-4 (the least-squares Jacobian of
-  :mod:`ctrplan.discrepancy.calibrate`) as accurate as central differences of tightly converged
-  cold solves: the reason for :data:`~ctrplan.discrepancy.simulate.WARM_OUTER_TOL`;
+  :mod:`ctrplan.discrepancy.fits.calibrate`) as accurate as central differences of tightly converged
+  cold solves: the reason for :data:`~ctrplan.discrepancy.fits.simulate.WARM_OUTER_TOL`;
 - the same values in one process and in worker processes (what a fit finds may not depend on how
   many workers run it);
 - fewer outer iterations (the point of the store).
@@ -20,8 +20,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy.parameters import apply_parameters, read_parameters
-from ctrplan.discrepancy.simulate import WARM_OUTER_TOL, WarmStarts, simulate
+from ctrplan.discrepancy.fits.parameters import apply_parameters, read_parameters
+from ctrplan.discrepancy.fits.simulate import WARM_OUTER_TOL, WarmStarts, simulate
 from ctrplan.history import MotionRecord, motion_state
 from ctrplan.mechanics import ModelSettings
 
@@ -114,7 +114,7 @@ def test_store_gives_the_same_values_in_worker_processes(robot, motion, monkeypa
     independent of the number of workers."""
     import importlib
 
-    simulate_module = importlib.import_module("ctrplan.discrepancy.simulate")
+    simulate_module = importlib.import_module("ctrplan.discrepancy.fits.simulate")
 
     monkeypatch.setattr(simulate_module, "_MIN_PARALLEL_SECONDS", 0.0)   # this short motion on two workers
     other = apply_parameters(robot, ("precurvature_y_1",), read_parameters(robot, ("precurvature_y_1",)) * 1.01)

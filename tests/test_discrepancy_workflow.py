@@ -13,14 +13,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from ctrplan.discrepancy import Noise, synthesize, write_synth
-from ctrplan.discrepancy.gridsearch import grid_search_friction
-from ctrplan.discrepancy.data import MeasuredData, load_measured_data
-from ctrplan.discrepancy.decision import cautions
-from ctrplan.discrepancy.output import reproduce_errors
-from ctrplan.discrepancy.parameters import ParameterError, apply_parameters, read_parameters
-from ctrplan.discrepancy.report import write_report
-from ctrplan.discrepancy.signatures import friction_signature, regression_signature, registration_signature
-from ctrplan.discrepancy.split import configurations_repeat, make_split, sample_units
+from ctrplan.discrepancy.fits.gridsearch import grid_search_friction
+from ctrplan.discrepancy.measured.data import MeasuredData, load_measured_data
+from ctrplan.discrepancy.verdict.decision import cautions
+from ctrplan.discrepancy.outputs.output import reproduce_errors
+from ctrplan.discrepancy.fits.parameters import ParameterError, apply_parameters, read_parameters
+from ctrplan.discrepancy.outputs.report import write_report
+from ctrplan.discrepancy.verdict.signatures import friction_signature, regression_signature, registration_signature
+from ctrplan.discrepancy.measured.split import configurations_repeat, make_split, sample_units
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.history import MotionRecord
 from ctrplan.effects import EffectSet
@@ -265,7 +265,7 @@ def test_an_interrupted_run_resumes_from_finished_stages(tmp_path, caplog, capsy
         resumed = run_discrepancy(model, data, out, opts, progress=False).to_dict()
     assert "  pilot: reused from an earlier run" in caplog.messages
     assert resumed["stage_reused"]["baseline"] == "partly reused"      # the pilot and a fold's fit read
-    assert {r.name.rpartition(".")[0] for r in caplog.records} == {"ctrplan.discrepancy"}
+    assert caplog.records and all(r.name.startswith("ctrplan.discrepancy.") for r in caplog.records)
     assert capsys.readouterr().out == ""
     assert stage.stat().st_mtime_ns == stamp
     fresh = run_discrepancy(model, data, tmp_path / "fresh", opts, progress=False).to_dict()
@@ -357,7 +357,7 @@ def test_friction_grid_search_extends_past_the_coarse_grid_edge(tmp_path):
 
 
 def _figures(mean_mm, max_mm):
-    from ctrplan.discrepancy.evaluation import ErrorFigures
+    from ctrplan.discrepancy.fits.evaluation import ErrorFigures
 
     return ErrorFigures(position_mean=mean_mm * 1e-3, position_std=None, position_p95=None,
                         position_max=max_mm * 1e-3, tangent_mean=None, tangent_max=None, seconds_per_sample=0.0,
@@ -371,7 +371,7 @@ def test_cautions_flag_an_atypical_friction_coefficient_and_a_worse_maximum():
     and one that prints metres as millimetres."""
     from types import SimpleNamespace
 
-    from ctrplan.discrepancy.estimates import AtypicalValue
+    from ctrplan.discrepancy.fits.estimates import AtypicalValue
 
     before, worse_max = _figures(5.2, 16.8), _figures(4.3, 23.2)
     mu = AtypicalValue(name="mu_1", value=0.975, typical=(0.0, 0.5), typical_text="0..0.5", unit="-",
@@ -393,9 +393,9 @@ def test_a_baseline_parameter_outside_its_range_is_a_caution_in_report_units(cap
     are stored ("0.2 rad") and cautions that a caller's logging cannot see."""
     from types import SimpleNamespace
 
-    from ctrplan.discrepancy.estimates import ParameterEstimate
-    from ctrplan.discrepancy.evaluation import Errors
-    from ctrplan.discrepancy.output import run_cautions
+    from ctrplan.discrepancy.fits.estimates import ParameterEstimate
+    from ctrplan.discrepancy.fits.evaluation import Errors
+    from ctrplan.discrepancy.outputs.output import run_cautions
 
     def row(name, unit, value, *, typical=True, at_bound=False):
         return ParameterEstimate(name=name, unit=unit, value=value, stderr=None, ci=None, typical=None,
@@ -424,7 +424,7 @@ def test_friction_grid_search_that_cannot_bracket_the_minimum_says_at_bound(tmp_
     import dataclasses
     import importlib
 
-    calibration = importlib.import_module("ctrplan.discrepancy.gridsearch")
+    calibration = importlib.import_module("ctrplan.discrepancy.fits.gridsearch")
 
     pair = load_robot(ROOT / "model" / "ha2019-table1-tube-pair.toml")
     data = tmp_path / "pair.csv"

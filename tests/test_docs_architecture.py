@@ -121,7 +121,7 @@ def test_the_page_s_mechanics_model_is_solved_by_name_with_the_physics_it_states
     does not (catches a solve that is not called, or called with the wrong robot). The batch
     evaluator, the simulator along a motion and a robot file's ``model`` key take it by name."""
     from ctrplan.batch import evaluate_configuration
-    from ctrplan.discrepancy.simulate import simulate
+    from ctrplan.discrepancy.fits.simulate import simulate
     from ctrplan.io.robot_file import load_robot, robot_from_toml_text
     from ctrplan.mechanics import solve_standard
     from ctrplan.models import MODEL_REGISTRY

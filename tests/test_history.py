@@ -235,7 +235,7 @@ def test_apply_history_puts_the_drive_before_the_tracker():
 
 # --------------------------------------------------------------------------- one history, two paths
 def _both_paths(robot, data_path):
-    from ctrplan.discrepancy.data import load_measured_data
+    from ctrplan.discrepancy.measured.data import load_measured_data
     from ctrplan.planning import path_history
 
     data = load_measured_data(data_path, robot)
@@ -259,7 +259,7 @@ def test_measured_and_planned_paths_give_the_same_history(tmp_path):
     (path_history of the same joint values) agree sample by sample, per pair: directions,
     releases, friction states and the tube angles behind the play. Also on a block of rows
     (a calibration block): its history is the whole record's, not one restarted at the block."""
-    from ctrplan.discrepancy.synth import trajectory_protocol
+    from ctrplan.discrepancy.measured.synth import trajectory_protocol
     from ctrplan.io.robot_file import load_robot, robot_from_toml_text, robot_to_toml
     from ctrplan.io.tables import write_table
 

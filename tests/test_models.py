@@ -71,7 +71,7 @@ def test_other_modules_use_the_same_model_names():
     from ctrplan import batch
     from ctrplan.io import robot_file
 
-    simulate = importlib.import_module("ctrplan.discrepancy.simulate")
+    simulate = importlib.import_module("ctrplan.discrepancy.fits.simulate")
 
     assert robot_file.MODELS is MODELS
     assert batch.MODELS is MODELS and simulate.MODELS is MODELS

@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..discrepancy.predictions import predict
-from ..discrepancy.parameters import apply_parameters, needs_solve, parameter
+from ..discrepancy.fits.predictions import predict
+from ..discrepancy.fits.parameters import apply_parameters, needs_solve, parameter
 from ..effects import EffectSet, apply_output_effects, robot_effects
 
 #: Forward-difference step of a sensitivity, as a fraction of the parameter's scale

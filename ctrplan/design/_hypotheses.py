@@ -85,7 +85,7 @@ class Hypothesis:
     def undetermined(self, robot=None) -> tuple:
         """Free parameters the recorded data left undetermined or poorly determined: a standard
         error that is infinite, or whose 95 % interval is wider than the parameter's typical range
-        (:func:`ctrplan.discrepancy.parameters.parameter`)."""
+        (:func:`ctrplan.discrepancy.fits.parameters.parameter`)."""
         out = []
         for n in self.free:
             se = self.stderr.get(n, math.nan)
@@ -93,7 +93,7 @@ class Hypothesis:
                 out.append(n)
                 continue
             if robot is not None and np.isfinite(se):
-                from ..discrepancy.parameters import parameter
+                from ..discrepancy.fits.parameters import parameter
 
                 typical = parameter(robot, n).typical
                 if typical is not None and 2 * 1.96 * se > abs(typical[1] - typical[0]):

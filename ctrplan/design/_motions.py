@@ -295,7 +295,7 @@ def motion_data(robot, t, q, *, frame: str = "robot", file: str = "<designed mot
     -------
     MeasuredData
     """
-    from ..discrepancy.data import MeasuredData
+    from ..discrepancy.measured.data import MeasuredData
 
     alpha, beta = configurations if configurations is not None else joint_configurations(robot, q)
     K, n = alpha.shape

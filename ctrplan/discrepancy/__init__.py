@@ -1,38 +1,32 @@
 """Model-discrepancy analysis: which effect is missing from a robot model, judged on measured data.
 
-- :mod:`.data`: measured data with its whole recorded motion, configuration groups and the split;
-- :mod:`.simulate`: the models along a motion (branch following; the friction state comes from
-  :mod:`ctrplan.history`; Sections III and V-B of Ha, Fagogenis & Dupont, IEEE T-RO 35(2) 2019,
-  doi:10.1109/TRO.2018.2878906);
-- :mod:`.synth`: measured-like data with hidden effects of the registry :mod:`ctrplan.effects`
-  and sensor noise (``ctrplan synth``);
-- :mod:`.parameters`: calibration parameters (baseline tube parameters and effect parameters);
-- :mod:`.calibrate`: least squares on Eq. (49), Kabsch registration; :mod:`.gridsearch`: the
-  grid search of friction coefficients;
-- :mod:`.noise`: the sensor noise from rests; :mod:`.consistency`: is a residual noise;
-- :mod:`.statistics`: comparisons of cross-validated models and intervals over units;
-- the workflow (``ctrplan discrepancy``, :func:`run_discrepancy`, which returns a
-  :class:`DiscrepancyResult`), by stage: :mod:`.options`, :mod:`.stages`, :mod:`.setup`,
-  :mod:`.split`, :mod:`.evaluation`, :mod:`.baseline`, :mod:`.signatures`, :mod:`.decision`,
-  :mod:`.fitting`, :mod:`.estimates`, :mod:`.pairs`, :mod:`.envelope`, :mod:`.coverage`,
-  :mod:`.output`, :mod:`.workflow`;
-- :mod:`.report`: the report folder (markdown, ``results.json``, plots), the only module that
-  converts results to millimetres and degrees; the markdown is formatted from ``results.json``
-  alone (:func:`write_report_from_results` writes it again).
+The workflow (``ctrplan discrepancy``, :func:`run_discrepancy`, which returns a
+:class:`DiscrepancyResult`) in the order it runs:
+
+- :mod:`.measured`: the measured data, the split and the sensor noise (and synthetic data);
+- :mod:`.fits`: the models along the motion, calibration by least squares on Eq. (49) of Ha,
+  Fagogenis & Dupont, IEEE T-RO 35(2) 2019, doi:10.1109/TRO.2018.2878906, the baseline and the
+  candidate effects, cross-validated;
+- :mod:`.verdict`: signature tests, comparisons, the decision, the prediction with the motion
+  history and the friction bound's coverage;
+- :mod:`.outputs`: the updated robot file, ``results.json`` and the report;
+- beside them: :mod:`.options` (what a run may change), :mod:`.setup` and :mod:`.stages` (the
+  inputs and the store of finished stages, so that a run resumes), :mod:`.provenance` (the code
+  a result was made with) and :mod:`.workflow` (the stages in order).
 """
 
-from .simulate import Simulation, simulate
-from .synth import Noise, SynthResult, synthesize, truth_path, write_synth
-from .predictions import pose_errors, predict
-from .calibrate import CalibrationResult, calibrate
-from .gridsearch import grid_search
-from .data import MeasuredData, load_measured_data
-from .split import DataSplit, make_split
-from .parameters import apply_parameters, read_parameters
-from .signatures import SignatureTest, friction_signature, regression_signature, registration_signature
+from .fits.simulate import Simulation, simulate
+from .measured.synth import Noise, SynthResult, synthesize, truth_path, write_synth
+from .fits.predictions import pose_errors, predict
+from .fits.calibrate import CalibrationResult, calibrate
+from .fits.gridsearch import grid_search
+from .measured.data import MeasuredData, load_measured_data
+from .measured.split import DataSplit, make_split
+from .fits.parameters import apply_parameters, read_parameters
+from .verdict.signatures import SignatureTest, friction_signature, regression_signature, registration_signature
 from .options import DiscrepancyOptions
 from .workflow import DiscrepancyResult, run_discrepancy
-from .report import write_report, write_report_from_results
+from .outputs.report import write_report, write_report_from_results
 
 __all__ = [
     "Simulation", "simulate",

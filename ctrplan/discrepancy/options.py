@@ -39,7 +39,7 @@ ENVELOPE_NOISE_FACTOR = 1.62
 #: start as the development fit, buffers, a prior toward the robot file's tube parameters, bounds
 #: widened where a fit ends at them, pairs fitted jointly, a smooth time-shift interpolant; 7 =
 #: contact solves of a fit started from the fit's previous evaluation at the same sample, to
-#: the tighter tolerances of :data:`~ctrplan.discrepancy.simulate.WARM_OUTER_TOL`; 8 = standard
+#: the tighter tolerances of :data:`~ctrplan.discrepancy.fits.simulate.WARM_OUTER_TOL`; 8 = standard
 #: errors over clusters of neighbouring blocks with t intervals, values left on a bound widened
 #: without a refit flagged, blocks lengthened where the residuals' correlation needs a longer
 #: buffer, comparisons of two candidates corrected for the folds' shared training data; 9 =
@@ -63,16 +63,16 @@ class DiscrepancyOptions:
     effects : tuple of str or None
         Candidate effects to test and try (names of :data:`ctrplan.effects.REGISTRY`); None: every
         registered effect, in registry order.
-    frame : {"robot", "tracker"} or None
+    frame : PoseFrame, str or None
         Frame of the measurements (default from the file type, see
-        :func:`ctrplan.discrepancy.data.load_measured_data`). "tracker" fits a registration.
+        :func:`ctrplan.discrepancy.measured.data.load_measured_data`). "tracker" fits a registration.
     bag : BagSelection or None
         What to read when the data is a ROS 2 bag (:class:`ctrplan.io.ros2.BagSelection`; None:
         the bag's only joint-state and pose topics).
     test_fraction : float
         Share of the units held back as the untouched test split, at least
-        :data:`~ctrplan.discrepancy.split.MIN_TEST_UNITS` units
-        (:func:`~ctrplan.discrepancy.split.make_split`).
+        :data:`~ctrplan.discrepancy.measured.split.MIN_TEST_UNITS` units
+        (:func:`~ctrplan.discrepancy.measured.split.make_split`).
     n_blocks : int or None
         Time blocks a continuous motion is cut into (the units of its split and tests); None: from
         the record's length.
@@ -90,7 +90,7 @@ class DiscrepancyOptions:
         the signature tests, and the false-alarm rate of the noise test.
     prior_strengths : tuple of float
         Strengths tau of the prior toward the robot file's tube parameters among which the
-        baseline's out-of-fold error chooses (:func:`~ctrplan.discrepancy.baseline.calibrate_baseline`;
+        baseline's out-of-fold error chooses (:func:`~ctrplan.discrepancy.fits.baseline.calibrate_baseline`;
         a relative change tau costs one residual of the pilot fit's rms); 0 (the robot file's
         parameters, only a registration fitted) is always among them, ``inf`` is no prior.
     n_permutations : int
@@ -119,7 +119,7 @@ class DiscrepancyOptions:
         prediction and the envelope are also evaluated, next to the fitted ones.
     bound_target : float
         Share of measured tips the calibrated bound is to cover
-        (:mod:`~ctrplan.discrepancy.coverage`).
+        (:mod:`~ctrplan.discrepancy.verdict.coverage`).
     bound_samples : int
         Development samples (and, separately, test samples) at which the friction bound is
         evaluated for its calibration and its check; 0 skips them.

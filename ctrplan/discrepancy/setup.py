@@ -7,12 +7,13 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping
 
+from ..choices import PoseFrame
 from ..effects import REGISTRY, curved_tubes, get
 from ..errors import CtrplanError
 from ..mechanics import ModelSettings
-from .data import MeasuredData, load_measured_data
+from .measured.data import MeasuredData, load_measured_data
 from .options import DiscrepancyOptions
-from .parameters import REGISTRATION
+from .fits.parameters import REGISTRATION
 from .stages import StageStore, stage_key
 
 __all__ = ["DiscrepancySetup", "load_inputs", "default_baseline_parameters", "effect_parameters",
@@ -27,7 +28,7 @@ def default_baseline_parameters(robot, register: bool) -> tuple:
     Returns
     -------
     tuple of str
-        Names in :mod:`ctrplan.discrepancy.parameters`.
+        Names in :mod:`ctrplan.discrepancy.fits.parameters`.
     """
     names = [f"precurvature_y_{i + 1}" for i in curved_tubes(robot)]
     names += [f"k_xy_relative_{i + 1}" for i in range(1, robot.n_tubes)]
@@ -75,7 +76,7 @@ class DiscrepancySetup:
     settings : ModelSettings
         Model settings of every fit and evaluation (arc-length step ``ds`` [m], no multistart).
     base_names : tuple of str
-        Baseline parameters (:mod:`ctrplan.discrepancy.parameters`).
+        Baseline parameters (:mod:`ctrplan.discrepancy.fits.parameters`).
     effects : tuple of str
         Candidate effects to test and try, in registry order.
     skipped : mapping of str to str
@@ -113,7 +114,7 @@ def load_inputs(robot_path, data_path, out_dir, options: DiscrepancyOptions) -> 
     robot_path : path
         Robot model file (TOML, SI units).
     data_path : path
-        Measured data (:func:`~ctrplan.discrepancy.data.load_measured_data`; SI units).
+        Measured data (:func:`~ctrplan.discrepancy.measured.data.load_measured_data`; SI units).
     out_dir : path
         Report folder.
     options : DiscrepancyOptions
@@ -135,7 +136,7 @@ def load_inputs(robot_path, data_path, out_dir, options: DiscrepancyOptions) -> 
 
     robot = load_robot(robot_path)
     data = load_measured_data(data_path, robot, frame=options.frame, bag=options.bag)
-    register = data.frame == "tracker"
+    register = data.frame == PoseFrame.TRACKER
     base_names = tuple(options.fit) if options.fit else default_baseline_parameters(robot, register)
     requested = tuple(options.effects) if options.effects is not None else tuple(REGISTRY)
     unknown = [e for e in requested if e not in REGISTRY]

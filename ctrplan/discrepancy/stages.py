@@ -12,7 +12,7 @@ import numpy as np
 from ..cache import content_key, file_hash, mechanics_version
 from ..effects import REGISTRY
 from ..io.atomic import atomic_write_text
-from .noise import CORRELATION_LENGTH_METHOD
+from .measured.noise import CORRELATION_LENGTH_METHOD
 from .options import FIT_VERSION, DiscrepancyOptions
 
 __all__ = ["StageStore", "stage_key"]
@@ -83,7 +83,7 @@ def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
     samples and target); :data:`~ctrplan.discrepancy.options.FIT_VERSION` and
     :data:`ctrplan.constants.MECHANICS_VERSION` enter it so that stages of an earlier fitting
     procedure or of other mechanics are not reused, and so does the method the installed scipy
-    gives the noise estimate (:data:`~ctrplan.discrepancy.noise.CORRELATION_LENGTH_METHOD`).
+    gives the noise estimate (:data:`~ctrplan.discrepancy.measured.noise.CORRELATION_LENGTH_METHOD`).
 
     Parameters
     ----------

@@ -7,36 +7,36 @@ mm + deg of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906):
 1. :func:`~ctrplan.discrepancy.setup.load_inputs`: robot, data, baseline parameters, the
    candidate effects of the registry (:mod:`ctrplan.effects`) the data can show, and the store
    of finished stages (:mod:`ctrplan.discrepancy.stages`);
-2. :func:`~ctrplan.discrepancy.split.split_samples`: an untouched test split held back, the rest
+2. :func:`~ctrplan.discrepancy.measured.split.split_samples`: an untouched test split held back, the rest
    (development) in blocked cross-validation folds;
-3. :func:`~ctrplan.discrepancy.baseline.pilot_fit` and
-   :func:`~ctrplan.discrepancy.baseline.calibrate_baseline`: a pilot fit on the development samples
+3. :func:`~ctrplan.discrepancy.fits.baseline.pilot_fit` and
+   :func:`~ctrplan.discrepancy.fits.baseline.calibrate_baseline`: a pilot fit on the development samples
    chooses the buffer around validation and test blocks, the development blocks' length
-   (:func:`~ctrplan.discrepancy.split.choose_blocks`: longer blocks, dealt into the folds again,
+   (:func:`~ctrplan.discrepancy.measured.split.choose_blocks`: longer blocks, dealt into the folds again,
    where the buffer needs more than half a block) and the prior's scale; then the standard
    model by least squares on Eq. (49) with a prior toward the robot file's tube parameters whose
    strength the out-of-fold error chooses, on the development samples and without each fold;
-4. :func:`~ctrplan.discrepancy.signatures.diagnose_residuals`: each effect's signature test on the
+4. :func:`~ctrplan.discrepancy.verdict.signatures.diagnose_residuals`: each effect's signature test on the
    baseline's out-of-fold residuals;
-5. :func:`~ctrplan.discrepancy.decision.check_noise`: the sensor noise against them;
-6. :func:`~ctrplan.discrepancy.fitting.refit_contact_baseline` and
-   :func:`~ctrplan.discrepancy.fitting.fit_candidates`: every candidate fitted by its entry's
+5. :func:`~ctrplan.discrepancy.verdict.decision.check_noise`: the sensor noise against them;
+6. :func:`~ctrplan.discrepancy.fits.fitting.refit_contact_baseline` and
+   :func:`~ctrplan.discrepancy.fits.fitting.fit_candidates`: every candidate fitted by its entry's
    strategy and cross-validated;
-7. :func:`~ctrplan.discrepancy.decision.name_effect`: the verdict (named, ambiguous or none);
-8. :func:`~ctrplan.discrepancy.pairs.fit_second_effect`: a second effect fitted together with
+7. :func:`~ctrplan.discrepancy.verdict.decision.name_effect`: the verdict (named, ambiguous or none);
+8. :func:`~ctrplan.discrepancy.fits.pairs.fit_second_effect`: a second effect fitted together with
    it, compared in both directions;
-9. :func:`~ctrplan.discrepancy.output.evaluate_test_split`: the final model's gain on the test
+9. :func:`~ctrplan.discrepancy.outputs.output.evaluate_test_split`: the final model's gain on the test
    split, with intervals (the only use of the test split for a decision's figures);
-10. :func:`~ctrplan.discrepancy.envelope.predict_with_history`: the history-aware prediction and
-    the friction envelope on the test split (:func:`~ctrplan.discrepancy.output.validate_prediction`),
-    and :func:`~ctrplan.discrepancy.coverage.check_bound`: the friction bound's coverage of the
+10. :func:`~ctrplan.discrepancy.verdict.envelope.predict_with_history`: the history-aware prediction and
+    the friction envelope on the test split (:func:`~ctrplan.discrepancy.outputs.output.validate_prediction`),
+    and :func:`~ctrplan.discrepancy.verdict.coverage.check_bound`: the friction bound's coverage of the
     measured tips and a bound calibrated to cover a chosen share;
-11. :func:`~ctrplan.discrepancy.output.write_updated_model` and
-    :func:`~ctrplan.discrepancy.output.check_reproduction`: one robot file with what was learned,
-    reloaded and checked; :func:`~ctrplan.discrepancy.output.run_cautions`: what a reader must not
+11. :func:`~ctrplan.discrepancy.outputs.output.write_updated_model` and
+    :func:`~ctrplan.discrepancy.outputs.output.check_reproduction`: one robot file with what was learned,
+    reloaded and checked; :func:`~ctrplan.discrepancy.outputs.output.run_cautions`: what a reader must not
     overlook.
 
-The stages' results make one :class:`DiscrepancyResult`, which :mod:`ctrplan.discrepancy.report`
+The stages' results make one :class:`DiscrepancyResult`, which :mod:`ctrplan.discrepancy.outputs.report`
 formats (``results.json``, ``report.md``, plots; millimetres and degrees only there).
 
 Every stage that fits or evaluates reads its result from ``out_dir/.stages`` when an earlier run
@@ -56,24 +56,24 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .._log import deprecated_echo
-from .baseline import Baseline, calibrate_baseline, pilot_fit
-from .coverage import BoundCalibration, check_bound
-from .decision import Naming, NoiseCheck, check_noise, name_effect
-from .envelope import HistoryPrediction, predict_with_history
-from .evaluation import evaluate_rows
-from .fitting import CrossValidated, fit_candidates, refit_contact_baseline
+from .fits.baseline import Baseline, calibrate_baseline, pilot_fit
+from .verdict.coverage import BoundCalibration, check_bound
+from .verdict.decision import Naming, NoiseCheck, check_noise, name_effect
+from .verdict.envelope import HistoryPrediction, predict_with_history
+from .fits.evaluation import evaluate_rows
+from .fits.fitting import CrossValidated, fit_candidates, refit_contact_baseline
 from .options import DiscrepancyOptions
-from .output import (PredictionCheck, Reproduction, TestSplit, UpdatedModel, check_reproduction, evaluate_test_split,
+from .outputs.output import (PredictionCheck, Reproduction, TestSplit, UpdatedModel, check_reproduction, evaluate_test_split,
                      final_candidate, final_parameters, run_cautions, validate_prediction, write_updated_model)
-from .pairs import Combination, fit_second_effect
+from .fits.pairs import Combination, fit_second_effect
 from .setup import DiscrepancySetup, load_inputs
-from .signatures import diagnose_residuals
-from .split import DataSplit, choose_blocks, split_samples
+from .verdict.signatures import diagnose_residuals
+from .measured.split import DataSplit, choose_blocks, split_samples
 
 __all__ = ["run_discrepancy", "DiscrepancyOptions", "DiscrepancyResult", "STAGES", "CANDIDATE_STAGE"]
 
 #: The stages of :func:`run_discrepancy` whose wall time :attr:`DiscrepancyResult.stage_seconds`
-#: holds, in order (the report's names for them: :data:`ctrplan.discrepancy.report.STAGE_LABELS`):
+#: holds, in order (the report's names for them: :data:`ctrplan.discrepancy.outputs.report.STAGE_LABELS`):
 #: ``setup`` (:func:`load_inputs`), ``split``, ``baseline`` (the pilot fit and the baseline's
 #: calibration), ``signature_tests``, ``noise_check``, ``contact_baseline``, ``candidates`` (one
 #: entry per candidate effect, ``CANDIDATE_STAGE.format(effect)``, in the order they are fitted),
@@ -123,7 +123,7 @@ class DiscrepancyResult:
         Stage 12: that file reloaded, on the test split.
     options : DiscrepancyOptions
     cautions : tuple of str
-        What a reader must not overlook (:func:`~ctrplan.discrepancy.output.run_cautions`).
+        What a reader must not overlook (:func:`~ctrplan.discrepancy.outputs.output.run_cautions`).
     seconds : float
         Wall time of the run [s].
     stage_seconds : dict of str to float
@@ -177,7 +177,7 @@ class DiscrepancyResult:
 
     @property
     def final(self):
-        """The final model's :class:`~ctrplan.discrepancy.fitting.Candidate` (None: the
+        """The final model's :class:`~ctrplan.discrepancy.fits.fitting.Candidate` (None: the
         recalibrated baseline)."""
         return final_candidate(self.naming, self.combination)
 
@@ -192,9 +192,9 @@ class DiscrepancyResult:
         return self.updated.path
 
     def to_dict(self) -> dict:
-        """The results as ``results.json`` stores them (:func:`ctrplan.discrepancy.results.results_dict`;
+        """The results as ``results.json`` stores them (:func:`ctrplan.discrepancy.outputs.results.results_dict`;
         report units where a key ends ``_mm`` or ``_deg``)."""
-        from .results import results_dict
+        from .outputs.results import results_dict
 
         return results_dict(self)
 
@@ -272,11 +272,11 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         Robot model file with the candidate effects switched off (or not: the baseline uses
         the standard model, which ignores friction and clearance).
     data_path : path
-        Measured data (:func:`ctrplan.discrepancy.data.load_measured_data`).
+        Measured data (:func:`ctrplan.discrepancy.measured.data.load_measured_data`).
     out_dir : path
         Report folder; finished stages are kept in ``out_dir/.stages`` and reused by a rerun
         with the same inputs and options. The updated robot file is written there;
-        :func:`ctrplan.discrepancy.report.write_report` writes the report.
+        :func:`ctrplan.discrepancy.outputs.report.write_report` writes the report.
     options : DiscrepancyOptions
     echo : callable, optional
         Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and

@@ -12,6 +12,7 @@ import dataclasses
 
 import numpy as np
 
+from ..choices import EffectStore
 from ..history import HistoryOperator, play, time_shift
 from ..robot import ROTATION, Section
 from ._fit import GRID, NO_FIT, SCAN
@@ -189,7 +190,7 @@ register(Effect(
     name="friction", label="torsional friction", model="friction", parameters=_friction_parameters,
     description="maximal torsional Coulomb friction against the last relative rotation of each pair "
                 "(Section III, Eqs. (37)-(47))",
-    store="robot", apply_robot=_friction_apply,
+    store=EffectStore.ROBOT, apply_robot=_friction_apply,
     read=lambda robot: {f"mu_{k + 1}": 0.0 for k in range(robot.n_tubes - 1)},
     active=lambda v: any(x > 0 for x in v.values()),
     present=lambda robot: any(mu > 0 for mu in robot.friction_coefficients),
@@ -226,7 +227,7 @@ register(Effect(
     name="clearance", label="clearance", model="clearance", parameters=_clearance_parameters,
     description="radial clearance between nested tubes: the inner tube moves inside the outer one "
                 "(Sections II-B to II-E, Eq. (15)); nominal diameters",
-    store="robot", fitted=lambda robot, data: (), apply_robot=_clearance_apply,
+    store=EffectStore.ROBOT, fitted=lambda robot, data: (), apply_robot=_clearance_apply,
     read=lambda robot: {f"clearance_{k + 1}": float(c) for k, c in enumerate(robot.clearances)}
     if _has_clearance(robot) else {},
     signature=_clearance_signature, synth_option="--clearance-m",
@@ -270,7 +271,7 @@ register(Effect(
     name="offplane", label="off-plane precurvature", model="standard", parameters=_offplane_parameters,
     description="x precurvature of every curved section of a tube (the calibrated x-curvature of Tables VI "
                 "and VII, Section V-C)",
-    store="robot", apply_robot=_offplane_apply,
+    store=EffectStore.ROBOT, apply_robot=_offplane_apply,
     read=lambda robot: {f"precurvature_x_{i + 1}": robot.tubes[i].sections[_first_curved(robot, i)].precurvature[0]
                         for i in curved_tubes(robot)},
     signature=lambda ctx: ctx.regression_test("offplane", angle_features(ctx.data.alpha),
@@ -313,7 +314,7 @@ register(Effect(
     name="poisson", label="stiffness ratio / Poisson ratio (torsional stiffness)", model="standard",
     parameters=_poisson_parameters,
     description="Poisson ratio of each tube, k_z = k_xy / (1 + nu) (Section II-C; calibrated in Tables V-VII)",
-    store="robot", apply_robot=_poisson_apply,
+    store=EffectStore.ROBOT, apply_robot=_poisson_apply,
     read=lambda robot: {f"poisson_ratio_{i + 1}": t.poisson_ratio for i, t in enumerate(robot.tubes)},
     signature=_poisson_signature, synth_option="--poisson", synth_help="Poisson ratio per tube.",
     plan="the Poisson ratios of the robot file",
@@ -352,7 +353,7 @@ def _registration_output(tip, tangent, values):
 register(Effect(
     name="registration", label="registration", model="standard", parameters=_registration_parameters,
     description="rigid map from the robot base frame to the tracker frame, p_tracker = exp([r]x) p + t",
-    store="registration", apply_output=_registration_output,
+    store=EffectStore.REGISTRATION, apply_output=_registration_output,
     signature=lambda ctx: ctx.rigid_test("registration"),
     synth_option="--registration",
     synth_help="Robot-to-tracker transform 'rx,ry,rz,tx,ty,tz' (rotation vector [rad], translation [m]).",

@@ -4,7 +4,7 @@ A :class:`FitStrategy` is a name, a function that fits one candidate from a fit 
 properties the workflow asks of it (whether it starts from the clearance-model refit of the tube
 parameters, whether its model contains the baseline's, whether it adds parameters, how a second
 effect of a pair places it). The context is the workflow's
-:class:`~ctrplan.discrepancy.fitting.FitContext`: the fit's samples, its starting fits and the
+:class:`~ctrplan.discrepancy.fits.fitting.FitContext`: the fit's samples, its starting fits and the
 solvers (``calibrate``, ``scan``, ``grid``, ``refine_contact``), so that a strategy is written
 without importing the workflow. The built-in strategies (:data:`NESTED`, :data:`GRID`,
 :data:`NO_FIT`, :data:`SCAN`) follow Section V-C and Table VII of Ha, Fagogenis & Dupont, IEEE
@@ -33,7 +33,7 @@ class FitStrategy:
     fit : callable
         ``fit(ctx) -> CalibrationResult``: the candidate's fit on ``ctx.fit_data`` (development
         samples, or without fold ``ctx.k``); ``ctx`` is a
-        :class:`~ctrplan.discrepancy.fitting.FitContext`.
+        :class:`~ctrplan.discrepancy.fits.fitting.FitContext`.
     description : str
         One sentence for the docs and reports.
     from_contact_baseline : bool

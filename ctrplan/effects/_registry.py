@@ -7,6 +7,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from ..choices import EffectStore
 from ..models import MODEL_REGISTRY
 from ..registry import Registry
 from ._fit import NESTED, FitStrategy
@@ -14,10 +15,8 @@ from ._fit import NESTED, FitStrategy
 __all__ = ["ParameterSpec", "Effect", "EFFECT_REGISTRY", "REGISTRY", "STORES", "register",
            "unregister", "registered", "get", "effect_names", "effect_of_parameter", "parameter_spec"]
 
-#: Where a robot file keeps an effect's values: ``"robot"``: in the tube and pair tables (the effect
-#: changes the robot itself); ``"effects"``: in the ``[effects]`` table; ``"registration"``: in
-#: ``[tracker_registration]``.
-STORES = ("robot", "effects", "registration")
+#: Where a robot file keeps an effect's values (:class:`ctrplan.choices.EffectStore`).
+STORES = tuple(EffectStore)
 
 
 @dataclass(frozen=True)
@@ -157,8 +156,9 @@ class Effect:
         this robot (the order of its ``ctrplan synth`` option's values).
     description : str
         What it does, one sentence with its source.
-    store : {"robot", "effects", "registration"}
-        Where a robot file keeps its values (:data:`STORES`).
+    store : EffectStore or str
+        Where a robot file keeps its values (:class:`ctrplan.choices.EffectStore`; a string is
+        stored as its member).
     fitted : callable, optional
         ``fitted(robot, data) -> tuple of str``: the parameters the workflow fits on ``data``
         (``MeasuredData``: e.g. only the drives that move); default all of ``parameters``.
@@ -182,7 +182,7 @@ class Effect:
         coefficients in its pair tables); default False.
     signature : callable, optional
         ``signature(ctx) -> SignatureTest``: the test of its pattern in held-out residuals; ``ctx``
-        is the discrepancy workflow's :class:`~ctrplan.discrepancy.signatures.SignatureContext`
+        is the discrepancy workflow's :class:`~ctrplan.discrepancy.verdict.signatures.SignatureContext`
         (arrays of the held-out data and the tests to run on them).
     synth_option : str, optional
         Its option of ``ctrplan synth`` (e.g. ``"--backlash-rad"``): comma-separated values of
@@ -217,7 +217,7 @@ class Effect:
     model: str
     parameters: Callable[[Any], tuple]
     description: str
-    store: str = "effects"
+    store: EffectStore = EffectStore.EFFECTS
     fitted: Callable | None = None
     read: Callable | None = None
     apply_robot: Callable | None = None
@@ -245,8 +245,10 @@ class Effect:
         if not isinstance(self.fit, FitStrategy):
             raise TypeError(f"effect {self.name!r}: fit must be a FitStrategy (ctrplan.effects.NESTED, GRID, "
                             f"NO_FIT, SCAN or one's own), got {self.fit!r}")
-        if self.store not in STORES:
-            raise ValueError(f"effect {self.name!r}: store must be one of {STORES}, got {self.store!r}")
+        try:
+            object.__setattr__(self, "store", EffectStore(self.store))
+        except ValueError:
+            raise ValueError(f"effect {self.name!r}: store must be one of {', '.join(STORES)}, got {self.store!r}") from None
         if self.fit.needs_scan and (self.scan is None or self.after is None):
             raise ValueError(f"effect {self.name!r}: a scan fit needs scan values and the effect it follows")
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import ModelFileError, PhysicalParameterError
 from ..history import HistoryState, MotionRecord, apply_history
+from ..choices import EffectStore
 from ..models import MODEL_REGISTRY
 from ._registry import REGISTRY, effect_of_parameter, get
 
@@ -290,10 +291,10 @@ def effects_from_file(robot, table: Mapping, file: str) -> tuple:
         where = f"effects.{name}"
         if name not in REGISTRY:
             raise ModelFileError(file, where, f"unknown effect; known: "
-                                 + ", ".join(n for n, e in REGISTRY.items() if e.store == "effects"))
+                                 + ", ".join(n for n, e in REGISTRY.items() if e.store == EffectStore.EFFECTS))
         effect = get(name)
-        if effect.store != "effects":
-            home = ("[[tubes]] and [[pairs]]" if effect.store == "robot" else "[tracker_registration]")
+        if effect.store != EffectStore.EFFECTS:
+            home = ("[[tubes]] and [[pairs]]" if effect.store == EffectStore.ROBOT else "[tracker_registration]")
             raise ModelFileError(file, where, f"the {effect.label} belongs in {home}, not in [effects]")
         if not isinstance(params, Mapping):
             raise ModelFileError(file, where, f"expected a table of parameters, got {params!r}")

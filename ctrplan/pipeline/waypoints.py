@@ -77,7 +77,7 @@ class WaypointTable:
 
 def calibrated_bound(calibration: CalibratedBound | None, bound) -> np.ndarray:
     """The calibrated bound ``factor (bound + noise_margin_m)`` of the robot file's
-    ``[bound_calibration]`` (:mod:`ctrplan.discrepancy.coverage`) [m]; NaN without one.
+    ``[bound_calibration]`` (:mod:`ctrplan.discrepancy.verdict.coverage`) [m]; NaN without one.
 
     Parameters
     ----------

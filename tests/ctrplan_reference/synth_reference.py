@@ -1,7 +1,7 @@
 """Measured-like data with known hidden effects, made independently of the code that fits it.
 
 The discrepancy workflow fits history effects through ``ctrplan.history``, ``ctrplan.effects``
-and ``ctrplan.discrepancy.simulate``; ``ctrplan.discrepancy.synth`` hides effects through the same
+and ``ctrplan.discrepancy.fits.simulate``; ``ctrplan.discrepancy.measured.synth`` hides effects through the same
 code, so a sign or convention error in an operator would hide itself. This module makes the data
 another way:
 
@@ -448,7 +448,7 @@ def synthesize_reference(robot, *, samples: int = 500, rate_hz: float = 10.0, ba
         Columns ``time`` [s], ``sequence`` (0), ``alpha_1..n`` [rad], ``beta_1..n`` [m] (the
         COMMANDED joints at the sample times), ``tip_x, tip_y, tip_z`` [m],
         ``tangent_x, tangent_y, tangent_z``; rows whose truth solve failed are dropped. Loads
-        with :func:`ctrplan.discrepancy.data.load_measured_data` (frame ``"tracker"`` when a
+        with :func:`ctrplan.discrepancy.measured.data.load_measured_data` (frame ``"tracker"`` when a
         registration is given).
     truth : dict
         ``motion`` (:class:`ReferenceMotion`), ``times`` (K,) [s], ``kept`` (K,) bool,
@@ -561,7 +561,7 @@ def synthesize_reference_grid(robot, *, grid: int = 5, mu=None, registration=Non
                               noise_position_rms: float = 1.4e-3, noise_angle_rms: float = float(np.deg2rad(0.5)),
                               seed: int = 0, ds: float = 3e-3) -> tuple[pd.DataFrame, dict]:
     """Measured-like data of the paper's protocol (Section V-C of Ha, Fagogenis & Dupont 2019),
-    made independently of ``ctrplan.discrepancy.synth``.
+    made independently of ``ctrplan.discrepancy.measured.synth``.
 
     Every node of a ``grid`` per joint grid over ``robot.joints`` (a periodic rotation without its
     upper end, which is its lower end again), approached from every combination of relative

@@ -175,7 +175,7 @@ class Discrepancy:
     warmup_time = 0.0
 
     def setup_cache(self):
-        from ctrplan.discrepancy.synth import Noise, synthesize
+        from ctrplan.discrepancy.measured.synth import Noise, synthesize
         from ctrplan.io.robot_file import load_robot, robot_to_toml
         from ctrplan.mechanics import ModelSettings
 

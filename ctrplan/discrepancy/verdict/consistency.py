@@ -1,13 +1,13 @@
 """Is an out-of-sample tip residual consistent with the sensor's noise, correlated in time?
 
 :func:`noise_test` is an F test of the residual's mean square against the noise variance that
-:func:`ctrplan.discrepancy.noise.estimate_noise` reads from the rests of the data. Under the null
+:func:`ctrplan.discrepancy.measured.noise.estimate_noise` reads from the rests of the data. Under the null
 (the model is right) the residual is the noise plus the error of the values fitted on other
 samples, per component of variance ``sigma^2 (1 + p / n_eff)``. Its degrees of freedom combine
 two parts (Satterthwaite 1946, Eq. (2)): the noise's, the effective number of independent squares
 of K samples of the fitted correlation (Bayley & Hammersley 1946; ``3 K`` for white noise), and
 the fitted values' error with the ``p`` parameters. The noise estimate's own degrees of freedom
-(:attr:`~ctrplan.discrepancy.noise.NoiseEstimate.dof`) are the denominator's; a stated noise has
+(:attr:`~ctrplan.discrepancy.measured.noise.NoiseEstimate.dof`) are the denominator's; a stated noise has
 none (a chi-square test). The result is a :class:`NoiseTest`.
 
 References
@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
-from .noise import NoiseEstimate
+from ..measured.noise import NoiseEstimate
 
 __all__ = ["NoiseTest", "noise_test"]
 
@@ -139,7 +139,7 @@ def noise_test(residual, index, sequence, estimate: NoiseEstimate, *, n_paramete
     With noise correlated in time and regressors that vary slowly along the motion (the
     Jacobian of a model along a continuous trajectory; ``smooth_regressors``), the fitted
     values' error is that of ``n_eff = n_fitted / sum_h rho(h)`` independent observations
-    (:meth:`~ctrplan.discrepancy.noise.NoiseEstimate.long_run_factor`).
+    (:meth:`~ctrplan.discrepancy.measured.noise.NoiseEstimate.long_run_factor`).
 
     The statistic ``F = mean(residual^2) / (sigma_hat^2 (1 + p / n_eff))`` has, approximately:
 
@@ -177,7 +177,7 @@ def noise_test(residual, index, sequence, estimate: NoiseEstimate, *, n_paramete
     sequence : array-like of int, shape (K,)
         Motion of each (samples of different motions are independent).
     estimate : NoiseEstimate
-        :func:`~ctrplan.discrepancy.noise.estimate_noise`; must be known.
+        :func:`~ctrplan.discrepancy.measured.noise.estimate_noise`; must be known.
     n_parameters : int
         Parameters fitted (``p``).
     n_fitted : int

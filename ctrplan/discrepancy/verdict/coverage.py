@@ -67,10 +67,10 @@ from typing import Mapping
 import numpy as np
 from scipy import stats
 
-from .._log import progress_level
-from ..parallel import Executor
-from .logtext import figure, interval
-from .options import BOOTSTRAP_RESAMPLES, CONFIDENCE, ENVELOPE_NOISE_FACTOR
+from ..._log import progress_level
+from ...parallel import Executor
+from ..outputs.logtext import figure, interval
+from ..options import BOOTSTRAP_RESAMPLES, CONFIDENCE, ENVELOPE_NOISE_FACTOR
 from .statistics import unit_sums
 
 __all__ = ["NOISE_MULTIPLE", "DEFAULT_TARGET", "COVERAGE_TOLERANCE", "MIN_UNITS", "COVERAGE_STATUSES",
@@ -131,7 +131,7 @@ class BoundValues:
 
 def _bound_chunk(robot, alpha, beta, settings):
     """The bound at the rows of ``alpha``, ``beta`` (m, n): a list of m ``(position, translation_last, ok)``."""
-    from ..mechanics import evaluate_bound
+    from ...mechanics import evaluate_bound
 
     out = []
     for a, b in zip(alpha, beta):
@@ -662,8 +662,8 @@ def _bound_tag(robot, effects) -> str:
     """Tag of the stored bounds of ``robot`` (the written robot: every tube and pair parameter, as
     its robot file states it) with the history ``effects`` (:class:`ctrplan.effects.EffectSet`)
     and the running mechanics (:func:`ctrplan.cache.content_key`): 64 hexadecimal digits."""
-    from ..cache import content_key, mechanics_version
-    from ..io.robot_file import robot_to_toml
+    from ...cache import content_key, mechanics_version
+    from ...io.robot_file import robot_to_toml
 
     return content_key({"robot": robot_to_toml(robot), "effects": effects.to_dict(),
                         "mechanics_version": mechanics_version()})
@@ -701,8 +701,8 @@ def check_bound(setup, split, final, test_errors, final_params: dict, noise, opt
     -------
     BoundCalibration
     """
-    from ..effects import EffectSet
-    from .parameters import REGISTRATION, apply_parameters
+    from ...effects import EffectSet
+    from ..fits.parameters import REGISTRATION, apply_parameters
 
     names = tuple(n for n in final_params if n not in REGISTRATION)
     robot = apply_parameters(setup.robot, names, tuple(final_params[n] for n in names))

@@ -8,14 +8,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._log import progress_level
-from ..effects import EffectSet, registration_transform
-from .data import MeasuredData
-from .evaluation import evaluate_rows
-from .logtext import UNDEFINED, figure
-from .noise import NoiseEstimate
-from .options import ENVELOPE_NOISE_FACTOR, DiscrepancyOptions
-from .parameters import apply_parameters
+from ..._log import progress_level
+from ...effects import EffectSet, registration_transform
+from ..measured.data import MeasuredData
+from ..fits.evaluation import evaluate_rows
+from ..outputs.logtext import UNDEFINED, figure
+from ..measured.noise import NoiseEstimate
+from ..options import ENVELOPE_NOISE_FACTOR, DiscrepancyOptions
+from ..fits.parameters import apply_parameters
 
 __all__ = ["EnvelopeCoverage", "HistoryPrediction", "PREDICTION_DESCRIPTION", "predict_with_history",
            "envelope_coverage", "hull_distance"]
@@ -130,7 +130,7 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise: NoiseEstimate, st
     sub : MeasuredData
         The samples.
     noise : NoiseEstimate
-        :func:`~ctrplan.discrepancy.noise.estimate_noise` (its rms sets the margin; 0 when unknown).
+        :func:`~ctrplan.discrepancy.measured.noise.estimate_noise` (its rms sets the margin; 0 when unknown).
     stages : StageStore
     stage : str
     settings : ModelSettings
@@ -143,8 +143,8 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise: NoiseEstimate, st
     -------
     EnvelopeCoverage
     """
-    from ..mechanics import all_eta
-    from .simulate import simulate
+    from ...mechanics import all_eta
+    from ..fits.simulate import simulate
 
     sigma = noise.position_rms_m
     margin = ENVELOPE_NOISE_FACTOR * sigma if sigma else 0.0
@@ -223,7 +223,7 @@ def predict_with_history(setup, split, baseline, naming, noise, options: Discrep
     HistoryPrediction or None
         None without a friction candidate.
     """
-    from ..mechanics import all_eta
+    from ...mechanics import all_eta
 
     candidates, named = naming.candidates, naming.named
     if "friction" not in candidates:

@@ -10,23 +10,24 @@ from pathlib import Path
 
 import numpy as np
 
-from .._log import progress_level
-from ..effects import REGISTRY, EffectSet, robot_effects
-from ..io.atomic import atomic_write_text
-from .baseline import Baseline
-from .predictions import pose_errors, predict
-from .data import MeasuredData
-from .decision import Naming, atypical_caution, cautions
-from .estimates import display_value
-from .evaluation import ErrorFigures, Errors, evaluate_rows
-from .fitting import Candidate
+from ..._log import progress_level
+from ...choices import EffectStore, Verdict
+from ...effects import REGISTRY, EffectSet, robot_effects
+from ...io.atomic import atomic_write_text
+from ..fits.baseline import Baseline
+from ..fits.predictions import pose_errors, predict
+from ..measured.data import MeasuredData
+from ..verdict.decision import Naming, atypical_caution, cautions
+from ..fits.estimates import display_value
+from ..fits.evaluation import ErrorFigures, Errors, evaluate_rows
+from ..fits.fitting import Candidate
 from .logtext import figure, interval
-from .options import CONFIDENCE, DiscrepancyOptions
-from .pairs import Combination
-from .parameters import REGISTRATION, apply_parameters
-from .setup import DiscrepancySetup
-from .split import DataSplit
-from .statistics import Interval, mean_interval, shrink_interval
+from ..options import CONFIDENCE, DiscrepancyOptions
+from ..fits.pairs import Combination
+from ..fits.parameters import REGISTRATION, apply_parameters
+from ..setup import DiscrepancySetup
+from ..measured.split import DataSplit
+from ..verdict.statistics import Interval, mean_interval, shrink_interval
 
 __all__ = ["ModelFigures", "TestFigures", "PredictionCheck", "TestSplit", "evaluate_test_split", "UpdatedModel",
            "Reproduction", "write_updated_model", "check_reproduction", "reproduce_errors", "final_candidate",
@@ -130,7 +131,7 @@ def validate_prediction(prediction, split: DataSplit) -> PredictionCheck | None:
     """The history-aware prediction against the standard model on the test split: mean (with a
     t-interval over units), p95 and max tip position error of each [mm], and the per-unit paired
     difference of their means with its t-interval; the history "beats" the standard model when
-    that interval lies below zero (:func:`~ctrplan.discrepancy.statistics.mean_interval` of the
+    that interval lies below zero (:func:`~ctrplan.discrepancy.verdict.statistics.mean_interval` of the
     paired differences). Planning aims with the history-aware prediction only then.
 
     Parameters
@@ -352,7 +353,7 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
     SHA-256, the date, the samples, the verdict, the test split's errors and a caution for every
     value outside its typical range (the value is written: the data chose it over every other
     explanation). The values are those of the final model's joint fit. With ``bound`` (a
-    :class:`~ctrplan.discrepancy.coverage.BoundCalibration` with a finite factor), the table
+    :class:`~ctrplan.discrepancy.verdict.coverage.BoundCalibration` with a finite factor), the table
     ``[bound_calibration]``; with ``prediction_check`` (:func:`validate_prediction`),
     ``[prediction_validation]``: planning reads both.
 
@@ -370,7 +371,7 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
     -------
     UpdatedModel
     """
-    from ..io.robot_file import file_hash, robot_to_toml
+    from ...io.robot_file import file_hash, robot_to_toml
 
     robot = setup.robot
     final = final_candidate(naming, combination)
@@ -382,13 +383,13 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
         vals = [final_params.get(n, 0.0) for n in REGISTRATION]
         registration = {"rotation_vector_rad": vals[:3], "translation_m": vals[3:]}
     effects, _ = EffectSet.from_parameters(robot, tuple(final_params), tuple(final_params.values()))
-    stored = {name: dict(effects[name]) for name in effects if REGISTRY[name].store == "effects"}
+    stored = {name: dict(effects[name]) for name in effects if REGISTRY[name].store == EffectStore.EFFECTS}
     notes = tuple(atypical_caution(final.label, b) for b in final.atypical) if final is not None else ()
     data_name = Path(setup.data_path).name
     updated = apply_parameters(robot, tuple(final_params), tuple(final_params.values()))
     merged = robot_effects(robot).merged(stored)
     verdict = naming.verdict
-    if verdict == "ambiguous":
+    if verdict == Verdict.AMBIGUOUS:
         suffix = f"{naming.named}-or-{naming.decision.ambiguous_with}"
     else:
         suffix = "-".join(named_effects) or "recalibrated"
@@ -398,7 +399,7 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
                               effects=tuple((n, tuple(merged[n].items())) for n in merged))
     pos = test.final.position[np.isfinite(test.final.position)]
     note = ("ambiguous: " + naming.candidates[naming.decision.ambiguous_with].label + " explains the data equally "
-            "well" if verdict == "ambiguous" else "")
+            "well" if verdict == Verdict.AMBIGUOUS else "")
     source = {"method": "ctrplan discrepancy (fitted on the development split; errors on the untouched test split)",
               "data_file": data_name, "data_sha256": file_hash(setup.data_path),
               "date": datetime.date.today().isoformat(), "samples": int(setup.data.n_samples),
@@ -448,7 +449,7 @@ def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: i
     ModelFileError, PhysicalParameterError
         The file does not load.
     """
-    from ..io.robot_file import load_robot
+    from ...io.robot_file import load_robot
 
     robot = load_robot(model_path)
     model = robot.metadata.get("model") or "standard"
@@ -487,7 +488,7 @@ def check_reproduction(setup: DiscrepancySetup, split: DataSplit, updated: Updat
 def run_cautions(naming: Naming, combination: Combination | None, baseline: Baseline, test: TestSplit) -> tuple:
     """What a reader of the run must not overlook (logged as warnings): the final model's values
     outside their typical range and a maximum error that rises on the test split
-    (:func:`~ctrplan.discrepancy.decision.cautions`), and baseline parameters outside their typical
+    (:func:`~ctrplan.discrepancy.verdict.decision.cautions`), and baseline parameters outside their typical
     range or at a bound.
 
     Parameters

@@ -9,8 +9,8 @@ import logging
 
 import numpy as np
 
-from .._log import progress_level
-from ..effects import EffectSet, registration_transform
+from ..._log import progress_level
+from ...effects import EffectSet, registration_transform
 from .predictions import pose_errors, predict
 
 logger = logging.getLogger(__name__)

@@ -27,9 +27,9 @@ import dataclasses
 
 import numpy as np
 
-from ..effects import REGISTRY, EffectSet, ParameterSpec, apply_robot_effects, effect_of_parameter, parameter_spec
-from ..errors import CtrplanError
-from ..robot import Robot, Section
+from ...effects import REGISTRY, EffectSet, ParameterSpec, apply_robot_effects, effect_of_parameter, parameter_spec
+from ...errors import CtrplanError
+from ...robot import Robot, Section
 
 __all__ = ["parameter", "needs_solve", "read_parameters", "apply_parameters", "REGISTRATION", "BASELINE_KINDS",
            "BASELINE_TYPICAL_CHANGE", "BASELINE_BOUND_FACTOR", "ParameterError"]
@@ -135,7 +135,7 @@ def read_parameters(robot: Robot, names) -> np.ndarray:
     ParameterError
         As :func:`parameter`.
     """
-    from ..effects import robot_effects
+    from ...effects import robot_effects
 
     file_effects = robot_effects(robot)
     out = []

@@ -3,7 +3,7 @@
 to avoid local minima").
 
 - :func:`grid_search`: parameters by an m-D grid search on the Eq. (49) residuals of
-  :mod:`ctrplan.discrepancy.calibrate`, the other parameters held fixed, made cheaper by a coarse
+  :mod:`ctrplan.discrepancy.fits.calibrate`, the other parameters held fixed, made cheaper by a coarse
   grid on a subset of whole configuration groups followed by refinement on the whole calibration
   set;
 - :func:`grid_search_friction`: the friction coefficients mu_1..mu_(n-1) so (a 2-D search for
@@ -17,10 +17,10 @@ import time
 
 import numpy as np
 
-from ..mechanics import ModelSettings
-from ..models import check_model
+from ...mechanics import ModelSettings
+from ...models import check_model
 from .calibrate import CalibrationResult, _Objective, _uncertainty
-from .data import MeasuredData
+from ..measured.data import MeasuredData
 from .parameters import parameter
 from .predictions import FAILED_RESIDUAL
 
@@ -69,7 +69,7 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
         Standard errors and correlations at the best point (from one Jacobian of Eq. (49)).
     clusters : array-like, shape (K,), optional
         Unit of each sample: standard errors clustered over units
-        (:func:`~ctrplan.discrepancy.calibrate.covariance`).
+        (:func:`~ctrplan.discrepancy.fits.calibrate.covariance`).
 
     Returns
     -------

@@ -28,10 +28,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import CtrplanError, DataFileError
-from ..history import HistoryState, MotionRecord, motion_state
-from ..io.ros2 import BagSelection, is_bag, read_bag_measurements
-from ..io.tables import measurements_from_frame, read_measurements
+from ...choices import PoseFrame
+from ...errors import CtrplanError, DataFileError
+from ...history import HistoryState, MotionRecord, motion_state
+from ...io.ros2 import BagSelection, is_bag, read_bag_measurements
+from ...io.tables import measurements_from_frame, read_measurements
 
 __all__ = ["MeasuredData", "load_measured_data", "configuration_groups"]
 
@@ -67,7 +68,7 @@ class MeasuredData:
         ``"calibration"`` / ``"validation"`` when the file gives the split.
     time : ndarray or None, shape (K,) [s]
     file : str
-    frame : {"robot", "tracker"}
+    frame : PoseFrame
         Frame of ``tip`` and ``tangent``.
     record : MotionRecord
         The whole recorded motion (every row of the file), joints [rad, m], times [s].
@@ -90,7 +91,7 @@ class MeasuredData:
     subset: np.ndarray | None
     time: np.ndarray | None
     file: str
-    frame: str
+    frame: PoseFrame
     record: MotionRecord
     rows: np.ndarray
     given_eta: np.ndarray
@@ -133,7 +134,7 @@ class MeasuredData:
         ValueError
             A time offset on data without times.
         """
-        from ..effects import REGISTRY, history_state, robot_effects
+        from ...effects import REGISTRY, history_state, robot_effects
 
         # the state depends only on the effects that act on the motion: keep one per such set
         acting = robot_effects(robot).merged(effects or {})
@@ -151,7 +152,7 @@ def _is_whitespace_format(path: Path) -> bool:
     return path.suffix.lower() != ".csv"
 
 
-def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = None,
+def load_measured_data(path: str | os.PathLike, robot, *, frame: PoseFrame | str | None = None,
                        bag: BagSelection | None = None) -> MeasuredData:
     """Load measured data and complete its motion history.
 
@@ -163,8 +164,8 @@ def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = No
     robot : Robot
         Gives the number of tubes (and, for a bag, the joint names); joints are checked against
         its limits.
-    frame : {"robot", "tracker"}, optional
-        Frame of the measured poses. Default: ``"tracker"`` for Ha's format (its README: the
+    frame : PoseFrame or str, optional
+        Frame of the measured poses (``"robot"`` or ``"tracker"``). Default: ``"tracker"`` for Ha's format (its README: the
         registration is not given) and for a bag (a tracker's poses), ``"robot"`` for CSV.
     bag : BagSelection, optional
         Topics, child frame and joint names to read from a bag (default: the bag's only ones).
@@ -193,21 +194,22 @@ def load_measured_data(path: str | os.PathLike, robot, *, frame: str | None = No
         meas = measurements_from_frame(read.table, n, file)
         tmp = dict(alpha=meas.alpha, beta=meas.beta, tip=meas.tip, tangent=meas.tangent, eta=None,
                    time=meas.time, table=meas.frame)
-        default_frame = "tracker"
+        default_frame = PoseFrame.TRACKER
     elif _is_whitespace_format(path):
-        from ..io.tables import load_ha_trajectory
+        from ...io.tables import load_ha_trajectory
 
         table = load_ha_trajectory(path)
         tmp = _frame_to_arrays(table, n, file)
-        default_frame = "tracker"
+        default_frame = PoseFrame.TRACKER
     else:
         meas = read_measurements(path, n)
         tmp = dict(alpha=meas.alpha, beta=meas.beta, tip=meas.tip, tangent=meas.tangent, eta=meas.eta,
                    time=meas.time, table=meas.frame)
-        default_frame = "robot"
-    frame = frame or default_frame
-    if frame not in ("robot", "tracker"):
-        raise ValueError(f"frame must be 'robot' or 'tracker', got {frame!r}")
+        default_frame = PoseFrame.ROBOT
+    try:
+        frame = PoseFrame(frame or default_frame)
+    except ValueError:
+        raise ValueError(f"frame must be 'robot' or 'tracker', got {frame!r}") from None
     table = tmp["table"]
     k = tmp["alpha"].shape[0]
     if k < 2:

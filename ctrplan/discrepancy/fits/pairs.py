@@ -1,6 +1,6 @@
 """Stage 8 of the discrepancy workflow: a second effect fitted together with the named one, and
 whether either adds to the other (nested comparisons in both directions, cross-validated over the
-same folds as every candidate; :mod:`~ctrplan.discrepancy.fitting`)."""
+same folds as every candidate; :mod:`~ctrplan.discrepancy.fits.fitting`)."""
 
 from __future__ import annotations
 
@@ -11,17 +11,17 @@ from typing import Mapping
 
 import numpy as np
 
-from .._log import progress_level
-from ..effects import REGISTRY
-from ..models import MODEL_INFO
+from ..._log import progress_level
+from ...effects import REGISTRY
+from ...models import MODEL_INFO
 from .calibrate import CalibrationResult, calibrate
 from .estimates import display_value
 from .fitting import Candidate, combined_model, compare, contained, cross_validate, fit_rows, make_candidate, scan_fit
 from .gridsearch import grid_search
-from .options import DiscrepancyOptions
-from .setup import DiscrepancySetup, effect_parameters, reported_parameters
-from .split import DataSplit
-from .statistics import holm
+from ..options import DiscrepancyOptions
+from ..setup import DiscrepancySetup, effect_parameters, reported_parameters
+from ..measured.split import DataSplit
+from ..verdict.statistics import holm
 
 __all__ = ["Combination", "fit_second_effect", "first_vanishes", "pair_decision"]
 
@@ -73,7 +73,7 @@ def _fit_pair(ctx) -> CalibrationResult:
     clearance model with the named effect's own parameters in place, the second effect by its own
     strategy (its grid, or its parameters alone from its single fit of the same samples), then
     every effect parameter and the baseline's parameters refitted together with the contact model,
-    as a contact candidate alone is (:meth:`ctrplan.discrepancy.fitting.FitContext.refine_contact`); every
+    as a contact candidate alone is (:meth:`ctrplan.discrepancy.fits.fitting.FitContext.refine_contact`); every
     value is fitted with the other effect present.
     """
     setup, options, k, n_jobs = ctx["setup"], ctx["options"], ctx["k"], ctx["n_jobs"]

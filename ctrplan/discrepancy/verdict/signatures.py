@@ -42,8 +42,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .._log import progress_level
-from ..effects import REGISTRY
+from ..._log import progress_level
+from ...effects import REGISTRY
 
 __all__ = ["SignatureTest", "SignatureContext", "diagnose_residuals", "friction_signature", "regression_signature",
            "registration_signature", "vector_signature", "untestable", "tip_velocity", "label"]
@@ -452,7 +452,7 @@ def tip_velocity(tip, time, sequence=None) -> np.ndarray:
     time : array-like, shape (K,) [s], or None
     sequence : array-like of int, shape (K,), optional
     """
-    from ..history import sequence_segments
+    from ...history import sequence_segments
 
     tip = np.asarray(tip, dtype=float)
     K = tip.shape[0]
@@ -515,7 +515,7 @@ class SignatureContext:
         """d tip / d alpha_i of the baseline along the held-out motion, per tube i:
         ``{i: ndarray (K, 3) [m/rad]}`` by central differences of ``alpha_step``, branch
         following (NaN where a solve failed)."""
-        from .simulate import simulate
+        from ..fits.simulate import simulate
 
         stored = self.cache.load("alpha-jacobian") if self.cache is not None and not self._jac else None
         if stored:
@@ -535,8 +535,8 @@ class SignatureContext:
 
     def twist(self, tube: int) -> np.ndarray:
         """Twist psi(end) - psi(base) of one tube in the baseline's standard model, shape (K,) [rad]."""
-        from ..errors import CtrplanError
-        from ..mechanics import solve_standard
+        from ...errors import CtrplanError
+        from ...mechanics import solve_standard
 
         out = np.full(self.data.n_samples, np.nan)
         for k in range(self.data.n_samples):
@@ -556,14 +556,14 @@ class SignatureContext:
 
     def drive_directions(self) -> np.ndarray:
         """Direction of the last rotation of each drive, shape (K, n), along the whole record."""
-        from ..history import drive_directions
+        from ...history import drive_directions
 
         rec = self.data.record
         return drive_directions(rec.alpha, sequence=rec.sequence)[self.data.rows]
 
     def rotation_since_reversal(self) -> np.ndarray:
         """Relative rotation of each pair since its last reversal, shape (K, n - 1) [rad]."""
-        from ..history import rotation_since_reversal
+        from ...history import rotation_since_reversal
 
         rec = self.data.record
         return rotation_since_reversal(rec.alpha, sequence=rec.sequence)[self.data.rows]
@@ -615,10 +615,10 @@ def diagnose_residuals(setup, split, baseline, options) -> dict:
     dict of str to SignatureTest
         One per candidate effect (``effect_size_m`` [m]), in registry order.
     """
-    from .data import configuration_groups
-    from .options import ALPHA_STEP, TRAJECTORY_ROTATION_BIN, TRAJECTORY_TRANSLATION_BIN
-    from .parameters import apply_parameters
-    from .split import configurations_repeat
+    from ..measured.data import configuration_groups
+    from ..options import ALPHA_STEP, TRAJECTORY_ROTATION_BIN, TRAJECTORY_TRANSLATION_BIN
+    from ..fits.parameters import apply_parameters
+    from ..measured.split import configurations_repeat
 
     dev, params = setup.data.take(split.dev_rows), baseline.params
     logger.log(progress_level(), "testing residual signatures ...")

@@ -16,11 +16,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import CtrplanError
-from ..history import MotionRecord, motion_state, sequence_segments
-from ..mechanics import ModelSettings, solve_standard
-from ..models import MODEL_INFO, MODELS, check_model, standard_solution  # the one registry of models
-from ..parallel import Executor
+from ...errors import CtrplanError
+from ...history import MotionRecord, motion_state, sequence_segments
+from ...mechanics import ModelSettings, solve_standard
+from ...models import MODEL_INFO, MODELS, check_model, standard_solution  # the one registry of models
+from ...parallel import Executor
 
 __all__ = ["MODELS", "Simulation", "simulate", "WarmStarts", "WARM_OUTER_TOL"]
 
@@ -69,7 +69,7 @@ class WarmStarts:
     (:func:`~ctrplan.mechanics.solve_contact`), and a warm friction solve that does not
     converge is solved again as without the store.
 
-    A store belongs to one sequence of evaluations (one fit, :class:`~ctrplan.discrepancy.calibrate._Objective`):
+    A store belongs to one sequence of evaluations (one fit, :class:`~ctrplan.discrepancy.fits.calibrate._Objective`):
     what it holds depends only on that sequence, so a fit gives the same values whichever
     process runs it. The solver tolerances of a fit that uses it must be tight enough for
     finite differences of solutions started from different points (:data:`WARM_OUTER_TOL`).

@@ -4,7 +4,7 @@
 :meth:`~ctrplan.discrepancy.workflow.DiscrepancyResult.to_dict` returns. Keys say their unit: SI
 values where the key has ``_m``, ``_rad`` or no unit suffix, millimetres and degrees where it has
 ``_mm`` / ``_deg`` (the report reads them in those units). ``report.md`` is formatted from this
-dictionary alone (:mod:`ctrplan.discrepancy.report`).
+dictionary alone (:mod:`ctrplan.discrepancy.outputs.report`).
 """
 
 from __future__ import annotations
@@ -13,12 +13,13 @@ from dataclasses import asdict
 
 import numpy as np
 
-from ..effects import REGISTRY
-from .coverage import BOUND_DEFINITION
-from .decision import no_effect_sentence
-from .envelope import PREDICTION_DESCRIPTION
-from .evaluation import ErrorFigures
-from .provenance import provenance
+from ...choices import Verdict
+from ...effects import REGISTRY
+from ..verdict.coverage import BOUND_DEFINITION
+from ..verdict.decision import no_effect_sentence
+from ..verdict.envelope import PREDICTION_DESCRIPTION
+from ..fits.evaluation import ErrorFigures
+from ..provenance import provenance
 
 __all__ = ["results_dict", "candidate_dict", "noise_dict", "error_dict", "bound_dict", "json_default"]
 
@@ -40,12 +41,12 @@ def error_dict(f: ErrorFigures) -> dict:
 
 
 def _model_figures(m) -> dict:
-    """:class:`~ctrplan.discrepancy.output.ModelFigures` in mm."""
+    """:class:`~ctrplan.discrepancy.outputs.output.ModelFigures` in mm."""
     return {"mean_mm": m.mean.scaled(1e3).as_dict(), "p95_mm": _mm(m.p95), "max_mm": _mm(m.max)}
 
 
 def candidate_dict(c) -> dict:
-    """A :class:`~ctrplan.discrepancy.fitting.Candidate` as ``results.json`` stores it (mm in
+    """A :class:`~ctrplan.discrepancy.fits.fitting.Candidate` as ``results.json`` stores it (mm in
     ``out_of_fold``; SI in ``parameters`` and ``parameter_table``; Eq. (49) units in
     ``improvement_eq49``)."""
     out = {"effects": list(c.effects), "label": c.label, "model": c.model, "fit": c.fit.as_dict(),
@@ -65,7 +66,7 @@ def candidate_dict(c) -> dict:
 
 
 def noise_dict(check) -> dict:
-    """A :class:`~ctrplan.discrepancy.decision.NoiseCheck` as ``results.json`` stores it (mm)."""
+    """A :class:`~ctrplan.discrepancy.verdict.decision.NoiseCheck` as ``results.json`` stores it (mm)."""
     sigma = check.rms
     return {"rms_mm": check.rms_m * 1e3, "noise_rms_mm": None if sigma is None else sigma * 1e3,
             "ratio": check.ratio, "consistent": check.consistent,
@@ -80,7 +81,7 @@ def _coverage_dict(c, *, error_median: bool) -> dict:
 
 
 def bound_dict(b) -> dict:
-    """A :class:`~ctrplan.discrepancy.coverage.BoundCalibration` as ``results.json`` stores it (mm
+    """A :class:`~ctrplan.discrepancy.verdict.coverage.BoundCalibration` as ``results.json`` stores it (mm
     where the key says so): ``status`` one of "shown", "not shown", "failed", ``failing`` True
     exactly when "failed", ``conservative``, the intervals' ``confidence`` and the status's
     ``tolerance``, and ``calibration`` the factor's spread (``{"factor_ci", "coverage_ci",
@@ -179,7 +180,7 @@ def results_dict(result) -> dict:
         "skipped_effects": dict(setup.skipped), "noise": noise_dict(result.noise), "decision": naming.decision.as_dict(),
         "verdict": naming.verdict, "named_effect": naming.named,
         "no_effect_sentence": (no_effect_sentence(naming.decision, result.noise, naming.candidates)
-                               if naming.verdict == "none" else None),
+                               if naming.verdict == Verdict.NONE else None),
         "named_label": REGISTRY[naming.named].label if naming.named else None,
         "ambiguous_with": naming.decision.ambiguous_with,
         "candidates": {e: candidate_dict(c) for e, c in naming.candidates.items()},

@@ -16,16 +16,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._log import details, progress_level
+from ..._log import details, progress_level
+from ...choices import PoseFrame
 from .calibrate import CalibrationResult, calibrate, information_criterion
 from .estimates import display_value, parameter_table
 from .evaluation import Errors, evaluate_rows
 from .fitting import CrossValidated, compare, cross_validate, fit_rows, run_fits, stage_name
-from .options import DiscrepancyOptions
+from ..options import DiscrepancyOptions
 from .parameters import REGISTRATION, parameter, read_parameters
-from .setup import DiscrepancySetup
-from .split import DataSplit, choose_buffer
-from .statistics import Comparison
+from ..setup import DiscrepancySetup
+from ..measured.split import DataSplit, choose_buffer
+from ..verdict.statistics import Comparison
 
 __all__ = ["Baseline", "PriorChoice", "pilot_fit", "calibrate_baseline", "baseline_prior"]
 
@@ -46,7 +47,7 @@ class PriorChoice:
         Its out-of-fold mean Eq. (49) residual [mm + deg].
     against_file : Comparison
         Its out-of-fold Eq. (49) residuals against the robot file's parameters' (tau 0)
-        (:func:`~ctrplan.discrepancy.statistics.cv_comparison`; positive: better than the file).
+        (:func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison`; positive: better than the file).
     """
 
     strength: float
@@ -64,15 +65,15 @@ class Baseline:
     cv : CrossValidated
         The baseline with the chosen prior strength.
     bic : float
-        BIC of its development fit (:func:`~ctrplan.discrepancy.calibrate.information_criterion`).
+        BIC of its development fit (:func:`~ctrplan.discrepancy.fits.calibrate.information_criterion`).
     parameters : tuple of ParameterEstimate
-        :func:`~ctrplan.discrepancy.estimates.parameter_table` of its fitted values:
+        :func:`~ctrplan.discrepancy.fits.estimates.parameter_table` of its fitted values:
         uncertainty, change from the robot file's value, typical range.
     strength : float
         The chosen prior strength tau (0: the robot file's tube parameters, only the registration
         fitted; inf: no prior).
     prior : dict
-        ``{name: (robot file's value, scale)}`` of the chosen prior (:class:`~ctrplan.discrepancy.calibrate.Prior`);
+        ``{name: (robot file's value, scale)}`` of the chosen prior (:class:`~ctrplan.discrepancy.fits.calibrate.Prior`);
         empty for tau 0 and inf.
     choices : tuple of PriorChoice
         Every strength tried, strongest first.
@@ -115,7 +116,7 @@ def _tube_names(setup) -> tuple:
 def pilot_fit(setup: DiscrepancySetup, split: DataSplit, options: DiscrepancyOptions) -> tuple:
     """Stage 3a: the baseline fitted once on the development samples without a prior (the pilot),
     to choose what the folds then share: the buffer (from its residuals' autocorrelation,
-    :func:`~ctrplan.discrepancy.split.choose_buffer`) and the prior's scale (its rms Eq. (49)
+    :func:`~ctrplan.discrepancy.measured.split.choose_buffer`) and the prior's scale (its rms Eq. (49)
     residual). It never sees the test split.
 
     Parameters
@@ -202,7 +203,7 @@ def _tau_name(tau: float) -> str:
 def calibrate_baseline(setup: DiscrepancySetup, split: DataSplit, options: DiscrepancyOptions,
                        progress: bool = False, *, residual_scale: float = 1.0) -> Baseline:
     """Stage 3b: the baseline (standard model), by least squares on Eq. (49) of Ha, Fagogenis &
-    Dupont 2019 (:func:`~ctrplan.discrepancy.calibrate.calibrate`) with a prior toward the robot
+    Dupont 2019 (:func:`~ctrplan.discrepancy.fits.calibrate.calibrate`) with a prior toward the robot
     file's tube parameters, on the development samples and without each fold.
 
     The prior adds rows ``residual_scale (theta - theta_file) / (tau |theta_file|)`` for every tube
@@ -228,7 +229,7 @@ def calibrate_baseline(setup: DiscrepancySetup, split: DataSplit, options: Discr
         With the chosen strength, every strength's out-of-fold figures and its comparison with
         the robot file's parameters, and the parameters' clustered standard errors, changes from
         the robot file's values and typical ranges
-        (:func:`~ctrplan.discrepancy.estimates.parameter_table`).
+        (:func:`~ctrplan.discrepancy.fits.estimates.parameter_table`).
     """
     strengths = tuple(sorted(set(float(t) for t in options.prior_strengths) | {0.0}, reverse=True))
     cache: dict = {}
@@ -271,7 +272,7 @@ def calibrate_baseline(setup: DiscrepancySetup, split: DataSplit, options: Discr
     tube_names = _tube_names(setup)
     reference = dict(zip(tube_names, read_parameters(setup.robot, tube_names)))
     table = parameter_table(setup.robot, base, setup.base_names, reference=reference)
-    if setup.data.frame == "tracker":
+    if setup.data.frame == PoseFrame.TRACKER:
         # the registration of a tracker-frame file maps between two unrelated frames: any value
         # is typical (its range is the one a robot-frame file must keep)
         table = tuple(replace(row, typical=None, in_typical_range=True,

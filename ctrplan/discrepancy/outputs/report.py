@@ -4,7 +4,7 @@ The report formats a run's typed results (:class:`~ctrplan.discrepancy.workflow.
 SI units) for people, who read millimetres and degrees; it computes no figure of its own. This is
 the one module of the workflow that turns results into report units: ``results.json`` keeps SI
 values where the key says so (``_m``, ``_rad``, or no unit suffix) and millimetres / degrees
-where the key says ``_mm`` / ``_deg`` (:func:`ctrplan.discrepancy.results.results_dict`).
+where the key says ``_mm`` / ``_deg`` (:func:`ctrplan.discrepancy.outputs.results.results_dict`).
 
 ``report.md`` is formatted from ``results.json`` alone, which is written first: a report that
 could not be written is written again from it (:func:`write_report_from_results`,
@@ -22,13 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataFileError
-from ..io.atomic import atomic_write_text
-from ..io.ros2 import describe_bag_summary
-from .coverage import COVERAGE_TOLERANCE, MIN_UNITS
-from .estimates import display_value
+from ...errors import DataFileError
+from ...io.atomic import atomic_write_text
+from ...io.ros2 import describe_bag_summary
+from ..verdict.coverage import COVERAGE_TOLERANCE, MIN_UNITS
+from ..fits.estimates import display_value
 from .logtext import UNDEFINED  # how the report prints a figure the data leave undefined (null or NaN)
-from .options import CONFIDENCE
+from ..options import CONFIDENCE
 from .results import json_default, results_dict
 
 __all__ = ["write_report", "write_report_from_results", "report_markdown", "TABLE_VIII", "UNDEFINED"]
@@ -112,7 +112,7 @@ def _ci(d, nd=2, scale=1.0, unit=""):
 
 
 def _pct(cmp: dict) -> str:
-    """The reduction of a :func:`~ctrplan.discrepancy.statistics.cv_comparison` in % with its interval."""
+    """The reduction of a :func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison` in % with its interval."""
     cmp = cmp or {}
     why = _count_reason(cmp.get("n_folds"), "fold")
     value = _number(cmp.get("reduction"))
@@ -123,9 +123,9 @@ def _pct(cmp: dict) -> str:
 
 
 def _coverage_reason(d) -> str | None:
-    """Why a :class:`~ctrplan.discrepancy.coverage.Coverage` dict's interval is undefined: none,
+    """Why a :class:`~ctrplan.discrepancy.verdict.coverage.Coverage` dict's interval is undefined: none,
     no samples, or too few units for the bootstrap (fewer than
-    :data:`~ctrplan.discrepancy.coverage.MIN_UNITS`)."""
+    :data:`~ctrplan.discrepancy.verdict.coverage.MIN_UNITS`)."""
     if not d.get("n"):
         return "no samples"
     n = _number(d.get("n_units"))
@@ -135,8 +135,8 @@ def _coverage_reason(d) -> str | None:
 
 
 def _share(d) -> str:
-    """A :class:`~ctrplan.discrepancy.coverage.Coverage` dict's covered share in % with its
-    interval (ends None over fewer than :data:`~ctrplan.discrepancy.coverage.MIN_UNITS` units)."""
+    """A :class:`~ctrplan.discrepancy.verdict.coverage.Coverage` dict's covered share in % with its
+    interval (ends None over fewer than :data:`~ctrplan.discrepancy.verdict.coverage.MIN_UNITS` units)."""
     d = d or {}
     why = _coverage_reason(d)
     value = _number(d.get("covered"))
@@ -244,7 +244,7 @@ def _arrays(result) -> dict:
 
 
 def _plots(result, out: Path) -> list[str]:
-    from ..plots import new_figure, save_figure
+    from ...plots import new_figure, save_figure
 
     a = _arrays(result)
     files = []

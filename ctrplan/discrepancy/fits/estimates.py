@@ -1,5 +1,5 @@
 """Fitted parameter values as a report reads them: value, standard error and interval, the robot
-file's value, and the parameter's typical range with its source (:mod:`ctrplan.discrepancy.parameters`).
+file's value, and the parameter's typical range with its source (:mod:`ctrplan.discrepancy.fits.parameters`).
 
 - :func:`covariance`: standard errors and correlations of a least-squares fit, clustered over
   units of samples; neighbouring time blocks whose scores are correlated across their seam are
@@ -15,16 +15,16 @@ from typing import Mapping
 
 import numpy as np
 
-from .options import CONFIDENCE
+from ..options import CONFIDENCE
 from .parameters import parameter
-from .split import BUFFER_AUTOCORRELATION
+from ..measured.split import BUFFER_AUTOCORRELATION
 
 __all__ = ["ParameterEstimate", "AtypicalValue", "Uncertainty", "parameter_table", "atypical_values", "display_value",
            "covariance", "merge_neighbouring_units", "interval_quantile", "MIN_CLUSTERS", "SEAM_CORRELATION"]
 
 #: Clusters the merging of neighbouring units leaves at least (fewer units are not merged): the
 #: t quantile with 7 degrees of freedom is 2.36 at 95 %, and fewer clusters make the interval
-#: uninformative (as for the test split, :data:`~ctrplan.discrepancy.split.MIN_TEST_UNITS`).
+#: uninformative (as for the test split, :data:`~ctrplan.discrepancy.measured.split.MIN_TEST_UNITS`).
 MIN_CLUSTERS = 8
 #: Neighbouring clusters are merged while the correlation of their score sums exceeds this (the
 #: threshold at which the split's buffer deems the residuals' autocorrelation negligible): the
@@ -80,7 +80,7 @@ def interval_quantile(dof: int | None) -> float:
 def _score_autocorrelation(score, motion, position, threshold: float, max_lag: int) -> np.ndarray:
     """Autocorrelation of the per-sample scores along each motion, lag by lag from 1 until it falls to
     ``threshold`` (or ``max_lag``), pooled over the score's components (each scaled to a mean
-    square of 1 and centred per motion) as :func:`~ctrplan.discrepancy.split.residual_autocorrelation`
+    square of 1 and centred per motion) as :func:`~ctrplan.discrepancy.measured.split.residual_autocorrelation`
     pools the residual's.
 
     Parameters
@@ -127,7 +127,7 @@ def merge_neighbouring_units(units, motion, position, score, *, threshold: float
     correlation of the residuals across each seam, which the cluster-robust variance leaves
     out. The autocorrelation ``rho`` of the scores along the motions (:func:`_score_autocorrelation`)
     is kept up to the lag L at which it first falls to ``threshold`` (0 from there, as the
-    split's buffer, :func:`~ctrplan.discrepancy.split.choose_buffer`); with it, the correlation
+    split's buffer, :func:`~ctrplan.discrepancy.measured.split.choose_buffer`); with it, the correlation
     of two neighbouring clusters' score sums is ``C_ab / sqrt(V_a V_b)``, ``V_a = sum_{i, j in a}
     rho(|p_i - p_j|)``, ``C_ab = sum_{i in a, j in b} rho(p_j - p_i)`` (p: record positions). The
     neighbours with the largest such correlation are merged, one pair at a time, until none
@@ -315,7 +315,7 @@ class ParameterEstimate:
     Attributes
     ----------
     name : str
-        Its name (:mod:`ctrplan.discrepancy.parameters`).
+        Its name (:mod:`ctrplan.discrepancy.fits.parameters`).
     unit : str
         Its SI unit (``"1/m"``, ``"rad"``, ``"m"``, ``"s"``, ``"-"``).
     value : float
@@ -444,7 +444,7 @@ def parameter_table(robot, fit, names, *, reference: Mapping | None = None) -> t
         Gives each parameter's unit and typical range.
     fit : CalibrationResult
         Fitted and fixed values [SI], standard errors and the clusters they were computed over
-        (``dof``; :class:`~ctrplan.discrepancy.calibrate.CalibrationResult`).
+        (``dof``; :class:`~ctrplan.discrepancy.fits.calibrate.CalibrationResult`).
     names : sequence of str
     reference : mapping of str to float, optional
         E.g. the robot file's values [SI]: each estimate's ``reference`` and ``relative_change``.

@@ -1,15 +1,15 @@
 """Model calibration on measured tip poses (Section V-C of Ha, Fagogenis & Dupont 2019).
 
 - a model's tip poses along the data's motion history and their errors:
-  :mod:`ctrplan.discrepancy.predictions`;
+  :mod:`ctrplan.discrepancy.fits.predictions`;
 - :func:`calibrate`: least squares on the weighted sum of Eq. (49), ``|dp| / 1 mm + angle / 1 deg``
   per sample (1 deg of tangent error weighs as 1 mm of position error), over the chosen
-  parameters (:mod:`ctrplan.discrepancy.parameters`), including the rigid registration of a
+  parameters (:mod:`ctrplan.discrepancy.fits.parameters`), including the rigid registration of a
   tracker frame, started from a closed-form (Kabsch) registration. Two stages: the components
   of the pose error first (a smooth least-squares problem), then Eq. (49) itself from there with
   a Gauss-Newton model that keeps the curvature of its norms, stopped when the decrease still
   predicted is negligible in BIC units (see :func:`calibrate` for why);
-- the grid search of the friction coefficients: :mod:`ctrplan.discrepancy.gridsearch`.
+- the grid search of the friction coefficients: :mod:`ctrplan.discrepancy.fits.gridsearch`.
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..errors import CtrplanError
-from ..mechanics import ModelSettings
-from ..models import MODEL_INFO, check_model
-from .data import MeasuredData
-from ..effects import EffectSet, apply_output_effects, robot_effects
+from ...errors import CtrplanError
+from ...mechanics import ModelSettings
+from ...models import MODEL_INFO, check_model
+from ..measured.data import MeasuredData
+from ...effects import EffectSet, apply_output_effects, robot_effects
 from .estimates import Uncertainty, covariance
 from .parameters import REGISTRATION, needs_solve, parameter, read_parameters
 from .predictions import (ANGLE_UNIT, FAILED_RESIDUAL, POSITION_UNIT, SamplePredictions, eq49_residuals,
@@ -116,7 +116,7 @@ class CalibrationResult:
     n_clusters : int or None
         G, the clusters ``stderr`` is clustered over (neighbouring units merged); None without
         clustering. ``dof`` (``G - 1``) sets an interval's t quantile
-        (:func:`~ctrplan.discrepancy.estimates.interval_quantile`).
+        (:func:`~ctrplan.discrepancy.fits.estimates.interval_quantile`).
     """
 
     model: str
@@ -213,9 +213,9 @@ class _Objective:
     the mechanical parameters (a registration step re-uses the last solve).
 
     With a contact model, every evaluation starts each contact solve from the solution of the
-    objective's previous evaluation at that sample (:class:`~ctrplan.discrepancy.simulate.WarmStarts`),
+    objective's previous evaluation at that sample (:class:`~ctrplan.discrepancy.fits.simulate.WarmStarts`),
     with the outer and complementarity tolerances tightened to
-    :data:`~ctrplan.discrepancy.simulate.WARM_OUTER_TOL` so that finite differences between
+    :data:`~ctrplan.discrepancy.fits.simulate.WARM_OUTER_TOL` so that finite differences between
     evaluations stay accurate."""
 
     def __init__(self, robot, data, model, names, fixed, settings, n_jobs):

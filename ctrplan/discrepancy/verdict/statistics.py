@@ -207,7 +207,7 @@ def cv_comparison(err_a, err_b, fold, *, confidence: float = 0.95, corrected: bo
     Neither holds its level where the residual stays correlated across blocks: two equally
     good models with that slow discrepancy, corrected 0.11 / 0.040 / 0.010; blocks of 10 samples
     at phi = 0.9, corrected 0.062 / 0.016 / 0.0032 (uncorrected 0.13 / 0.054 / 0.017); keeping
-    the folds apart is the job of the blocks and buffers of :mod:`~ctrplan.discrepancy.split`.
+    the folds apart is the job of the blocks and buffers of :mod:`~ctrplan.discrepancy.measured.split`.
     The correction costs power: a real extra effect (coefficient 1, noise phi = 0.8) is found at
     0.0014 in 25 % of records instead of 66 % (random-walk regressor), in 66 % instead of 95 %
     (square wave). tests/test_discrepancy_statistics.py checks the size at these levels with a

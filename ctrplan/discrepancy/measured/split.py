@@ -33,8 +33,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._log import progress_level
-from ..errors import DataFileError
+from ..._log import progress_level
+from ...choices import SplitUnit
+from ...errors import DataFileError
 from .data import MeasuredData
 
 __all__ = ["DataSplit", "make_split", "split_samples", "configurations_repeat", "sample_units", "subsample",
@@ -106,14 +107,14 @@ def sample_units(data: MeasuredData, n_blocks: int | None = None) -> tuple[np.nd
     Returns
     -------
     units : ndarray of int, shape (K,)
-    kind : {"configuration group", "time block"}
+    kind : SplitUnit
     block_samples : int or None
         Samples per time block.
     """
     n_blocks = _auto_blocks(data.n_samples) if n_blocks is None else int(n_blocks)
     linked = _linked_units(data)
     if np.unique(linked).size >= n_blocks:
-        return linked, "configuration group", None
+        return linked, SplitUnit.CONFIGURATION_GROUP, None
     block = max(MIN_BLOCK_SAMPLES, int(np.ceil(data.n_samples / n_blocks)))
     _, q = np.unique(data.sequence, return_inverse=True)
     units = np.zeros(data.n_samples, dtype=np.int64)
@@ -121,7 +122,7 @@ def sample_units(data: MeasuredData, n_blocks: int | None = None) -> tuple[np.nd
         idx = np.flatnonzero(q == s)
         units[idx] = s * 1_000_000 + np.arange(idx.size) // block
     _, units = np.unique(units, return_inverse=True)
-    return units.ravel(), "time block", block
+    return units.ravel(), SplitUnit.TIME_BLOCK, block
 
 
 def _development_runs(data: MeasuredData, test_rows: np.ndarray) -> list:
@@ -404,7 +405,7 @@ def choose_blocks(setup, split: "DataSplit", residual, options) -> "DataSplit":
     residual : array-like, shape (N, 3)
         The pilot fit's residual vectors at the N development samples of ``split`` [m] (the
         baseline fitted on the development samples without a prior,
-        :func:`~ctrplan.discrepancy.baseline.pilot_fit`).
+        :func:`~ctrplan.discrepancy.fits.baseline.pilot_fit`).
     options : DiscrepancyOptions
         The ones ``split`` was made with.
 
@@ -430,7 +431,8 @@ class DataSplit:
         The units, the test split and the folds, and why so many.
     units : ndarray of int, shape (K,)
         Unit of every sample (never cut by the split).
-    unit_kind : {"time block", "configuration group"}
+    unit_kind : SplitUnit
+        Contiguous time blocks of a motion or groups of samples at one configuration.
     block_samples : int or None
         Samples per development time block (at least; a shorter stretch between test blocks is
         one block). The test split's blocks keep the length they were chosen with (``how``).
@@ -457,7 +459,7 @@ class DataSplit:
 
     how: str
     units: np.ndarray
-    unit_kind: str
+    unit_kind: SplitUnit
     block_samples: int | None
     test_rows: np.ndarray
     fold: np.ndarray
@@ -585,14 +587,14 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
         raise DataFileError(f"{data.file}: {ids.size} units ({kind}s) are too few for a test split of {n_test} units "
                             f"and {max(folds, 2)} cross-validation folds; give more samples")
     rng = np.random.default_rng(seed)
-    if kind == "time block":
+    if kind == SplitUnit.TIME_BLOCK:
         every = ids.size / n_test
         phase = rng.uniform(0, every)
         test_ids = np.unique(np.floor(phase + every * np.arange(n_test)).astype(int) % ids.size)
     else:
         test_ids = rng.choice(ids, size=n_test, replace=False)
     test = np.isin(units, test_ids)
-    recut = kind == "time block" and development_block is not None and development_block > block
+    recut = kind == SplitUnit.TIME_BLOCK and development_block is not None and development_block > block
     if recut:
         units = _recut_development(data, units, test, int(development_block))
         n_dev_units = int(np.unique(units[~test]).size)
@@ -605,7 +607,7 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
     for k, (_, val) in enumerate(GroupKFold(n_splits=folds).split(dev_idx, groups=units[dev_idx])):
         fold[dev_idx[val]] = k
     note = "" if data.subset is None else " (the file's 'subset' column is not used for the split)"
-    why_blocks = ("" if kind != "time block" else
+    why_blocks = ("" if kind != SplitUnit.TIME_BLOCK else
                   f" ({'as asked' if n_blocks is not None else f'{MAX_BLOCKS} at most, of at least {MIN_BLOCK_SAMPLES} samples'})")
     why_test = (f"{test_fraction:.0%} of the units" if n_test > MIN_TEST_UNITS or round(test_fraction * ids.size) == n_test
                 else f"at least {MIN_TEST_UNITS} units, more than {test_fraction:.0%}")
@@ -625,7 +627,7 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
 def _fit_minimum(setup) -> int:
     """The baseline's parameters plus the two largest effects' (a pair of stage 8 fits both with the
     baseline): every fit of the run needs more samples than that."""
-    from .setup import effect_parameters
+    from ..setup import effect_parameters
 
     sizes = sorted((len(effect_parameters(setup.robot, e, setup.data)) for e in setup.effects), reverse=True)
     return len(setup.base_names) + sum(sizes[:2])
@@ -642,7 +644,7 @@ def split_samples(setup, options) -> DataSplit:
     Returns
     -------
     DataSplit
-        Without a buffer (:func:`~ctrplan.discrepancy.baseline.pilot_fit` chooses it).
+        Without a buffer (:func:`~ctrplan.discrepancy.fits.baseline.pilot_fit` chooses it).
 
     Raises
     ------
@@ -660,7 +662,7 @@ def split_samples(setup, options) -> DataSplit:
                             f"samples")
     logger.log(progress_level(), f"data: {data.n_samples} samples ({data.frame} frame) from {data.file}; {split.how}")
     if data.source is not None:
-        from ..io.ros2 import describe_bag_summary
+        from ...io.ros2 import describe_bag_summary
 
         for line in describe_bag_summary(data.source):
             logger.log(progress_level(), f"  {line}")

@@ -41,7 +41,7 @@ the 1383.
   from repeated configurations (an upper bound), else unknown.
 
 Whether an out-of-sample residual is consistent with that noise is
-:func:`ctrplan.discrepancy.consistency.noise_test`.
+:func:`ctrplan.discrepancy.verdict.consistency.noise_test`.
 
 References
 ----------
@@ -82,7 +82,7 @@ except ImportError:                     # older scipy: the grid's best correlati
 CORRELATION_LENGTH_METHOD = "grid" if find_minimum is None else "find_minimum"
 
 from .data import MeasuredData
-from .options import MIN_REST_PAIRS
+from ..options import MIN_REST_PAIRS
 
 __all__ = ["NoiseEstimate", "estimate_noise", "NOISE_SOURCES", "CORRELATION_LENGTH_METHOD"]
 

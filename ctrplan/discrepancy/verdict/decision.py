@@ -4,8 +4,8 @@
 with the baseline's (a t test of the folds' log ratios, which holds its level for a model
 against one it contains) and with every other candidate's (the corrected resampled t test: two
 models of which neither contains the other) over the cross-validation folds
-(:func:`~ctrplan.discrepancy.fitting.compare`,
-:func:`~ctrplan.discrepancy.statistics.cv_comparison`). A candidate is
+(:func:`~ctrplan.discrepancy.fits.fitting.compare`,
+:func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison`). A candidate is
 *eligible* when
 
 - its improvement over the baseline is significant at the family-wise level
@@ -27,7 +27,7 @@ best explanation.
 
 **Noise.** The sensor noise comes from the development data's rests (consecutive samples at
 identical joints, at several lags, so that noise correlated in time is seen) when it has
-enough, else from what its source states (:mod:`~ctrplan.discrepancy.noise`); the baseline's
+enough, else from what its source states (:mod:`~ctrplan.discrepancy.measured.noise`); the baseline's
 out-of-fold residual is "consistent with noise" by an F test that allows for the fitted
 parameters, the noise's correlation and the noise estimate's own uncertainty, with false-alarm
 rate ``options.significance``.
@@ -42,15 +42,16 @@ from typing import Mapping
 
 import numpy as np
 
-from .._log import progress_level
-from ..effects import REGISTRY
+from ..._log import progress_level
+from ...choices import NoEffectCase, Verdict
+from ...effects import REGISTRY
 from .consistency import NoiseTest, noise_test
-from .estimates import AtypicalValue, display_value
-from .evaluation import ErrorFigures
-from .fitting import Candidate, compare
-from .noise import NoiseEstimate, estimate_noise
-from .options import DiscrepancyOptions
-from .split import DataSplit
+from ..fits.estimates import AtypicalValue, display_value
+from ..fits.evaluation import ErrorFigures
+from ..fits.fitting import Candidate, compare
+from ..measured.noise import NoiseEstimate, estimate_noise
+from ..options import DiscrepancyOptions
+from ..measured.split import DataSplit
 from .statistics import Comparison, holm
 
 __all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "check_noise", "name_effect", "cautions",
@@ -60,7 +61,7 @@ logger = logging.getLogger(__name__)
 
 #: What a run concludes: one effect (or a pair) named, two candidates the data cannot tell apart,
 #: or none.
-VERDICTS = ("named", "ambiguous", "none")
+VERDICTS = tuple(Verdict)
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,14 +71,14 @@ class NoiseCheck:
     Attributes
     ----------
     noise : NoiseEstimate
-        The noise estimate (:func:`~ctrplan.discrepancy.noise.estimate_noise`), from the
+        The noise estimate (:func:`~ctrplan.discrepancy.measured.noise.estimate_noise`), from the
         development samples only; its ``position_rms_m`` [m] is None when unknown.
     rms_m : float
         rms of the baseline's out-of-fold position errors [m] (NaN without a finite one).
     ratio : float or None
         ``rms_m`` over the noise rms [-]; None when the noise is unknown.
     test : NoiseTest or None
-        :func:`~ctrplan.discrepancy.consistency.noise_test`; None when the noise is unknown.
+        :func:`~ctrplan.discrepancy.verdict.consistency.noise_test`; None when the noise is unknown.
     """
 
     noise: NoiseEstimate
@@ -119,8 +120,8 @@ class Decision:
 
     Attributes
     ----------
-    verdict : str
-        One of :data:`VERDICTS`.
+    verdict : Verdict
+        Named, ambiguous or none.
     named : str or None
         The best eligible effect (the first of an ambiguous pair), or None.
     ambiguous_with : str or None
@@ -138,7 +139,7 @@ class Decision:
     why_not : mapping of str to tuple of str
         Candidate -> why it may not be named (only candidates with a reason).
     comparisons : mapping of str to Comparison
-        ``"<b> vs <a>"`` -> :func:`~ctrplan.discrepancy.statistics.cv_comparison` of a's and b's
+        ``"<b> vs <a>"`` -> :func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison` of a's and b's
         out-of-fold Eq. (49) residuals (positive: b better) [mm + deg], every ordered pair.
     separated_by : str or None
         What data would tell an ambiguous pair apart.
@@ -149,14 +150,13 @@ class Decision:
         The naming rule with its levels.
     runner_up : RunnerUp or None
         The second of an ambiguous pair.
-    no_effect_case : str or None
-        When none is named: ``"noise"`` (the residual is consistent with noise),
-        ``"unexplained"`` (it is not), ``"inconclusive"`` (it is not, but the noise is only a
-        lower bound) or ``"unknown"`` (the noise is unknown)
+    no_effect_case : NoEffectCase or None
+        When none is named: the residual is consistent with noise, it is not (unexplained), it is
+        not but the noise is only a lower bound (inconclusive), or the noise is unknown
         (:func:`no_effect_case`).
     """
 
-    verdict: str
+    verdict: Verdict
     named: str | None
     ambiguous_with: str | None
     eligible: tuple
@@ -171,7 +171,7 @@ class Decision:
     notes: tuple
     rule: str
     runner_up: RunnerUp | None = None
-    no_effect_case: str | None = None
+    no_effect_case: NoEffectCase | None = None
 
     def as_dict(self) -> dict:
         """Plain JSON form (``results.json["decision"]``; comparisons in Eq. (49) units)."""
@@ -211,15 +211,15 @@ class Naming:
         return self.decision.named
 
     @property
-    def verdict(self) -> str:
-        """One of :data:`VERDICTS`."""
+    def verdict(self) -> Verdict:
+        """Named, ambiguous or none."""
         return self.decision.verdict
 
 
 def check_noise(setup, split: DataSplit, baseline, options: DiscrepancyOptions) -> NoiseCheck:
-    """Stage 5: the sensor noise (:func:`~ctrplan.discrepancy.noise.estimate_noise` of the
+    """Stage 5: the sensor noise (:func:`~ctrplan.discrepancy.measured.noise.estimate_noise` of the
     development samples, never the test split) against the baseline's out-of-fold residual on the
-    development samples (:func:`~ctrplan.discrepancy.consistency.noise_test` with the baseline's
+    development samples (:func:`~ctrplan.discrepancy.verdict.consistency.noise_test` with the baseline's
     fitted parameters and the position components, 3 per sample, each fold's fit used).
 
     Parameters
@@ -278,12 +278,12 @@ def _separated_by(a: str, b: str) -> str:
     return "; ".join(parts) if parts else "more data of the kinds of motion where they differ"
 
 
-def no_effect_case(noise: NoiseCheck) -> str:
+def no_effect_case(noise: NoiseCheck) -> NoEffectCase:
     """What the noise test says when no effect is named.
 
     A rejection against a noise that is only a lower bound (rests too short to see its
     correlation) is no evidence of a missing effect
-    (:class:`~ctrplan.discrepancy.consistency.NoiseTest`): the test is then inconclusive. An
+    (:class:`~ctrplan.discrepancy.verdict.consistency.NoiseTest`): the test is then inconclusive. An
     acceptance against an upper bound (spread over repeated configurations) still says the
     residual is no larger than such noise.
 
@@ -293,17 +293,17 @@ def no_effect_case(noise: NoiseCheck) -> str:
 
     Returns
     -------
-    str
-        ``"noise"`` (the residual is consistent with the noise), ``"unexplained"`` (it is not),
-        ``"inconclusive"`` (not consistent with a noise that is only a lower bound) or
-        ``"unknown"`` (no noise known).
+    NoEffectCase
+        ``NOISE`` (the residual is consistent with the noise), ``UNEXPLAINED`` (it is not),
+        ``INCONCLUSIVE`` (not consistent with a noise that is only a lower bound) or ``UNKNOWN``
+        (no noise known).
     """
     test = noise.test
     if test is None:
-        return "unknown"
+        return NoEffectCase.UNKNOWN
     if test.noise_lower_bound and not test.consistent:
-        return "inconclusive"
-    return "noise" if test.consistent else "unexplained"
+        return NoEffectCase.INCONCLUSIVE
+    return NoEffectCase.NOISE if test.consistent else NoEffectCase.UNEXPLAINED
 
 
 def no_effect_sentence(decision: Decision, noise: NoiseCheck, candidates: Mapping[str, Candidate]) -> str:
@@ -332,17 +332,17 @@ def no_effect_sentence(decision: Decision, noise: NoiseCheck, candidates: Mappin
         best_text = (f"; the best explanation is {c.label} (out-of-fold mean "
                      f"{1e3 * c.out_of_fold_figures.position_mean:.3f} mm), not named: "
                      + "; ".join(decision.why_not.get(best, ("its improvement is not significant",))))
-    if case == "noise":
+    if case == NoEffectCase.NOISE:
         return (f"no candidate is eligible, and the out-of-fold residual of the calibrated baseline (rms "
                 f"{rms_mm:.3f} mm) is consistent with the sensor noise ({description}; F = "
                 f"{test.statistic:.3g} <= {test.threshold:.3g}, false-alarm rate {test.false_alarm_rate:g})"
                 + best_text)
-    if case == "inconclusive":
+    if case == NoEffectCase.INCONCLUSIVE:
         return (f"no candidate is eligible; the out-of-fold residual of the calibrated baseline (rms {rms_mm:.3f} "
                 f"mm) exceeds the sensor noise (F = {test.statistic:.3g} > {test.threshold:.3g}), but that noise is "
                 f"only a lower bound ({description}): the noise test is inconclusive, no evidence that the model "
                 f"misses something" + best_text)
-    if case == "unexplained":
+    if case == NoEffectCase.UNEXPLAINED:
         return (f"the out-of-fold residual of the calibrated baseline (rms {rms_mm:.3f} mm, "
                 f"{noise.ratio:.1f} times the sensor noise: {description}) is NOT consistent with noise "
                 f"(F = {test.statistic:.3g} > {test.threshold:.3g} at false-alarm rate "
@@ -361,10 +361,10 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     split : DataSplit
         Its folds.
     candidates : mapping of str to Candidate
-        :func:`~ctrplan.discrepancy.fitting.fit_candidates`: every candidate tried alone (the
+        :func:`~ctrplan.discrepancy.fits.fitting.fit_candidates`: every candidate tried alone (the
         Holm family).
     tests : mapping of str to SignatureTest
-        :func:`~ctrplan.discrepancy.signatures.diagnose_residuals` (reported; not a condition).
+        :func:`~ctrplan.discrepancy.verdict.signatures.diagnose_residuals` (reported; not a condition).
     noise : NoiseCheck
     options : DiscrepancyOptions
         ``significance``.
@@ -406,7 +406,7 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     notes = [f"{c.label} improves on the baseline significantly but is not named: " + "; ".join(why_not[e])
              for e, c in judged.items() if c.improvement_significant and not c.eligible]
     decision = Decision(
-        verdict="none", named=None, ambiguous_with=None, eligible=tuple(eligible),
+        verdict=Verdict.NONE, named=None, ambiguous_with=None, eligible=tuple(eligible),
         holm=MappingProxyType({e: bool(v) for e, v in significant.items()}), family=tuple(names), best=best,
         worse_than=MappingProxyType({e: tuple(v) for e, v in worse_than.items()}),
         why_not=MappingProxyType({e: tuple(r) for e, r in why_not.items() if r}),
@@ -432,12 +432,12 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
                              f"p = {gain.p_value:.2g}): the simpler {judged[simpler].label} is named")
                 named = simpler
                 break
-        decision = replace(decision, verdict="named", named=named)
+        decision = replace(decision, verdict=Verdict.NAMED, named=named)
         rivals = [e for e in eligible if e != named and not contained(e, named)]
         if rivals:
             second = rivals[0]
             diff = comparisons[f"{named} vs {second}"]
-            decision = replace(decision, verdict="ambiguous", ambiguous_with=second,
+            decision = replace(decision, verdict=Verdict.AMBIGUOUS, ambiguous_with=second,
                                separated_by=_separated_by(named, second),
                                runner_up=RunnerUp(effect=second, label=judged[second].label, difference=diff))
             notes.append(
@@ -451,7 +451,7 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
         if best != named:
             notes.append(f"the lowest out-of-fold error is {judged[best].label}'s, which cannot be named: "
                          + "; ".join(why_not[best]))
-        logger.log(level, f"{'ambiguous' if decision.verdict == 'ambiguous' else 'named effect'}: "
+        logger.log(level, f"{'ambiguous' if decision.verdict == Verdict.AMBIGUOUS else 'named effect'}: "
                           f"{judged[named].label}"
                    + (f" or {judged[decision.ambiguous_with].label}" if decision.ambiguous_with else ""))
         for line in decision.cautions:
@@ -470,7 +470,7 @@ def contained(a: str, b: str) -> bool:
     return a in REGISTRY[b].contains or b in REGISTRY[a].contains
 
 
-def cautions(verdict: str, candidate: Candidate | None, before: ErrorFigures, after: ErrorFigures) -> list[str]:
+def cautions(verdict: Verdict, candidate: Candidate | None, before: ErrorFigures, after: ErrorFigures) -> list[str]:
     """What a reader of the named effect must not overlook: a fitted value outside its typical
     range (with what to check), or an addition that lowers the mean error but raises the maximum.
 
@@ -488,7 +488,7 @@ def cautions(verdict: str, candidate: Candidate | None, before: ErrorFigures, af
     list of str
     """
     out = []
-    if verdict == "none" or candidate is None:
+    if verdict == Verdict.NONE or candidate is None:
         return out
     for b in candidate.atypical:
         out.append(atypical_caution(candidate.label, b))

@@ -6,7 +6,7 @@ Dupont 2019).
 - :func:`eq49_residuals`: the per-sample residual of Eq. (49), ``|dp| / 1 mm + angle / 1 deg``;
 - :func:`kabsch_registration`: the closed-form rigid registration of model tips onto measured ones.
 
-The calibration on them is :mod:`ctrplan.discrepancy.calibrate`.
+The calibration on them is :mod:`ctrplan.discrepancy.fits.calibrate`.
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..effects import EffectSet, apply_output_effects, robot_effects
-from ..mechanics import ModelSettings
-from ..models import MODEL_INFO, check_model
-from .data import MeasuredData
+from ...effects import EffectSet, apply_output_effects, robot_effects
+from ...mechanics import ModelSettings
+from ...models import MODEL_INFO, check_model
+from ..measured.data import MeasuredData
 from .parameters import apply_parameters
 
 __all__ = ["SamplePredictions", "predict", "pose_errors", "eq49_residuals", "kabsch_registration",
@@ -73,14 +73,14 @@ def predict(robot, names, values, data: MeasuredData, model: str, settings: Mode
     to the robot, the history ones to the whole recorded motion (drive backlash, tracker time
     offset, gradual friction; :meth:`MeasuredData.state`), the output ones (registration) to the
     computed tip poses. Each sequence is followed in order (each sample solved from the previous
-    one; :func:`ctrplan.discrepancy.simulate.simulate`) with the friction the history state
+    one; :func:`ctrplan.discrepancy.fits.simulate.simulate`) with the friction the history state
     applies.
 
     Parameters
     ----------
     robot : Robot
     names : sequence of str
-        Parameters to set (baseline parameters, :mod:`ctrplan.discrepancy.parameters`, and effect
+        Parameters to set (baseline parameters, :mod:`ctrplan.discrepancy.fits.parameters`, and effect
         parameters, :mod:`ctrplan.effects`), registration included.
     values : array-like, shape (m,)
         In the parameters' units (SI).
@@ -91,7 +91,7 @@ def predict(robot, names, values, data: MeasuredData, model: str, settings: Mode
     progress : bool
     warm_starts : WarmStarts, optional
         Contact solutions of earlier evaluations of the same samples to start from
-        (:class:`ctrplan.discrepancy.simulate.WarmStarts`).
+        (:class:`ctrplan.discrepancy.fits.simulate.WarmStarts`).
 
     Returns
     -------

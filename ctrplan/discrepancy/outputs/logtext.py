@@ -1,10 +1,10 @@
 """How the workflow's log lines print figures the data can leave undefined.
 
 A mean over no finite sample, a maximum of none, an interval over one unit: the results carry them
-as None or NaN (:class:`~ctrplan.discrepancy.statistics.Interval`,
-:class:`~ctrplan.discrepancy.coverage.Coverage`), and a log line prints them as
+as None or NaN (:class:`~ctrplan.discrepancy.verdict.statistics.Interval`,
+:class:`~ctrplan.discrepancy.verdict.coverage.Coverage`), and a log line prints them as
 :data:`UNDEFINED`, never ``nan``, never a made-up ``0``, and never raises on them. The report
-(:mod:`ctrplan.discrepancy.report`) prints them the same way.
+(:mod:`ctrplan.discrepancy.outputs.report`) prints them the same way.
 """
 
 from __future__ import annotations

@@ -34,13 +34,13 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from ..effects import REGISTRY, EffectSet, apply_output_effects, apply_robot_effects, history_state, model_of
-from ..errors import PhysicalParameterError
-from ..history import MotionRecord, motion_state
-from ..mechanics import ModelSettings
-from ..models import MODEL_INFO
-from ..robot import ROTATION, TRANSLATION
-from .simulate import simulate
+from ...effects import REGISTRY, EffectSet, apply_output_effects, apply_robot_effects, history_state, model_of
+from ...errors import PhysicalParameterError
+from ...history import MotionRecord, motion_state
+from ...mechanics import ModelSettings
+from ...models import MODEL_INFO
+from ...robot import ROTATION, TRANSLATION
+from ..fits.simulate import simulate
 
 __all__ = ["PROTOCOLS", "Noise", "SynthResult", "truth_model", "paper_protocol",
            "trajectory_protocol", "approach_path", "add_noise", "synthesize", "parse_values", "truth_path",
@@ -520,8 +520,8 @@ def write_synth(out: str | os.PathLike, result: SynthResult, *, robot_file: str 
     robot_file, robot_hash : str, optional
         Recorded in the sidecar (the robot file and its content hash).
     """
-    from ..io.atomic import atomic_write_text
-    from ..io.tables import write_table
+    from ...io.atomic import atomic_write_text
+    from ...io.tables import write_table
 
     truth = dict(result.truth)
     if robot_file is not None:

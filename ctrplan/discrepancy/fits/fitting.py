@@ -3,17 +3,17 @@ effects.
 
 Every model is fitted once on all development samples (its reported parameters, with standard
 errors clustered over units) and once per fold without that fold's samples and their buffer
-(:class:`~ctrplan.discrepancy.split.DataSplit`), by the **same procedure from the same cold
+(:class:`~ctrplan.discrepancy.measured.split.DataSplit`), by the **same procedure from the same cold
 start** (:func:`cross_validate`): every start scan, coarse grid and least-squares stage runs in
 every fold fit, and what a fold fit starts from is that fold's own fit of the model it builds on
 (the baseline, the contact baseline, the named effect). No fold fit sees its validation samples,
 not even through a starting point. The fold fits give the out-of-fold errors that the decision
-reads (:func:`~ctrplan.discrepancy.evaluation.out_of_fold`). Chosen once on the development data
+reads (:func:`~ctrplan.discrepancy.fits.evaluation.out_of_fold`). Chosen once on the development data
 and reused by the folds: the buffer and the scale of the prior (from the pilot fit,
-:func:`~ctrplan.discrepancy.baseline.pilot_fit`), and the prior's strength (by the baseline's
-out-of-fold error, :func:`~ctrplan.discrepancy.baseline.calibrate_baseline`). The baseline is in
-:mod:`~ctrplan.discrepancy.baseline`, a second effect fitted with the named one in
-:mod:`~ctrplan.discrepancy.pairs`.
+:func:`~ctrplan.discrepancy.fits.baseline.pilot_fit`), and the prior's strength (by the baseline's
+out-of-fold error, :func:`~ctrplan.discrepancy.fits.baseline.calibrate_baseline`). The baseline is in
+:mod:`~ctrplan.discrepancy.fits.baseline`, a second effect fitted with the named one in
+:mod:`~ctrplan.discrepancy.fits.pairs`.
 
 How each candidate is fitted is its registry entry's ``fit``, a :class:`ctrplan.effects.FitStrategy`
 called with a :class:`FitContext` (the fit's samples, its starting fits and the solvers):
@@ -40,21 +40,21 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._log import progress_level
-from ..effects import REGISTRY
-from ..models import MODEL_INFO, MODELS
-from ..parallel import Executor
+from ..._log import progress_level
+from ...effects import REGISTRY
+from ...models import MODEL_INFO, MODELS
+from ...parallel import Executor
 from .calibrate import CalibrationResult, _Objective, _uncertainty, calibrate, information_criterion
-from .data import MeasuredData
+from ..measured.data import MeasuredData
 from .estimates import atypical_values, display_value, parameter_table
 from .evaluation import ErrorFigures, Errors, out_of_fold
 from .gridsearch import grid_search
-from .options import CONFIDENCE, DiscrepancyOptions
+from ..options import CONFIDENCE, DiscrepancyOptions
 from .parameters import parameter, read_parameters
 from .predictions import FAILED_RESIDUAL, eq49_residuals
-from .setup import DiscrepancySetup, effect_parameters, reported_parameters
-from .split import DataSplit, subsample
-from .statistics import Comparison, cv_comparison
+from ..setup import DiscrepancySetup, effect_parameters, reported_parameters
+from ..measured.split import DataSplit, subsample
+from ..verdict.statistics import Comparison, cv_comparison
 
 __all__ = ["CrossValidated", "Candidate", "FitContext", "cross_validate", "refit_contact_baseline", "fit_candidates",
            "scan_fit", "combined_model", "needs_contact_baseline", "contained", "compare", "run_fits", "fit_rows", "stage_name",
@@ -114,7 +114,7 @@ class CrossValidated:
 
 @dataclass(frozen=True, eq=False)
 class Candidate:
-    """A candidate effect (or, in :class:`~ctrplan.discrepancy.pairs.Combination`, a pair of effects),
+    """A candidate effect (or, in :class:`~ctrplan.discrepancy.fits.pairs.Combination`, a pair of effects),
     fitted and cross-validated.
 
     Attributes
@@ -127,10 +127,10 @@ class Candidate:
         The parameters reported as its own [SI].
     units : dict of str to str
     parameters : tuple of ParameterEstimate
-        :func:`~ctrplan.discrepancy.estimates.parameter_table` of the shown parameters.
+        :func:`~ctrplan.discrepancy.fits.estimates.parameter_table` of the shown parameters.
     atypical : tuple of AtypicalValue
         Shown values outside their typical range
-        (:func:`~ctrplan.discrepancy.estimates.atypical_values`), each with what to check.
+        (:func:`~ctrplan.discrepancy.fits.estimates.atypical_values`), each with what to check.
     at_bound : tuple of str
         Fitted values at a bound or a grid's or scan's edge that could not be widened (the
         development fit's or a fold's).
@@ -142,7 +142,7 @@ class Candidate:
         BIC of the development fit, and its difference to the baseline's (to the named effect's
         for a pair).
     improvement : Comparison
-        :func:`~ctrplan.discrepancy.statistics.cv_comparison` of the out-of-fold Eq. (49)
+        :func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison` of the out-of-fold Eq. (49)
         residuals against the baseline's (against the named effect's for a pair) [mm + deg].
     improvement_position : Comparison
         The same for the tip position errors [m].
@@ -234,7 +234,7 @@ def contained(a: str, b: str) -> bool:
 
 
 def compare(split: DataSplit, err_a, err_b, *, nested: bool = True) -> Comparison:
-    """:func:`~ctrplan.discrepancy.statistics.cv_comparison` of two models' out-of-fold errors at
+    """:func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison` of two models' out-of-fold errors at
     the development samples (positive: b is better).
 
     ``nested``: b contains a (b is a with parameters added: a candidate against the baseline, a
@@ -243,7 +243,7 @@ def compare(split: DataSplit, err_a, err_b, *, nested: bool = True) -> Compariso
     (a useless extra parameter only raises b's out-of-fold error); two models of which neither
     contains the other (two candidates) are compared with the corrected resampled t test, whose
     uncorrected form exceeds its level there (both measured in
-    :func:`~ctrplan.discrepancy.statistics.cv_comparison`'s notes and
+    :func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison`'s notes and
     tests/test_discrepancy_statistics.py).
     """
     return cv_comparison(err_a, err_b, split.fold[split.dev_rows], confidence=CONFIDENCE, corrected=not nested)
@@ -422,7 +422,7 @@ def refit_contact_baseline(setup: DiscrepancySetup, split: DataSplit, baseline, 
     setup : DiscrepancySetup
     split : DataSplit
     baseline : Baseline
-        Stage 3 (:func:`~ctrplan.discrepancy.baseline.calibrate_baseline`).
+        Stage 3 (:func:`~ctrplan.discrepancy.fits.baseline.calibrate_baseline`).
     options : DiscrepancyOptions
 
     Returns
@@ -490,7 +490,7 @@ class FitContext:
     after: dict | None
 
     def calibrate(self, model: str, names, **keywords) -> CalibrationResult:
-        """:func:`~ctrplan.discrepancy.calibrate.calibrate` of the robot on the fit's samples with
+        """:func:`~ctrplan.discrepancy.fits.calibrate.calibrate` of the robot on the fit's samples with
         the setup's solver settings and ``n_jobs``; other arguments as there."""
         return calibrate(self.setup.robot, self.fit_data, model, names, settings=self.setup.settings,
                          n_jobs=self.n_jobs, **keywords)
@@ -501,7 +501,7 @@ class FitContext:
                         self.n_jobs, uncertainty=uncertainty, clusters=clusters)
 
     def grid(self, fixed, names, model: str, uncertainty: bool, clusters=None) -> CalibrationResult:
-        """:func:`~ctrplan.discrepancy.gridsearch.grid_search` of ``names`` on the fit's samples
+        """:func:`~ctrplan.discrepancy.fits.gridsearch.grid_search` of ``names`` on the fit's samples
         with the options' grid, search samples and seed."""
         o = self.options
         return grid_search(self.setup.robot, self.fit_data, fixed, names, model, settings=self.setup.settings,
@@ -618,7 +618,7 @@ def fit_candidates(setup: DiscrepancySetup, split: DataSplit, baseline, contact:
     """Stage 6b: switch each candidate effect on, fit it by its entry's strategy (``Effect.fit``)
     on the development samples and without each fold (each fold from its own baseline), and
     compare its out-of-fold errors with the baseline's
-    (:func:`~ctrplan.discrepancy.statistics.cv_comparison`). Fits finished by an earlier run are
+    (:func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison`). Fits finished by an earlier run are
     reused.
 
     Parameters
