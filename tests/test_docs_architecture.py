@@ -198,3 +198,46 @@ def test_the_page_s_effect_is_hidden_by_synthesize_and_named_by_the_workflow(tmp
     finally:
         if "tip_offset_z" in REGISTRY:
             unregister("tip_offset_z")
+
+
+def test_an_effect_fitted_by_a_strategy_of_its_own(tmp_path):
+    """A fit strategy written outside the package from the FitContext's solvers alone: the page's
+    tip offset fitted by a scan in 1 mm steps with the baseline held. The workflow calls it for
+    the development fit and every fold's, and the fitted offset is exactly a scan value (3 mm),
+    which the default least-squares strategy would not give. Catches a workflow that fits an
+    effect by anything other than its entry's strategy."""
+    import dataclasses
+
+    from ctrplan.discrepancy import Noise, synthesize, write_synth
+    from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
+    from ctrplan.effects import REGISTRY, FitStrategy, register, unregister
+    from ctrplan.io.robot_file import load_robot, robot_to_toml
+
+    steps = tuple(np.round(np.arange(-0.006, 0.0065, 0.001), 6))
+    folds = []
+
+    def scan_in_millimetres(ctx):
+        folds.append(ctx.k)
+        held = dict(zip(*ctx.base.all_parameters()))
+        return ctx.scan(ctx.entry.model, held, ctx.extra, steps, uncertainty=ctx.k is None)
+
+    (code,) = _blocks("An effect", "python")
+    try:
+        exec(compile(code, str(PAGE), "exec", dont_inherit=True), {})
+        register(dataclasses.replace(REGISTRY["tip_offset_z"], fit=FitStrategy("millimetre scan", scan_in_millimetres)),
+                 replace=True)
+        robot = load_robot(PAIR).replace(friction_coefficients=(0.0,))
+        model = tmp_path / "pair.toml"
+        model.write_text(robot_to_toml(robot))
+        data = tmp_path / "toy.csv"
+        write_synth(data, synthesize(robot, {"tip_offset_z": {"tip_offset_z": 0.0031}}, protocol="trajectory",
+                                     samples=300, noise=Noise(position_rms=0.5e-3, angle_rms=0.005), seed=41,
+                                     settings=ModelSettings(ds=6e-3)))
+        opts = DiscrepancyOptions(effects=("tip_offset_z",), ds=6e-3, n_permutations=99, max_evaluations=200,
+                                  n_folds=4, prior_strengths=(0.03,), n_jobs=1)
+        res = run_discrepancy(model, data, tmp_path / "out", opts, progress=False).to_dict()
+        assert sorted(folds, key=lambda k: -1 if k is None else k) == [None, 0, 1, 2, 3]
+        assert res["candidates"]["tip_offset_z"]["parameters"]["tip_offset_z"] == 0.003
+    finally:
+        if "tip_offset_z" in REGISTRY:
+            unregister("tip_offset_z")
