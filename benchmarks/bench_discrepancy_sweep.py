@@ -406,6 +406,7 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
     on it; the case's line of ``cases.jsonl`` (``seconds`` counts the data's making where this
     call made it, ``synth_seconds``; ``outcome``, ``written_stderr`` and ``value_check`` as
     :func:`score_run` gives them)."""
+    from ctrplan.discrepancy.outputs import words
     from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 
     t0 = time.perf_counter()
@@ -431,7 +432,7 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
     return {**plan, "verdict": res["verdict"], "named": res["named_effect"], "ambiguous_with": res["ambiguous_with"],
             "named_effects": final, "outcome": scored["outcome"], "fitted": fitted, "written": written,
             "written_stderr": scored["written_stderr"], "value_check": scored["value_check"],
-            "cautions": res["decision"].get("cautions", []), "noise_consistent": res["noise"]["consistent"],
+            "cautions": [words.caution(c) for c in res["decision"]["cautions"]], "noise_consistent": res["noise"]["consistent"],
             "noise_mm": res["noise"]["noise_rms_mm"],
             "test_mean_mm": {k: res["test_split"]["figures"][k]["mean_mm"]["value"] for k in ("file", "before", "after")},
             "prior_strength": res["baseline"]["prior_strength"], "synth_seconds": synth_s,

@@ -44,6 +44,7 @@ TABLE_VIII_SHRINK = {"mean": 0.46, "max": 0.49}
 
 def summarize(res: dict, data_path: Path, robot_path: Path, seconds: float, command: str) -> dict:
     """The results file's content from a run's results (mm and degrees, as the report)."""
+    from ctrplan.discrepancy.outputs import words
     from ctrplan.io.robot_file import file_hash
 
     def cand(c):
@@ -61,6 +62,7 @@ def summarize(res: dict, data_path: Path, robot_path: Path, seconds: float, comm
 
     fig = res["test_split"]["figures"]
     b = res["baseline"]
+    d, labels = res["decision"], words.labels_of(res["candidates"])
     comb = res.get("combination") or {}
     return {
         "command": command, "data_file": data_path.name, "data_sha256": file_hash(data_path),
@@ -68,8 +70,8 @@ def summarize(res: dict, data_path: Path, robot_path: Path, seconds: float, comm
         "n_samples": res["n_samples"], "split": res["split"]["how"], "buffer": res["split"]["buffer_note"],
         "n_folds": res["split"]["n_folds"], "verdict": res["verdict"], "named": res["named_effect"],
         "ambiguous_with": res["ambiguous_with"], "named_effects": res["named_effects"],
-        "separated_by": res["decision"].get("separated_by"), "notes": res["decision"]["notes"],
-        "decision_cautions": res["decision"].get("cautions", []), "rule": res["decision"]["rule"],
+        "separated_by": words.separated_by(d, labels), "notes": [words.note(n, d, labels) for n in d["notes"]],
+        "decision_cautions": [words.caution(c) for c in d["cautions"]], "rule": words.rule(d["rule"]),
         "best": res["decision"].get("best"),
         "noise": {"description": res["noise"]["noise"]["description"], "source": res["noise"]["noise"]["source"],
                   "noise_rms_mm": res["noise"]["noise_rms_mm"], "out_of_fold_rms_mm": res["noise"]["rms_mm"],
@@ -94,7 +96,7 @@ def summarize(res: dict, data_path: Path, robot_path: Path, seconds: float, comm
         "prediction": res["prediction"], "prediction_check": res.get("prediction_check"),
         "bound": None if not res.get("bound") else {k: res["bound"][k] for k in (
             "definition", "method", "target", "factor", "margin_mm", "status", "test", "raw_test", "translation_last")},
-        "table_viii_shrink": TABLE_VIII_SHRINK, "cautions": res["cautions"],
+        "table_viii_shrink": TABLE_VIII_SHRINK, "cautions": [words.caution(c) for c in res["cautions"]],
         "provenance": res["provenance"],
         "seconds_this_invocation": seconds,     # stages of an earlier invocation are reused
         "stage_seconds": res.get("stage_seconds", {}), "stage_reused": res.get("stage_reused", {}),

@@ -15,7 +15,8 @@ from enum import StrEnum
 
 __all__ = ["JointKind", "MotionKind", "FinalMotion", "BoundKind", "AimWith", "MapPlacement", "FirstPlan",
            "MapSource", "BagStorage", "RosDistro", "TangentAxis", "DesignMode", "PoseFrame", "Verdict", "NoEffectCase",
-           "SplitUnit", "EffectStore"]
+           "SplitUnit", "EffectStore", "NotNamedReason", "DecisionNoteKind", "CautionKind",
+           "NotPairedReason", "FitNoteKind"]
 
 
 class JointKind(StrEnum):
@@ -167,3 +168,61 @@ class EffectStore(StrEnum):
     ROBOT = "robot"
     EFFECTS = "effects"
     REGISTRATION = "registration"
+
+
+class NotNamedReason(StrEnum):
+    """Why the discrepancy workflow may not name a candidate effect: its improvement over the
+    baseline is not significant within the Holm family, another candidate's out-of-fold error is
+    significantly lower, or a value sits at a limit it could not widen."""
+
+    NOT_SIGNIFICANT = "not significant"
+    OUTPERFORMED = "outperformed"
+    AT_LIMIT = "at limit"
+
+
+class DecisionNoteKind(StrEnum):
+    """What a note of the discrepancy verdict records: a candidate that improves significantly
+    but is not named, a containing candidate passed over for the simpler one it contains, an
+    ambiguous pair, or a best explanation that cannot be named."""
+
+    SIGNIFICANT_NOT_NAMED = "significant, not named"
+    SIMPLER_NAMED = "simpler named"
+    AMBIGUOUS = "ambiguous"
+    BEST_NOT_NAMED = "best, not named"
+
+
+class CautionKind(StrEnum):
+    """What a caution of the discrepancy workflow flags: a named value outside its typical range,
+    a test-split maximum error that rises while the mean falls, or a baseline parameter outside its
+    typical range or at its bound."""
+
+    ATYPICAL_VALUE = "atypical value"
+    MAXIMUM_RISES = "maximum rises"
+    BASELINE_PARAMETER = "baseline parameter"
+
+
+class NotPairedReason(StrEnum):
+    """Why the discrepancy workflow does not fit a candidate together with the named effect: one
+    contains the other, it is fitted on top of a third effect, it adds no parameter, or alone it
+    does not lower the baseline's out-of-fold error (it is then counted in the pairs' Holm family)."""
+
+    CONTAINS = "contains"
+    CONTAINED = "contained"
+    ON_A_THIRD_EFFECT = "on a third effect"
+    ADDS_NO_PARAMETER = "adds no parameter"
+    NO_IMPROVEMENT_ALONE = "no improvement alone"
+
+
+class FitNoteKind(StrEnum):
+    """What a discrepancy candidate's fits say about themselves: the clearance-model refit it
+    shares stopped at its budget, a fit stopped at its budget, a value at its limit, a fit worse on
+    the calibration data than the baseline it contains or than the standard baseline, a fit better
+    there but worse out of fold (overfitting), or a pair's fit not converged or at its limit."""
+
+    CONTACT_REFIT_NOT_CONVERGED = "contact refit not converged"
+    NOT_CONVERGED = "not converged"
+    AT_LIMIT = "at limit"
+    WORSE_THAN_CONTAINED_BASELINE = "worse than the baseline it contains"
+    WORSE_THAN_STANDARD_BASELINE = "worse than the standard baseline"
+    OVERFITS = "overfits"
+    PAIR_NOT_CONVERGED = "pair not converged"

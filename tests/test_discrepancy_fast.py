@@ -21,6 +21,7 @@ import pytest
 
 from ctrplan.discrepancy.fits.parameters import apply_parameters, read_parameters
 from ctrplan.discrepancy.outputs.report import write_report
+from ctrplan.discrepancy.outputs.words import caution
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from ctrplan_reference.synth_reference import synthesize_reference
@@ -80,7 +81,7 @@ def test_hidden_backlash_beyond_its_typical_range_is_named_with_a_caution(tmp_pa
     res, *_ = _case(tmp_path, 3101, ("backlash", "time_offset", "friction"), backlash=(0.0, band))
     assert res["verdict"] == "named" and res["named_effect"] == "backlash", res["decision"]
     assert _fitted(res, "backlash")["backlash_2"] == pytest.approx(band, rel=0.1)
-    assert any("backlash_2" in c and "check the couplings" in c for c in res["decision"]["cautions"])
+    assert any("backlash_2" in c and "check the couplings" in c for c in map(caution, res["decision"]["cautions"]))
     assert not res["candidates"]["time_offset"]["eligible"]
     assert _shrinks_on_the_test_split(res), res["test_split"]["figures"]
     assert res["reproduced"]
@@ -104,7 +105,7 @@ def test_hidden_time_offset_beyond_its_typical_range_is_named_with_a_caution(lag
     res = lag_case[0]
     assert res["verdict"] == "named" and res["named_effect"] == "time_offset", res["decision"]
     assert _fitted(res, "time_offset")["time_offset"] == pytest.approx(0.32, abs=0.01)
-    assert any("time_offset" in c for c in res["decision"]["cautions"])
+    assert any("time_offset" in c for c in map(caution, res["decision"]["cautions"]))
     assert _shrinks_on_the_test_split(res), res["test_split"]["figures"]
     assert res["reproduced"]
 

@@ -145,6 +145,17 @@ def _naming(cands, split):
     return name_effect(split, cands, {}, noise, DiscrepancyOptions())
 
 
+def _said(naming):
+    """The decision's cautions, notes and what separates an ambiguous pair, in the report's words
+    (from the stored form, as ``results.json`` holds it)."""
+    from ctrplan.discrepancy.outputs import words
+
+    d = json.loads(json.dumps(naming.decision.as_dict()))
+    labels = words.labels_of(naming.candidates)
+    return ([words.caution(c) for c in d["cautions"]], [words.note(n, d, labels) for n in d["notes"]],
+            words.separated_by(d, labels))
+
+
 def test_the_best_explanation_wins_whatever_its_typical_range():
     """A dead band fitted at 5.9 deg (beyond a geared stage's 0-5 deg) with out-of-fold errors at
     the noise, and a time offset that also improves on the baseline but is significantly worse
@@ -170,9 +181,12 @@ def test_the_best_explanation_wins_whatever_its_typical_range():
     assert naming.candidates["backlash"].eligible and not naming.candidates["time_offset"].eligible
     assert naming.candidates["time_offset"].improvement_significant
     assert d.worse_than["time_offset"] == ("backlash",)
-    assert len(d.cautions) == 1 and "5.9 deg" in d.cautions[0] and "0..5 deg" in d.cautions[0]
-    assert "check the couplings of the drive" in d.cautions[0]
-    assert any("time offset" in n and "significantly higher than drive backlash" in n for n in d.notes)
+    assert len(d.cautions) == 1 and d.cautions[0].value is band and d.cautions[0].label == "drive backlash"
+    said_cautions, notes, _ = _said(naming)
+    assert "5.9 deg" in said_cautions[0] and "0..5 deg" in said_cautions[0]
+    assert "check the couplings of the drive" in said_cautions[0]
+    assert any("time offset" in n and "significantly higher than drive backlash" in n for n in notes)
+    assert d.why_not["time_offset"][0].outperformed_by["backlash"] < 0.05
     assert json.loads(json.dumps(d.as_dict())) == d.as_dict()           # plain JSON, no typed object left
     # a candidate against the baseline it extends: uncorrected; two candidates: corrected (and labelled so)
     from ctrplan.discrepancy.verdict.statistics import CORRECTED_METHOD, UNCORRECTED_METHOD
@@ -200,12 +214,15 @@ def test_naming_rule_says_ambiguous_for_a_tie_and_leaves_a_best_fit_at_its_limit
              "backlash": _candidate("backlash", split, base, r + rng.normal(0, 0.01, 400)),
              "time_offset": _candidate("time_offset", split, base, r + rng.normal(0, 0.01, 400)),
              "poisson": _candidate("poisson", split, base, base - 0.01 + rng.normal(0, 0.3, 400))}
-    d = _naming(cands, split).decision
+    naming = _naming(cands, split)
+    d = naming.decision
+    _, notes, separated_by = _said(naming)
     assert d.verdict == "ambiguous", d
     assert {d.named, d.ambiguous_with} == {"backlash", "time_offset"}
     assert d.runner_up.effect == d.ambiguous_with
-    assert "rests after reversals" in d.separated_by or "speed" in d.separated_by, d.separated_by
-    assert d.best == "offplane" and any("off-plane" in n and "at its limit" in n for n in d.notes)
+    assert set(d.separated_by) == {"backlash", "time_offset"}
+    assert "rests after reversals" in separated_by and "speed" in separated_by, separated_by
+    assert d.best == "offplane" and any("off-plane" in n and "at its limit" in n for n in notes)
     assert not d.holm["poisson"]
     assert json.loads(json.dumps(d.as_dict())) == d.as_dict()
     cands["offplane"] = _candidate("offplane", split, base, 0.5 * r, at_bound=limit)
@@ -385,8 +402,11 @@ def test_a_residual_above_a_noise_that_is_only_a_lower_bound_is_inconclusive():
     from dataclasses import replace as dc_replace
 
     from ctrplan.discrepancy.verdict.consistency import NoiseTest
-    from ctrplan.discrepancy.verdict.decision import Decision, NoiseCheck, no_effect_case, no_effect_sentence
     from ctrplan.discrepancy.measured.noise import NoiseEstimate
+    from ctrplan.discrepancy.outputs.results import noise_dict
+    from ctrplan.discrepancy.outputs.words import no_effect
+    from ctrplan.discrepancy.verdict.decision import Decision, NoiseCheck, no_effect_case
+    from ctrplan.discrepancy.verdict.reasons import NamingRule
 
     test = NoiseTest(statistic=3.0, threshold=1.2, p_value=1e-6, inflation=1.01, n_fitted_effective=900.0,
                      dof_residual=300.0, dof_noise=40.0, n_samples=400, n_rest_samples_left_out=0, consistent=False,
@@ -397,9 +417,9 @@ def test_a_residual_above_a_noise_that_is_only_a_lower_bound_is_inconclusive():
     low = dc_replace(check, test=dc_replace(test, noise_lower_bound=True))
     assert no_effect_case(low) == "inconclusive"
     decision = Decision(verdict="none", named=None, ambiguous_with=None, eligible=(), holm={}, family=(), best=None,
-                        worse_than={}, why_not={}, comparisons={}, separated_by=None, cautions=(), notes=(), rule="",
-                        no_effect_case="inconclusive")
-    text = no_effect_sentence(decision, low, {})
+                        worse_than={}, why_not={}, comparisons={}, separated_by=None, cautions=(), notes=(),
+                        rule=NamingRule(significance=0.05, n_folds=5, n_candidates=0), no_effect_case="inconclusive")
+    text = no_effect(decision.as_dict(), noise_dict(low), {})
     assert "inconclusive" in text and "misses something" not in text.replace("no evidence that the model misses", "")
     quiet = dc_replace(test, statistic=1.0, consistent=True)
     assert no_effect_case(dc_replace(low, test=dc_replace(quiet, noise_lower_bound=True))) == "noise"
@@ -425,7 +445,9 @@ def test_a_candidate_that_contains_another_is_named_only_when_it_improves_on_it(
     d = naming.decision
     assert naming.candidates["gradual_friction"].eligible and naming.candidates["friction"].eligible
     assert d.verdict == "named" and d.named == "friction" and d.ambiguous_with is None, d
-    assert any("contains torsional friction" in n and "simpler" in n for n in d.notes), d.notes
+    assert [(n.kind, n.effect, n.other) for n in d.notes] == [("simpler named", "gradual_friction", "friction")]
+    notes = _said(naming)[1]
+    assert any("contains torsional friction" in n and "simpler" in n for n in notes), notes
     cands["gradual_friction"] = _candidate("gradual_friction", split, base, 0.6 * fric)
     d = _naming(cands, split).decision
     assert d.verdict == "named" and d.named == "gradual_friction", d

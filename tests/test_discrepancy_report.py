@@ -68,7 +68,7 @@ def _parameter(name, value, unit, stderr, **kw):
 def _results() -> dict:
     """A run's results in the form ``results_dict`` gives them, every figure defined."""
     friction = {"effects": ["friction"], "label": "friction (Coulomb, along the motion)", "model": "friction",
-                "parameter_table": [_parameter("mu_1", 0.21, "-", 0.02)], "widened": [], "fit_note": None,
+                "parameter_table": [_parameter("mu_1", 0.21, "-", 0.02)], "widened": [], "fit_notes": [],
                 "out_of_fold": {"position_mean_mm": 1.1, "position_max_mm": 3.2},
                 "improvement_eq49": _comparison(0.42, 0.30, 0.52, 1e-4), "improvement_significant": True,
                 "eligible": True}
@@ -104,13 +104,16 @@ def _results() -> dict:
                            "dof_residual": 300.0, "dof_noise": None, "consistent": False, "false_alarm_rate": 0.01},
                   "noise": {"description": "0.5 mm rms, stated", "source": "stated"}},
         "decision": {"verdict": "named", "named": "friction", "ambiguous_with": None, "best": "friction",
-                     "why_not": {}, "separated_by": None, "cautions": [], "notes": ["offplane: not significant"],
-                     "rule": "the lowest out-of-fold error among the eligible"},
-        "verdict": "named", "named_effect": "friction", "no_effect_sentence": None,
+                     "why_not": {"offplane": [{"reason": "not significant", "p_value": 0.031}]},
+                     "separated_by": None, "cautions": [],
+                     "notes": [{"kind": "best, not named", "effect": "offplane"}],
+                     "rule": {"significance": 0.05, "n_folds": 5, "n_candidates": 2}},
+        "verdict": "named", "named_effect": "friction",
         "candidates": {"friction": friction, "offplane": offplane},
         "combination": {"first": "friction", "first_label": friction["label"], "named": None,
-                        "tried": {"clearance": clearance}, "not_tried": {"offplane": "it is not eligible"},
-                        "family": ["clearance", "offplane"], "rule": "Holm over the pairs", "dropped": None,
+                        "tried": {"clearance": clearance}, "not_tried": {"offplane": {"reason": "no improvement alone",
+                                                                           "mean_difference": -0.02}},
+                        "family": ["clearance", "offplane"], "rule": {"significance": 0.05}, "dropped": None,
                         "replaced_by": None},
         "test_split": {"label": friction["label"],
                        "figures": {"file": _model(3.0, 5.5, 7.0), "before": _model(2.0, 4.0, 5.0),
@@ -368,7 +371,7 @@ def test_the_report_is_written_again_from_results_json(monkeypatch, tmp_path):
     _set(results, "bound/translation_last", _coverage(10, 0.8, None, None, 1, mm=False))
     _set(results, "candidates/offplane/improvement_eq49", _comparison(NAN, NAN, NAN, 1.0, 1))
     _set(results, "decision", {**results["decision"], "verdict": "none", "named": None, "no_effect_case": "noise"})
-    results["no_effect_sentence"] = "no candidate is eligible, and the residual is consistent with the sensor noise"
+    _set(results, "noise/test/statistic", 1.1)
 
     def plots(result, out):
         (out / "error_histograms.png").write_bytes(b"png")
@@ -378,7 +381,8 @@ def test_the_report_is_written_again_from_results_json(monkeypatch, tmp_path):
     monkeypatch.setattr(report, "results_dict", lambda result: copy.deepcopy(results))
     report.write_report(object(), tmp_path)
     first = (tmp_path / "report.md").read_text()
-    assert "**No effect named.** no candidate is eligible, and the residual" in first
+    assert ("**No effect named.** no candidate is eligible, and the out-of-fold residual of the calibrated baseline "
+            "(rms 1.900 mm) is consistent with the sensor noise (0.5 mm rms, stated; F = 1.1 <= 1.3") in first
     assert "![error_histograms.png](error_histograms.png)" in first
     (tmp_path / "report.md").unlink()
     paths = report.write_report_from_results(tmp_path)
@@ -394,25 +398,57 @@ def test_the_report_is_written_again_from_results_json(monkeypatch, tmp_path):
     assert "![error_histograms.png]" not in text
 
 
-def test_a_results_json_without_the_no_effect_sentence_still_makes_a_report(monkeypatch, tmp_path):
-    """A results.json of a run that named nothing, written before it held the sentence: the
-    verdict is said from the decision and the noise check, an inconclusive noise test (a noise that
-    is only a lower bound) without "the model misses something". Catches a report that reads the
-    run's objects for it."""
+def test_the_reasons_of_the_verdict_are_put_in_words_from_their_kinds_and_numbers(monkeypatch, tmp_path):
+    """results.json stores why nothing was named as kinds and numbers (the noise test's case, its
+    F and threshold, the best candidate's reasons with their p values); the report says it in
+    words with those figures (mm), the rule with its levels and the notes with their labels; an
+    inconclusive noise test (a noise that is only a lower bound) without "the model misses
+    something". Catches a report that drops a figure, mixes up the cases or prints an effect's
+    name where its label belongs."""
     results = _results()
-    results.pop("no_effect_sentence")
     _set(results, "decision", {**results["decision"], "verdict": "none", "named": None, "best": "offplane",
-                               "why_not": {"offplane": ["its improvement is not significant (Holm)"]},
                                "no_effect_case": "unexplained"})
+    _set(results, "candidates/offplane/fit_notes", [
+        {"kind": "not converged", "development": True, "folds": [2, 4]},
+        {"kind": "overfits", "cost": 12.5, "baseline_cost": 13.0, "mean_m": 1.9e-3, "baseline_mean_m": 1.8e-3}])
     text = _write(monkeypatch, tmp_path, results)
-    assert ("**No effect named.** the out-of-fold residual of the calibrated baseline (rms 1.900 mm) is NOT consistent "
-            "with noise: the model misses something that no candidate explains; the best explanation is off-plane "
-            "precurvature, not named: its improvement is not significant (Holm).") in text
+    assert ("- off-plane precurvature: its fit did not converge (stopped at the evaluation budget): the development "
+            "fit, fold 2, fold 4; it fits the calibration data better (cost 12.5 against 13) but the held-out folds "
+            "worse (mean 1.900 against 1.800 mm)") in text
+    assert ("**No effect named.** the out-of-fold residual of the calibrated baseline (rms 1.900 mm, 3.8 times the "
+            "sensor noise: 0.5 mm rms, stated) is NOT consistent with noise (F = 14.4 > 1.3 at false-alarm rate 0.01, "
+            "after allowing for the 5 % a fitted model adds): the model misses something that no candidate explains; "
+            "the best explanation is off-plane precurvature (out-of-fold mean 1.800 mm), not named: its improvement "
+            "over the baseline is not significant (p = 0.031, Holm over 2 candidates at 0.05).") in text
+    assert ("Rule: out-of-fold improvement over the baseline significant at 0.05 (t test of the log ratios over 5 "
+            "folds, Holm over the 2 candidates tried)") in text
+    assert ("- the lowest out-of-fold error is off-plane precurvature's, which cannot be named: its improvement over "
+            "the baseline is not significant (p = 0.031, Holm over 2 candidates at 0.05).") in text
+    assert ("- not tried: off-plane precurvature, because alone it does not lower the baseline's out-of-fold error "
+            "(mean difference -0.02 mm + deg): counted in the family, not fitted.") in text
+    assert (f"Rule: out-of-fold Eq. (49) improvement over {results['candidates']['friction']['label']} alone "
+            "significant at 0.05 (t test of the log ratios over the folds, Holm over the family of pairs)") in text
     _set(results, "decision", {**results["decision"], "no_effect_case": "inconclusive"})
     text = _write(monkeypatch, tmp_path, results)
     assert ("**No effect named.** no candidate is eligible; the out-of-fold residual of the calibrated baseline (rms "
-            "1.900 mm) exceeds the sensor noise, but that noise is only a lower bound: the noise test is "
-            "inconclusive") in text
+            "1.900 mm) exceeds the sensor noise (F = 14.4 > 1.3), but that noise is only a lower bound (0.5 mm rms, "
+            "stated): the noise test is inconclusive") in text
+    assert "the model misses something that no candidate explains" not in text
+
+
+def test_a_results_json_of_an_earlier_ctrplan_with_sentences_still_makes_a_report(monkeypatch, tmp_path):
+    """A results.json from an earlier ctrplan stored the reasons as sentences (the no-effect
+    sentence, notes, rule, cautions): the report prints them as they are. Catches a report that
+    can no longer read the results folders its users already have."""
+    results = _results()
+    results["no_effect_sentence"] = "no candidate is eligible, and the residual is consistent with the sensor noise"
+    _set(results, "decision", {**results["decision"], "verdict": "none", "named": None, "no_effect_case": "noise",
+                               "notes": ["offplane: not significant"], "rule": "the lowest error among the eligible"})
+    results["cautions"] = ["baseline registration_tx = 4 mm: at its bound"]
+    text = _write(monkeypatch, tmp_path, results)
+    assert "**No effect named.** no candidate is eligible, and the residual is consistent with the sensor noise." in text
+    assert "Rule: the lowest error among the eligible." in text and "- offplane: not significant." in text
+    assert "- baseline registration_tx = 4 mm: at its bound." in text
 
 
 def test_plots_that_cannot_be_made_leave_a_note(monkeypatch, tmp_path, caplog):

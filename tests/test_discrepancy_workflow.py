@@ -367,20 +367,25 @@ def _figures(mean_mm, max_mm):
 def test_cautions_flag_an_atypical_friction_coefficient_and_a_worse_maximum():
     """A named friction coefficient beyond its typical range gets a caution with the value, the
     range and its source, and what to check; a maximum error that rises gets another (the
-    figures are in m, the caution in mm). Catches a caution that loses what a reader must check,
-    and one that prints metres as millimetres."""
+    figures are in m, the caution in mm). The cautions are kinds and numbers in SI; the words come
+    from their stored form. Catches a caution that loses what a reader must check, one that prints
+    metres as millimetres, and one whose stored form loses a figure."""
     from types import SimpleNamespace
 
+    from ctrplan.choices import CautionKind
     from ctrplan.discrepancy.fits.estimates import AtypicalValue
+    from ctrplan.discrepancy.outputs.words import caution
 
     before, worse_max = _figures(5.2, 16.8), _figures(4.3, 23.2)
     mu = AtypicalValue(name="mu_1", value=0.975, typical=(0.0, 0.5), typical_text="0..0.5", unit="-",
                        why="NiTi on NiTi", check="the tube surfaces")
     notes = cautions("named", SimpleNamespace(label="torsional friction", atypical=(mu,)), before, worse_max)
-    assert len(notes) == 2
-    assert notes[0] == ("torsional friction: mu_1 = 0.975, more than its typical 0..0.5 (NiTi on NiTi): check the "
-                        "tube surfaces")
-    assert "16.80 to 23.20 mm" in notes[1]
+    assert [c.kind for c in notes] == [CautionKind.ATYPICAL_VALUE, CautionKind.MAXIMUM_RISES]
+    assert notes[0].value is mu and notes[1].before_m == pytest.approx(16.8e-3) and notes[1].after_m == pytest.approx(23.2e-3)
+    stored = json.loads(json.dumps([c.as_dict() for c in notes]))
+    assert caution(stored[0]) == ("torsional friction: mu_1 = 0.975, more than its typical 0..0.5 (NiTi on NiTi): "
+                                  "check the tube surfaces")
+    assert "16.80 to 23.20 mm" in caution(stored[1])
     assert cautions("named", SimpleNamespace(label="torsional friction", atypical=()), before,
                     _figures(2.0, 8.0)) == []
     assert cautions("none", None, before, before) == []
@@ -396,6 +401,7 @@ def test_a_baseline_parameter_outside_its_range_is_a_caution_in_report_units(cap
     from ctrplan.discrepancy.fits.estimates import ParameterEstimate
     from ctrplan.discrepancy.fits.evaluation import Errors
     from ctrplan.discrepancy.outputs.output import run_cautions
+    from ctrplan.discrepancy.outputs.words import caution
 
     def row(name, unit, value, *, typical=True, at_bound=False):
         return ParameterEstimate(name=name, unit=unit, value=value, stderr=None, ci=None, typical=None,
@@ -410,9 +416,10 @@ def test_a_baseline_parameter_outside_its_range_is_a_caution_in_report_units(cap
     naming = SimpleNamespace(verdict="none", named=None, candidates={})
     with caplog.at_level(logging.WARNING, logger="ctrplan"):
         notes = run_cautions(naming, None, baseline, SimpleNamespace(baseline=errors, final=errors))
-    assert notes == ("baseline registration_rx = 11.46 deg; typical: a stated range",
-                     "baseline registration_tx = 4 mm: at its bound; typical: a stated range")
-    assert [r.getMessage() for r in caplog.records] == [f"caution: {n}" for n in notes]
+    text = [caution(c.as_dict()) for c in notes]
+    assert text == ["baseline registration_rx = 11.46 deg; typical: a stated range",
+                    "baseline registration_tx = 4 mm: at its bound; typical: a stated range"]
+    assert [r.getMessage() for r in caplog.records] == [f"caution: {n}" for n in text]
 
 
 def test_friction_grid_search_that_cannot_bracket_the_minimum_says_at_bound(tmp_path, monkeypatch):

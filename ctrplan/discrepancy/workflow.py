@@ -64,7 +64,8 @@ from .fits.evaluation import evaluate_rows
 from .fits.fitting import CrossValidated, fit_candidates, refit_contact_baseline
 from .options import DiscrepancyOptions
 from .outputs.output import (PredictionCheck, Reproduction, TestSplit, UpdatedModel, check_reproduction, evaluate_test_split,
-                     final_candidate, final_parameters, run_cautions, validate_prediction, write_updated_model)
+                     final_candidate, final_parameters, log_verdict, run_cautions, validate_prediction,
+                     write_updated_model)
 from .fits.pairs import Combination, fit_second_effect
 from .setup import DiscrepancySetup, load_inputs
 from .verdict.signatures import diagnose_residuals
@@ -122,7 +123,7 @@ class DiscrepancyResult:
     reproduction : Reproduction
         Stage 12: that file reloaded, on the test split.
     options : DiscrepancyOptions
-    cautions : tuple of str
+    cautions : tuple of Caution
         What a reader must not overlook (:func:`~ctrplan.discrepancy.outputs.output.run_cautions`).
     seconds : float
         Wall time of the run [s].
@@ -321,6 +322,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     clock.divide("candidates", {CANDIDATE_STAGE.format(e): f"oof-{e}" for e in candidates})
     with clock.stage("naming"):
         naming = name_effect(split, candidates, tests, noise, options)
+        log_verdict(naming, noise)
     with clock.stage("second_effect"):
         combination = fit_second_effect(setup, split, baseline, contact, naming, options, progress)
     with clock.stage("test_split"):

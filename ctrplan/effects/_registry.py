@@ -302,6 +302,13 @@ EFFECT_REGISTRY: Registry[Effect] = Registry("effect", check=_check_effect)
 REGISTRY = EFFECT_REGISTRY.view
 
 
+def _entry(effect) -> Effect:
+    """``effect`` itself, refused with a :class:`TypeError` unless it is an :class:`Effect`."""
+    if not isinstance(effect, Effect):
+        raise TypeError(f"an effect entry must be an Effect, got {effect!r}")
+    return effect
+
+
 def register(effect: Effect, *, replace: bool = False) -> Effect:
     """Add an effect to :data:`EFFECT_REGISTRY` under its name (at the end of the order).
 
@@ -313,9 +320,7 @@ def register(effect: Effect, *, replace: bool = False) -> Effect:
         A name that is taken by another effect (unless ``replace``), or ``after`` naming an
         unknown effect.
     """
-    if not isinstance(effect, Effect):
-        raise TypeError(f"an effect entry must be an Effect, got {effect!r}")
-    return EFFECT_REGISTRY.register(effect.name, effect, replace=replace)
+    return EFFECT_REGISTRY.register(_entry(effect).name, effect, replace=replace)
 
 
 def unregister(name: str) -> Effect:
@@ -332,9 +337,7 @@ def unregister(name: str) -> Effect:
 def registered(effect: Effect, *, replace: bool = False):
     """Register ``effect`` for the length of a ``with`` block, then restore the registry
     (tests, notebooks). Errors as :func:`register`."""
-    if not isinstance(effect, Effect):
-        raise TypeError(f"an effect entry must be an Effect, got {effect!r}")
-    return EFFECT_REGISTRY.registered(effect.name, effect, replace=replace)
+    return EFFECT_REGISTRY.registered(_entry(effect).name, effect, replace=replace)
 
 
 def get(name: str) -> Effect:

@@ -41,6 +41,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..._log import progress_level
+from ...choices import FitNoteKind
 from ...effects import REGISTRY
 from ...models import MODEL_INFO, MODELS
 from ...parallel import Executor
@@ -54,6 +55,7 @@ from .parameters import parameter, read_parameters
 from .predictions import FAILED_RESIDUAL, eq49_residuals
 from ..setup import DiscrepancySetup, effect_parameters, reported_parameters
 from ..measured.split import DataSplit, subsample
+from ..verdict.reasons import FitNote
 from ..verdict.statistics import Comparison, cv_comparison
 
 __all__ = ["CrossValidated", "Candidate", "FitContext", "cross_validate", "refit_contact_baseline", "fit_candidates",
@@ -146,8 +148,8 @@ class Candidate:
         residuals against the baseline's (against the named effect's for a pair) [mm + deg].
     improvement_position : Comparison
         The same for the tip position errors [m].
-    fit_note : str
-        What its fits say about themselves ("" if nothing).
+    fit_notes : tuple of FitNote
+        What its fits say about themselves (empty if nothing).
     improvement_significant : bool or None
         Its improvement is significant within its Holm family (stage 7 or 8).
     eligible : bool or None
@@ -173,7 +175,7 @@ class Candidate:
     delta_bic: float
     improvement: Comparison
     improvement_position: Comparison
-    fit_note: str = ""
+    fit_notes: tuple = ()
     improvement_significant: bool | None = None
     eligible: bool | None = None
     significant: bool | None = None
@@ -551,40 +553,38 @@ class FitContext:
                        evaluations=fit.evaluations + sum(f.evaluations for f in before))
 
 
-def _fit_note(effect: str, c: CrossValidated, base, contact: CrossValidated | None, options) -> str:
+def _fit_notes(effect: str, c: CrossValidated, base, contact: CrossValidated | None, options) -> tuple:
     """What a candidate's fits say about themselves: not converged, at a bound, worse on the
-    calibration data than the baseline, or better there but worse out of fold (overfitting)."""
+    calibration data than the baseline, or better there but worse out of fold (overfitting).
+
+    Returns
+    -------
+    tuple of FitNote
+    """
     notes = []
     if needs_contact_baseline(effect) and contact is not None and not contact.converged:
-        notes.append(f"the clearance-model refit of the tube parameters it shares did not converge (stopped at the "
-                     f"budget of {options.max_contact_evaluations} evaluations): the candidate may be underrated")
-    budget = [f"fold {k + 1}" for k, f in enumerate(c.folds) if not f.converged and not f.at_bound]
-    if not c.fit.converged and not c.fit.at_bound:
-        budget.insert(0, "the development fit")
-    if budget:
-        notes.append(f"its fit did not converge (stopped at the evaluation budget): {', '.join(budget)}")
+        notes.append(FitNote(FitNoteKind.CONTACT_REFIT_NOT_CONVERGED, max_evaluations=options.max_contact_evaluations))
+    folds = tuple(k + 1 for k, f in enumerate(c.folds) if not f.converged and not f.at_bound)
+    development = not c.fit.converged and not c.fit.at_bound
+    if folds or development:
+        notes.append(FitNote(FitNoteKind.NOT_CONVERGED, development=development, folds=folds))
     bounds = sorted(set(c.fit.at_bound) | {b for f in c.folds for b in f.at_bound})
     if bounds:
-        notes.append(f"at its limit, not converged: {'; '.join(bounds)}")
+        notes.append(FitNote(FitNoteKind.AT_LIMIT, limits=tuple(bounds)))
     fit, bfit = c.fit, base.fit
     base_mean, cand_mean = float(np.nanmean(base.oof.position)), float(np.nanmean(c.oof.position))
+    costs = {"cost": float(fit.cost), "baseline_cost": float(bfit.cost)}
     if fit.cost > bfit.cost * (1 + 1e-9):
         if REGISTRY[effect].fit.contains_baseline:
-            notes.append(f"it fits the calibration data worse than the baseline (cost {fit.cost:.4g} against "
-                         f"{bfit.cost:.4g}) although it contains the baseline: the fit failed")
+            notes.append(FitNote(FitNoteKind.WORSE_THAN_CONTAINED_BASELINE, **costs))
         else:
-            notes.append(f"it fits the calibration data worse than the standard baseline (cost {fit.cost:.4g} against "
-                         f"{bfit.cost:.4g}): the {fit.model} model with the shared refitted tube parameters does not "
-                         f"reach the standard model's fit")
+            notes.append(FitNote(FitNoteKind.WORSE_THAN_STANDARD_BASELINE, model=fit.model, **costs))
     elif cand_mean > base_mean:
-        notes.append(f"it fits the calibration data better (cost {fit.cost:.4g} against {bfit.cost:.4g}) but the "
-                     f"held-out folds worse (mean {cand_mean * 1e3:.3f} against {base_mean * 1e3:.3f} mm): its "
-                     f"parameters absorb a pattern of the calibration samples that does not hold elsewhere "
-                     f"(overfitting)")
-    return "; ".join(notes)
+        notes.append(FitNote(FitNoteKind.OVERFITS, mean_m=cand_mean, baseline_mean_m=base_mean, **costs))
+    return tuple(notes)
 
 
-def make_candidate(setup, split, baseline, effects, label, cv, shown_names, reference, note, widened=()) -> Candidate:
+def make_candidate(setup, split, baseline, effects, label, cv, shown_names, reference, notes=(), widened=()) -> Candidate:
     """A fitted and cross-validated model as a :class:`Candidate`: its shown parameters
     ``shown_names`` with their table and atypical values, its BIC (every baseline and shown
     parameter counted) and its comparisons with ``reference`` (the baseline, or the named
@@ -602,7 +602,7 @@ def make_candidate(setup, split, baseline, effects, label, cv, shown_names, refe
         at_bound=at_bound, widened=widened, n_parameters=k_total, bic=bic, delta_bic=bic - reference.bic,
         improvement=compare(split, reference.r, cv.r),
         improvement_position=compare(split, reference.oof.position, cv.oof.position),
-        fit_note=note)
+        fit_notes=tuple(notes))
 
 
 def _context(setup, split, baseline, contact, candidates, entry, extra, options, k, n_jobs) -> FitContext:
@@ -652,7 +652,7 @@ def fit_candidates(setup: DiscrepancySetup, split: DataSplit, baseline, contact:
 
         cv = cross_validate(setup, split, options, e, entry.model, fit_one, progress=progress)
         c = make_candidate(setup, split, baseline, (e,), entry.label, cv, reported_parameters(robot, e, data), baseline,
-                       _fit_note(e, cv, baseline, contact, options))
+                       _fit_notes(e, cv, baseline, contact, options))
         if entry.after is not None and candidates[entry.after].at_bound:
             # it carries the values of the fit it starts from: a value at its limit there is one here
             c = replace(c, at_bound=tuple(sorted(set(c.at_bound) | set(candidates[entry.after].at_bound))))
@@ -664,6 +664,6 @@ def fit_candidates(setup: DiscrepancySetup, split: DataSplit, baseline, contact:
                    + f"; out-of-fold mean {1e3 * held.position_mean:.3f} mm, max {1e3 * held.position_max:.3f} mm; "
                      f"error lower by {100 * imp.reduction:.0f} % ({100 * imp.reduction_ci[0]:.0f}.."
                      f"{100 * imp.reduction_ci[1]:.0f} %; {imp.mean_difference:.3f} mm + deg), p = {imp.p_value:.3g}"
-                   + (f"; {c.fit_note}" if c.fit_note else ""))
+                   + (f"; {', '.join(n.kind for n in c.fit_notes)}" if c.fit_notes else ""))
     return candidates
 

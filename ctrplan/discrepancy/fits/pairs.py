@@ -12,6 +12,7 @@ from typing import Mapping
 import numpy as np
 
 from ..._log import progress_level
+from ...choices import FitNoteKind, NotPairedReason
 from ...effects import REGISTRY
 from ...models import MODEL_INFO
 from .calibrate import CalibrationResult, calibrate
@@ -21,6 +22,7 @@ from .gridsearch import grid_search
 from ..options import DiscrepancyOptions
 from ..setup import DiscrepancySetup, effect_parameters, reported_parameters
 from ..measured.split import DataSplit
+from ..verdict.reasons import FitNote, NotPaired
 from ..verdict.statistics import holm
 
 __all__ = ["Combination", "fit_second_effect", "first_vanishes", "pair_decision"]
@@ -44,22 +46,22 @@ class Combination:
     replaced_by : str or None
     tried : mapping of str to Candidate
         Second effect -> the pair fitted and cross-validated.
-    not_tried : mapping of str to str
+    not_tried : mapping of str to NotPaired
         Every other candidate -> why it was not tried with the named one.
     family : tuple of str
         Every candidate that could be paired with the named one: the Holm family of the pairs
         (a pair not tried counts with p = 1).
-    rule : str
-        The rule a pair is named by.
+    significance : float
+        The level of the rule a pair is named by (:func:`fit_second_effect`) [-].
     """
 
     first: str
     first_label: str
     named: str | None
     tried: Mapping[str, Candidate]
-    not_tried: Mapping[str, str]
+    not_tried: Mapping
     family: tuple
-    rule: str
+    significance: float
     dropped: str | None = None
     replaced_by: str | None = None
 
@@ -171,27 +173,25 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
     candidates = naming.candidates
     first = candidates[named]
     first_names = reported_parameters(robot, named, data)
-    rule = (f"out-of-fold Eq. (49) improvement over {first.label} alone significant at {options.significance} "
-            f"(t test of the log ratios over the folds, Holm over the family of pairs), no value at its limit, and "
-            f"{first.label} still improving on the second effect alone at {options.significance}")
     not_tried, family, pool = {}, [], []
     for e, c in candidates.items():
         if e == named:
             continue
         if contained(e, named):
-            not_tried[e] = f"{'it contains' if named in REGISTRY[e].contains else 'it is contained in'} {first.label}"
+            not_tried[e] = NotPaired(NotPairedReason.CONTAINS if named in REGISTRY[e].contains
+                                     else NotPairedReason.CONTAINED)
             continue
         entry = REGISTRY[e]
         if entry.after is not None and entry.after != named:
-            not_tried[e] = f"it is fitted on top of {REGISTRY[entry.after].label}, a third effect"
+            not_tried[e] = NotPaired(NotPairedReason.ON_A_THIRD_EFFECT, after_label=REGISTRY[entry.after].label)
             continue
         if not tuple(n for n in reported_parameters(robot, e, data) if n not in first.params) and entry.fit.adds_parameters:
-            not_tried[e] = f"it adds no parameter to {first.label}"
+            not_tried[e] = NotPaired(NotPairedReason.ADDS_NO_PARAMETER)
             continue
         family.append(e)
         if not c.improvement.mean_difference > 0:
-            not_tried[e] = (f"alone it does not lower the baseline's out-of-fold error (mean difference "
-                            f"{c.improvement.mean_difference:.3g} mm + deg): counted in the family, not fitted")
+            not_tried[e] = NotPaired(NotPairedReason.NO_IMPROVEMENT_ALONE,
+                                     mean_difference=float(c.improvement.mean_difference))
             continue
         pool.append(e)
     tried = {}
@@ -209,9 +209,9 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
 
         cv = cross_validate(setup, split, options, tag, model, fit_one, progress=progress)
         shown_names = first_names + tuple(n for n in reported_parameters(robot, e, data) if n not in first_names)
-        note = "" if cv.converged else "a fit did not converge or sits at its limit"
+        notes = () if cv.converged else (FitNote(FitNoteKind.PAIR_NOT_CONVERGED),)
         c = make_candidate(setup, split, baseline, (named, e), f"{first.label} + {candidates[e].label}", cv, shown_names,
-                       first, note)
+                       first, notes)
         tried[e] = replace(c, reverse=compare(split, candidates[e].r, cv.r))
     eligible = {e: bool(c.eligible) for e, c in candidates.items()}
     vanishes = {e: first_vanishes(robot, named, c.parameters) for e, c in tried.items()}
@@ -227,7 +227,8 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
     for line in notes:
         logger.log(level, line)
     return Combination(first=named, first_label=first.label, named=second, tried=MappingProxyType(out),
-                       not_tried=MappingProxyType(not_tried), family=tuple(family), rule=rule, dropped=dropped,
+                       not_tried=MappingProxyType(not_tried), family=tuple(family),
+                       significance=options.significance, dropped=dropped,
                        replaced_by=replaced)
 
 

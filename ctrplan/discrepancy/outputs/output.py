@@ -11,17 +11,19 @@ from pathlib import Path
 import numpy as np
 
 from ..._log import progress_level
-from ...choices import EffectStore, Verdict
+from ...choices import CautionKind, EffectStore, Verdict
 from ...effects import REGISTRY, EffectSet, robot_effects
 from ...io.atomic import atomic_write_text
 from ..fits.baseline import Baseline
 from ..fits.predictions import pose_errors, predict
 from ..measured.data import MeasuredData
-from ..verdict.decision import Naming, atypical_caution, cautions
-from ..fits.estimates import display_value
+from ..verdict.decision import Naming, NoiseCheck, cautions
+from ..verdict.reasons import Caution
 from ..fits.evaluation import ErrorFigures, Errors, evaluate_rows
 from ..fits.fitting import Candidate
 from .logtext import figure, interval
+from .results import candidate_dict, noise_dict
+from .words import caution as caution_text, verdict_lines
 from ..options import CONFIDENCE, DiscrepancyOptions
 from ..fits.pairs import Combination
 from ..fits.parameters import REGISTRATION, apply_parameters
@@ -31,7 +33,7 @@ from ..verdict.statistics import Interval, mean_interval, shrink_interval
 
 __all__ = ["ModelFigures", "TestFigures", "PredictionCheck", "TestSplit", "evaluate_test_split", "UpdatedModel",
            "Reproduction", "write_updated_model", "check_reproduction", "reproduce_errors", "final_candidate",
-           "final_parameters", "validate_prediction", "run_cautions"]
+           "final_parameters", "validate_prediction", "run_cautions", "log_verdict"]
 
 logger = logging.getLogger(__name__)
 
@@ -313,9 +315,9 @@ class UpdatedModel:
     named_effects : tuple of str
     candidate : Candidate or None
         The candidate it comes from (None: the recalibrated baseline).
-    cautions : tuple of str
+    cautions : tuple of Caution
         Written values outside their typical range, each with the range's source and what to
-        check (also in the file's ``[effects_source]``).
+        check (in words in the file's ``[effects_source]``).
     """
 
     path: Path
@@ -384,7 +386,9 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
         registration = {"rotation_vector_rad": vals[:3], "translation_m": vals[3:]}
     effects, _ = EffectSet.from_parameters(robot, tuple(final_params), tuple(final_params.values()))
     stored = {name: dict(effects[name]) for name in effects if REGISTRY[name].store == EffectStore.EFFECTS}
-    notes = tuple(atypical_caution(final.label, b) for b in final.atypical) if final is not None else ()
+    written_cautions = (tuple(Caution(CautionKind.ATYPICAL_VALUE, label=final.label, value=b) for b in final.atypical)
+                        if final is not None else ())
+    notes = tuple(caution_text(c.as_dict()) for c in written_cautions)
     data_name = Path(setup.data_path).name
     updated = apply_parameters(robot, tuple(final_params), tuple(final_params.values()))
     merged = robot_effects(robot).merged(stored)
@@ -423,7 +427,7 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
     for c in notes:
         logger.warning(f"  written with a caution: {c}")
     return UpdatedModel(path=model_path, model=final_model, params=final_params, named_effects=tuple(named_effects),
-                        candidate=final, cautions=notes)
+                        candidate=final, cautions=written_cautions)
 
 
 def reproduce_errors(model_path, data: MeasuredData, settings=None, *, n_jobs: int = 1) -> dict:
@@ -500,16 +504,23 @@ def run_cautions(naming: Naming, combination: Combination | None, baseline: Base
 
     Returns
     -------
-    tuple of str
+    tuple of Caution
+        In words by :func:`~ctrplan.discrepancy.outputs.words.caution`.
     """
     final = final_candidate(naming, combination)
     notes = cautions(naming.verdict, final, ErrorFigures.of(test.baseline), ErrorFigures.of(test.final))
-    for r in baseline.parameters:
-        if r.in_typical_range and not r.at_bound:
-            continue
-        change = "" if r.relative_change is None else f", {100 * r.relative_change:+.0f} % from the robot file"
-        notes.append(f"baseline {display_value(r.name, r.value, r.unit)}{change}"
-                     + (": at its bound" if r.at_bound else "") + f"; typical: {r.typical_source}")
-    for line in notes:
-        logger.warning(f"caution: {line}")
+    notes += [Caution(CautionKind.BASELINE_PARAMETER, parameter=r) for r in baseline.parameters
+              if not r.in_typical_range or r.at_bound]
+    for c in notes:
+        logger.warning(f"caution: {caution_text(c.as_dict())}")
     return tuple(notes)
+
+
+def log_verdict(naming: Naming, noise: NoiseCheck) -> None:
+    """Log stage 7's verdict in words (:func:`~ctrplan.discrepancy.outputs.words.verdict_lines`):
+    the named effect or why none is at the progress level, its cautions as warnings, then the
+    notes of the naming rule."""
+    stored = {"decision": naming.decision.as_dict(), "noise": noise_dict(noise),
+              "candidates": {e: candidate_dict(c) for e, c in naming.candidates.items()}}
+    for level, line in verdict_lines(stored):
+        logger.log(logging.WARNING if level == "warning" else progress_level(), line)

@@ -30,6 +30,7 @@ from ..fits.estimates import display_value
 from .logtext import UNDEFINED  # how the report prints a figure the data leave undefined (null or NaN)
 from ..options import CONFIDENCE
 from .results import json_default, results_dict
+from . import words
 
 __all__ = ["write_report", "write_report_from_results", "report_markdown", "TABLE_VIII", "UNDEFINED"]
 
@@ -296,29 +297,6 @@ def _label(results: dict, effect) -> str:
     return c.get("label") or str(effect)
 
 
-def _no_effect_text(results: dict) -> str:
-    """Why no effect was named: the sentence the run stored, or, in a ``results.json`` written
-    without it, a shorter one from the decision and the noise check."""
-    if results.get("no_effect_sentence"):
-        return results["no_effect_sentence"]
-    d, noise = results["decision"], results.get("noise") or {}
-    case = d.get("no_effect_case")
-    rms = f"rms {_num(noise.get('rms_mm'), '.3f')} mm"
-    text = {"noise": f"no candidate is eligible, and the out-of-fold residual of the calibrated baseline ({rms}) is "
-                     f"consistent with the sensor noise",
-            "unexplained": f"the out-of-fold residual of the calibrated baseline ({rms}) is NOT consistent with noise: "
-                           f"the model misses something that no candidate explains",
-            "inconclusive": f"no candidate is eligible; the out-of-fold residual of the calibrated baseline ({rms}) "
-                            f"exceeds the sensor noise, but that noise is only a lower bound: the noise test is "
-                            f"inconclusive, no evidence that the model misses something"}.get(
-        case, f"no candidate is eligible; whether the out-of-fold residual ({rms}) is noise cannot be said")
-    best = d.get("best")
-    if best and best in (results.get("candidates") or {}):
-        why = "; ".join((d.get("why_not") or {}).get(best) or ["its improvement is not significant"])
-        text += f"; the best explanation is {_label(results, best)}, not named: {why}"
-    return text
-
-
 def _verdict_lines(results: dict) -> list[str]:
     d = results["decision"]
     ts = results["test_split"]
@@ -332,13 +310,17 @@ def _verdict_lines(results: dict) -> list[str]:
             f"mm; {_num(100 * f['confidence'], '.0f')} % intervals: {f['method']}. Table VIII of Ha et al. 2019 "
             f"(friction, grid data): mean -{100 * TABLE_VIII['mean']:.0f} %, max -{100 * TABLE_VIII['max']:.0f} %.")
     if d["verdict"] == "none":
-        return [f"**No effect named.** {_no_effect_text(results)}.", "", gain, ""]
+        # a results.json from an earlier ctrplan stored the sentence
+        why = results.get("no_effect_sentence") or words.no_effect(d, results.get("noise") or {},
+                                                                   results.get("candidates"))
+        return [f"**No effect named.** {why}.", "", gain, ""]
     comb = results.get("combination") or {}
-    caution = "".join(f" **Caution:** {c}." for c in d.get("cautions") or [])
+    caution = "".join(f" **Caution:** {words.caution(c)}." for c in d.get("cautions") or [])
     if d["verdict"] == "ambiguous":
         a, b = _label(results, d["named"]), _label(results, d["ambiguous_with"])
         head = (f"**Ambiguous: {a} or {b}.** Both lower the cross-validated error, and the data cannot tell them apart "
-                f"within their uncertainty. Data that would separate them: {d['separated_by']}. The updated model "
+                f"within their uncertainty. Data that would separate them: "
+                f"{words.separated_by(d, words.labels_of(results.get('candidates')))}. The updated model "
                 f"file carries {ts['label']} (the lower out-of-fold error of the two).{caution}")
     elif comb.get("replaced_by"):
         head = (f"**Named missing effect: {ts['label']}** ({comb['first_label']} was the best alone, but adds nothing "
@@ -381,16 +363,19 @@ def _candidate_lines(results: dict) -> list[str]:
     for e, c in results["candidates"].items():
         params = "; ".join(_value(r) for r in c["parameter_table"]) or "none (nominal)"
         imp = c.get("improvement_eq49") or {}
-        if c.get("fit_note"):
-            notes.append(f"- {c['label']}: {c['fit_note']}.")
+        # a results.json from an earlier ctrplan stored "fit_note", one sentence
+        said = [words.fit_note(n) for n in c.get("fit_notes") or ()] or ([c["fit_note"]] if c.get("fit_note") else [])
+        if said:
+            notes.append(f"- {c['label']}: {'; '.join(said)}.")
         if c.get("widened"):
             notes.append(f"- {c['label']}: widened because a fit ended at them: {'; '.join(c['widened'])}.")
         lines.append(f"| {c['label']} | {params} | {_fmt(c['out_of_fold']['position_mean_mm'], 3)} / "
                      f"{_fmt(c['out_of_fold']['position_max_mm'], 3)} | {_pct(imp)} | "
                      f"{_num(imp.get('p_value'), '.2g')} | "
                      f"{yes(c.get('improvement_significant'))} | {yes(c.get('eligible'))} |")
-    lines += ["", f"Rule: {d['rule']}.", ""]
-    lines += [f"- {n}." for n in d.get("notes") or []]
+    labels = words.labels_of(results.get("candidates"))
+    lines += ["", f"Rule: {words.rule(d['rule'])}.", ""]
+    lines += [f"- {words.note(n, d, labels)}." for n in d.get("notes") or []]
     if notes:
         lines += ["", "Fits:", ""] + notes
     return lines + [""]
@@ -475,7 +460,7 @@ def _combination_lines(results: dict) -> list[str]:
     comb = results.get("combination")
     if not comb:
         return []
-    lines = ["## A second effect fitted with the named one", "", f"Rule: {comb['rule']}.", ""]
+    lines = ["## A second effect fitted with the named one", "", f"Rule: {words.pair_rule(comb)}.", ""]
     if comb["tried"]:
         lines += ["| pair (fitted jointly) | fitted parameters | out-of-fold mean [mm] | error lower than the named "
                   "effect's alone by (95 % interval), p | than the second effect's alone by, p | named |",
@@ -491,7 +476,8 @@ def _combination_lines(results: dict) -> list[str]:
         lines += [f"{comb['first_label']} goes to zero when fitted with "
                   f"{_label(results, comb['replaced_by'])}: the pair is no better than the latter alone, "
                   f"which is the final model.", ""]
-    lines += [f"- not tried: {_label(results, e)}, because {why}." for e, why in (comb.get("not_tried") or {}).items()]
+    lines += [f"- not tried: {_label(results, e)}, because {words.not_paired(why, comb['first_label'])}."
+              for e, why in (comb.get("not_tried") or {}).items()]
     return lines + [""]
 
 
@@ -577,7 +563,7 @@ def _bound_lines(results: dict) -> list[str]:
 
 def _cautions_lines(results: dict) -> list[str]:
     cautions = results.get("cautions")
-    return ["Cautions:", ""] + [f"- {c}." for c in cautions] + [""] if cautions else []
+    return ["Cautions:", ""] + [f"- {words.caution(c)}." for c in cautions] + [""] if cautions else []
 
 
 def _updated_model_lines(results: dict) -> list[str]:

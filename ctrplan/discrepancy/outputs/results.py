@@ -13,10 +13,8 @@ from dataclasses import asdict
 
 import numpy as np
 
-from ...choices import Verdict
 from ...effects import REGISTRY
 from ..verdict.coverage import BOUND_DEFINITION
-from ..verdict.decision import no_effect_sentence
 from ..verdict.envelope import PREDICTION_DESCRIPTION
 from ..fits.evaluation import ErrorFigures
 from ..provenance import provenance
@@ -56,7 +54,7 @@ def candidate_dict(c) -> dict:
            "n_parameters": c.n_parameters, "bic": c.bic, "delta_bic": c.delta_bic,
            "out_of_fold": error_dict(c.out_of_fold_figures), "mean_eq49": c.mean_error,
            "improvement_eq49": c.improvement.as_dict(), "improvement_position": c.improvement_position.as_dict(),
-           "fit_note": c.fit_note}
+           "fit_notes": [n.as_dict() for n in c.fit_notes]}
     for key in ("improvement_significant", "eligible", "significant"):
         if getattr(c, key) is not None:
             out[key] = getattr(c, key)
@@ -141,7 +139,8 @@ def _combination_dict(combination) -> dict | None:
         return None
     return {"first": combination.first, "first_label": combination.first_label, "named": combination.named,
             "tried": {e: candidate_dict(c) for e, c in combination.tried.items()},
-            "not_tried": dict(combination.not_tried), "family": list(combination.family), "rule": combination.rule,
+            "not_tried": {e: r.as_dict() for e, r in combination.not_tried.items()}, "family": list(combination.family),
+            "rule": {"significance": combination.significance},
             "dropped": combination.dropped, "replaced_by": combination.replaced_by}
 
 
@@ -179,8 +178,6 @@ def results_dict(result) -> dict:
         "signature_tests": {e: {**t.as_dict(), "effect_size_mm": t.effect_size_m * 1e3} for e, t in result.tests.items()},
         "skipped_effects": dict(setup.skipped), "noise": noise_dict(result.noise), "decision": naming.decision.as_dict(),
         "verdict": naming.verdict, "named_effect": naming.named,
-        "no_effect_sentence": (no_effect_sentence(naming.decision, result.noise, naming.candidates)
-                               if naming.verdict == Verdict.NONE else None),
         "named_label": REGISTRY[naming.named].label if naming.named else None,
         "ambiguous_with": naming.decision.ambiguous_with,
         "candidates": {e: candidate_dict(c) for e, c in naming.candidates.items()},
@@ -195,7 +192,7 @@ def results_dict(result) -> dict:
         "updated_model_file": str(result.updated.path), "updated_model": result.updated.model,
         "reproduced": result.reproduction.reproduced, "reproduced_samples": split.n_test,
         "reproduced_position_mean_mm": float(np.nanmean(result.reproduction.position) * 1e3),
-        "cautions": list(result.cautions), "significance": options.significance, "options": opts,
+        "cautions": [c.as_dict() for c in result.cautions], "significance": options.significance, "options": opts,
         "seconds": result.seconds, "stage_seconds": {k: float(v) for k, v in result.stage_seconds.items()},
         "stage_reused": dict(result.stage_reused), "provenance": provenance(options),
     }

@@ -43,19 +43,19 @@ from typing import Mapping
 import numpy as np
 
 from ..._log import progress_level
-from ...choices import NoEffectCase, Verdict
+from ...choices import CautionKind, DecisionNoteKind, NoEffectCase, NotNamedReason, Verdict
 from ...effects import REGISTRY
 from .consistency import NoiseTest, noise_test
-from ..fits.estimates import AtypicalValue, display_value
 from ..fits.evaluation import ErrorFigures
 from ..fits.fitting import Candidate, compare
 from ..measured.noise import NoiseEstimate, estimate_noise
 from ..options import DiscrepancyOptions
 from ..measured.split import DataSplit
+from .reasons import Caution, DecisionNote, NamingRule, WhyNot
 from .statistics import Comparison, holm
 
 __all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "check_noise", "name_effect", "cautions",
-           "atypical_caution", "no_effect_case", "no_effect_sentence", "range_text", "VERDICTS"]
+           "no_effect_case", "VERDICTS"]
 
 logger = logging.getLogger(__name__)
 
@@ -136,18 +136,19 @@ class Decision:
         The candidate with the lowest out-of-fold error, eligible or not.
     worse_than : mapping of str to tuple of str
         Candidate -> the candidates whose out-of-fold error is significantly lower.
-    why_not : mapping of str to tuple of str
+    why_not : mapping of str to tuple of WhyNot
         Candidate -> why it may not be named (only candidates with a reason).
     comparisons : mapping of str to Comparison
         ``"<b> vs <a>"`` -> :func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison` of a's and b's
         out-of-fold Eq. (49) residuals (positive: b better) [mm + deg], every ordered pair.
-    separated_by : str or None
-        What data would tell an ambiguous pair apart.
-    cautions : tuple of str
+    separated_by : mapping of str to str, or None
+        An ambiguous pair: each effect -> the data that would tell it apart
+        (``Effect.separated_by``; effects without one left out).
+    cautions : tuple of Caution
         The named effect's values outside their typical range, with what to check.
-    notes : tuple of str
-    rule : str
-        The naming rule with its levels.
+    notes : tuple of DecisionNote
+    rule : NamingRule
+        The naming rule's levels.
     runner_up : RunnerUp or None
         The second of an ambiguous pair.
     no_effect_case : NoEffectCase or None
@@ -166,10 +167,10 @@ class Decision:
     worse_than: Mapping
     why_not: Mapping
     comparisons: Mapping
-    separated_by: str | None
+    separated_by: Mapping | None
     cautions: tuple
     notes: tuple
-    rule: str
+    rule: NamingRule
     runner_up: RunnerUp | None = None
     no_effect_case: NoEffectCase | None = None
 
@@ -178,10 +179,11 @@ class Decision:
         out = {"verdict": self.verdict, "named": self.named, "ambiguous_with": self.ambiguous_with,
                "eligible": list(self.eligible), "holm": dict(self.holm), "family": list(self.family),
                "best": self.best, "worse_than": {k: list(v) for k, v in self.worse_than.items()},
-               "why_not": {k: list(v) for k, v in self.why_not.items()},
+               "why_not": {k: [w.as_dict() for w in v] for k, v in self.why_not.items()},
                "comparisons": {k: c.as_dict() for k, c in self.comparisons.items()},
-               "separated_by": self.separated_by, "cautions": list(self.cautions), "notes": list(self.notes),
-               "rule": self.rule}
+               "separated_by": None if self.separated_by is None else dict(self.separated_by),
+               "cautions": [c.as_dict() for c in self.cautions], "notes": [n.as_dict() for n in self.notes],
+               "rule": self.rule.as_dict()}
         if self.runner_up is not None:
             r = self.runner_up
             out["runner_up"] = {"effect": r.effect, "label": r.label, "difference": r.difference.as_dict()}
@@ -254,28 +256,9 @@ def check_noise(setup, split: DataSplit, baseline, options: DiscrepancyOptions) 
     return check
 
 
-def range_text(b: AtypicalValue) -> str:
-    """The typical range of an atypical value for a report (rad as deg)."""
-    lo, hi = b.typical
-    if b.unit == "rad":
-        return f"{np.rad2deg(lo):.3g}..{np.rad2deg(hi):.3g} deg"
-    return f"{lo:.3g}..{hi:.3g}" + ("" if b.unit == "-" else f" {b.unit}")
-
-
-def atypical_caution(label: str, b: AtypicalValue) -> str:
-    """The caution beside a named value outside its typical range: the value, the range with its
-    source, and what to check (``b`` an entry of ``Candidate.atypical``)."""
-    lo, hi = b.typical
-    side = "more" if b.value > hi else "less"
-    shown = display_value(b.name, b.value, b.unit)
-    check = f": check {b.check}" if b.check else ""
-    return f"{label}: {shown}, {side} than its typical {range_text(b)} ({b.why}){check}"
-
-
-def _separated_by(a: str, b: str) -> str:
-    """What data would tell effects ``a`` and ``b`` apart (their entries' ``separated_by``)."""
-    parts = [f"{REGISTRY[e].label}: {REGISTRY[e].separated_by}" for e in (a, b) if REGISTRY[e].separated_by]
-    return "; ".join(parts) if parts else "more data of the kinds of motion where they differ"
+def _separated_by(a: str, b: str) -> dict:
+    """What data would tell effects ``a`` and ``b`` apart: each one's ``separated_by``."""
+    return {e: REGISTRY[e].separated_by for e in (a, b) if REGISTRY[e].separated_by}
 
 
 def no_effect_case(noise: NoiseCheck) -> NoEffectCase:
@@ -304,52 +287,6 @@ def no_effect_case(noise: NoiseCheck) -> NoEffectCase:
     if test.noise_lower_bound and not test.consistent:
         return NoEffectCase.INCONCLUSIVE
     return NoEffectCase.NOISE if test.consistent else NoEffectCase.UNEXPLAINED
-
-
-def no_effect_sentence(decision: Decision, noise: NoiseCheck, candidates: Mapping[str, Candidate]) -> str:
-    """Why no effect was named, for the log and the report.
-
-    Parameters
-    ----------
-    decision : Decision
-        With ``no_effect_case`` set.
-    noise : NoiseCheck
-    candidates : mapping of str to Candidate
-
-    Returns
-    -------
-    str
-        One sentence (mm in the text).
-    """
-    case = decision.no_effect_case
-    description = noise.noise.description
-    test = noise.test
-    rms_mm = noise.rms_m * 1e3
-    best = decision.best
-    best_text = ""
-    if best and candidates.get(best) is not None:
-        c = candidates[best]
-        best_text = (f"; the best explanation is {c.label} (out-of-fold mean "
-                     f"{1e3 * c.out_of_fold_figures.position_mean:.3f} mm), not named: "
-                     + "; ".join(decision.why_not.get(best, ("its improvement is not significant",))))
-    if case == NoEffectCase.NOISE:
-        return (f"no candidate is eligible, and the out-of-fold residual of the calibrated baseline (rms "
-                f"{rms_mm:.3f} mm) is consistent with the sensor noise ({description}; F = "
-                f"{test.statistic:.3g} <= {test.threshold:.3g}, false-alarm rate {test.false_alarm_rate:g})"
-                + best_text)
-    if case == NoEffectCase.INCONCLUSIVE:
-        return (f"no candidate is eligible; the out-of-fold residual of the calibrated baseline (rms {rms_mm:.3f} "
-                f"mm) exceeds the sensor noise (F = {test.statistic:.3g} > {test.threshold:.3g}), but that noise is "
-                f"only a lower bound ({description}): the noise test is inconclusive, no evidence that the model "
-                f"misses something" + best_text)
-    if case == NoEffectCase.UNEXPLAINED:
-        return (f"the out-of-fold residual of the calibrated baseline (rms {rms_mm:.3f} mm, "
-                f"{noise.ratio:.1f} times the sensor noise: {description}) is NOT consistent with noise "
-                f"(F = {test.statistic:.3g} > {test.threshold:.3g} at false-alarm rate "
-                f"{test.false_alarm_rate:g}, after allowing for the {100 * (test.inflation - 1):.0f} % a fitted "
-                f"model adds): the model misses something that no candidate explains" + best_text)
-    return (f"no candidate is eligible; whether the out-of-fold residual (rms {rms_mm:.3f} mm) is noise "
-            f"cannot be said: the sensor noise is {description}" + best_text)
 
 
 def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Mapping, noise: NoiseCheck,
@@ -391,19 +328,17 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     for e, c in candidates.items():
         reasons = []
         if not significant.get(e, False):
-            reasons.append(f"its improvement over the baseline is not significant (p = {c.improvement.p_value:.3g}, "
-                           f"Holm over {len(candidates)} candidates at {alpha})")
+            reasons.append(WhyNot(NotNamedReason.NOT_SIGNIFICANT, p_value=c.improvement.p_value))
         if worse_than[e]:
-            reasons.append("its out-of-fold error is significantly higher than "
-                           + ", ".join(f"{candidates[d].label}'s (p = {comparisons[f'{e} vs {d}'].p_worse:.2g})"
-                                       for d in worse_than[e]))
+            reasons.append(WhyNot(NotNamedReason.OUTPERFORMED, outperformed_by=MappingProxyType(
+                {d: comparisons[f"{e} vs {d}"].p_worse for d in worse_than[e]})))
         if c.at_bound:
-            reasons.append("at its limit, not converged: " + "; ".join(c.at_bound))
+            reasons.append(WhyNot(NotNamedReason.AT_LIMIT, limits=tuple(c.at_bound)))
         why_not[e] = reasons
         judged[e] = replace(c, improvement_significant=bool(significant.get(e, False)), eligible=not reasons)
     eligible = sorted((e for e, c in judged.items() if c.eligible), key=lambda e: judged[e].mean_error)
     best = min(judged, key=lambda e: judged[e].mean_error) if judged else None
-    notes = [f"{c.label} improves on the baseline significantly but is not named: " + "; ".join(why_not[e])
+    notes = [DecisionNote(DecisionNoteKind.SIGNIFICANT_NOT_NAMED, e)
              for e, c in judged.items() if c.improvement_significant and not c.eligible]
     decision = Decision(
         verdict=Verdict.NONE, named=None, ambiguous_with=None, eligible=tuple(eligible),
@@ -411,12 +346,7 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
         worse_than=MappingProxyType({e: tuple(v) for e, v in worse_than.items()}),
         why_not=MappingProxyType({e: tuple(r) for e, r in why_not.items() if r}),
         comparisons=MappingProxyType(comparisons), separated_by=None, cautions=(), notes=(),
-        rule=(f"out-of-fold improvement over the baseline significant at {alpha} (t test of the log ratios over "
-              f"{split.n_folds} folds, Holm over the {len(names)} candidates tried), no other candidate "
-              f"significantly better (corrected resampled t test, one-sided at {alpha}), no value at its limit; "
-              f"the lowest out-of-fold error wins, unless it contains another such candidate on which it does not "
-              f"improve significantly (then the simpler one); ambiguous when another such candidate remains"))
-    level = progress_level()
+        rule=NamingRule(significance=alpha, n_folds=split.n_folds, n_candidates=len(names)))
     if eligible:
         named = eligible[0]
         # parsimony between nested candidates: one that contains another eligible one (gradual
@@ -427,9 +357,7 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
             gain = compare(split, judged[simpler].r, judged[named].r)
             comparisons[f"{named} vs {simpler} (nested)"] = gain
             if not (gain.p_value < alpha and gain.mean_difference > 0):
-                notes.append(f"{judged[named].label} contains {judged[simpler].label} and does not improve on it "
-                             f"significantly (out-of-fold Eq. (49) error lower by {100 * gain.reduction:.0f} %, "
-                             f"p = {gain.p_value:.2g}): the simpler {judged[simpler].label} is named")
+                notes.append(DecisionNote(DecisionNoteKind.SIMPLER_NAMED, named, other=simpler, comparison=gain))
                 named = simpler
                 break
         decision = replace(decision, verdict=Verdict.NAMED, named=named)
@@ -438,30 +366,16 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
             second = rivals[0]
             diff = comparisons[f"{named} vs {second}"]
             decision = replace(decision, verdict=Verdict.AMBIGUOUS, ambiguous_with=second,
-                               separated_by=_separated_by(named, second),
+                               separated_by=MappingProxyType(_separated_by(named, second)),
                                runner_up=RunnerUp(effect=second, label=judged[second].label, difference=diff))
-            notes.append(
-                f"ambiguous: {judged[named].label} and {judged[second].label} explain the data equally well within "
-                f"their uncertainty (out-of-fold Eq. (49) error of the first lower by {100 * diff.reduction:.0f} %, "
-                f"{100 * diff.reduction_ci[0]:.0f}..{100 * diff.reduction_ci[1]:.0f} %, p = {diff.p_value:.2g} "
-                f"over {diff.n_folds} folds); data that "
-                f"would separate them: {decision.separated_by}")
-        decision = replace(decision, cautions=tuple(atypical_caution(judged[named].label, b)
-                                                    for b in judged[named].atypical))
-        if best != named:
-            notes.append(f"the lowest out-of-fold error is {judged[best].label}'s, which cannot be named: "
-                         + "; ".join(why_not[best]))
-        logger.log(level, f"{'ambiguous' if decision.verdict == Verdict.AMBIGUOUS else 'named effect'}: "
-                          f"{judged[named].label}"
-                   + (f" or {judged[decision.ambiguous_with].label}" if decision.ambiguous_with else ""))
-        for line in decision.cautions:
-            logger.warning(f"  caution: {line}")
+            notes.append(DecisionNote(DecisionNoteKind.AMBIGUOUS, named, other=second, comparison=diff))
+        decision = replace(decision, cautions=tuple(Caution(CautionKind.ATYPICAL_VALUE, label=judged[named].label,
+                                                            value=b) for b in judged[named].atypical))
+        if best != named and why_not[best]:         # (an eligible best passed over is a SIMPLER_NAMED note)
+            notes.append(DecisionNote(DecisionNoteKind.BEST_NOT_NAMED, best))
         decision = replace(decision, notes=tuple(notes))
     else:
         decision = replace(decision, notes=tuple(notes), no_effect_case=no_effect_case(noise))
-        logger.log(level, "no effect named: " + no_effect_sentence(decision, noise, judged))
-    for line in decision.notes:
-        logger.log(level, f"  {line}")
     return Naming(candidates=MappingProxyType(judged), decision=decision)
 
 
@@ -470,14 +384,13 @@ def contained(a: str, b: str) -> bool:
     return a in REGISTRY[b].contains or b in REGISTRY[a].contains
 
 
-def cautions(verdict: Verdict, candidate: Candidate | None, before: ErrorFigures, after: ErrorFigures) -> list[str]:
+def cautions(verdict: Verdict, candidate: Candidate | None, before: ErrorFigures, after: ErrorFigures) -> list:
     """What a reader of the named effect must not overlook: a fitted value outside its typical
     range (with what to check), or an addition that lowers the mean error but raises the maximum.
 
     Parameters
     ----------
-    verdict : str
-        :data:`VERDICTS`.
+    verdict : Verdict
     candidate : Candidate or None
         The final model's candidate.
     before, after : ErrorFigures
@@ -485,15 +398,16 @@ def cautions(verdict: Verdict, candidate: Candidate | None, before: ErrorFigures
 
     Returns
     -------
-    list of str
+    list of Caution
+        ``ATYPICAL_VALUE`` per value of ``candidate.atypical``, then ``MAXIMUM_RISES`` when the
+        maximum rises.
     """
     out = []
     if verdict == Verdict.NONE or candidate is None:
         return out
     for b in candidate.atypical:
-        out.append(atypical_caution(candidate.label, b))
+        out.append(Caution(CautionKind.ATYPICAL_VALUE, label=candidate.label, value=b))
     if after.position_max is not None and after.position_max > before.position_max:
-        out.append(f"the test split's maximum tip error rises from {1e3 * before.position_max:.2f} to "
-                   f"{1e3 * after.position_max:.2f} mm while the mean falls: the added effect makes some "
-                   f"samples worse")
+        out.append(Caution(CautionKind.MAXIMUM_RISES, before_m=float(before.position_max),
+                           after_m=float(after.position_max)))
     return out

@@ -1,0 +1,301 @@
+"""The verdict's reasons, notes, cautions and rule in words, for the log and the report.
+
+The verdict stage records kinds and numbers (:mod:`~ctrplan.discrepancy.verdict.reasons`); these
+functions read their stored form (``results.json["decision"]``, ``results.json["cautions"]``,
+``results.json["noise"]``) and write the sentences: millimetres and degrees, p values to two or
+three digits. A label is a candidate's ``label`` in ``results.json["candidates"]``
+(:func:`labels_of`); an effect without one is shown by its name. An entry that is already a
+sentence (in a ``results.json`` from an earlier ctrplan, which stored words) is returned as it is.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from ...choices import CautionKind, DecisionNoteKind, FitNoteKind, NoEffectCase, NotNamedReason, NotPairedReason
+from ..fits.estimates import display_value
+
+__all__ = ["labels_of", "why_not", "rule", "note", "separated_by", "caution", "range_text", "no_effect",
+           "verdict_lines",
+           "pair_rule", "not_paired", "fit_note"]
+
+#: Why the best explanation is not named, when the stored decision gives no reason.
+NOT_SIGNIFICANT_TEXT = "its improvement is not significant"
+
+
+def labels_of(candidates: Mapping) -> dict:
+    """Effect -> report label, from ``results.json["candidates"]`` (or any mapping of effect to a
+    dict with ``"label"``, or to an object with ``.label``)."""
+    out = {}
+    for e, c in (candidates or {}).items():
+        label = c.get("label") if isinstance(c, Mapping) else getattr(c, "label", None)
+        out[e] = label or str(e)
+    return out
+
+
+def _label(labels: Mapping, effect) -> str:
+    return labels.get(effect) or str(effect)
+
+
+def why_not(reasons, rule_levels: Mapping, labels: Mapping) -> str:
+    """Why a candidate may not be named, one clause per reason, joined by "; ".
+
+    Parameters
+    ----------
+    reasons : sequence of dict
+        ``results.json["decision"]["why_not"][effect]`` (:class:`~ctrplan.discrepancy.verdict.reasons.WhyNot`).
+    rule_levels : dict
+        ``results.json["decision"]["rule"]``: the Holm family's size and level.
+    labels : mapping of str to str
+
+    Returns
+    -------
+    str
+    """
+    out = []
+    for r in reasons:
+        if isinstance(r, str):
+            out.append(r)
+            continue
+        kind = NotNamedReason(r["reason"])
+        if kind == NotNamedReason.NOT_SIGNIFICANT:
+            out.append(f"its improvement over the baseline is not significant (p = {_g(r.get('p_value'), '.3g')}, "
+                       f"Holm over {rule_levels['n_candidates']} candidates at {rule_levels['significance']})")
+        elif kind == NotNamedReason.OUTPERFORMED:
+            out.append("its out-of-fold error is significantly higher than "
+                       + ", ".join(f"{_label(labels, d)}'s (p = {_g(p, '.2g')})"
+                                   for d, p in r["outperformed_by"].items()))
+        else:
+            out.append("at its limit, not converged: " + "; ".join(r["limits"]))
+    return "; ".join(out)
+
+
+def rule(levels: Mapping) -> str:
+    """The naming rule with its levels (``results.json["decision"]["rule"]``)."""
+    if isinstance(levels, str):
+        return levels
+    alpha = levels["significance"]
+    return (f"out-of-fold improvement over the baseline significant at {alpha} (t test of the log ratios over "
+            f"{levels['n_folds']} folds, Holm over the {levels['n_candidates']} candidates tried), no other candidate "
+            f"significantly better (corrected resampled t test, one-sided at {alpha}), no value at its limit; "
+            f"the lowest out-of-fold error wins, unless it contains another such candidate on which it does not "
+            f"improve significantly (then the simpler one); ambiguous when another such candidate remains")
+
+
+def separated_by(decision: Mapping, labels: Mapping) -> str | None:
+    """What data would tell an ambiguous pair apart (None when the verdict is not ambiguous)."""
+    texts = decision.get("separated_by")
+    if texts is None or isinstance(texts, str):
+        return texts
+    parts = [f"{_label(labels, e)}: {t}" for e, t in texts.items()]
+    return "; ".join(parts) if parts else "more data of the kinds of motion where they differ"
+
+
+def note(entry: Mapping, decision: Mapping, labels: Mapping) -> str:
+    """A note of the naming rule (an entry of ``results.json["decision"]["notes"]``) in words.
+
+    Parameters
+    ----------
+    entry : dict
+        :class:`~ctrplan.discrepancy.verdict.reasons.DecisionNote` as stored.
+    decision : dict
+        ``results.json["decision"]`` (its ``why_not``, ``rule`` and ``separated_by``).
+    labels : mapping of str to str
+
+    Returns
+    -------
+    str
+    """
+    if isinstance(entry, str):
+        return entry
+    kind = DecisionNoteKind(entry["kind"])
+    effect = entry["effect"]
+    first, other = _label(labels, effect), _label(labels, entry.get("other"))
+    cmp = entry.get("comparison") or {}
+    reasons = why_not((decision.get("why_not") or {}).get(effect, ()), decision["rule"], labels)
+    if kind == DecisionNoteKind.SIGNIFICANT_NOT_NAMED:
+        return f"{first} improves on the baseline significantly but is not named: {reasons}"
+    if kind == DecisionNoteKind.BEST_NOT_NAMED:
+        return f"the lowest out-of-fold error is {first}'s, which cannot be named: {reasons}"
+    if kind == DecisionNoteKind.SIMPLER_NAMED:
+        return (f"{first} contains {other} and does not improve on it significantly (out-of-fold Eq. (49) error "
+                f"lower by {_g(cmp.get('reduction'), '.0f', 100)} %, p = {_g(cmp.get('p_value'), '.2g')}): "
+                f"the simpler {other} is named")
+    lo, hi = cmp.get("reduction_ci") or (None, None)
+    return (f"ambiguous: {first} and {other} explain the data equally well within their uncertainty (out-of-fold "
+            f"Eq. (49) error of the first lower by {_g(cmp.get('reduction'), '.0f', 100)} %, {_g(lo, '.0f', 100)}.."
+            f"{_g(hi, '.0f', 100)} %, p = {_g(cmp.get('p_value'), '.2g')} over {cmp.get('n_folds')} folds); data that "
+            f"would separate them: {separated_by(decision, labels)}")
+
+
+def range_text(typical, unit: str) -> str:
+    """A typical range (low, high) [unit] for a report (rad as deg)."""
+    lo, hi = typical
+    if unit == "rad":
+        return f"{np.rad2deg(lo):.3g}..{np.rad2deg(hi):.3g} deg"
+    return f"{lo:.3g}..{hi:.3g}" + ("" if unit == "-" else f" {unit}")
+
+
+def caution(entry: Mapping) -> str:
+    """A caution (an entry of ``results.json["decision"]["cautions"]`` or ``results.json["cautions"]``,
+    :class:`~ctrplan.discrepancy.verdict.reasons.Caution` as stored) in words: the value, the
+    range with its source and what to check; the maximum's rise in mm; a baseline parameter with its
+    change from the robot file."""
+    if isinstance(entry, str):
+        return entry
+    kind = CautionKind(entry["kind"])
+    if kind == CautionKind.ATYPICAL_VALUE:
+        b = entry["value"]
+        lo, hi = b["typical"]
+        side = "more" if b["value"] > hi else "less"
+        check = f": check {b['check']}" if b.get("check") else ""
+        return (f"{entry['label']}: {display_value(b['name'], b['value'], b['unit'])}, {side} than its typical "
+                f"{range_text(b['typical'], b['unit'])} ({b['why']}){check}")
+    if kind == CautionKind.MAXIMUM_RISES:
+        return (f"the test split's maximum tip error rises from {_g(entry['before_m'], '.2f', 1e3)} to "
+                f"{_g(entry['after_m'], '.2f', 1e3)} mm while the mean falls: the added effect makes some samples "
+                f"worse")
+    r = entry["parameter"]
+    change = "" if r.get("relative_change") is None else f", {100 * r['relative_change']:+.0f} % from the robot file"
+    return (f"baseline {display_value(r['name'], r['value'], r['unit'])}{change}"
+            + (": at its bound" if r.get("at_bound") else "") + f"; typical: {r.get('typical_source')}")
+
+
+def no_effect(decision: Mapping, noise: Mapping, candidates: Mapping) -> str:
+    """Why no effect was named: the noise test's case with its figures, and the best explanation
+    with why it is not named.
+
+    Parameters
+    ----------
+    decision : dict
+        ``results.json["decision"]`` (``no_effect_case``, ``best``, ``why_not``, ``rule``).
+    noise : dict
+        ``results.json["noise"]`` (mm; its ``test`` and the estimate's ``description``).
+    candidates : dict
+        ``results.json["candidates"]`` (labels and out-of-fold means [mm]).
+
+    Returns
+    -------
+    str
+        One sentence (mm in the text).
+    """
+    labels = labels_of(candidates)
+    case = NoEffectCase(decision.get("no_effect_case") or NoEffectCase.UNKNOWN)
+    description = (noise.get("noise") or {}).get("description")
+    test = noise.get("test") or {}
+    rms = _g(noise.get("rms_mm"), ".3f")
+    best = decision.get("best")
+    best_text = ""
+    if best and best in (candidates or {}):
+        mean = ((candidates[best].get("out_of_fold") or {}).get("position_mean_mm"))
+        reasons = (decision.get("why_not") or {}).get(best)
+        best_text = (f"; the best explanation is {_label(labels, best)} (out-of-fold mean {_g(mean, '.3f')} mm), "
+                     f"not named: " + (why_not(reasons, decision["rule"], labels) if reasons else NOT_SIGNIFICANT_TEXT))
+    stat, threshold, alpha = _g(test.get("statistic"), ".3g"), _g(test.get("threshold"), ".3g"), test.get(
+        "false_alarm_rate")
+    if case == NoEffectCase.NOISE:
+        return (f"no candidate is eligible, and the out-of-fold residual of the calibrated baseline (rms {rms} mm) is "
+                f"consistent with the sensor noise ({description}; F = {stat} <= {threshold}, false-alarm rate "
+                f"{_g(alpha, 'g')})" + best_text)
+    if case == NoEffectCase.INCONCLUSIVE:
+        return (f"no candidate is eligible; the out-of-fold residual of the calibrated baseline (rms {rms} "
+                f"mm) exceeds the sensor noise (F = {stat} > {threshold}), but that noise is only a lower bound "
+                f"({description}): the noise test is inconclusive, no evidence that the model misses something"
+                + best_text)
+    if case == NoEffectCase.UNEXPLAINED:
+        inflation = test.get("inflation")
+        added = _g(None if inflation is None else inflation - 1, ".0f", 100)
+        return (f"the out-of-fold residual of the calibrated baseline (rms {rms} mm, {_g(noise.get('ratio'), '.1f')} "
+                f"times the sensor noise: {description}) is NOT consistent with noise (F = {stat} > {threshold} at "
+                f"false-alarm rate {_g(alpha, 'g')}, after allowing for the {added} % a fitted model adds): the model "
+                f"misses something that no candidate explains" + best_text)
+    return (f"no candidate is eligible; whether the out-of-fold residual (rms {rms} mm) is noise cannot be said: "
+            f"the sensor noise is {description}" + best_text)
+
+
+def pair_rule(combination: Mapping) -> str:
+    """The rule a second effect is named by (``results.json["combination"]``: its ``rule`` and
+    ``first_label``)."""
+    levels, first = combination["rule"], combination["first_label"]
+    if isinstance(levels, str):
+        return levels
+    alpha = levels["significance"]
+    return (f"out-of-fold Eq. (49) improvement over {first} alone significant at {alpha} (t test of the log ratios "
+            f"over the folds, Holm over the family of pairs), no value at its limit, and {first} still improving on "
+            f"the second effect alone at {alpha}")
+
+
+def not_paired(entry, first_label: str) -> str:
+    """Why a candidate was not fitted with the named effect (an entry of
+    ``results.json["combination"]["not_tried"]``; ``first_label`` the named effect's label)."""
+    if isinstance(entry, str):
+        return entry
+    kind = NotPairedReason(entry["reason"])
+    if kind == NotPairedReason.CONTAINS:
+        return f"it contains {first_label}"
+    if kind == NotPairedReason.CONTAINED:
+        return f"it is contained in {first_label}"
+    if kind == NotPairedReason.ON_A_THIRD_EFFECT:
+        return f"it is fitted on top of {entry['after_label']}, a third effect"
+    if kind == NotPairedReason.ADDS_NO_PARAMETER:
+        return f"it adds no parameter to {first_label}"
+    return (f"alone it does not lower the baseline's out-of-fold error (mean difference "
+            f"{_g(entry.get('mean_difference'), '.3g')} mm + deg): counted in the family, not fitted")
+
+
+def fit_note(entry) -> str:
+    """What a candidate's fits say about themselves (an entry of
+    ``results.json["candidates"][effect]["fit_notes"]``, :class:`~ctrplan.discrepancy.verdict.reasons.FitNote`
+    as stored), costs to four digits, means in mm."""
+    if isinstance(entry, str):
+        return entry
+    kind = FitNoteKind(entry["kind"])
+    if kind == FitNoteKind.CONTACT_REFIT_NOT_CONVERGED:
+        return (f"the clearance-model refit of the tube parameters it shares did not converge (stopped at the budget "
+                f"of {entry['max_evaluations']} evaluations): the candidate may be underrated")
+    if kind == FitNoteKind.NOT_CONVERGED:
+        fits = (["the development fit"] if entry.get("development") else []) + [f"fold {k}" for k in entry["folds"]]
+        return f"its fit did not converge (stopped at the evaluation budget): {', '.join(fits)}"
+    if kind == FitNoteKind.AT_LIMIT:
+        return f"at its limit, not converged: {'; '.join(entry['limits'])}"
+    if kind == FitNoteKind.PAIR_NOT_CONVERGED:
+        return "a fit did not converge or sits at its limit"
+    cost = f"cost {_g(entry['cost'], '.4g')} against {_g(entry['baseline_cost'], '.4g')}"
+    if kind == FitNoteKind.WORSE_THAN_CONTAINED_BASELINE:
+        return (f"it fits the calibration data worse than the baseline ({cost}) although it contains the baseline: "
+                f"the fit failed")
+    if kind == FitNoteKind.WORSE_THAN_STANDARD_BASELINE:
+        return (f"it fits the calibration data worse than the standard baseline ({cost}): the {entry['model']} model "
+                f"with the shared refitted tube parameters does not reach the standard model's fit")
+    return (f"it fits the calibration data better ({cost}) but the held-out folds worse (mean "
+            f"{_g(entry['mean_m'], '.3f', 1e3)} against {_g(entry['baseline_mean_m'], '.3f', 1e3)} mm): its parameters "
+            f"absorb a pattern of the calibration samples that does not hold elsewhere (overfitting)")
+
+
+def verdict_lines(results: Mapping) -> list:
+    """The verdict for the log, from a run's ``results.json`` form: the named effect (or pair) or
+    why none is, the cautions and the notes.
+
+    Returns
+    -------
+    list of (level, str)
+        ``"info"`` or ``"warning"`` with each line.
+    """
+    d = results["decision"]
+    labels = labels_of(results.get("candidates"))
+    if d["verdict"] == "none":
+        lines = [("info", "no effect named: " + no_effect(d, results.get("noise") or {}, results.get("candidates")))]
+    else:
+        lines = [("info", f"{'ambiguous' if d['verdict'] == 'ambiguous' else 'named effect'}: "
+                          f"{_label(labels, d['named'])}"
+                  + (f" or {_label(labels, d['ambiguous_with'])}" if d.get("ambiguous_with") else ""))]
+        lines += [("warning", f"  caution: {caution(c)}") for c in d.get("cautions") or ()]
+    lines += [("info", f"  {note(n, d, labels)}") for n in d.get("notes") or ()]
+    return lines
+
+
+def _g(x, spec: str, scale: float = 1.0) -> str:
+    """``x * scale`` formatted by ``spec``; ``nan`` for None (a non-finite figure stored as null)."""
+    return f"{float('nan') if x is None else x * scale:{spec}}"
