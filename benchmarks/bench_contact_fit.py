@@ -56,6 +56,25 @@ from ctrplan.discrepancy.options import DiscrepancyOptions
 from ctrplan.discrepancy.setup import default_baseline_parameters
 opts = DiscrepancyOptions()
 settings = opts.settings()
+try:                      # the fits' option objects
+    from ctrplan.discrepancy.fits.fitoptions import FitRun, FitStart, GridSpec
+    quiet = FitRun(settings=settings, uncertainty=False)
+
+    def fit(model, names, budget, initial=None, register=False, warm=False):
+        return calibrate(robot, sub, model, names, start=FitStart(initial, register=register, warm=warm),
+                         max_evaluations=budget, run=quiet)
+
+    def grid(fixed):
+        return grid_search_friction(robot, sub, fixed, grid=GridSpec(coarse=opts.friction_grid,
+                                    search_samples=opts.friction_search_samples, seed=0), run=quiet)
+except ImportError:       # a checkout whose fits take every option as a keyword
+    def fit(model, names, budget, initial=None, register=False, warm=False):
+        return calibrate(robot, sub, model, names, initial=initial, settings=settings, max_evaluations=budget,
+                         uncertainty=False, register=register, warm=warm)
+
+    def grid(fixed):
+        return grid_search_friction(robot, sub, fixed, settings=settings, coarse=opts.friction_grid,
+                                    search_samples=opts.friction_search_samples, seed=0, uncertainty=False)
 robot = load_robot(robot_file)
 data = load_measured_data(data_file, robot)
 sub = data.take(np.linspace(0, data.n_samples - 1, samples).astype(int))
@@ -64,21 +83,18 @@ tubes = default_baseline_parameters(robot, register)
 mus = tuple(f"mu_{k + 1}" for k in range(robot.n_tubes - 1))
 out = {}
 t = time.perf_counter()
-c = calibrate(robot, sub, "clearance", tubes, settings=settings, max_evaluations=opts.max_contact_evaluations,
-              uncertainty=False, register=register)
+c = fit("clearance", tubes, opts.max_contact_evaluations, register=register)
 out["clearance"] = {"seconds": time.perf_counter() - t, "evaluations": c.evaluations, "cost": c.cost,
                     "converged": c.converged, "values": dict(zip(c.names, c.values.tolist()))}
 fixed = dict(zip(c.names, c.values))
 t = time.perf_counter()
-g = grid_search_friction(robot, sub, fixed, settings=settings, coarse=opts.friction_grid,
-                         search_samples=opts.friction_search_samples, seed=0, uncertainty=False)
+g = grid(fixed)
 out["grid"] = {"seconds": time.perf_counter() - t, "evaluations": g.evaluations, "cost": g.cost,
                "converged": g.converged, "values": dict(zip(g.names, g.values.tolist()))}
 t = time.perf_counter()
 names = tubes + mus
 init = np.concatenate([c.values, g.values])
-r = calibrate(robot, sub, "friction", names, initial=init, settings=settings,
-              max_evaluations=opts.max_contact_evaluations, uncertainty=False, warm=True)
+r = fit("friction", names, opts.max_contact_evaluations, initial=init, warm=True)
 out["refine"] = {"seconds": time.perf_counter() - t, "evaluations": r.evaluations, "cost": r.cost,
                  "converged": r.converged, "values": dict(zip(r.names, r.values.tolist()))}
 print(json.dumps(out))

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import Noise, synthesize, write_synth
+from ctrplan.discrepancy import FitRun, FitStart, Noise, synthesize, write_synth
 from ctrplan.discrepancy.measured.data import load_measured_data
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings
@@ -44,15 +44,16 @@ def test_eq49_fit_converges_by_its_bic_rule_to_the_minimum_of_a_long_fit(lagged_
     Gauss-Newton model of Eq. (49), which misses the norms' curvature) and a stopping rule that
     stops short of the minimum."""
     robot, data = lagged_pair
-    fit = calibration.calibrate(robot, data, "standard", NAMES, settings=COARSE, max_evaluations=400)
+    fit = calibration.calibrate(robot, data, "standard", NAMES, max_evaluations=400,
+                                run=FitRun(settings=COARSE))
     assert fit.converged, fit.message
     assert "changes the BIC by" in fit.message and "NOT converged" not in fit.message
     assert fit.evaluations < 200, fit.message
     n = data.n_samples
     assert fit.cost / n > 4.0   # the missing lag: residuals far above the noise (~0.3 mm + deg)
     monkeypatch.setattr(calibration, "BIC_TOLERANCE", 0.0)
-    longer = calibration.calibrate(robot, data, "standard", NAMES, initial=fit.values, settings=COARSE,
-                                   max_evaluations=4000)
+    longer = calibration.calibrate(robot, data, "standard", NAMES, start=FitStart(fit.values),
+                                   max_evaluations=4000, run=FitRun(settings=COARSE))
     assert longer.cost <= fit.cost * (1 + 1e-9)
     assert n * np.log(fit.cost / longer.cost) < 0.05, (fit.message, longer.message)
 
@@ -61,7 +62,8 @@ def test_budget_stop_says_not_converged(lagged_pair):
     """A budget too small for the fit: ``converged`` is False and the message says NOT converged,
     with the decrease still predicted. Catches a fit that calls a budget stop convergence."""
     robot, data = lagged_pair
-    fit = calibration.calibrate(robot, data, "standard", NAMES, settings=COARSE, max_evaluations=8)
+    fit = calibration.calibrate(robot, data, "standard", NAMES, max_evaluations=8,
+                                run=FitRun(settings=COARSE))
     assert not fit.converged
     assert "NOT converged" in fit.message and "predicted further decrease" in fit.message
 
@@ -128,9 +130,11 @@ def test_rank_one_updates_save_evaluations_and_reach_the_same_minimum(lagged_pai
     differences only (BIC within 0.05) with fewer model evaluations. Catches updates that never
     happen and updates that stop the fit short of its minimum."""
     robot, data = lagged_pair
-    fit = calibration.calibrate(robot, data, "standard", NAMES, settings=COARSE, max_evaluations=400)
+    fit = calibration.calibrate(robot, data, "standard", NAMES, max_evaluations=400,
+                                run=FitRun(settings=COARSE))
     monkeypatch.setattr(calibration, "MAX_JACOBIAN_UPDATES", 0)
-    exact = calibration.calibrate(robot, data, "standard", NAMES, settings=COARSE, max_evaluations=400)
+    exact = calibration.calibrate(robot, data, "standard", NAMES, max_evaluations=400,
+                                run=FitRun(settings=COARSE))
     assert fit.converged and exact.converged
     assert "rank-one updates" in fit.message
     assert fit.evaluations < exact.evaluations, (fit.message, exact.message)

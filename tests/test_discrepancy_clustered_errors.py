@@ -18,7 +18,7 @@ import pytest
 from scipy import stats
 from scipy.signal import lfilter
 
-from ctrplan.discrepancy import Noise, synthesize, write_synth
+from ctrplan.discrepancy import FitRun, FitStart, Noise, synthesize, write_synth
 from ctrplan.discrepancy.measured.data import load_measured_data
 from ctrplan.discrepancy.fits.estimates import covariance, interval_quantile, parameter_table
 from ctrplan.discrepancy.options import CONFIDENCE
@@ -120,7 +120,8 @@ def test_a_bound_widened_on_the_last_allowed_pass_is_flagged(pair_samples, monke
     robot, data = pair_samples
     monkeypatch.setattr(calibration, "MAX_WIDENINGS", 2)
     far = replace(data, tip=data.tip + np.array([8.0, 0.0, 0.0]))
-    fit = calibration.calibrate(robot, far, "standard", ("registration_tx",), settings=COARSE, max_evaluations=40)
+    fit = calibration.calibrate(robot, far, "standard", ("registration_tx",), max_evaluations=40,
+                                run=FitRun(settings=COARSE))
     assert fit.values[0] == pytest.approx(7.0, abs=1e-5), fit.message
     assert fit.widened[-1] == "registration_tx upper bound to 10 m"
     assert len(fit.at_bound) == 1 and fit.at_bound[0].startswith("registration_tx (upper bound 7 m")
@@ -137,8 +138,8 @@ def test_a_bound_widened_when_the_budget_is_spent_is_flagged(pair_samples):
     bound unflagged and the fit "converged", and so a candidate that could be named."""
     robot, data = pair_samples
     far = replace(data, tip=data.tip + np.array([8.0, 0.0, 0.0]))
-    fit = calibration.calibrate(robot, far, "standard", ("registration_tx",), settings=COARSE, initial=[1.0],
-                                warm=True, max_evaluations=1)
+    fit = calibration.calibrate(robot, far, "standard", ("registration_tx",), start=FitStart([1.0], warm=True),
+                                max_evaluations=1, run=FitRun(settings=COARSE))
     assert fit.values[0] == pytest.approx(1.0, abs=1e-5), fit.message
     assert fit.widened == ("registration_tx upper bound to 3 m",)
     assert fit.at_bound == ("registration_tx (upper bound 1 m, widened to 3 m but not refitted: the evaluation "
@@ -154,14 +155,15 @@ def test_calibrate_records_the_clusters_and_the_table_uses_t_with_their_dof(pair
     interval, and a normal quantile where the errors are clustered."""
     robot, data = pair_samples
     names = ("registration_tx", "registration_ty")
-    fit = calibration.calibrate(robot, data, "standard", names, settings=COARSE, clusters=np.arange(12) // 3)
+    fit = calibration.calibrate(robot, data, "standard", names,
+                                run=FitRun(settings=COARSE, clusters=np.arange(12) // 3))
     assert fit.n_clusters == 4 and fit.dof == 3
     again = calibration.CalibrationResult.from_dict(fit.as_dict())
     assert again.n_clusters == 4 and again.dof == 3
     row = parameter_table(robot, fit, names)[0]
     half = float(stats.t.ppf(0.5 + CONFIDENCE / 2, 3)) * row.stderr
     assert row.ci == pytest.approx((row.value - half, row.value + half), rel=1e-12)
-    plain = calibration.calibrate(robot, data, "standard", names, settings=COARSE)
+    plain = calibration.calibrate(robot, data, "standard", names, run=FitRun(settings=COARSE))
     assert plain.n_clusters is None and plain.dof is None
     row = parameter_table(robot, plain, names)[0]
     assert row.ci[1] - row.value == pytest.approx(float(stats.norm.ppf(0.5 + CONFIDENCE / 2)) * row.stderr)

@@ -13,6 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from ctrplan.discrepancy import Noise, synthesize, write_synth
+from ctrplan.discrepancy.fits.fitoptions import FitRun, GridSpec
 from ctrplan.discrepancy.fits.gridsearch import grid_search_friction
 from ctrplan.discrepancy.measured.data import MeasuredData, load_measured_data
 from ctrplan.discrepancy.verdict.decision import cautions
@@ -350,7 +351,8 @@ def test_friction_grid_search_extends_past_the_coarse_grid_edge(tmp_path):
     data = tmp_path / "pair.csv"
     _synth(pair, {"friction": {"mu_1": 0.53}}, data, grid=3, noise=Noise(position_rms=0.0, angle_rms=0.0))
     off = pair.replace(friction_coefficients=(0.0,))
-    fit = grid_search_friction(off, load_measured_data(data, off), {}, settings=COARSE, coarse=(0.0, 0.1, 0.2))
+    fit = grid_search_friction(off, load_measured_data(data, off), {}, grid=GridSpec(coarse=(0.0, 0.1, 0.2)),
+                               run=FitRun(settings=COARSE))
     assert fit.values[0] == pytest.approx(0.53, abs=0.0125 + 1e-9)
     assert fit.converged and not fit.at_bound
     assert "grown to" in fit.message and fit.widened
@@ -444,8 +446,8 @@ def test_friction_grid_search_that_cannot_bracket_the_minimum_says_at_bound(tmp_
         return dataclasses.replace(spec, upper=0.3, typical=(0.0, 0.25)) if name == "mu_1" else spec
 
     monkeypatch.setattr(calibration, "parameter", capped)
-    fit = grid_search_friction(off, load_measured_data(data, off), {}, settings=COARSE, coarse=(0.0, 0.1, 0.2),
-                               uncertainty=False)
+    fit = grid_search_friction(off, load_measured_data(data, off), {}, grid=GridSpec(coarse=(0.0, 0.1, 0.2)),
+                               run=FitRun(settings=COARSE, uncertainty=False))
     assert not fit.converged and fit.at_bound and "mu_1 (edge of the grid at its limit 0.3" in fit.at_bound[0]
     assert "not converged" in fit.message
 

@@ -19,6 +19,7 @@ from .fits.simulate import Simulation, simulate
 from .measured.synth import Noise, SynthResult, synthesize, truth_path, write_synth
 from .fits.predictions import pose_errors, predict
 from .fits.calibrate import CalibrationResult, calibrate
+from .fits.fitoptions import FitRun, FitStart, GridSpec
 from .fits.gridsearch import grid_search
 from .measured.data import MeasuredData, load_measured_data
 from .measured.split import DataSplit, make_split
@@ -31,7 +32,7 @@ from .outputs.report import write_report, write_report_from_results
 __all__ = [
     "Simulation", "simulate",
     "Noise", "SynthResult", "synthesize", "truth_path", "write_synth",
-    "CalibrationResult", "calibrate", "grid_search", "pose_errors", "predict",
+    "CalibrationResult", "FitRun", "FitStart", "GridSpec", "calibrate", "grid_search", "pose_errors", "predict",
     "MeasuredData", "load_measured_data", "DataSplit", "make_split", "apply_parameters", "read_parameters",
     "SignatureTest", "friction_signature", "regression_signature", "registration_signature",
     "DiscrepancyOptions", "DiscrepancyResult", "run_discrepancy", "write_report", "write_report_from_results",

@@ -19,6 +19,7 @@ import numpy as np
 from ..._log import details, progress_level
 from ...choices import PoseFrame
 from .calibrate import CalibrationResult, calibrate, information_criterion
+from .fitoptions import FitRun, FitStart
 from .estimates import display_value, parameter_table
 from .evaluation import Errors, evaluate_rows
 from .fitting import CrossValidated, compare, cross_validate, fit_rows, run_fits, stage_name
@@ -142,9 +143,9 @@ def pilot_fit(setup: DiscrepancySetup, split: DataSplit, options: DiscrepancyOpt
     else:
         logger.log(progress_level(), "calibrating the baseline once on the development samples (pilot: buffer and "
                                      "prior scale) ...")
-        pilot = calibrate(setup.robot, data.take(split.fit_rows(data)), "standard", setup.base_names, settings=setup.settings,
-                          n_jobs=options.n_jobs, register=setup.register, max_evaluations=options.max_evaluations,
-                          uncertainty=False)
+        pilot = calibrate(setup.robot, data.take(split.fit_rows(data)), "standard", setup.base_names,
+                          start=FitStart(register=setup.register), max_evaluations=options.max_evaluations,
+                          run=FitRun(settings=setup.settings, n_jobs=options.n_jobs, uncertainty=False))
         setup.stages.save("pilot", pilot.as_dict())
     dev = split.dev_rows
     e = evaluate_rows(setup, dev, "pilot-residual", "standard", dict(zip(*pilot.all_parameters())),
@@ -180,17 +181,19 @@ def _baseline_path(setup, split, options, strengths, scale, k, n_jobs) -> dict:
     fixed_file = dict(zip(tube, read_parameters(setup.robot, tube)))
     out, prev = {}, None
     for tau in sorted(strengths, reverse=True):
-        kw = dict(settings=setup.settings, n_jobs=n_jobs, register=setup.register,
-                  max_evaluations=options.max_evaluations, uncertainty=k is None, clusters=units)
+        kw = dict(max_evaluations=options.max_evaluations,
+                  run=FitRun(settings=setup.settings, n_jobs=n_jobs, uncertainty=k is None, clusters=units))
+        cold = FitStart(register=setup.register)
         if tau == 0.0:
             names = tuple(n for n in setup.base_names if n in REGISTRATION)
-            fit = calibrate(setup.robot, fit_data, "standard", names, fixed=fixed_file, **kw)
+            fit = calibrate(setup.robot, fit_data, "standard", names, fixed=fixed_file, start=cold, **kw)
         elif prev is None:
             fit = calibrate(setup.robot, fit_data, "standard", setup.base_names,
-                            prior=baseline_prior(setup, tau, scale), **kw)
+                            prior=baseline_prior(setup, tau, scale), start=cold, **kw)
         else:
-            fit = calibrate(setup.robot, fit_data, "standard", setup.base_names, initial=prev.values, warm=True,
-                            prior=baseline_prior(setup, tau, scale), **kw)
+            fit = calibrate(setup.robot, fit_data, "standard", setup.base_names,
+                            prior=baseline_prior(setup, tau, scale),
+                            start=FitStart(prev.values, register=setup.register, warm=True), **kw)
         out[tau] = fit
         prev = fit if tau > 0 else prev
     return out

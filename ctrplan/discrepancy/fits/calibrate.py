@@ -26,6 +26,7 @@ from ...models import MODEL_INFO, check_model
 from ..measured.data import MeasuredData
 from ...effects import EffectSet, apply_output_effects, robot_effects
 from .estimates import Uncertainty, covariance
+from .fitoptions import FitRun, FitStart
 from .parameters import REGISTRATION, needs_solve, parameter, read_parameters
 from .predictions import (ANGLE_UNIT, FAILED_RESIDUAL, POSITION_UNIT, SamplePredictions, eq49_residuals,
                           kabsch_registration, pose_errors, predict)
@@ -554,10 +555,8 @@ class _Eq49Model:
         return rows
 
 
-def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | None = None,
-              initial=None, settings: ModelSettings | None = None, n_jobs: int = 1,
-              register: bool = False, max_evaluations: int = 40, uncertainty: bool = True,
-              warm: bool = False, prior: dict | None = None, clusters=None) -> CalibrationResult:
+def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | None = None, prior: dict | None = None,
+              start: FitStart = FitStart(), max_evaluations: int = 40, run: FitRun = FitRun()) -> CalibrationResult:
     """Fit parameters by least squares on the Eq. (49) residuals (Section V-C, Eq. (49) of
     Ha, Fagogenis & Dupont 2019).
 
@@ -569,32 +568,20 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
         The calibration samples.
     model : {"standard", "clearance", "friction"}
     names : sequence of str
-        Parameters to fit. Registration parameters are started from the Kabsch registration of
-        the initial model when ``register`` is True (and ``initial`` is not given).
+        Parameters to fit.
     fixed : dict, optional
         ``{name: value}`` held fixed (applied before the fitted ones).
-    initial : array-like, shape (m,), optional
-        Starting values (default: the robot's, zero registration).
-    settings : ModelSettings, optional
-    n_jobs : int
-    register : bool
-        Start registration parameters from the closed-form registration.
-    max_evaluations : int
-        Budget of model evaluations over the calibration set (Jacobian columns included), shared
-        by the two stages: a safety net, not the usual stop (stage 1 gets at most half).
-    uncertainty : bool
-        Compute the standard errors and correlations of the fitted values (from the last
-        Jacobian: no extra evaluation).
-    warm : bool
-        ``initial`` is already close to the minimum (a continuation of a fit of the same samples,
-        e.g. with another prior): stage 1 is skipped.
     prior : dict, optional
         ``{name: (center, scale)}``: a Gaussian prior on fitted parameters (:class:`Prior`), e.g.
         toward the robot file's tube parameters; names not fitted are ignored.
-    clusters : array-like, shape (K,), optional
-        Unit of each sample: the standard errors are clustered over units, neighbouring units of
-        one motion merged until their seams are nearly uncorrelated (:func:`covariance`;
-        ``n_clusters`` of the result).
+    start : FitStart
+        Starting values, a closed-form registration, a warm start.
+    max_evaluations : int
+        Budget of model evaluations over the calibration set (Jacobian columns included), shared
+        by the two stages: a safety net, not the usual stop (stage 1 gets at most half).
+    run : FitRun
+        Solver settings, worker processes, whether to compute standard errors and over which
+        clusters.
 
     Returns
     -------
@@ -636,6 +623,8 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     """
     t0 = time.perf_counter()
     check_model(model)
+    initial, register, warm = start.values, start.register, start.warm
+    settings, n_jobs, uncertainty, clusters = run.settings, run.n_jobs, run.uncertainty, run.clusters
     names = tuple(names)
     fixed = dict(fixed or {})
     k = data.n_samples

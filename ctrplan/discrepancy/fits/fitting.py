@@ -46,6 +46,7 @@ from ...effects import REGISTRY
 from ...models import MODEL_INFO, MODELS
 from ...parallel import Executor
 from .calibrate import CalibrationResult, _Objective, _uncertainty, calibrate, information_criterion
+from .fitoptions import FitRun, FitStart, GridSpec
 from ..measured.data import MeasuredData
 from .estimates import atypical_values, display_value, parameter_table
 from .evaluation import ErrorFigures, Errors, out_of_fold
@@ -251,6 +252,12 @@ def compare(split: DataSplit, err_a, err_b, *, nested: bool = True) -> Compariso
     return cv_comparison(err_a, err_b, split.fold[split.dev_rows], confidence=CONFIDENCE, corrected=not nested)
 
 
+def grid_spec(options: DiscrepancyOptions) -> GridSpec:
+    """The friction grid of ``options`` (``friction_grid``, ``friction_search_samples``, ``seed``)
+    as :func:`~ctrplan.discrepancy.fits.gridsearch.grid_search` takes it."""
+    return GridSpec(coarse=options.friction_grid, search_samples=options.friction_search_samples, seed=options.seed)
+
+
 def _extend_scan(values: tuple, spec, end: str) -> tuple:
     """The scan ``values`` (increasing) continued past its ``end`` ("upper"/"lower") by its own
     pattern, within the parameter's limit; () when it cannot go further."""
@@ -265,14 +272,16 @@ def _extend_scan(values: tuple, spec, end: str) -> tuple:
     return tuple(more.tolist())
 
 
-def scan_fit(robot, data: MeasuredData, model: str, fixed: dict, names, values, settings, n_jobs, *,
-             uncertainty: bool = True, clusters=None) -> CalibrationResult:
+def scan_fit(robot, data: MeasuredData, model: str, fixed: dict, names, values, *,
+             run: FitRun = FitRun()) -> CalibrationResult:
     """Best of a 1-D scan: every parameter in ``names`` set to each of ``values`` in turn, the
     others ``fixed``; the cost (Eq. (49)) of each trial and the scan's resolution in the message.
     A best value at the scan's last value (or its first, where the effect does not vanish there)
     extends the scan by its own pattern, up to the parameters' limit; only a best value at that
-    limit is "at bound" (not converged)."""
+    limit is "at bound" (not converged). ``run``: solver settings, worker processes, standard
+    errors and their clusters (:class:`~ctrplan.discrepancy.fits.calibrate.FitRun`)."""
     t0 = time.perf_counter()
+    settings, n_jobs, uncertainty, clusters = run.settings, run.n_jobs, run.uncertainty, run.clusters
     names = (names,) if isinstance(names, str) else tuple(names)
     values = tuple(sorted(float(v) for v in values))
     obj = _Objective(robot, data, model, names, fixed, settings, n_jobs)
@@ -438,9 +447,9 @@ def refit_contact_baseline(setup: DiscrepancySetup, split: DataSplit, baseline, 
     def fit_one(k, n_jobs):
         base = baseline.cv.fold_fit(k)
         fit_data, units = fit_rows(setup, split, k, options.max_contact_samples)
-        return calibrate(setup.robot, fit_data, "clearance", base.names, fixed=base.fixed, initial=base.values,
-                         settings=setup.settings, n_jobs=n_jobs, max_evaluations=options.max_contact_evaluations,
-                         uncertainty=False, warm=True, prior=baseline.prior, clusters=units)
+        return calibrate(setup.robot, fit_data, "clearance", base.names, fixed=base.fixed, prior=baseline.prior,
+                         start=FitStart(base.values, warm=True), max_evaluations=options.max_contact_evaluations,
+                         run=FitRun(settings=setup.settings, n_jobs=n_jobs, uncertainty=False, clusters=units))
 
     cv = cross_validate(setup, split, options, "contact-baseline", "clearance", fit_one, evaluate=False)
     logger.log(progress_level(), f"  clearance-model tube parameters: cost {cv.fit.cost:.4g}, {cv.fit.evaluations} "
@@ -491,24 +500,30 @@ class FitContext:
     contact: dict | None
     after: dict | None
 
-    def calibrate(self, model: str, names, **keywords) -> CalibrationResult:
+    def run(self, uncertainty: bool, clusters=None) -> FitRun:
+        """The fit's :class:`~ctrplan.discrepancy.fits.calibrate.FitRun`: the setup's solver
+        settings and ``n_jobs``, with ``uncertainty`` and ``clusters``."""
+        return FitRun(settings=self.setup.settings, n_jobs=self.n_jobs, uncertainty=uncertainty, clusters=clusters)
+
+    def calibrate(self, model: str, names, *, fixed=None, prior=None, initial=None, warm: bool = False,
+                  max_evaluations: int = 40, uncertainty: bool = True, clusters=None) -> CalibrationResult:
         """:func:`~ctrplan.discrepancy.fits.calibrate.calibrate` of the robot on the fit's samples with
-        the setup's solver settings and ``n_jobs``; other arguments as there."""
-        return calibrate(self.setup.robot, self.fit_data, model, names, settings=self.setup.settings,
-                         n_jobs=self.n_jobs, **keywords)
+        the setup's solver settings and ``n_jobs``, started from ``initial`` (warm: stage 1 skipped);
+        other arguments as there (a strategy calls it without importing the workflow's types)."""
+        return calibrate(self.setup.robot, self.fit_data, model, names, fixed=fixed, prior=prior,
+                         start=FitStart(initial, warm=warm), max_evaluations=max_evaluations,
+                         run=self.run(uncertainty, clusters))
 
     def scan(self, model: str, fixed, names, values, uncertainty: bool, clusters=None) -> CalibrationResult:
         """:func:`scan_fit` of ``names`` over ``values`` on the fit's samples."""
-        return scan_fit(self.setup.robot, self.fit_data, model, fixed, names, values, self.setup.settings,
-                        self.n_jobs, uncertainty=uncertainty, clusters=clusters)
+        return scan_fit(self.setup.robot, self.fit_data, model, fixed, names, values,
+                        run=self.run(uncertainty, clusters))
 
     def grid(self, fixed, names, model: str, uncertainty: bool, clusters=None) -> CalibrationResult:
         """:func:`~ctrplan.discrepancy.fits.gridsearch.grid_search` of ``names`` on the fit's samples
         with the options' grid, search samples and seed."""
-        o = self.options
-        return grid_search(self.setup.robot, self.fit_data, fixed, names, model, settings=self.setup.settings,
-                           n_jobs=self.n_jobs, coarse=o.friction_grid, search_samples=o.friction_search_samples,
-                           seed=o.seed, uncertainty=uncertainty, clusters=clusters)
+        return grid_search(self.setup.robot, self.fit_data, fixed, names, model, grid=grid_spec(self.options),
+                           run=self.run(uncertainty, clusters))
 
     def refine_contact(self, start: CalibrationResult, names: tuple) -> CalibrationResult:
         """A contact-model candidate's parameters ``names``, started from its grid or scan
@@ -525,9 +540,9 @@ class FitContext:
         fitted = tuple(base.names) + tuple(n for n in names if n not in base.names)
         fixed = {n: v for n, v in values.items() if n not in fitted}
         init = [values[n] if n in values else read_parameters(self.setup.robot, (n,))[0] for n in fitted]
-        fit = self.calibrate(start.model, fitted, fixed=fixed, initial=init,
+        fit = self.calibrate(start.model, fitted, fixed=fixed, prior=self.prior, initial=init, warm=True,
                              max_evaluations=self.options.max_contact_evaluations, uncertainty=self.k is None,
-                             warm=True, prior=self.prior, clusters=self.units)
+                             clusters=self.units)
         return replace(fit, message=f"{start.message}; then refitted with the baseline's parameters: {fit.message}",
                        seconds=start.seconds + fit.seconds, evaluations=start.evaluations + fit.evaluations,
                        at_bound=tuple(sorted(set(fit.at_bound) | set(start.at_bound))),

@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
-from ...mechanics import ModelSettings
 from ...models import check_model
 from .calibrate import CalibrationResult, _Objective, _uncertainty
+from .fitoptions import FitRun, GridSpec
 from ..measured.data import MeasuredData
 from .parameters import parameter
 from .predictions import FAILED_RESIDUAL
@@ -27,20 +27,18 @@ from .predictions import FAILED_RESIDUAL
 __all__ = ["grid_search", "grid_search_friction"]
 
 
-def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
-                settings: ModelSettings | None = None, n_jobs: int = 1, coarse=(0.0, 0.1, 0.2, 0.3, 0.4),
-                refinements: int = 2, search_samples: int = 96, seed: int = 0, progress=None, start=None,
-                uncertainty: bool = True, clusters=None) -> CalibrationResult:
+def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *, grid: GridSpec = GridSpec(),
+                start=None, progress=None, run: FitRun = FitRun()) -> CalibrationResult:
     """Parameters by grid search, other parameters ``fixed``: the paper's calibration of the
     friction coefficients (Section V-C: "calibrated during a second pass using a 2-D grid search
     to avoid local minima").
 
-    The coarse grid (``coarse`` per parameter) is scored on at most ``search_samples``
+    The coarse grid (``grid.coarse`` per parameter) is scored on at most ``grid.search_samples``
     calibration samples made of whole configuration groups; while its best point lies on the
     upper edge of a parameter's axis, that axis grows by a step that doubles each time, up to the
     parameter's limit (``ParameterSpec.hard``), and the new points are scored with every value of
     the other axes. Then rounds of a 3^m grid with half the previous step around the best point
-    are scored on the whole calibration set: ``refinements`` rounds below the coarse step, and
+    are scored on the whole calibration set: ``grid.refinements`` rounds below the coarse step, and
     one more for every doubling of the grid's spacing at the best point.
 
     Parameters
@@ -53,23 +51,16 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
     names : sequence of str
         The m gridded parameters (e.g. ``mu_1``, ``mu_2``).
     model : {"standard", "clearance", "friction"}
-    settings : ModelSettings, optional
-    n_jobs : int
-    coarse : sequence of float
-        Coarse grid values of every parameter, increasing, >= their lower bound.
-    refinements : int
-    search_samples : int
-    seed : int
-        Choice of the coarse-search subset.
-    progress : callable, optional
-        ``progress(done, total)`` after each grid point.
+    grid : GridSpec
+        The coarse grid, the refinements, the coarse search's samples and seed.
     start : array-like, shape (m,), optional
         A point found before: the coarse grid is skipped and the refinements start there.
-    uncertainty : bool
-        Standard errors and correlations at the best point (from one Jacobian of Eq. (49)).
-    clusters : array-like, shape (K,), optional
-        Unit of each sample: standard errors clustered over units
-        (:func:`~ctrplan.discrepancy.fits.calibrate.covariance`).
+    progress : callable, optional
+        ``progress(done, total)`` after each grid point.
+    run : FitRun
+        Solver settings, worker processes, and the standard errors and correlations at the best
+        point (from one Jacobian of Eq. (49); ``run.uncertainty``), clustered over
+        ``run.clusters`` (:func:`~ctrplan.discrepancy.fits.calibrate.covariance`).
 
     Returns
     -------
@@ -85,6 +76,8 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *,
     """
     t0 = time.perf_counter()
     check_model(model)
+    coarse, refinements, search_samples, seed = grid.coarse, grid.refinements, grid.search_samples, grid.seed
+    settings, n_jobs, uncertainty, clusters = run.settings, run.n_jobs, run.uncertainty, run.clusters
     names = tuple(names)
     m = len(names)
     specs = [parameter(robot, n) for n in names]

@@ -16,8 +16,10 @@ from ...choices import FitNoteKind, NotPairedReason
 from ...effects import REGISTRY
 from ...models import MODEL_INFO
 from .calibrate import CalibrationResult, calibrate
+from .fitoptions import FitRun, FitStart
 from .estimates import display_value
-from .fitting import Candidate, combined_model, compare, contained, cross_validate, fit_rows, make_candidate, scan_fit
+from .fitting import (Candidate, combined_model, compare, contained, cross_validate, fit_rows, grid_spec, make_candidate,
+                      scan_fit)
 from .gridsearch import grid_search
 from ..options import DiscrepancyOptions
 from ..setup import DiscrepancySetup, effect_parameters, reported_parameters
@@ -81,6 +83,8 @@ def _fit_pair(ctx) -> CalibrationResult:
     setup, options, k, n_jobs = ctx["setup"], ctx["options"], ctx["k"], ctx["n_jobs"]
     robot, settings, fit_data, units = setup.robot, setup.settings, ctx["fit_data"], ctx["units"]
     first, second, model = ctx["first"], ctx["second"], ctx["model"]
+    quiet = FitRun(settings=settings, n_jobs=n_jobs, uncertainty=False)
+    final = FitRun(settings=settings, n_jobs=n_jobs, uncertainty=k is None, clusters=units)
     f1 = first.cv.fold_fit(k)
     p1 = dict(zip(*f1.all_parameters()))
     entry = REGISTRY[second.effects[0]]
@@ -89,41 +93,36 @@ def _fit_pair(ctx) -> CalibrationResult:
         own = second.cv.fold_params(k)
         start = np.array([own[n] for n in extra], float)
         if entry.scan is not None:
-            start = scan_fit(robot, fit_data, model, p1, extra, entry.scan, settings, n_jobs, uncertainty=False).values
-        alone = calibrate(robot, fit_data, model, extra, fixed=p1, initial=start, settings=settings, n_jobs=n_jobs,
-                          max_evaluations=options.max_evaluations, uncertainty=False)
+            start = scan_fit(robot, fit_data, model, p1, extra, entry.scan, run=quiet).values
+        alone = calibrate(robot, fit_data, model, extra, fixed=p1, start=FitStart(start),
+                          max_evaluations=options.max_evaluations, run=quiet)
         names = tuple(f1.names) + extra
         init = np.concatenate([f1.values, alone.values])
-        return calibrate(robot, fit_data, model, names, fixed=f1.fixed, initial=init, settings=settings, n_jobs=n_jobs,
-                         max_evaluations=options.max_evaluations, uncertainty=k is None, warm=True,
-                         prior=ctx["prior"], clusters=units)
+        return calibrate(robot, fit_data, model, names, fixed=f1.fixed, prior=ctx["prior"],
+                         start=FitStart(init, warm=True), max_evaluations=options.max_evaluations, run=final)
     budget = options.max_contact_evaluations
     # the baseline parameters the named fit fitted (the robot file's, held by a prior of strength 0, stay held)
     base_names = tuple(n for n in setup.base_names if n in f1.names)
     first_extra = tuple(n for n in f1.names if n not in base_names)
     held = {n: v for n, v in p1.items() if n not in base_names}
-    tube = calibrate(robot, fit_data, "clearance", base_names, fixed=held, initial=[p1[n] for n in base_names],
-                     settings=settings, n_jobs=n_jobs, max_evaluations=budget, uncertainty=False, warm=True,
-                     prior=ctx["prior"])
+    tube = calibrate(robot, fit_data, "clearance", base_names, fixed=held, prior=ctx["prior"],
+                     start=FitStart([p1[n] for n in base_names], warm=True), max_evaluations=budget, run=quiet)
     params = {**held, **dict(zip(base_names, tube.values))}
     if entry.fit.pair_grid:
-        g = grid_search(robot, fit_data, params, extra, model, settings=settings, n_jobs=n_jobs,
-                        coarse=options.friction_grid, search_samples=options.friction_search_samples, seed=options.seed,
-                        uncertainty=False)
+        g = grid_search(robot, fit_data, params, extra, model, grid=grid_spec(options), run=quiet)
         params.update(zip(extra, g.values))
     else:
         own = second.cv.fold_params(k)
         if extra:
-            alone = calibrate(robot, fit_data, model, extra, fixed=params, initial=[own[n] for n in extra],
-                              settings=settings, n_jobs=n_jobs, max_evaluations=budget, uncertainty=False, warm=True)
+            alone = calibrate(robot, fit_data, model, extra, fixed=params,
+                              start=FitStart([own[n] for n in extra], warm=True), max_evaluations=budget, run=quiet)
             params.update(zip(extra, alone.values))
     free = base_names + tuple(dict.fromkeys(n for n in (*first_extra, *extra) if n not in base_names))
     if not free:
-        return calibrate(robot, fit_data, model, (), fixed=params, settings=settings, n_jobs=n_jobs)
+        return calibrate(robot, fit_data, model, (), fixed=params, run=FitRun(settings=settings, n_jobs=n_jobs))
     fixed = {n: v for n, v in params.items() if n not in free}
-    return calibrate(robot, fit_data, model, free, fixed=fixed, initial=[params[n] for n in free], settings=settings,
-                     n_jobs=n_jobs, max_evaluations=budget, uncertainty=k is None, warm=True, prior=ctx["prior"],
-                     clusters=units)
+    return calibrate(robot, fit_data, model, free, fixed=fixed, prior=ctx["prior"],
+                     start=FitStart([params[n] for n in free], warm=True), max_evaluations=budget, run=final)
 
 
 def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, contact, naming, options: DiscrepancyOptions,
