@@ -279,7 +279,7 @@ def scan_fit(robot, data: MeasuredData, model: str, fixed: dict, names, values, 
     A best value at the scan's last value (or its first, where the effect does not vanish there)
     extends the scan by its own pattern, up to the parameters' limit; only a best value at that
     limit is "at bound" (not converged). ``run``: solver settings, worker processes, standard
-    errors and their clusters (:class:`~ctrplan.discrepancy.fits.calibrate.FitRun`)."""
+    errors and their clusters (:class:`~ctrplan.discrepancy.fits.fitoptions.FitRun`)."""
     t0 = time.perf_counter()
     settings, n_jobs, uncertainty, clusters = run.settings, run.n_jobs, run.uncertainty, run.clusters
     names = (names,) if isinstance(names, str) else tuple(names)
@@ -501,7 +501,7 @@ class FitContext:
     after: dict | None
 
     def run(self, uncertainty: bool, clusters=None) -> FitRun:
-        """The fit's :class:`~ctrplan.discrepancy.fits.calibrate.FitRun`: the setup's solver
+        """The fit's :class:`~ctrplan.discrepancy.fits.fitoptions.FitRun`: the setup's solver
         settings and ``n_jobs``, with ``uncertainty`` and ``clusters``."""
         return FitRun(settings=self.setup.settings, n_jobs=self.n_jobs, uncertainty=uncertainty, clusters=clusters)
 
