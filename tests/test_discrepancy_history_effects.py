@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import Noise, synthesize, write_synth
+from ctrplan.discrepancy import Noise, synthesize
 from ctrplan.discrepancy.verdict.envelope import hull_distance
 from ctrplan.discrepancy.fits.estimates import AtypicalValue
 from ctrplan.discrepancy.fits.parameters import ParameterError, apply_parameters, needs_solve, parameter, read_parameters

@@ -24,7 +24,6 @@ from ctrplan.discrepancy.verdict.signatures import friction_signature, regressio
 from ctrplan.discrepancy.measured.split import configurations_repeat, make_split, sample_units
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.history import MotionRecord
-from ctrplan.effects import EffectSet
 from ctrplan.errors import DataFileError
 from ctrplan.io.robot_file import load_robot, robot_to_toml
 from ctrplan.mechanics import ModelSettings
