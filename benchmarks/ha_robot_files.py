@@ -67,7 +67,7 @@ def evaluate_file(path: Path, data_path: Path, ds: float, n_jobs: int) -> dict:
     import numpy as np
 
     from ctrplan.discrepancy.fits.predictions import predict
-    from ctrplan.discrepancy.verdict.coverage import NOISE_MULTIPLE, bound_values, calibrate_bound
+    from ctrplan.discrepancy.verdict.coverage import NOISE_MULTIPLE, BoundSamples, bound_values, calibrate_bound
     from ctrplan.discrepancy.measured.data import load_measured_data
     from ctrplan.discrepancy.measured.noise import estimate_noise
     from ctrplan.io.robot_file import load_robot
@@ -92,8 +92,8 @@ def evaluate_file(path: Path, data_path: Path, ds: float, n_jobs: int) -> dict:
     calibration[:REGISTRATION_ROWS] = True
     noise = estimate_noise(data, rows=calibration)
     units = np.arange(k) // 50
-    cal = calibrate_bound(e_std_all[:REGISTRATION_ROWS], b[:REGISTRATION_ROWS], e_std, b[rest], units[rest],
-                          noise_rms=noise.position_rms_m or 0.0)
+    cal = calibrate_bound(BoundSamples(e_std_all[:REGISTRATION_ROWS], b[:REGISTRATION_ROWS]),
+                          BoundSamples(e_std, b[rest], units[rest]), noise_rms=noise.position_rms_m or 0.0)
     ok = np.isfinite(e_std) & np.isfinite(b[rest])
     return {"robot_file": f"model/{path.name}", "friction_coefficients": list(robot.friction_coefficients),
             "rows_registered": REGISTRATION_ROWS, "rows_evaluated": int(rest.size),

@@ -9,7 +9,7 @@ SHA-256 over canonical JSON (:func:`content_key`: sorted keys, values that are n
 - the options that change the result (and none that do not, such as the number of workers),
 - the version of the mechanics (:data:`ctrplan.constants.MECHANICS_VERSION`), so that a result of
   older mechanics is computed again rather than reused, and any other version or method that can
-  move the figures (the discrepancy fits' ``FIT_VERSION``; the noise estimate's method, which
+  move the figures (the discrepancy fits' ``FIT_VERSION`` and their code's digest; the noise estimate's method, which
   depends on the installed scipy).
 
 Every key is the full digest (64 hex digits); file names that show a key may show its first 12.

@@ -18,7 +18,7 @@ from scipy import stats
 from scipy.signal import lfilter
 
 from ctrplan.discrepancy.verdict import coverage
-from ctrplan.discrepancy.verdict.coverage import Coverage, calibrate_bound, conformal_factor, coverage_figures
+from ctrplan.discrepancy.verdict.coverage import BoundSamples, Coverage, calibrate_bound, conformal_factor, coverage_figures
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.io.robot_file import load_robot, load_robot_calibration, robot_to_toml
 from ctrplan.pipeline import AimReason, aim_decision
@@ -115,13 +115,13 @@ def test_the_factor_spread_holds_the_coverage_the_factor_attains():
 
 
 # --------------------------------------------------------------------------- status of the calibrated bound
-def _calibrated(test_covered, units, **kw):
+def _calibrated(test_covered, units, cal_units=None, **kw):
     """:func:`calibrate_bound` with factor 0.9 (calibration scores 0.01..0.99) and unit bounds, the
     test samples covered where ``test_covered`` (errors 0.5 or 0.95 [m] against a bound of 0.9 m)."""
     cal_e = np.linspace(0.01, 0.99, 99)
     covered = np.asarray(test_covered, bool)
-    return calibrate_bound(cal_e, np.ones(99), np.where(covered, 0.5, 0.95), np.ones(covered.size), units,
-                           noise_rms=0.0, **kw)
+    return calibrate_bound(BoundSamples(cal_e, np.ones(99), cal_units),
+                           BoundSamples(np.where(covered, 0.5, 0.95), np.ones(covered.size), units), noise_rms=0.0, **kw)
 
 
 def test_a_coverage_at_its_target_whose_interval_reaches_far_below_it_is_not_shown():
@@ -174,8 +174,8 @@ def test_a_test_split_of_too_few_units_is_not_shown(units):
         cal = _calibrated(covered, units)
         assert cal.test.ci == (None, None) and cal.test.n_units == units.max() + 1
         assert cal.status == "not shown" and not cal.failing and not cal.conservative
-    none = calibrate_bound(np.linspace(0.01, 0.99, 99), np.ones(99), np.full(10, np.nan), np.ones(10),
-                           np.arange(10), noise_rms=0.0)
+    none = calibrate_bound(BoundSamples(np.linspace(0.01, 0.99, 99), np.ones(99)),
+                           BoundSamples(np.full(10, np.nan), np.ones(10), np.arange(10)), noise_rms=0.0)
     assert none.test.covered is None and none.status == "not shown" and not none.failing
 
 
@@ -235,7 +235,7 @@ def test_coverage_is_frozen_and_its_dict_is_the_former_one():
     assert d["n"] == 120 and d["n_units"] == 12 and d["bound_median_m"] == float(np.median(b))
     empty = coverage_figures([np.nan], [1e-3], 0.0, [0])
     assert empty == Coverage(0, None, (None, None), 0, dict.fromkeys(("median", "p90", "p95", "max")), None, None)
-    cal = calibrate_bound(e[:60], b[:60], e[60:], b[60:], units[60:], noise_rms=0.5e-4)
+    cal = calibrate_bound(BoundSamples(e[:60], b[:60]), BoundSamples(e[60:], b[60:], units[60:]), noise_rms=0.5e-4)
     m = coverage.NOISE_MULTIPLE * 0.5e-4
     assert cal.test.bound_median_m == pytest.approx(float(np.median(cal.factor * (b[60:] + m))))
     assert cal.raw_test.bound_median_m == float(np.median(b[60:]))
@@ -348,3 +348,11 @@ def test_measurements_of_another_effect_refuse_the_prediction_and_widen_the_boun
     assert not decision.use_history and decision.why is AimReason.DOES_NOT_BEAT_STANDARD
     assert "does not beat" in aim_reason(decision)
     assert res["bound"]["factor"] > 1.0
+
+
+def test_test_samples_without_units_are_refused():
+    """The coverage interval is a cluster bootstrap over the test units: test samples without
+    them are a ValueError naming the field, not an interval over samples taken as independent."""
+    with pytest.raises(ValueError, match="units"):
+        calibrate_bound(BoundSamples(np.linspace(0.01, 0.99, 99), np.ones(99)),
+                        BoundSamples(np.full(10, 0.5), np.ones(10)), noise_rms=0.0)

@@ -254,12 +254,13 @@ def test_bound_dict_keeps_the_former_keys_and_adds_the_new_ones():
     of results.json, and a ``failing`` that disagrees with the status."""
     import numpy as np
 
-    from ctrplan.discrepancy.verdict.coverage import calibrate_bound
+    from ctrplan.discrepancy.verdict.coverage import BoundSamples, calibrate_bound
 
     cal_e = np.linspace(0.01, 0.99, 99)
     for covered in (np.arange(200) % 10 < 9, np.arange(200) % 2 == 0, np.arange(200) % 10 < 7):
-        b = calibrate_bound(cal_e, np.ones(99), np.where(covered, 0.5, 0.95), np.ones(200),
-                            np.repeat(np.arange(20), 10), noise_rms=1e-4, cal_units=np.repeat(np.arange(33), 3))
+        b = calibrate_bound(BoundSamples(cal_e, np.ones(99), np.repeat(np.arange(33), 3)),
+                            BoundSamples(np.where(covered, 0.5, 0.95), np.ones(200), np.repeat(np.arange(20), 10)),
+                            noise_rms=1e-4)
         d = results_json.bound_dict(b)
         assert {"definition", "method", "target", "factor", "margin_mm", "noise_multiple", "noise_rms_mm",
                 "n_calibration", "test", "raw_test", "translation_last", "failing", "status"} <= set(d)

@@ -175,9 +175,9 @@ def test_stage_key_ignores_workers_and_tests_and_follows_fits_inputs_and_procedu
     """The key is unchanged by the workers, the permutations, the level, the stated noise, the
     envelope, the reference friction and the bound's samples and target; it changes with an
     option that changes a fit, with the effects tried, with either input file's bytes, with the
-    fitting procedure's version and with the mechanics version. Catches a key that sends every
-    rerun back to the start, or reuses stages fitted with other options, other data, an earlier
-    procedure or other mechanics."""
+    fitting procedure's version, with the mechanics version and with the digest of the code. Catches
+    a key that sends every rerun back to the start, or reuses stages fitted with other options,
+    other data, an earlier procedure, other mechanics or other code."""
     robot, data = tmp_path / "r.toml", tmp_path / "d.csv"
     robot.write_bytes(b"robot")
     data.write_bytes(b"data")
@@ -203,6 +203,10 @@ def test_stage_key_ignores_workers_and_tests_and_follows_fits_inputs_and_procedu
     from ctrplan import constants
 
     monkeypatch.setattr(constants, "MECHANICS_VERSION", f"{constants.MECHANICS_VERSION}-changed")
+    assert stages.stage_key(robot, data, base) != key
+    monkeypatch.setattr(constants, "MECHANICS_VERSION", constants.MECHANICS_VERSION.removesuffix("-changed"))
+    assert stages.stage_key(robot, data, base) == key
+    monkeypatch.setattr(stages, "source_digest", lambda: "0" * 64)
     assert stages.stage_key(robot, data, base) != key
 
 

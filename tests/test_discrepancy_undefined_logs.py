@@ -125,12 +125,14 @@ def test_a_bound_coverage_over_one_unit_logs_an_undefined_interval():
     cal_b = rng.uniform(1e-3, 3e-3, 40)
     cal_e = cal_b * rng.uniform(0.2, 1.2, 40)
     test_b = rng.uniform(1e-3, 3e-3, 10)
-    cal = coverage.calibrate_bound(cal_e, cal_b, test_b * 0.5, test_b, np.zeros(10, int), noise_rms=0.2e-3)
+    cal = coverage.calibrate_bound(coverage.BoundSamples(cal_e, cal_b),
+                                   coverage.BoundSamples(test_b * 0.5, test_b, np.zeros(10, int)), noise_rms=0.2e-3)
     assert cal.test.ci == (None, None) and cal.test.covered == 1.0
     line = coverage._bound_line((0.2,), cal)
     assert "covers 100 % (interval undefined, target 90 %" in line and "0..0 %" not in line and _no_nan(line)
 
-    none = coverage.calibrate_bound(cal_e, cal_b, np.full(10, NAN), test_b, np.zeros(10, int), noise_rms=0.2e-3)
+    none = coverage.calibrate_bound(coverage.BoundSamples(cal_e, cal_b),
+                                    coverage.BoundSamples(np.full(10, NAN), test_b, np.zeros(10, int)), noise_rms=0.2e-3)
     assert none.test.covered is None and none.raw_test.n == 0
     line = coverage._bound_line((0.2,), none)
     assert line.startswith("friction bound (mu = 0.2) on the test split: undefined of 0 measured tips")

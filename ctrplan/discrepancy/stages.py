@@ -14,6 +14,7 @@ from ..effects import REGISTRY
 from ..io.atomic import atomic_write_text
 from .measured.noise import CORRELATION_LENGTH_METHOD
 from .options import FIT_VERSION, DiscrepancyOptions
+from .provenance import source_digest
 
 __all__ = ["StageStore", "stage_key"]
 
@@ -82,8 +83,11 @@ def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
     permutations and level, the stated noise, the envelope, the reference friction, the bound's
     samples and target); :data:`~ctrplan.discrepancy.options.FIT_VERSION` and
     :data:`ctrplan.constants.MECHANICS_VERSION` enter it so that stages of an earlier fitting
-    procedure or of other mechanics are not reused, and so does the method the installed scipy
-    gives the noise estimate (:data:`~ctrplan.discrepancy.measured.noise.CORRELATION_LENGTH_METHOD`).
+    procedure or of other mechanics are not reused, and so do the digest of the code that can move
+    the figures (:func:`~ctrplan.discrepancy.provenance.source_digest`: a change of that code
+    that leaves ``FIT_VERSION`` as it was does not reuse stages of the earlier code) and the
+    method the installed scipy gives the noise estimate
+    (:data:`~ctrplan.discrepancy.measured.noise.CORRELATION_LENGTH_METHOD`).
 
     Parameters
     ----------
@@ -99,5 +103,5 @@ def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
     keyed = {f.name: getattr(options, f.name) for f in fields(options) if f.metadata.get("stage_key", True)}
     keyed["effects"] = sorted(options.effects if options.effects is not None else REGISTRY)
     return content_key({"robot_sha256": file_hash(robot_path), "data_sha256": file_hash(data_path), "options": keyed,
-                        "fit_version": FIT_VERSION, "mechanics_version": mechanics_version(),
+                        "fit_version": FIT_VERSION, "mechanics_version": mechanics_version(), "code_sha256": source_digest(),
                         "correlation_length_method": CORRELATION_LENGTH_METHOD})

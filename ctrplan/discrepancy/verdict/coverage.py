@@ -73,7 +73,7 @@ from ..outputs.logtext import figure, interval
 from ..options import BOOTSTRAP_RESAMPLES, CONFIDENCE, ENVELOPE_NOISE_FACTOR
 from .statistics import unit_sums
 
-__all__ = ["NOISE_MULTIPLE", "DEFAULT_TARGET", "COVERAGE_TOLERANCE", "MIN_UNITS", "COVERAGE_STATUSES",
+__all__ = ["BoundSamples", "NOISE_MULTIPLE", "DEFAULT_TARGET", "COVERAGE_TOLERANCE", "MIN_UNITS", "COVERAGE_STATUSES",
            "INTERVAL_METHOD", "BoundValues", "bound_values", "Coverage", "coverage_figures", "coverage_status",
            "conformal_factor", "FactorSpread", "factor_spread", "BoundCalibration", "calibrate_bound",
            "BOUND_DEFINITION"]
@@ -575,35 +575,56 @@ class BoundCalibration:
         return {k: v for k, v in table.items() if not (isinstance(v, float) and not np.isfinite(v))}
 
 
-def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *, noise_rms: float,
-                    target: float = DEFAULT_TARGET, test_translation_last=None, test_released=None,
-                    cal_units=None, seed: int = 0) -> BoundCalibration:
+@dataclass(frozen=True, eq=False)
+class BoundSamples:
+    """Measured tips' errors and the bound at them: one set of samples of :func:`calibrate_bound`.
+
+    Attributes
+    ----------
+    error : array-like, shape (n,)
+        Distance of each measured tip from the model's tip [m] (NaN where undefined, e.g. where
+        the bound did not solve).
+    bound : array-like, shape (n,)
+        The friction bound at each sample [m].
+    units : array-like, shape (n,), optional
+        The unit (time block) of each sample: the clusters of the bootstrap intervals. Required
+        for the test samples; for the calibration samples it adds the factor's spread.
+    translation_last : array-like, shape (n,), optional
+        The translation-last bound at each sample [m].
+    released : array-like of bool, shape (n,), optional
+        Samples after a final translation of every pair (where ``translation_last`` applies).
+    """
+
+    error: object
+    bound: object
+    units: object = None
+    translation_last: object = None
+    released: object = None
+
+
+def calibrate_bound(calibration: BoundSamples, test: BoundSamples, *, noise_rms: float,
+                    target: float = DEFAULT_TARGET, seed: int = 0) -> BoundCalibration:
     """Calibrate the bound on calibration samples and check it on test samples.
 
     The factor is :func:`conformal_factor`; its guarantee assumes exchangeable scores, which
     serially correlated out-of-fold errors are not, so the coverage is checked on the test split
     with a cluster-bootstrap interval over its units (:func:`coverage_figures`) and judged by
-    :func:`coverage_status` (with ``cal_units``, :func:`factor_spread` shows the factor's spread
-    as well).
+    :func:`coverage_status` (with the calibration samples' units, :func:`factor_spread` shows the
+    factor's spread as well).
 
     Parameters
     ----------
-    cal_error, cal_bound : array-like, shape (n,)
-        Errors and bounds of calibration samples [m] (out-of-fold errors: the model did not see
-        them).
-    test_error, test_bound : array-like, shape (K,)
-        Of the test samples [m].
-    test_units : array-like, shape (K,)
+    calibration : BoundSamples
+        Shape (n,): out-of-fold errors (the model did not see them) and bounds [m]; ``units``
+        optional, ``translation_last`` and ``released`` unused.
+    test : BoundSamples
+        Shape (K,): errors, bounds [m] and ``units`` of the test samples; with
+        ``translation_last`` and ``released``, the translation-last bound's coverage on the
+        released samples too.
     noise_rms : float
         Sensor rms position noise [m] (0 if unknown).
     target : float
         In (0, 1).
-    test_translation_last : array-like, shape (K,), optional
-        Translation-last bound at the test samples [m].
-    test_released : array-like of bool, shape (K,), optional
-        Test samples after a final translation of every pair.
-    cal_units : array-like, shape (n,), optional
-        Units of the calibration samples.
     seed : int
         Seed of the bootstrap resampling.
 
@@ -614,8 +635,13 @@ def calibrate_bound(cal_error, cal_bound, test_error, test_bound, test_units, *,
     Raises
     ------
     ValueError
-        ``target`` outside (0, 1).
+        ``target`` outside (0, 1); ``test.units`` missing.
     """
+    if test.units is None:
+        raise ValueError("calibrate_bound: the test samples need their units (BoundSamples.units)")
+    cal_error, cal_bound, cal_units = calibration.error, calibration.bound, calibration.units
+    test_error, test_bound, test_units = test.error, test.bound, test.units
+    test_translation_last, test_released = test.translation_last, test.released
     margin = NOISE_MULTIPLE * float(noise_rms)
     factor = conformal_factor(cal_error, cal_bound, margin, target)
     n_cal = int(np.sum(np.isfinite(np.asarray(cal_error, float)) & np.isfinite(np.asarray(cal_bound, float))))
@@ -726,11 +752,10 @@ def check_bound(setup, split, final, test_errors, final_params: dict, noise, opt
     test_e = test_errors.position[np.searchsorted(test_errors.rows, test_rows)]
     released = np.all(setup.data.translation_last[test_rows], axis=1)
     sigma = noise.rms or 0.0
-    cal = calibrate_bound(np.where(cal_b.ok, cal_e, np.nan), cal_b.position,
-                          np.where(test_b.ok, test_e, np.nan), test_b.position, split.units[test_rows],
-                          noise_rms=sigma, target=options.bound_target,
-                          test_translation_last=test_b.translation_last, test_released=released,
-                          cal_units=split.units[cal_rows], seed=options.seed)
+    cal = calibrate_bound(BoundSamples(np.where(cal_b.ok, cal_e, np.nan), cal_b.position, split.units[cal_rows]),
+                          BoundSamples(np.where(test_b.ok, test_e, np.nan), test_b.position, split.units[test_rows],
+                                       test_b.translation_last, released),
+                          noise_rms=sigma, target=options.bound_target, seed=options.seed)
     logger.log(progress_level(), _bound_line(robot.friction_coefficients, cal))
     return cal
 
