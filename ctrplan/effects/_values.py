@@ -290,7 +290,7 @@ def effects_from_file(robot, table: Mapping, file: str) -> tuple:
     for name, params in table.items():
         where = f"effects.{name}"
         if name not in REGISTRY:
-            raise ModelFileError(file, where, f"unknown effect; known: "
+            raise ModelFileError(file, where, "unknown effect; known: "
                                  + ", ".join(n for n, e in REGISTRY.items() if e.store == EffectStore.EFFECTS))
         effect = get(name)
         if effect.store != EffectStore.EFFECTS:

@@ -17,15 +17,15 @@ __all__ = ["UNDEFINED", "defined", "figure", "interval"]
 UNDEFINED = "undefined"
 
 
-def defined(x) -> float | None:
-    """``x`` as a finite float, or None where it is None, NaN, infinite or no number."""
+def defined(x, finite: bool = True) -> float | None:
+    """``x`` as a float, or None where it is None, NaN, no number, or (with ``finite``) infinite."""
     if x is None or isinstance(x, (bool, str)):
         return None
     try:
         v = float(x)
     except (TypeError, ValueError):
         return None
-    return v if math.isfinite(v) else None
+    return None if math.isnan(v) or (finite and math.isinf(v)) else v
 
 
 def figure(x, spec: str, scale: float = 1.0, unit: str = "") -> str:

@@ -523,4 +523,4 @@ def log_verdict(naming: Naming, noise: NoiseCheck) -> None:
     stored = {"decision": naming.decision.as_dict(), "noise": noise_dict(noise),
               "candidates": {e: candidate_dict(c) for e, c in naming.candidates.items()}}
     for level, line in verdict_lines(stored):
-        logger.log(logging.WARNING if level == "warning" else progress_level(), line)
+        logger.log(level if level >= logging.WARNING else progress_level(), line)

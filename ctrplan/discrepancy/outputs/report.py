@@ -27,7 +27,7 @@ from ...io.atomic import atomic_write_text
 from ...io.ros2 import describe_bag_summary
 from ..verdict.coverage import COVERAGE_TOLERANCE, MIN_UNITS
 from ..fits.estimates import display_value
-from .logtext import UNDEFINED  # how the report prints a figure the data leave undefined (null or NaN)
+from .logtext import UNDEFINED, defined  # how the report prints a figure the data leave undefined (null or NaN)
 from ..options import CONFIDENCE
 from .results import json_default, results_dict
 from . import words
@@ -46,14 +46,8 @@ REWRITE_COMMAND = "ctrplan discrepancy-report {out}"
 
 
 def _number(x) -> float | None:
-    """``x`` as a float, or None where it is no number or NaN (an undefined figure)."""
-    if x is None or isinstance(x, (bool, str)):
-        return None
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return None
-    return None if math.isnan(v) else v
+    """``x`` as a float (infinities kept), or None where it is no number or NaN (an undefined figure)."""
+    return defined(x, finite=False)
 
 
 def _undefined(reason: str | None = None) -> str:

@@ -10,12 +10,14 @@ sentence (in a ``results.json`` from an earlier ctrplan, which stored words) is 
 
 from __future__ import annotations
 
+import logging
 from typing import Mapping
 
 import numpy as np
 
 from ...choices import CautionKind, DecisionNoteKind, FitNoteKind, NoEffectCase, NotNamedReason, NotPairedReason
 from ..fits.estimates import display_value
+from .logtext import figure
 
 __all__ = ["labels_of", "why_not", "rule", "note", "separated_by", "caution", "range_text", "no_effect",
            "verdict_lines",
@@ -61,11 +63,11 @@ def why_not(reasons, rule_levels: Mapping, labels: Mapping) -> str:
             continue
         kind = NotNamedReason(r["reason"])
         if kind == NotNamedReason.NOT_SIGNIFICANT:
-            out.append(f"its improvement over the baseline is not significant (p = {_g(r.get('p_value'), '.3g')}, "
+            out.append(f"its improvement over the baseline is not significant (p = {figure(r.get('p_value'), '.3g')}, "
                        f"Holm over {rule_levels['n_candidates']} candidates at {rule_levels['significance']})")
         elif kind == NotNamedReason.OUTPERFORMED:
             out.append("its out-of-fold error is significantly higher than "
-                       + ", ".join(f"{_label(labels, d)}'s (p = {_g(p, '.2g')})"
+                       + ", ".join(f"{_label(labels, d)}'s (p = {figure(p, '.2g')})"
                                    for d, p in r["outperformed_by"].items()))
         else:
             out.append("at its limit, not converged: " + "; ".join(r["limits"]))
@@ -121,12 +123,12 @@ def note(entry: Mapping, decision: Mapping, labels: Mapping) -> str:
         return f"the lowest out-of-fold error is {first}'s, which cannot be named: {reasons}"
     if kind == DecisionNoteKind.SIMPLER_NAMED:
         return (f"{first} contains {other} and does not improve on it significantly (out-of-fold Eq. (49) error "
-                f"lower by {_g(cmp.get('reduction'), '.0f', 100)} %, p = {_g(cmp.get('p_value'), '.2g')}): "
+                f"lower by {figure(cmp.get('reduction'), '.0f', 100)} %, p = {figure(cmp.get('p_value'), '.2g')}): "
                 f"the simpler {other} is named")
     lo, hi = cmp.get("reduction_ci") or (None, None)
     return (f"ambiguous: {first} and {other} explain the data equally well within their uncertainty (out-of-fold "
-            f"Eq. (49) error of the first lower by {_g(cmp.get('reduction'), '.0f', 100)} %, {_g(lo, '.0f', 100)}.."
-            f"{_g(hi, '.0f', 100)} %, p = {_g(cmp.get('p_value'), '.2g')} over {cmp.get('n_folds')} folds); data that "
+            f"Eq. (49) error of the first lower by {figure(cmp.get('reduction'), '.0f', 100)} %, {figure(lo, '.0f', 100)}.."
+            f"{figure(hi, '.0f', 100)} %, p = {figure(cmp.get('p_value'), '.2g')} over {cmp.get('n_folds')} folds); data that "
             f"would separate them: {separated_by(decision, labels)}")
 
 
@@ -154,8 +156,8 @@ def caution(entry: Mapping) -> str:
         return (f"{entry['label']}: {display_value(b['name'], b['value'], b['unit'])}, {side} than its typical "
                 f"{range_text(b['typical'], b['unit'])} ({b['why']}){check}")
     if kind == CautionKind.MAXIMUM_RISES:
-        return (f"the test split's maximum tip error rises from {_g(entry['before_m'], '.2f', 1e3)} to "
-                f"{_g(entry['after_m'], '.2f', 1e3)} mm while the mean falls: the added effect makes some samples "
+        return (f"the test split's maximum tip error rises from {figure(entry['before_m'], '.2f', 1e3)} to "
+                f"{figure(entry['after_m'], '.2f', 1e3)} mm while the mean falls: the added effect makes some samples "
                 f"worse")
     r = entry["parameter"]
     change = "" if r.get("relative_change") is None else f", {100 * r['relative_change']:+.0f} % from the robot file"
@@ -185,20 +187,20 @@ def no_effect(decision: Mapping, noise: Mapping, candidates: Mapping) -> str:
     case = NoEffectCase(decision.get("no_effect_case") or NoEffectCase.UNKNOWN)
     description = (noise.get("noise") or {}).get("description")
     test = noise.get("test") or {}
-    rms = _g(noise.get("rms_mm"), ".3f")
+    rms = figure(noise.get("rms_mm"), ".3f")
     best = decision.get("best")
     best_text = ""
     if best and best in (candidates or {}):
         mean = ((candidates[best].get("out_of_fold") or {}).get("position_mean_mm"))
         reasons = (decision.get("why_not") or {}).get(best)
-        best_text = (f"; the best explanation is {_label(labels, best)} (out-of-fold mean {_g(mean, '.3f')} mm), "
+        best_text = (f"; the best explanation is {_label(labels, best)} (out-of-fold mean {figure(mean, '.3f')} mm), "
                      f"not named: " + (why_not(reasons, decision["rule"], labels) if reasons else NOT_SIGNIFICANT_TEXT))
-    stat, threshold, alpha = _g(test.get("statistic"), ".3g"), _g(test.get("threshold"), ".3g"), test.get(
+    stat, threshold, alpha = figure(test.get("statistic"), ".3g"), figure(test.get("threshold"), ".3g"), test.get(
         "false_alarm_rate")
     if case == NoEffectCase.NOISE:
         return (f"no candidate is eligible, and the out-of-fold residual of the calibrated baseline (rms {rms} mm) is "
                 f"consistent with the sensor noise ({description}; F = {stat} <= {threshold}, false-alarm rate "
-                f"{_g(alpha, 'g')})" + best_text)
+                f"{figure(alpha, 'g')})" + best_text)
     if case == NoEffectCase.INCONCLUSIVE:
         return (f"no candidate is eligible; the out-of-fold residual of the calibrated baseline (rms {rms} "
                 f"mm) exceeds the sensor noise (F = {stat} > {threshold}), but that noise is only a lower bound "
@@ -206,10 +208,10 @@ def no_effect(decision: Mapping, noise: Mapping, candidates: Mapping) -> str:
                 + best_text)
     if case == NoEffectCase.UNEXPLAINED:
         inflation = test.get("inflation")
-        added = _g(None if inflation is None else inflation - 1, ".0f", 100)
-        return (f"the out-of-fold residual of the calibrated baseline (rms {rms} mm, {_g(noise.get('ratio'), '.1f')} "
+        added = figure(None if inflation is None else inflation - 1, ".0f", 100)
+        return (f"the out-of-fold residual of the calibrated baseline (rms {rms} mm, {figure(noise.get('ratio'), '.1f')} "
                 f"times the sensor noise: {description}) is NOT consistent with noise (F = {stat} > {threshold} at "
-                f"false-alarm rate {_g(alpha, 'g')}, after allowing for the {added} % a fitted model adds): the model "
+                f"false-alarm rate {figure(alpha, 'g')}, after allowing for the {added} % a fitted model adds): the model "
                 f"misses something that no candidate explains" + best_text)
     return (f"no candidate is eligible; whether the out-of-fold residual (rms {rms} mm) is noise cannot be said: "
             f"the sensor noise is {description}" + best_text)
@@ -242,7 +244,7 @@ def not_paired(entry, first_label: str) -> str:
     if kind == NotPairedReason.ADDS_NO_PARAMETER:
         return f"it adds no parameter to {first_label}"
     return (f"alone it does not lower the baseline's out-of-fold error (mean difference "
-            f"{_g(entry.get('mean_difference'), '.3g')} mm + deg): counted in the family, not fitted")
+            f"{figure(entry.get('mean_difference'), '.3g')} mm + deg): counted in the family, not fitted")
 
 
 def fit_note(entry) -> str:
@@ -262,7 +264,7 @@ def fit_note(entry) -> str:
         return f"at its limit, not converged: {'; '.join(entry['limits'])}"
     if kind == FitNoteKind.PAIR_NOT_CONVERGED:
         return "a fit did not converge or sits at its limit"
-    cost = f"cost {_g(entry['cost'], '.4g')} against {_g(entry['baseline_cost'], '.4g')}"
+    cost = f"cost {figure(entry['cost'], '.4g')} against {figure(entry['baseline_cost'], '.4g')}"
     if kind == FitNoteKind.WORSE_THAN_CONTAINED_BASELINE:
         return (f"it fits the calibration data worse than the baseline ({cost}) although it contains the baseline: "
                 f"the fit failed")
@@ -270,7 +272,7 @@ def fit_note(entry) -> str:
         return (f"it fits the calibration data worse than the standard baseline ({cost}): the {entry['model']} model "
                 f"with the shared refitted tube parameters does not reach the standard model's fit")
     return (f"it fits the calibration data better ({cost}) but the held-out folds worse (mean "
-            f"{_g(entry['mean_m'], '.3f', 1e3)} against {_g(entry['baseline_mean_m'], '.3f', 1e3)} mm): its parameters "
+            f"{figure(entry['mean_m'], '.3f', 1e3)} against {figure(entry['baseline_mean_m'], '.3f', 1e3)} mm): its parameters "
             f"absorb a pattern of the calibration samples that does not hold elsewhere (overfitting)")
 
 
@@ -280,22 +282,18 @@ def verdict_lines(results: Mapping) -> list:
 
     Returns
     -------
-    list of (level, str)
-        ``"info"`` or ``"warning"`` with each line.
+    list of (int, str)
+        Each line with its logging level: ``logging.WARNING`` for a caution, ``logging.INFO``
+        for the rest.
     """
     d = results["decision"]
     labels = labels_of(results.get("candidates"))
     if d["verdict"] == "none":
-        lines = [("info", "no effect named: " + no_effect(d, results.get("noise") or {}, results.get("candidates")))]
+        lines = [(logging.INFO, "no effect named: " + no_effect(d, results.get("noise") or {}, results.get("candidates")))]
     else:
-        lines = [("info", f"{'ambiguous' if d['verdict'] == 'ambiguous' else 'named effect'}: "
+        lines = [(logging.INFO, f"{'ambiguous' if d['verdict'] == 'ambiguous' else 'named effect'}: "
                           f"{_label(labels, d['named'])}"
                   + (f" or {_label(labels, d['ambiguous_with'])}" if d.get("ambiguous_with") else ""))]
-        lines += [("warning", f"  caution: {caution(c)}") for c in d.get("cautions") or ()]
-    lines += [("info", f"  {note(n, d, labels)}") for n in d.get("notes") or ()]
+        lines += [(logging.WARNING, f"  caution: {caution(c)}") for c in d.get("cautions") or ()]
+    lines += [(logging.INFO, f"  {note(n, d, labels)}") for n in d.get("notes") or ()]
     return lines
-
-
-def _g(x, spec: str, scale: float = 1.0) -> str:
-    """``x * scale`` formatted by ``spec``; ``nan`` for None (a non-finite figure stored as null)."""
-    return f"{float('nan') if x is None else x * scale:{spec}}"
