@@ -70,6 +70,7 @@ def evaluate_file(path: Path, data_path: Path, ds: float, n_jobs: int) -> dict:
     from ctrplan.discrepancy.verdict.coverage import NOISE_MULTIPLE, BoundSamples, bound_values, calibrate_bound
     from ctrplan.discrepancy.measured.data import load_measured_data
     from ctrplan.discrepancy.measured.noise import estimate_noise
+    from ctrplan.discrepancy.outputs.words import noise_text
     from ctrplan.io.robot_file import load_robot
     from ctrplan.mechanics import ModelSettings
 
@@ -102,7 +103,7 @@ def evaluate_file(path: Path, data_path: Path, ds: float, n_jobs: int) -> dict:
             "bound_failed": int(np.sum(~bounds.ok[rest])),
             "within_bound_plus_0_6_mm": float(np.mean(e_std[ok] <= b[rest][ok] + ORIGINAL_MARGIN)),
             "median_error_over_bound": float(np.median(e_std[ok] / b[rest][ok])),
-            "noise": noise.description, "noise_multiple": NOISE_MULTIPLE,
+            "noise": noise_text(noise.as_dict()), "noise_multiple": NOISE_MULTIPLE,
             "calibrated_bound": {"factor": cal.factor, "margin_mm": cal.margin_m * 1e3, "status": cal.status,
                                  "test_coverage": cal.test.covered, "test_coverage_ci": list(cal.test.ci),
                                  "median_size_mm": cal.test.bound_median_m * 1e3,

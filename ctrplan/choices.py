@@ -16,7 +16,7 @@ from enum import StrEnum
 __all__ = ["JointKind", "MotionKind", "FinalMotion", "BoundKind", "AimWith", "MapPlacement", "FirstPlan",
            "MapSource", "BagStorage", "RosDistro", "TangentAxis", "DesignMode", "PoseFrame", "Verdict", "NoEffectCase",
            "SplitUnit", "EffectStore", "NotNamedReason", "DecisionNoteKind", "CautionKind",
-           "NotPairedReason", "FitNoteKind"]
+           "NotPairedReason", "FitNoteKind", "BufferReason", "BlocksKept"]
 
 
 class JointKind(StrEnum):
@@ -211,6 +211,24 @@ class NotPairedReason(StrEnum):
     ON_A_THIRD_EFFECT = "on a third effect"
     ADDS_NO_PARAMETER = "adds no parameter"
     NO_IMPROVEMENT_ALONE = "no improvement alone"
+
+
+class BufferReason(StrEnum):
+    """Why the discrepancy workflow's buffer has the length it has: configuration groups need
+    none, the residuals' autocorrelation falls to its threshold within half a block, or the buffer
+    is capped at half a block with the autocorrelation still above it."""
+
+    CONFIGURATION_GROUPS = "configuration groups"
+    AUTOCORRELATION_FALLS = "autocorrelation falls"
+    HALF_A_BLOCK = "half a block"
+
+
+class BlocksKept(StrEnum):
+    """Why the development blocks were not lengthened for a buffer capped at half a block: the
+    blocks were asked for, or longer ones would cut across test blocks or break a minimum."""
+
+    ASKED = "asked"
+    MINIMUMS = "minimums"
 
 
 class FitNoteKind(StrEnum):

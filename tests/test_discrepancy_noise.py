@@ -16,6 +16,7 @@ from scipy import signal, stats
 from ctrplan.discrepancy.measured.data import MeasuredData
 from ctrplan.discrepancy.verdict.consistency import NoiseTest, noise_test
 from ctrplan.discrepancy.measured.noise import NoiseEstimate, _median_constant, estimate_noise
+from ctrplan.discrepancy.outputs.words import noise_text
 from ctrplan.history import MotionRecord
 
 #: rms length of the simulated 3-D noise vector [m] (per component 0.5 / sqrt(3) mm).
@@ -194,18 +195,20 @@ def test_tracker_outliers_barely_move_the_estimate(phi):
 def test_rests_too_short_to_see_the_correlation_give_a_lower_bound_said_so():
     """Rests of only 2 samples (lag 1 alone) on AR(1) noise, and rests of 3-15 samples on noise
     correlated over 30 samples (phi 0.967): the correlation cannot be seen; the estimate is a
-    lower bound, its description says "at least", and it is never reported as the noise (a
+    lower bound, its sentence says "at least", and it is never reported as the noise (a
     lag-1 value silently taken for the noise is the bug this catches)."""
     rng = np.random.default_rng(77)
     config = _configurations(rng, 600, [2] * 60)
     tip = _noise(rng, config.size, PHI)
     est = estimate_noise(_data(tip, config))
     assert est.source == "rests" and est.lower_bound and not est.correlation_seen
-    assert est.description.startswith("at least") and "too few to see a correlation" in est.description
+    text = noise_text(est.as_dict())
+    assert text.startswith("at least") and "too few to see a correlation" in text
     assert est.position_rms_m < 0.8 * NOISE_RMS
     config = _trajectory(rng, 1300, 60)
     est = estimate_noise(_data(_noise(rng, config.size, np.exp(-1 / 30)), config))
-    assert est.lower_bound and est.description.startswith("at least") and "outlasts the rests" in est.description
+    text = noise_text(est.as_dict())
+    assert est.lower_bound and text.startswith("at least") and "outlasts the rests" in text
 
 
 def test_only_the_allowed_rows_and_only_true_rests_are_used():
@@ -246,7 +249,7 @@ def test_fallbacks_stated_repeated_configurations_unknown():
     assert est.source == "repeated configurations" and est.upper_bound
     assert est.position_rms_m == pytest.approx(NOISE_RMS, rel=0.2)
     est = estimate_noise(_data(tip, moving))
-    assert est.source is None and est.position_rms_m is None and est.description.startswith("unknown")
+    assert est.source is None and est.position_rms_m is None and noise_text(est.as_dict()).startswith("unknown")
     with pytest.raises(ValueError, match="must be known"):
         noise_test(tip, np.arange(k), np.zeros(k, int), est, n_parameters=1, n_fitted=10, alpha=0.01)
     with pytest.raises(ValueError, match="positive"):
@@ -264,7 +267,8 @@ def test_estimate_is_reproducible_and_json_ready():
     assert a.dof == b.dof and a.position_rms_m == b.position_rms_m
     out = json.loads(json.dumps(a.as_dict()))
     assert out["source"] == "rests" and len(out["lags"]) == len(out["semivariance_m2"]) == len(out["pair_counts"])
-    assert "mm rms" in out["description"]
+    assert "description" not in out and noise_text(out) == noise_text(a.as_dict())
+    assert noise_text(out).startswith(f"{a.position_rms_m * 1e3:.3f} mm rms from {a.n_runs} rests ({a.n_pairs} pairs")
 
 
 # --------------------------------------------------------------------------- the test
@@ -455,7 +459,7 @@ def test_rests_whose_first_samples_still_move_are_trimmed_and_pure_noise_is_not(
         tip[s] += 2.5e-3 * d                    # the sample the tube is still arriving at
         tip[s + 1] += 0.2e-3 * d
     est = estimate_noise(_data(tip, config))
-    assert est.settled_samples >= 1 and "left out" in est.description
+    assert est.settled_samples >= 1 and f"the first {est.settled_samples} sample" in noise_text(est.as_dict())
     assert est.position_rms_m == pytest.approx(NOISE_RMS, rel=0.15)
     trimmed = 0
     for seed in range(20):
@@ -463,3 +467,21 @@ def test_rests_whose_first_samples_still_move_are_trimmed_and_pure_noise_is_not(
         c = _trajectory(r, 600, 40)
         trimmed += estimate_noise(_data(_noise(r, 600, 0.0), c), n_simulations=20).settled_samples > 0
     assert trimmed <= 2, trimmed
+
+
+def test_the_noise_sentence_names_the_source_and_why_from_the_record():
+    """Estimates written by hand: a stated value says why the rests were not used (too few
+    pairs, or pairs without variation), repeated configurations give an upper bound with their
+    row count, and a results file of an earlier ctrplan, which stored the sentence, is printed as
+    stored. Catches a stated value reported without its reason, and the two reasons swapped."""
+    from ctrplan.discrepancy.options import MIN_REST_PAIRS
+
+    few = NoiseEstimate(position_rms_m=0.25e-3, source="stated", n_pairs=7, stated_m=0.25e-3).as_dict()
+    assert noise_text(few) == (f"0.250 mm rms as stated for the data (it has 7 pairs of consecutive samples at rest, "
+                               f"fewer than {MIN_REST_PAIRS})")
+    flat = NoiseEstimate(position_rms_m=0.25e-3, source="stated", n_pairs=400, stated_m=0.25e-3,
+                         no_variation=True).as_dict()
+    assert "400 pairs of consecutive samples at rest that show no variation" in noise_text(flat)
+    rep = NoiseEstimate(position_rms_m=0.5e-3, source="repeated configurations", n_pairs=90, upper_bound=True)
+    assert noise_text(rep.as_dict()).startswith("at most 0.500 mm rms: spread of 90 rows at repeated configurations")
+    assert noise_text({"description": "as stored", "source": "rests"}) == "as stored"

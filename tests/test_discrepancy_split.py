@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 from ctrplan.discrepancy.measured.data import MeasuredData
+from ctrplan.choices import BlocksKept, BufferReason
 from ctrplan.discrepancy.options import DiscrepancyOptions
+from ctrplan.discrepancy.outputs.words import buffer_text, split_text
 from ctrplan.discrepancy.measured.split import (BUFFER_AUTOCORRELATION, MIN_TEST_UNITS, MIN_UNITS_PER_FOLD, choose_blocks,
                                        choose_buffer, lengthen_blocks, make_split)
 from ctrplan.history import MotionRecord
@@ -100,8 +102,9 @@ def test_strong_serial_correlation_lengthens_the_blocks_until_the_buffer_reaches
     split = make_split(_data(), seed=0)
     r = _ar1(0.85, split.data.sequence, seed=1)
     dev = split.dev_rows
-    capped, why = choose_buffer(r[dev], split.data.take(dev), split.block_samples)
-    assert "half a block" in why and _dev_acf(split, r, capped + 1) > 0.3          # the old leak
+    capped = choose_buffer(r[dev], split.data.take(dev), split.block_samples)
+    assert capped.reason == BufferReason.HALF_A_BLOCK and _dev_acf(split, r, capped.samples + 1) > 0.3   # the old leak
+    capped = capped.samples
     out = lengthen_blocks(split, r[dev])
     assert out.block_samples > split.block_samples and out.buffer <= out.block_samples // 2
     assert out.buffer > capped
@@ -109,7 +112,10 @@ def test_strong_serial_correlation_lengthens_the_blocks_until_the_buffer_reaches
     assert measured <= BUFFER_AUTOCORRELATION + 0.02
     assert out.buffer_autocorrelation == pytest.approx(measured, abs=1e-9)
     assert out.buffer_autocorrelation <= BUFFER_AUTOCORRELATION
-    assert f"at least {out.block_samples} samples" in out.how and "lengthened" in out.buffer_note
+    assert out.rule.recut_block == out.block_samples and out.buffer_choice.lengthened_to == out.block_samples
+    assert out.buffer_choice.lengthened_from == split.block_samples
+    assert f"at least {out.block_samples} samples" in split_text(out.as_dict())
+    assert "lengthened" in buffer_text(out.as_dict())
     d = out.as_dict()
     assert d["block_samples"] == out.block_samples and d["buffer_samples"] == out.buffer
     assert d["buffer_autocorrelation"] == pytest.approx(out.buffer_autocorrelation)
@@ -127,7 +133,8 @@ def test_weak_serial_correlation_keeps_the_original_blocks_and_folds():
     np.testing.assert_array_equal(out.units, split.units)
     np.testing.assert_array_equal(out.fold, split.fold)
     assert out.block_samples == split.block_samples == 10 and out.n_folds == split.n_folds
-    assert (out.buffer, out.buffer_note) == choose_buffer(r[dev], split.data.take(dev), split.block_samples)
+    assert out.buffer_choice == choose_buffer(r[dev], split.data.take(dev), split.block_samples)
+    assert out.buffer == out.buffer_choice.samples and out.buffer_choice.lengthened_to is None
     assert _dev_acf(out, r, out.buffer + 1) <= BUFFER_AUTOCORRELATION + 0.03
 
 
@@ -172,11 +179,15 @@ def test_when_the_minimums_stop_the_lengthening_the_note_says_the_autocorrelatio
     assert min(fits) >= 20
     left = _dev_acf(out, r, out.buffer + 1)
     assert left > BUFFER_AUTOCORRELATION and out.buffer_autocorrelation == pytest.approx(left, abs=1e-9)
-    assert "half a block" in out.buffer_note and f"still {left:.2f} at lag {out.buffer + 1}" in out.buffer_note
+    assert out.buffer_choice.reason == BufferReason.HALF_A_BLOCK
+    assert out.buffer_choice.still == pytest.approx(left, abs=1e-9)
+    note = buffer_text(out.as_dict())
+    assert "half a block" in note and f"still {left:.2f} at lag {out.buffer + 1}" in note
     # a fit minimum out of reach: the blocks the test split was chosen with, as before
     kept = lengthen_blocks(split, r[split.dev_rows], min_fit_samples=10_000)
     np.testing.assert_array_equal(kept.units, split.units)
-    assert kept.buffer == split.block_samples // 2 and "still" in kept.buffer_note
+    assert kept.buffer == split.block_samples // 2 and kept.buffer_choice.kept == BlocksKept.MINIMUMS
+    assert kept.buffer_choice.min_fit_samples == 10_000 and "still" in buffer_text(kept.as_dict())
 
 
 def test_folds_asked_for_keep_their_units_per_fold_and_asked_blocks_stay():
@@ -191,11 +202,12 @@ def test_folds_asked_for_keep_their_units_per_fold_and_asked_blocks_stay():
     _assert_units_whole(out)
     _assert_buffers_hold(out)
     if out.buffer_autocorrelation > BUFFER_AUTOCORRELATION:
-        assert "still" in out.buffer_note
+        assert out.buffer_choice.reason == BufferReason.HALF_A_BLOCK and "still" in buffer_text(out.as_dict())
     asked = make_split(_data(), n_blocks=50, seed=0)
     same = lengthen_blocks(asked, r[asked.dev_rows], n_blocks=50)
     np.testing.assert_array_equal(same.fold, asked.fold)
-    assert same.buffer == 5 and "as asked" in same.buffer_note
+    assert same.buffer == 5 and same.buffer_choice.kept == BlocksKept.ASKED
+    assert "as asked" in buffer_text(same.as_dict())
 
 
 def test_arguments_that_change_the_test_split_or_residuals_of_other_rows_are_refused():
@@ -256,3 +268,37 @@ def test_every_fit_keeps_more_samples_than_a_pair_of_effects_has_parameters():
     setup = SimpleNamespace(robot=robot, data=data, effects=("offplane", "registration", "time_offset"),
                             base_names=base)
     assert _fit_minimum(setup) == 3 + 6 + 2
+
+
+def test_the_split_and_buffer_records_are_said_with_their_own_numbers():
+    """Records written by hand with distinct numbers: the sentences name each number where it
+    belongs and the reason's words, also after a round trip through JSON. Catches a sentence that
+    reads the wrong field (units for samples, the first block length for the re-cut one), and a
+    kind that loses its words when stored."""
+    import json
+
+    from ctrplan.choices import SplitUnit
+    from ctrplan.discrepancy.measured.split import BufferChoice, SplitRule
+
+    rule = SplitRule(n_units=37, unit_kind=SplitUnit.TIME_BLOCK, block_samples=13, blocks_asked=False,
+                     n_test_units=8, n_test_samples=104, test_fraction=0.2, test_at_minimum=True,
+                     n_development_units=11, n_development_samples=377, recut_block=41, n_folds=5,
+                     folds_asked=True, subset_ignored=True)
+    choice = BufferChoice(20, BufferReason.HALF_A_BLOCK, lag_one=0.97, still=0.456, lengthened_from=13,
+                          lengthened_to=41, min_units=4, min_fit_samples=1)
+    split = json.loads(json.dumps({"rule": rule.as_dict(), "buffer": choice.as_dict()}))
+    assert split_text(split) == (
+        "37 time blocks of 13 samples (50 at most, of at least 10 samples); test split: 8 units "
+        "(104 samples; at least 8 units, more than 20%) held back before any fit; development: 11 units (377 samples; "
+        "the stretches between test blocks re-cut into blocks of at least 41 samples, a shorter stretch whole) in 5 "
+        "cross-validation folds (GroupKFold; as asked) (the file's 'subset' column is not used for the split)")
+    assert buffer_text(split) == (
+        "20 samples (half a block, the most allowed): the residuals' autocorrelation is still 0.46 at lag 21 "
+        "(lag 1: 0.97); development blocks lengthened from 13 to at least 41 samples, the longest within the "
+        "stretches between test blocks that leave 4 development units and 1 calibration sample in every fit")
+    groups = {"rule": {**rule.as_dict(), "unit_kind": str(SplitUnit.CONFIGURATION_GROUP), "block_samples": None,
+                       "recut_block": None, "subset_ignored": False, "folds_asked": False, "test_at_minimum": False},
+              "buffer": BufferChoice(0, BufferReason.CONFIGURATION_GROUPS).as_dict()}
+    assert split_text(groups).startswith("37 configuration groups; test split: 8 units (104 samples; 20% of the units)")
+    assert split_text(groups).endswith("(GroupKFold; 10 at most, with at least 2 development units each)")
+    assert buffer_text(groups).startswith("no buffer: the units are configuration groups")

@@ -13,7 +13,8 @@ import pytest
 from scipy import signal, stats
 
 from ctrplan.discrepancy.measured.data import MeasuredData
-from ctrplan.discrepancy.measured.split import choose_buffer, make_split, near_rows, residual_autocorrelation
+from ctrplan.choices import BufferReason
+from ctrplan.discrepancy.measured.split import BufferChoice, choose_buffer, make_split, near_rows, residual_autocorrelation
 from ctrplan.discrepancy.verdict.statistics import (CORRECTED_METHOD, UNCORRECTED_METHOD, cv_comparison, holm, mean_interval,
                                             ratio_interval, shrink_interval)
 from ctrplan.errors import DataFileError
@@ -403,7 +404,7 @@ def test_buffer_keeps_fits_away_from_the_blocks_they_are_judged_on():
     """With a buffer of 3 samples, no calibration row of fold k lies within 3 samples of a row
     validated in fold k or of a test row, and every development row further away is kept.
     Catches buffers on one side only, across motions, or around the wrong blocks."""
-    s = make_split(_data(500), seed=3).with_buffer(3, "test")
+    s = make_split(_data(500), seed=3).with_buffer(BufferChoice(3, BufferReason.AUTOCORRELATION_FALLS))
     data = s.data
     idx = np.arange(500)
     for kf in range(s.n_folds):
@@ -432,11 +433,11 @@ def test_buffer_follows_the_residuals_autocorrelation(phi, expected):
         r[i] = phi * r[i - 1] + np.sqrt(1 - phi ** 2) * w[i]
     acf = residual_autocorrelation(r, _data(k), 12)
     assert acf[1] == pytest.approx(phi, abs=0.03)
-    h, _ = choose_buffer(r, _data(k), 40)
+    h = choose_buffer(r, _data(k), 40).samples
     assert abs(h - expected) <= 1
-    capped, why = choose_buffer(r, _data(k), 12)
-    assert capped == min(h, 6) and (capped < h) == ("half a block" in why)
-    assert choose_buffer(r, _data(k), None)[0] == 0
+    capped = choose_buffer(r, _data(k), 12)
+    assert capped.samples == min(h, 6) and (capped.samples < h) == (capped.reason == BufferReason.HALF_A_BLOCK)
+    assert choose_buffer(r, _data(k), None).samples == 0
 
 
 def test_grid_protocol_split_keeps_each_configuration_group_whole():

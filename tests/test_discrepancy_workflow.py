@@ -146,10 +146,10 @@ def test_split_never_separates_a_configuration_or_a_sequence(seed):
     config = unit * 10 + rng.integers(0, 3, 200)
     seq = unit * 10 + rng.integers(0, 2, 200)
     split = make_split(_toy_data(config, seq), n_blocks=20, seed=seed)
-    assert split.unit_kind == "configuration group", split.how
+    assert split.unit_kind == "configuration group", split.rule
     for ids in (config, seq):
         for u in np.unique(ids):
-            assert np.unique(split.fold[ids == u]).size == 1, split.how
+            assert np.unique(split.fold[ids == u]).size == 1, split.rule
 
 
 def test_a_trajectory_that_passes_home_twice_is_not_a_repeated_protocol():

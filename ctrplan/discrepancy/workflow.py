@@ -64,8 +64,8 @@ from .fits.evaluation import evaluate_rows
 from .fits.fitting import CrossValidated, fit_candidates, refit_contact_baseline
 from .options import DiscrepancyOptions
 from .outputs.output import (PredictionCheck, Reproduction, TestSplit, UpdatedModel, check_reproduction, evaluate_test_split,
-                     final_candidate, final_parameters, log_verdict, run_cautions, validate_prediction,
-                     write_updated_model)
+                     final_candidate, final_parameters, log_blocks, log_noise, log_pilot, log_split, log_verdict, run_cautions,
+                     validate_prediction, write_updated_model)
 from .fits.pairs import Combination, fit_second_effect
 from .setup import DiscrepancySetup, load_inputs
 from .verdict.signatures import diagnose_residuals
@@ -303,17 +303,21 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     clock.store = setup.stages
     with clock.stage("split"):
         split = split_samples(setup, options)
+        log_split(setup.data, split)
     with clock.stage("baseline"):
         split, scale, pilot = pilot_fit(setup, split, options)
+        log_pilot(split, scale)
         # the pilot's residuals at the development samples (stored by pilot_fit, read back)
         residual = evaluate_rows(setup, split.dev_rows, "pilot-residual", "standard",
                                  dict(zip(*pilot.all_parameters())), n_jobs=options.n_jobs).residual_base
-        split = choose_blocks(setup, split, residual, options)
+        piloted, split = split, choose_blocks(setup, split, residual, options)
+        log_blocks(piloted, split)
         baseline = calibrate_baseline(setup, split, options, progress, residual_scale=scale)
     with clock.stage("signature_tests"):
         tests = diagnose_residuals(setup, split, baseline, options)
     with clock.stage("noise_check"):
         noise = check_noise(setup, split, baseline, options)
+        log_noise(noise)
     with clock.stage("contact_baseline"):
         contact = refit_contact_baseline(setup, split, baseline, options)
     with clock.stage("candidates"):

@@ -150,10 +150,9 @@ def pilot_fit(setup: DiscrepancySetup, split: DataSplit, options: DiscrepancyOpt
     dev = split.dev_rows
     e = evaluate_rows(setup, dev, "pilot-residual", "standard", dict(zip(*pilot.all_parameters())),
                       n_jobs=options.n_jobs)
-    buffer, why = choose_buffer(e.residual_base, data.take(dev), split.block_samples)
+    choice = choose_buffer(e.residual_base, data.take(dev), split.block_samples)
     scale = float(np.sqrt(pilot.cost / max(pilot.n_samples, 1)))
-    logger.log(progress_level(), f"  buffer: {why}; prior scale: the pilot's rms Eq. (49) residual {scale:.3g} mm + deg")
-    return split.with_buffer(buffer, why), scale, pilot
+    return split.with_buffer(choice), scale, pilot
 
 
 def baseline_prior(setup, strength: float, scale: float) -> dict:

@@ -186,8 +186,10 @@ class NoiseEstimate:
         Seed of the simulations.
     settled_samples : int
         Samples left out at the start of every rest, where the tip still moved (:func:`_settled`).
-    description : str
-        One line for a report, in mm.
+    no_variation : bool
+        The rests held at least :data:`~ctrplan.discrepancy.options.MIN_REST_PAIRS` pairs of
+        consecutive samples but showed no variation (tracker resolution), so the estimate is the
+        stated value or a fallback.
     """
 
     position_rms_m: float | None
@@ -210,7 +212,7 @@ class NoiseEstimate:
     simulated_ratio: float | None = None
     seed: int = 0
     settled_samples: int = 0
-    description: str = ""
+    no_variation: bool = False
 
     @property
     def variance_m2(self) -> float | None:
@@ -251,8 +253,7 @@ class NoiseEstimate:
                 "dof": self.dof, "upper_bound": self.upper_bound, "lower_bound": self.lower_bound,
                 "stated_m": self.stated_m, "n_rest_samples": int(self.rest_rows.size),
                 "simulated_ratio": self.simulated_ratio, "seed": self.seed,
-                "settled_samples": self.settled_samples,
-                "description": self.description}
+                "settled_samples": self.settled_samples, "no_variation": self.no_variation}
 
 
 # --------------------------------------------------------------------------- rests
@@ -625,8 +626,8 @@ def estimate_noise(data: MeasuredData, rows=None, stated: float | None = None, *
     component.
 
     **Lower bound.** When the rests cannot see the semivariogram level off, the value is the
-    semivariance they reach and the estimate a lower bound (``lower_bound``; the description
-    begins "at least" and says why): with fewer than :data:`MIN_FIT_LAGS` lags (e.g. only pairs
+    semivariance they reach and the estimate a lower bound (``lower_bound``; the report's
+    sentence begins "at least" and says why): with fewer than :data:`MIN_FIT_LAGS` lags (e.g. only pairs
     of consecutive samples), or when the fitted correlation at the longest lag still exceeds
     :data:`SEEN_CORRELATION` (the correlation outlasts the rests; the fitted sill would be an
     extrapolation). A lag-1 value is never reported as the noise of a sensor that may be
@@ -676,17 +677,16 @@ def estimate_noise(data: MeasuredData, rows=None, stated: float | None = None, *
     runs, settle = _settled(data, _rest_runs(data, rows))
     lengths = np.array([r.size for r in runs], int)
     n_lag1 = int(np.sum(lengths - 1))
-    why = f"{n_lag1} pairs of consecutive samples at rest, fewer than {MIN_REST_PAIRS}"
+    no_variation = False
     if n_lag1 >= MIN_REST_PAIRS:
         est = _from_rests(data, runs, lengths, n_simulations, seed, stated, settle)
         if est is not None:
             return est
-        why = f"{n_lag1} pairs of consecutive samples at rest that show no variation (tracker resolution)"
+        no_variation = True
     if stated is not None:
         return NoiseEstimate(position_rms_m=stated, source="stated", n_runs=len(runs), n_pairs=n_lag1,
-                             stated_m=stated, seed=seed,
-                             description=f"{stated * 1e3:.3f} mm rms as stated for the data (it has {why})")
-    return _from_repeats(data, rows, n_lag1)
+                             stated_m=stated, seed=seed, no_variation=no_variation)
+    return _from_repeats(data, rows, n_lag1, no_variation)
 
 
 def _from_rests(data, runs, lengths, n_simulations, seed, stated, settle=0) -> NoiseEstimate | None:
@@ -712,34 +712,16 @@ def _from_rests(data, runs, lengths, n_simulations, seed, stated, settle=0) -> N
     mean, spread = float(np.mean(sim_var)), float(np.var(sim_var, ddof=1))
     dof = float(min(2.0 * mean ** 2 / spread, MAX_DOF)) if spread > 0 else MAX_DOF
     rms = float(np.sqrt(3.0 * var))
-    h_fit = int(lags[fitted - 1])
-    stated_text = "" if stated is None else f"; the data's source states {stated * 1e3:.3f} mm"
-    if settle:
-        stated_text = (f"; the first {settle} sample{'s' if settle > 1 else ''} of every rest left out (the tip "
-                       f"still moved there)") + stated_text
-    span = "lag 1" if h_fit == 1 else f"lags 1-{h_fit}"
-    where = f"{len(runs)} rests ({int(counts[0])} pairs of consecutive samples, {span})"
-    if seen:
-        corr = ("white (no correlation in time seen)" if not tau else
-                f"lag-1 correlation {lag1:.2f}, correlation length {tau:.1f} samples, nugget {100 * nugget:.0f} %")
-        text = f"{rms * 1e3:.3f} mm rms from {where}; {corr}; {dof:.0f} degrees of freedom"
-    else:
-        why = (f"only {span} {'has' if h_fit == 1 else 'have'} {MIN_LAG_PAIRS} or more pairs, too few to see a "
-               f"correlation in time"
-               if params is None else
-               f"the correlation (lag-1 {lag1:.2f}, length {tau:.0f} samples) outlasts the rests")
-        text = (f"at least {rms * 1e3:.3f} mm rms from {where}: {why}; the noise of a sensor correlated in time is "
-                f"larger than what such rests show")
     return NoiseEstimate(position_rms_m=rms, source="rests", n_runs=len(runs), n_pairs=int(counts[0]), lags=lags,
                          semivariance=g[0].copy(), pair_counts=counts, fitted_lags=fitted, nugget_share=nugget,
                          lag1_correlation=None if lag1 is None else float(lag1),
                          correlation_length=None if tau is None else float(tau), correlation_seen=seen, dof=dof,
                          upper_bound=False, lower_bound=not seen, stated_m=stated,
                          rest_rows=np.sort(np.asarray(data.rows)[np.concatenate(runs)]), simulated_ratio=mean / truth,
-                         seed=seed, settled_samples=settle, description=text + stated_text)
+                         seed=seed, settled_samples=settle)
 
 
-def _from_repeats(data: MeasuredData, rows, n_lag1: int) -> NoiseEstimate:
+def _from_repeats(data: MeasuredData, rows, n_lag1: int, no_variation: bool) -> NoiseEstimate:
     """:func:`estimate_noise`'s last fallbacks: the spread at repeated configurations (an upper
     bound; white-noise degrees of freedom), else unknown."""
     use = np.ones(data.n_samples, bool) if rows is None else np.asarray(rows, bool)
@@ -754,9 +736,5 @@ def _from_repeats(data: MeasuredData, rows, n_lag1: int) -> NoiseEstimate:
         dof = int(rep.sum() - np.count_nonzero(counts > 1))
         rms = float(np.sqrt(np.sum(dev * dev) / max(dof, 1)))
         return NoiseEstimate(position_rms_m=rms, source="repeated configurations", n_pairs=int(rep.sum()),
-                             dof=3.0 * dof, upper_bound=True,
-                             description=f"at most {rms * 1e3:.3f} mm rms: spread of {int(rep.sum())} rows at "
-                                         f"repeated configurations (includes any direction-dependent effect)")
-    return NoiseEstimate(position_rms_m=None, source=None, n_pairs=n_lag1,
-                         description="unknown: not stated (--noise-position-mm) and the data has neither rests nor "
-                                     "repeated configurations")
+                             dof=3.0 * dof, upper_bound=True, no_variation=no_variation)
+    return NoiseEstimate(position_rms_m=None, source=None, n_pairs=n_lag1, no_variation=no_variation)

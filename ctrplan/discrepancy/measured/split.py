@@ -28,22 +28,18 @@ fewer, longer blocks and the folds dealt again, as long as the folds keep
 
 from __future__ import annotations
 
-import logging
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from ..._log import progress_level
-from ...choices import SplitUnit
+from ...choices import BlocksKept, BufferReason, SplitUnit
 from ...errors import DataFileError
 from .data import MeasuredData
 
-__all__ = ["DataSplit", "make_split", "split_samples", "configurations_repeat", "sample_units", "subsample",
-           "choose_buffer", "lengthen_blocks", "choose_blocks", "residual_autocorrelation", "near_rows",
+__all__ = ["DataSplit", "SplitRule", "BufferChoice", "make_split", "split_samples", "configurations_repeat",
+           "sample_units", "subsample", "choose_buffer", "lengthen_blocks", "choose_blocks", "residual_autocorrelation", "near_rows",
            "MIN_BLOCK_SAMPLES", "MAX_BLOCKS", "MIN_TEST_UNITS", "MAX_FOLDS", "MIN_UNITS_PER_FOLD",
            "BUFFER_AUTOCORRELATION"]
-
-logger = logging.getLogger(__name__)
 
 #: Shortest time block [samples]: shorter blocks would share too much of their serial
 #: correlation with their neighbours to count as separate units.
@@ -256,7 +252,110 @@ def residual_autocorrelation(residual, data: MeasuredData, max_lag: int) -> np.n
     return acf
 
 
-def choose_buffer(residual, data: MeasuredData, block_samples: int | None) -> tuple[int, str]:
+@dataclass(frozen=True)
+class BufferChoice:
+    """Why the buffer has the length it has (:func:`choose_buffer`, :func:`lengthen_blocks`):
+    kinds and numbers, said in words by :func:`ctrplan.discrepancy.outputs.words.buffer_text`.
+
+    Attributes
+    ----------
+    samples : int
+        The buffer [samples].
+    reason : BufferReason
+    threshold : float
+        :data:`BUFFER_AUTOCORRELATION` [-].
+    lag_one : float or None
+        The residuals' autocorrelation at lag 1 [-] (None for configuration groups).
+    still : float or None
+        With ``HALF_A_BLOCK``: the autocorrelation left at lag ``samples + 1`` [-].
+    lengthened_from, lengthened_to : int or None
+        The development blocks' length before and after they were lengthened [samples] (None:
+        not lengthened).
+    kept : BlocksKept or None
+        Why blocks were not lengthened for a buffer capped at half a block.
+    min_units, min_fit_samples : int or None
+        The minimums the lengthening kept: development units, calibration samples per fit.
+    """
+
+    samples: int
+    reason: BufferReason
+    threshold: float = BUFFER_AUTOCORRELATION
+    lag_one: float | None = None
+    still: float | None = None
+    lengthened_from: int | None = None
+    lengthened_to: int | None = None
+    kept: BlocksKept | None = None
+    min_units: int | None = None
+    min_fit_samples: int | None = None
+
+    def as_dict(self) -> dict:
+        """JSON form: every attribute, the kinds as their strings."""
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        d["reason"] = str(self.reason)
+        d["kept"] = None if self.kept is None else str(self.kept)
+        return d
+
+
+@dataclass(frozen=True)
+class SplitRule:
+    """How the samples were split and why so many (:func:`make_split`): the numbers that
+    :func:`ctrplan.discrepancy.outputs.words.split_text` says in words.
+
+    Attributes
+    ----------
+    n_units : int
+    unit_kind : SplitUnit
+    block_samples : int or None
+        Samples per time block as first cut (None: configuration groups).
+    blocks_asked : bool
+        The number of blocks was asked for (else at most ``max_blocks`` of at least
+        ``min_block_samples`` samples).
+    n_test_units, n_test_samples : int
+    test_fraction : float
+        Share of the units asked for the test split [-].
+    test_at_minimum : bool
+        The test split holds ``min_test_units`` units, more than ``test_fraction``.
+    n_development_units, n_development_samples : int
+    recut_block : int or None
+        The development stretches re-cut into blocks of at least this many samples (None: not).
+    n_folds : int
+    folds_asked : bool
+        The number of folds was asked for (else at most ``max_folds`` with at least
+        ``min_units_per_fold`` development units each).
+    subset_ignored : bool
+        The data file's ``subset`` column was not used.
+    max_blocks, min_block_samples, min_test_units, max_folds, min_units_per_fold : int
+        The rules' constants (:data:`MAX_BLOCKS` ...).
+    """
+
+    n_units: int
+    unit_kind: SplitUnit
+    block_samples: int | None
+    blocks_asked: bool
+    n_test_units: int
+    n_test_samples: int
+    test_fraction: float
+    test_at_minimum: bool
+    n_development_units: int
+    n_development_samples: int
+    recut_block: int | None
+    n_folds: int
+    folds_asked: bool
+    subset_ignored: bool
+    max_blocks: int = MAX_BLOCKS
+    min_block_samples: int = MIN_BLOCK_SAMPLES
+    min_test_units: int = MIN_TEST_UNITS
+    max_folds: int = MAX_FOLDS
+    min_units_per_fold: int = MIN_UNITS_PER_FOLD
+
+    def as_dict(self) -> dict:
+        """JSON form: every attribute, the unit kind as its string."""
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        d["unit_kind"] = str(self.unit_kind)
+        return d
+
+
+def choose_buffer(residual, data: MeasuredData, block_samples: int | None) -> BufferChoice:
     """The buffer [samples] on each side of a validation or test block: the lag before the one at
     which the residuals' autocorrelation (:func:`residual_autocorrelation`) first falls to
     :data:`BUFFER_AUTOCORRELATION`, at most half a block; 0 for configuration groups (no serial
@@ -272,21 +371,19 @@ def choose_buffer(residual, data: MeasuredData, block_samples: int | None) -> tu
 
     Returns
     -------
-    buffer : int
-    why : str
-        One line for the report.
+    BufferChoice
+        The buffer (``samples``) and why that long.
     """
     if not block_samples:
-        return 0, "no buffer: the units are configuration groups, not blocks of a continuous motion"
+        return BufferChoice(0, BufferReason.CONFIGURATION_GROUPS)
     cap = block_samples // 2
     acf = residual_autocorrelation(residual, data, max(cap + 1, 1))
     below = np.flatnonzero(np.nan_to_num(acf[1:], nan=0.0) <= BUFFER_AUTOCORRELATION)
     if below.size and below[0] < cap + 1:
         h = int(below[0])          # lag below[0] + 1 is the first at or under the threshold
-        return h, (f"{h} samples: the residuals' autocorrelation falls to {BUFFER_AUTOCORRELATION:g} at lag {h + 1} "
-                   f"(lag 1: {acf[1]:.2f})")
-    return cap, (f"{cap} samples (half a block, the most allowed): the residuals' autocorrelation is still "
-                 f"{acf[min(cap + 1, acf.size - 1)]:.2f} at lag {cap + 1} (lag 1: {acf[1]:.2f})")
+        return BufferChoice(h, BufferReason.AUTOCORRELATION_FALLS, lag_one=float(acf[1]))
+    return BufferChoice(cap, BufferReason.HALF_A_BLOCK, lag_one=float(acf[1]),
+                        still=float(acf[min(cap + 1, acf.size - 1)]))
 
 
 def lengthen_blocks(split: "DataSplit", residual, *, test_fraction: float = 0.2, n_blocks: int | None = None,
@@ -301,7 +398,7 @@ def lengthen_blocks(split: "DataSplit", residual, *, test_fraction: float = 0.2,
     the blocks stay within the stretches, at least :data:`MIN_UNITS_PER_FOLD` development units
     per fold remain (``n_folds`` folds, else two) and every fit (all development samples, each
     fold) keeps ``min_fit_samples`` calibration samples outside the buffers; else the buffer is
-    the longest that keeps them (half such a block), and ``buffer_note`` says how far the
+    the longest that keeps them (half such a block), and ``buffer_choice`` holds how far the
     autocorrelation still is from :data:`BUFFER_AUTOCORRELATION`. The test split keeps its
     blocks and rows: it was chosen before the residuals, which come from a fit that never saw it.
 
@@ -320,7 +417,7 @@ def lengthen_blocks(split: "DataSplit", residual, *, test_fraction: float = 0.2,
     Returns
     -------
     DataSplit
-        With ``buffer``, ``buffer_note`` and ``buffer_autocorrelation``; when lengthened, with the
+        With ``buffer``, ``buffer_choice`` and ``buffer_autocorrelation``; when lengthened, with the
         development units re-cut, the folds dealt again and ``block_samples`` the development
         blocks' length.
 
@@ -337,15 +434,15 @@ def lengthen_blocks(split: "DataSplit", residual, *, test_fraction: float = 0.2,
                          f"got {residual.shape}")
     block = split.block_samples
     if not block:
-        return split.with_buffer(*choose_buffer(residual, dev_data, None))
+        return split.with_buffer(choose_buffer(residual, dev_data, None))
     runs = _development_runs(split.data, split.test_rows)
     longest = max(max((r.size for r in runs), default=0), block)
     acf = residual_autocorrelation(residual, dev_data, longest // 2 + 1)
     below = np.flatnonzero(np.nan_to_num(acf[1:], nan=0.0) <= BUFFER_AUTOCORRELATION)
     needed = int(below[0]) if below.size else None     # buffer reaching the threshold; None: none within a stretch
     if needed is not None and needed <= block // 2:
-        buffer, why = choose_buffer(residual, dev_data, block)
-        return split.with_buffer(buffer, why, acf[buffer + 1])
+        choice = choose_buffer(residual, dev_data, block)
+        return split.with_buffer(choice, acf[choice.samples + 1])
     min_units = MIN_UNITS_PER_FOLD * (n_folds if n_folds is not None else 2)
 
     def lengthened(h: int) -> DataSplit | None:
@@ -357,7 +454,7 @@ def lengthen_blocks(split: "DataSplit", residual, *, test_fraction: float = 0.2,
         if not np.array_equal(new.test_rows, split.test_rows):
             raise ValueError("test_fraction, n_blocks and n_folds must be the ones the split was made with "
                              "(they give another test split)")
-        new = new.with_buffer(h, "")
+        new = new.with_buffer(BufferChoice(h, BufferReason.HALF_A_BLOCK))
         fits = min(int(new.calibration_rows(k).sum()) for k in [None, *range(new.n_folds)])
         return new if fits >= min_fit_samples else None
 
@@ -373,22 +470,18 @@ def lengthen_blocks(split: "DataSplit", residual, *, test_fraction: float = 0.2,
             found = lengthened(mid)
             lo, hi, best = (mid, hi, found) if found is not None else (lo, mid, best)
     if best is None:
-        buffer, why = choose_buffer(residual, dev_data, block)
-        why += (" (blocks as asked, not lengthened)" if n_blocks is not None else
-                f" (longer blocks would cut across test blocks, or leave fewer than {min_units} development "
-                f"units or {min_fit_samples} calibration sample{'s' if min_fit_samples != 1 else ''} in a fit)")
-        return split.with_buffer(buffer, why, acf[buffer + 1])
+        choice = replace(choose_buffer(residual, dev_data, block),
+                         kept=BlocksKept.ASKED if n_blocks is not None else BlocksKept.MINIMUMS,
+                         min_units=min_units, min_fit_samples=min_fit_samples)
+        return split.with_buffer(choice, acf[choice.samples + 1])
     buffer = best.buffer
-    grown = f"development blocks lengthened from {block} to at least {best.block_samples} samples"
+    grown = {"lengthened_from": block, "lengthened_to": best.block_samples, "min_units": min_units,
+             "min_fit_samples": min_fit_samples, "lag_one": float(acf[1])}
     if buffer == needed:
-        why = (f"{buffer} samples: the residuals' autocorrelation falls to {BUFFER_AUTOCORRELATION:g} at lag "
-               f"{buffer + 1} (lag 1: {acf[1]:.2f}); {grown} so that it is at most half a block")
+        choice = BufferChoice(buffer, BufferReason.AUTOCORRELATION_FALLS, **grown)
     else:
-        why = (f"{buffer} samples (half a block, the most allowed): the residuals' autocorrelation is still "
-               f"{acf[buffer + 1]:.2f} at lag {buffer + 1} (lag 1: {acf[1]:.2f}); {grown}, the longest within the "
-               f"stretches between test blocks that leave {min_units} development units and "
-               f"{min_fit_samples} calibration sample{'s' if min_fit_samples != 1 else ''} in every fit")
-    return best.with_buffer(buffer, why, acf[buffer + 1])
+        choice = BufferChoice(buffer, BufferReason.HALF_A_BLOCK, still=float(acf[buffer + 1]), **grown)
+    return best.with_buffer(choice, acf[buffer + 1])
 
 
 def choose_blocks(setup, split: "DataSplit", residual, options) -> "DataSplit":
@@ -414,11 +507,8 @@ def choose_blocks(setup, split: "DataSplit", residual, options) -> "DataSplit":
     DataSplit
         With the buffer; with longer development blocks and the folds dealt again when lengthened.
     """
-    out = lengthen_blocks(split, residual, test_fraction=options.test_fraction, n_blocks=options.n_blocks,
-                          n_folds=options.n_folds, min_fit_samples=_fit_minimum(setup) + 1)
-    if out.block_samples != split.block_samples:
-        logger.log(progress_level(), f"  blocks: {out.how}; buffer: {out.buffer_note}")
-    return out
+    return lengthen_blocks(split, residual, test_fraction=options.test_fraction, n_blocks=options.n_blocks,
+                           n_folds=options.n_folds, min_fit_samples=_fit_minimum(setup) + 1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -427,7 +517,7 @@ class DataSplit:
 
     Attributes
     ----------
-    how : str
+    rule : SplitRule
         The units, the test split and the folds, and why so many.
     units : ndarray of int, shape (K,)
         Unit of every sample (never cut by the split).
@@ -435,7 +525,7 @@ class DataSplit:
         Contiguous time blocks of a motion or groups of samples at one configuration.
     block_samples : int or None
         Samples per development time block (at least; a shorter stretch between test blocks is
-        one block). The test split's blocks keep the length they were chosen with (``how``).
+        one block). The test split's blocks keep the length they were chosen with (``rule``).
     test_rows : ndarray of bool, shape (K,)
         The untouched test split.
     fold : ndarray of int, shape (K,)
@@ -447,8 +537,8 @@ class DataSplit:
     buffer : int
         Samples left out of a fit on each side of the blocks it is judged on (validation and
         test); 0 until :meth:`with_buffer`.
-    buffer_note : str
-        Why that many.
+    buffer_choice : BufferChoice or None
+        Why that many (None until :meth:`with_buffer`).
     buffer_autocorrelation : float
         The residuals' autocorrelation at lag ``buffer + 1``, the nearest samples a fit keeps to
         the blocks it is judged on [-]; NaN when not known (configuration groups, no buffer
@@ -457,7 +547,7 @@ class DataSplit:
         The samples (for the buffers' record positions).
     """
 
-    how: str
+    rule: SplitRule
     units: np.ndarray
     unit_kind: SplitUnit
     block_samples: int | None
@@ -468,7 +558,7 @@ class DataSplit:
     seed: int
     data: MeasuredData
     buffer: int = 0
-    buffer_note: str = "not yet chosen"
+    buffer_choice: BufferChoice | None = None
     buffer_autocorrelation: float = float("nan")
 
     @property
@@ -492,10 +582,11 @@ class DataSplit:
     def n_dev_units(self) -> int:
         return int(np.unique(self.units[self.dev_rows]).size)
 
-    def with_buffer(self, buffer: int, note: str, autocorrelation: float = float("nan")) -> "DataSplit":
-        """The same split with a buffer of ``buffer`` samples (:func:`choose_buffer`) and the
-        residuals' ``autocorrelation`` at lag ``buffer + 1``."""
-        return replace(self, buffer=int(buffer), buffer_note=note, buffer_autocorrelation=float(autocorrelation))
+    def with_buffer(self, choice: BufferChoice, autocorrelation: float = float("nan")) -> "DataSplit":
+        """The same split with the buffer ``choice`` (:func:`choose_buffer`; ``choice.samples``
+        samples) and the residuals' ``autocorrelation`` at lag ``choice.samples + 1``."""
+        return replace(self, buffer=int(choice.samples), buffer_choice=choice,
+                       buffer_autocorrelation=float(autocorrelation))
 
     def calibration_rows(self, k: int | None = None) -> np.ndarray:
         """Rows fold ``k``'s model may be fitted on, shape (K,) bool: every development fold but
@@ -517,7 +608,7 @@ class DataSplit:
     def as_dict(self) -> dict:
         """The report's account of the samples: units, sizes, folds, buffer and the test split."""
         dev = self.dev_rows
-        return {"how": self.how, "unit_kind": self.unit_kind, "block_samples": self.block_samples,
+        return {"rule": self.rule.as_dict(), "unit_kind": self.unit_kind, "block_samples": self.block_samples,
                 "n_units": int(np.unique(self.units).size), "n_test": self.n_test, "n_development": self.n_dev,
                 "n_test_units": self.n_test_units, "n_development_units": self.n_dev_units,
                 "test_units": np.unique(self.units[self.test_rows]).tolist(),
@@ -526,7 +617,7 @@ class DataSplit:
                 "fold_units": [int(np.unique(self.units[self.fold == k]).size) for k in range(self.n_folds)],
                 "fit_samples": [int(self.fit_rows(self.data, k).sum()) for k in [None, *range(self.n_folds)]],
                 "max_fit_samples": self.max_fit_samples, "buffer_samples": self.buffer,
-                "buffer_note": self.buffer_note,
+                "buffer": None if self.buffer_choice is None else self.buffer_choice.as_dict(),
                 "buffer_autocorrelation": (None if not np.isfinite(self.buffer_autocorrelation)
                                            else float(self.buffer_autocorrelation)),
                 "development_first_last": [int(np.flatnonzero(dev)[0]), int(np.flatnonzero(dev)[-1])]}
@@ -606,21 +697,14 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
     dev_idx = np.flatnonzero(~test)
     for k, (_, val) in enumerate(GroupKFold(n_splits=folds).split(dev_idx, groups=units[dev_idx])):
         fold[dev_idx[val]] = k
-    note = "" if data.subset is None else " (the file's 'subset' column is not used for the split)"
-    why_blocks = ("" if kind != SplitUnit.TIME_BLOCK else
-                  f" ({'as asked' if n_blocks is not None else f'{MAX_BLOCKS} at most, of at least {MIN_BLOCK_SAMPLES} samples'})")
-    why_test = (f"{test_fraction:.0%} of the units" if n_test > MIN_TEST_UNITS or round(test_fraction * ids.size) == n_test
-                else f"at least {MIN_TEST_UNITS} units, more than {test_fraction:.0%}")
-    why_folds = ("as asked" if n_folds is not None else
-                 f"{MAX_FOLDS} at most, with at least {MIN_UNITS_PER_FOLD} development units each")
-    how = (f"{ids.size} {kind}s" + (f" of {block} samples" if block else "") + why_blocks
-           + f"; test split: {test_ids.size} units ({int(test.sum())} samples; {why_test}) held back before any fit; "
-             f"development: {n_dev_units} units ({dev_idx.size} samples"
-           + (f"; the stretches between test blocks re-cut into blocks of at least {int(development_block)} "
-              f"samples, a shorter stretch whole" if recut else "")
-           + f") in {folds} cross-validation folds (GroupKFold; {why_folds}){note}")
+    rule = SplitRule(n_units=int(ids.size), unit_kind=kind, block_samples=block, blocks_asked=n_blocks is not None,
+                     n_test_units=int(test_ids.size), n_test_samples=int(test.sum()), test_fraction=float(test_fraction),
+                     test_at_minimum=not (n_test > MIN_TEST_UNITS or round(test_fraction * ids.size) == n_test),
+                     n_development_units=int(n_dev_units), n_development_samples=int(dev_idx.size),
+                     recut_block=int(development_block) if recut else None, n_folds=int(folds),
+                     folds_asked=n_folds is not None, subset_ignored=data.subset is not None)
     block = int(development_block) if recut else block
-    return DataSplit(how=how, units=units, unit_kind=kind, block_samples=block, test_rows=test, fold=fold,
+    return DataSplit(rule=rule, units=units, unit_kind=kind, block_samples=block, test_rows=test, fold=fold,
                      n_folds=folds, max_fit_samples=max_fit_samples, seed=seed, data=data)
 
 
@@ -660,10 +744,4 @@ def split_samples(setup, options) -> DataSplit:
         raise DataFileError(f"{data.file}: {n_fit} calibration samples per fold are not more than the "
                             f"{len(setup.base_names)} baseline parameters plus the two largest effects'; give more "
                             f"samples")
-    logger.log(progress_level(), f"data: {data.n_samples} samples ({data.frame} frame) from {data.file}; {split.how}")
-    if data.source is not None:
-        from ...io.ros2 import describe_bag_summary
-
-        for line in describe_bag_summary(data.source):
-            logger.log(progress_level(), f"  {line}")
     return split

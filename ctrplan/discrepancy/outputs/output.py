@@ -23,7 +23,7 @@ from ..fits.evaluation import ErrorFigures, Errors, evaluate_rows
 from ..fits.fitting import Candidate
 from .logtext import figure, interval
 from .results import candidate_dict, noise_dict
-from .words import caution as caution_text, verdict_lines
+from .words import buffer_text, caution as caution_text, noise_text, split_text, verdict_lines
 from ..options import CONFIDENCE, DiscrepancyOptions
 from ..fits.pairs import Combination
 from ..fits.parameters import REGISTRATION, apply_parameters
@@ -33,7 +33,8 @@ from ..verdict.statistics import Interval, mean_interval, shrink_interval
 
 __all__ = ["ModelFigures", "TestFigures", "PredictionCheck", "TestSplit", "evaluate_test_split", "UpdatedModel",
            "Reproduction", "write_updated_model", "check_reproduction", "reproduce_errors", "final_candidate",
-           "final_parameters", "validate_prediction", "run_cautions", "log_verdict"]
+           "final_parameters", "validate_prediction", "run_cautions", "log_verdict", "log_split", "log_pilot",
+           "log_blocks", "log_noise"]
 
 logger = logging.getLogger(__name__)
 
@@ -524,3 +525,39 @@ def log_verdict(naming: Naming, noise: NoiseCheck) -> None:
               "candidates": {e: candidate_dict(c) for e, c in naming.candidates.items()}}
     for level, line in verdict_lines(stored):
         logger.log(level if level >= logging.WARNING else progress_level(), line)
+
+
+def log_split(data: MeasuredData, split: DataSplit) -> None:
+    """Log stage 2's split in words (:func:`~ctrplan.discrepancy.outputs.words.split_text`): the
+    samples, the units, the test split and the folds; for a ROS 2 bag, its summary."""
+    logger.log(progress_level(), f"data: {data.n_samples} samples ({data.frame} frame) from {data.file}; "
+                                 f"{split_text(split.as_dict())}")
+    if data.source is not None:
+        from ...io.ros2 import describe_bag_summary
+
+        for line in describe_bag_summary(data.source):
+            logger.log(progress_level(), f"  {line}")
+
+
+def log_pilot(split: DataSplit, scale: float) -> None:
+    """Log stage 3's pilot fit: the buffer it chose and the prior's scale [mm + deg]."""
+    logger.log(progress_level(), f"  buffer: {buffer_text(split.as_dict())}; prior scale: the pilot's rms "
+                                 f"Eq. (49) residual {scale:.3g} mm + deg")
+
+
+def log_blocks(before: DataSplit, after: DataSplit) -> None:
+    """Log stage 3a's blocks when they were lengthened: the split and the buffer in words."""
+    if after.block_samples != before.block_samples:
+        d = after.as_dict()
+        logger.log(progress_level(), f"  blocks: {split_text(d)}; buffer: {buffer_text(d)}")
+
+
+def log_noise(check: NoiseCheck) -> None:
+    """Log stage 5's noise check: the sensor noise estimate, the baseline's out-of-fold rms and
+    the test of the residual against the noise."""
+    test = check.test
+    logger.log(progress_level(),
+               f"  sensor noise: {noise_text(check.noise.as_dict())}; out-of-fold baseline rms "
+               f"{check.rms_m * 1e3:.3f} mm"
+               + (f" = {check.ratio:.2f} x noise; consistent with noise: {check.consistent} (F = {test.statistic:.3g}, "
+                  f"threshold {test.threshold:.3g} at false-alarm rate {test.false_alarm_rate:g})" if test else ""))

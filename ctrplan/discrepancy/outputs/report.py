@@ -329,12 +329,12 @@ def _split_lines(results: dict) -> list[str]:
     source = results.get("data_source")
     bag = [] if not source else [f"- {line}" for line in describe_bag_summary(source)]
     return ["## Samples", "", *bag,
-            f"- {results['n_samples']} samples in the {results['frame']} frame; {s['how']}.",
+            f"- {results['n_samples']} samples in the {results['frame']} frame; {words.split_text(s)}.",
             f"- Folds: {s['n_folds']} of {', '.join(map(str, s['fold_samples']))} samples ({', '.join(map(str, s['fold_units']))} "
             f"units); each fold is predicted by models fitted on the others, from the same cold start as the fit on "
             f"all development samples (fits use {', '.join(map(str, s['fit_samples']))} samples, at most "
             f"{s['max_fit_samples']}).",
-            f"- Buffer: {s['buffer_note']}; left out of every fit on each side of the blocks it is judged on "
+            f"- Buffer: {words.buffer_text(s)}; left out of every fit on each side of the blocks it is judged on "
             f"(validation and test).",
             "- Chosen once on the development samples and reused by every fold: the buffer, the development "
             "blocks' length and the prior's scale "
@@ -433,7 +433,7 @@ def _signature_lines(results: dict) -> list[str]:
 def _noise_lines(results: dict) -> list[str]:
     n = results["noise"]
     t = n.get("test")
-    text = (f"Sensor noise (development samples): {n['noise']['description']} (source: {n['noise']['source'] or 'none'}); "
+    text = (f"Sensor noise (development samples): {words.noise_text(n['noise'])} (source: {n['noise']['source'] or 'none'}); "
             f"out-of-fold baseline rms position error {_num(n.get('rms_mm'), '.3f')} mm")
     if t:
         dof = "" if t.get("dof_residual") is None else (f", {_num(t['dof_residual'], '.0f')} and "
@@ -488,7 +488,8 @@ def _prediction_lines(results: dict) -> list[str]:
     for env in pred.get("envelopes") or []:
         coeff = ", ".join(f"{k} = {_num(v, '.3g')}" for k, v in (env.get("coefficients") or {}).items())
         inside = _number(env.get("fraction_inside"))
-        lines += ["", f"Envelope coverage ({env.get('label', 'fitted')} coefficients {coeff}; {env['description']}): "
+        how = words.envelope_text(env, results["noise"]["noise"])
+        lines += ["", f"Envelope coverage ({env.get('label', 'fitted')} coefficients {coeff}; {how}): "
                       f"{env['inside']} of {env['n']} measured tips "
                       f"({_undefined('no samples') if inside is None else f'{100 * inside:.0f} %'}) lie inside "
                       f"the envelope of the bounding solutions plus {_num(env.get('margin_mm'), '.2f')} mm of sensor "

@@ -97,7 +97,8 @@ def _envelope_dict(env) -> dict:
     return {"n": env.n, "inside": env.inside, "fraction_inside": env.fraction_inside, "margin_mm": env.margin_m * 1e3,
             "outside_median_mm": _mm(env.outside_median_m), "outside_p95_mm": _mm(env.outside_p95_m),
             "outside_max_mm": _mm(env.outside_max_m), "size_median_mm": _mm(env.size_median_m),
-            "description": env.description, "coefficients": env.coefficients, "label": env.label}
+            "n_samples": env.n_samples, "n_solutions": env.n_solutions, "noise_factor": env.noise_factor,
+            "coefficients": env.coefficients, "label": env.label}
 
 
 def _position_stats(pos) -> dict:

@@ -15,12 +15,15 @@ from typing import Mapping
 
 import numpy as np
 
-from ...choices import CautionKind, DecisionNoteKind, FitNoteKind, NoEffectCase, NotNamedReason, NotPairedReason
+from ...choices import (BlocksKept, BufferReason, CautionKind, DecisionNoteKind, FitNoteKind, NoEffectCase,
+                        NotNamedReason, NotPairedReason, SplitUnit)
 from ..fits.estimates import display_value
+from ..measured.noise import MIN_LAG_PAIRS
+from ..options import MIN_REST_PAIRS
 from .logtext import figure
 
 __all__ = ["labels_of", "why_not", "rule", "note", "separated_by", "caution", "range_text", "no_effect",
-           "verdict_lines",
+           "verdict_lines", "split_text", "buffer_text", "noise_text", "envelope_text",
            "pair_rule", "not_paired", "fit_note"]
 
 #: Why the best explanation is not named, when the stored decision gives no reason.
@@ -297,3 +300,117 @@ def verdict_lines(results: Mapping) -> list:
         lines += [(logging.WARNING, f"  caution: {caution(c)}") for c in d.get("cautions") or ()]
     lines += [(logging.INFO, f"  {note(n, d, labels)}") for n in d.get("notes") or ()]
     return lines
+
+
+def _samples(n: int) -> str:
+    return f"{n} calibration sample{'s' if n != 1 else ''}"
+
+
+def split_text(split: Mapping) -> str:
+    """The units, the test split and the folds, and why so many, from a split's stored form
+    (:meth:`~ctrplan.discrepancy.measured.split.DataSplit.as_dict`; a results file from an
+    earlier ctrplan, which stored the sentence as ``how``, gives it back as stored)."""
+    if "rule" not in split:
+        return str(split.get("how", ""))
+    r = split["rule"]
+    kind, block = r["unit_kind"], r["block_samples"]
+    why_blocks = ("" if kind != SplitUnit.TIME_BLOCK else
+                  " (as asked)" if r["blocks_asked"] else
+                  f" ({r['max_blocks']} at most, of at least {r['min_block_samples']} samples)")
+    why_test = (f"at least {r['min_test_units']} units, more than {r['test_fraction']:.0%}" if r["test_at_minimum"]
+                else f"{r['test_fraction']:.0%} of the units")
+    why_folds = ("as asked" if r["folds_asked"] else
+                 f"{r['max_folds']} at most, with at least {r['min_units_per_fold']} development units each")
+    recut = ("" if r["recut_block"] is None else
+             f"; the stretches between test blocks re-cut into blocks of at least {r['recut_block']} samples, a "
+             f"shorter stretch whole")
+    return (f"{r['n_units']} {kind}s" + (f" of {block} samples" if block else "") + why_blocks
+            + f"; test split: {r['n_test_units']} units ({r['n_test_samples']} samples; {why_test}) held back before "
+              f"any fit; development: {r['n_development_units']} units ({r['n_development_samples']} samples{recut}) "
+              f"in {r['n_folds']} cross-validation folds (GroupKFold; {why_folds})"
+            + (" (the file's 'subset' column is not used for the split)" if r["subset_ignored"] else ""))
+
+
+def buffer_text(split: Mapping) -> str:
+    """How long the buffer is and why, from a split's stored form (``buffer``:
+    :meth:`~ctrplan.discrepancy.measured.split.BufferChoice.as_dict`; a results file from an
+    earlier ctrplan gives back its ``buffer_note``)."""
+    b = split.get("buffer")
+    if not isinstance(b, Mapping):
+        return str(split.get("buffer_note", "not yet chosen"))
+    n, reason = b["samples"], b["reason"]
+    if reason == BufferReason.CONFIGURATION_GROUPS:
+        return "no buffer: the units are configuration groups, not blocks of a continuous motion"
+    lag_one = f"(lag 1: {figure(b['lag_one'], '.2f')})"
+    if reason == BufferReason.AUTOCORRELATION_FALLS:
+        text = f"{n} samples: the residuals' autocorrelation falls to {b['threshold']:g} at lag {n + 1} {lag_one}"
+    else:
+        text = (f"{n} samples (half a block, the most allowed): the residuals' autocorrelation is still "
+                f"{figure(b['still'], '.2f')} at lag {n + 1} {lag_one}")
+    if b.get("lengthened_to") is not None:
+        text += (f"; development blocks lengthened from {b['lengthened_from']} to at least {b['lengthened_to']} "
+                 f"samples")
+        text += (" so that it is at most half a block" if reason == BufferReason.AUTOCORRELATION_FALLS else
+                 f", the longest within the stretches between test blocks that leave {b['min_units']} development "
+                 f"units and {_samples(b['min_fit_samples'])} in every fit")
+    elif b.get("kept") == BlocksKept.ASKED:
+        text += " (blocks as asked, not lengthened)"
+    elif b.get("kept") == BlocksKept.MINIMUMS:
+        text += (f" (longer blocks would cut across test blocks, or leave fewer than {b['min_units']} development "
+                 f"units or {_samples(b['min_fit_samples'])} in a fit)")
+    return text
+
+
+def noise_text(noise: Mapping) -> str:
+    """The sensor noise estimate in one line (mm), from its stored form
+    (:meth:`~ctrplan.discrepancy.measured.noise.NoiseEstimate.as_dict`; a results file from an
+    earlier ctrplan, which stored the line as ``description``, gives it back as stored)."""
+    if noise.get("description") is not None:
+        return str(noise["description"])
+    source, rms, n_pairs = noise.get("source"), noise.get("position_rms_m"), noise.get("n_pairs")
+    if source == "stated":
+        why = (f"{n_pairs} pairs of consecutive samples at rest that show no variation (tracker resolution)"
+               if noise.get("no_variation") else
+               f"{n_pairs} pairs of consecutive samples at rest, fewer than {MIN_REST_PAIRS}")
+        return f"{figure(rms, '.3f', 1e3)} mm rms as stated for the data (it has {why})"
+    if source == "repeated configurations":
+        return (f"at most {figure(rms, '.3f', 1e3)} mm rms: spread of {n_pairs} rows at repeated configurations "
+                f"(includes any direction-dependent effect)")
+    if source != "rests":
+        return ("unknown: not stated (--noise-position-mm) and the data has neither rests nor repeated "
+                "configurations")
+    fitted = noise.get("fitted_lags") or 0
+    h_fit = int(noise["lags"][fitted - 1]) if fitted else 0
+    span = "lag 1" if h_fit == 1 else f"lags 1-{h_fit}"
+    where = f"{noise.get('n_runs')} rests ({n_pairs} pairs of consecutive samples, {span})"
+    lag1, tau = noise.get("lag1_correlation"), noise.get("correlation_length_samples")
+    if noise.get("correlation_seen"):
+        corr = ("white (no correlation in time seen)" if not tau else
+                f"lag-1 correlation {figure(lag1, '.2f')}, correlation length {figure(tau, '.1f')} samples, nugget "
+                f"{figure(noise.get('nugget_share'), '.0f', 100)} %")
+        text = (f"{figure(rms, '.3f', 1e3)} mm rms from {where}; {corr}; {figure(noise.get('dof'), '.0f')} degrees "
+                f"of freedom")
+    else:
+        why = (f"only {span} {'has' if h_fit == 1 else 'have'} {MIN_LAG_PAIRS} or more pairs, too few to see a "
+               f"correlation in time" if lag1 is None else
+               f"the correlation (lag-1 {figure(lag1, '.2f')}, length {figure(tau, '.0f')} samples) outlasts the rests")
+        text = (f"at least {figure(rms, '.3f', 1e3)} mm rms from {where}: {why}; the noise of a sensor correlated in "
+                f"time is larger than what such rests show")
+    settle = noise.get("settled_samples") or 0
+    if settle:
+        text += (f"; the first {settle} sample{'s' if settle > 1 else ''} of every rest left out (the tip still "
+                 f"moved there)")
+    if noise.get("stated_m") is not None:
+        text += f"; the data's source states {figure(noise['stated_m'], '.3f', 1e3)} mm"
+    return text
+
+
+def envelope_text(envelope: Mapping, noise: Mapping) -> str:
+    """How the friction envelope's coverage was measured, from its stored form (``results.json
+    ["prediction"]["envelopes"]``) and the noise estimate's (:func:`noise_text`); an earlier
+    results file's ``description`` is given back as stored."""
+    if envelope.get("description") is not None:
+        return str(envelope["description"])
+    return (f"{envelope['n_samples']} evenly spaced held-out samples; convex hull of the {envelope['n_solutions']} "
+            f"bounding friction solutions (all eta, no release); margin {envelope['noise_factor']} x the noise rms "
+            f"({noise_text(noise)})")

@@ -202,7 +202,8 @@ def noise_test(residual, index, sequence, estimate: NoiseEstimate, *, n_paramete
         ``n_parameters`` < 0 or ``n_fitted`` < 1.
     """
     if estimate.position_rms_m is None or not estimate.position_rms_m > 0:
-        raise ValueError(f"the noise must be known to test a residual against it ({estimate.description})")
+        raise ValueError(f"the noise must be known to test a residual against it (estimate from "
+                         f"{estimate.source or 'no source'}: {estimate.position_rms_m!r} m rms)")
     if not 0.0 < alpha < 1.0:
         raise ValueError(f"alpha must be in (0, 1), got {alpha!r}")
     if n_parameters < 0 or n_fitted < 1:

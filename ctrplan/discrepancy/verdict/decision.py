@@ -35,14 +35,12 @@ rate ``options.significance``.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Mapping
 
 import numpy as np
 
-from ..._log import progress_level
 from ...choices import CautionKind, DecisionNoteKind, NoEffectCase, NotNamedReason, Verdict
 from ...effects import REGISTRY
 from .consistency import NoiseTest, noise_test
@@ -57,7 +55,6 @@ from .statistics import Comparison, holm
 __all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "check_noise", "name_effect", "cautions",
            "no_effect_case", "VERDICTS"]
 
-logger = logging.getLogger(__name__)
 
 #: What a run concludes: one effect (or a pair) named, two candidates the data cannot tell apart,
 #: or none.
@@ -248,12 +245,7 @@ def check_noise(setup, split: DataSplit, baseline, options: DiscrepancyOptions) 
         n_fit = min(f.n_samples for f in baseline.cv.folds)
         test = noise_test(res, data.rows[oof.rows], data.sequence[oof.rows], estimate,
                           n_parameters=len(baseline.fit.names), n_fitted=3 * n_fit, alpha=options.significance)
-    check = NoiseCheck(noise=estimate, rms_m=rms, ratio=rms / sigma if sigma else None, test=test)
-    logger.log(progress_level(),
-               f"  sensor noise: {estimate.description}; out-of-fold baseline rms {rms * 1e3:.3f} mm"
-               + (f" = {check.ratio:.2f} x noise; consistent with noise: {check.consistent} (F = {test.statistic:.3g}, "
-                  f"threshold {test.threshold:.3g} at false-alarm rate {test.false_alarm_rate:g})" if test else ""))
-    return check
+    return NoiseCheck(noise=estimate, rms_m=rms, ratio=rms / sigma if sigma else None, test=test)
 
 
 def _separated_by(a: str, b: str) -> dict:

@@ -49,7 +49,12 @@ class EnvelopeCoverage:
         How far beyond the margin the others lie [m]; None if none.
     size_median_m : float or None
         Median largest distance between two bounding tips [m].
-    description : str
+    n_samples : int
+        Held-out samples evaluated (evenly spaced).
+    n_solutions : int
+        Bounding friction solutions whose tips span the envelope.
+    noise_factor : float
+        :data:`ENVELOPE_NOISE_FACTOR` [-].
     coefficients : dict of str to float
         Friction coefficients used [-].
     label : str
@@ -64,7 +69,9 @@ class EnvelopeCoverage:
     outside_p95_m: float | None
     outside_max_m: float | None
     size_median_m: float | None
-    description: str
+    n_samples: int
+    n_solutions: int
+    noise_factor: float
     coefficients: dict
     label: str
 
@@ -182,9 +189,7 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise: NoiseEstimate, st
         outside_p95_m=float(np.percentile(far, 95)) if far.size else None,
         outside_max_m=float(far.max()) if far.size else None,
         size_median_m=float(np.nanmedian(size)) if ok.any() else None,
-        description=f"{sub.n_samples} evenly spaced held-out samples; convex hull of the "
-                    f"{tips.shape[1]} bounding friction solutions (all eta, no release); margin "
-                    f"{ENVELOPE_NOISE_FACTOR} x the noise rms ({noise.description})",
+        n_samples=int(sub.n_samples), n_solutions=int(tips.shape[1]), noise_factor=ENVELOPE_NOISE_FACTOR,
         coefficients=coefficients, label=label)
 
 
