@@ -108,7 +108,8 @@ def test_vector_signature_finds_a_planted_lag_and_not_noise():
 def _split(units, n_folds=10):
     """A split of development samples only: units dealt round-robin into folds, as GroupKFold does."""
     from ctrplan.discrepancy.measured.data import MeasuredData
-    from ctrplan.discrepancy.measured.split import DataSplit
+    from ctrplan.choices import SplitUnit
+    from ctrplan.discrepancy.measured.split import DataSplit, SplitRule
     from ctrplan.history import MotionRecord
 
     k = units.size
@@ -117,8 +118,14 @@ def _split(units, n_folds=10):
                         translation_last=np.zeros((k, 1), bool), sequence=np.zeros(k, int), config_id=np.arange(k),
                         subset=None, time=None, file="toy.csv", frame="robot", record=MotionRecord(z, z),
                         rows=np.arange(k), given_eta=np.zeros((k, 1), int))
-    return DataSplit(how="toy", units=units, unit_kind="time block", block_samples=10, test_rows=np.zeros(k, bool),
-                     fold=units % n_folds, n_folds=n_folds, max_fit_samples=k, seed=0, data=data)
+    n_units = int(np.unique(units).size)
+    rule = SplitRule(n_units=n_units, unit_kind=SplitUnit.TIME_BLOCK, block_samples=10, blocks_asked=True,
+                     n_test_units=0, n_test_samples=0, test_fraction=0.0, test_at_minimum=False,
+                     n_development_units=n_units, n_development_samples=k, recut_block=None, n_folds=n_folds,
+                     folds_asked=True, subset_ignored=False)
+    return DataSplit(rule=rule, units=units, unit_kind=SplitUnit.TIME_BLOCK, block_samples=10,
+                     test_rows=np.zeros(k, bool), fold=units % n_folds, n_folds=n_folds, max_fit_samples=k, seed=0,
+                     data=data)
 
 
 def _candidate(effect, split, r_base, r, *, atypical=(), at_bound=()):
@@ -411,7 +418,7 @@ def test_a_residual_above_a_noise_that_is_only_a_lower_bound_is_inconclusive():
     test = NoiseTest(statistic=3.0, threshold=1.2, p_value=1e-6, inflation=1.01, n_fitted_effective=900.0,
                      dof_residual=300.0, dof_noise=40.0, n_samples=400, n_rest_samples_left_out=0, consistent=False,
                      false_alarm_rate=0.01, noise_lower_bound=False, noise_upper_bound=False)
-    estimate = NoiseEstimate(position_rms_m=0.1e-3, source="rests", description="0.100 mm rms from rests")
+    estimate = NoiseEstimate(position_rms_m=0.1e-3, source="rests")
     check = NoiseCheck(noise=estimate, rms_m=0.3e-3, ratio=3.0, test=test)
     assert no_effect_case(check) == "unexplained"
     low = dc_replace(check, test=dc_replace(test, noise_lower_bound=True))
