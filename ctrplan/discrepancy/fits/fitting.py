@@ -599,7 +599,7 @@ def _fit_notes(effect: str, c: CrossValidated, base, contact: CrossValidated | N
     return tuple(notes)
 
 
-def make_candidate(setup, split, baseline, effects, label, cv, shown_names, reference, notes=(), widened=()) -> Candidate:
+def make_candidate(setup, split, baseline, effects, label, cv, shown_names, reference, notes=()) -> Candidate:
     """A fitted and cross-validated model as a :class:`Candidate`: its shown parameters
     ``shown_names`` with their table and atypical values, its BIC (every baseline and shown
     parameter counted) and its comparisons with ``reference`` (the baseline, or the named
@@ -610,7 +610,7 @@ def make_candidate(setup, split, baseline, effects, label, cv, shown_names, refe
     k_total = len(set(baseline.fit.names) | set(shown_names))
     bic = information_criterion(cv.fit.cost, cv.fit.n_samples, k_total)
     at_bound = tuple(sorted(set(cv.fit.at_bound) | {b for f in cv.folds for b in f.at_bound}))
-    widened = tuple(sorted(set(widened) | set(cv.fit.widened) | {w for f in cv.folds for w in f.widened}))
+    widened = tuple(sorted(set(cv.fit.widened) | {w for f in cv.folds for w in f.widened}))
     return Candidate(
         effects=tuple(effects), label=label, cv=cv, shown=shown, units={n: parameter(robot, n).unit for n in shown},
         parameters=parameter_table(robot, cv.fit, shown_names), atypical=atypical_values(robot, shown),

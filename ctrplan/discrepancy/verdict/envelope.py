@@ -122,8 +122,8 @@ def _prediction_line(label: str, position) -> str:
             f"{1e3 * p.max():.3f} mm ({p.size} samples)")
 
 
-def envelope_coverage(robot, params, sub: MeasuredData, noise: NoiseEstimate, stages, stage, settings, n_jobs, *,
-                      coefficients: dict, label: str) -> EnvelopeCoverage:
+def envelope_coverage(setup, params, sub: MeasuredData, noise: NoiseEstimate, stage: str, n_jobs: int, *,
+                      label: str) -> EnvelopeCoverage:
     """Coverage of the friction envelope: the convex hull of the 2^(n-1) bounding friction
     solutions (fixed eta, no release) at each sample of ``sub``, plus
     :data:`ENVELOPE_NOISE_FACTOR` times the noise rms; the bounding tips are kept in the stage
@@ -131,20 +131,20 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise: NoiseEstimate, st
 
     Parameters
     ----------
-    robot : Robot
+    setup : DiscrepancySetup
+        The input robot, the solver settings and the stage store.
     params : mapping of str to float
-        Calibrated parameters [SI] (tube parameters, friction coefficients, registration).
+        Calibrated parameters [SI] (tube parameters, friction coefficients ``mu_*``, registration);
+        the friction coefficients are reported with the coverage.
     sub : MeasuredData
         The samples.
     noise : NoiseEstimate
         :func:`~ctrplan.discrepancy.measured.noise.estimate_noise` (its rms sets the margin; 0 when unknown).
-    stages : StageStore
     stage : str
-    settings : ModelSettings
+        Name of the stage that keeps the bounding tips.
     n_jobs : int
-    coefficients : dict, keyword-only
-        Friction coefficients used (reported).
     label : str, keyword-only
+        ``"fitted"`` or ``"reference ..."``.
 
     Returns
     -------
@@ -153,6 +153,7 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise: NoiseEstimate, st
     from ...mechanics import all_eta
     from ..fits.simulate import simulate
 
+    robot, stages, settings = setup.robot, setup.stages, setup.settings
     sigma = noise.position_rms_m
     margin = ENVELOPE_NOISE_FACTOR * sigma if sigma else 0.0
     cached = stages.load(stage)
@@ -190,7 +191,7 @@ def envelope_coverage(robot, params, sub: MeasuredData, noise: NoiseEstimate, st
         outside_max_m=float(far.max()) if far.size else None,
         size_median_m=float(np.nanmedian(size)) if ok.any() else None,
         n_samples=int(sub.n_samples), n_solutions=int(tips.shape[1]), noise_factor=ENVELOPE_NOISE_FACTOR,
-        coefficients=coefficients, label=label)
+        coefficients={k: float(v) for k, v in params.items() if k.startswith("mu_")}, label=label)
 
 
 def predict_with_history(setup, split, baseline, naming, noise, options: DiscrepancyOptions, progress: bool = False, *,
@@ -273,10 +274,7 @@ def predict_with_history(setup, split, baseline, naming, noise, options: Discrep
     envelopes = []
     for label, params, key in sets:
         stage = f"envelope-{rows_env.size}" if label == "fitted" else f"envelope-{key}-{rows_env.size}"
-        env = envelope_coverage(setup.robot, params, sub, noise.noise, setup.stages, stage, setup.settings,
-                                options.n_jobs,
-                                coefficients={k: float(v) for k, v in params.items() if k.startswith("mu_")},
-                                label=label)
+        env = envelope_coverage(setup, params, sub, noise.noise, stage, options.n_jobs, label=label)
         envelopes.append(env)
         inside = figure(env.fraction_inside, ".0f", 100, " %")
         logger.log(level, f"  envelope ({label}): {env.inside} of {env.n} inside ({inside}), "
