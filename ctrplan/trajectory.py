@@ -28,12 +28,13 @@ Units: rotations in rad, translations in m, time in s.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Sequence
 
 import numpy as np
 import ruckig
 
 from .choices import MotionKind
+from .drive import DriveLimits, JointLimits
 from .errors import JointLimitError
 
 __all__ = [
@@ -171,6 +172,17 @@ class Trajectory:
     def n_joints(self) -> int:
         return self.position.shape[1]
 
+    @property
+    def drive(self) -> DriveLimits:
+        """The drive limits the trajectory was computed with (named by ``joint_names``)."""
+        return DriveLimits(self.control_rate_hz, self.max_velocity, self.max_acceleration, self.max_jerk,
+                           self.joint_names)
+
+    @property
+    def joints(self) -> JointLimits:
+        """The joints' names, kinds and position limits the trajectory was computed with."""
+        return JointLimits(self.joint_names, self.joint_kinds, self.lower, self.upper, self.periodic)
+
 
 @dataclass(frozen=True)
 class LimitViolation:
@@ -208,9 +220,7 @@ class LimitViolation:
 
 
 # ---------------------------------------------------------------------------------- parameterize
-def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[str], max_velocity,
-                      max_acceleration, max_jerk, control_rate_hz: float, lower, upper, periodic,
-                      *, joint_names: Sequence[str] | None = None) -> Trajectory:
+def time_parameterize(waypoints, motions: Sequence[str], joints: JointLimits, drive: DriveLimits) -> Trajectory:
     """Jerk-limited rest-to-rest trajectory through an ordered path, sampled at the control rate.
 
     Periodic rotations are first unwrapped along the path (``numpy.unwrap``) so that each segment
@@ -226,21 +236,16 @@ def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[s
     motions : sequence of str, length K
         ``motions[0] == "start"``; ``motions[k]`` (k >= 1) is ``"rotation"`` or
         ``"translation"``: the joint group that moves from waypoint k-1 to waypoint k.
-    joint_kinds : sequence of str, length n_joints
-        ``"rotation"`` or ``"translation"`` per joint.
-    max_velocity, max_acceleration, max_jerk : array-like, shape (n_joints,)
-        Drive limits, > 0 [rad/s or m/s, per s^2, per s^3].
-    control_rate_hz : float
-        Sample rate of the drive controller [Hz], > 0.
-    lower, upper : array-like, shape (n_joints,)
-        Joint limits [rad or m]; kept for :func:`check_trajectory` (ruckig ignores position limits
-        offline).
-    periodic : array-like of bool, shape (n_joints,)
-        Rotations without limits; only these are unwrapped. Bounded rotations are interpolated
-        linearly between their waypoint values, as in a bounded real-vector space; a planner
-        that models them as SO2 (which may cross +-pi) would validate a different segment.
-    joint_names : sequence of str, optional
-        Names used in messages (default ``"joint 0"``, ...).
+    joints : JointLimits
+        Names (used in messages), kinds and position limits of the n_joints joints
+        (:meth:`~ctrplan.drive.JointLimits.of_robot`). The position limits are kept for
+        :func:`check_trajectory` (ruckig ignores position limits offline). Periodic rotations
+        (without limits) are the only ones unwrapped; bounded rotations are interpolated linearly
+        between their waypoint values, as in a bounded real-vector space (a planner that models
+        them as SO2, which may cross +-pi, would validate a different segment).
+    drive : DriveLimits
+        Control rate [Hz] and velocity, acceleration and jerk limits, > 0 [rad/s or m/s, per s^2,
+        per s^3]; limits that name their joints are arranged in the joints' order.
 
     Returns
     -------
@@ -250,9 +255,9 @@ def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[s
     Raises
     ------
     ValueError
-        Bad shapes, unknown motion or joint kind, non-finite waypoint, a non-positive or
-        non-finite limit (naming the joint), or a segment that moves a joint outside its group by
-        more than ``GROUP_SNAP_TOL``.
+        Bad shapes, unknown motion, non-finite waypoint, a non-positive or non-finite limit
+        (naming the joint), drive limits without a joint, or a segment that moves a joint outside
+        its group by more than ``GROUP_SNAP_TOL``.
     ruckig.RuckigError
         If ruckig fails on a segment (re-raised with the segment and its waypoints).
     """
@@ -260,13 +265,9 @@ def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[s
     if q.ndim != 2 or q.shape[0] < 1:
         raise ValueError(f"waypoints must have shape (K, n_joints) with K >= 1, got {q.shape}")
     n_wp, n = q.shape
-    kinds = tuple(joint_kinds)
-    names = tuple(joint_names) if joint_names is not None else tuple(f"joint {i}" for i in range(n))
-    if len(kinds) != n or len(names) != n:
-        raise ValueError(f"joint_kinds and joint_names need {n} entries, got {len(kinds)} and {len(names)}")
-    for name, kind in zip(names, kinds):
-        if kind not in _UNITS:
-            raise ValueError(f"joint {name}: kind must be 'rotation' or 'translation', got {kind!r}")
+    kinds, names = joints.kinds, joints.names
+    if joints.n_joints != n:
+        raise ValueError(f"the joints need {n} entries (one per waypoint column), got {joints.n_joints}")
     motions = list(motions)
     if len(motions) != n_wp:
         raise ValueError(f"motions needs one entry per waypoint ({n_wp}), got {len(motions)}")
@@ -278,17 +279,14 @@ def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[s
     if not np.all(np.isfinite(q)):
         k, i = np.argwhere(~np.isfinite(q))[0]
         raise ValueError(f"waypoint {k}: joint {names[i]} = {float(q[k, i])!r} is not finite")
-    vmax = _positive_limits(max_velocity, n, names, kinds, "max_velocity", "/s")
-    amax = _positive_limits(max_acceleration, n, names, kinds, "max_acceleration", "/s^2")
-    jmax = _positive_limits(max_jerk, n, names, kinds, "max_jerk", "/s^3")
-    rate = float(control_rate_hz)
+    drive = drive.in_order(names)
+    vmax = _positive_limits(drive.max_velocity, n, names, kinds, "max_velocity", "/s")
+    amax = _positive_limits(drive.max_acceleration, n, names, kinds, "max_acceleration", "/s^2")
+    jmax = _positive_limits(drive.max_jerk, n, names, kinds, "max_jerk", "/s^3")
+    rate = float(drive.control_rate_hz)
     if not np.isfinite(rate) or rate <= 0.0:
-        raise ValueError(f"control_rate_hz must be > 0 Hz, got {control_rate_hz!r}")
-    lo = _vector(lower, n, "lower")
-    hi = _vector(upper, n, "upper")
-    per = np.asarray(periodic, dtype=bool).reshape(-1)
-    if per.shape != (n,):
-        raise ValueError(f"periodic needs shape ({n},), got {per.shape}")
+        raise ValueError(f"control_rate_hz must be > 0 Hz, got {drive.control_rate_hz!r}")
+    lo, hi, per = joints.lower, joints.upper, joints.periodic
 
     if np.any(per):
         q[:, per] = np.unwrap(q[:, per], axis=0)
@@ -339,10 +337,8 @@ def time_parameterize(waypoints, motions: Sequence[str], joint_kinds: Sequence[s
         lower=lo, upper=hi, periodic=per)
 
 
-def time_parameterize_robot(robot, waypoints, motions: Sequence[str], *,
-                            max_velocity: Mapping[str, float], max_acceleration: Mapping[str, float],
-                            max_jerk: Mapping[str, float], control_rate_hz: float) -> Trajectory:
-    """:func:`time_parameterize` with joint kinds, names and limits taken from a robot.
+def time_parameterize_robot(robot, waypoints, motions: Sequence[str], drive: DriveLimits) -> Trajectory:
+    """:func:`time_parameterize` with the joints' kinds, names and limits taken from a robot.
 
     Parameters
     ----------
@@ -351,11 +347,9 @@ def time_parameterize_robot(robot, waypoints, motions: Sequence[str], *,
         Ordered path in the order of ``robot.joints`` [rad or m].
     motions : sequence of str, length K
         As in :func:`time_parameterize`.
-    max_velocity, max_acceleration, max_jerk : mapping of str to float
-        Drive limits by joint name (e.g. ``{"alpha_2": 1.0, "beta_3": 0.01}``) [unit/s, unit/s^2,
-        unit/s^3], as in a scenario file.
-    control_rate_hz : float
-        [Hz]
+    drive : DriveLimits
+        The drive's limits (e.g. a scenario file's ``[drive]``, ``Scenario.drive``, or
+        :meth:`~ctrplan.drive.DriveLimits.by_joint` of ``{joint name: value}`` tables).
 
     Returns
     -------
@@ -364,25 +358,15 @@ def time_parameterize_robot(robot, waypoints, motions: Sequence[str], *,
     Raises
     ------
     ValueError
-        If a joint has no limit in one of the mappings (naming it), or as :func:`time_parameterize`.
+        If the limits name joints and lack one of the robot's (naming it), or as
+        :func:`time_parameterize`.
     """
-    names = [j.name for j in robot.joints]
-    limits = []
-    for label, table in (("max_velocity", max_velocity), ("max_acceleration", max_acceleration),
-                         ("max_jerk", max_jerk)):
-        missing = [nm for nm in names if nm not in table]
-        if missing:
-            raise ValueError(f"{label} has no value for joint(s) {', '.join(missing)}")
-        limits.append([table[nm] for nm in names])
-    return time_parameterize(
-        waypoints, motions, [j.kind for j in robot.joints], *limits, control_rate_hz,
-        robot.joint_lower, robot.joint_upper, [j.periodic for j in robot.joints], joint_names=names)
+    return time_parameterize(waypoints, motions, JointLimits.of_robot(robot), drive)
 
 
 # ---------------------------------------------------------------------------------- checks
-def check_trajectory(traj: Trajectory, max_velocity=None, max_acceleration=None, max_jerk=None,
-                     lower=None, upper=None, periodic=None, *, strict: bool = False,
-                     limit_rtol: float = LIMIT_RTOL, jerk_rtol: float = JERK_RTOL,
+def check_trajectory(traj: Trajectory, drive: DriveLimits | None = None, joints: JointLimits | None = None, *,
+                     strict: bool = False, limit_rtol: float = LIMIT_RTOL, jerk_rtol: float = JERK_RTOL,
                      abs_tol: float = ABS_TOL) -> list[LimitViolation]:
     """Check a sampled trajectory against drive and joint limits.
 
@@ -396,12 +380,13 @@ def check_trajectory(traj: Trajectory, max_velocity=None, max_acceleration=None,
     Parameters
     ----------
     traj : Trajectory
-    max_velocity, max_acceleration, max_jerk : array-like, shape (n_joints,), optional
-        Limits [unit/s, unit/s^2, unit/s^3]; default: those ``traj`` was computed with.
-    lower, upper : array-like, shape (n_joints,), optional
-        Joint limits [rad or m]; default: ``traj.lower``, ``traj.upper``.
-    periodic : array-like of bool, shape (n_joints,), optional
-        Joints without position limits; default ``traj.periodic``.
+    drive : DriveLimits, optional
+        Velocity, acceleration and jerk limits [unit/s, unit/s^2, unit/s^3]; default: those
+        ``traj`` was computed with (``traj.drive``). Its control rate is not used: the samples
+        are checked against ``traj.control_rate_hz``.
+    joints : JointLimits, optional
+        Position limits [rad or m] and periodic joints; default ``traj.joints``. Names and kinds
+        are ``traj``'s.
     strict : bool
         Raise instead of returning violations.
     limit_rtol, jerk_rtol : float
@@ -420,13 +405,14 @@ def check_trajectory(traj: Trajectory, max_velocity=None, max_acceleration=None,
         If ``strict`` and a check fails; the message lists every violation.
     """
     n = traj.n_joints
-    vmax = _vector(traj.max_velocity if max_velocity is None else max_velocity, n, "max_velocity")
-    amax = _vector(traj.max_acceleration if max_acceleration is None else max_acceleration, n, "max_acceleration")
-    jmax = _vector(traj.max_jerk if max_jerk is None else max_jerk, n, "max_jerk")
-    lo = _vector(traj.lower if lower is None else lower, n, "lower")
-    hi = _vector(traj.upper if upper is None else upper, n, "upper")
-    per = np.asarray(traj.periodic if periodic is None else periodic, dtype=bool).reshape(n)
     names, kinds = traj.joint_names, traj.joint_kinds
+    drive = traj.drive if drive is None else drive.in_order(names)
+    joints = traj.joints if joints is None else joints
+    vmax = _vector(drive.max_velocity, n, "max_velocity")
+    amax = _vector(drive.max_acceleration, n, "max_acceleration")
+    jmax = _vector(drive.max_jerk, n, "max_jerk")
+    lo, hi = _vector(joints.lower, n, "lower"), _vector(joints.upper, n, "upper")
+    per = np.asarray(joints.periodic, dtype=bool).reshape(n)
     units = [_UNITS[k] for k in kinds]
     t, p, v, a = traj.t, traj.position, traj.velocity, traj.acceleration
     out: list[LimitViolation] = []

@@ -15,7 +15,7 @@ from ctrplan.design import (DesignInputError, Hypothesis, design_experiment, inf
                             result_hypotheses, sensitivities)
 from ctrplan.discrepancy import predict
 from ctrplan.io.robot_file import load_robot
-from ctrplan.io.scenario import DriveLimits
+from ctrplan.drive import DriveLimits
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"

@@ -22,7 +22,8 @@ LAYERS = (
                                                # the one rule of keys of stored results
     ("history",),                              # pure numerics of motion history
     ("robot", "calibration"),                  # calibration: the robot file's records of measurements, typed
-    ("coordinates", "effects"),                # robot-level quantities and the registry of effects
+    ("coordinates", "effects", "drive"),       # robot-level quantities, the registry of effects, the
+                                               # joints' and the drive's limits
     ("obstacles",),                            # obstacle types and their registry: the scenario loader (io),
                                                # the collision checker (planning) and the plots use them
     ("io",),                                   # files -> robots, scenarios, tables

@@ -10,6 +10,7 @@ import ctrplan.io.atomic as atomic
 import ctrplan.plots as plots
 from ctrplan.plots import plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes, plot_xy
 from ctrplan.report import format_summary, path_columns, write_plan_outputs
+from ctrplan.drive import DriveLimits, JointLimits
 from ctrplan.trajectory import time_parameterize
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -21,9 +22,10 @@ MOTIONS = ["start", "rotation", "translation", "rotation"]
 
 @pytest.fixture(scope="module")
 def traj():
-    return time_parameterize(WAYPOINTS, MOTIONS, KINDS, [1.0, 1.5, 0.01], [2.0, 3.0, 0.05],
-                             [20.0, 30.0, 1.0], 100.0, [-np.pi, -np.pi, -0.104], [np.pi, np.pi, -0.034],
-                             [True, True, False], joint_names=NAMES)
+    joints = JointLimits(tuple(NAMES), tuple(KINDS), [-np.pi, -np.pi, -0.104], [np.pi, np.pi, -0.034],
+                         [True, True, False])
+    return time_parameterize(WAYPOINTS, MOTIONS, joints,
+                             DriveLimits(100.0, [1.0, 1.5, 0.01], [2.0, 3.0, 0.05], [20.0, 30.0, 1.0]))
 
 
 def _is_png(path):

@@ -223,9 +223,8 @@ def test_obstacles_and_drive_feed_the_planning_and_trajectory_modules(tmp_path):
     dicts = [o.as_dict() for o in s.obstacles]
     assert [d["type"] for d in dicts] == ["sphere", "capsule", "box", "mesh"]
     assert dicts[3]["file"] == str((tmp_path / "meshes" / "tri.stl").resolve())
-    kw = s.drive.as_kwargs()
-    assert kw["max_velocity"] == {"alpha_2": 1.0, "alpha_3": 2.0, "beta_3": 0.01}
-    assert kw["control_rate_hz"] == 100.0
+    assert s.drive.joint_names == ("alpha_2", "alpha_3", "beta_3")
+    assert s.drive.max_velocity.tolist() == [1.0, 2.0, 0.01] and s.drive.control_rate_hz == 100.0
     from ctrplan.obstacles import obstacle_from_dict
 
     built = [obstacle_from_dict(dict(d)) for d in dicts]

@@ -7,6 +7,7 @@ import pytest
 import ruckig
 from _robots import table2_robot
 
+from ctrplan.drive import DriveLimits, JointLimits
 from ctrplan.errors import JointLimitError
 from ctrplan.trajectory import (
     check_trajectory,
@@ -36,7 +37,9 @@ def _param(waypoints=WAYPOINTS, motions=MOTIONS, **kw):
     args = dict(max_velocity=VMAX, max_acceleration=AMAX, max_jerk=JMAX, control_rate_hz=RATE,
                 lower=LOWER, upper=UPPER, periodic=PERIODIC)
     args.update(kw)
-    return time_parameterize(waypoints, motions, KINDS, joint_names=NAMES, **args)
+    joints = JointLimits(tuple(NAMES), tuple(KINDS), args["lower"], args["upper"], args["periodic"])
+    drive = DriveLimits(args["control_rate_hz"], args["max_velocity"], args["max_acceleration"], args["max_jerk"])
+    return time_parameterize(waypoints, motions, joints, drive)
 
 
 @pytest.fixture(scope="module")
@@ -132,8 +135,8 @@ SIX_JMAX = np.array([40.0, 30.0, 40.0, 0.4, 0.4, 0.5])
 
 
 def _six_segment(q0, q1, motion):
-    return time_parameterize([q0, q1], ["start", motion], SIX_KINDS, SIX_VMAX, SIX_AMAX, SIX_JMAX, RATE,
-                             [-9.0] * 3 + [-1.0] * 3, [9.0] * 3 + [1.0] * 3, [False] * 6)
+    joints = JointLimits.unnamed(SIX_KINDS, [-9.0] * 3 + [-1.0] * 3, [9.0] * 3 + [1.0] * 3)
+    return time_parameterize([q0, q1], ["start", motion], joints, DriveLimits(RATE, SIX_VMAX, SIX_AMAX, SIX_JMAX))
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -195,7 +198,8 @@ def test_check_trajectory_catches_motion_of_the_wrong_group(traj):
 
 
 def test_check_trajectory_catches_tighter_limits_and_joint_limits(traj):
-    found = check_trajectory(traj, max_velocity=VMAX / 2, upper=[np.pi, np.pi, -0.06])
+    found = check_trajectory(traj, DriveLimits(RATE, VMAX / 2, AMAX, JMAX),
+                             JointLimits(tuple(NAMES), tuple(KINDS), LOWER, [np.pi, np.pi, -0.06], PERIODIC))
     checks = {(v.check, v.joint) for v in found}
     assert ("velocity", "alpha_2") in checks
     assert ("position", "beta_3") in checks
@@ -260,12 +264,21 @@ def test_from_robot_uses_joint_names_and_limits():
     robot = table2_robot()
     limits = {name: dict(zip(NAMES, values)) for name, values in
               (("max_velocity", VMAX), ("max_acceleration", AMAX), ("max_jerk", JMAX))}
-    traj = time_parameterize_robot(robot, WAYPOINTS, MOTIONS, control_rate_hz=RATE, **limits)
+    traj = time_parameterize_robot(robot, WAYPOINTS, MOTIONS, DriveLimits.by_joint(NAMES, control_rate_hz=RATE,
+                                                                                   **limits))
     assert traj.joint_names == tuple(NAMES) and list(traj.periodic) == [True, True, False]
     assert check_trajectory(traj) == []
+    # limits named in another order are arranged in the robot's
+    shuffled = DriveLimits.by_joint(NAMES[::-1], control_rate_hz=RATE, **limits)
+    again = time_parameterize_robot(robot, WAYPOINTS, MOTIONS, shuffled)
+    np.testing.assert_array_equal(again.position, traj.position)
+    np.testing.assert_array_equal(again.max_velocity, VMAX)
     del limits["max_jerk"]["beta_3"]
     with pytest.raises(ValueError, match="max_jerk.*beta_3"):
-        time_parameterize_robot(robot, WAYPOINTS, MOTIONS, control_rate_hz=RATE, **limits)
+        DriveLimits.by_joint(NAMES, control_rate_hz=RATE, **limits)
+    with pytest.raises(ValueError, match="no value for joint\\(s\\) beta_3"):
+        time_parameterize_robot(robot, WAYPOINTS, MOTIONS, DriveLimits(RATE, VMAX[:2], AMAX[:2], JMAX[:2],
+                                                                       ("alpha_2", "alpha_3")))
 
 
 def _replace(traj, **changes):

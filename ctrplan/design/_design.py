@@ -20,7 +20,7 @@ import numpy as np
 from scipy import stats
 
 from ..choices import DesignMode, JointKind
-from ..io.scenario import DriveLimits
+from ..drive import DriveLimits
 from ._criteria import (Information, ds_criterion, information, noise_weight, prior_precision, sensitivities)
 from ._hypotheses import DesignInputError
 from ._motions import feasible, joint_configurations, motion_data, primitives, sample, trajectory

@@ -26,6 +26,7 @@ import numpy as np
 from ..choices import MotionKind
 from ..history import MotionRecord, motion_state
 from ..robot import ROTATION, TRANSLATION
+from ..drive import JointLimits
 from ..trajectory import Trajectory, time_parameterize
 
 #: Speed factor of a ``slow`` primitive: the drive limits are scaled by f, f^2, f^3 [-].
@@ -183,7 +184,7 @@ def trajectory(robot, prims, drive) -> Trajectory:
     prims : sequence of Primitive
         Consecutive (each starts where the previous ended).
     drive : DriveLimits
-        The drive's limits and control rate (:class:`ctrplan.io.scenario.DriveLimits`).
+        The drive's limits and control rate (:class:`ctrplan.drive.DriveLimits`).
 
     Returns
     -------
@@ -197,10 +198,11 @@ def trajectory(robot, prims, drive) -> Trajectory:
     """
     if not prims:
         raise ValueError("no primitives")
-    names = tuple(robot.joint_names)
-    kinds = tuple(j.kind for j in robot.joints)
-    lower, upper = robot.joint_lower, robot.joint_upper
-    periodic = [j.periodic for j in robot.joints]
+    joints = JointLimits.of_robot(robot)
+    names, kinds = joints.names, joints.kinds
+    # each piece is validated on its straight segment, unwrapped or not: no joint taken as periodic
+    pieces = JointLimits(names, kinds, joints.lower, joints.upper, np.zeros(len(names), bool))
+    drive = drive.in_order(names)
     dt = 1.0 / drive.control_rate_hz
     n = len(names)
     q = np.asarray(prims[0].waypoints[0], float)
@@ -212,9 +214,7 @@ def trajectory(robot, prims, drive) -> Trajectory:
             raise ValueError("primitives do not join: one starts where the previous did not end")
         f = prim.speed
         for a, b, motion in zip(prim.waypoints[:-1], prim.waypoints[1:], prim.motions):
-            piece = time_parameterize(np.vstack([a, b]), [MotionKind.START, motion], kinds, drive.max_velocity * f,
-                                      drive.max_acceleration * f ** 2, drive.max_jerk * f ** 3,
-                                      drive.control_rate_hz, lower, upper, [False] * n, joint_names=names)
+            piece = time_parameterize(np.vstack([a, b]), [MotionKind.START, motion], pieces, drive.scaled(f))
             s = piece.segments[0]
             m = len(piece.t) - 1
             segments.append(replace(s, index=len(segments), t_start=i0 * dt, t_end=(i0 + m) * dt, i_start=i0,
@@ -236,8 +236,8 @@ def trajectory(robot, prims, drive) -> Trajectory:
                       joint_names=names, joint_kinds=kinds, control_rate_hz=drive.control_rate_hz,
                       max_velocity=np.asarray(drive.max_velocity, float),
                       max_acceleration=np.asarray(drive.max_acceleration, float),
-                      max_jerk=np.asarray(drive.max_jerk, float), lower=np.asarray(lower, float),
-                      upper=np.asarray(upper, float), periodic=np.asarray(periodic, bool))
+                      max_jerk=np.asarray(drive.max_jerk, float), lower=joints.lower, upper=joints.upper,
+                      periodic=joints.periodic)
 
 
 def sample(traj: Trajectory, period: float, t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

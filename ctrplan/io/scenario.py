@@ -22,6 +22,7 @@ from pydantic import AfterValidator, ConfigDict, Field
 from ..choices import AimWith, FinalMotion, FirstPlan, JointKind, MapPlacement
 from ..calibration import RobotCalibration
 from ..coordinates import map_coordinates
+from ..drive import DriveLimits
 from ..errors import JointLimitError, ModelFileError
 from ..obstacles import OBSTACLE_TYPES, Box, Capsule, Mesh, Sphere  # noqa: F401 (the built-in types, also here)
 from ..planner_info import PLANNER_REGISTRY, check_planner, check_planner_options
@@ -36,7 +37,6 @@ __all__ = [
     "TaskGoal",
     "PlannerSettings",
     "BoundFieldSettings",
-    "DriveLimits",
 ]
 
 Positive = Annotated[float, Field(gt=0.0)]
@@ -304,35 +304,6 @@ class BoundFieldSettings:
     first_plan: FirstPlan = FirstPlan.PREVIEW
     refine_rounds: int | None = None
     refine_tolerance: float = 0.25e-3
-
-
-@dataclass(frozen=True, eq=False)
-class DriveLimits:
-    """Limits of the joint drives for time parameterization (ruckig).
-
-    Attributes
-    ----------
-    control_rate_hz : float
-        Control rate [Hz].
-    max_velocity, max_acceleration, max_jerk : ndarray, shape (n_joints,)
-        In robot joint order; rad/s^k for rotations, m/s^k for translations (k = 1, 2, 3).
-    joint_names : tuple of str
-        Robot joint names, the order of the arrays.
-    """
-
-    control_rate_hz: float
-    max_velocity: np.ndarray
-    max_acceleration: np.ndarray
-    max_jerk: np.ndarray
-    joint_names: tuple[str, ...] = ()
-
-    def as_kwargs(self) -> dict:
-        """Keyword arguments of ``ctrplan.trajectory.time_parameterize_robot``: the three limit
-        tables as ``{joint name: value}`` and ``control_rate_hz``."""
-        return {"max_velocity": dict(zip(self.joint_names, self.max_velocity.tolist())),
-                "max_acceleration": dict(zip(self.joint_names, self.max_acceleration.tolist())),
-                "max_jerk": dict(zip(self.joint_names, self.max_jerk.tolist())),
-                "control_rate_hz": self.control_rate_hz}
 
 
 @dataclass(frozen=True, eq=False)

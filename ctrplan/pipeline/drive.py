@@ -33,7 +33,7 @@ def time_parameterize(setup: PlanSetup, ordered):
     from ..trajectory import check_trajectory, time_parameterize_robot
 
     sc = setup.scenario
-    traj = time_parameterize_robot(setup.robot, ordered.q, ordered.motions, **sc.drive.as_kwargs()) \
+    traj = time_parameterize_robot(setup.robot, ordered.q, ordered.motions, sc.drive) \
         if sc.drive is not None else None
     violations = check_trajectory(traj) if traj is not None else []
     if violations:
