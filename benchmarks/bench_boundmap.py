@@ -114,7 +114,7 @@ def main(argv=None) -> int:
                     help="scheduler cost per chunk [ms] added in the projection")
     args = ap.parse_args(argv)
 
-    from ctrplan.boundmap import chunk_shape_for, compute_bound_map
+    from ctrplan.boundmap import DEFAULT_CHUNK_SIZE, ComputeOptions, chunk_shape_for, compute_bound_map
     from ctrplan.mechanics import ModelSettings
 
     res = tuple(int(x) for x in args.resolution.split(","))
@@ -126,8 +126,9 @@ def main(argv=None) -> int:
     store.parent.mkdir(parents=True, exist_ok=True)
     print(f"robot {robot_path.name}, resolution {res} ({int(np.prod(res))} nodes), ds {args.ds * 1e3:g} mm, "
           f"store {store}")
-    run, _ = compute_bound_map(robot_path, res, ModelSettings(ds=args.ds), out_path=store, n_jobs=args.jobs,
-                               scheduler=args.scheduler, chunk_size=args.chunk_size, progress=True)
+    options = ComputeOptions(n_jobs=args.jobs, scheduler=args.scheduler,
+                             chunk_size=args.chunk_size or DEFAULT_CHUNK_SIZE, progress=True)
+    run, _ = compute_bound_map(robot_path, res, ModelSettings(ds=args.ds), out_path=store, options=options)
     st = run.store
     print(f"this invocation: {run.executor}, {run.n_computed} chunks computed, {run.n_reused} reused, "
           f"wall {run.wall_seconds:.1f} [s]")

@@ -276,6 +276,7 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
     import numpy as np
 
     from .boundmap import MapSpec, default_spec, map_coordinates, map_file, map_identity, map_paths
+    from .boundmap.compute import DEFAULT_CHUNK_SIZE, ComputeOptions
     from .boundmap.files import compute_bound_map
     from .io.robot_file import load_robot
     from .mechanics import evaluate_bound
@@ -309,8 +310,9 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
     logger.info(f"map coordinates: {', '.join(f'{n} ({r} nodes)' for n, r in zip(coords.names, spec.resolution))}; "
                 f"placement {spec.placement}; key {ident.key[:12]}; mechanics {ident.mechanics_version}")
     n_jobs = 1 if scheduler else (jobs or os.cpu_count() or 1)
-    run, path = compute_bound_map(robot_path, spec, settings, out_path=out, store_path=store_path, n_jobs=n_jobs,
-                                  scheduler=scheduler, chunk_size=chunk_size, progress=_progress(no_progress))
+    options = ComputeOptions(n_jobs=n_jobs, scheduler=scheduler, chunk_size=chunk_size or DEFAULT_CHUNK_SIZE,
+                             progress=_progress(no_progress))
+    run, path = compute_bound_map(robot_path, spec, settings, out_path=out, store_path=store_path, options=options)
     field = run.field
     secs = np.asarray(run.chunk_seconds)
     timing = (f"; chunk time mean {secs.mean():.2f} s, max {secs.max():.2f} s" if secs.size else "")

@@ -84,7 +84,7 @@ def test_six_joint_field_takes_joint_vectors_and_ignores_common_motion():
                                diagnostics=SimpleNamespace(converged=True, unstable=False))
 
     relative_bound.name = "relative-bound"
-    field = compute_field(robot, relative_bound, (8, 8, 3, 5), progress=False)
+    field = compute_field(robot, relative_bound, (8, 8, 3, 5))
     assert field.shape == (8, 8, 3, 5) and field.n_joints == 6
     q = np.array([0.2, 1.0, -2.0, -0.004, -0.014, -0.06])
     b = field(q)

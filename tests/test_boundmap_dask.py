@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.boundmap import (BoundMapStore, compute_bound_map, compute_bound_map_store, load_bound_map,
+from ctrplan.boundmap import (BoundMapStore, ComputeOptions, compute_bound_map, compute_bound_map_store, load_bound_map,
                               start_local_cluster)
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings, evaluate_bound
@@ -51,7 +51,7 @@ def robot_file(tmp_path_factory):
 def serial(robot_file):
     robot = load_robot(robot_file)
     return compute_bound_map_store(robot, evaluate_bound, RES, SETTINGS, robot_file_text=robot_file.read_text(),
-                                   chunk_size=CHUNK, progress=False)
+                                   options=ComputeOptions(chunk_size=CHUNK))
 
 
 @pytest.fixture(scope="module")
@@ -65,8 +65,8 @@ def client():
 
 def _run(robot_file, store, client, **kw):
     robot = load_robot(robot_file)
-    return compute_bound_map_store(robot, evaluate_bound, RES, SETTINGS, store, scheduler=client,
-                                   robot_file_text=robot_file.read_text(), chunk_size=CHUNK, progress=False, **kw)
+    return compute_bound_map_store(robot, evaluate_bound, RES, SETTINGS, store, robot_file_text=robot_file.read_text(),
+                                   options=ComputeOptions(scheduler=client, chunk_size=CHUNK, **kw))
 
 
 def test_serial_reference_is_a_real_map(serial):
@@ -95,8 +95,9 @@ def test_cluster_map_equals_serial_map(robot_file, serial, client, tmp_path):
 def test_local_processes_map_equals_serial_map(robot_file, serial, tmp_path):
     """Catches chunks written to the wrong nodes when they come back out of order from workers."""
     robot = load_robot(robot_file)
-    run = compute_bound_map_store(robot, evaluate_bound, RES, SETTINGS, tmp_path / "local.zarr", n_jobs=2,
-                                  robot_file_text=robot_file.read_text(), chunk_size=CHUNK, progress=False)
+    run = compute_bound_map_store(robot, evaluate_bound, RES, SETTINGS, tmp_path / "local.zarr",
+                                  robot_file_text=robot_file.read_text(),
+                                  options=ComputeOptions(n_jobs=2, chunk_size=CHUNK))
     assert run.executor == "2 local processes" and run.n_computed == 8
     np.testing.assert_array_equal(run.field.values, serial.field.values)
     np.testing.assert_array_equal(run.field.valid, serial.field.valid)
@@ -174,7 +175,7 @@ def test_cli_killed_run_resumes(tmp_path):
     st = BoundMapStore.open(store)
     done_before = np.flatnonzero(st.done())
     assert 3 <= done_before.size < st.n_chunks == 24
-    run, path = compute_bound_map(robot_file, res, SETTINGS, out_path=store, n_jobs=1, progress=False)
+    run, path = compute_bound_map(robot_file, res, SETTINGS, out_path=store, options=ComputeOptions(n_jobs=1))
     assert path == store
     assert run.n_reused == done_before.size and run.n_computed == 24 - done_before.size
     runs = run.store.chunk_run()

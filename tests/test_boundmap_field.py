@@ -3,8 +3,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ctrplan.boundmap import (BoundField, BoundFieldKeyError, compute_field, field_key, interpolation_error,
-                              load_bound_map, uniform_axis)
+from ctrplan.boundmap import (BoundField, BoundFieldKeyError, ComputeOptions, compute_field, field_key,
+                              interpolation_error, load_bound_map, uniform_axis)
 from ctrplan.mechanics.results import ModelSettings
 from test_planning_helpers import fake_bound, fake_robot
 
@@ -26,7 +26,7 @@ class CountingBound:
 
 @pytest.fixture(scope="module")
 def field():
-    return compute_field(fake_robot(), fake_bound, RES, progress=False)
+    return compute_field(fake_robot(), fake_bound, RES)
 
 
 def exact(robot, q, quantity="position"):
@@ -103,25 +103,24 @@ def test_resume_computes_only_missing_chunks(tmp_path):
     robot = fake_robot()
     store = tmp_path / "map.zarr"
     n_nodes = int(np.prod(RES))  # 192 nodes, chunks of (1, 3, 4) = 12 nodes -> 16 chunks
-    partial = compute_field(robot, fake_bound, RES, store=store, chunk_size=12,
-                                 progress=False, max_chunks=5)
+    partial = compute_field(robot, fake_bound, RES, store=store, options=ComputeOptions(chunk_size=12, max_chunks=5))
     assert partial is None  # interrupted
     counter = CountingBound()
-    full = compute_field(robot, counter, RES, store=store, chunk_size=12, progress=False)
+    full = compute_field(robot, counter, RES, store=store, options=ComputeOptions(chunk_size=12))
     assert counter.calls == n_nodes - 5 * 12
-    ref = compute_field(robot, fake_bound, RES, progress=False)
+    ref = compute_field(robot, fake_bound, RES)
     np.testing.assert_array_equal(full.values, ref.values)
     assert full.key == ref.key
     # the finished store is a map the planner reads
     np.testing.assert_array_equal(load_bound_map(store, key=ref.key).values, ref.values)
     # a finished store evaluates nothing
     counter2 = CountingBound()
-    compute_field(robot, counter2, RES, store=store, chunk_size=12, progress=False)
+    compute_field(robot, counter2, RES, store=store, options=ComputeOptions(chunk_size=12))
     assert counter2.calls == 0
     # another model setting with the same store raises, naming the store and the setting
     with pytest.raises(BoundFieldKeyError, match="settings.ds"):
         compute_field(robot, fake_bound, RES, settings=ModelSettings(ds=2e-3), store=store,
-                           chunk_size=12, progress=False)
+                      options=ComputeOptions(chunk_size=12))
 
 
 def test_failed_and_unstable_points_are_invalid():
@@ -135,7 +134,7 @@ def test_failed_and_unstable_points_are_invalid():
             res.diagnostics = SimpleNamespace(converged=True, unstable=True)
         return res
 
-    f = compute_field(fake_robot(), flaky, (4, 4, 3), progress=False)
+    f = compute_field(fake_robot(), flaky, (4, 4, 3))
     assert not f.valid[0, 0, 0] and not f.valid[1, 1, 2] and f.valid[1, 1, 1]
     assert f.metadata["n_invalid"] == 4 * 4 + 3 - 1
 
@@ -216,7 +215,7 @@ def test_adaptive_spec_puts_translation_nodes_where_the_bound_bends(tmp_path):
 
     drop.name = "drop"
     spec = MapSpec((4, 4, 8), "adaptive", pilot_lines=2)
-    run = compute_bound_map_store(fake_robot(), drop, spec, store=tmp_path / "m.zarr", progress=False)
+    run = compute_bound_map_store(fake_robot(), drop, spec, store=tmp_path / "m.zarr")
     nodes = run.field.axes[2]
     assert nodes[0] == -0.104 and nodes[-1] == -0.034
     assert np.sum(np.abs(nodes + 0.040) < 0.008) >= 5       # most nodes within 8 mm of the drop
@@ -225,7 +224,7 @@ def test_adaptive_spec_puts_translation_nodes_where_the_bound_bends(tmp_path):
     assert pts.shape == (2, 71, 3) and vals.shape == (2, 71, 4) and np.all(np.isfinite(vals))
     assert run.field.key != field_key(fake_robot(), None, MapSpec((4, 4, 8)), drop)
     # the adaptive map beats the uniform one with the same nodes
-    uni = compute_bound_map_store(fake_robot(), drop, MapSpec((4, 4, 8)), progress=False).field
+    uni = compute_bound_map_store(fake_robot(), drop, MapSpec((4, 4, 8))).field
     q = np.column_stack([np.zeros(300), np.zeros(300), np.linspace(-0.104, -0.034, 300)])
     exact = np.array([drop(None, *fake_robot().configuration(x)).position for x in q])
     assert np.max(np.abs(run.field(q) - exact)) < 0.5 * np.max(np.abs(uni(q) - exact))

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from test_planning_helpers import fake_bound, fake_robot
 
 from ctrplan import cli
-from ctrplan.boundmap import (BoundMapMismatchError, BoundMapStore, IncompleteBoundMapError, MapSpec,
+from ctrplan.boundmap import (BoundMapMismatchError, BoundMapStore, ComputeOptions, IncompleteBoundMapError, MapSpec,
                               chunk_shape_for, compute_bound_map, compute_bound_map_store, compute_field, field_key,
                               load_bound_map, load_or_compute_bound_map)
 from ctrplan.io.robot_file import load_robot
@@ -46,8 +46,8 @@ def test_chunk_shape(res, size, want):
 
 def test_fake_map_chunks_cover_the_grid_once(tmp_path):
     robot = fake_robot()
-    run = compute_bound_map_store(robot, fake_bound, (5, 7, 3), store=tmp_path / "m.zarr", chunk_size=10,
-                                  progress=False)
+    run = compute_bound_map_store(robot, fake_bound, (5, 7, 3), store=tmp_path / "m.zarr",
+                                  options=ComputeOptions(chunk_size=10))
     st = run.store
     assert st.chunks == chunk_shape_for((5, 7, 3), 10)
     assert st.chunk_sizes().sum() == 5 * 7 * 3
@@ -57,14 +57,14 @@ def test_fake_map_chunks_cover_the_grid_once(tmp_path):
         np.testing.assert_array_equal(st.chunk_nodes(c), run.field.nodes().reshape(5, 7, 3, 3)[st.chunk_slices(c)]
                                       .reshape(-1, 3))
     assert np.all(covered == 1)
-    ref = compute_field(robot, fake_bound, (5, 7, 3), progress=False)
+    ref = compute_field(robot, fake_bound, (5, 7, 3))
     np.testing.assert_array_equal(run.field.values, ref.values)
     assert np.all(np.isfinite(st.chunk_seconds())) and st.chunk_cold().sum() <= 1
 
 
 def test_store_records_robot_file_hash_and_settings(tmp_path):
     robot_file = pair_file(tmp_path)
-    run, path = compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=tmp_path / "m.zarr", progress=False)
+    run, path = compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=tmp_path / "m.zarr")
     attrs = BoundMapStore.open(path).attrs
     assert attrs["robot_sha256"] == hashlib.sha256(robot_file.read_bytes()).hexdigest()
     assert attrs["robot_hash_of"] == "robot file"
@@ -80,7 +80,7 @@ def test_store_records_robot_file_hash_and_settings(tmp_path):
 def test_resuming_into_another_map_is_refused(tmp_path):
     robot_file = pair_file(tmp_path)
     store = tmp_path / "m.zarr"
-    compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=store, progress=False, max_chunks=1)
+    compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=store, options=ComputeOptions(max_chunks=1))
     old_sha = hashlib.sha256(robot_file.read_bytes()).hexdigest()
     cases = [
         (dict(resolution=(4, 4)), "spec", {"resolution": [4, 3], "placement": "uniform"},
@@ -90,7 +90,7 @@ def test_resuming_into_another_map_is_refused(tmp_path):
     for change, key, stored, requested in cases:
         kw = dict(resolution=(4, 3), settings=SETTINGS) | change
         with pytest.raises(BoundMapMismatchError) as err:
-            compute_bound_map(robot_file, kw["resolution"], kw["settings"], out_path=store, progress=False)
+            compute_bound_map(robot_file, kw["resolution"], kw["settings"], out_path=store)
         e = err.value
         assert (e.key, e.stored, e.requested) == (key, stored, requested)
         assert str(store) in str(e) and key in str(e)
@@ -98,7 +98,7 @@ def test_resuming_into_another_map_is_refused(tmp_path):
     robot_file = pair_file(tmp_path, mu=0.3)
     new_sha = hashlib.sha256(robot_file.read_bytes()).hexdigest()
     with pytest.raises(BoundMapMismatchError) as err:
-        compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=store, progress=False)
+        compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=store)
     assert (err.value.key, err.value.stored, err.value.requested) == ("robot_sha256", old_sha, new_sha)
     assert old_sha in str(err.value) and new_sha in str(err.value)
     # nothing of the refused runs was written
@@ -108,8 +108,8 @@ def test_resuming_into_another_map_is_refused(tmp_path):
 def test_incomplete_store_is_not_a_map(tmp_path):
     robot = fake_robot()
     store = tmp_path / "m.zarr"
-    run = compute_bound_map_store(robot, fake_bound, (4, 4, 3), store=store, chunk_size=12, progress=False,
-                                  max_chunks=2)
+    run = compute_bound_map_store(robot, fake_bound, (4, 4, 3), store=store,
+                                  options=ComputeOptions(chunk_size=12, max_chunks=2))
     assert run.field is None and run.n_computed == 2
     with pytest.raises(IncompleteBoundMapError, match=r"m\.zarr.*2 of 4 chunks not computed"):
         load_bound_map(store)
@@ -121,7 +121,7 @@ def test_npz_output_and_planner_lookup(tmp_path, monkeypatch, caplog):
     """An .npz output goes through its store; the planner finds cached stores and resumes them."""
     robot_file = pair_file(tmp_path)
     robot = load_robot(robot_file)
-    run, path = compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=tmp_path / "m.npz", progress=False)
+    run, path = compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=tmp_path / "m.npz")
     assert path == tmp_path / "m.npz" and (tmp_path / "m.zarr").is_dir()
     np.testing.assert_array_equal(load_bound_map(path, key=run.field.key).values,
                                   load_bound_map(tmp_path / "m.zarr", key=run.field.key).values)
@@ -129,7 +129,7 @@ def test_npz_output_and_planner_lookup(tmp_path, monkeypatch, caplog):
     monkeypatch.chdir(tmp_path)
     key = run.field.key
     cache = Path(".cache") / "boundmaps" / f"pair-{key[:12]}.zarr"
-    compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=cache, progress=False, max_chunks=1, chunk_size=3)
+    compute_bound_map(robot_file, (4, 3), SETTINGS, out_path=cache, options=ComputeOptions(max_chunks=1, chunk_size=3))
     caplog.set_level(logging.INFO, logger="ctrplan")
     field, source, _ = load_or_compute_bound_map(robot_file, robot, (4, 3), SETTINGS)
     assert source == "computed" and ".cache/boundmaps" in caplog.messages[-1]
@@ -234,14 +234,14 @@ def test_maps_of_other_mechanics_are_stale_and_named(tmp_path, monkeypatch, capl
     # a map computed by "older" mechanics, shipped next to a robot file
     robot_file = pair_file(tmp_path)
     monkeypatch.setattr(constants, "MECHANICS_VERSION", "1999.01.01")
-    old_run, old_path = compute_bound_map(robot_file, (4, 3), SETTINGS, fake_pair_bound, progress=False,
+    old_run, old_path = compute_bound_map(robot_file, (4, 3), SETTINGS, fake_pair_bound,
                                           out_path=tmp_path / "boundmaps" / "placeholder.npz")
     old_path.rename(tmp_path / "boundmaps" / f"pair-{old_run.field.key[:12]}.npz")
     store = tmp_path / "boundmaps" / "placeholder.zarr"
     monkeypatch.undo()
     # resuming the old store with today's mechanics is refused, naming the version
     with pytest.raises(BoundMapMismatchError) as err:
-        compute_bound_map(robot_file, (4, 3), SETTINGS, fake_pair_bound, out_path=store, progress=False)
+        compute_bound_map(robot_file, (4, 3), SETTINGS, fake_pair_bound, out_path=store)
     assert (err.value.key, err.value.stored, err.value.requested) == ("mechanics_version", "1999.01.01",
                                                                        MECHANICS_VERSION)
     # the lookup skips the old shipped map, says why, and computes a new one

@@ -78,11 +78,11 @@ def test_deprecated_echo_receives_the_messages_of_its_call():
 def test_progress_bars_are_off_by_default(capsys):
     """Library calls show no tqdm bar unless asked: a bound map computed with the default, then
     with ``progress=True`` (the bar goes to stderr)."""
-    from ctrplan.boundmap import compute_field
+    from ctrplan.boundmap import ComputeOptions, compute_field
 
     compute_field(fake_robot(), fake_bound, (4, 4, 3))
     assert capsys.readouterr() == ("", "")
-    compute_field(fake_robot(), fake_bound, (4, 4, 3), progress=True)
+    compute_field(fake_robot(), fake_bound, (4, 4, 3), options=ComputeOptions(progress=True))
     assert "bound map" in capsys.readouterr().err
 
 

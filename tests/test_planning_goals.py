@@ -19,7 +19,7 @@ def test_ik_finds_both_elbows_and_picks_lowest_bound():
         return SimpleNamespace(position=p, angle=p, translation_last_position=p, translation_last_angle=p,
                                diagnostics=SimpleNamespace(converged=True, unstable=False))
 
-    field = compute_field(robot, bound, (24, 8, 3), progress=False)
+    field = compute_field(robot, bound, (24, 8, 3))
     sol = resolve_goal(TaskGoal(target, 1e-4), robot, lambda q: True, field=field,
                        solve_standard=fake_solve_standard, seed=0)
     assert sol.tip_error < 1e-4
@@ -70,7 +70,7 @@ def test_tie_in_bound_and_residual_goes_to_the_solution_found_first():
         return SimpleNamespace(position=p, angle=p, translation_last_position=p, translation_last_angle=p,
                                diagnostics=SimpleNamespace(converged=True, unstable=False))
 
-    field = compute_field(robot, flat, (12, 6, 3), progress=False)
+    field = compute_field(robot, flat, (12, 6, 3))
     sol = resolve_goal(TaskGoal(target, 1e-3), robot, lambda q: True, field=field,
                        solve_standard=fake_solve_standard, seed=0)
     assert len(sol.candidates) >= 2

@@ -14,7 +14,7 @@ GOAL = np.array([1.2, 0.0, -0.07])
 @pytest.fixture(scope="module")
 def setup():
     robot = fake_robot()
-    field = compute_field(robot, fake_bound, (16, 16, 3), progress=False)
+    field = compute_field(robot, fake_bound, (16, 16, 3))
     return robot, field
 
 
@@ -198,7 +198,7 @@ def test_motion_cost_equals_a_hand_computation_on_a_linear_bound():
     from ompl import base as ob
 
     robot = fake_robot()
-    field = compute_field(robot, _linear_bound, (8, 8, 3), progress=False)
+    field = compute_field(robot, _linear_bound, (8, 8, 3))
     m_per_rad, w = 0.05, 500.0
     js = JointStateSpace(robot, meters_per_radian=m_per_rad)
     si = ob.SpaceInformation(js.space)

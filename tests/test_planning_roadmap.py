@@ -19,7 +19,7 @@ WEIGHT = 1000.0
 @pytest.fixture(scope="module")
 def setup():
     robot = fake_robot()
-    field = compute_field(robot, fake_bound, (16, 16, 3), progress=False)
+    field = compute_field(robot, fake_bound, (16, 16, 3))
     js = JointStateSpace(robot)
     checker = BatchValidityChecker(robot, None, field, check_stability=False, joint_space=js)
     roadmap = build_roadmap(checker, js, field, n_nodes=300, seed=4)

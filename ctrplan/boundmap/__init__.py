@@ -20,8 +20,8 @@ much inside a sampling planner. A bound map evaluates it once on a grid and inte
 
 from .accuracy import InterpolationError, interpolation_error, sample_exact
 from .axes import PLACEMENTS, MapSpec, place_nodes, uniform_axis
-from .compute import (DEFAULT_CHUNK_SIZE, BoundMapRun, SchedulerUnreachableError, compute_bound_map_store,
-                      compute_field, evaluate_configuration, start_local_cluster)
+from .compute import (DEFAULT_CHUNK_SIZE, BoundMapRun, ComputeOptions, SchedulerUnreachableError,
+                      compute_bound_map_store, compute_field, evaluate_configuration, start_local_cluster)
 from ..coordinates import MapCoordinates, map_coordinates
 from .field import QUANTITIES, UNITS, BoundField
 from .files import compute_bound_map, default_spec, find_bound_map, load_or_compute_bound_map, map_file, map_paths
@@ -36,7 +36,7 @@ __all__ = [
     "MapCoordinates", "map_coordinates", "MapSpec", "PLACEMENTS", "place_nodes", "uniform_axis",
     "QUANTITIES", "UNITS", "BoundField", "BoundFieldKeyError", "BoundMapMismatchError", "MapIdentity",
     "evaluator_name", "field_key", "map_identity", "BoundMapStore", "IncompleteBoundMapError", "STORE_SUFFIX",
-    "chunk_shape_for", "is_store_path", "load_bound_map", "DEFAULT_CHUNK_SIZE", "BoundMapRun",
+    "chunk_shape_for", "is_store_path", "load_bound_map", "DEFAULT_CHUNK_SIZE", "BoundMapRun", "ComputeOptions",
     "SchedulerUnreachableError", "compute_bound_map_store", "compute_field", "evaluate_configuration",
     "start_local_cluster", "compute_bound_map", "default_spec", "find_bound_map", "load_or_compute_bound_map",
     "map_paths",

@@ -30,7 +30,7 @@ from .field import QUANTITIES, BoundField
 from .identity import as_spec, map_identity
 from .store import BoundMapStore, chunk_shape_for
 
-__all__ = ["DEFAULT_CHUNK_SIZE", "SCHEDULER_TIMEOUT_S", "SchedulerUnreachableError", "BoundMapRun",
+__all__ = ["DEFAULT_CHUNK_SIZE", "SCHEDULER_TIMEOUT_S", "SchedulerUnreachableError", "BoundMapRun", "ComputeOptions",
            "evaluate_configuration", "compute_bound_map_store", "compute_field", "start_local_cluster"]
 
 logger = logging.getLogger(__name__)
@@ -194,10 +194,40 @@ def _axes_and_pilots(robot, coords, spec, executor, evaluator, settings, progres
     return axes, pilots
 
 
-def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n_jobs: int = 1, *,
-                            scheduler=None, chunk_size: int = DEFAULT_CHUNK_SIZE, progress: bool = False,
-                            robot_file_text: str | None = None, metadata: dict | None = None,
-                            max_chunks: int | None = None, on_chunk=None) -> BoundMapRun:
+@dataclass(frozen=True)
+class ComputeOptions:
+    """How a bound map's computation runs: where, in what pieces, how far, and what it shows.
+    None of these enters the map's identity (the same map comes out however it is computed).
+
+    Attributes
+    ----------
+    n_jobs : int
+        Without ``scheduler``: 1 evaluates in this process, k > 1 on k local worker processes
+        (:class:`ctrplan.parallel.Executor`).
+    scheduler : str or distributed.Client, optional
+        Dask scheduler address (``"tcp://host:8786"``) or a connected client (left open).
+    chunk_size : int
+        Nodes per chunk for a new store (an existing store keeps its chunks).
+    progress : bool
+        tqdm bars (pilot points, then nodes); default none.
+    max_chunks : int, optional
+        Compute at most this many missing chunks, then stop (the field is None unless complete).
+    on_chunk : callable, optional
+        ``on_chunk(n_written, chunk)`` after each chunk is written; an exception raised there
+        stops the run like an interruption.
+    """
+
+    n_jobs: int = 1
+    scheduler: object = None
+    chunk_size: int = DEFAULT_CHUNK_SIZE
+    progress: bool = False
+    max_chunks: int | None = None
+    on_chunk: object = None
+
+
+def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, *,
+                            options: ComputeOptions = ComputeOptions(), robot_file_text: str | None = None,
+                            metadata: dict | None = None) -> BoundMapRun:
     """Evaluate a bound map chunk by chunk into a zarr store, resuming finished chunks.
 
     Parameters
@@ -213,24 +243,13 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
     store : str or Path, optional
         Store directory (``*.zarr``). Finished chunks found there are reused when the store was
         made for the same map (identity). None: in memory.
-    n_jobs : int
-        Without ``scheduler``: 1 evaluates in this process, k > 1 on k local worker processes
-        (:class:`ctrplan.parallel.Executor`).
-    scheduler : str or distributed.Client, optional, keyword-only
-        Dask scheduler address (``"tcp://host:8786"``) or a connected client (left open).
-    chunk_size : int, keyword-only
-        Nodes per chunk for a new store (an existing store keeps its chunks).
-    progress : bool, keyword-only
-        tqdm bars (pilot points, then nodes); default none.
+    options : ComputeOptions, keyword-only
+        Workers or a Dask scheduler, chunk size, progress bars, a stop after some chunks, a
+        callback per chunk.
     robot_file_text : str, optional, keyword-only
         Robot file content: its sha256 identifies the robot in the store and the key.
     metadata : dict, optional, keyword-only
         Extra JSON metadata for a new store.
-    max_chunks : int, optional, keyword-only
-        Compute at most this many missing chunks, then stop (the field is None unless complete).
-    on_chunk : callable, optional, keyword-only
-        ``on_chunk(n_written, chunk)`` after each chunk is written; an exception raised there
-        stops the run like an interruption.
 
     Returns
     -------
@@ -246,6 +265,8 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
         A spec that does not fit the robot's map coordinates, or a bad chunk size.
     """
     t_start = time.perf_counter()
+    n_jobs, scheduler, chunk_size, progress = options.n_jobs, options.scheduler, options.chunk_size, options.progress
+    max_chunks, on_chunk = options.max_chunks, options.on_chunk
     ident = map_identity(robot, settings, spec, evaluator, robot_file_text)
     spec = as_spec(robot, spec)
     coords = map_coordinates(robot)
@@ -299,10 +320,10 @@ def compute_bound_map_store(robot, evaluator, spec, settings=None, store=None, n
                        chunk_seconds=computed, pilot_evaluations=pilot_evals, pilot_seconds=pilot_secs)
 
 
-def compute_field(robot, evaluator, spec, settings=None, store=None, n_jobs: int = 1, **kwargs) -> BoundField | None:
+def compute_field(robot, evaluator, spec, settings=None, store=None, **kwargs) -> BoundField | None:
     """The bound map as a :class:`BoundField` (:func:`compute_bound_map_store`'s ``field``).
 
     Parameters and errors as :func:`compute_bound_map_store`; returns None only when
-    ``max_chunks`` stopped the run early.
+    ``options.max_chunks`` stopped the run early.
     """
-    return compute_bound_map_store(robot, evaluator, spec, settings, store, n_jobs, **kwargs).field
+    return compute_bound_map_store(robot, evaluator, spec, settings, store, **kwargs).field

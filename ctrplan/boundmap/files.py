@@ -26,7 +26,7 @@ from ..choices import JointKind, MapSource
 from .._log import deprecated_echo, progress_level
 from ..cache import cache_dir
 from .axes import MapSpec
-from .compute import DEFAULT_CHUNK_SIZE, compute_bound_map_store
+from .compute import ComputeOptions, compute_bound_map_store
 from ..coordinates import map_coordinates
 from .identity import BoundFieldKeyError, BoundMapMismatchError, map_identity
 from .store import STORE_SUFFIX, IncompleteBoundMapError, load_bound_map
@@ -116,8 +116,7 @@ def map_file(base, suffix: str) -> Path:
 
 
 def compute_bound_map(robot_path, spec, settings, evaluator=None, *, out_path=None, store_path=None,
-                      n_jobs: int = 1, scheduler=None, chunk_size: int | None = None, progress: bool = False,
-                      max_chunks: int | None = None, on_chunk=None):
+                      options: ComputeOptions = ComputeOptions()):
     """Compute (or resume) the bound map of a robot file into a zarr store.
 
     Parameters
@@ -135,8 +134,9 @@ def compute_bound_map(robot_path, spec, settings, evaluator=None, *, out_path=No
     store_path : path, optional, keyword-only
         Chunk store of an ``.npz`` output (default: ``out_path`` with suffix ``.zarr``); must be
         None or equal to ``out_path`` for a ``.zarr`` output.
-    n_jobs, scheduler, chunk_size, progress, max_chunks, on_chunk
-        See :func:`~ctrplan.boundmap.compute.compute_bound_map_store`.
+    options : ComputeOptions, keyword-only
+        Workers or a Dask scheduler, chunk size, progress, a stop after some chunks, a callback
+        per chunk (:class:`~ctrplan.boundmap.compute.ComputeOptions`).
 
     Returns
     -------
@@ -173,10 +173,8 @@ def compute_bound_map(robot_path, spec, settings, evaluator=None, *, out_path=No
     else:
         raise ValueError(f"bound map output {out} must end in {STORE_SUFFIX} (chunked store) or .npz")
     store.parent.mkdir(parents=True, exist_ok=True)
-    run = compute_bound_map_store(
-        robot, evaluator, spec, settings, store, n_jobs, scheduler=scheduler,
-        chunk_size=chunk_size or DEFAULT_CHUNK_SIZE, progress=progress, robot_file_text=text,
-        metadata={"robot_file": robot_path.name}, max_chunks=max_chunks, on_chunk=on_chunk)
+    run = compute_bound_map_store(robot, evaluator, spec, settings, store, options=options, robot_file_text=text,
+                                  metadata={"robot_file": robot_path.name})
     if run.field is not None and out.suffix == ".npz":
         run.field.save(out)
     return run, out
@@ -316,6 +314,7 @@ def load_or_compute_bound_map(robot_path, robot, spec, settings, n_jobs: int = 1
     logger.log(progress_level(), f"computing the bound map of {robot_path.name} "
                f"({', '.join(map_coordinates(robot).names)}; {ident.spec}) into {store}; interrupt and rerun to resume")
     store.parent.mkdir(parents=True, exist_ok=True)
-    run = compute_bound_map_store(robot, evaluator, spec, settings, store, n_jobs, scheduler=scheduler,
-                                  robot_file_text=text, metadata={"robot_file": robot_path.name}, progress=progress)
+    run = compute_bound_map_store(robot, evaluator, spec, settings, store,
+                                  options=ComputeOptions(n_jobs=n_jobs, scheduler=scheduler, progress=progress),
+                                  robot_file_text=text, metadata={"robot_file": robot_path.name})
     return run.field, MapSource.COMPUTED, time.perf_counter() - t0
