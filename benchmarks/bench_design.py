@@ -150,7 +150,8 @@ def run_case(index: int, out: Path, jobs: int) -> dict:
     """Case ``index`` of :data:`CASES`, its line of ``cases.jsonl``."""
     from bench_discrepancy_sweep import _truth_robot
 
-    from ctrplan.design import design_experiment, result_hypotheses, sample, trajectory
+    from ctrplan.design import (DesignSearch, ExperimentLimits, SensorNoise, design_experiment, result_hypotheses,
+                                sample, trajectory)
     from ctrplan.discrepancy import load_measured_data
     from ctrplan.io.robot_file import robot_to_toml
 
@@ -171,9 +172,9 @@ def run_case(index: int, out: Path, jobs: int) -> dict:
     data = load_measured_data(recorded, base)
     noise = first["noise"]["noise"]
     t1 = time.perf_counter()
-    design = design_experiment(base, data, hyps, noise_position=noise["position_rms_m"],
-                               noise_lag1=noise.get("lag1_correlation"), n_random=1, seed=seed, n_jobs=1,
-                               duration=BUDGET_S)
+    design = design_experiment(base, data, hyps,
+                               noise=SensorNoise(noise["position_rms_m"], noise.get("lag1_correlation")),
+                               limits=ExperimentLimits(duration=BUDGET_S), search=DesignSearch(n_random=1, seed=seed))
     design_s = time.perf_counter() - t1
     runs, files = {}, {}
     motions = {"designed": design.primitives, "random": design.random_primitives[0]}

@@ -725,7 +725,8 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
     The motion is made of primitives the effects respond to, stays inside the joint limits, stable and
     clear of the scenario's obstacles, and is time-parameterized within the drive limits (ruckig).
     """
-    from .design import DesignInputError, design_experiment, read_results, result_hypotheses
+    from .design import (DesignInputError, DesignSearch, ExperimentLimits, SensorNoise, design_experiment, read_results,
+                         result_hypotheses)
     from .design import write_design
     from .discrepancy import load_measured_data
     from .io.robot_file import load_robot
@@ -766,9 +767,12 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
     interest = [p.strip() for p in parameters.split(",") if p.strip()] if parameters else None
     if duration is not None and not duration > 0:
         raise DesignInputError(f"option --duration {duration!r}: must be > 0 s")
-    res = design_experiment(robot, data, hyps, noise_position=sigma, noise_lag1=lag1, drive=drive,
-                            obstacles=obstacles or (), start=start, duration=duration, interest=interest, rest=rest,
-                            n_random=random_motions, seed=seed, n_jobs=jobs or os.cpu_count() or 1)
+    res = design_experiment(robot, data, hyps, noise=SensorNoise(sigma, lag1),
+                            limits=ExperimentLimits(drive=drive, obstacles=tuple(obstacles or ()), start=start,
+                                                    duration=duration, rest=rest),
+                            interest=interest,
+                            search=DesignSearch(n_random=random_motions, seed=seed,
+                                                n_jobs=jobs or os.cpu_count() or 1))
     command = "ctrplan " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     paths = write_design(res, robot, out_dir, command=command, bag=not no_bag, frame=data.frame)
     logger.info(f"design: {res.duration:.1f} s, {len(res.primitives)} primitives; report: {paths['markdown']}")

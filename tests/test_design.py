@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from ctrplan.design import (DesignInputError, Hypothesis, design_experiment, information, motion_data,
-                            result_hypotheses, sensitivities)
+from ctrplan.design import (DesignInputError, DesignSearch, ExperimentLimits, Hypothesis, SensorNoise,
+                            design_experiment, information, motion_data, result_hypotheses, sensitivities)
 from ctrplan.discrepancy import predict
 from ctrplan.io.robot_file import load_robot
 from ctrplan.drive import DriveLimits
@@ -125,7 +125,8 @@ def test_predicted_standard_errors_match_monte_carlo_fits():
                      free=("precurvature_x_1", "k_xy_relative_2"))
     recorded = _sweep(robot, [[0.0], [0.5]])
     drive = DriveLimits(250.0, np.array([1.0]), np.array([4.0]), np.array([40.0]), ("alpha_2",))
-    res = design_experiment(robot, recorded, [hyp], noise_position=SIGMA, drive=drive, duration=12.0, n_random=1,
+    res = design_experiment(robot, recorded, [hyp], noise=SensorNoise(SIGMA),
+                            limits=ExperimentLimits(drive=drive, duration=12.0), search=DesignSearch(n_random=1),
                             interest=("precurvature_x_1",))
     predicted = res.stderr["designed"]["precurvature_x_1"]
     assert predicted < res.stderr["recorded"]["precurvature_x_1"]
@@ -157,9 +158,9 @@ def test_candidates_on_two_processes_give_the_same_design():
     hyps = _pair_hypotheses(robot)
     recorded = _sweep(robot, [[0.0], [0.5]])
     drive = DriveLimits(250.0, np.array([1.0]), np.array([4.0]), np.array([40.0]), ("alpha_2",))
-    kw = dict(noise_position=SIGMA, drive=drive, duration=8.0, n_random=1)
-    one = design_experiment(robot, recorded, hyps, n_jobs=1, **kw)
-    two = design_experiment(robot, recorded, hyps, n_jobs=2, **kw)
+    kw = dict(noise=SensorNoise(SIGMA), limits=ExperimentLimits(drive=drive, duration=8.0))
+    one = design_experiment(robot, recorded, hyps, search=DesignSearch(n_random=1, n_jobs=1), **kw)
+    two = design_experiment(robot, recorded, hyps, search=DesignSearch(n_random=1, n_jobs=2), **kw)
     assert [p.describe(robot.joint_names) for p in one.primitives] == \
         [p.describe(robot.joint_names) for p in two.primitives]
     for key in ("recorded", "designed", "repeated"):
@@ -249,8 +250,9 @@ def test_the_designed_motion_is_feasible_checked_independently():
     q_block = robot.joint_vector(robot.home_alpha, robot.home_beta) + np.array([0.0, 1.5, 0.0])
     tip = solve_standard(robot, *robot.configuration(q_block)).tip_position
     sphere = Sphere(center_m=tuple(tip), radius_m=0.004)
-    res = design_experiment(robot, recorded, hyps, noise_position=SIGMA, drive=drive, duration=12.0,
-                            obstacles=(sphere,), n_random=2)
+    res = design_experiment(robot, recorded, hyps, noise=SensorNoise(SIGMA),
+                            limits=ExperimentLimits(drive=drive, duration=12.0, obstacles=(sphere,)),
+                            search=DesignSearch(n_random=2))
     traj = res.trajectory
     p, dt = traj.position, 1.0 / traj.control_rate_hz
     for i, j in enumerate(robot.joints):

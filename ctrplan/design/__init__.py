@@ -15,9 +15,10 @@ hypotheses (T-optimality) or determines the parameters (Ds-optimality), and writ
 from ._hypotheses import DesignInputError, Hypothesis, read_results, result_hypotheses
 from ._criteria import Information, Sensitivities, information, noise_weight, sensitivities
 from ._motions import Primitive, motion_data, primitives, sample, trajectory
-from ._design import DesignResult, design_experiment, drive_from_data
+from ._design import DesignResult, DesignSearch, ExperimentLimits, SensorNoise, design_experiment, drive_from_data
 from ._output import write_design
 
 __all__ = ["DesignInputError", "Hypothesis", "read_results", "result_hypotheses", "Information", "Sensitivities",
            "information", "noise_weight", "sensitivities", "Primitive", "motion_data", "primitives", "sample",
-           "trajectory", "DesignResult", "design_experiment", "drive_from_data", "write_design"]
+           "trajectory", "DesignResult", "SensorNoise", "ExperimentLimits", "DesignSearch", "design_experiment",
+           "drive_from_data", "write_design"]

@@ -237,10 +237,70 @@ class _Evaluator:
         return out
 
 
-def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_lag1: float | None = None,
-                      drive: DriveLimits | None = None, obstacles=(), start=None, duration: float | None = None,
-                      interest=None, settings=None, rest: float = 1.0, n_random: int = 3, seed: int = 0,
-                      n_jobs: int = 1) -> DesignResult:
+@dataclass(frozen=True)
+class SensorNoise:
+    """The tip sensor's noise, as the fit will weigh the samples of the designed motion.
+
+    Attributes
+    ----------
+    position : float
+        Noise rms per tip coordinate [m], > 0 (e.g. a discrepancy run's
+        ``results.json["noise"]["noise"]["position_rms_m"]``).
+    lag1 : float, optional
+        Lag-one autocorrelation of the noise [-] (AR(1) inflation of :func:`noise_weight`).
+    """
+
+    position: float
+    lag1: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class ExperimentLimits:
+    """What the designed motion keeps to.
+
+    Attributes
+    ----------
+    drive : DriveLimits, optional
+        Drive limits of the motion; default :func:`drive_from_data` (the recorded motion's).
+    obstacles : sequence of Obstacle
+        Scenario obstacles the robot stays clear of.
+    start : array-like, shape (n_joints,), optional
+        Start configuration [rad or m]; default the robot's home.
+    duration : float, optional
+        Budget [s]; default the recorded trajectory's duration.
+    rest : float
+        Rest after each primitive [s].
+    """
+
+    drive: DriveLimits | None = None
+    obstacles: tuple = ()
+    start: object = None
+    duration: float | None = None
+    rest: float = 1.0
+
+
+@dataclass(frozen=True)
+class DesignSearch:
+    """How the search runs and what it is compared with.
+
+    Attributes
+    ----------
+    n_random : int
+        Random motions of the same budget to compare with.
+    seed : int
+        Seed of the random motions.
+    n_jobs : int
+        Processes the candidates of each search step are evaluated on
+        (:class:`ctrplan.parallel.Executor`).
+    """
+
+    n_random: int = 3
+    seed: int = 0
+    n_jobs: int = 1
+
+
+def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: ExperimentLimits = ExperimentLimits(),
+                      interest=None, settings=None, search: DesignSearch = DesignSearch()) -> DesignResult:
     """Design the next measured trajectory.
 
     Parameters
@@ -252,31 +312,17 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     hypotheses : sequence of Hypothesis
         Two or more: the motion separates them (T-optimality). One: the motion determines its
         parameters of interest (Ds-optimality).
-    noise_position : float
-        Sensor noise per tip coordinate [m], > 0.
-    noise_lag1 : float, optional
-        Lag-one autocorrelation of the noise (AR(1) inflation of :func:`noise_weight`).
-    drive : DriveLimits, optional
-        Default :func:`drive_from_data`.
-    obstacles : sequence of Obstacle
-        Scenario obstacles the robot must stay clear of.
-    start : array-like, shape (n_joints,), optional
-        Start configuration [rad or m]; default the robot's home.
-    duration : float, optional
-        Budget [s]; default the recorded trajectory's duration.
+    noise : SensorNoise
+        Sensor noise per tip coordinate [m] and its lag-one autocorrelation.
+    limits : ExperimentLimits
+        Drive limits, obstacles, start, budget [s] and rests [s] of the motion.
     interest : sequence of str, optional
         Parameters mode: the parameters to determine; default the hypothesis's own effect
         parameters the recorded data left undetermined (:meth:`Hypothesis.undetermined`), else every
         undetermined one, else its effect parameters, else every free one.
     settings : ModelSettings, optional
-    rest : float
-        Rest after each primitive [s].
-    n_random : int
-        Random motions of the same budget to compare with.
-    seed : int
-        Seed of the random motions.
-    n_jobs : int
-        Processes the candidates of each search step are evaluated on (:class:`ctrplan.parallel.Executor`).
+    search : DesignSearch
+        Random motions to compare with, their seed, worker processes.
 
     Returns
     -------
@@ -298,7 +344,10 @@ def design_experiment(robot, data, hypotheses, *, noise_position: float, noise_l
     if not hyps:
         raise DesignInputError("no hypothesis to design for")
     mode = DesignMode.SEPARATE if len(hyps) > 1 else DesignMode.PARAMETERS
-    weight, inflation = noise_weight(noise_position, noise_lag1)
+    noise_position, drive, obstacles, start, duration, rest = (noise.position, limits.drive, limits.obstacles,
+                                                               limits.start, limits.duration, limits.rest)
+    n_random, seed, n_jobs = search.n_random, search.seed, search.n_jobs
+    weight, inflation = noise_weight(noise_position, noise.lag1)
     period = _period(data)
     drive = drive or drive_from_data(robot, data)
     rec_t = data.record.time
