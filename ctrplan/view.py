@@ -14,6 +14,7 @@ opens offline. Building the view does no mechanics solves: it draws what the pla
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -21,7 +22,7 @@ import numpy as np
 
 from .io.atomic import atomic_path
 
-__all__ = ["PLAN_VIEW_FILE", "plan_view_figure", "write_plan_view", "obstacle_triangles"]
+__all__ = ["PLAN_VIEW_FILE", "WaypointFrames", "plan_view_figure", "write_plan_view", "obstacle_triangles"]
 
 #: File name of the interactive view in a plan's output folder.
 PLAN_VIEW_FILE = "plan.html"
@@ -39,11 +40,41 @@ FRICTION_COLOR = "rgb(214,39,40)"
 TARGET_COLOR = "rgb(44,160,44)"
 
 
-def plan_view_figure(standard: Sequence, *, friction_tips: Sequence | None = None,
-                     friction_shapes: Sequence | None = None, predicted_tips=None,
-                     predicted_shapes: Sequence | None = None, obstacles: Sequence = (), targets=None,
-                     step_labels: Sequence[str] | None = None, step_notes: Sequence[str] | None = None,
-                     title: str = ""):
+@dataclass(frozen=True, eq=False)
+class WaypointFrames:
+    """What the view shows at each of the K ordered waypoints of a plan (one slider step each).
+
+    Attributes
+    ----------
+    standard : sequence of (array-like, shape (N_k, 3)) or None, length K
+        Standard-model centerline at each ordered waypoint k [m], base first (None or empty
+        where it is unknown: the step then shows no standard shape).
+    friction_tips : sequence of array-like, shape (m_k, 3), length K, optional
+        Tips of the bounding friction solutions at waypoint k [m] (m_k = 2^(n-1) when all were
+        solved).
+    friction_shapes : sequence of (sequence of array-like, shape (N, 3)), length K, optional
+        Centerlines of those solutions at waypoint k [m] (innermost tube, base to tip); drawn
+        as one trace per waypoint.
+    predicted_tips : array-like, shape (K, 3), optional
+        Tip predicted for the plan's motion history [m]; NaN rows are not drawn.
+    predicted_shapes : sequence of (array-like, shape (N_k, 3)) or None, length K, optional
+        Predicted centerline [m]; None where it is unknown.
+    labels : sequence of str, length K, optional
+        Slider label of each step (default: the waypoint index).
+    notes : sequence of str, length K, optional
+        Text added to the title at each step (e.g. the motion and the bound).
+    """
+
+    standard: Sequence
+    friction_tips: Sequence | None = None
+    friction_shapes: Sequence | None = None
+    predicted_tips: object = None
+    predicted_shapes: Sequence | None = None
+    labels: Sequence[str] | None = None
+    notes: Sequence[str] | None = None
+
+
+def plan_view_figure(frames: WaypointFrames, *, obstacles: Sequence = (), targets=None, title: str = ""):
     """Build the plotly figure of :func:`write_plan_view` (same parameters, without ``path``).
 
     Returns
@@ -56,18 +87,19 @@ def plan_view_figure(standard: Sequence, *, friction_tips: Sequence | None = Non
     """
     import plotly.graph_objects as go
 
+    standard = frames.standard
     K = len(standard)
-    friction_tips = _per_waypoint(friction_tips, K, "friction_tips")
-    friction_shapes = _per_waypoint(friction_shapes, K, "friction_shapes")
-    predicted_shapes = _per_waypoint(predicted_shapes, K, "predicted_shapes")
-    pred_tips = np.full((K, 3), np.nan) if predicted_tips is None else np.asarray(predicted_tips, dtype=float)
+    friction_tips = _per_waypoint(frames.friction_tips, K, "friction_tips")
+    friction_shapes = _per_waypoint(frames.friction_shapes, K, "friction_shapes")
+    predicted_shapes = _per_waypoint(frames.predicted_shapes, K, "predicted_shapes")
+    pred_tips = (np.full((K, 3), np.nan) if frames.predicted_tips is None
+                 else np.asarray(frames.predicted_tips, dtype=float))
     if pred_tips.shape != (K, 3):
         raise ValueError(f"predicted_tips needs shape ({K}, 3) [m], got {pred_tips.shape}")
-    labels = [str(k) for k in range(K)] if step_labels is None else list(step_labels)
-    notes = [""] * K if step_notes is None else list(step_notes)
+    labels = [str(k) for k in range(K)] if frames.labels is None else list(frames.labels)
+    notes = [""] * K if frames.notes is None else list(frames.notes)
     if len(labels) != K or len(notes) != K:
-        raise ValueError(f"step_labels and step_notes need one entry per waypoint ({K}), got "
-                         f"{len(labels)} and {len(notes)}")
+        raise ValueError(f"labels and notes need one entry per waypoint ({K}), got {len(labels)} and {len(notes)}")
 
     fig = go.Figure()
     for k, obstacle in enumerate(obstacles):
@@ -103,7 +135,8 @@ def plan_view_figure(standard: Sequence, *, friction_tips: Sequence | None = Non
         fig.add_trace(go.Scatter3d(x=x, y=y, z=z, mode="markers", name=f"predicted tip (waypoint {k})",
                                    marker=dict(size=5, color=PREDICTED_COLOR, symbol="circle"),
                                    visible=visible))
-        x, y, z = _joined([_points(s, f"friction_shapes[{k}]") for s in (() if friction_shapes[k] is None else friction_shapes[k])])
+        shapes = () if friction_shapes[k] is None else friction_shapes[k]
+        x, y, z = _joined([_points(s, f"friction_shapes[{k}]") for s in shapes])
         fig.add_trace(go.Scatter3d(x=x, y=y, z=z, mode="lines", name=f"friction envelope (waypoint {k})",
                                    line=dict(color=FRICTION_COLOR, width=2), opacity=0.6,
                                    visible=visible))
@@ -130,10 +163,7 @@ def plan_view_figure(standard: Sequence, *, friction_tips: Sequence | None = Non
     return fig
 
 
-def write_plan_view(path, standard: Sequence, *, friction_tips: Sequence | None = None,
-                    friction_shapes: Sequence | None = None, predicted_tips=None,
-                    predicted_shapes: Sequence | None = None, obstacles: Sequence = (), targets=None,
-                    step_labels: Sequence[str] | None = None, step_notes: Sequence[str] | None = None,
+def write_plan_view(path, frames: WaypointFrames, *, obstacles: Sequence = (), targets=None,
                     title: str = "") -> Path:
     """Write the interactive view of a plan to a self-contained HTML file, atomically.
 
@@ -142,20 +172,9 @@ def write_plan_view(path, standard: Sequence, *, friction_tips: Sequence | None 
     path : str or Path
         Output HTML file (its folder must exist). It embeds plotly.js: no network is needed to
         open it.
-    standard : sequence of (array-like, shape (N_k, 3)) or None, length K
-        Standard-model centerline at each ordered waypoint k [m], base first (None or empty
-        where it is unknown: the step then shows no standard shape). K is the number of slider
-        steps.
-    friction_tips : sequence of array-like, shape (m_k, 3), length K, optional
-        Tips of the bounding friction solutions at waypoint k [m] (m_k = 2^(n-1) when all were
-        solved).
-    friction_shapes : sequence of (sequence of array-like, shape (N, 3)), length K, optional
-        Centerlines of those solutions at waypoint k [m] (innermost tube, base to tip); drawn
-        as one trace per waypoint.
-    predicted_tips : array-like, shape (K, 3), optional
-        Tip predicted for the plan's motion history [m]; NaN rows are not drawn.
-    predicted_shapes : sequence of (array-like, shape (N_k, 3)) or None, length K, optional
-        Predicted centerline [m]; None where it is unknown.
+    frames : WaypointFrames
+        The standard, predicted and friction shapes and tips at each of the K ordered waypoints
+        [m], with the slider's labels and notes.
     obstacles : sequence of Obstacle or dict
         :class:`ctrplan.obstacles.Obstacle` instances (any registered type, e.g. a scenario's
         ``obstacles``) or dicts with a registered ``type``
@@ -163,10 +182,6 @@ def write_plan_view(path, standard: Sequence, *, friction_tips: Sequence | None 
         :meth:`~ctrplan.obstacles.Obstacle.triangles` (:func:`obstacle_triangles`).
     targets : array-like, shape (G, 3), optional
         Goal tip positions [m].
-    step_labels : sequence of str, length K, optional
-        Slider label of each step (default: the waypoint index).
-    step_notes : sequence of str, length K, optional
-        Text added to the title at each step (e.g. the motion and the bound).
     title : str
 
     Returns
@@ -182,10 +197,7 @@ def write_plan_view(path, standard: Sequence, *, friction_tips: Sequence | None 
     FileNotFoundError
         The output folder does not exist.
     """
-    fig = plan_view_figure(standard, friction_tips=friction_tips, friction_shapes=friction_shapes,
-                           predicted_tips=predicted_tips, predicted_shapes=predicted_shapes,
-                           obstacles=obstacles, targets=targets, step_labels=step_labels,
-                           step_notes=step_notes, title=title)
+    fig = plan_view_figure(frames, obstacles=obstacles, targets=targets, title=title)
     path = Path(path)
     html = fig.to_html(include_plotlyjs=True, full_html=True, config={"displaylogo": False})
     with atomic_path(path) as tmp:

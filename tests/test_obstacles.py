@@ -28,7 +28,7 @@ from ctrplan.obstacles import (OBSTACLE_TYPES, Obstacle, PositiveFloat, Vector3,
 from ctrplan.planning import (BoundCostObjective, CollisionChecker, JointStateSpace, ValidityChecker, plan_route,
                               route_checks)
 from ctrplan.plots import plot_robot_shapes
-from ctrplan.view import plan_view_figure
+from ctrplan.view import WaypointFrames, plan_view_figure
 from test_planning_verify import dense_reference_violations  # exact model, whole body, 0.005 rad / 0.1 mm
 
 REPO = Path(__file__).resolve().parents[1]
@@ -291,7 +291,7 @@ def test_both_plots_draw_a_registered_obstacle_where_it_is(tmp_path, monkeypatch
         assert polys.shape[1:] == (3, 3) and len(polys) >= 2 * plots.SPHERE_RESOLUTION
         assert _on_the_surface(post, polys.reshape(-1, 3) / 1e3)
 
-    fig = plan_view_figure([shape], obstacles=sc.obstacles)
+    fig = plan_view_figure(WaypointFrames([shape]), obstacles=sc.obstacles)
     (trace,) = [t for t in fig.data if t.name == "obstacle 2 (cylinder)"]
     verts_mm = np.column_stack([trace.x, trace.y, trace.z])
     assert _on_the_surface(post, verts_mm / 1e3, tol=1e-7)              # the view rounds to 0.1 um

@@ -248,9 +248,9 @@ def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, m
     captured = {}
     write = view.write_plan_view
 
-    def spy(path, standard, **kw):        # keeps what write_report gives the view, and writes it
-        captured.update(kw, standard=standard)
-        return write(path, standard, **kw)
+    def spy(path, frames, **kw):          # keeps what write_report gives the view, and writes it
+        captured.update(kw, frames=frames)
+        return write(path, frames, **kw)
 
     monkeypatch.setattr(view, "write_plan_view", spy)
     written = pipeline.write_report(run)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ctrplan.obstacles import obstacle_from_dict
-from ctrplan.view import obstacle_triangles, plan_view_figure, write_plan_view
+from ctrplan.view import WaypointFrames, obstacle_triangles, plan_view_figure, write_plan_view
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")
@@ -42,16 +42,18 @@ def _mesh(folder: Path) -> dict:
 
 
 def _plan(folder: Path) -> dict:
+    """Keyword arguments of :func:`write_plan_view` and :func:`plan_view_figure`."""
     s = np.linspace(0.0, 0.1, 20)
     standard = [np.column_stack([0.02 * k * s**2, np.zeros_like(s), s]) for k in range(K)]
     standard[2][7] = KNOWN_POINT_M
     friction_shapes = [[c + [0.001 * e, 0.0, 0.0] for e in (-1, 1, -2, 2)] for c in standard]
-    return dict(standard=standard, friction_shapes=friction_shapes,
-                friction_tips=[[f[-1] for f in fs] for fs in friction_shapes],
-                predicted_shapes=[c + [0.0, 0.0005, 0.0] for c in standard],
-                predicted_tips=np.array([c[-1] + [0.0, 0.0005, 0.0] for c in standard]),
-                obstacles=[SPHERE, BOX, CAPSULE, _mesh(folder)], targets=np.array([[0.001, 0.0, 0.1]]),
-                step_notes=["start", "rotation", "translation", "rotation"], title="synthetic")
+    frames = WaypointFrames(standard, friction_shapes=friction_shapes,
+                            friction_tips=[[f[-1] for f in fs] for fs in friction_shapes],
+                            predicted_shapes=[c + [0.0, 0.0005, 0.0] for c in standard],
+                            predicted_tips=np.array([c[-1] + [0.0, 0.0005, 0.0] for c in standard]),
+                            notes=["start", "rotation", "translation", "rotation"])
+    return dict(frames=frames, obstacles=[SPHERE, BOX, CAPSULE, _mesh(folder)],
+                targets=np.array([[0.001, 0.0, 0.1]]), title="synthetic")
 
 
 def _trace(fig, name):
@@ -74,7 +76,7 @@ def test_traces_are_in_mm_and_each_step_shows_only_its_waypoint(tmp_path):
     x, y, z = (1e3 * c for c in KNOWN_POINT_M)
     std = _trace(fig, "standard (waypoint 2)")
     assert (std.x[7], std.y[7], std.z[7]) == pytest.approx((x, y, z), abs=1e-9)
-    np.testing.assert_allclose(np.column_stack([std.x, std.y, std.z]), 1e3 * plan["standard"][2], atol=1e-4)
+    np.testing.assert_allclose(np.column_stack([std.x, std.y, std.z]), 1e3 * plan["frames"].standard[2], atol=1e-4)
     # the same numbers are in the HTML file as written (mm, not m)
     html = write_plan_view(tmp_path / "plan.html", **plan).read_text(encoding="utf-8")
     assert all(repr(round(v, 4)) in html for v in (x, y, z))
@@ -82,9 +84,10 @@ def test_traces_are_in_mm_and_each_step_shows_only_its_waypoint(tmp_path):
     env = _trace(fig, "friction envelope (waypoint 1)")
     assert sum(v is None for v in env.x) == 4 and len(env.x) == 4 * (20 + 1)
     tips = _trace(fig, "friction tips (waypoint 1)")
-    np.testing.assert_allclose(np.column_stack([tips.x, tips.y, tips.z]), 1e3 * np.array(plan["friction_tips"][1]))
+    np.testing.assert_allclose(np.column_stack([tips.x, tips.y, tips.z]),
+                               1e3 * np.array(plan["frames"].friction_tips[1]))
     pred = _trace(fig, "predicted tip (waypoint 3)")
-    np.testing.assert_allclose([pred.x[0], pred.y[0], pred.z[0]], 1e3 * plan["predicted_tips"][3])
+    np.testing.assert_allclose([pred.x[0], pred.y[0], pred.z[0]], 1e3 * plan["frames"].predicted_tips[3])
     target = _trace(fig, "targets")
     assert (target.x[0], target.z[0]) == pytest.approx((1.0, 100.0))
     steps = fig.layout.sliders[0].steps
@@ -100,7 +103,7 @@ def test_traces_are_in_mm_and_each_step_shows_only_its_waypoint(tmp_path):
 
 def test_obstacles_are_triangulated_where_the_collision_checker_places_them(tmp_path):
     mesh = _mesh(tmp_path)
-    fig = plan_view_figure([None], obstacles=[SPHERE, BOX, mesh])
+    fig = plan_view_figure(WaypointFrames([None]), obstacles=[SPHERE, BOX, mesh])
     tri = _trace(fig, "obstacle 3 (mesh)")
     verts, faces = obstacle_from_dict(mesh).triangles()
     np.testing.assert_allclose(np.column_stack([tri.x, tri.y, tri.z]), 1e3 * verts, atol=1e-4)
@@ -119,13 +122,15 @@ def test_obstacles_are_triangulated_where_the_collision_checker_places_them(tmp_
 
 def test_bad_inputs_raise_value_errors_naming_the_input(tmp_path):
     with pytest.raises(ValueError, match=r"standard\[0\] needs shape \(N, 3\)"):
-        plan_view_figure([np.zeros((5, 2))])
+        plan_view_figure(WaypointFrames([np.zeros((5, 2))]))
     with pytest.raises(ValueError, match="predicted_tips needs shape"):
-        plan_view_figure([np.zeros((5, 3))] * 2, predicted_tips=np.zeros((3, 3)))
+        plan_view_figure(WaypointFrames([np.zeros((5, 3))] * 2, predicted_tips=np.zeros((3, 3))))
     with pytest.raises(ValueError, match="friction_tips needs one entry per waypoint"):
-        plan_view_figure([np.zeros((5, 3))] * 2, friction_tips=[np.zeros((2, 3))])
+        plan_view_figure(WaypointFrames([np.zeros((5, 3))] * 2, friction_tips=[np.zeros((2, 3))]))
+    with pytest.raises(ValueError, match="labels and notes need one entry per waypoint"):
+        plan_view_figure(WaypointFrames([np.zeros((5, 3))] * 2, notes=["start"]))
     with pytest.raises(ValueError, match="obstacle 0"):
-        plan_view_figure([np.zeros((5, 3))], obstacles=[{"type": "cone"}])
+        plan_view_figure(WaypointFrames([np.zeros((5, 3))]), obstacles=[{"type": "cone"}])
 
 
 # ---------------------------------------------------------------------------------- browser

@@ -96,7 +96,7 @@ def write_report(run, out_dir: str | os.PathLike | None = None, *, summary: dict
     """
     from ..plots import plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes
     from ..report import write_plan_outputs
-    from ..view import PLAN_VIEW_FILE, write_plan_view
+    from ..view import PLAN_VIEW_FILE, WaypointFrames, write_plan_view
 
     out = Path(out_dir) if out_dir is not None else run.setup.out_dir
     if out is None:
@@ -138,18 +138,18 @@ def write_report(run, out_dir: str | os.PathLike | None = None, *, summary: dict
     pred = aware.prediction
 
     def view(path):
-        write_plan_view(
-            path, [None if r is None else r.standard.centerline for r in results],
+        frames = WaypointFrames(
+            [None if r is None else r.standard.centerline for r in results],
             friction_tips=[None if r is None else [f.tip_position for f in r.friction.values()]
                            for r in results],
             friction_shapes=[None if r is None else [f.centerlines[-1] for f in r.friction.values()]
                              for r in results],
-            predicted_tips=pred.tip, predicted_shapes=pred.shape or None, obstacles=obstacles,
-            targets=np.array(targets).reshape(-1, 3),
-            step_labels=[str(k) for k in range(len(results))],
-            step_notes=[f"{m}, bound {1e3 * b:.2f} mm, predicted offset {1e3 * o:.2f} mm"
-                        for m, b, o in zip(aware.ordered.motions, exact.position, pred.offset)],
-            title=f"{sc.name} (bound-aware plan)")
+            predicted_tips=pred.tip, predicted_shapes=pred.shape or None,
+            labels=[str(k) for k in range(len(results))],
+            notes=[f"{m}, bound {1e3 * b:.2f} mm, predicted offset {1e3 * o:.2f} mm"
+                   for m, b, o in zip(aware.ordered.motions, exact.position, pred.offset)])
+        write_plan_view(path, frames, obstacles=obstacles, targets=np.array(targets).reshape(-1, 3),
+                        title=f"{sc.name} (bound-aware plan)")
 
     figures = {"robot_shapes.png": fig_shapes, "bound_along_path.png": fig_bound, PLAN_VIEW_FILE: view}
     if traj is not None:
