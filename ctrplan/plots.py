@@ -10,6 +10,7 @@ units in the axis labels.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -24,8 +25,8 @@ from .io.atomic import atomic_path
 from .obstacles import as_obstacle
 from .trajectory import ROTATION, TRANSLATION, Trajectory
 
-__all__ = ["plot_robot_shapes", "plot_bound_along_path", "plot_joint_trajectories", "plot_xy", "new_figure",
-           "save_figure", "obstacle_triangles"]
+__all__ = ["plot_robot_shapes", "BoundProfile", "plot_bound_along_path", "plot_joint_trajectories", "plot_xy",
+           "new_figure", "save_figure", "obstacle_triangles"]
 
 M_TO_MM = 1e3
 DPI = 120
@@ -169,44 +170,59 @@ def _equal_3d(ax, pts_mm):
 
 
 # ---------------------------------------------------------------------------------- bound
-def plot_bound_along_path(path, s_path: Sequence, bound_mm: Sequence, translation_last_mm: Sequence,
-                          motions: Sequence[Sequence[str]],
-                          labels: Sequence[str] = ("bound-aware plan", "bound-blind plan"), *,
-                          threshold_mm: float | None = None, s_label: str = "path parameter s [-]",
-                          title: str = "", given_last_mm: Sequence | None = None) -> Path:
-    """Friction-induced tip error bound along one or more plans, side by side.
+@dataclass(frozen=True, eq=False)
+class BoundProfile:
+    """The friction-induced tip error bound along one plan's ordered waypoints, as
+    :func:`plot_bound_along_path` draws it (SI; the figure shows mm).
+
+    Attributes
+    ----------
+    s : array-like, shape (K,)
+        Path parameter of each waypoint (e.g. normalized arc length) [-, or the unit the
+        figure's ``s_label`` names].
+    bound : array-like, shape (K,)
+        Tip error bound b(q) at each waypoint [m] (friction model, Section III of Ha, Fagogenis &
+        Dupont 2019).
+    translation_last : array-like, shape (K,)
+        Bound at each waypoint when reached by a translation last [m]; NaN where not available.
+    motions : sequence of str, length K
+        Motion that reaches each waypoint (``"start"``, ``"rotation"``, ``"translation"``); the
+        interval before waypoint k is shaded by ``motions[k]``.
+    given_last : array-like, shape (K,), optional
+        Bound given the last motion at each waypoint [m]: the translation-last bound along a
+        translation phase, the friction bound along a rotation (what the plan's cost
+        integrates).
+    label : str
+        Title of the plan's panel.
+    """
+
+    s: object
+    bound: object
+    translation_last: object
+    motions: Sequence[str]
+    given_last: object = None
+    label: str = "plan"
+
+
+def plot_bound_along_path(path, profiles, *, threshold: float | None = None, s_label: str = "path parameter s [-]",
+                          title: str = "") -> Path:
+    """Friction-induced tip error bound along one or more plans, side by side (one panel each).
 
     Each panel's title leads with the largest bound the plan optimized: the bound given the last
-    motion when ``given_last_mm`` is given (Section V-B of Ha, Fagogenis & Dupont 2019), then the
+    motion when the profile has it (Section V-B of Ha, Fagogenis & Dupont 2019), then the
     largest friction bound; else the largest friction bound.
 
     Parameters
     ----------
     path : str or Path
         Output PNG.
-    s_path : sequence of array-like, shape (K_j,)
-        Path parameter of each waypoint of plan j (e.g. normalized arc length) [-, or see
-        ``s_label``].
-    bound_mm : sequence of array-like, shape (K_j,)
-        Tip error bound b(q) at each waypoint of plan j [mm] (friction model, Section III of
-        Ha, Fagogenis & Dupont 2019).
-    translation_last_mm : sequence of array-like, shape (K_j,)
-        Bound at each waypoint of plan j when reached by a translation last [mm]; NaN where not
-        available.
-    motions : sequence of sequence of str, length K_j
-        Motion that reaches each waypoint (``"start"``, ``"rotation"``, ``"translation"``); the
-        interval before waypoint k is shaded by ``motions[j][k]``.
-    labels : sequence of str
-        Title of each panel.
-    threshold_mm : float, optional
-        Allowed bound, drawn as a horizontal line [mm].
+    profiles : BoundProfile or sequence of BoundProfile
+        One per plan [m].
+    threshold : float, optional
+        Allowed bound, drawn as a horizontal line [m].
     s_label : str
         Label of the horizontal axis, with its unit.
     title : str
-    given_last_mm : sequence of array-like, shape (K_j,), optional
-        Bound given the last motion at each waypoint of plan j [mm]: the translation-last bound
-        along a translation phase, the friction bound along a rotation (what the plan's cost
-        integrates).
 
     Returns
     -------
@@ -215,43 +231,38 @@ def plot_bound_along_path(path, s_path: Sequence, bound_mm: Sequence, translatio
     Raises
     ------
     ValueError
-        If the arrays of one plan have different lengths, or the number of plans differs between
-        arguments.
+        No profile, or the arrays of one profile of different lengths (naming the plan).
     """
-    if len(s_path) and np.ndim(s_path[0]) == 0:  # a single plan given as flat arrays
-        s_path, bound_mm, translation_last_mm = [s_path], [bound_mm], [translation_last_mm]
-        motions = [motions]
-        given_last_mm = None if given_last_mm is None else [given_last_mm]
-    n_plans = len(s_path)
-    if not (len(bound_mm) == len(translation_last_mm) == len(motions) == n_plans) or n_plans == 0 or (
-            given_last_mm is not None and len(given_last_mm) != n_plans):
-        raise ValueError(f"need the same number (>= 1) of plans in s_path, bound_mm, translation_last_mm, "
-                         f"motions (and given_last_mm), got {len(s_path)}, {len(bound_mm)}, "
-                         f"{len(translation_last_mm)}, {len(motions)}"
-                         + ("" if given_last_mm is None else f", {len(given_last_mm)}"))
+    profiles = [profiles] if isinstance(profiles, BoundProfile) else list(profiles)
+    n_plans = len(profiles)
+    if n_plans == 0:
+        raise ValueError("need at least one plan's bound profile")
+    threshold_mm = None if threshold is None else threshold * M_TO_MM
     fig = new_figure((5.5 * n_plans, 4.0))
     axes = fig.subplots(1, n_plans, sharey=True, squeeze=False)
     for j, ax in enumerate(axes[0]):
-        s = np.asarray(s_path[j], dtype=float)
-        b = np.asarray(bound_mm[j], dtype=float)
-        tl = np.asarray(translation_last_mm[j], dtype=float)
-        if not (b.shape == tl.shape == s.shape and len(motions[j]) == s.size):
-            raise ValueError(f"plan {j}: s_path, bound_mm, translation_last_mm and motions need equal "
-                             f"lengths, got {s.shape}, {b.shape}, {tl.shape}, {len(motions[j])}")
-        _shade_phases(ax, [(s[k - 1], s[k], motions[j][k]) for k in range(1, s.size)])
+        prof = profiles[j]
+        s = np.asarray(prof.s, dtype=float)
+        b = np.asarray(prof.bound, dtype=float) * M_TO_MM
+        tl = np.asarray(prof.translation_last, dtype=float) * M_TO_MM
+        motions = list(prof.motions)
+        if not (b.shape == tl.shape == s.shape and len(motions) == s.size):
+            raise ValueError(f"plan {j} ({prof.label}): s, bound, translation_last and motions need equal "
+                             f"lengths, got {s.shape}, {b.shape}, {tl.shape}, {len(motions)}")
+        _shade_phases(ax, [(s[k - 1], s[k], motions[k]) for k in range(1, s.size)])
         ax.plot(s, b, "o-", ms=3, color="tab:red", label="friction bound")
         if np.any(np.isfinite(tl)):
             ax.plot(s, tl, "s--", ms=3, color="tab:purple", label="translation-last bound")
         if threshold_mm is not None:
             ax.axhline(threshold_mm, color="k", ls=":", lw=1, label=f"limit {threshold_mm:.3g} mm")
         peak = np.nanmax(b) if np.any(np.isfinite(b)) else float("nan")
-        name = labels[j] if j < len(labels) else f"plan {j}"
-        if given_last_mm is None:
+        name = prof.label
+        if prof.given_last is None:
             ax.set_title(f"{name} (max {peak:.3g} mm)")
         else:
-            g = np.asarray(given_last_mm[j], dtype=float)
+            g = np.asarray(prof.given_last, dtype=float) * M_TO_MM
             if g.shape != s.shape:
-                raise ValueError(f"plan {j}: given_last_mm needs the length of s_path, got {g.shape} and {s.shape}")
+                raise ValueError(f"plan {j} ({name}): given_last needs the length of s, got {g.shape} and {s.shape}")
             ax.plot(s, g, "-", lw=2.5, alpha=0.5, color="tab:green", label="bound given the last motion")
             top = np.nanmax(g) if np.any(np.isfinite(g)) else float("nan")
             ax.set_title(f"{name}: max {top:.3g} mm given the last motion\n(friction bound max {peak:.3g} mm)",

@@ -8,7 +8,7 @@ import pytest
 
 import ctrplan.io.atomic as atomic
 import ctrplan.plots as plots
-from ctrplan.plots import plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes, plot_xy
+from ctrplan.plots import BoundProfile, plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes, plot_xy
 from ctrplan.report import format_summary, path_columns, write_plan_outputs
 from ctrplan.drive import DriveLimits, JointLimits
 from ctrplan.trajectory import time_parameterize
@@ -118,38 +118,49 @@ def test_unknown_obstacle_raises_and_writes_nothing(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def _profiles(s, bound_mm, tl_mm, motions, given_mm=None):
+    """Two plans' profiles in SI from figures in mm."""
+    labels = ("bound-aware plan", "bound-blind plan")
+    return [BoundProfile(s[j], bound_mm[j] * 1e-3, tl_mm[j] * 1e-3, motions[j],
+                         given_last=None if given_mm is None else given_mm[j] * 1e-3, label=labels[j])
+            for j in range(len(s))]
+
+
 def test_bound_along_two_plans_and_one_plan(tmp_path, figures):
-    """One panel per plan; each shows its bound as given (mm), the translation-last bound only
+    """One panel per plan; each shows its bound (given in m) in mm, the translation-last bound only
     where there is one, the limit line, the plan's maximum in the title and a y label with its
-    unit. Catches plans drawn into one panel or swapped, a unit conversion applied twice, a
-    missing limit."""
+    unit. Catches plans drawn into one panel or swapped, a unit conversion applied twice or
+    not at all, a missing limit."""
     s = [np.linspace(0, 1, 4), np.linspace(0, 1, 3)]
     bound = [np.array([0.5, 1.0, 0.8, 0.6]), np.array([0.5, 2.5, 1.1])]
     tl = [np.array([np.nan, np.nan, 0.4, np.nan]), np.full(3, np.nan)]
     motions = [MOTIONS, ["start", "rotation", "translation"]]
-    assert _is_png(plot_bound_along_path(tmp_path / "b2.png", s, bound, tl, motions, threshold_mm=1.5))
-    assert _is_png(plot_bound_along_path(tmp_path / "b1.png", s[0], bound[0], tl[0], MOTIONS,
-                                         labels=("plan",)))
+    profiles = _profiles(s, bound, tl, motions)
+    assert _is_png(plot_bound_along_path(tmp_path / "b2.png", profiles, threshold=1.5e-3))
+    assert _is_png(plot_bound_along_path(tmp_path / "b1.png", BoundProfile(s[0], bound[0] * 1e-3, tl[0] * 1e-3,
+                                                                            MOTIONS)))
     two, one = figures
     assert len(two.axes) == 2 and len(one.axes) == 1
     assert two.axes[0].get_ylabel() == "tip error bound [mm]"
     for j, ax in enumerate(two.axes):
         (line,) = _lines_with_label(ax, "friction bound")
         np.testing.assert_array_equal(line.get_xdata(), s[j])
-        np.testing.assert_array_equal(line.get_ydata(), bound[j])
+        np.testing.assert_allclose(line.get_ydata(), bound[j], rtol=1e-12)
         (limit,) = _lines_with_label(ax, "limit 1.5 mm")
-        assert list(limit.get_ydata()) == [1.5, 1.5]
+        assert list(limit.get_ydata()) == pytest.approx([1.5, 1.5], rel=1e-12)
         assert ax.get_xlabel() == "path parameter s [-]"
     assert two.axes[0].get_title() == "bound-aware plan (max 1 mm)"
     assert two.axes[1].get_title() == "bound-blind plan (max 2.5 mm)"
     (tl_line,) = _lines_with_label(two.axes[0], "translation-last bound")
-    np.testing.assert_array_equal(tl_line.get_ydata(), tl[0])
+    np.testing.assert_allclose(tl_line.get_ydata(), tl[0], rtol=1e-12)
     assert _lines_with_label(two.axes[1], "translation-last bound") == []   # all NaN: not drawn
     # one shaded span per motion phase (3 phases in plan 0, 2 in plan 1)
     assert [len(ax.patches) for ax in two.axes] == [3, 2]
     assert one.axes[0].get_title() == "plan (max 1 mm)"
     with pytest.raises(ValueError, match="plan 1"):
-        plot_bound_along_path(tmp_path / "bad.png", s, [bound[0], bound[0]], tl, motions)
+        plot_bound_along_path(tmp_path / "bad.png", _profiles(s, [bound[0], bound[0]], tl, motions))
+    with pytest.raises(ValueError, match="at least one"):
+        plot_bound_along_path(tmp_path / "none.png", [])
 
 
 def test_bound_along_path_leads_with_the_bound_given_the_last_motion(tmp_path, figures):
@@ -161,16 +172,16 @@ def test_bound_along_path_leads_with_the_bound_given_the_last_motion(tmp_path, f
     tl = [np.array([np.nan, np.nan, 0.4, np.nan]), np.full(3, np.nan)]
     given = [np.array([0.5, 3.1, 0.4, 0.6]), np.array([0.5, 4.9, 1.1])]
     motions = [MOTIONS, ["start", "rotation", "translation"]]
-    assert _is_png(plot_bound_along_path(tmp_path / "g.png", s, bound, tl, motions, given_last_mm=given))
+    assert _is_png(plot_bound_along_path(tmp_path / "g.png", _profiles(s, bound, tl, motions, given)))
     (fig,) = figures
     assert fig.axes[0].get_title().startswith("bound-aware plan: max 3.1 mm given the last motion")
     assert fig.axes[1].get_title().startswith("bound-blind plan: max 4.9 mm given the last motion")
     assert "friction bound max 5.29 mm" in fig.axes[0].get_title()
     for j, ax in enumerate(fig.axes):
         (line,) = _lines_with_label(ax, "bound given the last motion")
-        np.testing.assert_array_equal(line.get_ydata(), given[j])
-    with pytest.raises(ValueError, match="given_last_mm"):
-        plot_bound_along_path(tmp_path / "bad.png", s, bound, tl, motions, given_last_mm=given[:1])
+        np.testing.assert_allclose(line.get_ydata(), given[j], rtol=1e-12)
+    with pytest.raises(ValueError, match="given_last"):
+        plot_bound_along_path(tmp_path / "bad.png", _profiles(s, bound, tl, motions, [given[0], given[0][:2]]))
 
 
 def test_joint_trajectories_and_xy(tmp_path, traj, figures):

@@ -94,7 +94,7 @@ def write_report(run, out_dir: str | os.PathLike | None = None, *, summary: dict
     ValueError
         No output folder: neither ``out_dir`` nor ``run.setup.out_dir``.
     """
-    from ..plots import plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes
+    from ..plots import BoundProfile, plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes
     from ..report import write_plan_outputs
     from ..view import PLAN_VIEW_FILE, WaypointFrames, write_plan_view
 
@@ -118,12 +118,9 @@ def write_report(run, out_dir: str | os.PathLike | None = None, *, summary: dict
         plot_robot_shapes(path, shapes, obstacles, tips, title=f"{sc.name}: robot at the ordered waypoints")
 
     def fig_bound(path):
-        plot_bound_along_path(path, [b.dense_s for b in bounds],
-                              [np.asarray(b.dense_friction) * 1e3 for b in bounds],
-                              [np.asarray(b.dense_translation_last) * 1e3 for b in bounds],
-                              [b.dense_motion for b in bounds], labels=labels,
-                              given_last_mm=[np.asarray(b.dense_given_last) * 1e3 for b in bounds],
-                              s_label="joint-space path length [m, weighted metric]",
+        profiles = [BoundProfile(b.dense_s, b.dense_friction, b.dense_translation_last, b.dense_motion,
+                                 given_last=b.dense_given_last, label=label) for b, label in zip(bounds, labels)]
+        plot_bound_along_path(path, profiles, s_label="joint-space path length [m, weighted metric]",
                               title=f"{sc.name}: interpolated bound along the ordered path")
 
     aware = plans.aware
