@@ -22,8 +22,8 @@ import pytest
 from ctrplan.errors import UnreachableGoalError
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings, solve_standard
-from ctrplan.planning import (BoundCostObjective, CollisionChecker, JointStateSpace, MotionVerifier, ValidityChecker,
-                              order_path, plan_route, route_checks)
+from ctrplan.planning import (BoundCostObjective, CheckResolution, CollisionChecker, JointStateSpace, MotionVerifier,
+                              ValidityChecker, order_path, plan_route, route_checks)
 from ctrplan.planning.validity import BatchValidityChecker
 from ctrplan.planning.verify import body_step
 from test_planning_helpers import fake_robot
@@ -159,7 +159,8 @@ def test_a_thin_obstacle_between_start_and_goal_is_never_crossed(plate_problem):
     check rejects the segment and the repair, checked 8 times more finely, goes round."""
     robot, plate = plate_problem
     js = JointStateSpace(robot)
-    checks = route_checks(robot, [plate], None, SETTINGS, joint_space=js, search_resolution=0.02, repair_factor=8)
+    checks = route_checks(robot, [plate], None, SETTINGS, joint_space=js,
+                          resolution=CheckResolution(search=0.02, repair_factor=8))
     assert checks.search.check_motion(START, GOAL)
     route = plan_route(robot, START, [GOAL], checks, BoundCostObjective.factory(None, bound_weight=0.0),
                        iterations=60, seed=3, joint_space=js, repair_iterations=300)
@@ -181,7 +182,7 @@ def _random_obstacle_case(seed):
         tips.append(solve_standard(robot, *robot.configuration(q), SETTINGS).tip_position)
     obstacles = [{"type": "sphere", "center_m": tuple(t + rng.normal(0, 0.004, 3)), "radius_m": float(r)}
                  for t, r in zip(tips, rng.uniform(0.003, 0.008, 3))]
-    checks = route_checks(robot, obstacles, None, SETTINGS, joint_space=js, search_resolution=0.01)
+    checks = route_checks(robot, obstacles, None, SETTINGS, joint_space=js, resolution=CheckResolution(search=0.01))
     ends = []
     while len(ends) < 2:
         q = robot.joint_lower + rng.random(3) * (robot.joint_upper - robot.joint_lower)

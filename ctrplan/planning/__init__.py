@@ -30,7 +30,7 @@ from .history import DEFAULT_FINAL_MOTION, FINAL_MOTIONS, approach_history, end_
 from .objective import DEFAULT_BOUND_WEIGHT, BoundCostObjective
 from .ordering import LastMotionBounds, OrderedPath, OrderedWaypoint, bounds_given_last_motion, order_path
 from .planners import PLANNERS, SearchResult, SearchSettings, ValidityChecker, plan
-from .route import Route, RouteChecks, plan_route, route_checks
+from .route import CheckResolution, Route, RouteChecks, plan_route, route_checks
 from .space import DEFAULT_METERS_PER_RADIAN, JointStateSpace, unwrap_path, wrap_angle
 from .validity import BatchMotionValidator, BatchValidityChecker, use_motion_validator
 from .verify import MotionCheck, MotionVerifier
@@ -46,7 +46,7 @@ __all__ = [
     "path_history", "approach_history", "end_with", "goal_indices", "FINAL_MOTIONS",
     "DEFAULT_FINAL_MOTION",
     "BatchValidityChecker", "BatchMotionValidator", "use_motion_validator", "MotionVerifier", "MotionCheck",
-    "Route", "RouteChecks", "plan_route", "route_checks",
+    "Route", "RouteChecks", "CheckResolution", "plan_route", "route_checks",
 ]
 
 # Names this package had before each concept got one name: PlanResult (now SearchResult, distinct

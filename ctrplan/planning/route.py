@@ -33,8 +33,8 @@ from .planners import SearchResult, SearchSettings, plan
 from .validity import BatchValidityChecker
 from .verify import DEFAULT_MAX_BODY_STEP, DEFAULT_VERIFY_RESOLUTION, MotionVerifier
 
-__all__ = ["RouteChecks", "Route", "route_checks", "plan_route", "DEFAULT_SEARCH_RESOLUTION", "DEFAULT_REWIRE_FACTOR",
-           "DEFAULT_SEARCH_REFINE_RATIO", "DEFAULT_REPAIR_FACTOR", "DEFAULT_REPAIR_ITERATIONS",
+__all__ = ["RouteChecks", "Route", "CheckResolution", "route_checks", "plan_route", "DEFAULT_SEARCH_RESOLUTION",
+           "DEFAULT_REWIRE_FACTOR", "DEFAULT_SEARCH_REFINE_RATIO", "DEFAULT_REPAIR_FACTOR", "DEFAULT_REPAIR_ITERATIONS",
            "DEFAULT_COLLISION_SEGMENT"]
 
 # Validity-checking resolution of the search [m of the weighted joint metric] (OMPL's rule,
@@ -95,13 +95,37 @@ class RouteChecks:
                 "final_check_time_s": self.final.seconds}
 
 
+@dataclass(frozen=True)
+class CheckResolution:
+    """How finely :func:`route_checks`' checkers look at a motion.
+
+    Attributes
+    ----------
+    search : float
+        OMPL validity-checking resolution of the search [m of the weighted metric].
+    search_refine_ratio : float
+        ``ModelSettings.refine_ratio`` of the search's standard model [-].
+    search_ds_factor : float
+        The search's arc-length step is this times ``settings.ds`` [-].
+    final, max_body_step : float
+        See :class:`~ctrplan.planning.verify.MotionVerifier` [m].
+    repair_factor : int
+        The repair search checks motions this many times more finely than the search.
+    segment_length : float
+        Capsule length of the collision bodies [m].
+    """
+
+    search: float = DEFAULT_SEARCH_RESOLUTION
+    search_refine_ratio: float = DEFAULT_SEARCH_REFINE_RATIO
+    search_ds_factor: float = DEFAULT_SEARCH_DS_FACTOR
+    final: float = DEFAULT_VERIFY_RESOLUTION
+    max_body_step: float = DEFAULT_MAX_BODY_STEP
+    repair_factor: int = DEFAULT_REPAIR_FACTOR
+    segment_length: float = DEFAULT_COLLISION_SEGMENT
+
+
 def route_checks(robot, obstacles=(), field=None, settings=None, *, joint_space=None,
-                 search_resolution: float = DEFAULT_SEARCH_RESOLUTION,
-                 search_refine_ratio: float = DEFAULT_SEARCH_REFINE_RATIO,
-                 search_ds_factor: float = DEFAULT_SEARCH_DS_FACTOR,
-                 final_resolution: float = DEFAULT_VERIFY_RESOLUTION, max_body_step: float = DEFAULT_MAX_BODY_STEP,
-                 repair_factor: int = DEFAULT_REPAIR_FACTOR,
-                 segment_length: float = DEFAULT_COLLISION_SEGMENT) -> RouteChecks:
+                 resolution: CheckResolution = CheckResolution()) -> RouteChecks:
     """The search, repair and final checkers of a planning problem.
 
     Parameters
@@ -115,18 +139,9 @@ def route_checks(robot, obstacles=(), field=None, settings=None, *, joint_space=
         Standard-model settings of the final check (``multistart`` is not run: the map flags
         multi-equilibrium regions).
     joint_space : JointStateSpace, optional, keyword-only
-    search_resolution : float, keyword-only
-        OMPL validity-checking resolution of the search [m of the weighted metric].
-    search_refine_ratio : float, keyword-only
-        ``ModelSettings.refine_ratio`` of the search's standard model.
-    search_ds_factor : float, keyword-only
-        The search's arc-length step is this times ``settings.ds``.
-    final_resolution, max_body_step : float, keyword-only
-        See :class:`~ctrplan.planning.verify.MotionVerifier` [m].
-    repair_factor : int, keyword-only
-        The repair search checks motions this many times more finely than the search.
-    segment_length : float, keyword-only
-        Capsule length of the collision bodies [m].
+    resolution : CheckResolution, keyword-only
+        Resolutions of the search, repair and final checks, the search's model steps, the
+        collision bodies' length.
 
     Returns
     -------
@@ -139,15 +154,15 @@ def route_checks(robot, obstacles=(), field=None, settings=None, *, joint_space=
     js = joint_space if joint_space is not None else JointStateSpace(robot)
     obstacles = list(obstacles)
     # the search avoids what the final check inflates
-    collision = CollisionChecker(obstacles, segment_length=segment_length, padding=0.5 * max_body_step) \
+    r = resolution
+    collision = CollisionChecker(obstacles, segment_length=r.segment_length, padding=0.5 * r.max_body_step) \
         if obstacles else None
-    search_settings = settings.replace(refine_ratio=search_refine_ratio, ds=settings.ds * search_ds_factor)
-    search = BatchValidityChecker(robot, collision, field, search_settings, joint_space=js,
-                                  resolution=search_resolution)
+    search_settings = settings.replace(refine_ratio=r.search_refine_ratio, ds=settings.ds * r.search_ds_factor)
+    search = BatchValidityChecker(robot, collision, field, search_settings, joint_space=js, resolution=r.search)
     repair = BatchValidityChecker(robot, collision, field, search_settings, joint_space=js,
-                                  resolution=search_resolution / int(repair_factor))
-    final = MotionVerifier(robot, obstacles, field, settings, joint_space=js, resolution=final_resolution,
-                           max_body_step=max_body_step, segment_length=segment_length)
+                                  resolution=r.search / int(r.repair_factor))
+    final = MotionVerifier(robot, obstacles, field, settings, joint_space=js, resolution=r.final,
+                           max_body_step=r.max_body_step, segment_length=r.segment_length)
     return RouteChecks(search, repair, final)
 
 
