@@ -3,7 +3,7 @@ import pytest
 
 from ctrplan.errors import UnreachableGoalError
 from ctrplan.boundmap import compute_field
-from ctrplan.planning import TaskGoal, resolve_goal
+from ctrplan.planning import IKSearch, TaskGoal, resolve_goal
 from test_planning_helpers import fake_robot, fake_solve_standard, fake_tip
 
 
@@ -21,7 +21,7 @@ def test_ik_finds_both_elbows_and_picks_lowest_bound():
 
     field = compute_field(robot, bound, (24, 8, 3))
     sol = resolve_goal(TaskGoal(target, 1e-4), robot, lambda q: True, field=field,
-                       solve_standard=fake_solve_standard, seed=0)
+                       solve_standard=fake_solve_standard, search=IKSearch(seed=0))
     assert sol.tip_error < 1e-4
     np.testing.assert_allclose(fake_tip(*robot.configuration(sol.q)), target, atol=1e-4)
     assert len(sol.candidates) >= 2  # the mirrored elbow also reaches the target
@@ -72,7 +72,7 @@ def test_tie_in_bound_and_residual_goes_to_the_solution_found_first():
 
     field = compute_field(robot, flat, (12, 6, 3))
     sol = resolve_goal(TaskGoal(target, 1e-3), robot, lambda q: True, field=field,
-                       solve_standard=fake_solve_standard, seed=0)
+                       solve_standard=fake_solve_standard, search=IKSearch(seed=0))
     assert len(sol.candidates) >= 2
     np.testing.assert_array_equal(sol.candidate_bounds, sol.candidate_bounds[0])
     assert np.all(sol.candidate_errors < 1e-6)

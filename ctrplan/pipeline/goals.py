@@ -18,7 +18,7 @@ from .._log import deprecated_echo, progress_level
 from ..calibration import PredictionValidation
 from ..errors import CtrplanError, UnreachableGoalError
 from ..io.scenario import TaskGoal
-from ..planning import resolve_goal
+from ..planning import IKSearch, resolve_goal
 from ..planning.goals import compensate_goal
 from ..planning.history import approach_history, approach_rows
 from ..planning.route import route_checks
@@ -216,7 +216,7 @@ def resolve_goals(setup: PlanSetup, field, validity, echo=None) -> ResolvedGoals
     """
     t0 = time.perf_counter()
     goals = tuple(resolve_goal(g, setup.robot, validity_fn=validity, field=field, settings=setup.check_settings,
-                               seed=k + 1)
+                               search=IKSearch(seed=k + 1))
                   for k, g in enumerate(setup.scenario.goals))
     seconds = time.perf_counter() - t0
     for k, g in enumerate(goals):

@@ -208,7 +208,7 @@ class Planner:
         ValueError
             A malformed goal.
         """
-        from ..planning import resolve_goal
+        from ..planning import IKSearch, resolve_goal
 
         names = self.robot.joint_names
         if isinstance(goal, dict) and set(goal) <= set(names) and goal:
@@ -217,7 +217,7 @@ class Planner:
                 raise ValueError(f"joint goal misses {', '.join(missing)}")
             goal = np.array([goal[nm] for nm in names], dtype=float)
         sol = resolve_goal(goal, self.robot, validity_fn=self.checks.search, field=self.field,
-                           settings=self.setup.check_settings, seed=seed)
+                           settings=self.setup.check_settings, search=IKSearch(seed=seed))
         return np.asarray(sol.q, dtype=float)
 
     def plan_to(self, goal, *, start=None, move: bool = True) -> GoalPlan:

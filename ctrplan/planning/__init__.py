@@ -25,7 +25,8 @@ Building blocks (each usable on its own in an OMPL setup, see ``docs/planning.md
 from ..boundmap import (QUANTITIES, BoundField, BoundFieldKeyError, InterpolationError, field_key,
                         interpolation_error)
 from .collision import CollisionChecker, CollisionReport
-from .goals import CompensatedGoal, GoalSolution, JointGoal, TaskGoal, as_goal, compensate_goal, resolve_goal
+from .goals import (CompensatedGoal, GoalSolution, IKSearch, JointGoal, TaskGoal, as_goal, compensate_goal,
+                    resolve_goal)
 from .history import DEFAULT_FINAL_MOTION, FINAL_MOTIONS, approach_history, end_with, goal_indices, path_history
 from .objective import DEFAULT_BOUND_WEIGHT, BoundCostObjective
 from .ordering import LastMotionBounds, OrderedPath, OrderedWaypoint, bounds_given_last_motion, order_path
@@ -42,7 +43,8 @@ __all__ = [
     "BoundCostObjective", "DEFAULT_BOUND_WEIGHT",
     "PLANNERS", "SearchResult", "SearchSettings", "ValidityChecker", "plan",
     "OrderedPath", "OrderedWaypoint", "LastMotionBounds", "order_path", "bounds_given_last_motion",
-    "JointGoal", "TaskGoal", "as_goal", "GoalSolution", "resolve_goal", "CompensatedGoal", "compensate_goal",
+    "JointGoal", "TaskGoal", "as_goal", "GoalSolution", "IKSearch", "resolve_goal", "CompensatedGoal",
+    "compensate_goal",
     "path_history", "approach_history", "end_with", "goal_indices", "FINAL_MOTIONS",
     "DEFAULT_FINAL_MOTION",
     "BatchValidityChecker", "BatchMotionValidator", "use_motion_validator", "MotionVerifier", "MotionCheck",

@@ -29,7 +29,7 @@ from ..errors import CtrplanError, UnreachableGoalError
 from ..io.scenario import JointGoal, TaskGoal
 from .space import wrap_angle
 
-__all__ = ["JointGoal", "TaskGoal", "GoalSolution", "resolve_goal", "DEFAULT_IK_STARTS_PER_JOINT",
+__all__ = ["JointGoal", "TaskGoal", "GoalSolution", "IKSearch", "resolve_goal", "DEFAULT_IK_STARTS_PER_JOINT",
            "DEFAULT_IK_MAX_STARTS", "CompensatedGoal", "compensate_goal"]
 
 # Coarse start grid: nodes per joint (3 joints -> 27 starts, ~1-3 s with a ~1 ms model).
@@ -147,9 +147,31 @@ def as_goal(goal) -> JointGoal | TaskGoal:
     return JointGoal(goal)
 
 
+@dataclass(frozen=True)
+class IKSearch:
+    """The multi-start inverse kinematics of :func:`resolve_goal` for a task-space goal.
+
+    Attributes
+    ----------
+    starts_per_joint : int
+        Multi-start grid nodes per joint.
+    max_starts : int
+        Largest number of starts: a bigger grid is replaced by this many seeded Latin-hypercube
+        points of the joint box.
+    seed : int
+        Seed of the start jitter.
+    max_nfev : int
+        Model evaluations per least-squares run.
+    """
+
+    starts_per_joint: int = DEFAULT_IK_STARTS_PER_JOINT
+    max_starts: int = DEFAULT_IK_MAX_STARTS
+    seed: int = 0
+    max_nfev: int = 60
+
+
 def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None, settings=None, *,
-                 starts_per_joint: int = DEFAULT_IK_STARTS_PER_JOINT, seed: int = 0,
-                 max_nfev: int = 60, max_starts: int = DEFAULT_IK_MAX_STARTS) -> GoalSolution:
+                 search: IKSearch = IKSearch()) -> GoalSolution:
     """Turn a goal into one joint vector.
 
     Parameters
@@ -169,15 +191,8 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
         ``(robot, alpha, beta, settings) -> StandardSolution``; default
         :func:`ctrplan.mechanics.solve_standard`.
     settings : ModelSettings, optional
-    starts_per_joint : int, keyword-only
-        Multi-start grid nodes per joint.
-    max_starts : int, keyword-only
-        Largest number of starts: a bigger grid is replaced by this many seeded Latin-hypercube
-        points of the joint box.
-    seed : int, keyword-only
-        Seed of the start jitter.
-    max_nfev : int, keyword-only
-        Model evaluations per least-squares run.
+    search : IKSearch, keyword-only
+        Starts, their seed and the evaluations of each least-squares run of a task-space goal.
 
     Returns
     -------
@@ -221,12 +236,12 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
             return np.full(3, _FAILED_RESIDUAL)
         return np.asarray(sol.tip_position, dtype=float) - target
 
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(search.seed)
     best_err, best_q = np.inf, None
     sols, errs = [], []
-    starts = _starts(robot, int(starts_per_joint), int(max_starts), rng)
+    starts = _starts(robot, int(search.starts_per_joint), int(search.max_starts), rng)
     for q0 in starts:
-        res = least_squares(residual, q0, bounds=(lo, hi), method="trf", max_nfev=max_nfev,
+        res = least_squares(residual, q0, bounds=(lo, hi), method="trf", max_nfev=search.max_nfev,
                             x_scale=np.where([j.kind == JointKind.ROTATION for j in robot.joints], 1.0, 0.01))
         q = np.where(periodic, wrap_angle(res.x), res.x)
         err = float(np.linalg.norm(residual(q)))
@@ -470,7 +485,7 @@ def compensate_goal(target, robot, q_standard, state, settings=None, *, toleranc
             it += 1
             r = p.tip_position - target
             step = -scale * (np.linalg.pinv(J * scale[None, :]) @ r)
-            t, improved = 1.0, False
+            t = 1.0
             for _ in range(_MAX_HALVINGS + 1):
                 q_new = np.clip(q + t * step, lo, hi)
                 try:
