@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
 from scipy.interpolate import RegularGridInterpolator
 
 from ctrplan.boundmap import (QUANTITIES, BoundField, ExactSamples, MapSpec, cell_nodes, preview_spec, refined_field,

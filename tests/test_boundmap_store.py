@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from test_planning_helpers import fake_bound, fake_robot
 
 from ctrplan import cli
-from ctrplan.boundmap import (BoundMapMismatchError, BoundMapStore, ComputeOptions, IncompleteBoundMapError, MapSpec,
+from ctrplan.boundmap import (BoundMapMismatchError, BoundMapStore, ComputeOptions, IncompleteBoundMapError,
                               chunk_shape_for, compute_bound_map, compute_bound_map_store, compute_field, field_key,
                               load_bound_map, load_or_compute_bound_map)
 from ctrplan.io.robot_file import load_robot

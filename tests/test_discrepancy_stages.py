@@ -20,7 +20,6 @@ import pytest
 from ctrplan.discrepancy import options, setup as setup_stage, stages
 from ctrplan.discrepancy.fits import baseline as baseline_stage, fitting
 from ctrplan.discrepancy.measured import split as split_stage
-from ctrplan.discrepancy.outputs import report
 from ctrplan.discrepancy.verdict import decision, signatures
 from ctrplan.discrepancy.outputs import results as results_json
 from ctrplan.discrepancy.fits.calibrate import CalibrationResult

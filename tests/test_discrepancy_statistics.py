@@ -405,7 +405,6 @@ def test_buffer_keeps_fits_away_from_the_blocks_they_are_judged_on():
     validated in fold k or of a test row, and every development row further away is kept.
     Catches buffers on one side only, across motions, or around the wrong blocks."""
     s = make_split(_data(500), seed=3).with_buffer(BufferChoice(3, BufferReason.AUTOCORRELATION_FALLS))
-    data = s.data
     idx = np.arange(500)
     for kf in range(s.n_folds):
         cal = s.calibration_rows(kf)

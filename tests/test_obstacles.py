@@ -25,7 +25,7 @@ from ctrplan.io.scenario import load_scenario
 from ctrplan.mechanics import ModelSettings
 from ctrplan.obstacles import (OBSTACLE_TYPES, Obstacle, PositiveFloat, Vector3, convex_triangles, obstacle_from_dict,
                                register_obstacle_type, rotation_z_to, unregister_obstacle_type)
-from ctrplan.planning import (BoundCostObjective, CollisionChecker, JointStateSpace, ValidityChecker, plan_route,
+from ctrplan.planning import (BoundCostObjective, CollisionChecker, JointStateSpace, plan_route,
                               route_checks)
 from ctrplan.plots import plot_robot_shapes
 from ctrplan.view import WaypointFrames, plan_view_figure
