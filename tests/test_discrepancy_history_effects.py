@@ -428,6 +428,7 @@ def test_a_residual_above_a_noise_that_is_only_a_lower_bound_is_inconclusive():
                         rule=NamingRule(significance=0.05, n_folds=5, n_candidates=0), no_effect_case="inconclusive")
     text = no_effect(decision.as_dict(), noise_dict(low), {})
     assert "inconclusive" in text and "misses something" not in text.replace("no evidence that the model misses", "")
+    assert "0.100 mm rms" in text and "None" not in text          # the noise said from its record
     quiet = dc_replace(test, statistic=1.0, consistent=True)
     assert no_effect_case(dc_replace(low, test=dc_replace(quiet, noise_lower_bound=True))) == "noise"
     assert no_effect_case(dc_replace(check, test=None)) == "unknown"

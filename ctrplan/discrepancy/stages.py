@@ -103,5 +103,6 @@ def stage_key(robot_path, data_path, options: DiscrepancyOptions) -> str:
     keyed = {f.name: getattr(options, f.name) for f in fields(options) if f.metadata.get("stage_key", True)}
     keyed["effects"] = sorted(options.effects if options.effects is not None else REGISTRY)
     return content_key({"robot_sha256": file_hash(robot_path), "data_sha256": file_hash(data_path), "options": keyed,
-                        "fit_version": FIT_VERSION, "mechanics_version": mechanics_version(), "code_sha256": source_digest(),
+                        "fit_version": FIT_VERSION, "mechanics_version": mechanics_version(),
+                        "code_sha256": source_digest(),
                         "correlation_length_method": CORRELATION_LENGTH_METHOD})

@@ -64,8 +64,8 @@ from .fits.evaluation import evaluate_rows
 from .fits.fitting import CrossValidated, fit_candidates, refit_contact_baseline
 from .options import DiscrepancyOptions
 from .outputs.output import (PredictionCheck, Reproduction, TestSplit, UpdatedModel, check_reproduction, evaluate_test_split,
-                     final_candidate, final_parameters, log_blocks, log_noise, log_pilot, log_split, log_verdict, run_cautions,
-                     validate_prediction, write_updated_model)
+                     final_candidate, final_parameters, log_blocks, log_noise, log_pilot, log_split, log_verdict,
+                     run_cautions, validate_prediction, write_updated_model)
 from .fits.pairs import Combination, fit_second_effect
 from .setup import DiscrepancySetup, load_inputs
 from .verdict.signatures import diagnose_residuals

@@ -37,7 +37,8 @@ from ...errors import DataFileError
 from .data import MeasuredData
 
 __all__ = ["DataSplit", "SplitRule", "BufferChoice", "make_split", "split_samples", "configurations_repeat",
-           "sample_units", "subsample", "choose_buffer", "lengthen_blocks", "choose_blocks", "residual_autocorrelation", "near_rows",
+           "sample_units", "subsample", "choose_buffer", "lengthen_blocks", "choose_blocks", "residual_autocorrelation",
+           "near_rows",
            "MIN_BLOCK_SAMPLES", "MAX_BLOCKS", "MIN_TEST_UNITS", "MAX_FOLDS", "MIN_UNITS_PER_FOLD",
            "BUFFER_AUTOCORRELATION"]
 
@@ -698,7 +699,8 @@ def make_split(data: MeasuredData, *, test_fraction: float = 0.2, n_blocks: int 
     for k, (_, val) in enumerate(GroupKFold(n_splits=folds).split(dev_idx, groups=units[dev_idx])):
         fold[dev_idx[val]] = k
     rule = SplitRule(n_units=int(ids.size), unit_kind=kind, block_samples=block, blocks_asked=n_blocks is not None,
-                     n_test_units=int(test_ids.size), n_test_samples=int(test.sum()), test_fraction=float(test_fraction),
+                     n_test_units=int(test_ids.size), n_test_samples=int(test.sum()),
+                     test_fraction=float(test_fraction),
                      test_at_minimum=not (n_test > MIN_TEST_UNITS or round(test_fraction * ids.size) == n_test),
                      n_development_units=int(n_dev_units), n_development_samples=int(dev_idx.size),
                      recut_block=int(development_block) if recut else None, n_folds=int(folds),

@@ -130,9 +130,9 @@ def note(entry: Mapping, decision: Mapping, labels: Mapping) -> str:
                 f"the simpler {other} is named")
     lo, hi = cmp.get("reduction_ci") or (None, None)
     return (f"ambiguous: {first} and {other} explain the data equally well within their uncertainty (out-of-fold "
-            f"Eq. (49) error of the first lower by {figure(cmp.get('reduction'), '.0f', 100)} %, {figure(lo, '.0f', 100)}.."
-            f"{figure(hi, '.0f', 100)} %, p = {figure(cmp.get('p_value'), '.2g')} over {cmp.get('n_folds')} folds); data that "
-            f"would separate them: {separated_by(decision, labels)}")
+            f"Eq. (49) error of the first lower by {figure(cmp.get('reduction'), '.0f', 100)} %, "
+            f"{figure(lo, '.0f', 100)}..{figure(hi, '.0f', 100)} %, p = {figure(cmp.get('p_value'), '.2g')} over "
+            f"{cmp.get('n_folds')} folds); data that would separate them: {separated_by(decision, labels)}")
 
 
 def range_text(typical, unit: str) -> str:
@@ -177,7 +177,7 @@ def no_effect(decision: Mapping, noise: Mapping, candidates: Mapping) -> str:
     decision : dict
         ``results.json["decision"]`` (``no_effect_case``, ``best``, ``why_not``, ``rule``).
     noise : dict
-        ``results.json["noise"]`` (mm; its ``test`` and the estimate's ``description``).
+        ``results.json["noise"]`` (mm; its ``test`` and the estimate, said by :func:`noise_text`).
     candidates : dict
         ``results.json["candidates"]`` (labels and out-of-fold means [mm]).
 
@@ -188,7 +188,7 @@ def no_effect(decision: Mapping, noise: Mapping, candidates: Mapping) -> str:
     """
     labels = labels_of(candidates)
     case = NoEffectCase(decision.get("no_effect_case") or NoEffectCase.UNKNOWN)
-    description = (noise.get("noise") or {}).get("description")
+    description = noise_text(noise.get("noise") or {})
     test = noise.get("test") or {}
     rms = figure(noise.get("rms_mm"), ".3f")
     best = decision.get("best")
@@ -212,10 +212,11 @@ def no_effect(decision: Mapping, noise: Mapping, candidates: Mapping) -> str:
     if case == NoEffectCase.UNEXPLAINED:
         inflation = test.get("inflation")
         added = figure(None if inflation is None else inflation - 1, ".0f", 100)
-        return (f"the out-of-fold residual of the calibrated baseline (rms {rms} mm, {figure(noise.get('ratio'), '.1f')} "
-                f"times the sensor noise: {description}) is NOT consistent with noise (F = {stat} > {threshold} at "
-                f"false-alarm rate {figure(alpha, 'g')}, after allowing for the {added} % a fitted model adds): the model "
-                f"misses something that no candidate explains" + best_text)
+        ratio = figure(noise.get("ratio"), ".1f")
+        return (f"the out-of-fold residual of the calibrated baseline (rms {rms} mm, {ratio} times the sensor noise: "
+                f"{description}) is NOT consistent with noise (F = {stat} > {threshold} at false-alarm rate "
+                f"{figure(alpha, 'g')}, after allowing for the {added} % a fitted model adds): the model misses "
+                f"something that no candidate explains" + best_text)
     return (f"no candidate is eligible; whether the out-of-fold residual (rms {rms} mm) is noise cannot be said: "
             f"the sensor noise is {description}" + best_text)
 
@@ -275,8 +276,8 @@ def fit_note(entry) -> str:
         return (f"it fits the calibration data worse than the standard baseline ({cost}): the {entry['model']} model "
                 f"with the shared refitted tube parameters does not reach the standard model's fit")
     return (f"it fits the calibration data better ({cost}) but the held-out folds worse (mean "
-            f"{figure(entry['mean_m'], '.3f', 1e3)} against {figure(entry['baseline_mean_m'], '.3f', 1e3)} mm): its parameters "
-            f"absorb a pattern of the calibration samples that does not hold elsewhere (overfitting)")
+            f"{figure(entry['mean_m'], '.3f', 1e3)} against {figure(entry['baseline_mean_m'], '.3f', 1e3)} mm): its "
+            f"parameters absorb a pattern of the calibration samples that does not hold elsewhere (overfitting)")
 
 
 def verdict_lines(results: Mapping) -> list:
@@ -292,7 +293,8 @@ def verdict_lines(results: Mapping) -> list:
     d = results["decision"]
     labels = labels_of(results.get("candidates"))
     if d["verdict"] == "none":
-        lines = [(logging.INFO, "no effect named: " + no_effect(d, results.get("noise") or {}, results.get("candidates")))]
+        text = no_effect(d, results.get("noise") or {}, results.get("candidates"))
+        lines = [(logging.INFO, "no effect named: " + text)]
     else:
         lines = [(logging.INFO, f"{'ambiguous' if d['verdict'] == 'ambiguous' else 'named effect'}: "
                           f"{_label(labels, d['named'])}"
