@@ -275,8 +275,8 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
     """
     import numpy as np
 
-    from .boundmap import MapSpec, default_spec, map_coordinates, map_file, map_identity, map_paths
-    from .boundmap.compute import DEFAULT_CHUNK_SIZE, ComputeOptions
+    from .boundmap import (DEFAULT_CHUNK_SIZE, ComputeOptions, MapSpec, default_spec, map_coordinates, map_file,
+                           map_identity, map_paths)
     from .boundmap.files import compute_bound_map
     from .io.robot_file import load_robot
     from .mechanics import evaluate_bound
@@ -309,9 +309,8 @@ def boundmap(robot_path, resolution, placement, ds, out_path, fmt, store_path, j
         store_path = map_file(cache, ".zarr") if not out_path else out.with_suffix(".zarr")
     logger.info(f"map coordinates: {', '.join(f'{n} ({r} nodes)' for n, r in zip(coords.names, spec.resolution))}; "
                 f"placement {spec.placement}; key {ident.key[:12]}; mechanics {ident.mechanics_version}")
-    n_jobs = 1 if scheduler else (jobs or os.cpu_count() or 1)
-    options = ComputeOptions(n_jobs=n_jobs, scheduler=scheduler, chunk_size=chunk_size or DEFAULT_CHUNK_SIZE,
-                             progress=_progress(no_progress))
+    options = ComputeOptions(n_jobs=1 if scheduler else (jobs or os.cpu_count() or 1), scheduler=scheduler,
+                             chunk_size=chunk_size or DEFAULT_CHUNK_SIZE, progress=_progress(no_progress))
     run, path = compute_bound_map(robot_path, spec, settings, out_path=out, store_path=store_path, options=options)
     field = run.field
     secs = np.asarray(run.chunk_seconds)
@@ -726,8 +725,7 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
     clear of the scenario's obstacles, and is time-parameterized within the drive limits (ruckig).
     """
     from .design import (DesignInputError, DesignSearch, ExperimentLimits, SensorNoise, design_experiment, read_results,
-                         result_hypotheses)
-    from .design import write_design
+                         result_hypotheses, write_design)
     from .discrepancy import load_measured_data
     from .io.robot_file import load_robot
 
@@ -767,12 +765,10 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
     interest = [p.strip() for p in parameters.split(",") if p.strip()] if parameters else None
     if duration is not None and not duration > 0:
         raise DesignInputError(f"option --duration {duration!r}: must be > 0 s")
-    res = design_experiment(robot, data, hyps, noise=SensorNoise(sigma, lag1),
-                            limits=ExperimentLimits(drive=drive, obstacles=tuple(obstacles or ()), start=start,
-                                                    duration=duration, rest=rest),
-                            interest=interest,
-                            search=DesignSearch(n_random=random_motions, seed=seed,
-                                                n_jobs=jobs or os.cpu_count() or 1))
+    limits = ExperimentLimits(drive=drive, obstacles=tuple(obstacles or ()), start=start, duration=duration, rest=rest)
+    search = DesignSearch(n_random=random_motions, seed=seed, n_jobs=jobs or os.cpu_count() or 1)
+    res = design_experiment(robot, data, hyps, noise=SensorNoise(sigma, lag1), limits=limits, interest=interest,
+                            search=search)
     command = "ctrplan " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     paths = write_design(res, robot, out_dir, command=command, bag=not no_bag, frame=data.frame)
     logger.info(f"design: {res.duration:.1f} s, {len(res.primitives)} primitives; report: {paths['markdown']}")
