@@ -32,7 +32,7 @@ def test_unreachable_names_target_in_mm():
     robot = fake_robot()
     with pytest.raises(UnreachableGoalError, match=r"\(100\.00, 0\.00, 50\.00\) mm; best distance reached"):
         resolve_goal({"tip_position_m": [0.1, 0.0, 0.05], "tolerance_m": 1e-3}, robot,
-                     solve_standard=fake_solve_standard, starts_per_joint=2)
+                     solve_standard=fake_solve_standard, search=IKSearch(starts_per_joint=2))
 
 
 def test_joint_goal_passthrough():
