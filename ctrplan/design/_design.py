@@ -244,8 +244,9 @@ class SensorNoise:
     Attributes
     ----------
     position : float
-        Noise rms per tip coordinate [m], > 0 (e.g. a discrepancy run's
-        ``results.json["noise"]["noise"]["position_rms_m"]``).
+        Noise rms per tip coordinate [m], > 0 (a discrepancy run's
+        ``results.json["noise"]["noise"]["position_rms_m"]`` is the rms length of the 3-D noise
+        vector, ``sqrt(3)`` times this).
     lag1 : float, optional
         Lag-one autocorrelation of the noise [-] (AR(1) inflation of :func:`noise_weight`).
     """
