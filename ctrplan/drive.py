@@ -77,15 +77,25 @@ class JointLimits:
 
     @classmethod
     def of_robot(cls, robot) -> "JointLimits":
-        """The joints of ``robot`` (:class:`ctrplan.robot.Robot`), in its joint order."""
+        """The joints of ``robot`` (:class:`ctrplan.robot.Robot`), in its joint order: names,
+        kinds, ``robot.joint_lower`` / ``joint_upper`` [rad or m], shape (n_joints,) each, and
+        which rotations are periodic."""
         return cls(names=tuple(j.name for j in robot.joints), kinds=tuple(j.kind for j in robot.joints),
                    lower=robot.joint_lower, upper=robot.joint_upper,
                    periodic=[j.periodic for j in robot.joints])
 
     @classmethod
     def unnamed(cls, kinds: Sequence[str], lower=None, upper=None, periodic=None) -> "JointLimits":
-        """Joints named ``"joint 0"``, ``"joint 1"``, ...; without ``lower``/``upper``, no
-        position limits (-inf, inf); without ``periodic``, none periodic."""
+        """Joints named ``"joint 0"``, ``"joint 1"``, ... of the given ``kinds`` (length
+        n_joints); ``lower``/``upper`` shape (n_joints,) [rad or m], default no position limits
+        (-inf, inf); ``periodic`` shape (n_joints,) bool, default none periodic.
+
+        Raises
+        ------
+        ValueError
+            As the class: a kind that is neither rotation nor translation, or arrays of
+            another length.
+        """
         n = len(kinds)
         return cls(names=tuple(f"joint {i}" for i in range(n)), kinds=tuple(kinds),
                    lower=np.full(n, -np.inf) if lower is None else lower,
@@ -94,6 +104,7 @@ class JointLimits:
 
     @property
     def n_joints(self) -> int:
+        """Number of joints."""
         return len(self.names)
 
 
@@ -125,6 +136,20 @@ class DriveLimits:
         """Limits given as ``{joint name: value}`` tables (as in a scenario file's ``[drive]``),
         arranged in the order of ``names``.
 
+        Parameters
+        ----------
+        names : sequence of str, length n_joints
+            The joints, in the order of the arrays.
+        max_velocity, max_acceleration, max_jerk : mapping of str to float, keyword-only
+            [rad/s or m/s, per s^2, per s^3] by joint name.
+        control_rate_hz : float, keyword-only
+            [Hz].
+
+        Returns
+        -------
+        DriveLimits
+            Arrays shape (n_joints,), ``joint_names == tuple(names)``.
+
         Raises
         ------
         ValueError
@@ -143,7 +168,16 @@ class DriveLimits:
 
     def in_order(self, names: Sequence[str]) -> "DriveLimits":
         """These limits arranged in the order of ``names`` (as they are when the limits carry no
-        names).
+        names, or the same names in the same order).
+
+        Parameters
+        ----------
+        names : sequence of str, length n_joints
+
+        Returns
+        -------
+        DriveLimits
+            Arrays shape (n_joints,) in the order of ``names``.
 
         Raises
         ------
@@ -165,7 +199,18 @@ class DriveLimits:
     def scaled(self, speed: float) -> "DriveLimits":
         """The limits of a motion at ``speed`` times the drive's pace: velocity times ``speed``,
         acceleration times ``speed**2``, jerk times ``speed**3`` (a time scaling of the same
-        profile)."""
+        profile).
+
+        Parameters
+        ----------
+        speed : float
+            Time-scaling factor [-], > 0 (e.g. 0.25 for a slow motion).
+
+        Returns
+        -------
+        DriveLimits
+            Same control rate and joint names.
+        """
         return DriveLimits(self.control_rate_hz, np.asarray(self.max_velocity, float) * speed,
                            np.asarray(self.max_acceleration, float) * speed ** 2,
                            np.asarray(self.max_jerk, float) * speed ** 3, self.joint_names)
