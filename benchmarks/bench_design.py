@@ -173,7 +173,7 @@ def run_case(index: int, out: Path, jobs: int) -> dict:
     noise = first["noise"]["noise"]
     t1 = time.perf_counter()
     design = design_experiment(base, data, hyps,
-                               noise=SensorNoise(noise["position_rms_m"], noise.get("lag1_correlation")),
+                               noise=SensorNoise.from_estimate(noise),
                                limits=ExperimentLimits(duration=BUDGET_S), search=DesignSearch(n_random=1, seed=seed))
     design_s = time.perf_counter() - t1
     runs, files = {}, {}

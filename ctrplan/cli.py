@@ -751,11 +751,11 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
     if noise_mm is not None:
         if not (noise_mm > 0 and noise_mm < float("inf")):
             raise DesignInputError(f"option --noise-position-mm {noise_mm!r}: must be > 0 mm")
-        sigma, lag1 = noise_mm * 1e-3, None
+        sensor = SensorNoise(noise_mm * 1e-3)
+    elif noise.get("position_rms_m"):
+        sensor = SensorNoise.from_estimate(noise, where=f"{where}: noise")
     else:
-        sigma, lag1 = noise.get("position_rms_m"), noise.get("lag1_correlation")
-        if not sigma:
-            raise DesignInputError(f"{where}: no sensor noise estimate; give --noise-position-mm")
+        raise DesignInputError(f"{where}: no sensor noise estimate; give --noise-position-mm")
     drive = obstacles = start = None
     if scenario_path is not None:
         from .io.scenario import load_scenario
@@ -767,7 +767,7 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
         raise DesignInputError(f"option --duration {duration!r}: must be > 0 s")
     limits = ExperimentLimits(drive=drive, obstacles=tuple(obstacles or ()), start=start, duration=duration, rest=rest)
     search = DesignSearch(n_random=random_motions, seed=seed, n_jobs=jobs or os.cpu_count() or 1)
-    res = design_experiment(robot, data, hyps, noise=SensorNoise(sigma, lag1), limits=limits, interest=interest,
+    res = design_experiment(robot, data, hyps, noise=sensor, limits=limits, interest=interest,
                             search=search)
     command = "ctrplan " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     paths = write_design(res, robot, out_dir, command=command, bag=not no_bag, frame=data.frame)

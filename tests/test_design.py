@@ -151,6 +151,37 @@ def test_predicted_standard_errors_match_monte_carlo_fits():
     assert realized == pytest.approx(predicted, rel=0.3)
 
 
+def test_a_runs_noise_estimate_becomes_the_noise_per_coordinate():
+    """The discrepancy run's estimate from rests of white noise drawn per coordinate (0.3 mm in
+    each of x, y and z, 60 rests of 4-12 samples): :meth:`SensorNoise.from_estimate` gives 0.3 mm
+    within 10 % (the estimate's 3-D rms length, 0.52 mm, taken for the noise per coordinate would
+    weigh every sample a third of what it is worth), the same from the estimate's JSON form; an
+    estimate without a value is refused."""
+    from ctrplan.discrepancy.measured.data import MeasuredData
+    from ctrplan.discrepancy.measured.noise import estimate_noise
+    from ctrplan.history import MotionRecord
+
+    rng = np.random.default_rng(11)
+    lengths = rng.integers(4, 13, 60)
+    # one moving sample between rests, each rest at its own configuration
+    config = np.concatenate([np.concatenate([[-1 - k], np.full(m, k)]) for k, m in enumerate(lengths)])
+    k = config.size
+    tip = np.array([0.0, 0.0, 0.1]) + rng.normal(0.0, SIGMA, (k, 3))
+    alpha = np.stack([config * 1e-3, np.zeros(k)], axis=1)
+    beta, sequence = np.zeros((k, 2)), np.zeros(k, int)
+    data = MeasuredData(alpha=alpha, beta=beta, tip=tip, tangent=None, eta=np.zeros((k, 1), int),
+                        translation_last=np.zeros((k, 1), bool), sequence=sequence, config_id=config, subset=None,
+                        time=None, file="rests.csv", frame="robot", record=MotionRecord(alpha, beta, sequence=sequence),
+                        rows=np.arange(k), given_eta=np.zeros((k, 1), int))
+    est = estimate_noise(data, seed=0)
+    assert est.source == "rests"
+    noise = SensorNoise.from_estimate(est)
+    assert noise.position == pytest.approx(SIGMA, rel=0.10)
+    assert SensorNoise.from_estimate(json.loads(json.dumps(est.as_dict()))) == noise
+    with pytest.raises(DesignInputError, match="position_rms_m None"):
+        SensorNoise.from_estimate({"position_rms_m": None}, where="out/run/results.json")
+
+
 def test_candidates_on_two_processes_give_the_same_design():
     """The candidates of a search step split over two worker processes: the same motion and the same
     separation as in one process (catches results merged to the wrong candidate)."""
@@ -292,7 +323,7 @@ def _results_json(tmp_path, robot_file, data_file):
            "named_effect": "offplane", "ambiguous_with": "registration",
            "candidates": {"offplane": {"label": "off-plane precurvature", "fit": fit(offplane)},
                           "registration": {"label": "registration", "fit": fit(registration)}},
-           "noise": {"noise": {"position_rms_m": SIGMA, "lag1_correlation": 0.2}}}
+           "noise": {"noise": {"position_rms_m": float(np.sqrt(3.0)) * SIGMA, "lag1_correlation": 0.2}}}
     folder = tmp_path / "result"
     folder.mkdir()
     (folder / "results.json").write_text(json.dumps(res))
@@ -332,6 +363,8 @@ def test_cli_writes_a_trajectory_ready_to_run(tmp_path):
     assert r.exit_code == 0, r.output
     summary = json.loads((out / "design.json").read_text())
     assert summary["mode"] == "separate" and summary["duration_s"] <= 8.0
+    # the run's 3-D noise rms is weighed as the noise per coordinate it stands for
+    assert summary["noise_position_m"] == pytest.approx(SIGMA, rel=1e-12)
     assert set(summary["separation"]) == {"recorded", "designed", "repeated", "random", "designed_alone"}
     samples = pd.read_csv(out / "samples.csv")
     assert {"time", "alpha_2", "tip_x__offplane", "tip_z__registration"} <= set(samples.columns)

@@ -246,13 +246,45 @@ class SensorNoise:
     position : float
         Noise rms per tip coordinate [m], > 0 (a discrepancy run's
         ``results.json["noise"]["noise"]["position_rms_m"]`` is the rms length of the 3-D noise
-        vector, ``sqrt(3)`` times this).
+        vector, ``sqrt(3)`` times this: :meth:`from_estimate` converts it).
     lag1 : float, optional
         Lag-one autocorrelation of the noise [-] (AR(1) inflation of :func:`noise_weight`).
     """
 
     position: float
     lag1: float | None = None
+
+    @classmethod
+    def from_estimate(cls, estimate, *, where: str = "noise estimate") -> "SensorNoise":
+        """The noise per tip coordinate of a discrepancy run's noise estimate.
+
+        Parameters
+        ----------
+        estimate : NoiseEstimate or mapping
+            :class:`ctrplan.discrepancy.NoiseEstimate` or its JSON form
+            (``results.json["noise"]["noise"]``): ``position_rms_m``, the rms length of the 3-D
+            noise vector [m], and ``lag1_correlation`` [-] (None: white).
+        where : str
+            What the estimate was read from, for the error message.
+
+        Returns
+        -------
+        SensorNoise
+            ``position = position_rms_m / sqrt(3)`` (the estimate's noise is the same and
+            independent in x, y and z), ``lag1 = lag1_correlation``.
+
+        Raises
+        ------
+        DesignInputError
+            The estimate has no finite positive ``position_rms_m``.
+        """
+        get = estimate.get if hasattr(estimate, "get") else lambda k: getattr(estimate, k, None)
+        rms = get("position_rms_m")
+        if rms is None or not (float(rms) > 0 and np.isfinite(float(rms))):
+            raise DesignInputError(f"{where}: position_rms_m {rms!r} is not a noise estimate (> 0 m); give the "
+                                   f"noise per tip coordinate")
+        lag1 = get("lag1_correlation")
+        return cls(float(rms) / float(np.sqrt(3.0)), None if lag1 is None else float(lag1))
 
 
 @dataclass(frozen=True, eq=False)
