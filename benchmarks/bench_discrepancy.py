@@ -36,7 +36,7 @@ def main(argv=None):
     ap.add_argument("--data", default=None, help="paper-protocol CSV from `ctrplan synth` (default: generate)")
     args = ap.parse_args(argv)
 
-    from ctrplan.discrepancy import synthesize, write_synth
+    from ctrplan.discrepancy import SynthProtocol, synthesize, write_synth
     from ctrplan.discrepancy.outputs.report import write_report
     from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
     from ctrplan.io.robot_file import load_robot, robot_to_toml
@@ -46,7 +46,7 @@ def main(argv=None):
     robot = load_robot(ROOT / "model" / "ha2019-table7-calibrated.toml")
     t0 = time.perf_counter()
     if args.data is None:
-        res = synthesize(robot, {"friction": {"mu_1": 0.22, "mu_2": 0.12}}, protocol="paper", grid=args.grid,
+        res = synthesize(robot, {"friction": {"mu_1": 0.22, "mu_2": 0.12}}, protocol=SynthProtocol.paper(args.grid),
                          seed=0, n_jobs=args.jobs)
         data = out / "paper-protocol-friction.csv"
         write_synth(data, res)

@@ -14,7 +14,7 @@ from __future__ import annotations
 from enum import StrEnum
 
 __all__ = ["JointKind", "MotionKind", "FinalMotion", "BoundKind", "AimWith", "MapPlacement", "FirstPlan",
-           "MapSource", "BagStorage", "RosDistro", "TangentAxis", "DesignMode", "PoseFrame", "Verdict", "NoEffectCase",
+           "MapSource", "BagStorage", "RosDistro", "TangentAxis", "DesignMode", "PoseFrame", "ProtocolKind", "Verdict", "NoEffectCase",
            "SplitUnit", "EffectStore", "NotNamedReason", "DecisionNoteKind", "CautionKind",
            "NotPairedReason", "FitNoteKind", "BufferReason", "BlocksKept"]
 
@@ -123,6 +123,15 @@ class DesignMode(StrEnum):
 
     SEPARATE = "separate"
     PARAMETERS = "parameters"
+
+
+class ProtocolKind(StrEnum):
+    """Where synthetic data are sampled: the paper's grid of configurations, each approached
+    from every relative rotation direction (Section V-C of Ha et al. 2019), or a seeded
+    continuous trajectory like Ha's measured one."""
+
+    PAPER = "paper"
+    TRAJECTORY = "trajectory"
 
 
 class PoseFrame(StrEnum):

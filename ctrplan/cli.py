@@ -367,7 +367,7 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
     """
     import numpy as np
 
-    from .discrepancy.measured.synth import Noise, parse_values, synthesize, write_synth
+    from .discrepancy.measured.synth import Noise, SynthProtocol, parse_values, synthesize, write_synth
     from .effects import REGISTRY, EffectSet
     from .errors import PhysicalParameterError
     from .io.robot_file import file_hash, load_robot
@@ -404,7 +404,7 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
     except PhysicalParameterError as exc:
         raise PhysicalParameterError(f"option {(moving or used or ['--effects'])[-1]}: {exc}") from None
     noise = Noise(position_rms=noise_mm * 1e-3, angle_rms=float(np.deg2rad(noise_deg)))
-    result = synthesize(robot, effects, protocol=protocol, grid=grid, samples=samples, noise=noise,
+    result = synthesize(robot, effects, protocol=SynthProtocol(protocol, grid, samples), noise=noise,
                         seed=seed, settings=_settings(ds), n_jobs=jobs or os.cpu_count() or 1,
                         progress=_progress(no_progress))
     sidecar = write_synth(out_path, result, robot_file=robot_path, robot_hash=file_hash(robot_path))

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import FitRun, FitStart, Noise, synthesize, write_synth
+from ctrplan.discrepancy import FitRun, FitStart, Noise, SynthProtocol, synthesize, write_synth
 from ctrplan.discrepancy.measured.data import load_measured_data
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings
@@ -32,7 +32,7 @@ def lagged_pair(tmp_path_factory):
     robot = load_robot(PAIR).replace(friction_coefficients=(0.0,))
     path = tmp_path_factory.mktemp("calib") / "lag.csv"
     noise = Noise(position_rms=0.2e-3, angle_rms=float(np.deg2rad(0.2)))
-    write_synth(path, synthesize(robot, {"time_offset": {"time_offset": 0.3}}, protocol="trajectory", samples=150,
+    write_synth(path, synthesize(robot, {"time_offset": {"time_offset": 0.3}}, protocol=SynthProtocol.trajectory(150),
                                  noise=noise, seed=3, settings=COARSE))
     return robot, load_measured_data(path, robot)
 

@@ -18,7 +18,7 @@ import pytest
 from scipy import stats
 from scipy.signal import lfilter
 
-from ctrplan.discrepancy import FitRun, FitStart, Noise, synthesize, write_synth
+from ctrplan.discrepancy import FitRun, FitStart, Noise, SynthProtocol, synthesize, write_synth
 from ctrplan.discrepancy.measured.data import load_measured_data
 from ctrplan.discrepancy.fits.estimates import covariance, interval_quantile, parameter_table
 from ctrplan.discrepancy.options import CONFIDENCE
@@ -102,7 +102,8 @@ def pair_samples(tmp_path_factory):
     robot = load_robot(PAIR).replace(friction_coefficients=(0.0,))
     path = tmp_path_factory.mktemp("bounds") / "pair.csv"
     noise = Noise(position_rms=0.2e-3, angle_rms=float(np.deg2rad(0.2)))
-    write_synth(path, synthesize(robot, {}, protocol="trajectory", samples=12, noise=noise, seed=1, settings=COARSE))
+    write_synth(path, synthesize(robot, {}, protocol=SynthProtocol.trajectory(12), noise=noise, seed=1,
+                                 settings=COARSE))
     return robot, load_measured_data(path, robot)
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan.discrepancy import Noise, synthesize
+from ctrplan.discrepancy import Noise, SynthProtocol, synthesize
 from ctrplan.discrepancy.verdict.envelope import hull_distance
 from ctrplan.discrepancy.fits.estimates import AtypicalValue
 from ctrplan.discrepancy.fits.parameters import ParameterError, apply_parameters, needs_solve, parameter, read_parameters
@@ -53,7 +53,7 @@ def test_synth_hides_history_effects_and_refuses_them_on_the_paper_protocol():
     nothing or that leak into the recorded joints."""
     robot = load_robot(TABLE7).replace(friction_coefficients=(0.0, 0.0))
     clean = Noise(position_rms=0.0, angle_rms=0.0)
-    kw = dict(protocol="trajectory", samples=120, noise=clean, seed=3, settings=COARSE)
+    kw = dict(protocol=SynthProtocol.trajectory(120), noise=clean, seed=3, settings=COARSE)
     base = synthesize(robot, {}, **kw).frame
     for eff in ({"backlash": {"backlash_2": 0.08, "backlash_3": 0.08}}, {"time_offset": {"time_offset": 0.2}}):
         f = synthesize(robot, eff, **kw).frame
@@ -62,7 +62,8 @@ def test_synth_hides_history_effects_and_refuses_them_on_the_paper_protocol():
         moved = np.linalg.norm(f[["tip_x", "tip_y", "tip_z"]].values - base[["tip_x", "tip_y", "tip_z"]].values, axis=1)
         assert moved.max() > 1e-3
     with pytest.raises(PhysicalParameterError, match="trajectory protocol"):
-        synthesize(robot, {"backlash": {"backlash_2": 0.1}}, protocol="paper", grid=2, noise=clean, settings=COARSE)
+        synthesize(robot, {"backlash": {"backlash_2": 0.1}}, protocol=SynthProtocol.paper(2), noise=clean,
+                   settings=COARSE)
     with pytest.raises(PhysicalParameterError, match="needs the effect 'friction'"):
         synthesize(robot, {"gradual_friction": {"friction_angle": 0.1}}, **kw)
 

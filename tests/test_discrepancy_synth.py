@@ -20,7 +20,7 @@ from click.testing import CliRunner
 from ctrplan import cli
 from ctrplan.effects import EffectSet
 from ctrplan.history import MotionRecord, motion_state
-from ctrplan.discrepancy.measured.synth import (Noise, add_noise, approach_path, paper_protocol, synthesize,
+from ctrplan.discrepancy.measured.synth import (Noise, SynthProtocol, add_noise, approach_path, paper_protocol, synthesize,
                                        trajectory_protocol, truth_model, truth_path, _reversals)
 from ctrplan.errors import PhysicalParameterError
 from ctrplan.io.robot_file import load_robot
@@ -114,7 +114,7 @@ def test_noise_statistics():
 @pytest.fixture(scope="module")
 def clean(robot):
     """Grid-3 paper protocol, no effects, no noise (standard truth)."""
-    return synthesize(robot, {}, grid=3, noise=NO_NOISE, settings=SETTINGS)
+    return synthesize(robot, {}, protocol=SynthProtocol.paper(3), noise=NO_NOISE, settings=SETTINGS)
 
 
 def test_standard_truth_is_the_standard_model_and_noise_rms_on_the_grid(robot, clean):
@@ -125,27 +125,27 @@ def test_standard_truth_is_the_standard_model_and_noise_rms_on_the_grid(robot, c
         np.testing.assert_allclose(f.loc[k, TIP].to_numpy(float), std.tip_position, atol=1e-12)
     # the approach does not matter without friction: four equal rows per configuration
     assert (f.groupby("config_id")[TIP].nunique() == 1).all().all()
-    noisy = synthesize(robot, {}, grid=3, settings=SETTINGS, seed=4)
+    noisy = synthesize(robot, {}, protocol=SynthProtocol.paper(3), settings=SETTINGS, seed=4)
     err = noisy.frame[TIP].to_numpy() - f[TIP].to_numpy()
     assert np.sqrt(np.mean(np.sum(err ** 2, axis=1))) == pytest.approx(1.4e-3, rel=0.2)
     assert (noisy.frame.groupby("config_id")[TIP].nunique() == 4).all().all()   # independent noise
 
 
 def test_seeded_reproducibility(robot):
-    a = synthesize(robot, {}, grid=2, settings=SETTINGS, seed=7)
-    b = synthesize(robot, {}, grid=2, settings=SETTINGS, seed=7)
-    c = synthesize(robot, {}, grid=2, settings=SETTINGS, seed=8)
+    a = synthesize(robot, {}, protocol=SynthProtocol.paper(2), settings=SETTINGS, seed=7)
+    b = synthesize(robot, {}, protocol=SynthProtocol.paper(2), settings=SETTINGS, seed=7)
+    c = synthesize(robot, {}, protocol=SynthProtocol.paper(2), settings=SETTINGS, seed=8)
     pd.testing.assert_frame_equal(a.frame, b.frame)
     assert not np.allclose(a.frame[TIP], c.frame[TIP])
 
 
 def test_effects_change_the_tips_and_friction_separates_the_approaches(robot, clean):
     ref = clean.frame[clean.frame["config_id"] < 8]
-    off = synthesize(robot, {"offplane": {"precurvature_x_3": 2.0}}, grid=3, noise=NO_NOISE,
+    off = synthesize(robot, {"offplane": {"precurvature_x_3": 2.0}}, protocol=SynthProtocol.paper(3), noise=NO_NOISE,
                      settings=SETTINGS)
     d = np.linalg.norm(off.frame[TIP].to_numpy() - clean.frame[TIP].to_numpy(), axis=1)
     assert np.median(d) > 1e-4
-    fr = synthesize(robot, {"friction": {"mu_1": 0.3, "mu_2": 0.3}}, grid=2, noise=NO_NOISE,
+    fr = synthesize(robot, {"friction": {"mu_1": 0.3, "mu_2": 0.3}}, protocol=SynthProtocol.paper(2), noise=NO_NOISE,
                     settings=SETTINGS)
     assert fr.truth["truth_model"] == "friction"
     # alpha_3 - alpha_2 = pi at alpha_2 = 0 is past the bifurcation (unstable): dropped, listed
@@ -159,10 +159,24 @@ def test_effects_change_the_tips_and_friction_separates_the_approaches(robot, cl
     assert len(ref) == 32
 
 
+def test_the_protocol_record_refuses_what_the_protocols_cannot_make():
+    """A kind alone takes the default grid and samples; an unknown kind, a grid of one node and
+    a single sample are refused with the value named (each would fail later inside the protocol,
+    or silently make a grid without relative rotations)."""
+    assert SynthProtocol.of("trajectory") == SynthProtocol.trajectory()
+    assert SynthProtocol.of("paper").grid == 8 and SynthProtocol().kind == "paper"
+    with pytest.raises(PhysicalParameterError, match="paper, trajectory, got 'helix'"):
+        SynthProtocol("helix")
+    with pytest.raises(PhysicalParameterError, match="grid must be an integer >= 2, got 1"):
+        SynthProtocol.paper(1)
+    with pytest.raises(PhysicalParameterError, match="samples must be an integer >= 2, got 1.5"):
+        SynthProtocol.trajectory(1.5)
+
+
 def test_registration_is_applied(robot, clean):
     reg = (0.1, -0.2, 0.3, 0.01, -0.02, 0.03)
-    moved = synthesize(robot, EffectSet.from_values(robot, {"registration": reg}), grid=3, noise=NO_NOISE,
-                       settings=SETTINGS)
+    moved = synthesize(robot, EffectSet.from_values(robot, {"registration": reg}), protocol=SynthProtocol.paper(3),
+                       noise=NO_NOISE, settings=SETTINGS)
     from scipy.spatial.transform import Rotation
 
     R = Rotation.from_rotvec(reg[:3]).as_matrix()
@@ -173,8 +187,8 @@ def test_registration_is_applied(robot, clean):
 
 
 def test_trajectory_synth_friction_uses_the_history(robot):
-    res = synthesize(robot, {"friction": {"mu_1": 0.3, "mu_2": 0.3}}, protocol="trajectory",
-                     samples=30, noise=NO_NOISE, settings=SETTINGS, seed=2)
+    res = synthesize(robot, {"friction": {"mu_1": 0.3, "mu_2": 0.3}}, protocol=SynthProtocol.trajectory(30),
+                     noise=NO_NOISE, settings=SETTINGS, seed=2)
     f = res.frame
     assert res.truth["truth_model"] == "friction" and len(f) + res.truth["counts"]["dropped"] == 30
     h = motion_state(MotionRecord(f[ALPHA].to_numpy(), f[BETA].to_numpy(), sequence=f["sequence"].to_numpy()))

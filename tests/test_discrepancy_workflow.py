@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
-from ctrplan.discrepancy import Noise, synthesize, write_synth
+from ctrplan.discrepancy import Noise, SynthProtocol, synthesize, write_synth
 from ctrplan.discrepancy.fits.fitoptions import FitRun, GridSpec
 from ctrplan.discrepancy.fits.gridsearch import grid_search_friction
 from ctrplan.discrepancy.measured.data import MeasuredData, load_measured_data
@@ -50,7 +50,7 @@ def _no_effects_model(tmp_path, offplane_zero=False):
 def _synth(robot, effects, path, grid, seed=0, settings=COARSE, noise=Noise()):
     """The paper's protocol by ``ctrplan synth`` (the code under test): for the grid search and
     the resumption, which test the fitting, not whether an effect is recognized."""
-    res = synthesize(robot, effects, protocol="paper", grid=grid, noise=noise, seed=seed,
+    res = synthesize(robot, effects, protocol=SynthProtocol.paper(grid), noise=noise, seed=seed,
                      settings=settings, n_jobs=2)
     write_synth(path, res)
     return res

@@ -170,7 +170,7 @@ def test_the_page_s_effect_is_hidden_by_synthesize_and_named_by_the_workflow(tmp
     signature, fits it, names it with its size within 0.5 mm, writes it into the updated robot
     file's [effects] table and reproduces the errors from that file. Catches any place that still
     lists the effects by name instead of iterating the registry."""
-    from ctrplan.discrepancy import Noise, synthesize, write_synth
+    from ctrplan.discrepancy import Noise, SynthProtocol, synthesize, write_synth
     from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
     from ctrplan.effects import REGISTRY, unregister
     from ctrplan.io.robot_file import load_robot, robot_to_toml
@@ -183,8 +183,9 @@ def test_the_page_s_effect_is_hidden_by_synthesize_and_named_by_the_workflow(tmp
         model = tmp_path / "pair.toml"
         model.write_text(robot_to_toml(robot))
         data = tmp_path / "toy.csv"
-        write_synth(data, synthesize(robot, {"tip_offset_z": {"tip_offset_z": 0.003}}, protocol="trajectory",
-                                     samples=500, noise=Noise(position_rms=0.5e-3, angle_rms=0.005), seed=37,
+        write_synth(data, synthesize(robot, {"tip_offset_z": {"tip_offset_z": 0.003}},
+                                     protocol=SynthProtocol.trajectory(500),
+                                     noise=Noise(position_rms=0.5e-3, angle_rms=0.005), seed=37,
                                      settings=ModelSettings(ds=6e-3)))
         opts = DiscrepancyOptions(effects=("backlash", "time_offset", "tip_offset_z"), ds=6e-3, n_permutations=199,
                                   max_evaluations=200, n_folds=5, prior_strengths=(0.03, float("inf")), n_jobs=1)
@@ -208,7 +209,7 @@ def test_an_effect_fitted_by_a_strategy_of_its_own(tmp_path):
     effect by anything other than its entry's strategy."""
     import dataclasses
 
-    from ctrplan.discrepancy import Noise, synthesize, write_synth
+    from ctrplan.discrepancy import Noise, SynthProtocol, synthesize, write_synth
     from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
     from ctrplan.effects import REGISTRY, FitStrategy, register, unregister
     from ctrplan.io.robot_file import load_robot, robot_to_toml
@@ -230,8 +231,9 @@ def test_an_effect_fitted_by_a_strategy_of_its_own(tmp_path):
         model = tmp_path / "pair.toml"
         model.write_text(robot_to_toml(robot))
         data = tmp_path / "toy.csv"
-        write_synth(data, synthesize(robot, {"tip_offset_z": {"tip_offset_z": 0.0031}}, protocol="trajectory",
-                                     samples=300, noise=Noise(position_rms=0.5e-3, angle_rms=0.005), seed=41,
+        write_synth(data, synthesize(robot, {"tip_offset_z": {"tip_offset_z": 0.0031}},
+                                     protocol=SynthProtocol.trajectory(300),
+                                     noise=Noise(position_rms=0.5e-3, angle_rms=0.005), seed=41,
                                      settings=ModelSettings(ds=6e-3)))
         opts = DiscrepancyOptions(effects=("tip_offset_z",), ds=6e-3, n_permutations=99, max_evaluations=200,
                                   n_folds=4, prior_strengths=(0.03,), n_jobs=1)

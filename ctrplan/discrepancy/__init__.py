@@ -16,7 +16,7 @@ The workflow (``ctrplan discrepancy``, :func:`run_discrepancy`, which returns a
 """
 
 from .fits.simulate import Simulation, simulate
-from .measured.synth import Noise, SynthResult, synthesize, truth_path, write_synth
+from .measured.synth import Noise, SynthProtocol, SynthResult, synthesize, truth_path, write_synth
 from .fits.predictions import pose_errors, predict
 from .fits.calibrate import CalibrationResult, calibrate
 from .fits.fitoptions import FitRun, FitStart, GridSpec
@@ -31,7 +31,7 @@ from .outputs.report import write_report, write_report_from_results
 
 __all__ = [
     "Simulation", "simulate",
-    "Noise", "SynthResult", "synthesize", "truth_path", "write_synth",
+    "Noise", "SynthProtocol", "SynthResult", "synthesize", "truth_path", "write_synth",
     "CalibrationResult", "FitRun", "FitStart", "GridSpec", "calibrate", "grid_search", "pose_errors", "predict",
     "MeasuredData", "load_measured_data", "DataSplit", "make_split", "apply_parameters", "read_parameters",
     "SignatureTest", "friction_signature", "regression_signature", "registration_signature",

@@ -175,14 +175,14 @@ class Discrepancy:
     warmup_time = 0.0
 
     def setup_cache(self):
-        from ctrplan.discrepancy.measured.synth import Noise, synthesize
+        from ctrplan.discrepancy.measured.synth import Noise, SynthProtocol, synthesize
         from ctrplan.io.robot_file import load_robot, robot_to_toml
         from ctrplan.mechanics import ModelSettings
 
         folder = Path(tempfile.mkdtemp(prefix="ctrplan-asv-discrepancy-"))
         robot = load_robot(REPO / "model" / "ha2019-table1-tube-pair.toml").replace(friction_coefficients=(0.0,))
         (folder / "pair.toml").write_text(robot_to_toml(robot, header="Table I tube pair, friction off"))
-        made = synthesize(robot, {"time_offset": {"time_offset": 0.2}}, protocol="trajectory", samples=400,
+        made = synthesize(robot, {"time_offset": {"time_offset": 0.2}}, protocol=SynthProtocol.trajectory(400),
                           noise=Noise(position_rms=5e-4), seed=7, settings=ModelSettings(ds=6e-3))
         made.frame.to_csv(folder / "data.csv", index=False)
         return str(folder)

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ...choices import ProtocolKind
 from ...effects import REGISTRY, EffectSet, apply_output_effects, apply_robot_effects, history_state, model_of
 from ...errors import PhysicalParameterError
 from ...history import MotionRecord, motion_state
@@ -42,11 +43,11 @@ from ...models import MODEL_INFO
 from ...robot import ROTATION, TRANSLATION
 from ..fits.simulate import simulate
 
-__all__ = ["PROTOCOLS", "Noise", "SynthResult", "truth_model", "paper_protocol",
+__all__ = ["PROTOCOLS", "SynthProtocol", "Noise", "SynthResult", "truth_model", "paper_protocol",
            "trajectory_protocol", "approach_path", "add_noise", "synthesize", "parse_values", "truth_path",
            "write_synth"]
 
-PROTOCOLS = ("paper", "trajectory")
+PROTOCOLS = tuple(k.value for k in ProtocolKind)
 
 # Relative rotation of each pair on the way to a configuration (Section V-C: "Each of the
 # relative rotations is performed by 90 deg of tube base rotation") [rad].
@@ -115,6 +116,55 @@ def truth_model(effects) -> str:
 
 
 # --------------------------------------------------------------------------- protocols
+@dataclass(frozen=True)
+class SynthProtocol:
+    """Where :func:`synthesize` evaluates the truth.
+
+    Attributes
+    ----------
+    kind : ProtocolKind or {"paper", "trajectory"}
+        The paper's grid (:func:`paper_protocol`) or a seeded trajectory
+        (:func:`trajectory_protocol`).
+    grid : int
+        Nodes per joint of the paper protocol, >= 2.
+    samples : int
+        Samples of the trajectory protocol, >= 2.
+
+    Raises
+    ------
+    PhysicalParameterError
+        An unknown kind, a grid or a sample count out of range.
+    """
+
+    kind: ProtocolKind = ProtocolKind.PAPER
+    grid: int = 8
+    samples: int = TRAJECTORY_SAMPLES
+
+    def __post_init__(self):
+        if self.kind not in PROTOCOLS:
+            raise PhysicalParameterError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {self.kind!r}")
+        object.__setattr__(self, "kind", ProtocolKind(self.kind))
+        for name, low in (("grid", 2), ("samples", 2)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+                raise PhysicalParameterError(f"protocol {name} must be an integer >= {low}, got {value!r}")
+
+    @classmethod
+    def paper(cls, grid: int = 8) -> "SynthProtocol":
+        """The paper protocol on ``grid`` nodes per joint."""
+        return cls(ProtocolKind.PAPER, grid=grid)
+
+    @classmethod
+    def trajectory(cls, samples: int = TRAJECTORY_SAMPLES) -> "SynthProtocol":
+        """The trajectory protocol of ``samples`` samples."""
+        return cls(ProtocolKind.TRAJECTORY, samples=samples)
+
+    @classmethod
+    def of(cls, protocol) -> "SynthProtocol":
+        """``protocol`` itself, or the protocol of that kind with the default grid and samples."""
+        return protocol if isinstance(protocol, cls) else cls(protocol)
+
+
 def _joint_grid(joint, nodes: int) -> np.ndarray:
     if joint.periodic:  # -pi and pi are the same angle: do not sample both
         return joint.lower + (joint.upper - joint.lower) * np.arange(nodes) / nodes
@@ -346,9 +396,8 @@ def add_noise(tip, tangent, noise: Noise, rng: np.random.Generator):
 
 
 # --------------------------------------------------------------------------- driver
-def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
-               samples: int = TRAJECTORY_SAMPLES, noise: Noise = Noise(), seed: int = 0,
-               settings: ModelSettings | None = None, n_jobs: int = 1,
+def synthesize(robot, effects=None, *, protocol: SynthProtocol | str = SynthProtocol(), noise: Noise = Noise(),
+               seed: int = 0, settings: ModelSettings | None = None, n_jobs: int = 1,
                progress: bool = False) -> SynthResult:
     """Generate measured-like data from ``robot`` with hidden ``effects``.
 
@@ -359,12 +408,9 @@ def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
     effects : EffectSet or mapping, optional
         Hidden effects ``{effect: {parameter: value}}`` of the registry (:mod:`ctrplan.effects`),
         SI units; e.g. the registration maps the robot frame to the tracker frame.
-    protocol : {"paper", "trajectory"}
-        See :func:`paper_protocol` and :func:`trajectory_protocol`.
-    grid : int
-        Nodes per joint of the paper protocol.
-    samples : int
-        Samples of the trajectory protocol.
+    protocol : SynthProtocol or {"paper", "trajectory"}
+        The protocol, e.g. ``SynthProtocol.paper(grid=8)`` or ``SynthProtocol.trajectory(samples=1200)``;
+        a kind alone takes the default grid and samples.
     noise : Noise
     seed : int
         Seeds one numpy Generator for the trajectory and the noise.
@@ -387,8 +433,8 @@ def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
         friction without a clearance.
     """
     t0 = time.perf_counter()
-    if protocol not in PROTOCOLS:
-        raise PhysicalParameterError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+    spec = SynthProtocol.of(protocol)
+    protocol, grid, samples = spec.kind, spec.grid, spec.samples
     settings = settings or ModelSettings()
     rng = np.random.default_rng(seed)
     effects = EffectSet(effects or {}, robot)
@@ -396,10 +442,10 @@ def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
     model = truth_model(effects)
     info = MODEL_INFO[model]
     moving = [n for n in effects.active() if REGISTRY[n].needs_motion]
-    if moving and protocol != "trajectory":
+    if moving and protocol != ProtocolKind.TRAJECTORY:
         raise PhysicalParameterError(
             f"effects {', '.join(moving)} change the motion history and need the trajectory protocol (protocol "
-            f"{protocol!r} solves every target without its approach path)")
+            f"{protocol.value!r} solves every target without its approach path)")
     if info.contact:
         try:
             truth_robot.clearances  # noqa: B018
@@ -410,7 +456,7 @@ def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
     acols = [f"alpha_{i + 1}" for i in range(n)]
     bcols = [f"beta_{i + 1}" for i in range(n)]
     ecols = [f"eta_{i + 1}" for i in range(n - 1)]
-    if protocol == "paper":
+    if protocol == ProtocolKind.PAPER:
         frame = paper_protocol(robot, grid)
         alpha, beta = frame[acols].to_numpy(float), frame[bcols].to_numpy(float)
         eta = frame[ecols].to_numpy(int)
@@ -445,7 +491,7 @@ def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
         extra = {"samples": int(samples), "rate_hz": TRAJECTORY_RATE_HZ,
                  "translation_last_samples": int(np.any(hist.released, axis=1).sum()),
                  "reversals": {j.name: _reversals(frame[j.name]) for j in robot.joints}}
-    if protocol == "trajectory" or info.friction:
+    if protocol == ProtocolKind.TRAJECTORY or info.friction:
         tip, tangent, ok, message = sim.tip, sim.tangent, sim.ok, sim.message
     tip, tangent = apply_output_effects(tip, tangent, effects)
     tip_n, tan_n = add_noise(np.nan_to_num(tip), np.nan_to_num(tangent, nan=1.0), noise, rng)
@@ -467,7 +513,7 @@ def synthesize(robot, effects=None, *, protocol: str = "paper", grid: int = 8,
         "robot": robot.name,
         "effects": effects.to_dict(),
         "truth_model": model,
-        "protocol": protocol,
+        "protocol": protocol.value,
         **extra,
         "noise": {"position_rms_m": noise.position_rms, "angle_rms_rad": noise.angle_rms},
         "seed": int(seed),
