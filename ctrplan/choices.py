@@ -14,8 +14,8 @@ from __future__ import annotations
 from enum import StrEnum
 
 __all__ = ["JointKind", "MotionKind", "FinalMotion", "BoundKind", "AimWith", "MapPlacement", "FirstPlan",
-           "MapSource", "BagStorage", "RosDistro", "TangentAxis", "DesignMode", "PoseFrame", "ProtocolKind", "Verdict", "NoEffectCase",
-           "SplitUnit", "EffectStore", "NotNamedReason", "DecisionNoteKind", "CautionKind",
+           "MapSource", "BagStorage", "RosDistro", "TangentAxis", "DesignMode", "PoseFrame", "ProtocolKind", "Verdict",
+           "NoEffectCase", "SplitUnit", "EffectStore", "NotNamedReason", "DecisionNoteKind", "CautionKind",
            "NotPairedReason", "FitNoteKind", "BufferReason", "BlocksKept"]
 
 

@@ -24,7 +24,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 import click  # noqa: E402
 
-from .choices import BagStorage, MapPlacement, PoseFrame, RosDistro, TangentAxis
+from .choices import BagStorage, MapPlacement, PoseFrame, ProtocolKind, RosDistro, TangentAxis
 from .errors import CtrplanError, JointLimitError  # noqa: E402
 from .models import MODEL_INFO, MODELS  # noqa: E402
 
@@ -344,7 +344,7 @@ def _effect_options(command):
               help="Nominal robot model file (TOML, SI units).")
 @click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
               help="Output CSV; the truth goes to <out>.truth.json.")
-@click.option("--protocol", type=click.Choice(["paper", "trajectory"]), default="paper", show_default=True,
+@click.option("--protocol", type=_choice(ProtocolKind), default="paper", show_default=True,
               help="paper: joint grid, 2^(n-1) approach directions (Section V-C); trajectory: "
                    "continuous motion with reversals at 10 Hz.")
 @click.option("--grid", type=int, default=8, show_default=True, help="Paper protocol: nodes per joint.")
@@ -398,7 +398,7 @@ def synth(robot_path, out_path, protocol, grid, samples, noise_mm, noise_deg, se
     try:
         effects = EffectSet(values, robot)
         moving = [REGISTRY[n].synth_option for n in effects.active() if REGISTRY[n].needs_motion]
-        if moving and protocol != "trajectory":
+        if moving and protocol != ProtocolKind.TRAJECTORY:
             raise PhysicalParameterError("needs --protocol trajectory (the paper protocol solves every target "
                                          "without its approach path)")
     except PhysicalParameterError as exc:
