@@ -708,7 +708,7 @@ def _report_failed(result, out_dir, exc: Exception) -> None:
 @click.option("--duration", type=float, default=None, help="Budget [s] (default: the recorded trajectory's duration).")
 @click.option("--rest", type=float, default=1.0, show_default=True, help="Rest after each motion primitive [s].")
 @click.option("--noise-position-mm", "noise_mm", type=float, default=None,
-              help="Sensor noise per tip coordinate [mm] (default: the result's estimate).")
+              help="3-D rms tip position noise [mm], as in synth and discrepancy (default: the result's estimate).")
 @click.option("--random-motions", type=int, default=3, show_default=True,
               help="Random motions of the same budget the design is compared with.")
 @click.option("--no-bag", is_flag=True, help="Do not write the ROS 2 bag.")
@@ -751,7 +751,7 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
     if noise_mm is not None:
         if not (noise_mm > 0 and noise_mm < float("inf")):
             raise DesignInputError(f"option --noise-position-mm {noise_mm!r}: must be > 0 mm")
-        sensor = SensorNoise(noise_mm * 1e-3)
+        sensor = SensorNoise.from_estimate({"position_rms_m": noise_mm * 1e-3}, where="option --noise-position-mm")
     elif noise.get("position_rms_m"):
         sensor = SensorNoise.from_estimate(noise, where=f"{where}: noise")
     else:

@@ -371,6 +371,13 @@ def test_cli_writes_a_trajectory_ready_to_run(tmp_path):
     traj = read_joint_trajectory(out / "trajectory_bag")
     assert traj is not None
     assert (out / "separation.png").stat().st_size > 0 and (out / "design.md").read_text().startswith("# Designed")
+    # --noise-position-mm is the 3-D rms length, as synth and discrepancy take it
+    given = CliRunner().invoke(main, ["design", "--result", str(folder), "--out", str(tmp_path / "given"),
+                                      "--duration", "2", "--random-motions", "1", "--no-bag",
+                                      "--noise-position-mm", str(1e3 * float(np.sqrt(3.0)) * 2 * SIGMA)],
+                               catch_exceptions=False)
+    assert given.exit_code == 0, given.output
+    assert json.loads((tmp_path / "given" / "design.json").read_text())["noise_position_m"] == pytest.approx(2 * SIGMA)
     bad = CliRunner().invoke(main, ["design", "--result", str(folder), "--out", str(out), "--hypotheses", "backlash"])
     assert bad.exit_code != 0 and "no fitted candidate 'backlash'" in str(bad.exception)
 
