@@ -13,6 +13,7 @@ of the motion), which makes the gains exact sums.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -279,12 +280,11 @@ class SensorNoise:
             The estimate has no finite positive ``position_rms_m``.
         """
         get = estimate.get if hasattr(estimate, "get") else lambda k: getattr(estimate, k, None)
-        rms = get("position_rms_m")
-        if rms is None or not (float(rms) > 0 and np.isfinite(float(rms))):
-            raise DesignInputError(f"{where}: position_rms_m {rms!r} is not a noise estimate (> 0 m); give the "
-                                   f"noise per tip coordinate")
-        lag1 = get("lag1_correlation")
-        return cls(float(rms) / float(np.sqrt(3.0)), None if lag1 is None else float(lag1))
+        rms, lag1 = get("position_rms_m"), get("lag1_correlation")
+        if isinstance(rms, bool) or not (isinstance(rms, (int, float, np.floating)) and 0 < rms < np.inf):
+            raise DesignInputError(f"{where}: position_rms_m {rms!r} is not a noise estimate (> 0 m); give "
+                                   f"SensorNoise(position) per tip coordinate")
+        return cls(float(rms) / math.sqrt(3.0), None if lag1 is None else float(lag1))
 
 
 @dataclass(frozen=True, eq=False)
