@@ -55,10 +55,10 @@ Outcomes (:func:`outcome`; a name that carries a caution counts like any other):
   one's parameters too, against their hidden values);
 - **right name, value off**: the names are the truth but a written value is outside both;
 - **partly right**: of two hidden effects, exactly one is named and nothing else;
-- **ambiguous**: an ambiguous verdict whose written effect is in the truth (never counted as
-  found);
-- **wrong**: a named effect not in the truth, any name on a control, or an ambiguous verdict whose
-  written effect is not in the truth;
+- **ambiguous**: an ambiguous verdict whose written effects (none: an ambiguous verdict writes
+  the recalibrated baseline) are all in the truth (never counted as found);
+- **wrong**: a named effect not in the truth, any name on a control, or an ambiguous verdict that
+  writes an effect not in the truth;
 - **nothing**: verdict "none".
 
 The standard errors are those of the final model's development fit (the named effect's table,
@@ -329,7 +329,7 @@ def outcome(truth: list, verdict: str, named_effects: list, named_effect: str | 
     named_effects : list of str
         The effects of the final model.
     named_effect : str or None
-        The written effect of the verdict (the first of an ambiguous verdict).
+        The verdict's named effect (the first of an ambiguous verdict; not what is written).
     check : dict
         :func:`value_check` of the named effects.
     """
@@ -338,7 +338,7 @@ def outcome(truth: list, verdict: str, named_effects: list, named_effect: str | 
     if not truth:
         return "wrong"
     if verdict == "ambiguous":
-        return "ambiguous" if named_effect in truth else "wrong"
+        return "ambiguous" if set(named_effects) <= set(truth) else "wrong"
     named = set(named_effects)
     if not named or not named <= set(truth):
         return "wrong"

@@ -87,7 +87,7 @@ def sweep_table(res: dict) -> str:
     clear = f"every hidden effect above {100 * s['clear_size']:.0f} % of its typical range"
     lines += ["", f"A written value is right within {rule['stderrs']:g} standard errors (of the final model's "
                   f"development fit) or {100 * rule['share']:.0f} % of the true value. Targets:", "",
-              f"- wrong names (a named effect not in the truth, an ambiguous verdict whose written effect is not in it, "
+              f"- wrong names (a named effect not in the truth, an ambiguous verdict that writes an effect not in it, "
               f"any name on a control): {_share(w)}; target below {100 * w['rate_below']:.0f} %, interval's upper end "
               f"below {100 * w['upper_below']:.0f} %: {_met(w['met'])};",
               f"- the truth named alone (right, or right name with a value off) in the one-effect cases with {clear}: "

@@ -149,10 +149,14 @@ def test_a_pair_is_judged_by_the_standard_errors_of_the_pair_fit():
      "wrong"),
     ([], _res("named", ["backlash"]), "wrong"),
     ([], _res("ambiguous", ["offplane"], named_effect="offplane", ambiguous_with="registration"), "wrong"),
+    (["offplane"], _res("ambiguous", [], named_effect="registration", ambiguous_with="offplane"), "ambiguous"),
+    ([], _res("ambiguous", [], named_effect="registration", ambiguous_with="offplane"), "wrong"),
 ])
 def test_each_outcome(truth, res, expected):
     """Every outcome from its definition. Catches in particular an ambiguous verdict counted by
-    its pair (the truth only as the second, unwritten candidate must be wrong), a name on a
+    its pair (the truth only as the second, unwritten candidate must be wrong), one scored by the
+    first of its pair rather than by what it writes (an ambiguous verdict that writes the
+    recalibrated baseline names nothing wrong, unless the case is a control), a name on a
     control that is not wrong, and a partly right verdict with an extra wrong name."""
     hidden = {e: {} for e in truth}
     assert sweep.score_run(_plan(truth, hidden), res, {e: {} for e in res["named_effects"]})["outcome"] == expected

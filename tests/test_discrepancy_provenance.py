@@ -59,6 +59,7 @@ def _tree(tmp_path: Path) -> Path:
     for pkg in provenance.SOURCE_PACKAGES:
         shutil.copytree(root / pkg, copy / pkg, ignore=shutil.ignore_patterns("__pycache__"))
     for mod in provenance.SOURCE_MODULES:
+        (copy / mod).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(root / mod, copy / mod)
     return copy
 
@@ -79,4 +80,17 @@ def test_source_digest_covers_the_packages_and_modules(tmp_path, monkeypatch):
     target.write_text(text)
     constants = copy / "constants.py"
     constants.write_text(constants.read_text() + "\nEXTRA = 1\n")
+    assert source_digest() != before
+
+
+@pytest.mark.parametrize("module", ["choices.py", "models.py", "io/robot_file.py"])
+def test_source_digest_covers_the_records_the_models_and_the_robot_file(tmp_path, monkeypatch, module):
+    """The choices a run's records hold, the registry of mechanics models and the robot file the
+    workflow reads and writes can move a result: a code change there changes the digest. Catches
+    these modules left out of the digest (a results file then passes its check after such a change)."""
+    copy = _tree(tmp_path)
+    monkeypatch.setattr(provenance, "_root", lambda: copy)
+    before = source_digest()
+    target = copy / module
+    target.write_text(target.read_text() + "\nEXTRA = 1\n")
     assert source_digest() != before

@@ -55,7 +55,7 @@ def test_split_stage(monkeypatch):
         test = np.ones(len(units), bool)
         split = SimpleNamespace(test_rows=test, units=np.asarray(units), n_test=int(test.sum()))
         baseline = SimpleNamespace(file_cv=SimpleNamespace(params={}), params={})
-        naming = SimpleNamespace(named=None, candidates={})
+        naming = SimpleNamespace(named=None, verdict="none", candidates={})
         return output.evaluate_test_split(None, split, baseline, naming, None, SimpleNamespace(n_jobs=1))
 
     return run

@@ -23,8 +23,10 @@ __all__ = ["SOURCE_PACKAGES", "SOURCE_MODULES", "source_digest", "code_digest", 
 
 #: Subpackages of ``ctrplan`` whose code can move a discrepancy result's figures.
 SOURCE_PACKAGES = ("discrepancy", "effects", "history", "mechanics")
-#: Modules of ``ctrplan`` outside them whose code can too: the solvers' constants, the robot.
-SOURCE_MODULES = ("constants.py", "robot.py")
+#: Modules of ``ctrplan`` outside them whose code can too: the solvers' constants, the robot, the
+#: choices the workflow's records hold, the registry of mechanics models, and the robot file that
+#: the workflow reads and writes.
+SOURCE_MODULES = ("constants.py", "robot.py", "choices.py", "models.py", "io/robot_file.py")
 
 
 def _root() -> Path:

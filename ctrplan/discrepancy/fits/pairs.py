@@ -12,7 +12,7 @@ from typing import Mapping
 import numpy as np
 
 from ..._log import progress_level
-from ...choices import FitNoteKind, NotPairedReason
+from ...choices import FitNoteKind, NotPairedReason, Verdict
 from ...effects import REGISTRY
 from ...models import MODEL_INFO
 from .calibrate import CalibrationResult, calibrate
@@ -163,10 +163,11 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
     Returns
     -------
     Combination or None
-        None when no effect is named.
+        None when no effect is named or the verdict is ambiguous (which effect is there is still
+        open; a second effect on top of either would answer another question).
     """
     named = naming.named
-    if not named:
+    if not named or naming.verdict == Verdict.AMBIGUOUS:
         return None
     robot, data = setup.robot, setup.data
     candidates = naming.candidates

@@ -41,8 +41,11 @@ logger = logging.getLogger(__name__)
 
 def final_candidate(naming: Naming, combination: Combination | None) -> Candidate | None:
     """The model the run ends with: the named pair; else the second effect alone when the named
-    effect went to zero with it; else the named effect (the first of an ambiguous pair); else None
-    (the recalibrated baseline)."""
+    effect went to zero with it; else the named effect; else None (the recalibrated baseline), also
+    for an ambiguous verdict: which of its two effects is there is the open question, and a
+    robot file with the wrong one predicts worse off the recorded motion than the baseline."""
+    if naming.verdict == Verdict.AMBIGUOUS:
+        return None
     if combination is not None and combination.named:
         return combination.tried[combination.named]
     if combination is not None and combination.replaced_by:
@@ -403,8 +406,11 @@ def write_updated_model(setup: DiscrepancySetup, baseline: Baseline, naming: Nam
                                      + "".join(f"; caution: {c}" for c in notes),
                               effects=tuple((n, tuple(merged[n].items())) for n in merged))
     pos = test.final.position[np.isfinite(test.final.position)]
-    note = ("ambiguous: " + naming.candidates[naming.decision.ambiguous_with].label + " explains the data equally "
-            "well" if verdict == Verdict.AMBIGUOUS else "")
+    note = ""
+    if verdict == Verdict.AMBIGUOUS:
+        pair = f"{naming.candidates[naming.named].label} or {naming.candidates[naming.decision.ambiguous_with].label}"
+        note = (f"ambiguous: {pair}, " + ("not separable on the recorded motion" if naming.decision.inseparable else
+                                          "equally good within their uncertainty") + "; neither written")
     source = {"method": "ctrplan discrepancy (fitted on the development split; errors on the untouched test split)",
               "data_file": data_name, "data_sha256": file_hash(setup.data_path),
               "date": datetime.date.today().isoformat(), "samples": int(setup.data.n_samples),

@@ -312,10 +312,13 @@ def _verdict_lines(results: dict) -> list[str]:
     caution = "".join(f" **Caution:** {words.caution(c)}." for c in d.get("cautions") or [])
     if d["verdict"] == "ambiguous":
         a, b = _label(results, d["named"]), _label(results, d["ambiguous_with"])
-        head = (f"**Ambiguous: {a} or {b}.** Both lower the cross-validated error, and the data cannot tell them apart "
-                f"within their uncertainty. Data that would separate them: "
-                f"{words.separated_by(d, words.labels_of(results.get('candidates')))}. The updated model "
-                f"file carries {ts['label']} (the lower out-of-fold error of the two).{caution}")
+        why = ("their fitted tip displacement fields on this motion are collinear, so the motion cannot tell them "
+               "apart" if d.get("inseparable") else "the data cannot tell them apart within their uncertainty")
+        folder = Path(results["updated_model_file"]).parent if results.get("updated_model_file") else "DIR"
+        design = f" A motion that separates them: `ctrplan design --result {folder} --out DESIGN_DIR`."
+        head = (f"**Ambiguous: {a} or {b}.** Both lower the cross-validated error, and {why}. Data that would "
+                f"separate them: {words.separated_by(d, words.labels_of(results.get('candidates')))}.{design} The "
+                f"updated model file carries neither ({ts['label']}).{caution}")
     elif comb.get("replaced_by"):
         head = (f"**Named missing effect: {ts['label']}** ({comb['first_label']} was the best alone, but adds nothing "
                 f"once {ts['label']} is fitted with it).{caution}")

@@ -129,10 +129,18 @@ def note(entry: Mapping, decision: Mapping, labels: Mapping) -> str:
                 f"lower by {figure(cmp.get('reduction'), '.0f', 100)} %, p = {figure(cmp.get('p_value'), '.2g')}): "
                 f"the simpler {other} is named")
     lo, hi = cmp.get("reduction_ci") or (None, None)
-    return (f"ambiguous: {first} and {other} explain the data equally well within their uncertainty (out-of-fold "
-            f"Eq. (49) error of the first lower by {figure(cmp.get('reduction'), '.0f', 100)} %, "
-            f"{figure(lo, '.0f', 100)}..{figure(hi, '.0f', 100)} %, p = {figure(cmp.get('p_value'), '.2g')} over "
-            f"{cmp.get('n_folds')} folds); data that would separate them: {separated_by(decision, labels)}")
+    errors = (f"out-of-fold Eq. (49) error of the first lower by {figure(cmp.get('reduction'), '.0f', 100)} %, "
+              f"{figure(lo, '.0f', 100)}..{figure(hi, '.0f', 100)} %, p = {figure(cmp.get('p_value'), '.2g')} over "
+              f"{cmp.get('n_folds')} folds")
+    if kind == DecisionNoteKind.NOT_SEPARABLE:
+        sep = (decision.get("separability") or {}).get(f"{effect} vs {entry.get('other')}") or {}
+        return (f"ambiguous: {first} and {other} are not separable on this motion: their fitted tip displacement "
+                f"fields correlate at {figure(sep.get('correlation'), '.3f')} (not separable at "
+                f"{figure(sep.get('threshold'), '.3f')} or more; {figure(sep.get('unreproduced'), '.0f', 100)} % of "
+                f"either left unreproduced by the other), so whichever fits better ({errors}) is not evidence of "
+                f"which is there; data that would separate them: {separated_by(decision, labels)}")
+    return (f"ambiguous: {first} and {other} explain the data equally well within their uncertainty ({errors}); data "
+            f"that would separate them: {separated_by(decision, labels)}")
 
 
 def range_text(typical, unit: str) -> str:

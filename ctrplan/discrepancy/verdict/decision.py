@@ -25,6 +25,17 @@ best first, with what data would separate them (``Effect.separated_by``). A cand
 the best explanation but sits at its limit is left unnamed, and the report says that it is the
 best explanation.
 
+**Separability.** Before an effect is named alone, its fitted tip displacement field on the
+recorded motion is compared with that of every other candidate that improves on the baseline
+significantly (Holm) and neither contains it nor lies in it
+(:mod:`~ctrplan.discrepancy.verdict.separability`): when the two fields are collinear (correlation
+at or above :data:`~ctrplan.discrepancy.verdict.separability.INSEPARABLE_CORRELATION`), the motion
+cannot tell the two effects apart, whatever the comparison of their errors says, and the verdict
+is **ambiguous: not separable on this motion**, the most collinear such candidate second. An
+ambiguous verdict of either kind writes neither effect to the robot file (the recalibrated
+baseline), and no second effect is fitted on top of it: which effect is there is the open
+question, and a motion that separates them (``ctrplan design``) answers it.
+
 **Noise.** The sensor noise comes from the development data's rests (consecutive samples at
 identical joints, at several lags, so that noise correlated in time is seen) when it has
 enough, else from what its source states (:mod:`~ctrplan.discrepancy.measured.noise`); the baseline's
@@ -35,7 +46,7 @@ rate ``options.significance``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Mapping
 
@@ -50,9 +61,10 @@ from ..measured.noise import NoiseEstimate, estimate_noise
 from ..options import DiscrepancyOptions
 from ..measured.split import DataSplit
 from .reasons import Caution, DecisionNote, NamingRule, WhyNot
+from .separability import Separability, separability
 from .statistics import Comparison, holm
 
-__all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "check_noise", "name_effect", "cautions",
+__all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "Separability", "check_noise", "name_effect", "cautions",
            "no_effect_case", "VERDICTS"]
 
 
@@ -148,6 +160,13 @@ class Decision:
         The naming rule's levels.
     runner_up : RunnerUp or None
         The second of an ambiguous pair.
+    separability : mapping of str to Separability
+        ``"<named> vs <other>"`` -> the two fitted displacement fields compared, for every other
+        candidate significant over the baseline and not nested with the named one (empty when
+        nothing is named or no baseline residuals were given).
+    inseparable : bool
+        The verdict is ambiguous because the motion cannot separate the pair (not because both
+        are eligible).
     no_effect_case : NoEffectCase or None
         When none is named: the residual is consistent with noise, it is not (unexplained), it is
         not but the noise is only a lower bound (inconclusive), or the noise is unknown
@@ -169,6 +188,8 @@ class Decision:
     notes: tuple
     rule: NamingRule
     runner_up: RunnerUp | None = None
+    separability: Mapping = field(default_factory=lambda: MappingProxyType({}))
+    inseparable: bool = False
     no_effect_case: NoEffectCase | None = None
 
     def as_dict(self) -> dict:
@@ -186,6 +207,8 @@ class Decision:
             out["runner_up"] = {"effect": r.effect, "label": r.label, "difference": r.difference.as_dict()}
         if self.no_effect_case is not None:
             out["no_effect_case"] = self.no_effect_case
+        out["separability"] = {k: v.as_dict() for k, v in self.separability.items()}
+        out["inseparable"] = bool(self.inseparable)
         return out
 
 
@@ -282,7 +305,7 @@ def no_effect_case(noise: NoiseCheck) -> NoEffectCase:
 
 
 def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Mapping, noise: NoiseCheck,
-                options: DiscrepancyOptions) -> Naming:
+                options: DiscrepancyOptions, *, baseline_oof=None) -> Naming:
     """Stage 7: the verdict, by the rule of the module docstring.
 
     Parameters
@@ -297,6 +320,10 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     noise : NoiseCheck
     options : DiscrepancyOptions
         ``significance``.
+    baseline_oof : Errors, optional, keyword-only
+        The baseline's out-of-fold errors at the development samples (``Baseline.oof``; its
+        ``residual_base`` [m] is compared with the candidates' at the same rows); without it the
+        separability of the named effect is not measured (the workflow always gives it).
 
     Returns
     -------
@@ -354,13 +381,18 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
                 break
         decision = replace(decision, verdict=Verdict.NAMED, named=named)
         rivals = [e for e in eligible if e != named and not contained(e, named)]
-        if rivals:
-            second = rivals[0]
+        seps = _separabilities(named, judged, significant, baseline_oof)
+        decision = replace(decision, separability=MappingProxyType({f"{named} vs {e}": v for e, v in seps.items()}))
+        confused = sorted((e for e, v in seps.items() if not v.separable), key=lambda e: -abs(seps[e].correlation))
+        if rivals or confused:
+            second = rivals[0] if rivals else confused[0]
             diff = comparisons[f"{named} vs {second}"]
             decision = replace(decision, verdict=Verdict.AMBIGUOUS, ambiguous_with=second,
                                separated_by=MappingProxyType(_separated_by(named, second)),
-                               runner_up=RunnerUp(effect=second, label=judged[second].label, difference=diff))
-            notes.append(DecisionNote(DecisionNoteKind.AMBIGUOUS, named, other=second, comparison=diff))
+                               runner_up=RunnerUp(effect=second, label=judged[second].label, difference=diff),
+                               inseparable=not rivals)
+            notes.append(DecisionNote(DecisionNoteKind.AMBIGUOUS if rivals else DecisionNoteKind.NOT_SEPARABLE,
+                                      named, other=second, comparison=diff))
         decision = replace(decision, cautions=tuple(Caution(CautionKind.ATYPICAL_VALUE, label=judged[named].label,
                                                             value=b) for b in judged[named].atypical))
         if best != named and why_not[best]:         # (an eligible best passed over is a SIMPLER_NAMED note)
@@ -369,6 +401,30 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     else:
         decision = replace(decision, notes=tuple(notes), no_effect_case=no_effect_case(noise))
     return Naming(candidates=MappingProxyType(judged), decision=decision)
+
+
+def _separabilities(named: str, judged: Mapping, significant: Mapping, baseline_oof) -> dict:
+    """:func:`~ctrplan.discrepancy.verdict.separability.separability` of the named candidate against
+    every other candidate significant over the baseline and not nested with it (empty without the
+    baseline's out-of-fold errors).
+
+    Raises
+    ------
+    ValueError
+        A candidate's out-of-fold errors are at other samples than the baseline's.
+    """
+    first = judged[named].cv.oof
+    if baseline_oof is None or first is None:
+        return {}
+    out = {}
+    for e, c in judged.items():
+        if e == named or not significant.get(e, False) or contained(e, named) or c.cv.oof is None:
+            continue
+        for cand in (named, e):
+            if not np.array_equal(judged[cand].cv.oof.rows, baseline_oof.rows):
+                raise ValueError(f"separability: {cand}'s out-of-fold errors are at other samples than the baseline's")
+        out[e] = separability(named, e, baseline_oof.residual_base, first.residual_base, c.cv.oof.residual_base)
+    return out
 
 
 def contained(a: str, b: str) -> bool:

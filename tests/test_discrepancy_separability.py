@@ -1,0 +1,197 @@
+"""Separability of two candidate effects on the recorded motion, and what the verdict does with
+two it cannot tell apart (ctrplan.discrepancy.verdict.separability, verdict.decision.name_effect,
+outputs.output.final_candidate, fits.pairs.fit_second_effect).
+
+The toy runs build each candidate's out-of-fold residuals by hand: a hidden field F moves the
+tip; the baseline's residual is F plus noise; a candidate that reproduces a field G leaves
+F - G plus noise. Two candidates whose fields are multiples of one shape cannot be told apart on
+that motion, whichever has the lower error."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ctrplan.discrepancy.options import DiscrepancyOptions
+from ctrplan.discrepancy.verdict.separability import (INSEPARABLE_CORRELATION, INSEPARABLE_VIF, displacement_field,
+                                                       separability)
+
+K_UNITS, PER_UNIT = 40, 10
+
+
+def test_correlation_is_the_cosine_of_the_two_fields_and_the_threshold_a_vif_of_ten():
+    """rho against the angle between the stacked fields computed independently (the law of
+    cosines on their lengths and the length of their difference), sqrt(1 - rho^2) as the share
+    one leaves unreproduced, and the threshold at VIF 10 (rho^2 = 0.9). Catches a centred
+    correlation (a constant offset is part of a displacement field), a field taken with the
+    wrong sign, and a threshold that is not the stated one."""
+    rng = np.random.default_rng(11)
+    base = rng.normal(0, 1e-3, (300, 3))
+    fa, fb = rng.normal(0, 1e-3, (300, 3)), rng.normal(0, 1e-3, (300, 3))
+    s = separability("a", "b", base, base - fa, base - fb)
+    la, lb, ld = np.linalg.norm(fa), np.linalg.norm(fb), np.linalg.norm(fa - fb)
+    cos = (la ** 2 + lb ** 2 - ld ** 2) / (2 * la * lb)
+    assert s.correlation == pytest.approx(cos, abs=1e-12)
+    assert s.unreproduced == pytest.approx(np.sqrt(1 - cos ** 2), abs=1e-12)
+    assert s.rms_first_m == pytest.approx(la / np.sqrt(300), rel=1e-12)
+    assert INSEPARABLE_VIF == 10.0 and INSEPARABLE_CORRELATION ** 2 == pytest.approx(0.9, abs=1e-15)
+    # a constant offset with a small ripple: centred, the two would look unrelated; uncentred they are one field
+    offset = np.tile([1e-3, 0.0, 0.0], (300, 1))
+    s = separability("a", "b", base, base - offset - rng.normal(0, 2e-5, (300, 3)), base - 0.7 * offset)
+    assert s.correlation > 0.99 and not s.separable
+    # opposite signs are as collinear as equal ones
+    s = separability("a", "b", base, base - fa, base + 2 * fa)
+    assert s.correlation == pytest.approx(-1.0, abs=1e-12) and not s.separable
+    assert separability("a", "b", base, base, base - fb).separable          # a zero field is no signature
+    assert np.isnan(separability("a", "b", base, base, base - fb).correlation)
+
+
+def test_separability_skips_failed_samples_and_refuses_mismatched_shapes():
+    """Rows with a non-finite residual are left out and counted; shapes that differ raise.
+    Catches NaN propagating into rho and silently misaligned candidates."""
+    rng = np.random.default_rng(2)
+    base = rng.normal(0, 1e-3, (50, 3))
+    f = rng.normal(0, 1e-3, (50, 3))
+    first = base - f
+    first[3] = np.nan
+    s = separability("a", "b", base, first, base - 2 * f)
+    assert s.n_samples == 49 and s.correlation == pytest.approx(1.0, abs=1e-12)
+    with pytest.raises(ValueError, match="shapes"):
+        displacement_field(base, base[:10])
+    with pytest.raises(ValueError, match="threshold"):
+        separability("a", "b", base, base, base, threshold=1.5)
+    assert json.loads(json.dumps(s.as_dict()))["separable"] is False
+
+
+def _split(units, n_folds=10):
+    """A split of development samples only: units dealt round-robin into folds."""
+    from ctrplan.choices import SplitUnit
+    from ctrplan.discrepancy.measured.data import MeasuredData
+    from ctrplan.discrepancy.measured.split import DataSplit, SplitRule
+    from ctrplan.history import MotionRecord
+
+    k = units.size
+    z = np.zeros((k, 2))
+    data = MeasuredData(alpha=z, beta=z, tip=np.zeros((k, 3)), tangent=None, eta=np.zeros((k, 1), int),
+                        translation_last=np.zeros((k, 1), bool), sequence=np.zeros(k, int), config_id=np.arange(k),
+                        subset=None, time=None, file="toy.csv", frame="robot", record=MotionRecord(z, z),
+                        rows=np.arange(k), given_eta=np.zeros((k, 1), int))
+    n_units = int(np.unique(units).size)
+    rule = SplitRule(n_units=n_units, unit_kind=SplitUnit.TIME_BLOCK, block_samples=PER_UNIT, blocks_asked=True,
+                     n_test_units=0, n_test_samples=0, test_fraction=0.0, test_at_minimum=False,
+                     n_development_units=n_units, n_development_samples=k, recut_block=None, n_folds=n_folds,
+                     folds_asked=True, subset_ignored=False)
+    return DataSplit(rule=rule, units=units, unit_kind=SplitUnit.TIME_BLOCK, block_samples=PER_UNIT,
+                     test_rows=np.zeros(k, bool), fold=units % n_folds, n_folds=n_folds, max_fit_samples=k, seed=0,
+                     data=data)
+
+
+def _errors(residual):
+    from ctrplan.discrepancy.fits.evaluation import Errors
+
+    k = residual.shape[0]
+    return Errors(rows=np.arange(k), position=np.linalg.norm(residual, axis=1), angle=np.zeros(k),
+                  residual_base=residual, tip_base=np.zeros((k, 3)), seconds=0.0)
+
+
+def _candidate(effect, split, base_residual, residual):
+    """A candidate whose out-of-fold residual vectors are ``residual`` [m] (Eq. (49) residual:
+    their length in mm), compared with the baseline's."""
+    from ctrplan.discrepancy.fits.fitting import Candidate, CrossValidated, compare
+    from ctrplan.effects import REGISTRY
+
+    r_base, r = 1e3 * np.linalg.norm(base_residual, axis=1), 1e3 * np.linalg.norm(residual, axis=1)
+    cv = CrossValidated(name=effect, model="standard", fit=None, folds=(), params={}, oof=_errors(residual), r=r,
+                        fold=split.fold)
+    imp = compare(split, r_base, r)
+    return Candidate(effects=(effect,), label=REGISTRY[effect].label, cv=cv, shown={}, units={}, parameters=(),
+                     atypical=(), at_bound=(), widened=(), n_parameters=1, bic=0.0, delta_bic=0.0, improvement=imp,
+                     improvement_position=imp)
+
+
+def _run(second_shape):
+    """Off-plane precurvature reproduces the hidden field F; a registration reproduces 0.8 of it
+    (``"same"``) or its x component alone (``"x part"``), so that its error is significantly
+    higher than off-plane's and lower than the baseline's. Returns the split, the baseline's
+    errors and the candidates."""
+    rng = np.random.default_rng(2029)
+    units = np.repeat(np.arange(K_UNITS), PER_UNIT)
+    k = units.size
+    t = np.linspace(0, 6 * np.pi, k)
+    F = 3e-3 * np.column_stack([np.cos(t), np.sin(t), 0.3 * np.ones(k)])
+    G = F if second_shape == "same" else F * [1.0, 0.0, 0.0] / 0.8     # the x part of F alone: rho about 0.68
+    noise = lambda: rng.normal(0, 0.2e-3, (k, 3))  # noqa: E731
+    base = F + noise()
+    split = _split(units)
+    cands = {"offplane": _candidate("offplane", split, base, F - F + noise()),
+             "registration": _candidate("registration", split, base, base - 0.8 * G + noise())}
+    return split, _errors(base), cands
+
+
+def _naming(split, baseline_oof, cands):
+    from ctrplan.discrepancy.measured.noise import estimate_noise
+    from ctrplan.discrepancy.verdict.decision import NoiseCheck, name_effect
+
+    noise = NoiseCheck(noise=estimate_noise(split.data, stated=0.35e-3), rms_m=3e-3, ratio=8.0, test=None)
+    return name_effect(split, cands, {}, noise, DiscrepancyOptions(), baseline_oof=baseline_oof)
+
+
+def test_two_effects_with_collinear_fields_are_ambiguous_not_separable_and_neither_is_written():
+    """Off-plane precurvature fits best and the registration significantly worse, but both
+    improve on the baseline and the registration's fitted field is a multiple of the off-plane
+    one: the verdict is ambiguous ("not separable on this motion"), the report says so with the
+    correlation and the ``ctrplan design`` command, the run ends with the recalibrated baseline
+    (no effect written) and no second effect is fitted on top. Catches the confident single name
+    of the sweep's seeds 2015 and 2029 (a rotation of the tracker written for an off-plane
+    precurvature because it fitted a little better on a motion that cannot separate them), an
+    ambiguous verdict that still writes its first effect, and a pair stage run after it."""
+    from ctrplan.choices import DecisionNoteKind
+    from ctrplan.discrepancy.fits.pairs import fit_second_effect
+    from ctrplan.discrepancy.outputs import words
+    from ctrplan.discrepancy.outputs.output import final_candidate
+
+    split, base, cands = _run("same")
+    naming = _naming(split, base, cands)
+    d = naming.decision
+    assert d.worse_than["registration"] == ("offplane",)        # the errors alone would name off-plane
+    assert d.holm["registration"] and d.holm["offplane"]
+    assert d.verdict == "ambiguous" and d.inseparable, d
+    assert (d.named, d.ambiguous_with) == ("offplane", "registration")
+    sep = d.separability["offplane vs registration"]
+    assert sep.correlation > INSEPARABLE_CORRELATION and not sep.separable
+    assert [n.kind for n in d.notes if n.other == "registration"] == [DecisionNoteKind.NOT_SEPARABLE]
+    stored = json.loads(json.dumps(d.as_dict()))
+    assert stored == d.as_dict() and stored["inseparable"] is True
+    said = [words.note(n, stored, words.labels_of(naming.candidates)) for n in stored["notes"]]
+    assert any("not separable on this motion" in s and f"{sep.correlation:.3f}" in s for s in said), said
+    assert final_candidate(naming, None) is None
+    assert fit_second_effect(None, split, None, None, naming, DiscrepancyOptions(), False) is None
+
+
+def test_two_effects_with_distinct_fields_keep_the_named_effect():
+    """The registration reproduces the x component of the field alone, not collinear with the
+    off-plane field (rho about 0.68): the motion separates them and off-plane precurvature is named alone, its separability from
+    the registration recorded. Catches a rule that calls every pair of significant candidates
+    inseparable."""
+    from ctrplan.discrepancy.outputs.output import final_candidate
+
+    split, base, cands = _run("x part")
+    naming = _naming(split, base, cands)
+    d = naming.decision
+    assert d.verdict == "named" and d.named == "offplane" and not d.inseparable, d
+    sep = d.separability["offplane vs registration"]
+    assert 0.5 < sep.correlation < 0.8 and sep.separable
+    assert final_candidate(naming, None) is naming.candidates["offplane"]
+
+
+def test_separability_needs_the_candidates_at_the_baselines_samples():
+    """A candidate's out-of-fold errors at other rows than the baseline's raise rather than
+    compare misaligned fields."""
+    from dataclasses import replace
+
+    split, base, cands = _run("same")
+    shifted = replace(base, rows=base.rows + 1)
+    with pytest.raises(ValueError, match="other samples"):
+        _naming(split, shifted, cands)
