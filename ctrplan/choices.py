@@ -182,11 +182,13 @@ class EffectStore(StrEnum):
 class NotNamedReason(StrEnum):
     """Why the discrepancy workflow may not name a candidate effect: its improvement over the
     baseline is not significant within the Holm family, another candidate's out-of-fold error is
-    significantly lower, or a value sits at a limit it could not widen."""
+    significantly lower, a value sits at a limit it could not widen, or a fit of the baseline it
+    is compared with stopped at its evaluation budget before converging."""
 
     NOT_SIGNIFICANT = "not significant"
     OUTPERFORMED = "outperformed"
     AT_LIMIT = "at limit"
+    BASELINE_UNFINISHED = "baseline unfinished"
 
 
 class DecisionNoteKind(StrEnum):

@@ -421,14 +421,15 @@ def test_the_reasons_of_the_verdict_are_put_in_words_from_their_kinds_and_number
             "after allowing for the 5 % a fitted model adds): the model misses something that no candidate explains; "
             "the best explanation is off-plane precurvature (out-of-fold mean 1.800 mm), not named: its improvement "
             "over the baseline is not significant (p = 0.031, Holm over 2 candidates at 0.05).") in text
-    assert ("Rule: out-of-fold improvement over the baseline significant at 0.05 (t test of the log ratios over 5 "
-            "folds, Holm over the 2 candidates tried)") in text
+    assert ("Rule: out-of-fold improvement over the baseline significant at 0.05 (corrected resampled t test of the "
+            "log ratios over 5 folds, Holm over the 2 candidates tried)") in text
     assert ("- the lowest out-of-fold error is off-plane precurvature's, which cannot be named: its improvement over "
             "the baseline is not significant (p = 0.031, Holm over 2 candidates at 0.05).") in text
     assert ("- not tried: off-plane precurvature, because alone it does not lower the baseline's out-of-fold error "
             "(mean difference -0.02 mm + deg): counted in the family, not fitted.") in text
     assert (f"Rule: out-of-fold Eq. (49) improvement over {results['candidates']['friction']['label']} alone "
-            "significant at 0.05 (t test of the log ratios over the folds, Holm over the family of pairs)") in text
+            "significant at 0.05 (corrected resampled t test of the log ratios over the folds, Holm over the family of "
+            "pairs)") in text
     _set(results, "decision", {**results["decision"], "no_effect_case": "inconclusive"})
     text = _write(monkeypatch, tmp_path, results)
     assert ("**No effect named.** no candidate is eligible; the out-of-fold residual of the calibrated baseline (rms "

@@ -130,12 +130,24 @@ def _run(second_shape):
     return split, _errors(base), cands
 
 
-def _naming(split, baseline_oof, cands):
+def _baseline(oof, fits=()):
+    """The baseline as the naming rule reads it: its out-of-fold errors and its fits (development
+    fit first, then the folds; all converged when none are given)."""
+    from types import SimpleNamespace
+
+    from ctrplan.discrepancy.fits.calibrate import CalibrationResult
+
+    done = CalibrationResult("standard", ("k",), np.ones(1), np.ones(1))
+    fits = list(fits) or [done] * 11
+    return SimpleNamespace(oof=oof, cv=SimpleNamespace(fit=fits[0], folds=tuple(fits[1:])))
+
+
+def _naming(split, baseline_oof, cands, fits=()):
     from ctrplan.discrepancy.measured.noise import estimate_noise
     from ctrplan.discrepancy.verdict.decision import NoiseCheck, name_effect
 
     noise = NoiseCheck(noise=estimate_noise(split.data, stated=0.35e-3), rms_m=3e-3, ratio=8.0, test=None)
-    return name_effect(split, cands, {}, noise, DiscrepancyOptions(), baseline_oof=baseline_oof)
+    return name_effect(split, cands, {}, noise, DiscrepancyOptions(), baseline=_baseline(baseline_oof, fits))
 
 
 def test_two_effects_with_collinear_fields_are_ambiguous_not_separable_and_neither_is_written():
@@ -195,3 +207,31 @@ def test_separability_needs_the_candidates_at_the_baselines_samples():
     shifted = replace(base, rows=base.rows + 1)
     with pytest.raises(ValueError, match="other samples"):
         _naming(split, shifted, cands)
+
+
+def test_nothing_is_named_over_a_baseline_whose_fit_stopped_at_its_budget():
+    """The run of the test above, but the baseline's fit of fold 3 stopped at its evaluation
+    budget (a fit stopped at a bound is finished): no candidate is eligible, each with the reason
+    naming that fit, and the words say so. Catches an improvement over an unfinished baseline
+    (the candidate, started from it, finishes the baseline's own fit) taken for an effect."""
+    from ctrplan.choices import NotNamedReason
+    from ctrplan.discrepancy.fits.calibrate import CalibrationResult
+    from ctrplan.discrepancy.outputs import words
+    from ctrplan.discrepancy.verdict.decision import unfinished_fits
+
+    split, base, cands = _run("x part")
+    done = CalibrationResult("standard", ("k",), np.ones(1), np.ones(1))
+    stopped = CalibrationResult("standard", ("k",), np.ones(1), np.ones(1), converged=False)
+    at_bound = CalibrationResult("standard", ("k",), np.ones(1), np.ones(1), converged=False,
+                                 at_bound=("k (upper bound 5 -, its limit)",))
+    fits = [done, done, at_bound, done, stopped] + [done] * 6
+    assert unfinished_fits(_baseline(base, fits).cv) == ("fold 3",)
+    naming = _naming(split, base, cands, fits)
+    d = naming.decision
+    assert d.verdict == "none" and not d.eligible, d
+    for e in cands:
+        assert d.why_not[e][0].reason == NotNamedReason.BASELINE_UNFINISHED and d.why_not[e][0].limits == ("fold 3",)
+    stored = json.loads(json.dumps(d.as_dict()))
+    text = words.why_not(stored["why_not"]["offplane"], stored["rule"], words.labels_of(naming.candidates))
+    assert "stopped at their evaluation budget before converging (fold 3)" in text, text
+    assert _naming(split, base, cands, [done, done, at_bound] + [done] * 8).decision.named == "offplane"

@@ -325,7 +325,7 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
     # each candidate's stages end with its out-of-fold errors (fitting.cross_validate -> evaluation.out_of_fold)
     clock.divide("candidates", {CANDIDATE_STAGE.format(e): f"oof-{e}" for e in candidates})
     with clock.stage("naming"):
-        naming = name_effect(split, candidates, tests, noise, options, baseline_oof=baseline.oof)
+        naming = name_effect(split, candidates, tests, noise, options, baseline=baseline)
         log_verdict(naming, noise)
     with clock.stage("second_effect"):
         combination = fit_second_effect(setup, split, baseline, contact, naming, options, progress)

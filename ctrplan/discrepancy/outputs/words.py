@@ -72,6 +72,10 @@ def why_not(reasons, rule_levels: Mapping, labels: Mapping) -> str:
             out.append("its out-of-fold error is significantly higher than "
                        + ", ".join(f"{_label(labels, d)}'s (p = {figure(p, '.2g')})"
                                    for d, p in r["outperformed_by"].items()))
+        elif kind == NotNamedReason.BASELINE_UNFINISHED:
+            out.append("the baseline's fits it is compared with stopped at their evaluation budget before converging ("
+                       + ", ".join(r["limits"]) + "): an improvement over an unfinished fit is no evidence of a missing "
+                       "effect (a larger budget, `--max-evaluations`, lets them finish)")
         else:
             out.append("at its limit, not converged: " + "; ".join(r["limits"]))
     return "; ".join(out)
@@ -82,11 +86,13 @@ def rule(levels: Mapping) -> str:
     if isinstance(levels, str):
         return levels
     alpha = levels["significance"]
-    return (f"out-of-fold improvement over the baseline significant at {alpha} (t test of the log ratios over "
-            f"{levels['n_folds']} folds, Holm over the {levels['n_candidates']} candidates tried), no other candidate "
-            f"significantly better (corrected resampled t test, one-sided at {alpha}), no value at its limit; "
-            f"the lowest out-of-fold error wins, unless it contains another such candidate on which it does not "
-            f"improve significantly (then the simpler one); ambiguous when another such candidate remains")
+    return (f"out-of-fold improvement over the baseline significant at {alpha} (corrected resampled t test of the "
+            f"log ratios over {levels['n_folds']} folds, Holm over the {levels['n_candidates']} candidates tried), no "
+            f"other candidate significantly better (one-sided at {alpha}), no value at its limit, the baseline's fits "
+            f"finished; the lowest out-of-fold error wins, unless it contains another such candidate on which it does "
+            f"not improve significantly (then the simpler one); ambiguous when another such candidate remains, or "
+            f"when a candidate significant over the baseline moves the tip along a collinear field (not separable "
+            f"on this motion)")
 
 
 def separated_by(decision: Mapping, labels: Mapping) -> str | None:
@@ -236,8 +242,8 @@ def pair_rule(combination: Mapping) -> str:
     if isinstance(levels, str):
         return levels
     alpha = levels["significance"]
-    return (f"out-of-fold Eq. (49) improvement over {first} alone significant at {alpha} (t test of the log ratios "
-            f"over the folds, Holm over the family of pairs), no value at its limit, and {first} still improving on "
+    return (f"out-of-fold Eq. (49) improvement over {first} alone significant at {alpha} (corrected resampled t "
+            f"test of the log ratios over the folds, Holm over the family of pairs), no value at its limit, and {first} still improving on "
             f"the second effect alone at {alpha}")
 
 

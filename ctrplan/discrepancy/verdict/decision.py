@@ -1,9 +1,10 @@
 """Stages 5 and 7 of the discrepancy workflow: the sensor noise, and what is named.
 
 **Naming rule: the best explanation wins.** Every candidate's out-of-fold errors are compared
-with the baseline's (a t test of the folds' log ratios, which holds its level for a model
-against one it contains) and with every other candidate's (the corrected resampled t test: two
-models of which neither contains the other) over the cross-validation folds
+with the baseline's and with every other candidate's by the corrected resampled t test of the
+folds' log ratios (the test whose size the statistics tests check; uncorrected, a comparison with
+the baseline exceeds its level eightfold beside a slow unmodelled residual) over the
+cross-validation folds
 (:func:`~ctrplan.discrepancy.fits.fitting.compare`,
 :func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison`). A candidate is
 *eligible* when
@@ -15,7 +16,10 @@ models of which neither contains the other) over the cross-validation folds
   ``options.significance``): a candidate that another explains significantly better is never
   named, whatever the other's typical range;
 - none of its values sits at a bound that could not be widened (a fit at an optimizer bound, a
-  grid's edge or a scan's end is first extended, up to the parameter's limit).
+  grid's edge or a scan's end is first extended, up to the parameter's limit);
+- no fit of the baseline it is compared with stopped at its evaluation budget before converging
+  (:func:`unfinished_fits`: a candidate fitted from an unfinished baseline improves on it by
+  finishing the baseline's own fit).
 
 The eligible candidate with the lowest out-of-fold error is named, with a caution when a value
 lies outside its typical range (the value, the range with its source, and what to check). When
@@ -65,7 +69,7 @@ from .separability import Separability, separability
 from .statistics import Comparison, holm
 
 __all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "Separability", "check_noise", "name_effect", "cautions",
-           "no_effect_case", "VERDICTS"]
+           "no_effect_case", "unfinished_fits", "VERDICTS"]
 
 
 #: What a run concludes: one effect (or a pair) named, two candidates the data cannot tell apart,
@@ -305,7 +309,7 @@ def no_effect_case(noise: NoiseCheck) -> NoEffectCase:
 
 
 def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Mapping, noise: NoiseCheck,
-                options: DiscrepancyOptions, *, baseline_oof=None) -> Naming:
+                options: DiscrepancyOptions, *, baseline=None) -> Naming:
     """Stage 7: the verdict, by the rule of the module docstring.
 
     Parameters
@@ -320,10 +324,11 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     noise : NoiseCheck
     options : DiscrepancyOptions
         ``significance``.
-    baseline_oof : Errors, optional, keyword-only
-        The baseline's out-of-fold errors at the development samples (``Baseline.oof``; its
-        ``residual_base`` [m] is compared with the candidates' at the same rows); without it the
-        separability of the named effect is not measured (the workflow always gives it).
+    baseline : Baseline, optional, keyword-only
+        Stage 3: its out-of-fold errors at the development samples (``oof``, whose
+        ``residual_base`` [m] is compared with the candidates' at the same rows) and its fits
+        (``cv``: a fit that stopped at its evaluation budget makes every candidate ineligible).
+        Without it neither is checked (the workflow always gives it).
 
     Returns
     -------
@@ -339,13 +344,14 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
             if a == b:
                 continue
             # positive: b better than a
-            cmp = comparisons[f"{b} vs {a}"] = compare(split, candidates[a].r, candidates[b].r, nested=False)
+            cmp = comparisons[f"{b} vs {a}"] = compare(split, candidates[a].r, candidates[b].r)
             if cmp.p_worse < alpha and cmp.mean_difference < 0:
                 worse_than[b].append(a)
     why_not: dict = {}
     judged = {}
+    unfinished = unfinished_fits(baseline.cv) if baseline is not None else ()
     for e, c in candidates.items():
-        reasons = []
+        reasons = [WhyNot(NotNamedReason.BASELINE_UNFINISHED, limits=unfinished)] if unfinished else []
         if not significant.get(e, False):
             reasons.append(WhyNot(NotNamedReason.NOT_SIGNIFICANT, p_value=c.improvement.p_value))
         if worse_than[e]:
@@ -381,7 +387,7 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
                 break
         decision = replace(decision, verdict=Verdict.NAMED, named=named)
         rivals = [e for e in eligible if e != named and not contained(e, named)]
-        seps = _separabilities(named, judged, significant, baseline_oof)
+        seps = _separabilities(named, judged, significant, None if baseline is None else baseline.oof)
         decision = replace(decision, separability=MappingProxyType({f"{named} vs {e}": v for e, v in seps.items()}))
         confused = sorted((e for e, v in seps.items() if not v.separable), key=lambda e: -abs(seps[e].correlation))
         if rivals or confused:
@@ -425,6 +431,30 @@ def _separabilities(named: str, judged: Mapping, significant: Mapping, baseline_
                 raise ValueError(f"separability: {cand}'s out-of-fold errors are at other samples than the baseline's")
         out[e] = separability(named, e, baseline_oof.residual_base, first.residual_base, c.cv.oof.residual_base)
     return out
+
+
+def unfinished_fits(cv) -> tuple:
+    """The fits of a cross-validated model that stopped at their evaluation budget: not
+    converged, and not because a value sits at a bound (``"development fit"``, ``"fold <k>"``).
+
+    A candidate is fitted from the baseline's fit of the same fold and compared with its
+    out-of-fold errors; when that fit stopped before converging, the candidate's extra
+    iterations of the baseline's own parameters look like an improvement of its effect.
+
+    Parameters
+    ----------
+    cv : CrossValidated
+
+    Returns
+    -------
+    tuple of str
+    """
+    out = ("development fit",) if _unfinished(cv.fit) else ()
+    return out + tuple(f"fold {k}" for k, f in enumerate(cv.folds) if _unfinished(f))
+
+
+def _unfinished(fit) -> bool:
+    return fit is not None and not fit.converged and not fit.at_bound
 
 
 def contained(a: str, b: str) -> bool:

@@ -34,7 +34,8 @@ class WhyNot:
         one-sided p of that comparison [-].
     limits : tuple of str
         ``AT_LIMIT``: the fit's values at a bound, a grid's edge or a scan's end
-        (``Candidate.at_bound``).
+        (``Candidate.at_bound``); ``BASELINE_UNFINISHED``: the baseline's fits that stopped at
+        their evaluation budget (``"development fit"``, ``"fold <k>"``).
     """
 
     reason: NotNamedReason
