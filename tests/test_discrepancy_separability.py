@@ -184,9 +184,9 @@ def test_two_effects_with_collinear_fields_are_ambiguous_not_separable_and_neith
 
 def test_two_effects_with_distinct_fields_keep_the_named_effect():
     """The registration reproduces the x component of the field alone, not collinear with the
-    off-plane field (rho about 0.68): the motion separates them and off-plane precurvature is named alone, its separability from
-    the registration recorded. Catches a rule that calls every pair of significant candidates
-    inseparable."""
+    off-plane field (rho about 0.68): the motion separates them and off-plane precurvature is
+    named alone, its separability from the registration recorded. Catches a rule that calls
+    every pair of significant candidates inseparable."""
     from ctrplan.discrepancy.outputs.output import final_candidate
 
     split, base, cands = _run("x part")
@@ -235,3 +235,42 @@ def test_nothing_is_named_over_a_baseline_whose_fit_stopped_at_its_budget():
     text = words.why_not(stored["why_not"]["offplane"], stored["rule"], words.labels_of(naming.candidates))
     assert "stopped at their evaluation budget before converging (fold 3)" in text, text
     assert _naming(split, base, cands, [done, done, at_bound] + [done] * 8).decision.named == "offplane"
+
+
+def test_a_split_that_cannot_keep_its_folds_apart_names_only_at_a_level_seven_times_smaller():
+    """One candidate whose improvement over the baseline has p between 0.01 / 7 and 0.01: named
+    when the buffer reached the autocorrelation threshold; not named when the buffer was capped
+    at half a block with the autocorrelation still 0.5 there, where the rule runs at 0.01 / 7 and
+    says why. Catches a verdict unchanged where the comparison's rate was measured at up to 7
+    times its level (residual correlated from one block to the next)."""
+    from dataclasses import replace
+
+    from ctrplan.choices import BufferReason
+    from ctrplan.discrepancy.fits.fitting import compare
+    from ctrplan.discrepancy.measured.split import BufferChoice
+    from ctrplan.discrepancy.outputs import words
+    from ctrplan.discrepancy.verdict.decision import CORRELATED_FOLDS_SIZE_FACTOR, folds_kept_apart
+
+    rng = np.random.default_rng(77)
+    units = np.repeat(np.arange(K_UNITS), PER_UNIT)
+    split = _split(units)
+    k = units.size
+    noise = rng.normal(0, 0.4e-3, (k, 3))
+    base = np.tile([1e-3, 0.0, 0.0], (k, 1)) + noise
+    fold_scatter = rng.normal(0, 1.0, 10)[split.fold]
+    p = None
+    for gain in np.linspace(0.0, 0.5, 201):          # the smallest gain whose p lies between the two levels
+        cand = base * (1.0 - gain * (1.0 + 0.5 * fold_scatter))[:, None]
+        p = compare(split, np.linalg.norm(base, axis=1), np.linalg.norm(cand, axis=1)).p_value
+        if 0.01 / CORRELATED_FOLDS_SIZE_FACTOR < p < 0.01:
+            break
+    assert 0.01 / CORRELATED_FOLDS_SIZE_FACTOR < p < 0.01, p
+    cands = {"time_offset": _candidate("time_offset", split, base, cand)}
+    apart = replace(split, buffer_choice=BufferChoice(5, BufferReason.AUTOCORRELATION_FALLS, lag_one=0.6))
+    capped = replace(split, buffer_choice=BufferChoice(5, BufferReason.HALF_A_BLOCK, lag_one=0.9, still=0.5))
+    assert folds_kept_apart(apart) and not folds_kept_apart(capped)
+    assert _naming(apart, _errors(base), cands).decision.named == "time_offset"
+    d = _naming(capped, _errors(base), cands).decision
+    assert d.verdict == "none" and d.rule.alpha == pytest.approx(0.01 / 7) and not d.rule.folds_apart, d
+    text = words.rule(json.loads(json.dumps(d.as_dict()))["rule"])
+    assert "divided by 7" in text and "folds are not kept apart" in text, text

@@ -182,7 +182,8 @@ def _fold_errors(rng, n_folds=10, units_per_fold=4, per_unit=10, fit_scatter=0.6
 def test_size_checks_detect_twice_the_nominal_rate():
     """The record counts of the size checks below detect a true rejection rate of twice the
     nominal level with power > 0.9 (3000 records at 0.05 and 0.01, 24000 at 0.01 over the
-    registry's candidates), while a test of nominal size fails them once in 1000 runs. Catches size checks too small to fail."""
+    registry's candidates), while a test of nominal size fails them once in 1000 runs. Catches
+    size checks too small to fail."""
     assert _detection_power(3000, 0.05) > 0.9 and _detection_power(3000, 0.01) > 0.9
     assert _detection_power(24000, SMALLEST_LEVEL) > 0.9
     assert _detection_power(3000, SMALLEST_LEVEL) < 0.5          # why the smallest level needs more
@@ -229,8 +230,8 @@ def test_fold_comparison_finds_a_real_improvement_and_its_interval_covers_it():
 def test_fold_comparison_finds_a_real_extra_effect_when_the_folds_share_their_training_data():
     """A candidate with one extra, dead-band-like regressor whose true coefficient is 1.2 (the
     noise's standard deviation 1, AR(1) at phi = 0.8), fitted without each of 10 folds: the
-    corrected test finds it at the workflow's smallest level (0.01 over the registry's candidates) in at least 80 % of 300
-    records, and never finds the baseline better. Catches a correction that inflates the
+    corrected test finds it at the workflow's smallest level (0.01 over the registry's
+    candidates) in at least 80 % of 300 records, and never finds the baseline better. Catches a correction that inflates the
     variance so much that a real effect is no longer named."""
     rng = np.random.default_rng(8123)
     a, b, fold = _shared_fit_records(rng, 300, "nested", phi=0.8, kind="switch", effect=1.2)

@@ -67,15 +67,16 @@ def why_not(reasons, rule_levels: Mapping, labels: Mapping) -> str:
         kind = NotNamedReason(r["reason"])
         if kind == NotNamedReason.NOT_SIGNIFICANT:
             out.append(f"its improvement over the baseline is not significant (p = {figure(r.get('p_value'), '.3g')}, "
-                       f"Holm over {rule_levels['n_candidates']} candidates at {rule_levels['significance']})")
+                       f"Holm over {rule_levels['n_candidates']} candidates at "
+                       f"{figure(rule_levels.get('level', rule_levels['significance']), '.3g')})")
         elif kind == NotNamedReason.OUTPERFORMED:
             out.append("its out-of-fold error is significantly higher than "
                        + ", ".join(f"{_label(labels, d)}'s (p = {figure(p, '.2g')})"
                                    for d, p in r["outperformed_by"].items()))
         elif kind == NotNamedReason.BASELINE_UNFINISHED:
-            out.append("the baseline's fits it is compared with stopped at their evaluation budget before converging ("
-                       + ", ".join(r["limits"]) + "): an improvement over an unfinished fit is no evidence of a missing "
-                       "effect (a larger budget, `--max-evaluations`, lets them finish)")
+            out.append("the baseline's fits it is compared with stopped at their evaluation budget before "
+                       "converging (" + ", ".join(r["limits"]) + "): an improvement over an unfinished fit is no "
+                       "evidence of a missing effect")
         else:
             out.append("at its limit, not converged: " + "; ".join(r["limits"]))
     return "; ".join(out)
@@ -85,14 +86,20 @@ def rule(levels: Mapping) -> str:
     """The naming rule with its levels (``results.json["decision"]["rule"]``)."""
     if isinstance(levels, str):
         return levels
-    alpha = levels["significance"]
-    return (f"out-of-fold improvement over the baseline significant at {alpha} (corrected resampled t test of the "
+    alpha = levels.get("level", levels["significance"])
+    apart = ("" if levels.get("folds_apart", True) else
+             f"; every level is the significance {levels['significance']} divided by "
+             f"{levels['significance'] / alpha:.0f} because the buffer could not reach the residuals' autocorrelation "
+             f"threshold and the folds are not kept apart, where the comparison's rate was measured at up to that "
+             f"many times its level")
+    level = figure(alpha, ".3g")
+    return (f"out-of-fold improvement over the baseline significant at {level} (corrected resampled t test of the "
             f"log ratios over {levels['n_folds']} folds, Holm over the {levels['n_candidates']} candidates tried), no "
-            f"other candidate significantly better (one-sided at {alpha}), no value at its limit, the baseline's fits "
+            f"other candidate significantly better (one-sided at {level}), no value at its limit, the baseline's fits "
             f"finished; the lowest out-of-fold error wins, unless it contains another such candidate on which it does "
             f"not improve significantly (then the simpler one); ambiguous when another such candidate remains, or "
             f"when a candidate significant over the baseline moves the tip along a collinear field (not separable "
-            f"on this motion)")
+            f"on this motion){apart}")
 
 
 def separated_by(decision: Mapping, labels: Mapping) -> str | None:
@@ -243,8 +250,8 @@ def pair_rule(combination: Mapping) -> str:
         return levels
     alpha = levels["significance"]
     return (f"out-of-fold Eq. (49) improvement over {first} alone significant at {alpha} (corrected resampled t "
-            f"test of the log ratios over the folds, Holm over the family of pairs), no value at its limit, and {first} still improving on "
-            f"the second effect alone at {alpha}")
+            f"test of the log ratios over the folds, Holm over the family of pairs), no value at its limit, and "
+            f"{first} still improving on the second effect alone at {alpha}")
 
 
 def not_paired(entry, first_label: str) -> str:

@@ -21,6 +21,9 @@ cross-validation folds
   (:func:`unfinished_fits`: a candidate fitted from an unfinished baseline improves on it by
   finishing the baseline's own fit).
 
+Where the split could not keep its folds apart (:func:`folds_kept_apart`), every comparison runs
+at ``significance`` / :data:`CORRELATED_FOLDS_SIZE_FACTOR` (the rule records both levels).
+
 The eligible candidate with the lowest out-of-fold error is named, with a caution when a value
 lies outside its typical range (the value, the range with its source, and what to check). When
 another eligible candidate that does not contain it (or lie in it) remains, the two explain the
@@ -56,7 +59,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ...choices import CautionKind, DecisionNoteKind, NoEffectCase, NotNamedReason, Verdict
+from ...choices import BufferReason, CautionKind, DecisionNoteKind, NoEffectCase, NotNamedReason, Verdict
 from ...effects import REGISTRY
 from .consistency import NoiseTest, noise_test
 from ..fits.evaluation import ErrorFigures
@@ -69,8 +72,19 @@ from .separability import Separability, separability
 from .statistics import Comparison, holm
 
 __all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "Separability", "check_noise", "name_effect", "cautions",
-           "no_effect_case", "unfinished_fits", "VERDICTS"]
+           "no_effect_case", "unfinished_fits", "folds_kept_apart",
+           "CORRELATED_FOLDS_SIZE_FACTOR", "VERDICTS"]
 
+
+#: Where the split could not keep its folds apart (the buffer capped at half a block with the
+#: residuals' autocorrelation still above :data:`~ctrplan.discrepancy.measured.split.BUFFER_AUTOCORRELATION`
+#: there), the comparisons run at ``significance`` divided by this: the corrected comparison's
+#: rejection rate was measured at up to 7 times its level where the residual stays correlated
+#: from one block to the next (0.010 at 0.0014 for two equally good models beside a slow
+#: discrepancy, 0.0032 at 0.0014 with blocks of 10 samples at phi 0.9;
+#: :func:`~ctrplan.discrepancy.verdict.statistics.cv_comparison`'s notes), so a level divided by 7
+#: keeps the rate at most the one asked for in every regime measured.
+CORRELATED_FOLDS_SIZE_FACTOR = 7.0
 
 #: What a run concludes: one effect (or a pair) named, two candidates the data cannot tell apart,
 #: or none.
@@ -334,7 +348,8 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     -------
     Naming
     """
-    alpha = options.significance
+    apart = folds_kept_apart(split)
+    alpha = options.significance if apart else options.significance / CORRELATED_FOLDS_SIZE_FACTOR
     significant = holm({e: (c.improvement.p_value if c.improvement.mean_difference > 0 else 1.0)
                         for e, c in candidates.items()}, alpha) if candidates else {}
     names = list(candidates)
@@ -371,7 +386,8 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
         worse_than=MappingProxyType({e: tuple(v) for e, v in worse_than.items()}),
         why_not=MappingProxyType({e: tuple(r) for e, r in why_not.items() if r}),
         comparisons=MappingProxyType(comparisons), separated_by=None, cautions=(), notes=(),
-        rule=NamingRule(significance=alpha, n_folds=split.n_folds, n_candidates=len(names)))
+        rule=NamingRule(significance=options.significance, n_folds=split.n_folds, n_candidates=len(names),
+                        level=alpha, folds_apart=apart))
     if eligible:
         named = eligible[0]
         # parsimony between nested candidates: one that contains another eligible one (gradual
@@ -431,6 +447,25 @@ def _separabilities(named: str, judged: Mapping, significant: Mapping, baseline_
                 raise ValueError(f"separability: {cand}'s out-of-fold errors are at other samples than the baseline's")
         out[e] = separability(named, e, baseline_oof.residual_base, first.residual_base, c.cv.oof.residual_base)
     return out
+
+
+def folds_kept_apart(split: DataSplit) -> bool:
+    """The split's buffer reached the residuals' autocorrelation threshold, so the folds'
+    comparisons hold their level: False when the buffer was capped at half a block (the blocks
+    could not be lengthened further) with the autocorrelation there still above
+    :data:`~ctrplan.discrepancy.measured.split.BUFFER_AUTOCORRELATION`.
+
+    Parameters
+    ----------
+    split : DataSplit
+
+    Returns
+    -------
+    bool
+    """
+    choice = split.buffer_choice
+    return not (choice is not None and choice.reason == BufferReason.HALF_A_BLOCK and choice.still is not None
+                and choice.still > choice.threshold)
 
 
 def unfinished_fits(cv) -> tuple:

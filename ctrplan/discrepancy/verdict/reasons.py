@@ -135,15 +135,29 @@ class NamingRule:
         Cross-validation folds the tests run over.
     n_candidates : int
         Candidates tried alone: the Holm family.
+    level : float or None
+        The level the comparisons ran at [-]: ``significance``, or ``significance`` divided by
+        :data:`~ctrplan.discrepancy.verdict.decision.CORRELATED_FOLDS_SIZE_FACTOR` when the split
+        could not keep its folds apart (None: ``significance``).
+    folds_apart : bool
+        The buffer reached the autocorrelation threshold (the comparisons hold their level).
     """
 
     significance: float
     n_folds: int
     n_candidates: int
+    level: float | None = None
+    folds_apart: bool = True
+
+    @property
+    def alpha(self) -> float:
+        """The level the comparisons ran at [-]."""
+        return self.significance if self.level is None else self.level
 
     def as_dict(self) -> dict:
-        """``{"significance", "n_folds", "n_candidates"}``."""
-        return {"significance": self.significance, "n_folds": self.n_folds, "n_candidates": self.n_candidates}
+        """``{"significance", "n_folds", "n_candidates", "level", "folds_apart"}``."""
+        return {"significance": self.significance, "n_folds": self.n_folds, "n_candidates": self.n_candidates,
+                "level": self.alpha, "folds_apart": self.folds_apart}
 
 
 @dataclass(frozen=True)
