@@ -70,6 +70,10 @@ class CalibratedBound(_Table):
         (less the tolerance), its upper end below it, or neither
         (:func:`ctrplan.discrepancy.verdict.coverage.coverage_status`). Files written before this rule
         hold "met", "failing" or "conservative", which are read as they are.
+    coverage_tolerance : float or None
+        The tolerance behind ``status`` and ``conservative`` [-]: "shown" compares the interval's
+        lower end with ``target_coverage - coverage_tolerance`` (None: not recorded, files written
+        before it was).
     conservative : bool
         The test coverage's interval lies above the target by more than the tolerance.
     data_file, data_sha256, date : str
@@ -89,6 +93,7 @@ class CalibratedBound(_Table):
     raw_bound_test_coverage: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     failing: bool = False
     status: Literal["shown", "not shown", "failed", "met", "failing", "conservative"] | None = None
+    coverage_tolerance: Annotated[float, Field(ge=0.0, lt=1.0)] | None = None
     conservative: bool = False
     data_file: str = ""
     data_sha256: str = ""

@@ -196,8 +196,10 @@ def test_the_interval_is_seeded_and_the_file_table_loads():
     the robot file's ``[bound_calibration]`` table loads in its schema
     (:class:`ctrplan.calibration.CalibratedBound`), ``failing`` and ``status`` included. Catches an unseeded
     interval (a run that cannot be repeated) and a table the robot file refuses (a status outside
-    its schema)."""
+    its schema), and the table records the tolerance its status was judged with. Catches a
+    "shown" in a robot file that cannot say how much shortfall from the target it allowed."""
     from ctrplan.calibration import CalibratedBound
+    from ctrplan.discrepancy.verdict.coverage import COVERAGE_TOLERANCE
 
     rng = np.random.default_rng(99)
     x = _ar1_blocks(rng, 15, 30, 0.8)
@@ -211,6 +213,7 @@ def test_the_interval_is_seeded_and_the_file_table_loads():
         bound = CalibratedBound(**table)
         assert bound.failing == cal.failing and bound.test_coverage_low == cal.test.ci[0]
         assert bound.status == cal.status and bound.conservative == cal.conservative
+        assert bound.coverage_tolerance == cal.tolerance == COVERAGE_TOLERANCE     # what "shown" was judged by
         assert cal.calibration is not None and cal.calibration.n_units == 33
 
 

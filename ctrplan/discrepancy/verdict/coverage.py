@@ -569,7 +569,8 @@ class BoundCalibration:
                 "calibration_samples": self.n_calibration, "test_samples": self.test.n,
                 "test_coverage": self.test.covered, "test_coverage_low": self.test.ci[0],
                 "test_coverage_high": self.test.ci[1], "raw_bound_test_coverage": self.raw_test.covered,
-                "failing": self.failing, "status": self.status, "conservative": bool(self.conservative),
+                "failing": self.failing, "status": self.status, "coverage_tolerance": float(self.tolerance),
+                "conservative": bool(self.conservative),
                 "data_file": data_file, "data_sha256": data_sha256,
                 "date": datetime.date.today().isoformat()}
         return {k: v for k, v in table.items() if not (isinstance(v, float) and not np.isfinite(v))}
