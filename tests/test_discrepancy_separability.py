@@ -158,7 +158,8 @@ def test_two_effects_with_collinear_fields_are_ambiguous_not_separable_and_neith
     (no effect written) and no second effect is fitted on top. Catches the confident single name
     of the sweep's seeds 2015 and 2029 (a rotation of the tracker written for an off-plane
     precurvature because it fitted a little better on a motion that cannot separate them), an
-    ambiguous verdict that still writes its first effect, and a pair stage run after it."""
+    ambiguous verdict that still writes its first effect, and a pair stage run after it; a rival
+    at its parameter's limit (which cannot reach the field) is not counted."""
     from ctrplan.choices import DecisionNoteKind
     from ctrplan.discrepancy.fits.pairs import fit_second_effect
     from ctrplan.discrepancy.outputs import words
@@ -180,6 +181,13 @@ def test_two_effects_with_collinear_fields_are_ambiguous_not_separable_and_neith
     assert any("not separable on this motion" in s and f"{sep.correlation:.3f}" in s for s in said), said
     assert final_candidate(naming, None) is None
     assert fit_second_effect(None, split, None, None, naming, DiscrepancyOptions(), False) is None
+    # a collinear rival stopped at its parameter's limit cannot reach what the data ask: named alone
+    from dataclasses import replace
+
+    limit = ("registration_rz (upper bound 3.14 rad, its limit)",)
+    cands["registration"] = replace(cands["registration"], at_bound=limit)
+    d = _naming(split, base, cands).decision
+    assert d.verdict == "named" and d.named == "offplane" and not d.separability, d
 
 
 def test_two_effects_with_distinct_fields_keep_the_named_effect():

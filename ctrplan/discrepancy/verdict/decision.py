@@ -34,7 +34,7 @@ best explanation.
 
 **Separability.** Before an effect is named alone, its fitted tip displacement field on the
 recorded motion is compared with that of every other candidate that improves on the baseline
-significantly (Holm) and neither contains it nor lies in it
+significantly (Holm), neither contains it nor lies in it, and has no value at its limit
 (:mod:`~ctrplan.discrepancy.verdict.separability`): when the two fields are collinear (correlation
 at or above :data:`~ctrplan.discrepancy.verdict.separability.INSEPARABLE_CORRELATION`), the motion
 cannot tell the two effects apart, whatever the comparison of their errors says, and the verdict
@@ -427,8 +427,9 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
 
 def _separabilities(named: str, judged: Mapping, significant: Mapping, baseline_oof) -> dict:
     """:func:`~ctrplan.discrepancy.verdict.separability.separability` of the named candidate against
-    every other candidate significant over the baseline and not nested with it (empty without the
-    baseline's out-of-fold errors).
+    every other candidate significant over the baseline, not nested with it and not at its limit
+    (one whose value stops at the parameter's limit cannot reach what the data ask, which tells
+    them apart) (empty without the baseline's out-of-fold errors).
 
     Raises
     ------
@@ -440,7 +441,7 @@ def _separabilities(named: str, judged: Mapping, significant: Mapping, baseline_
         return {}
     out = {}
     for e, c in judged.items():
-        if e == named or not significant.get(e, False) or contained(e, named) or c.cv.oof is None:
+        if e == named or not significant.get(e, False) or contained(e, named) or c.at_bound or c.cv.oof is None:
             continue
         for cand in (named, e):
             if not np.array_equal(judged[cand].cv.oof.rows, baseline_oof.rows):
