@@ -8,6 +8,8 @@
   (where it ends below the robot's mu, under maximal friction the tubes snap).
 - :func:`predict_tip`: the tip and shape after a given motion history (Section V-B).
 - :func:`solve_standard_batch`: the standard model at many configurations in one compiled call.
+- :func:`standard_tip_derivatives` (and ``_batch``): exact derivatives of the standard model's tip
+  with respect to base rotations, precurvatures and stiffnesses (implicit-function theorem).
 
 :data:`MECHANICS_VERSION` names the version of their results (bound maps record it).
 
@@ -24,6 +26,8 @@ from ._standard_batch import StandardBatch, solve_standard_batch
 from ._lie import angle_between
 from ._standard_bodies import StandardBodies, solve_standard_bodies, solve_standard_bodies_packed
 from .standard import solve_standard
+from .sensitivity import (StandardTipDerivatives, StandardTipDerivativesBatch, standard_tip_derivatives,
+                          standard_tip_derivatives_batch)
 
 # The contact models (and the bound and prediction built on them) are imported on first use
 # (PEP 562), so a standard-model-only command (`ctrplan evaluate --model standard`) does not
@@ -62,5 +66,6 @@ __all__ = [
     "all_eta", "continue_friction", "FrictionBranch", "ModelSettings", "StandardSolution", "ContactSolution", "BoundResult", "Diagnostics",
     "TubeChain", "forward_kinematics", "chain_jacobians", "ArcLengthGrid", "build_grid",
     "StandardBodies", "solve_standard_bodies", "solve_standard_bodies_packed", "angle_between",
-    "predict_tip", "Prediction", "PAIR_CASES",
+    "predict_tip", "Prediction", "PAIR_CASES", "standard_tip_derivatives", "StandardTipDerivatives",
+    "standard_tip_derivatives_batch", "StandardTipDerivativesBatch",
 ]
