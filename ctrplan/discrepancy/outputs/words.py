@@ -89,9 +89,9 @@ def rule(levels: Mapping) -> str:
     alpha = levels.get("level", levels["significance"])
     apart = ("" if levels.get("folds_apart", True) else
              f"; every level is the significance {levels['significance']} divided by "
-             f"{levels['significance'] / alpha:.0f} because the buffer could not reach the residuals' autocorrelation "
-             f"threshold and the folds are not kept apart, where the comparison's rate was measured at up to that "
-             f"many times its level")
+             f"{levels['significance'] / alpha:.0f} because the buffer could not reach the autocorrelation threshold "
+             f"and the best candidate's residual stays correlated beyond it: the folds are not kept apart, where the "
+             f"comparison's rate was measured at up to that many times its level")
     level = figure(alpha, ".3g")
     return (f"out-of-fold improvement over the baseline significant at {level} (corrected resampled t test of the "
             f"log ratios over {levels['n_folds']} folds, Holm over the {levels['n_candidates']} candidates tried), no "

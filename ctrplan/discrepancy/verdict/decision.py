@@ -21,8 +21,10 @@ cross-validation folds
   (:func:`unfinished_fits`: a candidate fitted from an unfinished baseline improves on it by
   finishing the baseline's own fit).
 
-Where the split could not keep its folds apart (:func:`folds_kept_apart`), every comparison runs
-at ``significance`` / :data:`CORRELATED_FOLDS_SIZE_FACTOR` (the rule records both levels).
+Where the split could not keep its folds apart (:func:`folds_kept_apart`: the buffer capped
+short of the pilot residual's autocorrelation threshold, and the best candidate's out-of-fold
+residual still correlated beyond it), every comparison runs at ``significance`` /
+:data:`CORRELATED_FOLDS_SIZE_FACTOR` (the rule records both levels).
 
 The eligible candidate with the lowest out-of-fold error is named, with a caution when a value
 lies outside its typical range (the value, the range with its source, and what to check). When
@@ -66,7 +68,7 @@ from ..fits.evaluation import ErrorFigures
 from ..fits.fitting import Candidate, compare
 from ..measured.noise import NoiseEstimate, estimate_noise
 from ..options import DiscrepancyOptions
-from ..measured.split import DataSplit
+from ..measured.split import DataSplit, residual_autocorrelation
 from .reasons import Caution, DecisionNote, NamingRule, WhyNot
 from .separability import Separability, separability
 from .statistics import Comparison, holm
@@ -76,9 +78,9 @@ __all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "Separability", "chec
            "CORRELATED_FOLDS_SIZE_FACTOR", "VERDICTS"]
 
 
-#: Where the split could not keep its folds apart (the buffer capped at half a block with the
-#: residuals' autocorrelation still above :data:`~ctrplan.discrepancy.measured.split.BUFFER_AUTOCORRELATION`
-#: there), the comparisons run at ``significance`` divided by this: the corrected comparison's
+#: Where the split could not keep its folds apart (:func:`folds_kept_apart`: the buffer capped at
+#: half a block and the best candidate's residual still correlated above
+#: :data:`~ctrplan.discrepancy.measured.split.BUFFER_AUTOCORRELATION` there), the comparisons run at ``significance`` divided by this: the corrected comparison's
 #: rejection rate was measured at up to 7 times its level where the residual stays correlated
 #: from one block to the next (0.010 at 0.0014 for two equally good models beside a slow
 #: discrepancy, 0.0032 at 0.0014 with blocks of 10 samples at phi 0.9;
@@ -348,7 +350,9 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     -------
     Naming
     """
-    apart = folds_kept_apart(split)
+    lowest = min(candidates, key=lambda e: candidates[e].mean_error) if candidates else None
+    oof = None if lowest is None else candidates[lowest].cv.oof
+    apart = folds_kept_apart(split, None if oof is None else oof.residual_base)
     alpha = options.significance if apart else options.significance / CORRELATED_FOLDS_SIZE_FACTOR
     significant = holm({e: (c.improvement.p_value if c.improvement.mean_difference > 0 else 1.0)
                         for e, c in candidates.items()}, alpha) if candidates else {}
@@ -450,23 +454,39 @@ def _separabilities(named: str, judged: Mapping, significant: Mapping, baseline_
     return out
 
 
-def folds_kept_apart(split: DataSplit) -> bool:
-    """The split's buffer reached the residuals' autocorrelation threshold, so the folds'
-    comparisons hold their level: False when the buffer was capped at half a block (the blocks
-    could not be lengthened further) with the autocorrelation there still above
-    :data:`~ctrplan.discrepancy.measured.split.BUFFER_AUTOCORRELATION`.
+def folds_kept_apart(split: DataSplit, residual=None) -> bool:
+    """The folds' comparisons hold their level: the split's buffer reached the autocorrelation
+    threshold (:data:`~ctrplan.discrepancy.measured.split.BUFFER_AUTOCORRELATION`) of the pilot
+    fit's residuals, or, where it was capped at half a block short of it, the best candidate's
+    out-of-fold residual ``residual`` falls to the threshold within the buffer.
+
+    The pilot's residual holds whatever effect is missing, so a capped buffer alone says only
+    that something slow is left; when the best explanation takes it away, what remains between
+    the folds is near-independent and the comparisons hold their level. When even the best
+    explanation leaves the residual correlated beyond the buffer (a slow discrepancy no candidate
+    models, the regime where the comparisons were measured at up to 7 times their level), they
+    do not.
 
     Parameters
     ----------
     split : DataSplit
+    residual : ndarray, shape (K_dev, 3), optional
+        The best candidate's out-of-fold residual vectors at the development samples [m]
+        (without it, a capped buffer is not kept apart).
 
     Returns
     -------
     bool
     """
     choice = split.buffer_choice
-    return not (choice is not None and choice.reason == BufferReason.HALF_A_BLOCK and choice.still is not None
-                and choice.still > choice.threshold)
+    if not (choice is not None and choice.reason == BufferReason.HALF_A_BLOCK and choice.still is not None
+            and choice.still > choice.threshold):
+        return True
+    if residual is None:
+        return False
+    lag = int(choice.samples) + 1
+    left = residual_autocorrelation(residual, split.data.take(split.dev_rows), lag)[lag]
+    return bool(np.isfinite(left) and left <= choice.threshold)
 
 
 def unfinished_fits(cv) -> tuple:
