@@ -299,3 +299,32 @@ def test_a_split_that_cannot_keep_its_folds_apart_names_only_at_a_level_seven_ti
     assert d.verdict == "none" and d.rule.alpha == pytest.approx(0.01 / 7) and not d.rule.folds_apart, d
     text = words.rule(json.loads(json.dumps(d.as_dict()))["rule"])
     assert "divided by 7" in text and "folds are not kept apart" in text, text
+
+
+def test_a_registration_far_outside_its_range_on_a_collinear_motion_is_neither_named_nor_written():
+    """The sweep's seed 2029 in miniature: a registration rotation of 17 deg about the base axis
+    (its whole interval beyond the typical +-10 deg) fits best, the off-plane precurvature that
+    made the data fits significantly worse, and their fields are collinear. Today's verdict is
+    ambiguous, not separable, the registration first with its caution; the run ends with the
+    recalibrated baseline, so the sweep scores it "ambiguous", not "wrong". Catches the harm of a
+    value wholly outside its range earning only a caution: the confident name of an effect that
+    the motion cannot tell from the truth."""
+    from dataclasses import replace
+
+    from ctrplan.discrepancy.fits.estimates import AtypicalValue
+    from ctrplan.discrepancy.outputs.output import final_candidate
+
+    split, base, cands = _run("same")
+    rot = AtypicalValue(name="registration_rz", value=float(np.deg2rad(17.1)), unit="rad",
+                        typical=(float(np.deg2rad(-10)), float(np.deg2rad(10))), typical_text="-10..10 deg",
+                        why="a robot-frame data file whose frame is off by more than 10 deg is a tracker-frame file",
+                        check="the frame of the data file")
+    cands = {"registration": replace(cands["offplane"], effects=("registration",), label="registration",
+                                     atypical=(rot,)),
+             "offplane": replace(cands["registration"], effects=("offplane",), label="off-plane precurvature")}
+    naming = _naming(split, base, cands)
+    d = naming.decision
+    assert d.worse_than["offplane"] == ("registration",)
+    assert d.verdict == "ambiguous" and d.inseparable and (d.named, d.ambiguous_with) == ("registration", "offplane")
+    assert [c.value for c in d.cautions] == [rot]
+    assert final_candidate(naming, None) is None
