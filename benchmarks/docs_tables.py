@@ -100,9 +100,10 @@ def sweep_table(res: dict) -> str:
         hidden = "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["hidden"].values() for k, v in e.items()) or "-"
         shares = ", ".join(f"{e} {100 * v:.0f} %" for e, v in c["size_shares"].items())
         noise = "white" if not c["ar1"] else f"AR(1) {c['ar1']:g}"
-        verdict = c["outcome"] + ": " + (c["verdict"] if c["verdict"] == "none" else
-                                         ", ".join(c["named_effects"]) + (f" or {c['ambiguous_with']}"
-                                                                          if c["ambiguous_with"] else ""))
+        if c["verdict"] == "ambiguous":     # an ambiguous verdict writes neither effect: say the pair
+            verdict = f"{c['outcome']}: {c['named']} or {c['ambiguous_with']}, neither written"
+        else:
+            verdict = c["outcome"] + ": " + (c["verdict"] if c["verdict"] == "none" else ", ".join(c["named_effects"]))
         if c.get("cautions"):
             verdict += " (caution)"
         checks = c.get("value_check", {})
@@ -171,8 +172,8 @@ def _unit(name: str) -> str:
 def ha_table(res: dict) -> str:
     """Verdict, candidates, baseline prior, test-split figures next to Table VIII, noise, bound."""
     verdict = res["verdict"] + ("" if res["verdict"] == "none" else f": {', '.join(res['named_effects'])}")
-    if res["ambiguous_with"]:
-        verdict += f" or {res['ambiguous_with']}"
+    if res["ambiguous_with"]:     # an ambiguous verdict writes neither effect: say the pair
+        verdict = f"ambiguous: {res['named']} or {res['ambiguous_with']}, neither written"
     lines = [f"Data: {res['n_samples']} samples ({res['data_file']}, SHA-256 {res['data_sha256'][:12]}...); "
              f"{res['split']}; buffer {res['buffer']}.", "", f"**Verdict: {verdict}.**"]
     if res.get("separated_by") and res["ambiguous_with"]:
