@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from ctrplan.discrepancy.options import DiscrepancyOptions
+from test_discrepancy_history_effects import _split  # a split of development samples only, as GroupKFold deals it
 from ctrplan.discrepancy.verdict.separability import (INSEPARABLE_CORRELATION, INSEPARABLE_VIF, displacement_field,
                                                        separability)
 
@@ -63,29 +64,6 @@ def test_separability_skips_failed_samples_and_refuses_mismatched_shapes():
     with pytest.raises(ValueError, match="threshold"):
         separability("a", "b", base, base, base, threshold=1.5)
     assert json.loads(json.dumps(s.as_dict()))["separable"] is False
-
-
-def _split(units, n_folds=10):
-    """A split of development samples only: units dealt round-robin into folds."""
-    from ctrplan.choices import SplitUnit
-    from ctrplan.discrepancy.measured.data import MeasuredData
-    from ctrplan.discrepancy.measured.split import DataSplit, SplitRule
-    from ctrplan.history import MotionRecord
-
-    k = units.size
-    z = np.zeros((k, 2))
-    data = MeasuredData(alpha=z, beta=z, tip=np.zeros((k, 3)), tangent=None, eta=np.zeros((k, 1), int),
-                        translation_last=np.zeros((k, 1), bool), sequence=np.zeros(k, int), config_id=np.arange(k),
-                        subset=None, time=None, file="toy.csv", frame="robot", record=MotionRecord(z, z),
-                        rows=np.arange(k), given_eta=np.zeros((k, 1), int))
-    n_units = int(np.unique(units).size)
-    rule = SplitRule(n_units=n_units, unit_kind=SplitUnit.TIME_BLOCK, block_samples=PER_UNIT, blocks_asked=True,
-                     n_test_units=0, n_test_samples=0, test_fraction=0.0, test_at_minimum=False,
-                     n_development_units=n_units, n_development_samples=k, recut_block=None, n_folds=n_folds,
-                     folds_asked=True, subset_ignored=False)
-    return DataSplit(rule=rule, units=units, unit_kind=SplitUnit.TIME_BLOCK, block_samples=PER_UNIT,
-                     test_rows=np.zeros(k, bool), fold=units % n_folds, n_folds=n_folds, max_fit_samples=k, seed=0,
-                     data=data)
 
 
 def _errors(residual):
