@@ -10,11 +10,23 @@ T-RO 35(2) 2019). The truth's tube parameters (in-plane precurvatures and bendin
 ratios) are 5-15 % away from the base file's, the way a real tube set differs from its drawing;
 the tracker noise is 0.5 mm rms, white or AR(1) (phi 0.6 or 0.85 per sample); the hidden effects
 are none (a control), one, or two at once, drawn from drive backlash, tracker time offset,
-torsional friction, gradually developing friction and off-plane precurvature, each with a size
-from 10 to 150 % of its typical range (:data:`SIZE_RANGE`). The workflow runs with its default
-options (every registered candidate) from the base file without the effects.
+torsional friction, gradually developing friction and off-plane precurvature. Every parameter of
+a hidden effect (each rotating drive's backlash, each tube's off-plane precurvature, each pair's
+friction coefficient) has its own size, log-uniform from 10 % to 5 times its typical range
+(:data:`SIZE_RANGE`; of the half-width for a range symmetric about zero, with a random sign), so
+that a case can lie far outside the range the workflow calls typical and beyond a fit's limit.
+Half the cases hide one effect, a third two and a sixth none (:data:`KIND_CYCLE`). The workflow
+runs with its default options (every registered candidate) from the base file without the
+effects.
 
-    python benchmarks/bench_discrepancy_sweep.py [--cases 50] [--first-seed 2000] [--jobs 2]
+How large each hidden effect is on the record (:func:`effect_displacements`): the reference
+synthesizer makes the case's record again without that effect (and without noise; a two-effect
+case keeps the other), and the effect's signal-to-noise ratio is the rms over the samples of the
+3-D tip displacement between the two noise-free records, over the noise's rms length. Friction
+and gradual friction are removed by zero friction coefficients (the clearance model throughout),
+so that the ratio is the friction's own and not the clearance model's.
+
+    python benchmarks/bench_discrepancy_sweep.py [--cases 100] [--first-seed 2000] [--jobs 2]
                                                  [--run-first SEED ...]
                                                  [--scheduler tcp://host:8786]
                                                  [--out out/bench-discrepancy-sweep]
@@ -24,10 +36,12 @@ options (every registered candidate) from the base file without the effects.
 Each case is a folder under ``--out`` (the workflow's log in ``workflow.log``; its stages are reused when the sweep is run again
 after an interruption) and a line of ``cases.jsonl`` there; finished cases are not run again. The
 results file is rewritten after every case with the cases finished so far (``cases`` of
-``cases_planned``). ``--synthesize-only`` makes every case's data (``data.csv`` in its folder; the
-reference synthesizer takes up to half an hour for a three-tube case), the cases on ``--jobs``
+``cases_planned``). ``--synthesize-only`` makes every case's data and its effects' signal-to-noise
+ratios (``data.csv``, ``snr.json`` and ``plan.json`` in its folder; the reference synthesizer
+takes up to half an hour for a three-tube case), the cases on ``--jobs``
 processes at once (or on the ``--scheduler``'s workers), and stops, so that another process or
-machine can make the data while the cases run; a case whose data exists does not make it again.
+machine can make the data while the cases run; a case whose data exists for its present plan
+does not make it again (a case folder or a recorded case of another plan is made and run again).
 With ``--scheduler`` the cases run on the Dask workers of that cluster (each with ``--jobs``
 processes), else one after the other here. ``--run-first`` runs the cases of the given seeds
 before the others (the cases themselves do not change): until all planned cases are finished,
@@ -73,8 +87,8 @@ Every outcome's rate has a two-sided 90 % Clopper-Pearson interval. Targets, eac
 false or null (no such cases) in the results file: wrong names (controls included) below 5 % and
 the interval's upper end below 10 %; the truth named alone (right, or right name with a value off)
 in at least 80 % of the clear one-effect cases; both effects named in at least half of the clear
-two-effect cases. A case is clear when every hidden effect is above 30 % of its typical range
-(:data:`CLEAR_SIZE`).
+two-effect cases. A case is clear when every hidden effect moves the tip by at least the noise:
+signal-to-noise ratio at least 1 (:data:`CLEAR_SNR`, fixed before any case was run).
 """
 
 from __future__ import annotations
@@ -86,6 +100,7 @@ import json
 import logging
 import math
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -96,17 +111,17 @@ ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = {"pair": ROOT / "model" / "ha2019-table1-tube-pair.toml",
           "three-tube": ROOT / "model" / "ha2019-table7-calibrated.toml",
           "table5-pair": ROOT / "model" / "ha2019-table5-path-history-pair.toml"}
-#: The robot of case i is ROBOT_CYCLE[i % 5] and its kind KIND_CYCLE[(i // 5) % 5]: 60 % of the
-#: cases on the tube pair, 20 % on each of the others; 60 % with one effect, 20 % with two, 20 %
-#: controls, every robot with every kind; the first 15 cases hold five of each of one effect,
-#: control and one effect again, so that a shorter run still sees controls.
+#: The robot of case i is ROBOT_CYCLE[i % 5] and its kind KIND_CYCLE[(i // 5) % 6]: 60 % of the
+#: cases on the tube pair, 20 % on each of the others; of 30 cases 15 with one effect, 10 with
+#: two, 5 controls, every robot with every kind; the first 15 cases hold five of each kind, so
+#: that a shorter run still sees every kind.
 ROBOT_CYCLE = ("pair", "pair", "pair", "three-tube", "table5-pair")
-KIND_CYCLE = ("one", "control", "one", "two", "one")
+KIND_CYCLE = ("one", "two", "control", "one", "two", "one")
 KINDS = ("control", "one", "two")
 EFFECTS = ("backlash", "time_offset", "friction", "gradual_friction", "offplane")
-#: Size of a hidden effect: uniform in this share of its typical range (of the half-width for a
-#: range symmetric about zero, with a random sign).
-SIZE_RANGE = (0.1, 1.5)
+#: Size of each parameter of a hidden effect: log-uniform in this share of its typical range (of
+#: the half-width for a range symmetric about zero, with a random sign).
+SIZE_RANGE = (0.1, 5.0)
 #: Relative error of every baseline tube parameter of the truth against the base file.
 MISSPECIFICATION = (0.05, 0.15)
 NOISE_M = 0.5e-3
@@ -115,9 +130,10 @@ SAMPLES = 500
 OUTCOMES = ("right", "right name, value off", "partly right", "ambiguous", "wrong", "nothing")
 #: Outcomes in which the hidden effects are named, alone, with an unambiguous verdict.
 NAMED_ALONE = ("right", "right name, value off")
-#: Cases whose hidden effects are all above this share of their typical range count for the
-#: targets on finding the truth.
-CLEAR_SIZE = 0.3
+#: Cases whose hidden effects all reach this signal-to-noise ratio (rms tip displacement of the
+#: effect over the noise's rms length, :func:`effect_displacements`) count for the targets on
+#: finding the truth.
+CLEAR_SNR = 1.0
 #: A written value is right within this many standard errors of the true value ...
 VALUE_STDERRS = 3.0
 #: ... or within this share of it.
@@ -140,9 +156,16 @@ def _draw_size(spec, share, rng) -> float:
     return float(lo + share * (hi - lo))
 
 
+def _draw_share(rng) -> float:
+    """A size as a share of the typical range, log-uniform in :data:`SIZE_RANGE`."""
+    lo, hi = SIZE_RANGE
+    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+
 def plan_case(seed: int, index: int) -> dict:
-    """The truth of case ``index`` (seeded by ``seed``): robot, hidden effects with their sizes (SI
-    and as a share of the typical range), tube-parameter errors, noise."""
+    """The truth of case ``index`` (seeded by ``seed``): robot, hidden effects with their sizes (SI,
+    and each parameter's share of its typical range in ``size_shares``, keyed like ``hidden``),
+    tube-parameter errors, noise."""
     import numpy as np
 
     from ctrplan.discrepancy.fits.parameters import parameter
@@ -163,23 +186,22 @@ def plan_case(seed: int, index: int) -> dict:
         chosen = []
     hidden, shares = {}, {}
     rotating = sorted({j.tube for j in robot.joints if j.kind == "rotation"})
+
+    def draw(key, specs):
+        shares[key] = {k: _draw_share(rng) for k in specs}
+        hidden[key] = {k: _draw_size(s, shares[key][k], rng) for k, s in specs.items()}
+
     for e in chosen:
-        share = float(rng.uniform(*SIZE_RANGE))
-        shares[e] = share
         specs = {p.name: p for p in REGISTRY[e].parameters(robot)}
         if e == "backlash":
-            hidden[e] = {f"backlash_{i + 1}": _draw_size(specs[f"backlash_{i + 1}"], share, rng) for i in rotating}
-        elif e == "time_offset":
-            hidden[e] = {"time_offset": _draw_size(specs["time_offset"], share, rng)}
-        elif e == "offplane":
-            hidden[e] = {k: _draw_size(s, share, rng) for k, s in specs.items()}
+            draw(e, {f"backlash_{i + 1}": specs[f"backlash_{i + 1}"] for i in rotating})
+        elif e in ("time_offset", "offplane"):
+            draw(e, specs)
         elif e == "friction":
-            fs = {p.name: p for p in REGISTRY["friction"].parameters(robot)}
-            hidden[e] = {k: _draw_size(s, share, rng) for k, s in fs.items()}
+            draw(e, {p.name: p for p in REGISTRY["friction"].parameters(robot)})
         elif e == "gradual_friction":
-            fs = {p.name: p for p in REGISTRY["friction"].parameters(robot)}
-            hidden["friction"] = {k: _draw_size(s, float(rng.uniform(0.3, 1.0)), rng) for k, s in fs.items()}
-            hidden[e] = {"friction_angle": _draw_size(specs["friction_angle"], share, rng)}
+            draw("friction", {p.name: p for p in REGISTRY["friction"].parameters(robot)})
+            draw(e, {"friction_angle": specs["friction_angle"]})
     from ctrplan.discrepancy.setup import default_baseline_parameters
 
     names = default_baseline_parameters(robot, register=False)
@@ -362,42 +384,95 @@ def rescore(case: dict) -> dict:
     """A recorded case (a line of ``cases.jsonl``) scored by the present rules: ``outcome`` and
     ``value_check`` replaced; a case recorded without ``written_stderr`` has only the share rule."""
     check = value_check(case, case["named_effects"], case["written"], case.get("written_stderr"))
-    return {**case, "value_check": check,
+    return {**case, "value_check": check, "clear": _clear(case),
             "outcome": outcome(case["truth"], case["verdict"], case["named_effects"], case["named"], check)}
 
 
-def synthesize_case(seed: int, index: int, out: str) -> tuple:
-    """The base file and the data of case ``index`` (seeded by ``seed``; reference synthesizer) in
-    its folder under ``out``, the data made unless an earlier run made it: ``(plan, base file,
-    data file, seconds spent making the data)``."""
+def _synthesize(plan: dict, noise: bool = True) -> tuple:
+    """The reference synthesizer's record of the plan's truth: ``(base robot, frame, truth)``
+    (:func:`synth_reference.synthesize_reference`; without noise when ``noise`` is false)."""
     from ctrplan_reference.synth_reference import synthesize_reference
 
+    base, truth = _truth_robot(plan)
+    hidden = plan["hidden"]
+    kw = {}
+    if "backlash" in hidden:
+        kw["backlash"] = tuple(hidden["backlash"].get(f"backlash_{i + 1}", 0.0) for i in range(base.n_tubes))
+    if "time_offset" in hidden:
+        kw["time_offset"] = hidden["time_offset"]["time_offset"]
+    if "friction" in hidden:
+        kw["mu"] = truth.friction_coefficients
+    if "gradual_friction" in hidden:
+        kw["friction_angle"] = hidden["gradual_friction"]["friction_angle"]
+    if not noise:
+        kw.update(noise_position_rms=0.0, noise_angle_rms=0.0)
+    else:
+        kw["noise_position_rms"] = plan["noise_m"]
+    frame, record = synthesize_reference(truth, samples=SAMPLES, seed=plan["seed"], noise_ar1=plan["ar1"], **kw)
+    return base, frame, record
+
+
+def without(plan: dict, effect: str) -> dict:
+    """The plan with the hidden ``effect`` removed; the motion, the tube errors and the other
+    effects stay. Friction and gradual friction are removed by setting every friction
+    coefficient to zero: the truth stays the contact model (the clearance model throughout), so
+    that what is removed is the friction's own displacement and not the clearance model's."""
+    hidden = {k: v for k, v in plan["hidden"].items() if k != effect}
+    if effect in ("friction", "gradual_friction"):
+        hidden.pop("gradual_friction", None)
+        hidden["friction"] = {k: 0.0 for k in plan["hidden"]["friction"]}
+    return {**plan, "hidden": hidden, "truth": [e for e in plan["truth"] if e != effect]}
+
+
+def effect_displacements(plan: dict, tip) -> dict:
+    """``{effect: {"rms_m", "snr", "samples"}}`` of every hidden effect: the rms over the samples
+    of the 3-D distance [m] between the noise-free tip ``tip`` (K, 3) of the case's record (robot
+    frame, NaN where its solve failed) and the noise-free tip of the record made again without that
+    effect (:func:`without`, the same motion), over the samples solved in both; ``snr`` is that rms
+    over the noise's rms length (``plan["noise_m"]``)."""
+    import numpy as np
+
+    out = {}
+    for e in plan["truth"]:
+        _, _, record = _synthesize(without(plan, e), noise=False)
+        d = np.linalg.norm(np.asarray(tip, float) - record["tip"], axis=1)
+        d = d[np.isfinite(d)]
+        rms = float(np.sqrt(np.mean(d ** 2))) if d.size else float("nan")
+        out[e] = {"rms_m": rms, "snr": rms / plan["noise_m"], "samples": int(d.size)}
+    return out
+
+
+def synthesize_case(seed: int, index: int, out: str) -> tuple:
+    """The base file, the data and the effects' signal-to-noise ratios of case ``index`` (seeded
+    by ``seed``; reference synthesizer) in its folder under ``out``, made unless an earlier run
+    made them for the same plan (``plan.json`` there; a folder of another plan is made again):
+    ``(plan with "snr" and "clear", base file, data file, seconds spent making them)``."""
     from ctrplan.io.robot_file import robot_to_toml
 
     plan = plan_case(seed, index)
     folder = Path(out) / f"case-{seed}"
     folder.mkdir(parents=True, exist_ok=True)
-    base, truth = _truth_robot(plan)
+    stored = folder / "plan.json"
+    data, snr_file = folder / "data.csv", folder / "snr.json"
+    if not stored.exists() or json.loads(stored.read_text()) != plan:
+        for f in (data, snr_file, stored, folder / "workflow.log"):
+            f.unlink(missing_ok=True)
+        shutil.rmtree(folder / "report", ignore_errors=True)     # stages of another plan's run
+        stored.write_text(json.dumps(plan, indent=1) + "\n")
+    base, _ = _truth_robot(plan)
     model = folder / "base.toml"
     model.write_text(robot_to_toml(base, header="sweep base file: nominal tube parameters, candidate effects off"))
-    data = folder / "data.csv"
     t0 = time.perf_counter()
-    hidden = plan["hidden"]
-    if not data.exists():
-        kw = {}
-        if "backlash" in hidden:
-            kw["backlash"] = tuple(hidden["backlash"].get(f"backlash_{i + 1}", 0.0) for i in range(base.n_tubes))
-        if "time_offset" in hidden:
-            kw["time_offset"] = hidden["time_offset"]["time_offset"]
-        if "friction" in hidden:
-            kw["mu"] = truth.friction_coefficients
-        if "gradual_friction" in hidden:
-            kw["friction_angle"] = hidden["gradual_friction"]["friction_angle"]
-        frame, _ = synthesize_reference(truth, samples=SAMPLES, seed=seed, noise_position_rms=plan["noise_m"],
-                                        noise_ar1=plan["ar1"], **kw)
+    if not (data.exists() and snr_file.exists()):
+        _, frame, record = _synthesize(plan)
+        snr = effect_displacements(plan, record["tip"])
         tmp = data.with_suffix(".tmp")
         frame.to_csv(tmp, index=False)
         tmp.replace(data)
+        snr_file.write_text(json.dumps(snr, indent=1) + "\n")
+    snr = json.loads(snr_file.read_text())
+    plan = {**plan, "snr": {e: v["snr"] for e, v in snr.items()}}
+    plan["clear"] = _clear(plan)
     return plan, model, data, time.perf_counter() - t0
 
 
@@ -475,8 +550,10 @@ def _rate(k: int, n: int) -> dict:
 
 
 def _clear(case: dict) -> bool:
-    """Every hidden effect of the case is above ``CLEAR_SIZE`` of its typical range."""
-    return bool(case["truth"]) and min(case["size_shares"].values()) > CLEAR_SIZE
+    """Every hidden effect of the case reaches :data:`CLEAR_SNR` (a case recorded without
+    signal-to-noise ratios is not clear)."""
+    snr = case.get("snr") or {}
+    return bool(case["truth"]) and all(snr.get(e, 0.0) >= CLEAR_SNR for e in case["truth"])
 
 
 def summarize(cases: list) -> dict:
@@ -501,7 +578,9 @@ def summarize(cases: list) -> dict:
             "by_kind": {k: counts([c for c in cases if c["kind"] == k]) for k in KINDS},
             "by_truth": {t: counts([c for c in cases if label(c) == t]) for t in truths},
             "rates": {o: _rate(sum(c["outcome"] == o for c in cases), n) for o in OUTCOMES},
-            "clear_size": CLEAR_SIZE, "value_rule": {"stderrs": VALUE_STDERRS, "share": VALUE_SHARE},
+            "clear_snr": CLEAR_SNR, "clear_cases": {k: sum(c["kind"] == k and _clear(c) for c in cases)
+                                                   for k in ("one", "two")},
+            "value_rule": {"stderrs": VALUE_STDERRS, "share": VALUE_SHARE},
             "targets": {
                 "wrong": {**wrong, "rate_below": WRONG_RATE_BELOW, "upper_below": WRONG_UPPER_BELOW,
                           "met": None if not n else wrong["rate"] < WRONG_RATE_BELOW
@@ -527,7 +606,7 @@ def sweep_code_digest() -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", type=int, default=50)
+    ap.add_argument("--cases", type=int, default=100)
     ap.add_argument("--first-seed", type=int, default=2000)
     ap.add_argument("--jobs", type=int, default=2, help="worker processes within a case")
     ap.add_argument("--scheduler", default=None, help="address of a Dask scheduler to run the cases on")
@@ -551,6 +630,9 @@ def main(argv=None):
         for line in log.read_text().splitlines():
             if line.strip():
                 c = json.loads(line)
+                plan = plan_case(c["seed"], c["index"])
+                if {k: c.get(k) for k in plan} != plan:      # recorded under another plan: run it again
+                    continue
                 if "written" not in c:   # a case recorded before the written values were: read its file
                     files = sorted((out / f"case-{c['seed']}" / "report").glob("*.toml"))
                     c["written"] = written_values(files[-1], c["named_effects"], c["fitted"]) if files else None

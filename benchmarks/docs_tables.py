@@ -84,7 +84,8 @@ def sweep_table(res: dict) -> str:
     t = s["targets"]
     rule = s["value_rule"]
     w, one, two = t["wrong"], t["clear_one_named"], t["clear_two_both_named"]
-    clear = f"every hidden effect above {100 * s['clear_size']:.0f} % of its typical range"
+    clear = (f"every hidden effect's signal-to-noise ratio (rms tip displacement over the noise's rms length) at "
+             f"least {s['clear_snr']:g}")
     lines += ["", f"A written value is right within {rule['stderrs']:g} standard errors (of the final model's "
                   f"development fit) or {100 * rule['share']:.0f} % of the true value. Targets:", "",
               f"- wrong names (a named effect not in the truth, an ambiguous verdict that writes an effect not in it, "
@@ -94,11 +95,13 @@ def sweep_table(res: dict) -> str:
               f"{_share(one)}; target at least {100 * one['at_least']:.0f} %: {_met(one['met'])};",
               f"- both effects named (right, or right names with a value off) in the two-effect cases with {clear}: "
               f"{_share(two)}; target at least {100 * two['at_least']:.0f} %: {_met(two['met'])}.", "",
-              "| seed | robot | truth (size, share of the typical range) | noise | verdict | written to the robot file "
-              "(against the truth) |", "|---|---|---|---|---|---|"]
+              f"Clear cases: {s['clear_cases']['one']} with one effect, {s['clear_cases']['two']} with two.", "",
+              "| seed | robot | truth (size, share of the typical range) | signal-to-noise | noise | verdict | written to "
+              "the robot file (against the truth) |", "|---|---|---|---|---|---|---|"]
     for c in res["cases"]:
-        hidden = "; ".join(f"{k} = {_value('', v, _unit(k))}" for e in c["hidden"].values() for k, v in e.items()) or "-"
-        shares = ", ".join(f"{e} {100 * v:.0f} %" for e, v in c["size_shares"].items())
+        hidden = "; ".join(f"{k} = {_value('', v, _unit(k))} ({100 * c['size_shares'][e][k]:.0f} %)"
+                           for e, group in c["hidden"].items() for k, v in group.items()) or "-"
+        snr = ", ".join(f"{e} {v:.1f}" for e, v in c["snr"].items()) + (" (clear)" if c["clear"] else "") or "-"
         noise = "white" if not c["ar1"] else f"AR(1) {c['ar1']:g}"
         if c["verdict"] == "ambiguous":     # an ambiguous verdict writes neither effect: say the pair
             verdict = f"{c['outcome']}: {c['named']} or {c['ambiguous_with']}, neither written"
@@ -110,8 +113,7 @@ def sweep_table(res: dict) -> str:
         written = ("(its robot file is missing)" if c["written"] is None else
                    "; ".join(f"{k} = {_value('', v, _unit(k))}" + _against(checks.get(k))
                              for e in c["written"].values() for k, v in e.items()) or "-")
-        lines.append(f"| {c['seed']} | {c['robot']} | {hidden}" + (f" ({shares})" if shares else "")
-                     + f" | {noise} | {verdict} | {written} |")
+        lines.append(f"| {c['seed']} | {c['robot']} | {hidden} | {snr} | {noise} | {verdict} | {written} |")
     return "\n".join(lines)
 
 
