@@ -422,3 +422,29 @@ def test_several_recordings_are_combined_as_separate_motions(tmp_path, monkeypat
     monkeypatch.setattr(disc, "load_measured_data", second_in_tracker_frame)
     with pytest.raises(DataFileError, match="different frames"):
         _combine_recordings(PAIR, paths, None, BagSelection(), tmp_path / "out2")
+
+
+def test_settings_given_reach_the_checks_and_the_predictions():
+    """A caller's ``settings`` (a coarser arc-length step) are the settings of the design's checks
+    and predictions: the design runs, its motion stays inside the limits of its bounded joints, and its
+    separation differs from the default step's by no more than the step changes the model.
+    Catches settings passed where the checker expects a bound map (the design then fails at its
+    first candidate)."""
+    from ctrplan.mechanics import ModelSettings
+
+    robot = load_robot(PAIR)
+    hyps = _pair_hypotheses(robot)
+    recorded = _sweep(robot, [[0.0], [0.5]])
+    drive = DriveLimits(250.0, np.array([1.0]), np.array([4.0]), np.array([40.0]), ("alpha_2",))
+    kw = dict(noise=SensorNoise(SIGMA), limits=ExperimentLimits(drive=drive, duration=8.0),
+              search=DesignSearch(n_random=0))
+    coarse = design_experiment(robot, recorded, hyps, settings=ModelSettings(ds=6e-3), **kw)
+    default = design_experiment(robot, recorded, hyps, **kw)
+    assert coarse.primitives
+    q = np.concatenate([p.waypoints for p in coarse.primitives])
+    bounded = [not j.periodic for j in robot.joints]
+    assert np.all(q[:, bounded] >= robot.joint_lower[bounded] - 1e-12)
+    assert np.all(q[:, bounded] <= robot.joint_upper[bounded] + 1e-12)
+    assert coarse.separation["designed"].keys() == default.separation["designed"].keys()
+    for pair, t in coarse.separation["designed"].items():
+        assert t == pytest.approx(default.separation["designed"][pair], rel=0.2)

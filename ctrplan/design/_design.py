@@ -393,7 +393,7 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
     # candidates pass the planner's compiled checker (limits, convergence, determinant test, collisions);
     # a primitive is appended only after the states along it, checked one by one with the multistart
     # search for other equilibria, pass too: a measured motion must not pass where the tubes can snap
-    quick = BatchValidityChecker(robot, collision, settings, check_stability=True)
+    quick = BatchValidityChecker(robot, collision, settings=settings, check_stability=True)
     checker = BatchValidityChecker(robot, reference=ValidityChecker(robot, collision, settings=settings,
                                                                     check_stability=True),
                                    resolution=CHECK_RESOLUTION)
