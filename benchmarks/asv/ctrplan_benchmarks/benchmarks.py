@@ -11,8 +11,20 @@ What they time (in-process unless said otherwise):
 - ``Discrepancy.time_workflow``: the discrepancy workflow on a small synthetic case (the Table I
   tube pair, 400 samples along a trajectory with a 0.2 s tracker lag hidden, two candidates,
   5 folds);
-- ``timeraw_*``: importing ctrplan and the first bound in a fresh interpreter (the compiled
-  kernels read from their cache).
+- ``Evaluate.time_*``: the work of ``ctrplan evaluate --jobs 1`` (``ctrplan.batch.evaluate_table``,
+  one process): the friction model (the full bound: every friction solution and the clearance
+  solution) on the paper's 4x4x4 grid and the standard model on the rows of Ha's measured
+  trajectory (Table II robot; skipped without ``../shared/data``);
+- ``CandidateFit.time_clearance_fit``: one discrepancy candidate's fit, the tube parameters and
+  the registration with the clearance model on 48 samples of Ha's measured trajectory (skipped
+  without the data);
+- ``Design.time_design``: one ``ctrplan.design.design_experiment`` search separating drive
+  backlash from torsional friction on the Table I tube pair (a 10-s motion after a 12-s
+  recording, no random comparison);
+- ``timeraw_*``: importing ctrplan, the first bound, and the Quick start's plan
+  (``ctrplan plan scenarios/obstacles.toml`` with its files: summary, plots, 3-D view) in a fresh
+  interpreter (the compiled kernels read from their cache; the plan's bound map read from the
+  shipped file).
 
 Run from the repository root: ``asv --config benchmarks/asv/asv.conf.json continuous --factor 1.15
 main HEAD`` (docs/benchmarks.md).
@@ -195,6 +207,139 @@ class Discrepancy:
                                      max_evaluations=100, prior_strengths=(0.03, float("inf")),
                                      max_calibration_samples=100, bound_samples=30, n_jobs=1)
         run_discrepancy(Path(folder) / "pair.toml", Path(folder) / "data.csv", out, options, progress=False)
+
+
+HA_DATA = REPO.parent / "shared" / "data" / "ha-three-tube-trajectory" / "jointTipTrajectory_measured.txt"
+
+
+class Evaluate:
+    """The work of ``ctrplan evaluate --jobs 1``: the full bound on the 4x4x4 grid, the standard
+    model on the measured trajectory's rows."""
+
+    timeout = 900
+    number = 1
+    repeat = (2, 5, 120.0)
+    warmup_time = 0.0
+
+    def setup(self):
+        from ctrplan.batch import evaluate_table
+        from ctrplan.io.robot_file import load_robot
+        from ctrplan.mechanics import ModelSettings
+
+        self.robot = load_robot(REPO / "model" / "ha2019-table2-nominal.toml")
+        self.settings = ModelSettings()
+        axes = [np.linspace(lo, hi, 4) for lo, hi in zip(self.robot.joint_lower, self.robot.joint_upper)]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(axes))
+        configs = [self.robot.configuration(q) for q in grid]
+        self.grid = (np.array([a for a, _ in configs]), np.array([b for _, b in configs]))
+        self.rows = None
+        if HA_DATA.exists():
+            from ctrplan.io.tables import load_ha_trajectory
+
+            frame = load_ha_trajectory(HA_DATA)
+            self.rows = (frame[[f"alpha_{i}" for i in (1, 2, 3)]].to_numpy(),
+                         frame[[f"beta_{i}" for i in (1, 2, 3)]].to_numpy())
+        self.evaluate_table = evaluate_table
+        evaluate_table(self.robot, self.grid[0][:1], self.grid[1][:1], "friction", self.settings, n_jobs=1)
+        evaluate_table(self.robot, self.grid[0][:1], self.grid[1][:1], "standard", self.settings, n_jobs=1)
+
+    def time_friction_grid(self):
+        self.evaluate_table(self.robot, *self.grid, "friction", self.settings, n_jobs=1)
+
+    def time_standard_trajectory_rows(self):
+        if self.rows is None:
+            raise NotImplementedError(f"no measured trajectory at {HA_DATA}")
+        self.evaluate_table(self.robot, *self.rows, "standard", self.settings, n_jobs=1)
+
+
+class CandidateFit:
+    """One candidate's fit: tube parameters and registration with the clearance model, 48 samples
+    of Ha's measured trajectory, the workflow's default budget of model evaluations."""
+
+    timeout = 900
+    number = 1
+    repeat = (2, 3, 120.0)
+    warmup_time = 0.0
+
+    def setup(self):
+        if not HA_DATA.exists():
+            raise NotImplementedError(f"no measured trajectory at {HA_DATA}")
+        from ctrplan.discrepancy.fits.calibrate import calibrate
+        from ctrplan.discrepancy.fits.fitoptions import FitRun, FitStart
+        from ctrplan.discrepancy.measured.data import load_measured_data
+        from ctrplan.discrepancy.options import DiscrepancyOptions
+        from ctrplan.discrepancy.setup import default_baseline_parameters
+        from ctrplan.io.robot_file import load_robot
+
+        robot = load_robot(REPO / "model" / "ha2019-table2-nominal.toml")
+        data = load_measured_data(HA_DATA, robot)
+        sub = data.take(np.linspace(0, data.n_samples - 1, 48).astype(int))
+        opts = DiscrepancyOptions()
+        register = data.frame == "tracker"
+        names = default_baseline_parameters(robot, register)
+        run = FitRun(settings=opts.settings(), uncertainty=False)
+
+        def fit(budget):
+            return calibrate(robot, sub, "clearance", names, start=FitStart(None, register=register),
+                             max_evaluations=budget, run=run)
+
+        self.fit, self.budget = fit, opts.max_contact_evaluations
+        fit(2)           # compiled kernels loaded
+
+    def time_clearance_fit(self):
+        self.fit(self.budget)
+
+
+class Design:
+    """One experiment design separating drive backlash from torsional friction (Table I pair)."""
+
+    timeout = 900
+    number = 1
+    repeat = (2, 3, 120.0)
+    warmup_time = 0.0
+
+    def setup(self):
+        import ctrplan.design as design
+        from ctrplan.discrepancy.measured.synth import Noise, SynthProtocol, synthesize
+        from ctrplan.io.robot_file import load_robot
+        from ctrplan.mechanics import ModelSettings
+
+        robot = load_robot(REPO / "model" / "ha2019-table1-tube-pair.toml").replace(friction_coefficients=(0.0,))
+        self.settings = ModelSettings(ds=6e-3)
+        made = synthesize(robot, {"backlash": {"backlash_2": np.deg2rad(3.0)}},
+                          protocol=SynthProtocol.trajectory(120), noise=Noise(position_rms=5e-4), seed=3,
+                          settings=self.settings)
+        folder = Path(tempfile.mkdtemp(prefix="ctrplan-asv-design-"))
+        made.frame.to_csv(folder / "data.csv", index=False)
+        from ctrplan.discrepancy.measured.data import load_measured_data
+
+        self.data = load_measured_data(folder / "data.csv", robot)
+        self.robot, self.design = robot, design
+        self.hypotheses = (
+            design.Hypothesis("backlash", "drive backlash", "standard", ("backlash_2",), np.array([np.deg2rad(3.0)]),
+                              ("backlash_2",)),
+            design.Hypothesis("friction", "torsional friction", "friction", ("mu_1",), np.array([0.3]), ("mu_1",)))
+        self.limits = design.ExperimentLimits(duration=10.0)
+        self.noise = design.SensorNoise(5e-4 / np.sqrt(3.0))
+
+    def time_design(self):
+        self.design.design_experiment(self.robot, self.data, self.hypotheses, noise=self.noise, limits=self.limits,
+                                      settings=self.settings, search=self.design.DesignSearch(n_random=0))
+
+
+def timeraw_quickstart_plan():
+    """The Quick start's plan with its files, through the command line's entry point."""
+    return f"""
+import os, shutil, tempfile
+from ctrplan.cli import main
+out = tempfile.mkdtemp(prefix="ctrplan-asv-quickstart-")
+os.chdir(out)
+try:
+    main(["plan", {str(REPO / "scenarios" / "obstacles.toml")!r}, "--out", out], standalone_mode=False)
+finally:
+    os.chdir("/")
+    shutil.rmtree(out, ignore_errors=True)
+"""
 
 
 def timeraw_import():
