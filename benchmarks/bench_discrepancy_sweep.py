@@ -505,6 +505,7 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
     written = written_values(res["updated_model_file"], final, fitted)
     scored = score_run(plan, res, written)
     return {**plan, "verdict": res["verdict"], "named": res["named_effect"], "ambiguous_with": res["ambiguous_with"],
+            "decision": decision_record(res["decision"], plan["truth"], final),
             "named_effects": final, "outcome": scored["outcome"], "fitted": fitted, "written": written,
             "written_stderr": scored["written_stderr"], "value_check": scored["value_check"],
             "cautions": [words.caution(c) for c in res["decision"]["cautions"]], "noise_consistent": res["noise"]["consistent"],
@@ -513,6 +514,18 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
             "prior_strength": res["baseline"]["prior_strength"], "synth_seconds": synth_s,
             "seconds": time.perf_counter() - t0, "stage_seconds": res.get("stage_seconds", {}),
             "source_sha256": res["provenance"]["source_sha256"]}
+
+
+def decision_record(decision: dict, truth: list, named: list) -> dict:
+    """What a case's verdict rests on, to say why a target is missed: the candidates that passed
+    the Holm gate, the eligible ones, the best, the level of the rule, the reasons (``why_not``)
+    for every hidden or named effect that has them, and the separability of the named effect
+    against the others (``{"a vs b": {"correlation", ...}}`` as the decision holds it)."""
+    return {"holm_passed": sorted(e for e, ok in decision.get("holm", {}).items() if ok),
+            "eligible": list(decision.get("eligible", [])), "best": decision.get("best"),
+            "level": (decision.get("rule") or {}).get("level"),
+            "why_not": {e: r for e, r in decision.get("why_not", {}).items() if r and (e in truth or e in named)},
+            "inseparable": decision.get("inseparable"), "separability": decision.get("separability", {})}
 
 
 def written_values(model_file, named, fitted) -> dict:

@@ -97,7 +97,7 @@ def sweep_table(res: dict) -> str:
               f"{_share(two)}; target at least {100 * two['at_least']:.0f} %: {_met(two['met'])}.", "",
               f"Clear cases: {s['clear_cases']['one']} with one effect, {s['clear_cases']['two']} with two.", "",
               "| seed | robot | truth (size, share of the typical range) | signal-to-noise | noise | verdict | written to "
-              "the robot file (against the truth) |", "|---|---|---|---|---|---|---|"]
+              "the robot file (against the truth) | why a hidden effect is not named |", "|---|---|---|---|---|---|---|---|"]
     for c in res["cases"]:
         hidden = "; ".join(f"{k} = {_value('', v, _unit(k))} ({100 * c['size_shares'][e][k]:.0f} %)"
                            for e, group in c["hidden"].items() for k, v in group.items()) or "-"
@@ -113,8 +113,36 @@ def sweep_table(res: dict) -> str:
         written = ("(its robot file is missing)" if c["written"] is None else
                    "; ".join(f"{k} = {_value('', v, _unit(k))}" + _against(checks.get(k))
                              for e in c["written"].values() for k, v in e.items()) or "-")
-        lines.append(f"| {c['seed']} | {c['robot']} | {hidden} | {snr} | {noise} | {verdict} | {written} |")
+        lines.append(f"| {c['seed']} | {c['robot']} | {hidden} | {snr} | {noise} | {verdict} | {written} | "
+                     f"{_why(c)} |")
     return "\n".join(lines)
+
+
+def _why(case: dict) -> str:
+    """Why each hidden effect that the written model lacks was not named (the case's decision
+    record): its first reason with its figure (p value, the candidates that beat it, the limit),
+    or that the pair was not separable (with the correlation of the two displacement fields)."""
+    rec = case.get("decision")
+    if not rec:
+        return "-"
+    out = []
+    for e in case["truth"]:
+        if e in case["named_effects"]:
+            continue
+        reasons = rec["why_not"].get(e) or []
+        if case["verdict"] == "ambiguous" and e in (case["named"], case["ambiguous_with"]):
+            pair = {case["named"], case["ambiguous_with"]}
+            rho = [v["correlation"] for k, v in rec.get("separability", {}).items() if set(k.split(" vs ")) == pair]
+            out.append(f"{e}: not separable" + (f" (rho {rho[0]:.3f})" if rho else ""))
+        elif not reasons:
+            out.append(f"{e}: eligible, another named" if e in rec["eligible"] else f"{e}: -")
+        else:
+            r = reasons[0]
+            detail = {"not significant": lambda: f"p {r['p_value']:.2g} at level {rec['level']:.2g}",
+                      "outperformed": lambda: "by " + ", ".join(sorted(r["outperformed_by"])),
+                      "at limit": lambda: "; ".join(r["limits"][:1])}.get(r["reason"], lambda: "")()
+            out.append(f"{e}: {r['reason']}" + (f" ({detail})" if detail else ""))
+    return "; ".join(out) or "-"
 
 
 def _truth_label(truth: str) -> str:

@@ -363,3 +363,28 @@ def test_signal_to_noise_of_a_time_offset_and_a_stale_case_folder(tmp_path):
     expected = np.sqrt(np.nanmean(d ** 2)) / plan["noise_m"]
     assert plan["snr"]["time_offset"] == pytest.approx(expected, rel=1e-12)
     assert expected > 0.1 and plan["clear"] == (expected >= sweep.CLEAR_SNR)
+
+
+def _load_docs_tables():
+    spec = importlib.util.spec_from_file_location("docs_tables", ROOT / "benchmarks" / "docs_tables.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_why_a_hidden_effect_is_not_named_reads_the_decision_record():
+    """The sweep table's reason per hidden effect the written model lacks: the first reason with its
+    figure, the correlation of an ambiguous pair, nothing for a named effect. Catches a reason
+    shown for the wrong effect or an ambiguous pair's correlation taken from another pair."""
+    why = _load_docs_tables()._why
+    rec = {"eligible": [], "level": 0.00125, "separability": {
+        "registration vs offplane": {"correlation": 0.987}, "registration vs backlash": {"correlation": 0.2}},
+        "why_not": {"backlash": [{"reason": "not significant", "p_value": 0.031},
+                                 {"reason": "outperformed", "outperformed_by": {"registration": 0.001}}]}}
+    two = {"truth": ["backlash", "offplane"], "named_effects": [], "verdict": "ambiguous", "named": "registration",
+           "ambiguous_with": "offplane", "decision": rec}
+    assert why(two) == "backlash: not significant (p 0.031 at level 0.0013); offplane: not separable (rho 0.987)"
+    named = {**two, "truth": ["backlash"], "named_effects": ["backlash"], "verdict": "named", "named": "backlash",
+             "ambiguous_with": None}
+    assert why(named) == "-"
+    assert why({**two, "decision": None}) == "-"
