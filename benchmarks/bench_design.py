@@ -48,6 +48,7 @@ from unittest import mock
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))  # the frozen reference ctrplan_reference (tests/, not installed)
 
 #: The cases: robot, truth, alternative, hidden values (SI), seed. Two robots (the Table I tube pair
 #: and the Table VII three-tube robot), three confusable pairs.

@@ -108,6 +108,7 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))  # the frozen reference ctrplan_reference (tests/, not installed)
 ROBOTS = {"pair": ROOT / "model" / "ha2019-table1-tube-pair.toml",
           "three-tube": ROOT / "model" / "ha2019-table7-calibrated.toml",
           "table5-pair": ROOT / "model" / "ha2019-table5-path-history-pair.toml"}

@@ -53,6 +53,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))  # the frozen reference ctrplan_reference (tests/, not installed)
 
 from ctrplan.io.robot_file import load_robot  # noqa: E402
 from ctrplan.mechanics import MECHANICS_VERSION  # noqa: E402

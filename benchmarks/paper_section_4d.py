@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -23,9 +24,11 @@ import numpy as np  # noqa: E402
 from ctrplan.io.robot_file import load_robot  # noqa: E402
 from ctrplan.mechanics import ModelSettings, all_eta, solve_clearance, solve_friction, solve_standard  # noqa: E402
 from ctrplan.mechanics._lie import angle_between  # noqa: E402
-from ctrplan_reference.paper_grids import PAPER_TIMES_S, grid_4x4x4  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))  # the frozen reference ctrplan_reference (tests/, not installed)
+
+from ctrplan_reference.paper_grids import PAPER_TIMES_S, grid_4x4x4  # noqa: E402
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robot", default=str(ROOT / "model" / "ha2019-table2-nominal.toml"))

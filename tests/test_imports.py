@@ -37,3 +37,21 @@ def test_contact_model_names_resolve_on_first_use():
     assert set(mechanics.__all__) <= set(dir(mechanics))
     with pytest.raises(AttributeError, match="no_such_solver"):
         mechanics.no_such_solver  # noqa: B018
+
+
+def test_the_frozen_reference_is_not_a_package_of_the_distribution():
+    """The packages the build puts into ctrplan's distribution (pyproject's
+    ``[tool.setuptools.packages.find]``, found as setuptools finds them) are ``ctrplan`` and its
+    subpackages only: the frozen reference of ``tests/ctrplan_reference`` is for the tests and the
+    benchmarks, which put ``tests/`` on their import path, not a top-level package of every
+    user's environment."""
+    import tomllib
+    from pathlib import Path
+
+    from setuptools import find_packages
+
+    root = Path(__file__).resolve().parents[1]
+    spec = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]["find"]
+    found = [pkg for where in spec["where"] for pkg in find_packages(str(root / where), include=spec["include"])]
+    assert "ctrplan" in found and "ctrplan.mechanics" in found
+    assert all(pkg == "ctrplan" or pkg.startswith("ctrplan.") for pkg in found), found
