@@ -43,8 +43,9 @@ processes at once (or on the ``--scheduler``'s workers), and stops, so that anot
 machine can make the data while the cases run; a case whose data exists for its present plan
 does not make it again (a case folder or a recorded case of another plan is made and run again).
 With ``--scheduler`` the cases run on the Dask workers of that cluster (each with ``--jobs``
-processes), else one after the other here. ``--run-first`` runs the cases of the given seeds
-before the others (the cases themselves do not change): until all planned cases are finished,
+processes), else one after the other here, a case whose data is made (by ``--synthesize-only``
+beside the run) before one whose data is still to make. ``--run-first`` runs the cases of the given
+seeds before the others (the cases themselves do not change): until all planned cases are finished,
 the results file holds a chosen subset, and the docs table names its seeds.
 
 What the truth and the reference share with the code under test: the robot description
@@ -618,6 +619,13 @@ def sweep_code_digest() -> str:
     return h.hexdigest()
 
 
+def data_ready(out, seed: int) -> bool:
+    """The data and the signal-to-noise ratios of case ``seed`` exist under ``out`` (made by an
+    earlier run or by ``--synthesize-only`` beside this one)."""
+    folder = Path(out) / f"case-{seed}"
+    return (folder / "data.csv").exists() and (folder / "snr.json").exists()
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=100)
@@ -708,7 +716,10 @@ def main(argv=None):
             for fut in as_completed(futures):
                 record(fut.result())
     else:
-        for s in todo:
+        todo = list(todo)
+        while todo:        # a case whose data is made runs before one whose data is still to make
+            s = next((x for x in todo if data_ready(out, x)), todo[0])
+            todo.remove(s)
             record(run_case(s, s - args.first_seed, str(out), args.jobs))
     cases = write_results()
     summary = summarize(cases)
