@@ -514,7 +514,8 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
             "noise_mm": res["noise"]["noise_rms_mm"],
             "test_mean_mm": {k: res["test_split"]["figures"][k]["mean_mm"]["value"] for k in ("file", "before", "after")},
             "prior_strength": res["baseline"]["prior_strength"], "synth_seconds": synth_s,
-            "seconds": time.perf_counter() - t0, "stage_seconds": res.get("stage_seconds", {}),
+            "seconds": time.perf_counter() - t0, "load_average": os.getloadavg()[0],
+            "stage_seconds": res.get("stage_seconds", {}),
             "source_sha256": res["provenance"]["source_sha256"]}
 
 
@@ -619,6 +620,19 @@ def sweep_code_digest() -> str:
     return h.hexdigest()
 
 
+def case_seconds(cases: list) -> dict:
+    """Seconds of the workflow per case (the data's making, where a case's run made it, left out):
+    total, mean, median, p90 and max, and the median of the cases' 1-minute load averages at their
+    end (None when no case recorded one)."""
+    import numpy as np
+
+    t = np.array([c["seconds"] - c.get("synth_seconds", 0.0) for c in cases], float)
+    load = [c["load_average"] for c in cases if c.get("load_average") is not None]
+    return {"total": float(t.sum()), "mean": float(t.mean()), "median": float(np.median(t)),
+            "p90": float(np.percentile(t, 90)), "max": float(t.max()),
+            "load_average_median": float(np.median(load)) if load else None}
+
+
 def data_ready(out, seed: int) -> bool:
     """The data and the signal-to-noise ratios of case ``seed`` exist under ``out`` (made by an
     earlier run or by ``--synthesize-only`` beside this one)."""
@@ -680,8 +694,7 @@ def main(argv=None):
             "command": f"python benchmarks/bench_discrepancy_sweep.py --cases {args.cases} --first-seed {args.first_seed}",
             "cases_planned": len(seeds), "samples": SAMPLES, "robots": {k: v.name for k, v in ROBOTS.items()},
             "summary": summarize(cases),
-            "case_seconds": {"total": sum(c["seconds"] for c in cases),
-                             "median": sorted(c["seconds"] for c in cases)[len(cases) // 2]},
+            "case_seconds": case_seconds(cases),
             "provenance": {**provenance(), "sweep_code_sha256": sweep_code_digest(),
                            "cases_source_sha256": sorted({c["source_sha256"] for c in cases})},
             "cases": cases}, indent=1) + "\n")

@@ -68,8 +68,11 @@ def sweep_table(res: dict) -> str:
     per_robot = ", ".join(f"{k}: {sum(c[o] for o in OUTCOMES)}" for k, c in s["by_robot"].items())
     lines = [f"{n} cases" + (f" of the {planned} planned, seeds {_seed_ranges([c['seed'] for c in res['cases']])}"
                              if planned != n else "") + f" ({per_robot}); "
-             f"cost {res['case_seconds']['total'] / 3600:.1f} h of cases (median {res['case_seconds']['median']:.0f} s "
-             f"a case).", "",
+             f"cost {res['case_seconds']['total'] / 3600:.1f} h of workflow runs (a case: mean "
+             f"{res['case_seconds']['mean']:.0f} s, median {res['case_seconds']['median']:.0f} s, p90 "
+             f"{res['case_seconds']['p90']:.0f} s, max {res['case_seconds']['max']:.0f} s"
+             + (f"; median load average {res['case_seconds']['load_average_median']:.1f}"
+                if res['case_seconds'].get('load_average_median') is not None else "") + ").", "",
              "| cases | " + " | ".join(OUTCOMES) + " |", "|---|" + "---|" * len(OUTCOMES)]
     lines.append("| all | " + " | ".join(str(s["by_outcome"][o]) for o in OUTCOMES) + " |")
     lines.append("| rate (90 % interval) | " + " | ".join(
