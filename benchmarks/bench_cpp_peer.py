@@ -118,6 +118,8 @@ def build(checkout: Path, folder: Path) -> Path:
 
     Raises
     ------
+    ValueError
+        ``folder`` is inside the repository.
     FileNotFoundError
         The checkout lacks one of :data:`SOURCES`.
     subprocess.CalledProcessError

@@ -300,6 +300,7 @@ class Design:
 
     def setup(self):
         import ctrplan.design as design
+        from ctrplan.discrepancy.measured.data import load_measured_data
         from ctrplan.discrepancy.measured.synth import Noise, SynthProtocol, synthesize
         from ctrplan.io.robot_file import load_robot
         from ctrplan.mechanics import ModelSettings
@@ -309,11 +310,9 @@ class Design:
         made = synthesize(robot, {"backlash": {"backlash_2": np.deg2rad(3.0)}},
                           protocol=SynthProtocol.trajectory(120), noise=Noise(position_rms=5e-4), seed=3,
                           settings=self.settings)
-        folder = Path(tempfile.mkdtemp(prefix="ctrplan-asv-design-"))
-        made.frame.to_csv(folder / "data.csv", index=False)
-        from ctrplan.discrepancy.measured.data import load_measured_data
-
-        self.data = load_measured_data(folder / "data.csv", robot)
+        with tempfile.TemporaryDirectory(prefix="ctrplan-asv-design-") as folder:
+            made.frame.to_csv(Path(folder) / "data.csv", index=False)
+            self.data = load_measured_data(Path(folder) / "data.csv", robot)
         self.robot, self.design = robot, design
         self.hypotheses = (
             design.Hypothesis("backlash", "drive backlash", "standard", ("backlash_2",), np.array([np.deg2rad(3.0)]),
