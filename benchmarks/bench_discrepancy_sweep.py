@@ -522,13 +522,16 @@ def run_case(seed: int, index: int, out: str, jobs: int) -> dict:
 def decision_record(decision: dict, truth: list, named: list) -> dict:
     """What a case's verdict rests on, to say why a target is missed: the candidates that passed
     the Holm gate, the eligible ones, the best, the level of the rule, the reasons (``why_not``)
-    for every hidden or named effect that has them, and the separability of the named effect
-    against the others (``{"a vs b": {"correlation", ...}}`` as the decision holds it)."""
+    for every hidden or named effect that has them, the separability of the named effect
+    against the others (``{"a vs b": {"correlation", ...}}`` as the decision holds it), and
+    whether two effects were named together that neither could be alone."""
     return {"holm_passed": sorted(e for e, ok in decision.get("holm", {}).items() if ok),
             "eligible": list(decision.get("eligible", [])), "best": decision.get("best"),
             "level": (decision.get("rule") or {}).get("level"),
             "why_not": {e: r for e, r in decision.get("why_not", {}).items() if r and (e in truth or e in named)},
-            "inseparable": decision.get("inseparable"), "separability": decision.get("separability", {})}
+            "inseparable": decision.get("inseparable"), "separability": decision.get("separability", {}),
+            "named_jointly": any(n.get("kind") == "named jointly" for n in decision.get("notes") or []
+                                 if isinstance(n, dict))}
 
 
 def written_values(model_file, named, fitted) -> dict:
@@ -652,6 +655,8 @@ def main(argv=None):
                     help="run the cases of these seeds (of the planned ones) before the others")
     ap.add_argument("--synthesize-only", action="store_true",
                     help="make the data of the planned cases not made yet, run no workflow, write no results")
+    ap.add_argument("--ready-only", action="store_true",
+                    help="run only the planned cases whose data is made; the others stay planned")
     ap.add_argument("--results-only", action="store_true",
                     help="rewrite the results file from the finished cases, rescored by the present rules, "
                          "without running any")
@@ -679,6 +684,8 @@ def main(argv=None):
         ap.error(f"--run-first: seeds {unknown} are not among the planned {seeds[0]}..{seeds[-1]}")
     first = [s for s in args.run_first if s not in done]
     todo = first + [s for s in seeds if s not in done and s not in first]
+    if args.ready_only:
+        todo = [s for s in todo if data_ready(out, s)]
     print(f"{len(seeds) - len(todo)} of {len(seeds)} cases finished earlier, {len(todo)} to run; load average "
           f"{os.getloadavg()[0]:.2f}", flush=True)
     t0 = time.perf_counter()

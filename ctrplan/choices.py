@@ -195,13 +195,15 @@ class DecisionNoteKind(StrEnum):
     """What a note of the discrepancy verdict records: a candidate that improves significantly
     but is not named, a containing candidate passed over for the simpler one it contains, an
     ambiguous pair (two eligible candidates, or two whose fitted tip displacement fields the
-    recorded motion cannot separate), or a best explanation that cannot be named."""
+    recorded motion cannot separate), a best explanation that cannot be named, or two effects
+    named together that neither could be alone."""
 
     SIGNIFICANT_NOT_NAMED = "significant, not named"
     SIMPLER_NAMED = "simpler named"
     AMBIGUOUS = "ambiguous"
     NOT_SEPARABLE = "not separable"
     BEST_NOT_NAMED = "best, not named"
+    NAMED_JOINTLY = "named jointly"
 
 
 class CautionKind(StrEnum):

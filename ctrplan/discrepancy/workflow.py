@@ -24,7 +24,9 @@ mm + deg of Ha, Fagogenis & Dupont 2019, doi:10.1109/TRO.2018.2878906):
    strategy and cross-validated;
 7. :func:`~ctrplan.discrepancy.verdict.decision.name_effect`: the verdict (named, ambiguous or none);
 8. :func:`~ctrplan.discrepancy.fits.pairs.fit_second_effect`: a second effect fitted together with
-   it, compared in both directions;
+   it, compared in both directions; when nothing is named, pairs started from the best explanation,
+   both effects named together when the pair improves on the baseline at the strictest step of the
+   naming rule's family and each adds to the other (:func:`~ctrplan.discrepancy.fits.pairs.joint_naming`);
 9. :func:`~ctrplan.discrepancy.outputs.output.evaluate_test_split`: the final model's gain on the test
    split, with intervals (the only use of the test split for a decision's figures);
 10. :func:`~ctrplan.discrepancy.verdict.envelope.predict_with_history`: the history-aware prediction and
@@ -66,7 +68,7 @@ from .options import DiscrepancyOptions
 from .outputs.output import (PredictionCheck, Reproduction, TestSplit, UpdatedModel, check_reproduction, evaluate_test_split,
                      final_candidate, final_parameters, log_blocks, log_noise, log_pilot, log_split, log_verdict,
                      run_cautions, validate_prediction, write_updated_model)
-from .fits.pairs import Combination, fit_second_effect
+from .fits.pairs import Combination, fit_second_effect, joint_naming
 from .setup import DiscrepancySetup, load_inputs
 from .verdict.signatures import diagnose_residuals
 from .measured.split import DataSplit, choose_blocks, split_samples
@@ -329,6 +331,10 @@ def run_discrepancy(robot_path, data_path, out_dir, options: DiscrepancyOptions 
         log_verdict(naming, noise)
     with clock.stage("second_effect"):
         combination = fit_second_effect(setup, split, baseline, contact, naming, options, progress)
+        joint = joint_naming(naming, combination)
+        if joint is not naming:
+            naming = joint
+            log_verdict(naming, noise)
     with clock.stage("test_split"):
         test = evaluate_test_split(setup, split, baseline, naming, combination, options, progress)
     with clock.stage("prediction"):

@@ -1,18 +1,25 @@
 """Stage 8 of the discrepancy workflow: a second effect fitted together with the named one, and
 whether either adds to the other (nested comparisons in both directions, cross-validated over the
-same folds as every candidate; :mod:`~ctrplan.discrepancy.fits.fitting`)."""
+same folds as every candidate; :mod:`~ctrplan.discrepancy.fits.fitting`).
+
+When stage 7 names nothing, two missing effects may each leave the other's residual in its own
+out-of-fold errors, so that neither alone improves on the baseline consistently over the folds.
+The same stage then starts from the best explanation (:func:`joint_start`) and names a pair only
+when the pair improves on the baseline at the strictest step of stage 7's Holm family and each
+of its effects adds to the other (:func:`pair_decision` with ``joint_level``); both effects are
+then named together (:func:`joint_naming`)."""
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Mapping
 
 import numpy as np
 
 from ..._log import progress_level
-from ...choices import FitNoteKind, NotPairedReason, Verdict
+from ...choices import CautionKind, DecisionNoteKind, FitNoteKind, NoEffectCase, NotNamedReason, NotPairedReason, Verdict
 from ...effects import REGISTRY
 from ...models import MODEL_INFO
 from .calibrate import CalibrationResult, calibrate
@@ -24,10 +31,10 @@ from .gridsearch import grid_search
 from ..options import DiscrepancyOptions
 from ..setup import DiscrepancySetup, effect_parameters, reported_parameters
 from ..measured.split import DataSplit
-from ..verdict.reasons import FitNote, NotPaired
+from ..verdict.reasons import Caution, DecisionNote, FitNote, NotPaired
 from ..verdict.statistics import holm
 
-__all__ = ["Combination", "fit_second_effect", "first_vanishes", "pair_decision"]
+__all__ = ["Combination", "fit_second_effect", "first_vanishes", "pair_decision", "joint_start", "joint_naming"]
 
 logger = logging.getLogger(__name__)
 
@@ -55,6 +62,15 @@ class Combination:
         (a pair not tried counts with p = 1).
     significance : float
         The level of the rule a pair is named by (:func:`fit_second_effect`) [-].
+    joint : bool
+        Stage 7 named nothing and ``first`` is its best explanation (:func:`joint_start`): a
+        pair named here names both of its effects.
+    joint_level : float or None
+        With ``joint``: the level at which a pair must improve on the baseline [-] (stage 7's
+        level over the number of candidates it tried alone).
+    against_baseline : mapping of str to Comparison
+        With ``joint``: second effect -> the pair's out-of-fold Eq. (49) residuals against the
+        baseline's (positive: the pair better) [mm + deg]; empty otherwise.
     """
 
     first: str
@@ -66,6 +82,9 @@ class Combination:
     significance: float
     dropped: str | None = None
     replaced_by: str | None = None
+    joint: bool = False
+    joint_level: float | None = None
+    against_baseline: Mapping = field(default_factory=lambda: MappingProxyType({}))
 
 
 def _fit_pair(ctx) -> CalibrationResult:
@@ -146,12 +165,22 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
     second effect alone is eligible in stage 7; the second effect alone is then the final model.
     Otherwise the named effect alone stays the final model, with a note of why.
 
+    When stage 7 named nothing, the same search starts from its best explanation A when
+    :func:`joint_start` allows it (a *joint* search). The rule is then stage 7's: every
+    comparison at its level (``naming.decision.rule.level``, lowered where the folds are not kept
+    apart), and a pair is named only when, besides both nested comparisons, its out-of-fold error
+    is significantly lower than the baseline's at that level divided by the number of candidates
+    stage 7 tried alone (the strictest step of its Holm family: A was chosen after those tests,
+    so the pair may not be judged more leniently than any of them). Nothing is dropped: B alone
+    is not eligible (stage 7 named nothing).
+
     Parameters
     ----------
     setup : DiscrepancySetup
     split : DataSplit
     baseline : Baseline
-        Stage 3 (its prior is kept in the pair fits).
+        Stage 3 (its prior is kept in the pair fits; its out-of-fold errors are a joint pair's
+        reference).
     contact : CrossValidated or None
         Stage 6a (unused: a pair refits its tube parameters from the named effect's fit).
     naming : Naming
@@ -163,11 +192,17 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
     Returns
     -------
     Combination or None
-        None when no effect is named or the verdict is ambiguous (which effect is there is still
-        open; a second effect on top of either would answer another question).
+        None when the verdict is ambiguous (which effect is there is still open; a second effect
+        on top of either would answer another question), or when no effect is named and
+        :func:`joint_start` gives none.
     """
-    named = naming.named
-    if not named or naming.verdict == Verdict.AMBIGUOUS:
+    if naming.verdict == Verdict.AMBIGUOUS:
+        return None
+    named, joint = naming.named, False
+    if not named:
+        named = joint_start(naming)
+        joint = named is not None
+    if not named:
         return None
     robot, data = setup.robot, setup.data
     candidates = naming.candidates
@@ -215,21 +250,87 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
         tried[e] = replace(c, reverse=compare(split, candidates[e].r, cv.r))
     eligible = {e: bool(c.eligible) for e, c in candidates.items()}
     vanishes = {e: first_vanishes(robot, named, c.parameters) for e, c in tried.items()}
-    out, second, dropped, replaced, notes = pair_decision(named, tried, family, naming.decision.worse_than,
-                                                          options.significance, eligible=eligible, vanishes=vanishes)
+    alpha, joint_level, against = options.significance, None, {}
+    if joint:
+        alpha = naming.decision.rule.level
+        joint_level = alpha / max(len(naming.decision.family), 1)
+        against = {e: compare(split, baseline.r, c.cv.r) for e, c in tried.items()}
+    out, second, dropped, replaced, notes = pair_decision(named, tried, family, naming.decision.worse_than, alpha,
+                                                          eligible=eligible, vanishes=vanishes,
+                                                          joint_level=joint_level, against_baseline=against)
     level = progress_level()
     for e, c in out.items():
         imp, rev = c.improvement, c.reverse
+        base = (f"; than the baseline by {100 * against[e].reduction:.0f} %, p = {against[e].p_value:.3g}"
+                if e in against else "")
         logger.log(level, f"  {c.label}: " + ", ".join(display_value(n, v, c.units[n]) for n, v in c.shown.items())
                    + f"; error lower than {first.label} alone by {100 * imp.reduction:.0f} %, p = {imp.p_value:.3g}; "
                      f"than {candidates[e].label} alone by {100 * rev.reduction:.0f} %, p = {rev.p_value:.3g}"
-                   + ("" if c.cv.converged else "; a fit NOT converged"))
+                   + base + ("" if c.cv.converged else "; a fit NOT converged"))
     for line in notes:
         logger.log(level, line)
     return Combination(first=named, first_label=first.label, named=second, tried=MappingProxyType(out),
                        not_tried=MappingProxyType(not_tried), family=tuple(family),
-                       significance=options.significance, dropped=dropped,
-                       replaced_by=replaced)
+                       significance=alpha, dropped=dropped, replaced_by=replaced, joint=joint,
+                       joint_level=joint_level, against_baseline=MappingProxyType(against))
+
+
+def joint_start(naming) -> str | None:
+    """The effect a joint search of stage 8 starts from when stage 7 named nothing: its best
+    explanation (lowest out-of-fold error), when that lowers the baseline's error on average, no
+    value of it sits at its limit, no other candidate explains the data significantly better, the
+    baseline's fits converged, and the baseline's residual is not consistent with the sensor
+    noise (``NoEffectCase.NOISE``: nothing is left to explain).
+
+    Parameters
+    ----------
+    naming : Naming
+        Stage 7.
+
+    Returns
+    -------
+    str or None
+        The effect, or None (an effect was named, the verdict is ambiguous, or a condition fails).
+    """
+    d = naming.decision
+    if d.verdict != Verdict.NONE or d.best is None or d.no_effect_case == NoEffectCase.NOISE:
+        return None
+    best = naming.candidates[d.best]
+    reasons = {w.reason for w in d.why_not.get(d.best, ())}
+    if (not best.improvement.mean_difference > 0 or best.at_bound or d.worse_than.get(d.best)
+            or reasons & {NotNamedReason.AT_LIMIT, NotNamedReason.OUTPERFORMED, NotNamedReason.BASELINE_UNFINISHED}):
+        return None
+    return d.best
+
+
+def joint_naming(naming, combination: Combination | None):
+    """Stage 7's verdict once a joint search of stage 8 named a pair: both effects named (the
+    verdict ``NAMED`` with the search's start as the named effect and a ``NAMED_JOINTLY`` note;
+    the pair is the final model through ``combination.named``). Any other case: ``naming`` as it
+    is.
+
+    Parameters
+    ----------
+    naming : Naming
+        Stage 7.
+    combination : Combination or None
+        Stage 8.
+
+    Returns
+    -------
+    Naming
+    """
+    if combination is None or not combination.joint or not combination.named:
+        return naming
+    first, second = combination.first, combination.named
+    pair = combination.tried[second]
+    note = DecisionNote(DecisionNoteKind.NAMED_JOINTLY, first, other=second,
+                        comparison=combination.against_baseline.get(second))
+    decision = replace(naming.decision, verdict=Verdict.NAMED, named=first, no_effect_case=None,
+                       notes=(*naming.decision.notes, note),
+                       cautions=tuple(Caution(CautionKind.ATYPICAL_VALUE, label=pair.label, value=b)
+                                      for b in pair.atypical))
+    return replace(naming, decision=decision)
 
 
 def first_vanishes(robot, named: str, parameters) -> bool | None:
@@ -280,7 +381,8 @@ def first_vanishes(robot, named: str, parameters) -> bool | None:
 
 
 def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha: float, *,
-                  eligible: Mapping, vanishes: Mapping) -> tuple:
+                  eligible: Mapping, vanishes: Mapping, joint_level: float | None = None,
+                  against_baseline: Mapping | None = None) -> tuple:
     """Which pair, if any, replaces the named effect (the rule of :func:`fit_second_effect`).
 
     Parameters
@@ -300,12 +402,19 @@ def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha
         another, no value at its limit): B alone replaces A only when B alone may be named.
     vanishes : mapping of str to bool or None
         Second effect B -> :func:`first_vanishes` of A in the pair (None: not known).
+    joint_level : float or None
+        A joint search (A was not named alone): a pair is significant only when its comparison
+        with the baseline (``against_baseline``) has p at most this level and a positive mean
+        difference; A is then never dropped. None: A was named.
+    against_baseline : mapping of str to Comparison, optional
+        With ``joint_level``: B -> the pair's out-of-fold errors against the baseline's (a B
+        missing counts as not significant).
 
     Returns
     -------
     pairs : dict of str to Candidate
-        ``tried`` with ``improvement_significant`` (Holm over ``family``) and ``significant``
-        (also no value at its limit).
+        ``tried`` with ``improvement_significant`` (Holm over ``family``; with ``joint_level``
+        also significant against the baseline) and ``significant`` (also no value at its limit).
     second : str or None
         B of the named pair: it improves on A significantly and A still improves on B alone.
     dropped, replaced_by : str or None
@@ -318,6 +427,9 @@ def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha
     out = {}
     for e, c in tried.items():
         ok = bool(verdict.get(e) and c.improvement.mean_difference > 0)
+        if joint_level is not None:
+            base = (against_baseline or {}).get(e)
+            ok = ok and base is not None and base.p_value <= joint_level and base.mean_difference > 0
         out[e] = replace(c, improvement_significant=ok, significant=ok and not c.at_bound)
     passing = [e for e, c in out.items() if c.significant]
     best = min(passing, key=lambda e: out[e].mean_error) if passing else None
@@ -332,7 +444,9 @@ def pair_decision(named: str, tried: Mapping, family, worse_than: Mapping, alpha
             head = (f"the pair {out[best].label} improves on {named} alone but not significantly on {best} alone "
                     f"(p = {rev.p_value:.3g})")
             zero = vanishes.get(best)
-            if named in worse_than.get(best, ()):
+            if joint_level is not None:
+                notes.append(f"{head}: neither is named (nothing was named alone)")
+            elif named in worse_than.get(best, ()):
                 notes.append(f"{head}, which is itself significantly worse than {named}: {named} alone stays the "
                              f"final model")
             elif not eligible.get(best, False):

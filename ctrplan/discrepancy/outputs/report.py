@@ -457,17 +457,24 @@ def _combination_lines(results: dict) -> list[str]:
     comb = results.get("combination")
     if not comb:
         return []
-    lines = ["## A second effect fitted with the named one", "", f"Rule: {words.pair_rule(comb)}.", ""]
+    title = ("## Two effects fitted together (neither named alone)" if comb.get("joint")
+             else "## A second effect fitted with the named one")
+    lines = [title, "", f"Rule: {words.pair_rule(comb)}.", ""]
     if comb["tried"]:
-        lines += ["| pair (fitted jointly) | fitted parameters | out-of-fold mean [mm] | error lower than the named "
-                  "effect's alone by (95 % interval), p | than the second effect's alone by, p | named |",
-                  "|---|---|---|---|---|---|"]
+        against = comb.get("against_baseline") or {}
+        first = "first" if comb.get("joint") else "named"
+        lines += ["| pair (fitted jointly) | fitted parameters | out-of-fold mean [mm] | error lower than the "
+                  f"{first} effect's alone by (95 % interval), p | than the second effect's alone by, p | "
+                  + ("than the baseline by, p | " if against else "") + "named |",
+                  "|---|---|---|---|---|" + ("---|" if against else "") + "---|"]
         for e, c in comb["tried"].items():
             imp, rev = c.get("improvement_eq49") or {}, c.get("reverse") or {}
             reverse = f"{_pct(rev)}, {_num(rev.get('p_value'), '.2g')}" if rev else "-"
+            base = against.get(e)
+            base = (f"{_pct(base)}, {_num(base.get('p_value'), '.2g')} | " if base else "- | ") if against else ""
             lines.append(f"| {c['label']} | {'; '.join(_value(r) for r in c['parameter_table'])} | "
                          f"{_fmt(c['out_of_fold']['position_mean_mm'], 3)} | {_pct(imp)}, "
-                         f"{_num(imp.get('p_value'), '.2g')} | {reverse} | {'yes' if e == comb['named'] else 'no'} |")
+                         f"{_num(imp.get('p_value'), '.2g')} | {reverse} | {base}{'yes' if e == comb['named'] else 'no'} |")
         lines.append("")
     if comb.get("dropped"):
         lines += [f"{comb['first_label']} goes to zero when fitted with "

@@ -141,8 +141,9 @@ def _combination_dict(combination) -> dict | None:
     return {"first": combination.first, "first_label": combination.first_label, "named": combination.named,
             "tried": {e: candidate_dict(c) for e, c in combination.tried.items()},
             "not_tried": {e: r.as_dict() for e, r in combination.not_tried.items()}, "family": list(combination.family),
-            "rule": {"significance": combination.significance},
-            "dropped": combination.dropped, "replaced_by": combination.replaced_by}
+            "rule": {"significance": combination.significance, "joint_level": combination.joint_level},
+            "dropped": combination.dropped, "replaced_by": combination.replaced_by, "joint": combination.joint,
+            "against_baseline": {e: c.as_dict() for e, c in combination.against_baseline.items()}}
 
 
 def results_dict(result) -> dict:

@@ -137,6 +137,11 @@ def note(entry: Mapping, decision: Mapping, labels: Mapping) -> str:
         return f"{first} improves on the baseline significantly but is not named: {reasons}"
     if kind == DecisionNoteKind.BEST_NOT_NAMED:
         return f"the lowest out-of-fold error is {first}'s, which cannot be named: {reasons}"
+    if kind == DecisionNoteKind.NAMED_JOINTLY:
+        return (f"{first} and {other} are named together: neither improves on the baseline significantly alone, "
+                f"the pair does (out-of-fold Eq. (49) error lower by {figure(cmp.get('reduction'), '.0f', 100)} %, "
+                f"p = {figure(cmp.get('p_value'), '.2g')} over {cmp.get('n_folds')} folds), and each adds to the "
+                f"other significantly")
     if kind == DecisionNoteKind.SIMPLER_NAMED:
         return (f"{first} contains {other} and does not improve on it significantly (out-of-fold Eq. (49) error "
                 f"lower by {figure(cmp.get('reduction'), '.0f', 100)} %, p = {figure(cmp.get('p_value'), '.2g')}): "
@@ -249,9 +254,14 @@ def pair_rule(combination: Mapping) -> str:
     if isinstance(levels, str):
         return levels
     alpha = levels["significance"]
-    return (f"out-of-fold Eq. (49) improvement over {first} alone significant at {alpha} (corrected resampled t "
+    rule = (f"out-of-fold Eq. (49) improvement over {first} alone significant at {alpha:.3g} (corrected resampled t "
             f"test of the log ratios over the folds, Holm over the family of pairs), no value at its limit, and "
-            f"{first} still improving on the second effect alone at {alpha}")
+            f"{first} still improving on the second effect alone at {alpha:.3g}")
+    if levels.get("joint_level") is None:
+        return rule
+    return (f"{first} is the best explanation, named nothing alone; a pair names both of its effects when its "
+            f"improvement over the baseline is significant at {levels['joint_level']:.3g} (the naming rule's level "
+            f"over the candidates tried alone), its {rule}")
 
 
 def not_paired(entry, first_label: str) -> str:

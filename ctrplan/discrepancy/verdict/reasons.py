@@ -64,13 +64,15 @@ class DecisionNote:
     kind : DecisionNoteKind
     effect : str
         ``SIGNIFICANT_NOT_NAMED``, ``BEST_NOT_NAMED``: the candidate not named; ``SIMPLER_NAMED``:
-        the containing candidate passed over; ``AMBIGUOUS``: the named one.
+        the containing candidate passed over; ``AMBIGUOUS``: the named one; ``NAMED_JOINTLY``:
+        the first of the pair named together.
     other : str or None
-        ``SIMPLER_NAMED``: the simpler candidate named; ``AMBIGUOUS``: the second of the pair.
+        ``SIMPLER_NAMED``: the simpler candidate named; ``AMBIGUOUS``: the second of the pair;
+        ``NAMED_JOINTLY``: the second effect named with ``effect``.
     comparison : Comparison or None
         ``SIMPLER_NAMED``: ``other``'s out-of-fold Eq. (49) residuals against ``effect``'s
         (positive: ``effect`` better) [mm + deg]; ``AMBIGUOUS``: the second's against the named
-        one's.
+        one's; ``NAMED_JOINTLY``: the pair's against the baseline's.
     """
 
     kind: DecisionNoteKind
