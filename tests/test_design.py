@@ -323,11 +323,44 @@ def _results_json(tmp_path, robot_file, data_file):
            "named_effect": "offplane", "ambiguous_with": "registration",
            "candidates": {"offplane": {"label": "off-plane precurvature", "fit": fit(offplane)},
                           "registration": {"label": "registration", "fit": fit(registration)}},
-           "noise": {"noise": {"position_rms_m": float(np.sqrt(3.0)) * SIGMA, "lag1_correlation": 0.2}}}
+           "noise": {"noise": {"position_rms_m": float(np.sqrt(3.0)) * SIGMA, "lag1_correlation": 0.2,
+                               "lower_bound": True}}}
     folder = tmp_path / "result"
     folder.mkdir()
     (folder / "results.json").write_text(json.dumps(res))
     return folder, res
+
+
+def test_the_design_weighs_the_noise_by_the_workflows_long_run_variance_factor():
+    """A noise estimate with a white half and a correlation length of 10 samples: the design's
+    variance factor is the workflow's long-run factor (``NoiseEstimate.long_run_factor``), checked
+    here against the sum of the correlation over every lag, 10.5, not the 2.65 of the estimate's
+    lag-one correlation taken as an AR(1) coefficient (which overstates the information fourfold);
+    a white estimate gives 1, an estimate with only a lag-one correlation is all AR(1), and the
+    weight is 1 / (s^2 f). Catches the AR(1) inflation at the estimate's lag-one correlation and
+    a white part dropped."""
+    from ctrplan.design import noise_weight
+    from ctrplan.discrepancy.measured.noise import NoiseEstimate
+
+    c, tau = 0.5, 10.0
+    phi = np.exp(-1.0 / tau)
+    estimate = NoiseEstimate(position_rms_m=np.sqrt(3.0) * SIGMA, source="rests", nugget_share=1 - c,
+                             lag1_correlation=c * phi, correlation_length=tau, lower_bound=True)
+    summed = 1.0 + 2.0 * sum(c * phi ** h for h in range(1, 5000))      # sum of rho(h) over all lags
+    for given in (estimate, estimate.as_dict()):
+        noise = SensorNoise.from_estimate(given)
+        assert noise.long_run_factor == pytest.approx(summed, rel=1e-9)
+        assert noise.long_run_factor == pytest.approx(estimate.long_run_factor(), rel=1e-12)
+        assert noise.position == pytest.approx(SIGMA) and noise.lower_bound
+    assert summed == pytest.approx(10.5, abs=0.01) and (1 + c * phi) / (1 - c * phi) == pytest.approx(2.65, abs=0.01)
+    weight, f = noise_weight(SIGMA, phi, correlated_share=c)
+    assert f == pytest.approx(summed) and weight == pytest.approx(1.0 / (SIGMA ** 2 * summed))
+    white = SensorNoise.from_estimate({"position_rms_m": 1e-3, "nugget_share": 1.0, "correlation_length_samples": 0.0})
+    assert white.long_run_factor == 1.0 and not white.lower_bound
+    ar1 = SensorNoise.from_estimate({"position_rms_m": 1e-3, "lag1_correlation": 0.6})
+    assert ar1.long_run_factor == pytest.approx(1.6 / 0.4)
+    with pytest.raises(DesignInputError, match="nugget_share"):
+        SensorNoise.from_estimate({"position_rms_m": 1e-3, "nugget_share": 1.5, "correlation_length_samples": 3.0})
 
 
 def test_result_hypotheses_take_the_ambiguous_pair_and_name_what_is_missing(tmp_path):
@@ -371,13 +404,16 @@ def test_cli_writes_a_trajectory_ready_to_run(tmp_path):
     traj = read_joint_trajectory(out / "trajectory_bag")
     assert traj is not None
     assert (out / "separation.png").stat().st_size > 0 and (out / "design.md").read_text().startswith("# Designed")
+    # the run's noise was only a lower bound: flagged in design.json and said in the report
+    assert summary["noise_lower_bound"] is True and "only a lower bound" in (out / "design.md").read_text()
     # --noise-position-mm is the 3-D rms length, as synth and discrepancy take it
     given = CliRunner().invoke(main, ["design", "--result", str(folder), "--out", str(tmp_path / "given"),
                                       "--duration", "2", "--random-motions", "1", "--no-bag",
                                       "--noise-position-mm", str(1e3 * float(np.sqrt(3.0)) * 2 * SIGMA)],
                                catch_exceptions=False)
     assert given.exit_code == 0, given.output
-    assert json.loads((tmp_path / "given" / "design.json").read_text())["noise_position_m"] == pytest.approx(2 * SIGMA)
+    stated = json.loads((tmp_path / "given" / "design.json").read_text())
+    assert stated["noise_position_m"] == pytest.approx(2 * SIGMA) and stated["noise_lower_bound"] is False
     bad = CliRunner().invoke(main, ["design", "--result", str(folder), "--out", str(out), "--hypotheses", "backlash"])
     assert bad.exit_code != 0 and "no fitted candidate 'backlash'" in str(bad.exception)
 

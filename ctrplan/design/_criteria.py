@@ -21,10 +21,13 @@ addition combine by addition.
   half-width per parameter so that parameters the recorded data leave undetermined get a finite
   (prior-limited) variance; the criterion is ``-log det`` of its block of interest.
 
-``W`` is the sensor's position noise, ``1 / (s^2 f)`` per coordinate, with ``f = (1 + phi) /
-(1 - phi)`` the variance inflation of a mean over AR(1) noise of lag-one correlation ``phi`` (the
-noise estimate's, when the discrepancy result gives one): correlated noise carries less evidence
-per sample.
+``W`` is the sensor's position noise, ``1 / (s^2 f)`` per coordinate, with ``f`` the long-run
+variance factor of the discrepancy workflow's own noise model
+(:meth:`ctrplan.discrepancy.measured.noise.NoiseEstimate.long_run_factor`): ``f = 1 + 2 c phi /
+(1 - phi)`` for a white part of share ``1 - c`` beside an exponentially correlated part with
+lag-one correlation ``phi``, the factor by which the variance of a mean of many consecutive
+samples exceeds the white one; ``(1 + phi) / (1 - phi)`` when the noise is all AR(1)
+(``c = 1``). Correlated noise carries less evidence per sample.
 """
 
 from __future__ import annotations
@@ -194,15 +197,50 @@ def information(sens, weight: float) -> Information:
     return Information(pairs, tuple(fisher), int(ok.sum()))
 
 
-def noise_weight(position_rms: float, lag1: float | None = None) -> tuple[float, float]:
-    """``W`` and the AR(1) variance inflation ``f`` it includes.
+def long_run_factor(lag1: float | None = None, correlated_share: float = 1.0) -> float:
+    """The long-run variance factor ``1 + 2 c phi / (1 - phi)`` of noise whose correlated part
+    (share ``c`` of the variance) has lag-one correlation ``phi`` and whose rest is white: the
+    factor by which the variance of a mean of many consecutive samples exceeds that of white
+    noise (the discrepancy workflow's
+    :meth:`~ctrplan.discrepancy.measured.noise.NoiseEstimate.long_run_factor`).
+
+    Parameters
+    ----------
+    lag1 : float, optional
+        ``phi``, the correlated part's lag-one correlation [-], clipped to [0, 0.99]; None, NaN
+        or negative: white (factor 1).
+    correlated_share : float
+        ``c`` in [0, 1] [-] (1: all AR(1), factor ``(1 + phi) / (1 - phi)``).
+
+    Returns
+    -------
+    float
+        [-], >= 1.
+
+    Raises
+    ------
+    ValueError
+        ``correlated_share`` outside [0, 1].
+    """
+    if not 0.0 <= correlated_share <= 1.0:
+        raise ValueError(f"correlated share must be in [0, 1], got {correlated_share!r}")
+    phi = 0.0 if lag1 is None or not np.isfinite(lag1) else float(np.clip(lag1, 0.0, 0.99))
+    return 1.0 + 2.0 * correlated_share * phi / (1.0 - phi)
+
+
+def noise_weight(position_rms: float, lag1: float | None = None, *,
+                 correlated_share: float = 1.0) -> tuple[float, float]:
+    """``W`` and the long-run variance factor ``f`` it includes (:func:`long_run_factor`).
 
     Parameters
     ----------
     position_rms : float
         Sensor noise per tip coordinate [m], > 0.
     lag1 : float, optional
-        Lag-one autocorrelation of the noise in [0, 1); None or negative: white.
+        Lag-one correlation of the correlated part of the noise in [0, 1); None or negative:
+        white.
+    correlated_share : float, keyword-only
+        Share of the variance in the correlated part, [0, 1] (1: all AR(1)).
 
     Returns
     -------
@@ -210,11 +248,15 @@ def noise_weight(position_rms: float, lag1: float | None = None) -> tuple[float,
         [1/m^2]
     inflation : float
         [-], >= 1.
+
+    Raises
+    ------
+    ValueError
+        ``position_rms`` not > 0, or ``correlated_share`` outside [0, 1].
     """
     if not (position_rms > 0 and np.isfinite(position_rms)):
         raise ValueError(f"position noise must be > 0 m, got {position_rms!r}")
-    phi = 0.0 if lag1 is None or not np.isfinite(lag1) else float(np.clip(lag1, 0.0, 0.99))
-    inflation = (1 + phi) / (1 - phi)
+    inflation = long_run_factor(lag1, correlated_share)
     return 1.0 / (position_rms ** 2 * inflation), inflation
 
 

@@ -22,7 +22,8 @@ from scipy import stats
 
 from ..choices import DesignMode, JointKind
 from ..drive import DriveLimits
-from ._criteria import (Information, ds_criterion, information, noise_weight, prior_precision, sensitivities)
+from ._criteria import (Information, ds_criterion, information, long_run_factor, noise_weight, prior_precision,
+                        sensitivities)
 from ._hypotheses import DesignInputError
 from ._motions import feasible, joint_configurations, motion_data, primitives, sample, trajectory
 
@@ -90,7 +91,10 @@ class DesignResult:
     noise_position : float
         Sensor noise per coordinate used [m].
     noise_inflation : float
-        AR(1) variance inflation used [-].
+        Long-run variance factor of the noise used [-] (:attr:`SensorNoise.long_run_factor`).
+    noise_lower_bound : bool
+        The noise is only a lower bound (:attr:`SensorNoise.lower_bound`): the predicted
+        separations and powers are upper bounds, the standard errors lower bounds.
     budget : float
         Duration allowed [s].
     seconds : dict
@@ -119,6 +123,7 @@ class DesignResult:
     noise_position: float
     noise_inflation: float
     budget: float
+    noise_lower_bound: bool = False
     seconds: dict = field(default_factory=dict)
     evaluations: int = 0
     random_primitives: tuple = ()
@@ -249,22 +254,41 @@ class SensorNoise:
         ``results.json["noise"]["noise"]["position_rms_m"]`` is the rms length of the 3-D noise
         vector, ``sqrt(3)`` times this: :meth:`from_estimate` converts it).
     lag1 : float, optional
-        Lag-one autocorrelation of the noise [-] (AR(1) inflation of :func:`noise_weight`).
+        Lag-one correlation ``phi`` of the correlated part of the noise [-] (None: white).
+    correlated_share : float
+        Share ``c`` of the noise variance in that correlated part, the rest white [-] (1: all
+        AR(1)); the long-run variance factor is ``1 + 2 c phi / (1 - phi)``
+        (:func:`~ctrplan.design.noise_weight`).
+    lower_bound : bool
+        The noise is only a lower bound (the discrepancy run's rests were too short to see its
+        correlation): the noise may be larger, so the design's predicted evidence is an upper
+        bound.
     """
 
     position: float
     lag1: float | None = None
+    correlated_share: float = 1.0
+    lower_bound: bool = False
+
+    @property
+    def long_run_factor(self) -> float:
+        """``1 + 2 c phi / (1 - phi)`` [-] (:func:`~ctrplan.design._criteria.long_run_factor`)."""
+        return long_run_factor(self.lag1, self.correlated_share)
 
     @classmethod
     def from_estimate(cls, estimate, *, where: str = "noise estimate") -> "SensorNoise":
-        """The noise per tip coordinate of a discrepancy run's noise estimate.
+        """The noise per tip coordinate of a discrepancy run's noise estimate, with the
+        estimate's own correlation model (its white share and correlation length).
 
         Parameters
         ----------
         estimate : NoiseEstimate or mapping
             :class:`ctrplan.discrepancy.NoiseEstimate` or its JSON form
             (``results.json["noise"]["noise"]``): ``position_rms_m``, the rms length of the 3-D
-            noise vector [m], and ``lag1_correlation`` [-] (None: white).
+            noise vector [m]; ``nugget_share`` (the white share ``1 - c``) and
+            ``correlation_length`` (JSON: ``correlation_length_samples``; ``tau`` [samples],
+            ``phi = exp(-1 / tau)``; 0 or None: white); ``lower_bound``. An estimate with only
+            ``lag1_correlation`` is taken as all AR(1) (``c = 1``).
         where : str
             What the estimate was read from, for the error message.
 
@@ -272,19 +296,31 @@ class SensorNoise:
         -------
         SensorNoise
             ``position = position_rms_m / sqrt(3)`` (the estimate's noise is the same and
-            independent in x, y and z), ``lag1 = lag1_correlation``.
+            independent in x, y and z).
 
         Raises
         ------
         DesignInputError
-            The estimate has no finite positive ``position_rms_m``.
+            The estimate has no finite positive ``position_rms_m``, or a white share outside
+            [0, 1].
         """
         get = estimate.get if hasattr(estimate, "get") else lambda k: getattr(estimate, k, None)
-        rms, lag1 = get("position_rms_m"), get("lag1_correlation")
+        rms = get("position_rms_m")
         if isinstance(rms, bool) or not (isinstance(rms, (int, float, np.floating)) and 0 < rms < np.inf):
             raise DesignInputError(f"{where}: position_rms_m {rms!r} is not a noise estimate (> 0 m); give "
                                    f"SensorNoise(position) per tip coordinate")
-        return cls(float(rms) / math.sqrt(3.0), None if lag1 is None else float(lag1))
+        tau = get("correlation_length")
+        tau = get("correlation_length_samples") if tau is None else tau
+        nugget = get("nugget_share")
+        lower = bool(get("lower_bound") or False)
+        if tau is not None and nugget is not None:
+            if not 0.0 <= float(nugget) <= 1.0:
+                raise DesignInputError(f"{where}: nugget_share {nugget!r} is not a share in [0, 1]")
+            if not float(tau) > 0:
+                return cls(float(rms) / math.sqrt(3.0), None, 1.0, lower)
+            return cls(float(rms) / math.sqrt(3.0), math.exp(-1.0 / float(tau)), 1.0 - float(nugget), lower)
+        lag1 = get("lag1_correlation")
+        return cls(float(rms) / math.sqrt(3.0), None if lag1 is None else float(lag1), 1.0, lower)
 
 
 @dataclass(frozen=True, eq=False)
@@ -380,7 +416,7 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
     noise_position, drive, obstacles, start, duration, rest = (noise.position, limits.drive, limits.obstacles,
                                                                limits.start, limits.duration, limits.rest)
     n_random, seed, n_jobs = search.n_random, search.seed, search.n_jobs
-    weight, inflation = noise_weight(noise_position, noise.lag1)
+    weight, inflation = noise_weight(noise_position, noise.lag1, correlated_share=noise.correlated_share)
     period = _period(data)
     drive = drive or drive_from_data(robot, data)
     rec_t = data.record.time
@@ -565,5 +601,5 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
     return DesignResult(mode=mode, hypotheses=hyps, interest=tuple(interest), primitives=tuple(chosen),
                         trajectory=traj, time=ts, joints=qs, tips=tips, separation=separation, stderr=stderr,
                         power=power, noise_position=float(noise_position), noise_inflation=float(inflation),
-                        budget=budget, seconds=seconds, evaluations=ev.evaluations,
+                        budget=budget, noise_lower_bound=bool(noise.lower_bound), seconds=seconds, evaluations=ev.evaluations,
                         random_primitives=tuple(random_walks), confounded=confounded)

@@ -47,6 +47,7 @@ def design_dict(result, robot, *, command: str = "") -> dict:
         "separation": result.separation, "power": result.power, "stderr": result.stderr,
         "confounded": result.confounded,
         "noise_position_m": result.noise_position, "noise_inflation": result.noise_inflation,
+        "noise_lower_bound": result.noise_lower_bound,
         "evaluations": result.evaluations, "seconds": result.seconds, "command": command,
         "joint_names": list(robot.joint_names),
         "drive": {"control_rate_hz": result.trajectory.control_rate_hz,
@@ -107,8 +108,12 @@ def _plot(result, path: Path) -> None:
 def _markdown(d: dict) -> str:
     lines = [f"# Designed experiment ({d['mode']})", "", f"Criterion: {d['criterion']}.", "",
              f"Duration {d['duration_s']:.1f} s of a budget of {d['budget_s']:.1f} s, {d['n_samples']} sensor samples; "
-             f"sensor noise {1e3 * d['noise_position_m']:.3g} mm per coordinate (AR(1) inflation "
-             f"{d['noise_inflation']:.3g}).", "", "Hypotheses:", ""]
+             f"sensor noise {1e3 * d['noise_position_m']:.3g} mm per coordinate (long-run variance factor "
+             f"{d['noise_inflation']:.3g})."
+             + (" **The noise is only a lower bound** (the discrepancy run's rests were too short to see its "
+                "correlation): the noise may be larger, so the predicted separations and powers below are upper "
+                "bounds and the standard errors lower bounds." if d.get("noise_lower_bound") else ""),
+             "", "Hypotheses:", ""]
     for h in d["hypotheses"]:
         lines.append(f"- `{h['key']}`: {h['label']} ({h['model']} model; refit over {len(h['free'])} parameters)")
     lines += ["", "Motion:", ""] + [f"{k + 1}. {p}" for k, p in enumerate(d["primitives"])] + [""]
