@@ -414,8 +414,9 @@ def lengthen_blocks(split: "DataSplit", residual, *, test_fraction: float = 0.2,
     measured holds its level (8000 records each, at 0.01, 0.00143 and 0.00018: two equally
     good non-nested models, and a useless extra regressor beside a slow unmodelled discrepancy,
     noise phi 0.6 and 0.9); with 40 blocks of 10 samples the latter two exceed it up to fourfold,
-    which the level of :func:`~ctrplan.discrepancy.verdict.decision.folds_kept_apart` covers. The test split keeps its
-    blocks and rows: it was chosen before the residuals, which come from a fit that never saw it.
+    which the level of :func:`~ctrplan.discrepancy.verdict.decision.folds_kept_apart` covers.
+
+    The test split keeps its blocks and rows: it was chosen before the residuals, which come from a fit that never saw it.
 
     Parameters
     ----------

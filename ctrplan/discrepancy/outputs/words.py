@@ -249,7 +249,8 @@ def no_effect(decision: Mapping, noise: Mapping, candidates: Mapping) -> str:
 
 def pair_rule(combination: Mapping) -> str:
     """The rule a second effect is named by (``results.json["combination"]``: its ``rule`` and
-    ``first_label``)."""
+    ``first_label``); for a joint search (``rule["joint_level"]`` given: nothing was named alone)
+    also the level at which the pair must improve on the baseline."""
     levels, first = combination["rule"], combination["first_label"]
     if isinstance(levels, str):
         return levels
