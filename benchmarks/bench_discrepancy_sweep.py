@@ -684,10 +684,13 @@ def main(argv=None):
         ap.error(f"--run-first: seeds {unknown} are not among the planned {seeds[0]}..{seeds[-1]}")
     first = [s for s in args.run_first if s not in done]
     todo = first + [s for s in seeds if s not in done and s not in first]
+    waiting = 0
     if args.ready_only:
-        todo = [s for s in todo if data_ready(out, s)]
-    print(f"{len(seeds) - len(todo)} of {len(seeds)} cases finished earlier, {len(todo)} to run; load average "
-          f"{os.getloadavg()[0]:.2f}", flush=True)
+        ready = [s for s in todo if data_ready(out, s)]
+        waiting, todo = len(todo) - len(ready), ready
+    print(f"{len(seeds) - len(todo) - waiting} of {len(seeds)} cases finished earlier, {len(todo)} to run"
+          + (f", {waiting} left for when their data is made" if args.ready_only else "")
+          + f"; load average {os.getloadavg()[0]:.2f}", flush=True)
     t0 = time.perf_counter()
     results = Path(args.results)
 
