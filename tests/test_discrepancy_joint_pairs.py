@@ -145,19 +145,19 @@ def test_the_joint_search_needs_a_best_explanation_that_could_be_named():
     alone = {e: _errors(split, [x[i]], y)[0] for i, e in enumerate(EFFECTS)}
     cands = {e: _candidate(e, split, base, alone[e]) for e in EFFECTS}
     plain = _naming(cands, split)
-    if plain.verdict == Verdict.NONE:
-        start = joint_start(plain)
-        assert start == plain.decision.best
-        at_limit = dict(cands, **{start: _candidate(start, split, base, alone[start], at_bound=("x (its limit)",))})
-        assert joint_start(_naming(at_limit, split)) != start
-        noise = replace(plain, decision=replace(plain.decision, no_effect_case=NoEffectCase.NOISE))
-        assert joint_start(noise) is None
+    assert plain.verdict == Verdict.NONE             # the record this test is about (seeded)
+    start = joint_start(plain)
+    assert start == plain.decision.best
+    at_limit = dict(cands, **{start: _candidate(start, split, base, alone[start], at_bound=("x (its limit)",))})
+    assert joint_start(_naming(at_limit, split)) != start
+    noise = replace(plain, decision=replace(plain.decision, no_effect_case=NoEffectCase.NOISE))
+    assert joint_start(noise) is None
     strong = _errors(split, [x[0], x[1]], y)[0]
     named = _naming(dict(cands, backlash=_candidate("backlash", split, base, strong * 0.2)), split)
     assert named.verdict != Verdict.NONE and joint_start(named) is None
     assert joint_naming(named, None) is named
-    if comb is not None and not comb.named:
-        assert joint_naming(naming, comb) is naming
+    assert comb is not None and not comb.named       # a joint search that named no pair (seeded)
+    assert joint_naming(naming, comb) is naming
 
 
 def test_the_workflow_runs_the_joint_search_when_nothing_is_named_and_reports_it(tmp_path):
