@@ -17,6 +17,7 @@ from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings
 
 calibration = importlib.import_module("ctrplan.discrepancy.fits.calibrate")
+objective = importlib.import_module("ctrplan.discrepancy.fits.objective")
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIR = ROOT / "model" / "ha2019-table1-tube-pair.toml"
@@ -71,7 +72,7 @@ def test_budget_stop_says_not_converged(lagged_pair):
 def _objective(robot, data):
     from ctrplan.discrepancy.fits.parameters import parameter, read_parameters
 
-    obj = calibration._Objective(robot, data, "standard", NAMES, {}, COARSE, 1)
+    obj = objective.FitObjective(robot, data, "standard", NAMES, {}, COARSE, 1)
     specs = [parameter(robot, n) for n in NAMES]
     lower = np.array([p.lower for p in specs])
     upper = np.array([p.upper for p in specs])
@@ -80,12 +81,13 @@ def _objective(robot, data):
 
 
 def test_jacobian_columns_match_central_differences(lagged_pair):
-    """The forward-difference Jacobian of the error components agrees with central differences
+    """The Jacobian of the error components (exact columns, registration by forward differences)
+    agrees with central differences
     taken here with a ten times larger step (relative 2e-3 of the largest entry). Catches a
     column scaled by the wrong step or written to the wrong parameter."""
     robot, data = lagged_pair
     obj, lower, upper, scale, x0 = _objective(robot, data)
-    jac = calibration._Jacobians(obj, lower, upper, scale)
+    jac = objective.ComponentJacobians(obj, lower, upper, scale)
     _, _, ok, jc = jac.exact(x0)
     for j in range(x0.size):
         h = 1e-3 * max(1.0, abs(x0[j]))
@@ -97,15 +99,23 @@ def test_jacobian_columns_match_central_differences(lagged_pair):
         assert err < 2e-3 * np.abs(central[ok]).max(), (NAMES[j], err)
 
 
-def test_rank_one_update_meets_the_secant_condition_and_the_cap_restores_forward_differences(lagged_pair):
+def _without_derivatives(monkeypatch):
+    """Fits as a model without exact derivatives has them (a contact model): every mechanical
+    column by forward differences and rank-one updates."""
+    monkeypatch.setattr(objective.FitObjective, "standard_columns", lambda self, x, columns: {})
+
+
+def test_rank_one_update_meets_the_secant_condition_and_the_cap_restores_forward_differences(lagged_pair,
+                                                                                             monkeypatch):
     """An updated Jacobian reproduces the change of the components along the step (secant
     condition, to rounding), differs from the last one by a matrix of rank one and costs no
     model evaluation; after ``max_updates`` updates the next Jacobian is a forward difference
     again. Catches an update along the wrong direction or scaled by the wrong units, and a cap
     that never refreshes."""
+    _without_derivatives(monkeypatch)
     robot, data = lagged_pair
     obj, lower, upper, scale, x0 = _objective(robot, data)
-    jac = calibration._Jacobians(obj, lower, upper, scale, max_updates=2)
+    jac = objective.ComponentJacobians(obj, lower, upper, scale, max_updates=2)
     c0, _, _, j0 = jac.exact(x0)
     j0 = j0.copy()
     x1 = x0 + np.array([0.05, -0.08, 0.01]) * scale
@@ -122,13 +132,14 @@ def test_rank_one_update_meets_the_secant_condition_and_the_cap_restores_forward
     x3 = x2 + np.array([0.01, 0.01, -0.01]) * scale
     _, _, _, j3 = jac.updated(x3)
     assert jac.is_exact
-    assert np.array_equal(j3, calibration._Jacobians(obj, lower, upper, scale).exact(x3)[3])
+    assert np.array_equal(j3, objective.ComponentJacobians(obj, lower, upper, scale).exact(x3)[3])
 
 
 def test_rank_one_updates_save_evaluations_and_reach_the_same_minimum(lagged_pair, monkeypatch):
     """The fit with rank-one Jacobian updates reaches the minimum of the fit with forward
     differences only (BIC within 0.05) with fewer model evaluations. Catches updates that never
     happen and updates that stop the fit short of its minimum."""
+    _without_derivatives(monkeypatch)
     robot, data = lagged_pair
     fit = calibration.calibrate(robot, data, "standard", NAMES, max_evaluations=400,
                                 run=FitRun(settings=COARSE))

@@ -15,26 +15,22 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ...errors import CtrplanError
-from ...mechanics import ModelSettings
-from ...models import MODEL_INFO, check_model
+from ...models import check_model
 from ..measured.data import MeasuredData
-from ...effects import EffectSet, apply_output_effects, robot_effects
 from .estimates import Uncertainty, covariance
 from .fitoptions import FitRun, FitStart
+from .objective import ComponentJacobians, FitObjective
 from .parameters import REGISTRATION, needs_solve, parameter, read_parameters
-from .predictions import (ANGLE_UNIT, FAILED_RESIDUAL, POSITION_UNIT, SamplePredictions, eq49_residuals,
-                          kabsch_registration, pose_errors, predict)
+from .predictions import FAILED_RESIDUAL, kabsch_registration
 
 __all__ = ["CalibrationResult", "Prior", "calibrate", "information_criterion", "covariance"]
 
-#: Relative finite-difference step of the least-squares Jacobian (solver tolerances are ~1e-9).
-DIFF_STEP = 1e-4
 #: Stopping tolerances of both least-squares stages (``scipy.optimize.least_squares``): relative
 #: change of the cost (``ftol``; 1e-6 of a cost of ~1000 (mm + deg)^2 changes the BIC by ~1e-4 per
 #: 100 samples) and of the parameter vector (``xtol``).
@@ -54,7 +50,7 @@ NORM_FLOOR = 1e-3
 #: Smallest cosine of the tangent error in the model's ``d angle / d sin(angle)`` (errors near
 #: 90 deg are failures of the fit, not its working range).
 COS_FLOOR = 0.1
-#: Jacobians of the error components between exact ones (:class:`_Jacobians`): at most this many
+#: Jacobians of the error components between exact ones (:class:`ComponentJacobians`): at most this many
 #: rank-one (Broyden) updates of the mechanical columns follow a forward-difference Jacobian. An
 #: update costs no model evaluation where a forward difference costs one per mechanical
 #: parameter; a step its model predicted poorly, a change of the failed samples, and every
@@ -209,102 +205,6 @@ def bound_flags(specs, values) -> tuple:
     return tuple(out)
 
 
-class _Objective:
-    """Eq. (49) residuals as a function of the fitted parameters, with the mechanics cached on
-    the mechanical parameters (a registration step re-uses the last solve).
-
-    With a contact model, every evaluation starts each contact solve from the solution of the
-    objective's previous evaluation at that sample (:class:`~ctrplan.discrepancy.fits.simulate.WarmStarts`),
-    with the outer and complementarity tolerances tightened to
-    :data:`~ctrplan.discrepancy.fits.simulate.WARM_OUTER_TOL` so that finite differences between
-    evaluations stay accurate."""
-
-    def __init__(self, robot, data, model, names, fixed, settings, n_jobs):
-        from .simulate import WARM_OUTER_TOL, WarmStarts
-
-        settings = settings or ModelSettings()
-        self.warm_starts = None
-        if MODEL_INFO[check_model(model)].contact:
-            self.warm_starts = WarmStarts()
-            settings = replace(settings, outer_tol=min(settings.outer_tol, WARM_OUTER_TOL),
-                               complementarity_tol=min(settings.complementarity_tol, WARM_OUTER_TOL))
-        self.robot, self.data, self.model, self.settings, self.n_jobs = robot, data, model, settings, n_jobs
-        self.names = tuple(names)
-        self.fixed = dict(fixed)
-        self.all_names = tuple(self.fixed) + self.names
-        # parameters that need a new model solve: mechanical and history ones (not registration)
-        self.mech = [k for k, nm in enumerate(self.all_names) if needs_solve(robot, nm)]
-        self._cache: dict = {}
-        self.evaluations = 0
-
-    def full(self, x):
-        return np.concatenate([np.asarray(list(self.fixed.values()), float), np.asarray(x, float)])
-
-    def prediction(self, x) -> SamplePredictions:
-        v = self.full(x)
-        key = tuple(np.round(v[self.mech], 15))
-        base = self._cache.get(key)
-        if base is None:
-            mech_names = [self.all_names[k] for k in self.mech]
-            base = predict(self.robot, mech_names, v[self.mech], self.data, self.model, self.settings,
-                           n_jobs=self.n_jobs, warm_starts=self.warm_starts)
-            self.evaluations += 1
-            if len(self._cache) > 64:
-                self._cache.clear()
-            self._cache[key] = base
-        out_names = [nm for k, nm in enumerate(self.all_names) if k not in set(self.mech)]
-        effects, _ = EffectSet.from_parameters(self.robot, out_names, [v[self.all_names.index(nm)] for nm in out_names])
-        tip, tangent = apply_output_effects(base.tip_base, base.tangent_base, robot_effects(self.robot).merged(effects))
-        return SamplePredictions(tip=tip, tangent=tangent, tip_base=base.tip_base, tangent_base=base.tangent_base,
-                          ok=base.ok, message=base.message, seconds=base.seconds)
-
-    def residuals(self, x):
-        pos, ang, _ = pose_errors(self.prediction(x), self.data)
-        return eq49_residuals(pos, ang)
-
-    def pose_components(self, x):
-        """Position and tangent errors of every sample as vectors, for the Gauss-Newton model of
-        Eq. (49) (:class:`_Eq49Model`).
-
-        Returns
-        -------
-        dp : ndarray, shape (K, 3)
-            ``p_measured - p_model`` [mm]; zero where the model failed.
-        t : ndarray, shape (K, 3), or None
-            ``t_measured x t_model`` [deg] (length sin(angle) / 1 deg); None without tangents.
-        cos_angle : ndarray, shape (K,)
-            ``t_measured . t_model`` (1 without tangents).
-        ok : ndarray of bool, shape (K,)
-        """
-        pred = self.prediction(x)
-        dp = np.nan_to_num((self.data.tip - pred.tip) / POSITION_UNIT, nan=0.0)
-        dp[~pred.ok] = 0.0
-        if self.data.tangent is None:
-            return dp, None, np.ones(len(dp)), pred.ok
-        tm = self.data.tangent / np.linalg.norm(self.data.tangent, axis=1, keepdims=True)
-        tp = pred.tangent / np.linalg.norm(pred.tangent, axis=1, keepdims=True)
-        t = np.nan_to_num(np.cross(tm, tp) / ANGLE_UNIT, nan=0.0)
-        c = np.nan_to_num(np.einsum("ij,ij->i", tm, tp), nan=1.0)
-        t[~pred.ok] = 0.0
-        return dp, t, c, pred.ok
-
-    def component_residuals(self, x):
-        """Smooth companion of :meth:`residuals`, shape (6 K,) or (3 K,) without tangents: per
-        sample the position error components [mm] and the components of ``t_measured x
-        t_model`` (length sin(angle)) [deg]. Its sum of squares is ``sum |dp|^2 + angle^2``
-        where Eq. (49) squares the sum; a failed sample gets :data:`FAILED_RESIDUAL` spread over
-        its components."""
-        pred = self.prediction(x)
-        parts = [(self.data.tip - pred.tip) / POSITION_UNIT]
-        if self.data.tangent is not None:
-            tm = self.data.tangent / np.linalg.norm(self.data.tangent, axis=1, keepdims=True)
-            tp = pred.tangent / np.linalg.norm(pred.tangent, axis=1, keepdims=True)
-            parts.append(np.cross(tm, tp) / ANGLE_UNIT)
-        comp = np.nan_to_num(np.concatenate(parts, axis=1), nan=0.0)
-        comp[~pred.ok] = FAILED_RESIDUAL / np.sqrt(comp.shape[1])
-        return comp.ravel()
-
-
 @dataclass(frozen=True)
 class Prior:
     """A Gaussian prior on fitted parameters as least-squares rows ``(x_j - center_j) / scale_j``.
@@ -345,89 +245,6 @@ class Prior:
         return J
 
 
-class _Jacobians:
-    """Jacobians ``J_c`` of the error components of :meth:`_Objective.pose_components`, shape
-    (K, w, m) (w = 3 position components [mm], and 3 tangent ones [deg] with tangents), exact or
-    updated.
-
-    :meth:`exact` takes forward differences (:data:`DIFF_STEP`, the step of
-    ``scipy.optimize.least_squares``'s ``"2-point"`` scheme): one model evaluation per mechanical
-    parameter. :meth:`updated` moves the last Jacobian to a new point by Broyden's rank-one
-    update of its mechanical columns in the parameters' scaled units (the secant condition
-    ``J_new dx = c(x_new) - c(x_old)`` along the step; Broyden 1965, Dennis & Schnabel 1996,
-    Sec. 8.1), which costs no model evaluation; the registration columns, which re-use the
-    cached mechanics, are always forward differences. It falls back to :meth:`exact` after
-    :data:`MAX_JACOBIAN_UPDATES` updates, when the set of failed samples changed, or when the
-    step moved no mechanical parameter.
-    """
-
-    def __init__(self, obj: "_Objective", lower, upper, scale, max_updates: int | None = None):
-        self.obj, self.lower, self.upper = obj, np.asarray(lower, float), np.asarray(upper, float)
-        self.scale = np.asarray(scale, float)
-        m = self.lower.size
-        n_fixed = len(obj.fixed)
-        self.mech = np.array([n_fixed + j in set(obj.mech) for j in range(m)], dtype=bool)
-        self.max_updates = MAX_JACOBIAN_UPDATES if max_updates is None else int(max_updates)
-        self.x = self.c = self.cos = self.ok = self.jc = None
-        self.is_exact = False
-        self.updates = 0
-        self.n_exact = self.n_updated = 0
-
-    def components(self, x):
-        """``(c, cos_angle, ok)`` at ``x``: components (K, w), cosines (K,), ok flags (K,)."""
-        dp, t, c, ok = self.obj.pose_components(x)
-        return (dp if t is None else np.concatenate([dp, t], axis=1)), c, ok
-
-    def _differences(self, x, c0, columns, jc) -> None:
-        for j in columns:
-            step = DIFF_STEP * max(1.0, abs(x[j])) * (1.0 if x[j] >= 0 else -1.0)
-            if not self.lower[j] <= x[j] + step <= self.upper[j]:
-                step = -step
-            xs = x.copy()
-            xs[j] += step
-            cj, _, okj = self.components(xs)
-            jc[:, :, j] = np.where(okj[:, None], (cj - c0) / step, 0.0)
-
-    def _store(self, x, c, cos, ok, jc, exact: bool):
-        jc[~ok] = 0.0
-        self.x, self.c, self.cos, self.ok, self.jc, self.is_exact = x.copy(), c, cos, ok, jc, exact
-        return c, cos, ok, jc
-
-    def exact(self, x):
-        """Forward-difference Jacobian at ``x``; returns ``(c, cos, ok, J_c)``."""
-        x = np.asarray(x, float)
-        c0, cos0, ok0 = self.components(x)
-        jc = np.zeros((c0.shape[0], c0.shape[1], x.size))
-        self._differences(x, c0, range(x.size), jc)
-        self.updates = 0
-        self.n_exact += 1
-        return self._store(x, c0, cos0, ok0, jc, True)
-
-    def updated(self, x):
-        """The last Jacobian moved to ``x`` by a rank-one update (or :meth:`exact` where it
-        must be); returns ``(c, cos, ok, J_c)``."""
-        x = np.asarray(x, float)
-        if self.jc is None or self.updates >= self.max_updates:
-            return self.exact(x)
-        c1, cos1, ok1 = self.components(x)
-        dx = x - self.x
-        s = np.where(self.mech, dx / self.scale, 0.0)
-        ss = float(s @ s)
-        if not np.array_equal(ok1, self.ok) or ss == 0.0:
-            return self.exact(x)
-        jc = self.jc.copy()
-        y = c1 - self.c - jc @ dx
-        jc[:, :, self.mech] += y[:, :, None] * (s[self.mech] / self.scale[self.mech])[None, None, :] / ss
-        self._differences(x, c1, np.flatnonzero(~self.mech), jc)
-        self.updates += 1
-        self.n_updated += 1
-        return self._store(x, c1, cos1, ok1, jc, False)
-
-    def note(self) -> str:
-        """``"<n> forward-difference Jacobians, <m> rank-one updates"``."""
-        return f"{self.n_exact} forward-difference Jacobians, {self.n_updated} rank-one updates"
-
-
 def _poor_step(f_old, rows_old, x_old, f_new, x_new) -> bool:
     """The step ``x_old -> x_new`` achieved less than :data:`POOR_STEP_RATIO` of the decrease of
     ``|f|^2`` that the linear model ``f_old + rows_old dx`` predicted (or the model predicted none)."""
@@ -442,7 +259,7 @@ class _Eq49Model:
     """Eq. (49) as a least-squares problem whose Gauss-Newton model keeps the curvature of its norms.
 
     Per sample the residual ``h = |dp| + angle`` [mm + deg] of Eq. (49) is a function of the
-    error components ``c = (dp, t)`` (:meth:`_Objective.pose_components`). Its plain
+    error components ``c = (dp, t)`` (:meth:`FitObjective.pose_components`). Its plain
     Gauss-Newton model ``(h + grad h . J_c s)^2`` drops ``h`` times the curvature of the norms,
     which for ``h^2`` is as large as the part it keeps: ``Hess(h^2) / 2 = grad h grad h^T + h
     Hess h``, with ``Hess |dp| = (I - u u^T) / |dp|`` (u the direction of dp) and likewise for
@@ -454,21 +271,22 @@ class _Eq49Model:
     - rows 4-6 (with tangents): value 0, Jacobian ``sqrt(h / (|t| cos(angle))) (I - v v^T) J_t``.
 
     Their sum of squares is the Eq. (49) cost, their ``J^T f`` its half gradient and their
-    ``J^T J`` half the Hessian of the cost up to the components' own curvature. ``J_c`` is a
-    forward difference (:data:`DIFF_STEP`) of the components, or with ``scale`` given a rank-one
-    update of the last one after a step its model predicted well (:class:`_Jacobians`); a
-    Jacobian whose model says the fit may stop (:meth:`bic_left` below :data:`BIC_TOLERANCE`) is
-    always a forward difference, so the stopping rule is read from an exact one. A failed
+    ``J^T J`` half the Hessian of the cost up to the components' own curvature. ``J_c`` is exact
+    (derivatives where the model has them, else forward differences:
+    :meth:`ComponentJacobians.exact`), or with ``scale`` given a rank-one update of the last one
+    after a step its model predicted well (:class:`ComponentJacobians`); a Jacobian whose model
+    says the fit may stop (:meth:`bic_left` below :data:`BIC_TOLERANCE`) is always exact, so the
+    stopping rule is read from an exact one. A failed
     sample has value :data:`FAILED_RESIDUAL` and zero rows. A :class:`Prior` appends its rows
     after the samples'.
     """
 
-    def __init__(self, obj: _Objective, lower, upper, prior: "Prior | None" = None, scale=None):
+    def __init__(self, obj: FitObjective, lower, upper, prior: "Prior | None" = None, scale=None):
         self.obj, self.lower, self.upper = obj, np.asarray(lower, float), np.asarray(upper, float)
         self.width = 4 if obj.data.tangent is None else 7
         self.prior = prior
-        self.jacobians = _Jacobians(obj, lower, upper, np.ones(self.lower.size) if scale is None else scale,
-                                    0 if scale is None else MAX_JACOBIAN_UPDATES)
+        self.jacobians = ComponentJacobians(obj, lower, upper, np.ones(self.lower.size) if scale is None else scale,
+                                            0 if scale is None else MAX_JACOBIAN_UPDATES)
         self.n_samples = obj.data.n_samples
         self._last = None   # (f, rows, x) of the last Jacobian
         #: Decrease of the cost to the minimum of the model at the last Jacobian [(mm + deg)^2],
@@ -510,7 +328,7 @@ class _Eq49Model:
         return not (after > 0.0 and self.n_samples * np.log(before / after) >= BIC_TOLERANCE)
 
     def exact_rows(self, x):
-        """The rows at ``x`` from a forward-difference Jacobian (:meth:`jac` without updates)."""
+        """The rows at ``x`` from an exact Jacobian (:meth:`jac` without updates)."""
         x = np.asarray(x, float)
         rows = self._rows(x, *self.jacobians.exact(x))
         self._last = (self._f, rows, x.copy())
@@ -607,7 +425,7 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     parameters) stage 2 then fell by about 0.1 (mm + deg)^2 a step out of 25 800 (a BIC change of
     0.001 a step) and stopped at its budget after 53 steps; on a synthetic lagged trajectory it
     even met ``ftol`` with tiny steps 0.34 BIC units above the minimum. Stage 1 fits the
-    components of the errors (:meth:`_Objective.component_residuals`, smooth: a handful of
+    components of the errors (:meth:`FitObjective.component_residuals`, smooth: a handful of
     steps); stage 2 minimises Eq. (49) from there with the generalized Gauss-Newton rows of
     :class:`_Eq49Model`, whose model includes the norms' curvature (on Ha's trajectory: 3-4
     accepted steps, the predicted decrease falling about 3.5-fold a step, and a lower minimum
@@ -633,7 +451,7 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
                            f"({', '.join(names)}); a calibration needs more samples than parameters")
     # fitted registration parameters start at zero (then Kabsch when ``register``)
     x0 = read_parameters(robot, names) if initial is None else np.asarray(initial, float).copy()
-    obj = _Objective(robot, data, model, names, fixed, settings, n_jobs)
+    obj = FitObjective(robot, data, model, names, fixed, settings, n_jobs)
     if register and initial is None and any(nm in REGISTRATION for nm in names):
         pred = obj.prediction(x0)
         if not pred.ok.any():
@@ -668,12 +486,12 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     else:
         comp = obj.component_residuals if pr is None else (
             lambda x: np.concatenate([obj.component_residuals(x), pr.rows(x)]))
-        first_jacobians = _Jacobians(obj, lower, upper, scale)
+        first_jacobians = ComponentJacobians(obj, lower, upper, scale, MAX_JACOBIAN_UPDATES)
         last = []
 
         def comp_jac(x):
             """Jacobian of the components (with the prior's rows): a rank-one update after a step
-            its model predicted well, else forward differences (:class:`_Jacobians`)."""
+            its model predicted well, else forward differences (:class:`ComponentJacobians`)."""
             x = np.asarray(x, float)
             f = comp(x)
             poor = not last or _poor_step(*last[-1], f, x)
@@ -701,9 +519,10 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     # stage 2: Eq. (49) itself, with the rest of the budget, its Gauss-Newton model keeping the
     # curvature of the norms; stopped when the decrease the model still predicts is negligible.
     # A value that ends at an optimizer bound has the bound widened and stage 2 goes on from there.
-    widened, steps, n_exact, n_updated = [], 0, 0, 0
+    widened, steps, passes = [], 0, []
     for _ in range(MAX_WIDENINGS + 1):
         eq49 = _Eq49Model(obj, lower, upper, pr, scale=scale)
+        passes.append(eq49.jacobians)
 
         budget_stop = []
 
@@ -720,8 +539,6 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
         sol = least_squares(eq49.fun, np.clip(x1, lower, upper), jac=eq49.jac, max_nfev=left, callback=settled,
                             bounds=(lower, upper), x_scale=scale, method="trf", xtol=XTOL, ftol=FTOL)
         steps += sol.nfev
-        n_exact += eq49.jacobians.n_exact
-        n_updated += eq49.jacobians.n_updated
         x1 = sol.x
         grown = []   # "<name> (...)" of the values whose bound was widened on this pass
         for j, nm in enumerate(names):
@@ -743,9 +560,8 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
     unrefitted = tuple(f"{g}: {why})" for g in grown)
     if uncertainty and not (eq49.jacobians.is_exact and np.array_equal(eq49.jacobians.x, sol.x)):
         # stopped on an updated Jacobian (by a tolerance or the budget): the standard errors and
-        # the decrease still predicted are read from a forward difference
+        # the decrease still predicted are read from an exact one
         sol.jac = eq49.exact_rows(sol.x)
-        n_exact += 1
     r = obj.residuals(sol.x)
     converged = bool(sol.status > 0 or (sol.status == -2 and not budget_stop))
     left_bic = eq49.bic_left(k)
@@ -754,8 +570,10 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
            else "the evaluation budget is spent" if budget_stop else sol.message)
     at_bound = bound_flags(specs, sol.x) + unrefitted
     msg = (f"least squares: error components {stage1}, "
-           f"then Eq. (49): {how} ({steps} steps, {n_exact} forward-difference Jacobians, {n_updated} rank-one "
-           f"updates; {obj.evaluations} evaluations)"
+           f"then Eq. (49): {how} ({steps} steps, {sum(j.n_exact for j in passes)} Jacobians "
+           f"({sum(j.n_derivative_columns for j in passes)} mechanical columns from exact derivatives, "
+           f"{sum(j.n_difference_columns for j in passes)} by forward differences), "
+           f"{sum(j.n_updated for j in passes)} rank-one updates; {obj.evaluations} evaluations)"
            + ("" if not widened else f"; widened: {', '.join(widened)}")
            + ("" if converged else f"; NOT converged: stopped at the budget of {max_evaluations} evaluations "
                                    f"(predicted further decrease {eq49.remaining:.3g} (mm + deg)^2, "
@@ -771,7 +589,7 @@ def calibrate(robot, data: MeasuredData, model: str, names, *, fixed: dict | Non
                              unc.correlation, at_bound, tuple(widened), prior_cost, unc.n_clusters)
 
 
-def _uncertainty(obj: _Objective, specs, x, clusters=None) -> Uncertainty:
+def _uncertainty(obj: FitObjective, specs, x, clusters=None) -> Uncertainty:
     """Standard errors and correlations (:func:`covariance`, unpacking as ``stderr, correlation``;
     ``n_clusters`` for the fit's result) at ``x`` from one Jacobian of Eq. (49), neighbouring units
     of one motion merged."""

@@ -45,7 +45,8 @@ from ...choices import FitNoteKind
 from ...effects import REGISTRY
 from ...models import MODEL_INFO, MODELS
 from ...parallel import Executor
-from .calibrate import CalibrationResult, _Objective, _uncertainty, calibrate, information_criterion
+from .calibrate import CalibrationResult, _uncertainty, calibrate, information_criterion
+from .objective import FitObjective
 from .fitoptions import FitRun, FitStart, GridSpec
 from ..measured.data import MeasuredData
 from .estimates import atypical_values, display_value, parameter_table
@@ -286,7 +287,7 @@ def scan_fit(robot, data: MeasuredData, model: str, fixed: dict, names, values, 
     settings, n_jobs, uncertainty, clusters = run.settings, run.n_jobs, run.uncertainty, run.clusters
     names = (names,) if isinstance(names, str) else tuple(names)
     values = tuple(sorted(float(v) for v in values))
-    obj = _Objective(robot, data, model, names, fixed, settings, n_jobs)
+    obj = FitObjective(robot, data, model, names, fixed, settings, n_jobs)
     specs = [parameter(robot, n) for n in names]
     tight = max(specs, key=lambda p: p.hard[0])  # the narrowest limit governs a common scan
     costs = {}

@@ -18,7 +18,8 @@ import time
 import numpy as np
 
 from ...models import check_model
-from .calibrate import CalibrationResult, _Objective, _uncertainty
+from .calibrate import CalibrationResult, _uncertainty
+from .objective import FitObjective
 from .fitoptions import FitRun, GridSpec
 from ..measured.data import MeasuredData
 from .parameters import parameter
@@ -89,8 +90,8 @@ def grid_search(robot, data: MeasuredData, fixed: dict, names, model: str, *, gr
     n_groups = max(1, min(groups.size, int(search_samples // max(rows_per_group, 1))))
     chosen = rng.choice(groups, size=n_groups, replace=False)
     sub = data.take(np.isin(data.config_id, chosen))
-    obj_sub = _Objective(robot, sub, model, names, fixed, settings, n_jobs)
-    obj_all = _Objective(robot, data, model, names, fixed, settings, n_jobs)
+    obj_sub = FitObjective(robot, sub, model, names, fixed, settings, n_jobs)
+    obj_all = FitObjective(robot, data, model, names, fixed, settings, n_jobs)
     obj_all.warm_starts = obj_sub.warm_starts   # the refinements start from the coarse grid's solutions
     grid = list(itertools.product(coarse, repeat=m))
     step0 = float(np.min(np.diff(coarse))) if coarse.size > 1 else 0.05

@@ -54,6 +54,10 @@ class SamplePredictions:
     message : list of str
     seconds : float
         Wall time of the model evaluation.
+    alpha, beta : ndarray, shape (K, n), or None
+        Base rotations [rad] and translations [m] the tubes reached (history effects applied).
+    base_torsion : ndarray, shape (K, n), or None
+        Standard-model base torsions of the branch followed [1/m] (NaN where it failed).
     """
 
     tip: np.ndarray
@@ -63,6 +67,9 @@ class SamplePredictions:
     ok: np.ndarray
     message: list
     seconds: float
+    alpha: np.ndarray | None = None
+    beta: np.ndarray | None = None
+    base_torsion: np.ndarray | None = None
 
 
 def predict(robot, names, values, data: MeasuredData, model: str, settings: ModelSettings | None = None,
@@ -121,7 +128,9 @@ def predict(robot, names, values, data: MeasuredData, model: str, settings: Mode
     tip_base = np.asarray(sim.tip, float)
     tip, tangent = apply_output_effects(tip_base, sim.tangent, robot_effects(robot_p).merged(effects))
     return SamplePredictions(tip=tip, tangent=tangent, tip_base=tip_base, tangent_base=np.asarray(sim.tangent, float),
-                      ok=np.asarray(sim.ok, bool), message=list(sim.message), seconds=time.perf_counter() - t0)
+                      ok=np.asarray(sim.ok, bool), message=list(sim.message), seconds=time.perf_counter() - t0,
+                      alpha=np.asarray(state.alpha, float), beta=np.asarray(state.beta, float),
+                      base_torsion=np.asarray(sim.base_torsion, float))
 
 
 def pose_errors(pred: SamplePredictions, data: MeasuredData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -69,7 +69,7 @@ class WarmStarts:
     (:func:`~ctrplan.mechanics.solve_contact`), and a warm friction solve that does not
     converge is solved again as without the store.
 
-    A store belongs to one sequence of evaluations (one fit, :class:`~ctrplan.discrepancy.fits.calibrate._Objective`):
+    A store belongs to one sequence of evaluations (one fit, :class:`~ctrplan.discrepancy.fits.objective.FitObjective`):
     what it holds depends only on that sequence, so a fit gives the same values whichever
     process runs it. The solver tolerances of a fit that uses it must be tight enough for
     finite differences of solutions started from different points (:data:`WARM_OUTER_TOL`).
