@@ -306,3 +306,40 @@ def test_a_registration_far_outside_its_range_on_a_collinear_motion_is_neither_n
     assert d.verdict == "ambiguous" and d.inseparable and (d.named, d.ambiguous_with) == ("registration", "offplane")
     assert [c.value for c in d.cautions] == [rot]
     assert final_candidate(naming, None) is None
+
+
+def test_a_joint_search_judges_its_folds_from_the_pair_that_explains_most():
+    """Stage 7's best single effect leaves a slow residual, so its rule runs at 0.01 / 7; the
+    pair fitted in the joint search takes the slow part away (its out-of-fold residual white at
+    the capped buffer): the pairs' comparisons hold their level and run at 0.01. When the best
+    pair (lowest error) still leaves the drift, they run at 0.01 / 7, whatever a worse pair
+    leaves. Catches a joint search judged by a residual of a model it is not comparing."""
+    from dataclasses import replace
+
+    from scipy import signal
+
+    from ctrplan.choices import BufferReason
+    from ctrplan.discrepancy.fits.pairs import joint_search_level
+    from ctrplan.discrepancy.measured.split import BufferChoice
+    from ctrplan.discrepancy.verdict.decision import CORRELATED_FOLDS_SIZE_FACTOR
+
+    rng = np.random.default_rng(5)
+    units = np.repeat(np.arange(K_UNITS), PER_UNIT)
+    split = _split(units)
+    k = units.size
+    white = rng.normal(0, 0.4e-3, (k, 3))
+    drift = 0.4e-3 * signal.lfilter([np.sqrt(1 - 0.995 ** 2)], [1.0, -0.995], rng.normal(0, 1.0, (k, 3)), axis=0)
+    base = white + drift + np.tile([1e-3, 0.0, 0.0], (k, 1))
+    capped = replace(split, buffer_choice=BufferChoice(5, BufferReason.HALF_A_BLOCK, lag_one=0.9, still=0.5))
+    apart = replace(split, buffer_choice=BufferChoice(5, BufferReason.AUTOCORRELATION_FALLS, lag_one=0.6))
+    explains_both = _candidate("time_offset", split, base, white)
+    leaves_drift = _candidate("backlash", split, base, 1.3 * (white + drift))
+    assert explains_both.mean_error < leaves_drift.mean_error
+    low = 0.01 / CORRELATED_FOLDS_SIZE_FACTOR
+    assert joint_search_level(capped, {"time_offset": explains_both, "backlash": leaves_drift}, 0.01) == 0.01
+    assert joint_search_level(capped, {"backlash": leaves_drift}, 0.01) == pytest.approx(low)
+    worse_white = _candidate("time_offset", split, base, 3.0 * white)
+    assert worse_white.mean_error > leaves_drift.mean_error
+    assert joint_search_level(capped, {"time_offset": worse_white, "backlash": leaves_drift}, 0.01) == pytest.approx(low)
+    assert joint_search_level(apart, {"backlash": leaves_drift}, 0.01) == 0.01
+    assert joint_search_level(capped, {}, 0.01) == pytest.approx(low)

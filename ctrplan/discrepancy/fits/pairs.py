@@ -31,10 +31,12 @@ from .gridsearch import grid_search
 from ..options import DiscrepancyOptions
 from ..setup import DiscrepancySetup, effect_parameters, reported_parameters
 from ..measured.split import DataSplit
+from ..verdict.decision import CORRELATED_FOLDS_SIZE_FACTOR, folds_kept_apart
 from ..verdict.reasons import Caution, DecisionNote, FitNote, NotPaired
 from ..verdict.statistics import holm
 
-__all__ = ["Combination", "fit_second_effect", "first_vanishes", "pair_decision", "joint_start", "joint_naming"]
+__all__ = ["Combination", "fit_second_effect", "first_vanishes", "pair_decision", "joint_start", "joint_naming",
+           "joint_search_level"]
 
 logger = logging.getLogger(__name__)
 
@@ -167,8 +169,8 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
 
     When stage 7 named nothing, the same search starts from its best explanation A when
     :func:`joint_start` allows it (a *joint* search). The rule is then stage 7's: every
-    comparison at its level (``naming.decision.rule.level``, lowered where the folds are not kept
-    apart), and a pair is named only when, besides both nested comparisons, its out-of-fold error
+    comparison at its level, lowered where the folds are not kept apart as judged from the best
+    pair's residual (:func:`joint_search_level`), and a pair is named only when, besides both nested comparisons, its out-of-fold error
     is significantly lower than the baseline's at that level divided by the number of candidates
     stage 7 tried alone (the strictest step of its Holm family: A was chosen after those tests,
     so the pair may not be judged more leniently than any of them). Nothing is dropped: B alone
@@ -252,7 +254,7 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
     vanishes = {e: first_vanishes(robot, named, c.parameters) for e, c in tried.items()}
     alpha, joint_level, against = options.significance, None, {}
     if joint:
-        alpha = naming.decision.rule.level
+        alpha = joint_search_level(split, tried, options.significance)
         joint_level = alpha / max(len(naming.decision.family), 1)
         against = {e: compare(split, baseline.r, c.cv.r) for e, c in tried.items()}
     out, second, dropped, replaced, notes = pair_decision(named, tried, family, naming.decision.worse_than, alpha,
@@ -273,6 +275,35 @@ def fit_second_effect(setup: DiscrepancySetup, split: DataSplit, baseline, conta
                        not_tried=MappingProxyType(not_tried), family=tuple(family),
                        significance=alpha, dropped=dropped, replaced_by=replaced, joint=joint,
                        joint_level=joint_level, against_baseline=MappingProxyType(against))
+
+
+def joint_search_level(split: DataSplit, tried: Mapping, significance: float) -> float:
+    """The level of a joint search's comparisons: ``significance``, or that divided by
+    :data:`~ctrplan.discrepancy.verdict.decision.CORRELATED_FOLDS_SIZE_FACTOR` where the folds
+    are not kept apart (:func:`~ctrplan.discrepancy.verdict.decision.folds_kept_apart`) as judged
+    from the out-of-fold residual of the pair with the lowest error.
+
+    Stage 7 judges the folds from its best single explanation; when two effects are missing,
+    that explanation leaves the other effect's slow residual between the folds, while the pair
+    that explains both may leave a residual that falls to the threshold within the buffer. The
+    pairs are then the models compared, and the rule is stage 7's, applied to them.
+
+    Parameters
+    ----------
+    split : DataSplit
+    tried : mapping of str to Candidate
+        The pairs fitted (their ``cv.oof.residual_base`` [m] at the development samples).
+    significance : float
+        The level asked for (``DiscrepancyOptions.significance``).
+
+    Returns
+    -------
+    float
+    """
+    lowest = min(tried, key=lambda e: tried[e].mean_error) if tried else None
+    oof = None if lowest is None else tried[lowest].cv.oof
+    apart = folds_kept_apart(split, None if oof is None else oof.residual_base)
+    return significance if apart else significance / CORRELATED_FOLDS_SIZE_FACTOR
 
 
 def joint_start(naming) -> str | None:
