@@ -101,7 +101,7 @@ class FitObjective:
 
     def pose_components(self, x):
         """Position and tangent errors of every sample as vectors, for the Gauss-Newton model of
-        Eq. (49) (:class:`_Eq49Model`).
+        Eq. (49) (``calibrate._Eq49Model``).
 
         Returns
         -------
@@ -140,13 +140,14 @@ class FitObjective:
         derivatives of what the parameter changes: the robot's packed precurvatures and
         stiffnesses and the base rotations of the motion history (central differences of
         :func:`~ctrplan.discrepancy.fits.parameters.apply_parameters` and
-        :meth:`MeasuredData.state`, which solve nothing; exact for the maps linear in the
-        parameter, such as a scaled precurvature or a relative stiffness). The tip and tangent
+        :meth:`MeasuredData.state`, which solve nothing, one-sided at a parameter's limit; exact
+        for the maps linear in the parameter, such as a scaled precurvature or a relative
+        stiffness). The tip and tangent
         derivatives then pass through the output effects and the components by a central
         difference of that cheap map along them.
 
-        A parameter that moves a translation beta anywhere (a time offset), a tube length or a
-        section break has no exact column (the solver's discrete map is only piecewise smooth
+        A parameter that moves a translation beta at a solved sample (a time offset on a motion
+        that translates a tube), a tube length or a section break has no exact column (the solver's discrete map is only piecewise smooth
         in them); nor has any parameter when the model is not the standard one, or when a
         sample the model solved has no derivative there (an unstable or unconverged row).
 
