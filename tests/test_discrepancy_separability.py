@@ -223,6 +223,19 @@ def test_nothing_is_named_over_a_baseline_whose_fit_stopped_at_its_budget():
     assert _naming(split, base, cands, [done, done, at_bound] + [done] * 8).decision.named == "offplane"
 
 
+def _noise_beside_a_drift(seed):
+    """A split of K_UNITS units of PER_UNIT samples and, per sample, white noise (0.4 mm per
+    component) and a slow AR(1) drift (phi 0.995, 0.4 mm), with the generator that drew them."""
+    from scipy import signal
+
+    rng = np.random.default_rng(seed)
+    split = _split(np.repeat(np.arange(K_UNITS), PER_UNIT))
+    k = K_UNITS * PER_UNIT
+    white = rng.normal(0, 0.4e-3, (k, 3))
+    drift = 0.4e-3 * signal.lfilter([np.sqrt(1 - 0.995 ** 2)], [1.0, -0.995], rng.normal(0, 1.0, (k, 3)), axis=0)
+    return split, white, drift, rng
+
+
 def test_a_split_that_cannot_keep_its_folds_apart_names_only_at_a_level_seven_times_smaller():
     """One candidate whose improvement over the baseline has p between 0.01 / 7 and 0.01. Named
     when the buffer reached the autocorrelation threshold, and when it was capped at half a block
@@ -234,20 +247,14 @@ def test_a_split_that_cannot_keep_its_folds_apart_names_only_at_a_level_seven_ti
     makes the pilot's residual slow)."""
     from dataclasses import replace
 
-    from scipy import signal
-
     from ctrplan.choices import BufferReason
     from ctrplan.discrepancy.fits.fitting import compare
     from ctrplan.discrepancy.measured.split import BufferChoice
     from ctrplan.discrepancy.outputs import words
     from ctrplan.discrepancy.verdict.decision import CORRELATED_FOLDS_SIZE_FACTOR, folds_kept_apart
 
-    rng = np.random.default_rng(77)
-    units = np.repeat(np.arange(K_UNITS), PER_UNIT)
-    split = _split(units)
-    k = units.size
-    white = rng.normal(0, 0.4e-3, (k, 3))
-    drift = 0.4e-3 * signal.lfilter([np.sqrt(1 - 0.995 ** 2)], [1.0, -0.995], rng.normal(0, 1.0, (k, 3)), axis=0)
+    split, white, drift, rng = _noise_beside_a_drift(77)
+    k = white.shape[0]
     offset = np.tile([1e-3, 0.0, 0.0], (k, 1))
     fold_scatter = rng.normal(0, 1.0, 10)[split.fold]
 
@@ -316,19 +323,13 @@ def test_a_joint_search_judges_its_folds_from_the_pair_that_explains_most():
     leaves. Catches a joint search judged by a residual of a model it is not comparing."""
     from dataclasses import replace
 
-    from scipy import signal
-
     from ctrplan.choices import BufferReason
     from ctrplan.discrepancy.fits.pairs import joint_search_level
     from ctrplan.discrepancy.measured.split import BufferChoice
     from ctrplan.discrepancy.verdict.decision import CORRELATED_FOLDS_SIZE_FACTOR
 
-    rng = np.random.default_rng(5)
-    units = np.repeat(np.arange(K_UNITS), PER_UNIT)
-    split = _split(units)
-    k = units.size
-    white = rng.normal(0, 0.4e-3, (k, 3))
-    drift = 0.4e-3 * signal.lfilter([np.sqrt(1 - 0.995 ** 2)], [1.0, -0.995], rng.normal(0, 1.0, (k, 3)), axis=0)
+    split, white, drift, rng = _noise_beside_a_drift(5)
+    k = white.shape[0]
     base = white + drift + np.tile([1e-3, 0.0, 0.0], (k, 1))
     capped = replace(split, buffer_choice=BufferChoice(5, BufferReason.HALF_A_BLOCK, lag_one=0.9, still=0.5))
     apart = replace(split, buffer_choice=BufferChoice(5, BufferReason.AUTOCORRELATION_FALLS, lag_one=0.6))
