@@ -291,3 +291,72 @@ def test_measured_and_planned_paths_agree_on_has_trajectory():
     data, measured, planned = _both_paths(robot, HA_DATA)
     _assert_same(measured, planned)
     assert data.n_samples == 1307 and measured.released.any() and not measured.released.all()
+
+
+def _directions_loop(x, tol):
+    """Direction of the last change of each column of ``x`` with hysteresis ``tol``, one sample
+    at a time (the rule of ``rotation_directions``)."""
+    out = np.zeros(x.shape, dtype=int)
+    for i in range(x.shape[1]):
+        state, anchor = 0, x[0, i]
+        for k, v in enumerate(x[:, i]):
+            if state >= 0 and v > anchor and (state == 1 or v - anchor > tol):
+                state, anchor = 1, v
+            elif state <= 0 and v < anchor and (state == -1 or anchor - v > tol):
+                state, anchor = -1, v
+            elif state == 1 and anchor - v > tol:
+                state, anchor = -1, v
+            elif state == -1 and v - anchor > tol:
+                state, anchor = 1, v
+            out[k, i] = state
+    return out
+
+
+def _friction_loop(alpha, beta, sequence, theta_c, rot_tol, trans_tol):
+    """The friction state of the module's rule, sample by sample in Python: (eta, released,
+    friction), each (K, n - 1)."""
+    K, n = alpha.shape
+    rel = np.diff(alpha, axis=1)
+    eta = np.zeros((K, n - 1), int)
+    released = np.zeros((K, n - 1), bool)
+    friction = np.zeros((K, n - 1))
+    for label in np.unique(sequence):
+        idx = np.flatnonzero(sequence == label)
+        eta[idx] = _directions_loop(rel[idx], rot_tol)
+        for i in range(n - 1):
+            ref_rel, ref_beta, free, e = rel[idx[0], i], beta[idx[0]], False, 0.0
+            for j, k in enumerate(idx):
+                if j > 0:
+                    if abs(rel[k, i] - ref_rel) > rot_tol:
+                        ref_rel, ref_beta, free = rel[k, i], beta[k], False
+                    free = free or np.max(np.abs(beta[k] - ref_beta)) > trans_tol
+                    if theta_c > 0:
+                        dr = rel[k, i] - rel[idx[j - 1], i]
+                        e = np.sign(dr) + (e - np.sign(dr)) * np.exp(-abs(dr) / theta_c)
+                released[k, i] = free
+                if theta_c > 0:
+                    e = 0.0 if free else e
+                    friction[k, i] = e
+                else:
+                    friction[k, i] = 0.0 if free else eta[k, i]
+    return eta, released, friction
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_motion_state_equals_the_rule_sample_by_sample(seed):
+    """The compiled friction state equals the rule applied one sample and one pair at a time on
+    random motions (rotations and translations that pause, interleaved sequences, abrupt and
+    gradual friction)."""
+    rng = np.random.default_rng(seed)
+    K, n = 250, 3
+    alpha = np.cumsum(rng.normal(0, 0.05, (K, n)) * (rng.random((K, 1)) < 0.7), axis=0)
+    beta = np.cumsum(rng.normal(0, 0.002, (K, n)) * (rng.random((K, 1)) < 0.3), axis=0)
+    sequence = rng.integers(0, 3, K) if seed % 2 else np.repeat(np.arange(5), 50)
+    for theta_c in (0.0, 0.05):
+        st = motion_state(MotionRecord(alpha, beta, sequence=sequence), friction_angle=theta_c,
+                          rotation_tol=1e-3, translation_tol=1e-3)
+        eta, released, friction = _friction_loop(alpha, beta, sequence, theta_c, 1e-3, 1e-3)
+        np.testing.assert_array_equal(st.eta, eta)
+        np.testing.assert_array_equal(st.released, released)
+        np.testing.assert_allclose(st.friction, friction, rtol=0, atol=1e-14)
+        assert released.any() and (~released).any() and (eta == -1).any() and (eta == 1).any()

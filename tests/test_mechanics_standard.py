@@ -415,3 +415,94 @@ def test_multistart_early_stop_keeps_a_nearby_equilibrium():
     assert not batch.certified[0]
     assert batch.n_equilibria[0] == 3 and batch.unstable[0]
     assert batch.iterations[0] < 45
+
+
+def _path_reference(robot, alpha, beta, settings, guess, follow, check_stability):
+    """Rows solved one ``solve_standard`` call at a time with the start rule of
+    ``solve_standard_path``: (tips, converged, unstable, base torsions, reused, Newton
+    iterations)."""
+    K = len(alpha)
+    tips = np.full((K, 3), np.nan)
+    conv, unst, reused = np.zeros(K, bool), np.zeros(K, bool), np.zeros(K, bool)
+    iterations = np.zeros(K, int)
+    sig = np.full((K, robot.n_tubes), np.nan)
+    prev, prev_start = None, None
+    for k in range(K):
+        if follow[k]:
+            start = None if prev is None else prev.base_torsion
+        else:
+            start = None if np.isnan(guess[k, 0]) else guess[k]
+        try:
+            robot.check_configuration(alpha[k], beta[k])
+        except JointLimitError:
+            prev = prev_start = None
+            continue
+        same_start = follow[k] or (start is None and prev_start is None) or (
+            start is not None and prev_start is not None and np.array_equal(start, prev_start))
+        if (prev is not None and same_start and np.array_equal(alpha[k], prev.alpha)
+                and np.array_equal(beta[k], prev.beta)):
+            sol, reused[k] = prev, True
+        else:
+            sol = solve_standard(robot, alpha[k], beta[k], settings, initial_guess=start,
+                                 check_stability=check_stability)
+        prev_start = start
+        prev = sol if sol.diagnostics.converged else None
+        conv[k], unst[k] = sol.diagnostics.converged, sol.diagnostics.unstable
+        iterations[k] = sol.diagnostics.iterations
+        if conv[k]:
+            tips[k], sig[k] = sol.tip_position, sol.base_torsion
+    return tips, conv, unst, sig, reused, iterations
+
+
+@pytest.mark.parametrize("check_stability", [False, True])
+def test_path_equals_solve_standard_row_by_row(check_stability):
+    """``solve_standard_path`` gives, row by row, what ``solve_standard`` gives started the way
+    a caller following a path starts it: from the last converged row where ``follow`` is set
+    (the long pair, whose branch past its bifurcation depends on the way there: up to 97 mm
+    from what a cold start finds), from the given guess or from none elsewhere (the
+    same Newton iterations, so the same starts); a repeated configuration with the same start is
+    reused, and an impossible one breaks the chain."""
+    from ctrplan.mechanics import solve_standard_path
+
+    settings = ModelSettings(ds=3e-3)
+    pair = _long_pair(1 / 0.08)      # bistable beyond about 2.7 rad: the branch depends on the way there
+    th = np.concatenate([np.linspace(2.0, 3.6, 17), [3.6, 3.6], np.linspace(3.5, 2.4, 12)])
+    alpha = np.array([pair.configuration([t])[0] for t in th])
+    beta = np.array([pair.configuration([t])[1] for t in th])
+    K = len(th)
+    follow = np.ones(K, bool)
+    follow[[0, 20]] = False
+    guess = np.full((K, 2), np.nan)
+    guess[20] = [0.0, 5.0]
+    path = solve_standard_path(pair, alpha, beta, settings, initial_guess=guess, follow=follow,
+                               check_stability=check_stability)
+    tips, conv, unst, sig, reused, iterations = _path_reference(pair, alpha, beta, settings, guess, follow,
+                                                                check_stability)
+    np.testing.assert_allclose(path.tip_position[conv], tips[conv], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(path.base_torsion[conv], sig[conv], rtol=0, atol=1e-10)
+    np.testing.assert_array_equal(path.converged, conv)
+    np.testing.assert_array_equal(path.unstable, unst)
+    np.testing.assert_array_equal(path.reused, reused)
+    np.testing.assert_array_equal(path.iterations[~reused], iterations[~reused])
+    assert reused.sum() >= 1
+    cold = solve_standard_path(pair, alpha, beta, settings)
+    assert np.max(np.linalg.norm(cold.tip_position - path.tip_position, axis=1)) > 0.05
+
+    robot = table2_robot()
+    rng = np.random.default_rng(11)
+    qs = np.cumsum(rng.normal(0, [0.2, 0.2, 0.004], (12, 3)), axis=0) + [0.0, 0.0, -0.06]
+    alpha = np.array([robot.configuration(q, check_limits=False)[0] for q in qs])
+    beta = np.array([robot.configuration(q, check_limits=False)[1] for q in qs])
+    beta[6, 2] = 0.01     # inner base in front of the outer bases: impossible
+    follow = np.ones(12, bool)
+    follow[0] = False
+    guess = np.full((12, 3), np.nan)
+    path = solve_standard_path(robot, alpha, beta, settings, follow=follow, check_stability=check_stability)
+    tips, conv, unst, sig, reused, iterations = _path_reference(robot, alpha, beta, settings, guess, follow,
+                                                                check_stability)
+    assert not path.valid[6] and not path.converged[6]
+    np.testing.assert_allclose(path.tip_position[conv], tips[conv], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(path.converged, conv)
+    np.testing.assert_array_equal(path.iterations[conv], iterations[conv])
+    with pytest.raises(ValueError, match="follow"):
+        solve_standard_path(robot, alpha, beta, settings, follow=follow[:3])

@@ -35,6 +35,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..constants import HISTORY_ROTATION_TOL, HISTORY_TRANSLATION_TOL
 from ._record import MotionRecord
@@ -54,10 +55,18 @@ PAIR_CASES = {
 
 def _directions(x: np.ndarray, tol: float) -> np.ndarray:
     """Direction of the last change of each column of ``x`` (K, m), hysteresis ``tol``."""
-    out = np.zeros(x.shape, dtype=int)
+    out = np.zeros(x.shape, dtype=np.int64)
+    _directions_into(np.ascontiguousarray(x, dtype=float), float(tol), out)
+    return out
+
+
+@njit(cache=True)
+def _directions_into(x, tol, out):
+    """:func:`_directions` of ``x`` (K, m), written into ``out`` (K, m) int."""
     for i in range(x.shape[1]):
-        state, anchor = 0, x[0, i] if len(x) else 0.0
-        for k, v in enumerate(x[:, i]):
+        state, anchor = 0, x[0, i] if x.shape[0] else 0.0
+        for k in range(x.shape[0]):
+            v = x[k, i]
             if state >= 0 and v > anchor and (state == 1 or v - anchor > tol):
                 state, anchor = 1, v
             elif state <= 0 and v < anchor and (state == -1 or anchor - v > tol):
@@ -67,7 +76,51 @@ def _directions(x: np.ndarray, tol: float) -> np.ndarray:
             elif state == -1 and v - anchor > tol:
                 state, anchor = 1, v
             out[k, i] = state
-    return out
+
+
+@njit(cache=True)
+def _friction_rows(rel, beta, rows, offsets, rotation_tol, translation_tol, friction_angle, eta, released,
+                   friction):
+    """The loop of :func:`motion_state` over each motion (rows ``rows[offsets[g]:offsets[g + 1]]``
+    in order): ``released`` and ``friction`` (K, m), written in place from the relative
+    rotations ``rel`` (K, m) [rad], the translations ``beta`` (K, n) [m] and the directions
+    ``eta`` (K, m) of :func:`_directions`."""
+    m = rel.shape[1]
+    n = beta.shape[1]
+    for g in range(offsets.shape[0] - 1):
+        idx = rows[offsets[g]:offsets[g + 1]]
+        if idx.shape[0] == 0:
+            continue
+        ref_rel = rel[idx[0]].copy()
+        ref_beta = np.empty((m, n))     # bases at each pair's last rotation
+        for i in range(m):
+            ref_beta[i] = beta[idx[0]]
+        free = np.zeros(m, dtype=np.bool_)
+        e = np.zeros(m)
+        for j in range(idx.shape[0]):
+            k = idx[j]
+            if j > 0:
+                for i in range(m):
+                    if np.abs(rel[k, i] - ref_rel[i]) > rotation_tol:
+                        ref_rel[i] = rel[k, i]
+                        ref_beta[i] = beta[k]
+                        free[i] = False
+                for i in range(m):
+                    if np.max(np.abs(beta[k] - ref_beta[i])) > translation_tol:
+                        free[i] = True
+                if friction_angle > 0.0:
+                    for i in range(m):
+                        dr = rel[k, i] - rel[idx[j - 1], i]
+                        sg = np.sign(dr)
+                        e[i] = sg + (e[i] - sg) * np.exp(-np.abs(dr) / friction_angle)
+            for i in range(m):
+                released[k, i] = free[i]
+                if friction_angle > 0.0:
+                    if free[i]:
+                        e[i] = 0.0
+                    friction[k, i] = e[i]
+                else:
+                    friction[k, i] = 0.0 if free[i] else eta[k, i]
 
 
 def _check_tol(rotation_tol, translation_tol=1.0):
@@ -321,32 +374,17 @@ def motion_state(record: MotionRecord, seen: MotionRecord | None = None, *, fric
     alpha, beta = seen.alpha, seen.beta
     K, n = alpha.shape
     m = n - 1
-    eta = np.zeros((K, m), dtype=int)
+    eta = np.zeros((K, m), dtype=np.int64)
     released = np.zeros((K, m), dtype=bool)
     friction = np.zeros((K, m))
-    rel = np.diff(alpha, axis=1)
-    for idx in seen.segments():
+    rel = np.ascontiguousarray(np.diff(alpha, axis=1), dtype=float)
+    segments = seen.segments()
+    for idx in segments:
         eta[idx] = _directions(rel[idx], rotation_tol)
-        ref_rel = rel[idx[0]].copy()
-        ref_beta = np.repeat(beta[idx[0]][None, :], m, axis=0)      # (m, n): bases at each pair's last rotation
-        free = np.zeros(m, dtype=bool)
-        e = np.zeros(m)
-        for j, k in enumerate(idx):
-            if j > 0:
-                rotated = np.abs(rel[k] - ref_rel) > rotation_tol
-                ref_rel[rotated] = rel[k][rotated]
-                ref_beta[rotated] = beta[k]
-                free[rotated] = False
-                free |= np.max(np.abs(beta[k][None, :] - ref_beta), axis=1) > translation_tol
-                if friction_angle > 0.0:
-                    dr = rel[k] - rel[idx[j - 1]]
-                    e = np.sign(dr) + (e - np.sign(dr)) * np.exp(-np.abs(dr) / friction_angle)
-            released[k] = free
-            if friction_angle > 0.0:
-                e[free] = 0.0
-                friction[k] = e
-            else:
-                friction[k] = np.where(free, 0.0, eta[k])
+    rows = np.concatenate(segments).astype(np.int64) if segments else np.zeros(0, dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum([len(idx) for idx in segments])]).astype(np.int64)
+    _friction_rows(rel, np.ascontiguousarray(beta, dtype=float), rows, offsets, float(rotation_tol),
+                   float(translation_tol), float(friction_angle), eta, released, friction)
     if given_eta is not None:
         g = np.asarray(given_eta, dtype=float).reshape(K, m)
         if not np.all(np.isin(g, (-1.0, 0.0, 1.0))):

@@ -22,7 +22,7 @@ from ..constants import MECHANICS_VERSION
 from .discrete import TubeChain, chain_jacobians, forward_kinematics
 from .grid import ArcLengthGrid, build_grid
 from .results import BoundResult, ContactSolution, Diagnostics, ModelSettings, StandardSolution
-from ._standard_batch import StandardBatch, solve_standard_batch
+from ._standard_batch import StandardBatch, StandardPath, solve_standard_batch, solve_standard_path
 from ._lie import angle_between
 from ._standard_bodies import StandardBodies, solve_standard_bodies, solve_standard_bodies_packed
 from .standard import solve_standard
@@ -62,7 +62,8 @@ def __dir__():
 
 
 __all__ = [
-    "MECHANICS_VERSION", "solve_standard", "solve_standard_batch", "StandardBatch", "solve_clearance", "solve_friction", "solve_contact", "evaluate_bound",
+    "MECHANICS_VERSION", "solve_standard", "solve_standard_batch", "StandardBatch",
+    "solve_standard_path", "StandardPath", "solve_clearance", "solve_friction", "solve_contact", "evaluate_bound",
     "all_eta", "continue_friction", "FrictionBranch", "ModelSettings", "StandardSolution", "ContactSolution", "BoundResult", "Diagnostics",
     "TubeChain", "forward_kinematics", "chain_jacobians", "ArcLengthGrid", "build_grid",
     "StandardBodies", "solve_standard_bodies", "solve_standard_bodies_packed", "angle_between",

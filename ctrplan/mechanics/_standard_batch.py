@@ -25,7 +25,7 @@ from . import warmup
 from ._uniqueness import unique_equilibrium_certified_at
 from .standard import _damping, _integrate, _multistart_search, _newton, _shoot, _solve_small, _tip_frame
 
-__all__ = ["StandardBatch", "solve_standard_batch"]
+__all__ = ["StandardBatch", "StandardPath", "solve_standard_batch", "solve_standard_path"]
 
 _PREDICTOR_STEP_FACTOR = PREDICTOR_STEP_FACTOR  # frozen into the compiled code
 # With ``follow`` on threads, the rows are cut into contiguous blocks of at least this many rows,
@@ -404,6 +404,184 @@ def _batch_parallel(alpha, beta, valid, sig_init, tubes, opts, out, n_blocks):
             if valid[k]:
                 _solve_one(k, alpha, beta, sig_init, tubes, opts, np.full(n, np.nan), out,
                            np.full((n + 4, n), np.nan))
+
+
+@njit(cache=True, error_model="numpy")
+def _path_row(k, alpha, beta, start, predict, tubes, opts, out, res_out, det_out):
+    """Configuration ``k`` exactly as :func:`ctrplan.mechanics.solve_standard` solves it from
+    ``start`` (n,) [1/m] (``predict``: no initial guess, ``start`` is zero twist): Newton
+    shooting (``standard._shoot``), retried from zero twist if a given start fails, the
+    determinant test, with ``opts.multistart`` > 0 the multistart search, and the tip. Writes
+    row ``k`` of ``out`` and the tip-torsion residual [1/m] and shooting-Jacobian determinant
+    into ``res_out``, ``det_out``."""
+    lengths, brk, nbrk, curv = tubes.lengths, tubes.breaks, tubes.n_breaks, tubes.precurvature
+    kxy, ratio = tubes.k_xy, tubes.stiffness_ratio
+    n = alpha.shape[1]
+    s, first, last, present, uhat = _grid(beta[k], lengths, brk, nbrk, curv, opts.ds, opts.merge_tol,
+                                          opts.refine_ratio, opts.refine_length)
+    cs, cpresent, cuhat = s, present, uhat
+    if predict or opts.multistart > 0:
+        cs, _, _, cpresent, cuhat = _grid(beta[k], lengths, brk, nbrk, curv, _PREDICTOR_STEP_FACTOR * opts.ds,
+                                          opts.merge_tol, opts.refine_ratio, opts.refine_length)
+    a = alpha[k].copy()
+    sig0, res, it, ok, detJ, psi, sig = _shoot(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, start.copy(),
+                                               lengths, opts.tol, opts.maxit, predict)
+    if not ok and not predict:
+        sig0, res, it2, ok, detJ, psi, sig = _shoot(s, present, uhat, s, present, uhat, kxy, ratio, a, np.zeros(n),
+                                                    lengths, opts.tol, opts.maxit, False)
+        it += it2
+    unstable = ok and not detJ > 0.0
+    count = 0
+    if ok and opts.multistart > 0:
+        count, ms_it = _multistart_search(s, present, uhat, cs, cpresent, cuhat, kxy, ratio, a, sig0, lengths,
+                                          opts.tol, opts.maxit, opts.multistart)
+        it += ms_it
+        if count > 1:
+            unstable = True
+    out.n_eq[k] = count
+    out.iters[k] = it
+    out.conv[k] = ok
+    out.unst[k] = unstable
+    out.sig_out[k] = sig0
+    res_out[k] = res
+    det_out[k] = detJ
+    if ok:
+        p, R = _tip_frame(s, present, uhat, kxy, psi, sig)
+        out.tips[k] = p
+        out.tans[k] = R[:, 2]
+
+
+@njit(cache=True)
+def _path(alpha, beta, valid, guess, follow, tubes, opts, out, res_out, det_out, reused):
+    """Rows in order, each started as a sequence of :func:`ctrplan.mechanics.solve_standard`
+    calls starts it (see :func:`solve_standard_path`); ``reused`` (K,) bool is set where a row
+    repeats the previous row's configuration and start and takes its solution."""
+    K, n = alpha.shape
+    prev = -1              # row of the last converged solution (-1: none)
+    prev_start = np.zeros(n)
+    prev_start_kind = 0    # start of the last row: 0 none (no guess, or reset), 1 given
+    start = np.zeros(n)
+    for k in range(K):
+        if not valid[k]:
+            prev = -1
+            prev_start_kind = 0
+            continue
+        if follow[k]:
+            given = prev >= 0
+            if given:
+                start[:] = out.sig_out[prev]
+        else:
+            given = not np.isnan(guess[k, 0])
+            if given:
+                start[:] = guess[k]
+        same_config = prev >= 0 and np.array_equal(alpha[k], alpha[prev]) and np.array_equal(beta[k], beta[prev])
+        same_start = follow[k] or (not given and prev_start_kind == 0) or (
+            given and prev_start_kind == 1 and np.array_equal(start, prev_start))
+        if same_config and same_start:
+            out.tips[k] = out.tips[prev]
+            out.tans[k] = out.tans[prev]
+            out.sig_out[k] = out.sig_out[prev]
+            out.conv[k] = out.conv[prev]
+            out.unst[k] = out.unst[prev]
+            out.n_eq[k] = out.n_eq[prev]
+            res_out[k] = res_out[prev]
+            det_out[k] = det_out[prev]
+            reused[k] = True
+        else:
+            if not given:
+                start[:] = 0.0
+            _path_row(k, alpha, beta, start, not given, tubes, opts, out, res_out, det_out)
+        if given:
+            prev_start[:] = start
+        prev_start_kind = 1 if given else 0
+        prev = k if out.conv[k] else -1
+
+
+@dataclass
+class StandardPath(StandardBatch):
+    """:class:`StandardBatch` of :func:`solve_standard_path`, with per row:
+
+    Attributes
+    ----------
+    residual : ndarray, shape (K,)
+        Largest tip-torsion residual [1/m] of the last Newton iterate.
+    determinant : ndarray, shape (K,)
+        Shooting-Jacobian determinant at the solution (NaN where not converged).
+    reused : ndarray of bool, shape (K,)
+        The row repeated the previous row's configuration and start and took its solution
+        without solving.
+    """
+
+    residual: np.ndarray = None
+    determinant: np.ndarray = None
+    reused: np.ndarray = None
+
+
+def solve_standard_path(robot, alpha, beta, settings: ModelSettings | None = None, *, initial_guess=None,
+                        follow=None, check_stability: bool = False) -> StandardPath:
+    """The standard model along rows in order, each solved as one :func:`solve_standard` call
+    started the way a caller following a path would start it, in one compiled call.
+
+    Row k is ``solve_standard(robot, alpha[k], beta[k], settings, initial_guess=start,
+    check_stability=check_stability)`` with ``start`` the base torsions of the last row whose
+    shooting converged if ``follow[k]`` (none if that row was impossible or did not converge),
+    else ``initial_guess[k]`` (none where it is NaN). A row whose configuration and start equal
+    the previous row's takes its solution without solving (``reused``). The numbers are those
+    of :func:`solve_standard` (same grids, iterations and tip arithmetic).
+
+    Parameters
+    ----------
+    robot : Robot
+    alpha, beta : array-like, shape (K, n)
+        Base rotations [rad] and translations [m].
+    settings : ModelSettings, optional
+    initial_guess : array-like, shape (K, n), optional
+        Base torsions [1/m]; NaN rows (default all): no initial guess.
+    follow : array-like of bool, shape (K,), optional
+        Rows that start from the previous solution (default none).
+    check_stability : bool
+        Run the multistart search of :func:`solve_standard` at every converged row.
+
+    Returns
+    -------
+    StandardPath
+        Impossible configurations are flagged ``valid = False`` (NaN tips) instead of raising;
+        tips are NaN where the shooting did not converge.
+
+    Raises
+    ------
+    ValueError
+        If the arrays do not have the shapes above.
+    """
+    settings = settings or ModelSettings()
+    n = robot.n_tubes
+    alpha, beta = configuration_arrays(robot, alpha, beta)
+    K = alpha.shape[0]
+    guess = (np.full((K, n), np.nan) if initial_guess is None
+             else np.ascontiguousarray(np.broadcast_to(initial_guess, (K, n)), dtype=float))
+    follow = np.zeros(K, dtype=bool) if follow is None else np.ascontiguousarray(follow, dtype=bool)
+    if follow.shape != (K,):
+        raise ValueError(f"follow must have shape ({K},), got {follow.shape}")
+    valid = robot.configurations_possible(alpha, beta)
+    pk = pack_robot(robot)
+    out = BatchOutput(np.full((K, 3), np.nan), np.full((K, 3), np.nan), np.full((K, n), np.nan),
+                      np.zeros(K, dtype=bool), np.zeros(K, dtype=bool), np.zeros(K, dtype=np.int64),
+                      np.zeros(K, dtype=np.int64), np.zeros(K, dtype=bool))
+    residual = np.full(K, np.nan)
+    determinant = np.full(K, np.nan)
+    reused = np.zeros(K, dtype=bool)
+    tubes = BatchTubes(pk.lengths, pk.breaks, pk.n_breaks, pk.precurvature, pk.k_xy, pk.stiffness_ratio)
+    opts = BatchOptions(ds=float(settings.ds), merge_tol=float(GRID_MERGE_TOL),
+                        refine_ratio=float(settings.refine_ratio), refine_length=float(settings.refine_length),
+                        tol=float(settings.shooting_tol), maxit=int(settings.max_shooting_iterations),
+                        multistart=int(settings.multistart) if check_stability else 0, predict=False,
+                        follow=True)
+    _path(alpha, beta, valid, guess, follow, tubes, opts, out, residual, determinant, reused)
+    determinant[~out.conv] = np.nan
+    return StandardPath(tip_position=out.tips, tip_tangent=out.tans, base_torsion=out.sig_out,
+                        converged=out.conv, unstable=out.unst, valid=valid, iterations=out.iters,
+                        n_equilibria=out.n_eq, certified=out.certified, residual=residual,
+                        determinant=determinant, reused=reused)
 
 
 def configuration_arrays(robot, alpha, beta):

@@ -147,8 +147,8 @@ class FitObjective:
         difference of that cheap map along them.
 
         A parameter that moves a translation beta at a solved sample (a time offset on a motion
-        that translates a tube), a tube length or a section break has no exact column (the solver's discrete map is only piecewise smooth
-        in them); nor has any parameter when the model is not the standard one, or when a
+        that translates a tube), a tube length or a section break has no exact column (the
+        solver's discrete map is only piecewise smooth in them); nor has any parameter when the model is not the standard one, or when a
         sample the model solved has no derivative there (an unstable or unconverged row).
 
         Parameters
@@ -163,7 +163,7 @@ class FitObjective:
             ``{column: ndarray (K, w)}``, d components / d parameter [mm or deg per unit of the
             parameter], zero at failed samples; only for the columns that have one.
         """
-        columns = [j for j in columns]
+        columns = list(columns)
         if self.model != "standard" or not columns:
             return {}
         x = np.asarray(x, float)

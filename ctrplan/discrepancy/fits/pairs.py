@@ -31,7 +31,7 @@ from .gridsearch import grid_search
 from ..options import DiscrepancyOptions
 from ..setup import DiscrepancySetup, effect_parameters, reported_parameters
 from ..measured.split import DataSplit
-from ..verdict.decision import CORRELATED_FOLDS_SIZE_FACTOR, folds_kept_apart
+from ..verdict.decision import comparison_level
 from ..verdict.reasons import Caution, DecisionNote, FitNote, NotPaired
 from ..verdict.statistics import holm
 
@@ -300,10 +300,7 @@ def joint_search_level(split: DataSplit, tried: Mapping, significance: float) ->
     -------
     float
     """
-    lowest = min(tried, key=lambda e: tried[e].mean_error) if tried else None
-    oof = None if lowest is None else tried[lowest].cv.oof
-    apart = folds_kept_apart(split, None if oof is None else oof.residual_base)
-    return significance if apart else significance / CORRELATED_FOLDS_SIZE_FACTOR
+    return comparison_level(split, tried, significance)
 
 
 def joint_start(naming) -> str | None:

@@ -18,7 +18,7 @@ import numpy as np
 
 from ...errors import CtrplanError
 from ...history import MotionRecord, motion_state, sequence_segments
-from ...mechanics import ModelSettings, solve_standard
+from ...mechanics import ModelSettings, solve_standard, solve_standard_path
 from ...models import MODEL_INFO, MODELS, check_model, standard_solution  # the one registry of models
 from ...parallel import Executor
 
@@ -28,9 +28,11 @@ __all__ = ["MODELS", "Simulation", "simulate", "WarmStarts", "WARM_OUTER_TOL"]
 # transfer (a contact solve takes ~0.1 s, a task ~1 s), few enough to balance 2-8 workers.
 _ROWS_PER_TASK = 16
 # Rough serial cost of one sample [s] (Table VII robot, ds 3 mm, one core): a standard solve
-# from a good guess, and a contact solve. Work estimated below _MIN_PARALLEL_SECONDS runs in
-# this process: starting or feeding loky workers costs about a second.
-_STANDARD_COST_S = 0.003
+# from the previous sample's solution in the compiled path (83 us a row on a random walk of 400
+# rows, 124 us through solve_standard one row at a time), and a contact solve. Work estimated
+# below _MIN_PARALLEL_SECONDS runs in this process: starting or feeding loky workers costs about
+# a second.
+_STANDARD_COST_S = 1e-4
 _CONTACT_COST_S = 0.1
 _MIN_PARALLEL_SECONDS = 2.0
 #: Outer (centerline change [m]) and complementarity tolerances of contact solves that use
@@ -203,6 +205,8 @@ def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, solve, contact, sett
     stored: None, or the :class:`WarmStarts` entries of these rows (``{key: start}``), whose
     contact solves then start from them and whose solutions are returned as new entries.
     """
+    if not contact and solve is standard_solution:
+        return _standard_rows(robot, alpha, beta, guess, follow, settings, check_stability)
     m, n = alpha.shape
     tip, tan, ok, msg, torsion, counts = _no_results(m, n)
     new = [] if stored is not None else None
@@ -289,6 +293,41 @@ def _solve_rows(robot, alpha, beta, guess, follow, eta, mu, solve, contact, sett
             msg[k] = f"{type(exc).__name__}: {exc}"
             prev_std = prev_cont = prev_key = prev_start = None
     return tip, tan, ok, msg, torsion, counts, new
+
+
+def _standard_rows(robot, alpha, beta, guess, follow, settings, check_stability):
+    """:func:`_solve_rows` of the standard model in one compiled call
+    (:func:`ctrplan.mechanics.solve_standard_path`: the same starts, reuse and numbers as the
+    loop over :func:`~ctrplan.mechanics.solve_standard`), with the same messages."""
+    m, n = alpha.shape
+    tip, tan, ok, msg, torsion, counts = _no_results(m, n)
+    path = solve_standard_path(robot, alpha, beta, settings, initial_guess=guess, follow=follow,
+                               check_stability=check_stability)
+    conv, unstable = path.converged & path.valid, path.unstable & path.valid
+    ok[:] = conv & ~unstable
+    tip[ok], tan[ok] = path.tip_position[ok], path.tip_tangent[ok]
+    torsion[conv] = path.base_torsion[conv]
+    counts["n_standard"] = int(np.sum(path.valid & ~path.reused))
+    counts["n_reused"] = int(np.sum(ok & path.reused))
+    for k in range(m):
+        if ok[k]:
+            msg[k] = "converged"
+        elif not path.valid[k]:
+            try:
+                robot.check_configuration(alpha[k], beta[k])
+                msg[k] = "configuration not possible"
+            except CtrplanError as exc:
+                msg[k] = f"{type(exc).__name__}: {exc}"
+        elif not conv[k]:
+            msg[k] = ("standard model: shooting did not converge (tip torsion residual "
+                      f"{path.residual[k]:.3g} 1/m)")
+        elif path.n_equilibria[k] > 1:
+            msg[k] = (f"standard model: elastically unstable: {path.n_equilibria[k]} equilibria found by "
+                      "the multistart search")
+        else:
+            msg[k] = (f"standard model: elastically unstable: shooting Jacobian determinant "
+                      f"{path.determinant[k]:.3g} <= 0")
+    return tip, tan, ok, msg, torsion, counts, None
 
 
 def _tasks_from_groups(groups, size):
@@ -441,7 +480,8 @@ def simulate(robot, alpha, beta, *, model: str, eta=None, mu=None, sequence=None
     the sequence starts from zero twist.
 
     Branch following runs in two stages when a contact model has sequences: the standard model
-    sequentially along each sequence (about 2 ms a sample), then the contact solves in
+    sequentially along each sequence (about 0.1 ms a sample, one compiled call per task:
+    :func:`~ctrplan.mechanics.solve_standard_path`), then the contact solves in
     parallel chunks, each standard solve restarted from the first stage's base torsions (it
     converges in one Newton step to the same branch). A contact solve is warm-started only from
     a solution at the same configuration (same grid): the previous sample's when it did not

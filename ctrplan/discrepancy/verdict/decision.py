@@ -74,7 +74,7 @@ from .separability import Separability, separability
 from .statistics import Comparison, holm
 
 __all__ = ["NoiseCheck", "Naming", "Decision", "RunnerUp", "Separability", "check_noise", "name_effect", "cautions",
-           "no_effect_case", "unfinished_fits", "folds_kept_apart",
+           "no_effect_case", "unfinished_fits", "folds_kept_apart", "comparison_level",
            "CORRELATED_FOLDS_SIZE_FACTOR", "VERDICTS"]
 
 
@@ -350,10 +350,8 @@ def name_effect(split: DataSplit, candidates: Mapping[str, Candidate], tests: Ma
     -------
     Naming
     """
-    lowest = min(candidates, key=lambda e: candidates[e].mean_error) if candidates else None
-    oof = None if lowest is None else candidates[lowest].cv.oof
-    apart = folds_kept_apart(split, None if oof is None else oof.residual_base)
-    alpha = options.significance if apart else options.significance / CORRELATED_FOLDS_SIZE_FACTOR
+    alpha = comparison_level(split, candidates, options.significance)
+    apart = alpha == options.significance   # the level is divided where the folds are not apart
     significant = holm({e: (c.improvement.p_value if c.improvement.mean_difference > 0 else 1.0)
                         for e, c in candidates.items()}, alpha) if candidates else {}
     names = list(candidates)
@@ -487,6 +485,31 @@ def folds_kept_apart(split: DataSplit, residual=None) -> bool:
     lag = int(choice.samples) + 1
     left = residual_autocorrelation(residual, split.data.take(split.dev_rows), lag)[lag]
     return bool(np.isfinite(left) and left <= choice.threshold)
+
+
+def comparison_level(split: DataSplit, fitted: Mapping, significance: float) -> float:
+    """The level of comparisons among fitted models: ``significance``, or that divided by
+    :data:`CORRELATED_FOLDS_SIZE_FACTOR` where the folds are not kept apart
+    (:func:`folds_kept_apart`), judged from the out-of-fold residual of the model with the lowest
+    error among ``fitted``.
+
+    Parameters
+    ----------
+    split : DataSplit
+    fitted : mapping of str to Candidate
+        The models compared (their ``mean_error`` [m] and ``cv.oof.residual_base`` [m] at the
+        development samples); empty: the folds of a capped buffer are not kept apart.
+    significance : float
+        The level asked for (``DiscrepancyOptions.significance``).
+
+    Returns
+    -------
+    float
+    """
+    lowest = min(fitted, key=lambda e: fitted[e].mean_error) if fitted else None
+    oof = None if lowest is None else fitted[lowest].cv.oof
+    apart = folds_kept_apart(split, None if oof is None else oof.residual_base)
+    return significance if apart else significance / CORRELATED_FOLDS_SIZE_FACTOR
 
 
 def unfinished_fits(cv) -> tuple:
