@@ -15,6 +15,9 @@ What they time (in-process unless said otherwise):
   one process): the friction model (the full bound: every friction solution and the clearance
   solution) on the paper's 4x4x4 grid and the standard model on the rows of Ha's measured
   trajectory (Table II robot; skipped without ``../shared/data``);
+- ``Simulate.time_standard_along_trajectory``: the standard model along Ha's measured
+  trajectory, each sequence followed in order, as a discrepancy fit evaluates it (skipped
+  without the data);
 - ``CandidateFit.time_clearance_fit``: one discrepancy candidate's fit, the tube parameters and
   the registration with the clearance model on 48 samples of Ha's measured trajectory (skipped
   without the data);
@@ -250,6 +253,34 @@ class Evaluate:
         if self.rows is None:
             raise NotImplementedError(f"no measured trajectory at {HA_DATA}")
         self.evaluate_table(self.robot, *self.rows, "standard", self.settings, n_jobs=1)
+
+
+class Simulate:
+    """The standard model along Ha's measured trajectory as every standard-model evaluation of a
+    discrepancy fit runs it (``ctrplan.discrepancy.fits.simulate.simulate``: each sequence
+    followed in order, one process)."""
+
+    timeout = 300
+    warmup_time = 0.0
+
+    def setup(self):
+        if not HA_DATA.exists():
+            raise NotImplementedError(f"no measured trajectory at {HA_DATA}")
+        from ctrplan.discrepancy.fits.simulate import simulate
+        from ctrplan.discrepancy.measured.data import load_measured_data
+        from ctrplan.io.robot_file import load_robot
+
+        robot = load_robot(REPO / "model" / "ha2019-table2-nominal.toml")
+        data = load_measured_data(HA_DATA, robot)
+
+        def run():
+            return simulate(robot, data.alpha, data.beta, model="standard", sequence=data.sequence)
+
+        self.run = run
+        run()            # compiled kernels loaded
+
+    def time_standard_along_trajectory(self):
+        self.run()
 
 
 class CandidateFit:
