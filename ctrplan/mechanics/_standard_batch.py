@@ -552,6 +552,10 @@ def solve_standard_path(robot, alpha, beta, settings: ModelSettings | None = Non
     ------
     ValueError
         If the arrays do not have the shapes above.
+
+    Notes
+    -----
+    Section II-A of Ha, Fagogenis & Dupont 2019 (refs [10], [11]), as :func:`solve_standard`.
     """
     settings = settings or ModelSettings()
     n = robot.n_tubes

@@ -255,6 +255,18 @@ class Evaluate:
         self.evaluate_table(self.robot, *self.rows, "standard", self.settings, n_jobs=1)
 
 
+def _ha_measured():
+    """The Table II nominal robot and Ha's measured trajectory read for it (``MeasuredData``);
+    raises ``NotImplementedError`` (asv: skipped) without the data."""
+    if not HA_DATA.exists():
+        raise NotImplementedError(f"no measured trajectory at {HA_DATA}")
+    from ctrplan.discrepancy.measured.data import load_measured_data
+    from ctrplan.io.robot_file import load_robot
+
+    robot = load_robot(REPO / "model" / "ha2019-table2-nominal.toml")
+    return robot, load_measured_data(HA_DATA, robot)
+
+
 class Simulate:
     """The standard model along Ha's measured trajectory as every standard-model evaluation of a
     discrepancy fit runs it (``ctrplan.discrepancy.fits.simulate.simulate``: each sequence
@@ -264,14 +276,9 @@ class Simulate:
     warmup_time = 0.0
 
     def setup(self):
-        if not HA_DATA.exists():
-            raise NotImplementedError(f"no measured trajectory at {HA_DATA}")
         from ctrplan.discrepancy.fits.simulate import simulate
-        from ctrplan.discrepancy.measured.data import load_measured_data
-        from ctrplan.io.robot_file import load_robot
 
-        robot = load_robot(REPO / "model" / "ha2019-table2-nominal.toml")
-        data = load_measured_data(HA_DATA, robot)
+        robot, data = _ha_measured()
 
         def run():
             return simulate(robot, data.alpha, data.beta, model="standard", sequence=data.sequence)
@@ -293,17 +300,12 @@ class CandidateFit:
     warmup_time = 0.0
 
     def setup(self):
-        if not HA_DATA.exists():
-            raise NotImplementedError(f"no measured trajectory at {HA_DATA}")
         from ctrplan.discrepancy.fits.calibrate import calibrate
         from ctrplan.discrepancy.fits.fitoptions import FitRun, FitStart
-        from ctrplan.discrepancy.measured.data import load_measured_data
         from ctrplan.discrepancy.options import DiscrepancyOptions
         from ctrplan.discrepancy.setup import default_baseline_parameters
-        from ctrplan.io.robot_file import load_robot
 
-        robot = load_robot(REPO / "model" / "ha2019-table2-nominal.toml")
-        data = load_measured_data(HA_DATA, robot)
+        robot, data = _ha_measured()
         sub = data.take(np.linspace(0, data.n_samples - 1, 48).astype(int))
         opts = DiscrepancyOptions()
         register = data.frame == "tracker"
