@@ -28,13 +28,12 @@ from .choices import BagStorage, MapPlacement, PoseFrame, ProtocolKind, RosDistr
 from .errors import CtrplanError, JointLimitError  # noqa: E402
 from .models import MODEL_INFO, MODELS  # noqa: E402
 
-# By name, not __name__: the same logger when run as ``python -m ctrplan.cli``.
 def _choice(choices) -> click.Choice:
     """The strings of a :mod:`ctrplan.choices` enum as a click choice (click would list the names)."""
     return click.Choice([m.value for m in choices])
 
 
-logger = logging.getLogger("ctrplan.cli")
+logger = logging.getLogger("ctrplan.cli")   # by name: the same logger under ``python -m ctrplan.cli``
 
 
 class _ConsoleHandler(logging.Handler):
@@ -197,6 +196,7 @@ def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_ou
     it and the next run goes on), so that later plans read it.
     """
     single = len(scenario_paths) == 1 and Path(scenario_paths[0]).is_file() and scheduler is None
+    scenario = scenario_paths[0] if single else None     # the file, or the scenario once it is loaded
     if ros2_out is not None:
         from .errors import ModelFileError, PhysicalParameterError
         from .io.ros2 import check_plan_bag_target
@@ -208,14 +208,14 @@ def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_ou
             check_plan_bag_target(ros2_out)
         except FileExistsError as exc:
             raise PhysicalParameterError(f"option --ros2: {exc}") from None
-
-        if load_scenario(scenario_paths[0]).drive is None:
+        scenario = load_scenario(scenario_paths[0])
+        if scenario.drive is None:
             raise ModelFileError(str(scenario_paths[0]), "drive", "option --ros2 needs the drive limits that make "
                                  "the joint trajectory; the scenario has no [drive] table")
     if single:
         from .api import plan_scenario, write_plan_ros2
 
-        result = plan_scenario(scenario_paths[0], out_dir, n_jobs=jobs or os.cpu_count() or 1, iterations=iterations,
+        result = plan_scenario(scenario, out_dir, n_jobs=jobs or os.cpu_count() or 1, iterations=iterations,
                                compare_blind=not no_blind, progress=_progress())
         logger.info(f"outputs in {result.output_dir}")
         if ros2_out is not None:

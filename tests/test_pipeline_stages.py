@@ -276,3 +276,67 @@ def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, m
     gi = plans.aware.goal_indices[0]
     np.testing.assert_allclose([target.x[0], target.y[0], target.z[0]],
                                1e3 * exact.results[gi].standard.tip_position, atol=1e-4)
+
+
+SPHERE_AWAY = """
+[[obstacles]]
+type = "sphere"
+center_m = [0.05, 0.05, 0.05]
+radius_m = 0.005
+"""
+
+
+def _count_builds(monkeypatch):
+    """Counts of the constructions of the joint space and the checkers from here on."""
+    from ctrplan.planning import collision, space, validity, verify
+
+    counts = {}
+    for cls in (space.JointStateSpace, collision.CollisionChecker, validity.BatchValidityChecker,
+                verify.MotionVerifier):
+        init = cls.__init__
+
+        def counted(self, *args, _init=init, _name=cls.__name__, **kwargs):
+            counts[_name] = counts.get(_name, 0) + 1
+            _init(self, *args, **kwargs)
+
+        monkeypatch.setattr(cls, "__init__", counted)
+    return counts
+
+
+def test_a_plan_builds_its_checkers_and_joint_space_once_and_each_stage_counts_its_own_work(tmp_path, monkeypatch):
+    """Stages 3 to 7 with both plans and an obstacle build the joint space and the checkers as
+    often as one ``route_checks`` call does (the start, the goal and both plans share them); the
+    goal stage's and the plans' counters add up to the shared checkers' totals, so no stage
+    reports another's work; and the plans equal those of checkers built afresh for each."""
+    from ctrplan.planning import route_checks
+
+    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, SPHERE_AWAY))
+    field = _field(setup.robot)
+    counts = _count_builds(monkeypatch)
+    route_checks(setup.robot, list(setup.obstacles), field, setup.check_settings)
+    one = dict(counts)
+    assert one == {"JointStateSpace": 1, "CollisionChecker": 2, "BatchValidityChecker": 2, "MotionVerifier": 1}
+    counts.clear()
+    run = pipeline.run_stages(setup, pipeline.given_bound_map(setup, field), compare_blind=True, n_jobs=1)
+    assert counts == one
+    assert setup.route_checks(field) is setup.route_checks(field)
+
+    total = setup.route_checks(field).counters()
+    plans = run.plans.routes.values()
+    assert len(plans) == 2
+    assert run.goal_checks.n_calls + sum(p.checks["validity_calls"] for p in plans) == total["validity_calls"]
+    for key in ("final_check_states", "final_check_motions", "search_motions_checked"):
+        assert sum(p.checks[key] for p in plans) == total[key] and all(p.checks[key] > 0 for p in plans), key
+    # the states evaluated before the plans are the goal stage's (the start and the goal, not cached yet)
+    assert 0 < total["search_states_evaluated"] - sum(p.checks["search_states_evaluated"] for p in plans) \
+        <= run.goal_checks.n_calls
+
+    # a copy of the setup (as another process gets it) has no checkers: it builds its own, and
+    # plans the same paths with them
+    import pickle
+
+    fresh = pickle.loads(pickle.dumps(setup))
+    assert "_route_checks" not in fresh.__dict__ and "joint_space" not in fresh.__dict__
+    again = pipeline.plan_routes(fresh, field, run.aimed, compare_blind=True, n_jobs=1)
+    for mode, plan in run.plans.routes.items():
+        np.testing.assert_array_equal(again.routes[mode].ordered.q, plan.ordered.q)

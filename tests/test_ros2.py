@@ -334,13 +334,26 @@ def test_plan_with_ros2_writes_the_trajectory_csv_as_a_bag(tmp_path, monkeypatch
     the robot file has one); the YAML beside the outputs holds the same trajectory."""
     from ruamel.yaml import YAML
 
+    import ctrplan.api
+    import ctrplan.io.scenario
+
     sc = _scenario(tmp_path, "{alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}")
     out, bag = tmp_path / "plan", tmp_path / "plan_bag"
     monkeypatch.setattr(sys, "argv", ["ctrplan", "plan", str(sc), "--out", str(out), "--iterations", "20",
                                       "--no-blind", "--ros2", str(bag)])
+    loads = []
+    load = ctrplan.io.scenario.load_scenario
+
+    def counted(*args, **kwargs):
+        loads.append(args[0])
+        return load(*args, **kwargs)
+
+    monkeypatch.setattr(ctrplan.io.scenario, "load_scenario", counted)
+    monkeypatch.setattr(ctrplan.api, "load_scenario", counted)
     with pytest.raises(SystemExit) as info:
         cli.run()
     assert info.value.code in (0, None), capsys.readouterr().err
+    assert len(loads) == 1, loads          # the scenario is read once (checked for --ros2, then planned)
     with open(out / "trajectory.csv") as fh:
         rows = list(csv.reader(fh))
     header, values = rows[0], np.array(rows[1:], dtype=float)

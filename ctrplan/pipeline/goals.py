@@ -21,7 +21,6 @@ from ..io.scenario import TaskGoal
 from ..planning import IKSearch, resolve_goal
 from ..planning.goals import compensate_goal
 from ..planning.history import approach_history, approach_rows
-from ..planning.route import route_checks
 from .setup import PlanSetup
 from .wording import aim_reason
 
@@ -168,9 +167,11 @@ def check_start(setup: PlanSetup, field):
     Returns
     -------
     BatchValidityChecker
-        The planning search's checker (collision with ``setup.obstacles``, elastic stability,
-        the map's valid region; ``setup.check_settings``). It counts its calls (``n_calls``,
-        ``n_model``, ``seconds_collision``), which the summary reports.
+        The planning search's checker (``setup.route_checks(field).search``: collision with
+        ``setup.obstacles``, elastic stability, the map's valid region;
+        ``setup.check_settings``), which the plans then search with. It counts its calls
+        (``n_calls``, ``n_model``, ``seconds_collision``); taken after the goals are aimed, they are
+        the goal stages' work, which the summary reports.
 
     Raises
     ------
@@ -178,8 +179,7 @@ def check_start(setup: PlanSetup, field):
         The start is in collision, elastically unstable or outside the map's valid region.
     """
     sc = setup.scenario
-    validity = route_checks(setup.robot, list(setup.obstacles), field, setup.check_settings,
-                            joint_space=setup.joint_space).search
+    validity = setup.route_checks(field).search
     if not validity(sc.start):
         raise UnreachableGoalError(f"{sc.file}: start configuration {sc.joint_dict(sc.start)} is invalid "
                                    "(collision, elastic instability or outside the bound map's valid region)")

@@ -129,17 +129,14 @@ class Planner:
     def __init__(self, setup, field, *, n_nodes: int | None = None, neighbours: int | None = None,
                  seed: int | None = None, cache_dir: str | os.PathLike | None = None, store: bool = True,
                  n_jobs: int = 1):
-        from ..planning import JointStateSpace
         from ..planning.roadmap import motion_terms
-        from ..planning.route import route_checks
         from .routes import effective_bound_weight
 
         sc = setup.scenario
         self.setup, self.field = setup, field
         self.robot = setup.robot
-        self.joint_space = JointStateSpace(self.robot)
-        self.checks = route_checks(self.robot, list(setup.obstacles), field, setup.check_settings,
-                                   joint_space=self.joint_space)
+        self.joint_space = setup.joint_space
+        self.checks = setup.route_checks(field)
         self.bound_weight = effective_bound_weight(sc.calibration.bound, sc.planner.bound_weight)
         self.terms = motion_terms(self.joint_space, field)
         self.current = np.array(sc.start, dtype=float)

@@ -14,10 +14,9 @@ import numpy as np
 
 from .._log import deprecated_echo, progress_level
 from ..errors import CtrplanError
-from ..mechanics import ModelSettings
-from ..planning import BoundCostObjective, JointStateSpace, SearchSettings
+from ..planning import BoundCostObjective, SearchSettings
 from ..planning.history import end_with, goal_indices
-from ..planning.route import plan_route, route_checks
+from ..planning.route import plan_route
 from .goals import AimedGoals
 from .path_bounds import PathBounds, bounds_along_path
 from .prediction import WaypointPredictions, predict_waypoints
@@ -101,17 +100,13 @@ class Plans:
 
 @dataclass(frozen=True, eq=False)
 class _PlanJob:
-    """Inputs of one plan (:func:`_plan_mode`); picklable, to run in another process."""
+    """Inputs of one plan (:func:`_plan_mode`); picklable, to run in another process (the setup
+    arrives there without its checkers and joint space, which that process builds once)."""
 
-    robot: Any
+    setup: PlanSetup
     field: Any
-    obstacles: list
-    check_settings: ModelSettings
-    settings: ModelSettings
-    start: np.ndarray
     goals: list
     weight: float
-    planner: Any
     iterations: int
     final_motion: str
     roadmap: Any = None
@@ -119,18 +114,21 @@ class _PlanJob:
 
 def _plan_mode(job: _PlanJob) -> RoutePlan:
     """One plan of a scenario (bound-aware or bound-blind): search, ordering, final check and the
-    report. Takes and returns only picklable data, so that it can run in another process."""
-    robot, field = job.robot, job.field
-    joint_space = JointStateSpace(robot)
-    checks = route_checks(robot, job.obstacles, field, job.check_settings, joint_space=joint_space)
-    p = job.planner
+    report, with the setup's checkers of the map (``PlanSetup.route_checks``) and its joint space.
+    Takes and returns only picklable data, so that it can run in another process."""
+    setup, field = job.setup, job.field
+    robot, joint_space = setup.robot, setup.joint_space
+    checks = setup.route_checks(field)
+    before = checks.counters()
+    p = setup.scenario.planner
     roadmap = None
     if job.roadmap is not None:
         from ..planning.roadmap import motion_terms
 
         roadmap = (job.roadmap, motion_terms(joint_space, field), job.weight)
     t0 = time.perf_counter()
-    route = plan_route(robot, job.start, job.goals, checks, BoundCostObjective.factory(field, bound_weight=job.weight),
+    route = plan_route(robot, setup.scenario.start, job.goals, checks,
+                       BoundCostObjective.factory(field, bound_weight=job.weight),
                        SearchSettings.from_scenario(p, iterations=job.iterations), joint_space=joint_space,
                        roadmap=roadmap)
     ordered = route.ordered
@@ -143,11 +141,11 @@ def _plan_mode(job: _PlanJob) -> RoutePlan:
         final_status.append(status)
     plan_time = time.perf_counter() - t0
     t0 = time.perf_counter()
-    bounds = bounds_along_path(ordered, robot, field, job.settings, joint_space)
+    bounds = bounds_along_path(ordered, robot, field, setup.settings, joint_space)
     exact_time = time.perf_counter() - t0
-    pred = predict_waypoints(ordered, robot, job.settings, bounds.exact)
+    pred = predict_waypoints(ordered, robot, setup.settings, bounds.exact)
     return RoutePlan(legs=route.legs, ordered=ordered, bounds=bounds, plan_time_s=plan_time,
-                     exact_time_s=exact_time, checks=checks.counters(),
+                     exact_time_s=exact_time, checks=checks.counters(since=before),
                      max_body_step_m=checks.final.max_body_step, prediction=pred, goal_indices=idx,
                      final_motion_status=final_status)
 
@@ -160,9 +158,10 @@ def _compile_before_fork(job) -> None:
     from ..mechanics import solve_standard, solve_standard_bodies
 
     try:
-        alpha, beta = job.robot.configuration(job.start)
-        solve_standard_bodies(job.robot, np.atleast_2d(alpha), np.atleast_2d(beta), job.check_settings)
-        solve_standard(job.robot, alpha, beta, job.settings)
+        setup = job.setup
+        alpha, beta = setup.robot.configuration(setup.scenario.start)
+        solve_standard_bodies(setup.robot, np.atleast_2d(alpha), np.atleast_2d(beta), setup.check_settings)
+        solve_standard(setup.robot, alpha, beta, setup.settings)
     except (CtrplanError, ValueError):   # only a warm-up: the plans report a bad start themselves
         pass
 
@@ -240,20 +239,16 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
     iters = iterations or sc.planner.iterations
     modes = ([("bound_aware", effective_bound_weight(sc.calibration.bound, sc.planner.bound_weight))]
              + ([("bound_blind", 0.0)] if compare_blind else []))
-    jobs = {mode: _PlanJob(robot=setup.robot, field=field, obstacles=list(setup.obstacles),
-                           check_settings=setup.check_settings, settings=setup.settings, start=sc.start,
-                           goals=list(aimed.q), weight=weight, planner=sc.planner, iterations=iters,
+    jobs = {mode: _PlanJob(setup=setup, field=field, goals=list(aimed.q), weight=weight, iterations=iters,
                            final_motion=aimed.final_motion)
             for mode, weight in modes}
     t0 = time.perf_counter()
     info = None
     if use_roadmap:
-        from ..planning.route import route_checks
         from .roadmap import load_roadmap
 
-        js = setup.joint_space
-        checker = route_checks(setup.robot, list(setup.obstacles), field, setup.check_settings, joint_space=js).search
-        roadmap, source, path = load_roadmap(setup, field, checker, js, n_jobs=n_jobs)
+        roadmap, source, path = load_roadmap(setup, field, setup.route_checks(field).search, setup.joint_space,
+                                             n_jobs=n_jobs)
         info = {"states": roadmap.n_nodes, "motions": roadmap.n_edges, "source": source,
                 "file": None if path is None else str(path), "time_s": time.perf_counter() - t0}
         jobs = {m: replace(job, roadmap=roadmap) for m, job in jobs.items()}
@@ -264,8 +259,8 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
         ordered = r.ordered
         logger.log(progress_level(),
                    f"{mode}: {len(ordered)} ordered waypoints, planning {r.plan_time_s:.1f} s "
-                   f"({r.checks['search_states_evaluated']} states checked, final check "
-                   f"{r.checks['final_check_states']} states, "
+                   f"({r.checks['validity_calls']} states checked, {r.checks['search_states_evaluated']} not cached, "
+                   f"final check {r.checks['final_check_states']} states, "
                    f"{ordered.n_subdivisions} bisections, {ordered.n_repairs} repairs); exact bound at waypoints: "
                    f"max {np.nanmax(lm.position) * 1e3:.2f} mm, final {lm.position[-1] * 1e3:.2f} mm")
     return Plans(routes=MappingProxyType(routes), in_parallel=in_parallel, time_s=seconds, roadmap=info)

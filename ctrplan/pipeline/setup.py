@@ -96,14 +96,43 @@ class PlanSetup:
     @functools.cached_property
     def joint_space(self):
         """The robot's :class:`~ctrplan.planning.JointStateSpace`, built once per plan and process
-        (its OMPL objects do not pickle: a copy of the setup in another process builds its own)."""
+        (its OMPL objects do not pickle: a copy of the setup in another process builds its own, as
+        it does its :meth:`route_checks`)."""
         from ..planning import JointStateSpace
 
         return JointStateSpace(self.robot)
 
+    def route_checks(self, field):
+        """The search, repair and final checkers of this plan with ``field``'s validity flags
+        (:func:`ctrplan.planning.route_checks` of the robot, the obstacles and
+        ``check_settings``, on :attr:`joint_space`), built once per map and process and shared by
+        every stage that checks states: the start, the goals, the roadmap and both plans. Their
+        counters therefore add up over the stages; a stage reports its own share as a difference
+        (:meth:`ctrplan.planning.RouteChecks.counters`).
+
+        Parameters
+        ----------
+        field : BoundField or None
+            The map whose validity flags the checkers read; the checkers of another map are
+            built for it.
+
+        Returns
+        -------
+        ctrplan.planning.RouteChecks
+        """
+        from ..planning.route import route_checks
+
+        built = self.__dict__.setdefault("_route_checks", {})
+        hit = built.get(id(field))
+        if hit is None or hit[0] is not field:
+            hit = built[id(field)] = (field, route_checks(self.robot, list(self.obstacles), field, self.check_settings,
+                                                          joint_space=self.joint_space))
+        return hit[1]
+
     def __getstate__(self):
         state = dict(self.__dict__)
         state.pop("joint_space", None)
+        state.pop("_route_checks", None)
         return state
 
     def __setstate__(self, state):

@@ -81,8 +81,29 @@ class RouteChecks:
     repair_search: BatchValidityChecker
     final: MotionVerifier
 
-    def counters(self) -> dict:
-        """Work of the three checkers (states, motions, model and collision seconds)."""
+    def counters(self, since: dict | None = None) -> dict:
+        """Work of the three checkers (states, motions, model and collision seconds).
+
+        Parameters
+        ----------
+        since : dict, optional
+            An earlier result of this method: the work done after it is returned (checkers
+            shared by several stages count for all of them).
+
+        Returns
+        -------
+        dict
+            ``validity_calls``, ``standard_model_solves``, ``search_states_evaluated``,
+            ``search_motions_checked``, ``final_check_motions``, ``final_check_states`` (int) and
+            ``search_standard_model_time_s``, ``search_collision_time_s``,
+            ``final_check_time_s`` [s].
+        """
+        now = self._counters()
+        if since is None:
+            return now
+        return {k: v - since[k] for k, v in now.items()}
+
+    def _counters(self) -> dict:
         c = self.search.counters()
         r = self.repair_search.counters()
         return {"validity_calls": c["n_calls"] + r["n_calls"],
