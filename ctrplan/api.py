@@ -25,8 +25,8 @@ from ._log import deprecated_echo
 from .boundmap import BoundField
 from .calibration import RobotCalibration
 from .io.scenario import Scenario, load_scenario
-from .pipeline import (BoundMapStage, PlanRun, default_out_dir, given_bound_map, load_bound_map, log_summary,
-                       plan_summary, run_stages, setup_plan, write_report)
+from .pipeline import (BoundMapStage, PlanRun, default_out_dir, given_bound_map, prepare_bound_map, log_summary,
+                       plan_summary, run_stages, setup_plan, write_plan_report)
 from .robot import Robot
 from .trajectory import Trajectory
 
@@ -125,7 +125,7 @@ class PlanResult:
         dict of str to pathlib.Path
             Written files by name.
         """
-        return write_report(self.run, out_dir)
+        return write_plan_report(self.run, out_dir)
 
 
 def _result(run: PlanRun, output_dir: Path | None) -> PlanResult:
@@ -213,7 +213,7 @@ def plan(scenario: Scenario | str | os.PathLike, *, bound_map: BoundField | Boun
     warmup.start()   # the final check's contact kernels compile beside planning on a cold start
     setup = setup_plan(sc, out_dir)
     if bound_map is None:
-        stage = load_bound_map(setup, n_jobs, progress=progress)
+        stage = prepare_bound_map(setup, n_jobs, progress=progress)
     elif isinstance(bound_map, BoundMapStage):
         stage = bound_map
     else:
@@ -221,7 +221,7 @@ def plan(scenario: Scenario | str | os.PathLike, *, bound_map: BoundField | Boun
     run = run_stages(setup, stage, iterations=iterations, compare_blind=compare_blind, n_jobs=n_jobs, started=t0)
     summary = plan_summary(run)
     if setup.out_dir is not None:
-        write_report(run, setup.out_dir, summary=summary)
+        write_plan_report(run, setup.out_dir, summary=summary)
     log_summary(summary)
     return _result(run, setup.out_dir)
 

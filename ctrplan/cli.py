@@ -159,7 +159,7 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
             logger.info(f"  row {int(r['row'])}: {r['status']}: {r['message']}")
 
 
-@main.command()
+@main.command("plan")
 @click.argument("scenario_paths", nargs=-1, required=True, type=click.Path(exists=True))
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Output folder (one scenario: default its [output] dir or out/<name>; several: the root of "
@@ -183,7 +183,7 @@ def evaluate(robot_path, configs_path, model, out_path, ds, jobs, no_progress, e
 @click.option("--no-full-map", is_flag=True,
               help="One scenario planned with a preview map (its robot has no map yet): do not compute the full "
                    "map after the plan (a later run computes it).")
-def plan(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_out, ros2_storage, ros2_distro,
+def plan_command(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind, ros2_out, ros2_storage, ros2_distro,
          ros2_frame, no_full_map):
     """Plan a friction-bound-aware motion for a scenario and write the drive trajectory.
 

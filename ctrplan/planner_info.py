@@ -1,9 +1,9 @@
 """The registry of planners: names, how each is made, and the parameters each declares.
 
-A name here is what a scenario file's ``[planner] name`` and :func:`ctrplan.planning.plan`
+A name here is what a scenario file's ``[planner] name`` and :func:`ctrplan.planning.plan_leg`
 accept; a scenario naming another one is refused when it loads, naming the file and the key. A
 planner declares its parameters (:class:`PlannerParameter`: type, default, range, how it is set),
-as OMPL planners do with ``declareParam``: a scenario key or a :func:`~ctrplan.planning.plan`
+as OMPL planners do with ``declareParam``: a scenario key or a :func:`~ctrplan.planning.plan_leg`
 option that the named planner does not declare is an error, never silently ignored.
 
 Users add a planner with :func:`register_planner` (or ``with PLANNER_REGISTRY.registered(...)``),
@@ -34,7 +34,7 @@ class PlannerParameter:
     Attributes
     ----------
     name : str
-        Its key in a scenario's ``[planner]`` table and in ``plan(..., options={name: value})``.
+        Its key in a scenario's ``[planner]`` table and in ``plan_leg(..., options={name: value})``.
     kind : type
         ``float``, ``int`` or ``bool``; an int is accepted for a float.
     description : str
@@ -190,7 +190,7 @@ def register_planner(info: PlannerInfo, *, replace: bool = False) -> PlannerInfo
     """Add a planner to :data:`PLANNER_REGISTRY` under ``info.name``.
 
     After this, scenario files accept ``[planner] name = "<name>"`` with the parameters it
-    declares as keys of ``[planner]``, and :func:`ctrplan.planning.plan` (and so
+    declares as keys of ``[planner]``, and :func:`ctrplan.planning.plan_leg` (and so
     :func:`ctrplan.plan`) plans with it.
 
     Parameters
@@ -282,7 +282,7 @@ def planner_table() -> str:
         One row per planner: name, how it searches, and each parameter as
         ``name (kind, [low, high]): description``.
     """
-    rows = ["| planner | how it searches | parameters (keys of `[planner]`, `plan(..., options=...)`) |",
+    rows = ["| planner | how it searches | parameters (keys of `[planner]`, `plan_leg(..., options=...)`) |",
             "|---|---|---|"]
     for name, info in PLANNER_REGISTRY.items():
         params = "; ".join(f"`{p.name}` ({p.kind.__name__}, [{_limit(p.low, '-inf')}, {_limit(p.high, 'inf')}]"

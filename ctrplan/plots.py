@@ -123,15 +123,16 @@ def _draw_obstacle(ax, obstacle, k: int) -> np.ndarray:
 
 def obstacle_triangles(obstacle, k: int, resolution: int) -> tuple[np.ndarray, np.ndarray]:
     """The triangles of an obstacle or obstacle dict as both drawings use them
-    (:meth:`~ctrplan.obstacles.Obstacle.triangles`).
+    (:meth:`~ctrplan.obstacles.Obstacle.triangles`): the figures at :data:`SPHERE_RESOLUTION`, the
+    3-D view (:mod:`ctrplan.view`) at its own.
 
     Parameters
     ----------
     obstacle : Obstacle or mapping
     k : int
-        Its number in the list drawn (1-based), for messages.
+        Its index in the list drawn (0-based, as in the scenario's ``obstacles``), for messages.
     resolution : int
-        Segments of a round outline.
+        Segments of a round outline (points per great circle of a sphere).
 
     Returns
     -------

@@ -22,7 +22,7 @@ import numpy as np
 
 from .io.atomic import atomic_path
 
-__all__ = ["PLAN_VIEW_FILE", "WaypointFrames", "plan_view_figure", "write_plan_view", "obstacle_triangles"]
+__all__ = ["PLAN_VIEW_FILE", "WaypointFrames", "plan_view_figure", "write_plan_view"]
 
 #: File name of the interactive view in a plan's output folder.
 PLAN_VIEW_FILE = "plan.html"
@@ -101,9 +101,11 @@ def plan_view_figure(frames: WaypointFrames, *, obstacles: Sequence = (), target
     if len(labels) != K or len(notes) != K:
         raise ValueError(f"labels and notes need one entry per waypoint ({K}), got {len(labels)} and {len(notes)}")
 
+    from .plots import obstacle_triangles
+
     fig = go.Figure()
     for k, obstacle in enumerate(obstacles):
-        verts, faces = obstacle_triangles(obstacle, k)
+        verts, faces = obstacle_triangles(obstacle, k, SPHERE_RESOLUTION)
         x, y, z = _mm(verts)
         fig.add_trace(go.Mesh3d(x=x, y=y, z=z, i=faces[:, 0].tolist(), j=faces[:, 1].tolist(),
                                 k=faces[:, 2].tolist(), color=OBSTACLE_COLOR, opacity=OBSTACLE_OPACITY,
@@ -179,7 +181,8 @@ def write_plan_view(path, frames: WaypointFrames, *, obstacles: Sequence = (), t
         :class:`ctrplan.obstacles.Obstacle` instances (any registered type, e.g. a scenario's
         ``obstacles``) or dicts with a registered ``type``
         (:func:`ctrplan.obstacles.obstacle_from_dict`); each is drawn as its
-        :meth:`~ctrplan.obstacles.Obstacle.triangles` (:func:`obstacle_triangles`).
+        :meth:`~ctrplan.obstacles.Obstacle.triangles` (:func:`ctrplan.plots.obstacle_triangles` at
+        ``SPHERE_RESOLUTION``).
     targets : array-like, shape (G, 3), optional
         Goal tip positions [m].
     title : str
@@ -206,34 +209,6 @@ def write_plan_view(path, frames: WaypointFrames, *, obstacles: Sequence = (), t
 
 
 # ---------------------------------------------------------------------------------- obstacles
-def obstacle_triangles(obstacle, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Triangulated surface of one obstacle: its :meth:`~ctrplan.obstacles.Obstacle.triangles`
-    at ``SPHERE_RESOLUTION`` points per great circle (the placement the collision checker uses).
-
-    Parameters
-    ----------
-    obstacle : Obstacle or dict
-        See :func:`write_plan_view`.
-    k : int
-        Index, for error messages.
-
-    Returns
-    -------
-    vertices : ndarray, shape (V, 3)
-        [m].
-    faces : ndarray of int, shape (F, 3)
-
-    Raises
-    ------
-    ValueError
-        Unknown obstacle type, a bad key, a missing mesh file, or triangles of the wrong shape;
-        the message starts with ``obstacle k``.
-    """
-    from .plots import obstacle_triangles
-
-    return obstacle_triangles(obstacle, k, SPHERE_RESOLUTION)
-
-
 def _obstacle_kind(obstacle) -> str:
     """The ``type`` of an obstacle or an obstacle dict (the class name for a duck-typed one)."""
     if isinstance(obstacle, dict):

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from ctrplan.boundmap import BoundField, compute_field, field_key, load_bound_map, map_coordinates
-from ctrplan.boundmap.compute import evaluate_configuration
+from ctrplan.boundmap.compute import node_values
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings, evaluate_bound
 
@@ -127,7 +127,7 @@ def test_shipped_map_matches_the_current_model(path):
     stored = field.values.reshape(-1, 4)
     for k in picks:
         alpha, beta = field.coordinates.configuration(nodes[k])
-        vals, ok = evaluate_configuration(robot, evaluate_bound, alpha, beta, settings)
+        vals, ok = node_values(robot, evaluate_bound, alpha, beta, settings)
         assert ok
         tol_m = 5 * settings.outer_tol
         tol_rad = 2 * tol_m / (settings.refine_ratio * settings.ds)

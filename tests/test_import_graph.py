@@ -225,6 +225,26 @@ def test_no_public_class_name_is_defined_twice():
     assert not twice, twice
 
 
+#: Public function names defined in two modules that mean the same: the rivalry test of two
+#: effects (one contains the other), in the discrepancy workflow's fits and its verdict.
+SAME_FUNCTION_TWICE = {"contained"}
+
+
+def test_no_public_function_name_is_defined_twice():
+    """One name, one function: catches a second ``plan``, ``load_bound_map``, ``write_report`` or
+    ``time_parameterize`` with another job (private modules, ``_name.py``, aside: their names are
+    not the package's API)."""
+    where = collections.defaultdict(set)
+    for name, path in _modules().items():
+        if path.name.startswith("_") and path.name != "__init__.py":
+            continue
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.FunctionDef) and not node.name.startswith("_"):
+                where[node.name].add(name)
+    twice = {f: sorted(m) for f, m in where.items() if len(m) > 1 and f not in SAME_FUNCTION_TWICE}
+    assert not twice, twice
+
+
 #: The longest a module may be, in lines, unless it holds compiled kernels (numba functions, whose
 #: helpers are inlined into each other and stay in one file so that they compile and cache together).
 MAX_MODULE_LINES = 800

@@ -1,5 +1,5 @@
 """Stage functions of :mod:`ctrplan.pipeline`: each returns a frozen result in SI values (m, rad),
-and the report (``plan_summary``, ``write_report``) alone converts to mm and degrees.
+and the report (``plan_summary``, ``write_plan_report``) alone converts to mm and degrees.
 
 The stages run on the Table VII robot with a synthetic constant bound field (friction 1 mm,
 0.1 rad; translation-last 0.5 mm, 0.05 rad), so no bound map is read or computed and each test
@@ -147,7 +147,7 @@ def planned(tmp_path_factory):
     resolved = pipeline.resolve_goals(setup, bound_map.field, validity)
     aimed = pipeline.aim_goals(setup, resolved, validity)
     plans = pipeline.plan_routes(setup, bound_map.field, aimed, compare_blind=True, n_jobs=1)
-    traj = pipeline.time_parameterize(setup, plans.aware.ordered)
+    traj = pipeline.drive_trajectory(setup, plans.aware.ordered)
     run = pipeline.PlanRun(setup=setup, bound_map=bound_map, goal_checks=pipeline.GoalCheckCounts.of(validity),
                            resolved=resolved, aimed=aimed, plans=plans, trajectory=traj,
                            waypoints=pipeline.waypoint_table(plans.aware, setup.calibration.bound),
@@ -237,7 +237,7 @@ def test_report_stage_converts_the_si_results_to_mm_and_degrees_once(planned):
 
 
 def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, monkeypatch):
-    """``write_report`` writes ``plan.html`` beside the other outputs: one slider step per ordered
+    """``write_plan_report`` writes ``plan.html`` beside the other outputs: one slider step per ordered
     waypoint, the standard centerline and friction tips of the exact bound in mm, the joint
     goal's tip as the target."""
     import re
@@ -248,12 +248,12 @@ def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, m
     captured = {}
     write = view.write_plan_view
 
-    def spy(path, frames, **kw):          # keeps what write_report gives the view, and writes it
+    def spy(path, frames, **kw):          # keeps what write_plan_report gives the view, and writes it
         captured.update(kw, frames=frames)
         return write(path, frames, **kw)
 
     monkeypatch.setattr(view, "write_plan_view", spy)
-    written = pipeline.write_report(run)
+    written = pipeline.write_plan_report(run)
     html = written["plan.html"].read_text(encoding="utf-8")
     K = len(plans.aware.ordered)
     assert len(re.findall(r'"method":\s*"update"', html)) == K

@@ -119,3 +119,23 @@ def test_the_former_names_warn_and_give_the_one_types():
     assert isinstance(g, planning.TaskGoal) and g.tolerance == 2e-3
     with pytest.raises(AttributeError):
         planning.NoSuchName
+
+
+def test_the_functions_renamed_to_one_meaning_per_name_warn_and_give_the_new_ones():
+    """A script written against the former names still runs, warned: ``ctrplan.planning.plan``
+    (one search, not ``ctrplan.plan``), the plan stages ``load_bound_map``, ``time_parameterize``
+    and ``write_report`` of ``ctrplan.pipeline`` (not the map reader, the waypoint timing or the
+    discrepancy report) and ``ctrplan.boundmap.evaluate_configuration`` (not ``ctrplan.batch``'s)."""
+    import ctrplan.boundmap as boundmap
+    import ctrplan.pipeline as pipeline
+    import ctrplan.planning as planning
+
+    for module, old, new in ((planning, "plan", planning.plan_leg),
+                             (pipeline, "load_bound_map", pipeline.prepare_bound_map),
+                             (pipeline, "time_parameterize", pipeline.drive_trajectory),
+                             (pipeline, "write_report", pipeline.write_plan_report),
+                             (boundmap, "evaluate_configuration", boundmap.node_values)):
+        with pytest.warns(DeprecationWarning, match=f"use {module.__name__}.{new.__name__}"):
+            assert getattr(module, old) is new
+    with pytest.raises(AttributeError):
+        pipeline.no_such_stage

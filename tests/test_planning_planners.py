@@ -4,7 +4,7 @@ import pytest
 from ctrplan.errors import UnreachableGoalError
 from ctrplan.boundmap import compute_field
 from ctrplan.planning import (PLANNERS, BoundCostObjective, JointStateSpace, SearchSettings, ValidityChecker,
-                              order_path, plan)
+                              order_path, plan_leg)
 from test_planning_helpers import fake_bound, fake_robot, fake_solve_standard
 
 START = np.array([-1.2, 0.0, -0.07])
@@ -28,13 +28,13 @@ def test_reproducible_and_bound_aware(setup):
     robot, field = setup
     valid = ValidityChecker(robot, check_stability=False)
     aware = BoundCostObjective.factory(field, bound_weight=1000.0)
-    r1 = plan(robot, START, GOAL, valid, aware, iterations=300, seed=3)
-    r2 = plan(robot, START, GOAL, valid, aware, iterations=300, seed=3)
+    r1 = plan_leg(robot, START, GOAL, valid, aware, iterations=300, seed=3)
+    r2 = plan_leg(robot, START, GOAL, valid, aware, iterations=300, seed=3)
     np.testing.assert_array_equal(r1.waypoints, r2.waypoints)
     assert r1.cost == r2.cost and r1.iterations == 300 and r1.solved
     assert r1.cost <= r1.cost_before_simplification + 1e-12
     np.testing.assert_array_equal(r1.waypoints[0], START)
-    blind = plan(robot, START, GOAL, valid, BoundCostObjective.factory(None, bound_weight=0.0),
+    blind = plan_leg(robot, START, GOAL, valid, BoundCostObjective.factory(None, bound_weight=0.0),
                  iterations=300, seed=3)
     # the bump (10.5 mm) sits between start and goal; the bound-aware path goes round it
     assert dense_max_bound(robot, field, blind.waypoints) > 8e-3
@@ -50,7 +50,7 @@ def test_every_registered_planner_runs(setup, name, in_child_process):
         return
     robot, field = setup
     valid = ValidityChecker(robot, check_stability=False)
-    r = plan(robot, START, GOAL, valid, BoundCostObjective.factory(field, bound_weight=1000.0),
+    r = plan_leg(robot, START, GOAL, valid, BoundCostObjective.factory(field, bound_weight=1000.0),
              planner=name, iterations=60, seed=5)
     assert r.solved and r.planner == name and r.n_vertices >= 2
 
@@ -64,13 +64,13 @@ def test_validity_with_model_and_unreachable(setup):
 
     wall = Wall(robot, solve_standard=fake_solve_standard)
     with pytest.raises(UnreachableGoalError, match="no exact path"):
-        plan(robot, [0, 0, -0.04], [0, 0, -0.09], wall, BoundCostObjective.factory(None, bound_weight=0.0),
+        plan_leg(robot, [0, 0, -0.04], [0, 0, -0.09], wall, BoundCostObjective.factory(None, bound_weight=0.0),
              iterations=80, seed=1)
     with pytest.raises(UnreachableGoalError, match="goal configuration"):
-        plan(robot, [0, 0, -0.04], [0, 0, -0.055], wall, BoundCostObjective.factory(None, bound_weight=0.0),
+        plan_leg(robot, [0, 0, -0.04], [0, 0, -0.055], wall, BoundCostObjective.factory(None, bound_weight=0.0),
              iterations=10, seed=1)
     with pytest.raises(ValueError, match="unknown planner"):
-        plan(robot, START, GOAL, wall, BoundCostObjective.factory(None, bound_weight=0.0), planner="PRM")
+        plan_leg(robot, START, GOAL, wall, BoundCostObjective.factory(None, bound_weight=0.0), planner="PRM")
     assert wall([0, 0, -0.04]) and not wall([0, 0, -0.2])  # joint limit
     assert wall.n_evaluations <= wall.n_calls
 
@@ -79,7 +79,7 @@ def test_ordered_segments_rotate_before_translating(setup):
     robot, field = setup
     valid = ValidityChecker(robot, check_stability=False)
     goal = np.array([1.0, 0.5, -0.04])
-    r = plan(robot, START, goal, valid, BoundCostObjective.factory(field), iterations=150, seed=2)
+    r = plan_leg(robot, START, goal, valid, BoundCostObjective.factory(field), iterations=150, seed=2)
     js = JointStateSpace(robot)
     ordered = order_path(r.waypoints, robot, valid, joint_space=js)
     q = ordered.q
@@ -144,8 +144,8 @@ def test_objective_in_a_plain_ompl_setup(setup):
     assert after >= (1.0 + 1000.0 * floor) * js.distance(START, GOAL) * (1 - 1e-12)
     # OMPL's path cost equals the numpy cost of the same waypoints
     assert objective.path_cost(w) == pytest.approx(after, rel=1e-9)
-    # and a pre-built objective can be handed to plan()
-    r = plan(robot, START, GOAL, lambda q: True, objective, iterations=50, seed=4, joint_space=js)
+    # and a pre-built objective can be handed to plan_leg()
+    r = plan_leg(robot, START, GOAL, lambda q: True, objective, iterations=50, seed=4, joint_space=js)
     assert r.solved
 
 
@@ -235,11 +235,11 @@ def test_search_settings_and_keywords_run_the_same_search(setup):
     valid = ValidityChecker(robot, check_stability=False)
     aware = BoundCostObjective.factory(field, bound_weight=1000.0)
     settings = SearchSettings(planner="RRTstar", iterations=200, seed=5, options={"range": 0.3, "goal_bias": 0.2})
-    a = plan(robot, START, GOAL, valid, aware, settings)
-    b = plan(robot, START, GOAL, valid, aware, planner="RRTstar", iterations=200, seed=5, range_=0.3, goal_bias=0.2)
+    a = plan_leg(robot, START, GOAL, valid, aware, settings)
+    b = plan_leg(robot, START, GOAL, valid, aware, planner="RRTstar", iterations=200, seed=5, range_=0.3, goal_bias=0.2)
     np.testing.assert_array_equal(a.waypoints, b.waypoints)
     assert a.cost == b.cost and a.iterations == 200
-    c = plan(robot, START, GOAL, valid, aware, settings, seed=6)
+    c = plan_leg(robot, START, GOAL, valid, aware, settings, seed=6)
     assert c.cost != a.cost or not np.array_equal(c.waypoints, a.waypoints)
 
 

@@ -1,7 +1,7 @@
 """The one registry type (:mod:`ctrplan.registry`) and the registries built on it: mechanics
 models, planners (with declared parameters) and obstacle types.
 
-A planner registered at run time is planned with through :func:`ctrplan.planning.plan` and
+A planner registered at run time is planned with through :func:`ctrplan.planning.plan_leg` and
 through :func:`ctrplan.plan` from a scenario file, in this process and in a worker process; a
 parameter it does not declare is refused, in a scenario file with the file and the key.
 """
@@ -24,7 +24,7 @@ from ctrplan.models import MODEL_REGISTRY, ModelInfo, check_model, contact_solut
 from ctrplan.obstacles import OBSTACLE_REGISTRY, OBSTACLE_TYPES, Sphere
 from ctrplan.planner_info import (PLANNER_REGISTRY, PlannerInfo, PlannerParameter, check_planner_options,
                                   register_planner)
-from ctrplan.planning import PLANNERS, BoundCostObjective, ValidityChecker, plan
+from ctrplan.planning import PLANNERS, BoundCostObjective, ValidityChecker, plan_leg
 from ctrplan.registry import Registry, UnknownNameError
 from test_planning_helpers import fake_robot
 
@@ -154,7 +154,7 @@ def _counting_info(applied: list) -> PlannerInfo:
 
 
 def test_a_registered_planner_plans_with_its_declared_parameters():
-    """plan() makes the planner through its entry and applies the declared parameters (catches
+    """plan_leg() makes the planner through its entry and applies the declared parameters (catches
     a plan that falls back to a built-in class or drops the options); an option it does not
     declare is an error, not ignored. Unregistered after the block, the name is unknown again."""
     robot = fake_robot()
@@ -164,12 +164,12 @@ def test_a_registered_planner_plans_with_its_declared_parameters():
     start, goal = np.array([-1.2, 0.0, -0.07]), np.array([1.2, 0.0, -0.07])
     with PLANNER_REGISTRY.registered("RadiusRRTstar", _counting_info(applied)):
         assert PLANNERS["RadiusRRTstar"] is _radius_rrt_star
-        res = plan(robot, start, goal, valid, objective, planner="RadiusRRTstar", iterations=200, seed=2, range_=0.3)
+        res = plan_leg(robot, start, goal, valid, objective, planner="RadiusRRTstar", iterations=200, seed=2, range_=0.3)
         assert res.planner == "RadiusRRTstar" and res.solved and applied == [0.3]
         with pytest.raises(ValueError, match="planner RadiusRRTstar does not declare a parameter 'goal_bias'"):
-            plan(robot, start, goal, valid, objective, planner="RadiusRRTstar", iterations=10, goal_bias=0.1)
+            plan_leg(robot, start, goal, valid, objective, planner="RadiusRRTstar", iterations=10, goal_bias=0.1)
     with pytest.raises(ValueError, match="unknown planner 'RadiusRRTstar'"):
-        plan(robot, start, goal, valid, objective, planner="RadiusRRTstar", iterations=10)
+        plan_leg(robot, start, goal, valid, objective, planner="RadiusRRTstar", iterations=10)
 
 
 def _scenario(tmp_path, planner_table: str) -> Path:

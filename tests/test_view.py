@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from ctrplan.obstacles import obstacle_from_dict
-from ctrplan.view import WaypointFrames, obstacle_triangles, plan_view_figure, write_plan_view
+from ctrplan.plots import obstacle_triangles
+from ctrplan.view import SPHERE_RESOLUTION, WaypointFrames, plan_view_figure, write_plan_view
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")
@@ -112,10 +113,10 @@ def test_obstacles_are_triangulated_where_the_collision_checker_places_them(tmp_
     r = np.linalg.norm(np.column_stack([sph.x, sph.y, sph.z]) - 1e3 * np.array(SPHERE["center_m"]), axis=1)
     np.testing.assert_allclose(r, 4.0, atol=1e-3)
     # a closed convex surface: every edge shared by exactly two triangles
-    _, f = obstacle_triangles(SPHERE)
+    _, f = obstacle_triangles(SPHERE, 0, SPHERE_RESOLUTION)
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
     assert set(np.unique(edges, axis=0, return_counts=True)[1]) == {2}
-    v, f = obstacle_triangles(BOX)
+    v, f = obstacle_triangles(BOX, 1, SPHERE_RESOLUTION)
     assert v.shape == (8, 3) and f.shape == (12, 3)
     np.testing.assert_allclose(np.ptp(v[:, 2]), 0.008)
 

@@ -21,7 +21,7 @@ much inside a sampling planner. A bound map evaluates it once on a grid and inte
 from .accuracy import InterpolationError, interpolation_error, sample_exact
 from .axes import PLACEMENTS, MapSpec, place_nodes, uniform_axis
 from .compute import (DEFAULT_CHUNK_SIZE, BoundMapRun, ComputeOptions, SchedulerUnreachableError,
-                      compute_bound_map_store, compute_field, evaluate_configuration, start_local_cluster)
+                      compute_bound_map_store, compute_field, node_values, start_local_cluster)
 from ..coordinates import MapCoordinates, map_coordinates
 from .field import QUANTITIES, UNITS, BoundField
 from .files import compute_bound_map, default_spec, find_bound_map, load_or_compute_bound_map, map_file, map_paths
@@ -37,10 +37,21 @@ __all__ = [
     "QUANTITIES", "UNITS", "BoundField", "BoundFieldKeyError", "BoundMapMismatchError", "MapIdentity",
     "evaluator_name", "field_key", "map_identity", "BoundMapStore", "IncompleteBoundMapError", "STORE_SUFFIX",
     "chunk_shape_for", "is_store_path", "load_bound_map", "DEFAULT_CHUNK_SIZE", "BoundMapRun", "ComputeOptions",
-    "SchedulerUnreachableError", "compute_bound_map_store", "compute_field", "evaluate_configuration",
+    "SchedulerUnreachableError", "compute_bound_map_store", "compute_field", "node_values",
     "start_local_cluster", "compute_bound_map", "default_spec", "find_bound_map", "load_or_compute_bound_map",
     "map_paths",
     "map_file",
     "InterpolationError", "interpolation_error", "sample_exact", "ExactSamples", "refined_field", "preview_spec",
     "subdivided", "cell_nodes", "with_nodes", "evaluate_nodes",
 ]
+
+
+def __getattr__(name):
+    # the name before it had one meaning (ctrplan.batch.evaluate_configuration runs a model by name)
+    if name == "evaluate_configuration":
+        import warnings
+
+        warnings.warn("ctrplan.boundmap.evaluate_configuration is deprecated: use ctrplan.boundmap.node_values",
+                      DeprecationWarning, stacklevel=2)
+        return node_values
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

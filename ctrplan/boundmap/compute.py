@@ -31,7 +31,7 @@ from .identity import as_spec, map_identity
 from .store import BoundMapStore, chunk_shape_for
 
 __all__ = ["DEFAULT_CHUNK_SIZE", "SCHEDULER_TIMEOUT_S", "SchedulerUnreachableError", "BoundMapRun", "ComputeOptions",
-           "evaluate_configuration", "compute_bound_map_store", "compute_field", "start_local_cluster"]
+           "node_values", "compute_bound_map_store", "compute_field", "start_local_cluster"]
 
 logger = logging.getLogger(__name__)
 
@@ -44,7 +44,7 @@ DEFAULT_CHUNK_SIZE = 64
 _CHUNKS_IN_THIS_PROCESS = 0
 
 
-def evaluate_configuration(robot, evaluator, alpha, beta, settings):
+def node_values(robot, evaluator, alpha, beta, settings):
     """The four map quantities and the validity of one configuration.
 
     Parameters
@@ -91,7 +91,7 @@ def _compute_chunk(robot, evaluator, settings, alpha, beta):
     values = np.empty((len(alpha), len(QUANTITIES)))
     valid = np.empty(len(alpha), dtype=bool)
     for m in range(len(alpha)):
-        values[m], valid[m] = evaluate_configuration(robot, evaluator, alpha[m], beta[m], settings)
+        values[m], valid[m] = node_values(robot, evaluator, alpha[m], beta[m], settings)
     _CHUNKS_IN_THIS_PROCESS += 1
     return values, valid, time.perf_counter() - t0, time.thread_time() - c0, _CHUNKS_IN_THIS_PROCESS == 1
 

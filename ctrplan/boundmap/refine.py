@@ -317,7 +317,7 @@ def with_nodes(field: BoundField, index, values, ok) -> BoundField:
 def evaluate_nodes(robot, field: BoundField, index, settings=None, n_jobs: int = 1, *,
                    evaluator=None) -> tuple[np.ndarray, np.ndarray]:
     """The exact map quantities at some nodes of a map (as its nodes were computed:
-    :func:`~ctrplan.boundmap.compute.evaluate_configuration` at their representative
+    :func:`~ctrplan.boundmap.compute.node_values` at their representative
     configurations).
 
     Parameters

@@ -5,7 +5,7 @@ rad, s); :func:`ctrplan.plan` composes them and returns them all in its
 1. :func:`setup_plan` (or :func:`load_setup` from a file) -> :class:`PlanSetup`: the scenario,
    its robot and the robot file's calibration (``Scenario.calibration``), the model settings and
    the bound map's spec;
-2. :func:`load_bound_map` -> :class:`BoundMapStage`: the robot's bound map (shipped in
+2. :func:`prepare_bound_map` -> :class:`BoundMapStage`: the robot's bound map (shipped in
    ``<robot dir>/boundmaps/`` as ``.npz`` or ``.zarr``, or cached) or computed into a zarr store
    (local cores or a Dask cluster; an interrupted computation resumes from its finished chunks);
    or :func:`given_bound_map`, a map handed in;
@@ -27,14 +27,14 @@ rad, s); :func:`ctrplan.plan` composes them and returns them all in its
    ordered plan creates (:func:`predict_waypoints` -> :class:`WaypointPredictions`; one contact
    solve at most per waypoint, usually none: the bound's own solutions are reused); the
    bound-aware plan's waypoints as arrays: :func:`waypoint_table` -> :class:`WaypointTable`;
-6. :func:`time_parameterize` -> the drive trajectory (ruckig, rest-to-rest, stop between
+6. :func:`drive_trajectory` -> the drive trajectory (ruckig, rest-to-rest, stop between
    phases), its samples checked;
 7. :func:`compare_plans` -> :class:`PlanComparison` (:class:`RouteMetrics` of both plans) and
    :func:`goal_outcomes` -> :class:`GoalOutcome` per goal.
 
 :func:`run_stages` runs stages 3 to 7 -> :class:`PlanRun`. The report is a separate layer, the
 only one with millimetres, degrees and dicts: :func:`plan_summary` (``summary.json``),
-:func:`write_report` (path.csv, trajectory.csv, figures, plan.html and summary.json, written
+:func:`write_plan_report` (path.csv, trajectory.csv, figures, plan.html and summary.json, written
 atomically) and :func:`log_summary`; :func:`read_plan_record` reads a summary back.
 
 The stages print nothing: they log to ``ctrplan.pipeline`` (:mod:`logging`) the lines ``ctrplan
@@ -47,8 +47,8 @@ current configuration on a roadmap built once per robot, map and obstacles (stag
 one goal, in a fraction of a second) -> :class:`GoalPlan`.
 """
 
-from .bound_map import GIVEN, BoundMapStage, complete_bound_map, given_bound_map, load_bound_map
-from .drive import time_parameterize
+from .bound_map import GIVEN, BoundMapStage, complete_bound_map, given_bound_map, prepare_bound_map
+from .drive import drive_trajectory
 from .evaluation import GoalOutcome, PlanComparison, RouteMetrics, compare_plans, goal_outcomes, route_metrics
 from .goals import (AimDecision, AimReason, AimedGoals, GoalCheckCounts, ResolvedGoals, aim_decision, aim_goals, check_start,
                     resolve_goals)
@@ -56,7 +56,7 @@ from .interactive import GoalPlan, Planner
 from .path_bounds import PATH_SAMPLE_SPACING, PathBounds, bounds_along_path
 from .prediction import WaypointPredictions, predict_waypoints
 from .refine import ExactBound, MapRefinement, Refinement, RefinementRound, refine_plans, start_refinement
-from .report import log_summary, path_rows, write_report
+from .report import log_summary, path_rows, write_plan_report
 from .routes import Plans, RoutePlan, effective_bound_weight, plan_routes
 from .run import PlanRun, run_plan, run_stages
 from .setup import PlanSetup, default_out_dir, load_setup, map_spec, setup_plan
@@ -67,7 +67,7 @@ __all__ = [
     # stage 1
     "PlanSetup", "setup_plan", "load_setup", "map_spec", "default_out_dir",
     # stage 2
-    "BoundMapStage", "load_bound_map", "complete_bound_map", "given_bound_map", "GIVEN",
+    "BoundMapStage", "prepare_bound_map", "complete_bound_map", "given_bound_map", "GIVEN",
     # stages 3 and 4
     "check_start", "GoalCheckCounts", "ResolvedGoals", "resolve_goals", "AimDecision", "AimReason", "aim_decision", "AimedGoals",
     "aim_goals",
@@ -77,7 +77,7 @@ __all__ = [
     "calibrated_bound", "MapRefinement", "RefinementRound", "Refinement", "ExactBound", "start_refinement",
     "refine_plans",
     # stage 6
-    "time_parameterize",
+    "drive_trajectory",
     # stage 7
     "RouteMetrics", "route_metrics", "PlanComparison", "compare_plans", "GoalOutcome", "goal_outcomes",
     # all stages
@@ -85,7 +85,23 @@ __all__ = [
     # one goal after another on a roadmap
     "Planner", "GoalPlan",
     # the report
-    "plan_summary", "COMPARED", "write_report", "path_rows", "log_summary", "PlanRecord", "read_plan_record",
+    "plan_summary", "COMPARED", "write_plan_report", "path_rows", "log_summary", "PlanRecord", "read_plan_record",
     # deprecated
     "run_plan",
 ]
+
+# The stages' names before each public name had one meaning: ctrplan.boundmap.load_bound_map reads a
+# map file, ctrplan.trajectory.time_parameterize times waypoints and the discrepancy workflow has
+# its own write_report.
+_RENAMED = {"load_bound_map": "prepare_bound_map", "time_parameterize": "drive_trajectory",
+            "write_report": "write_plan_report"}
+
+
+def __getattr__(name):
+    if name in _RENAMED:
+        import warnings
+
+        warnings.warn(f"ctrplan.pipeline.{name} is deprecated: use ctrplan.pipeline.{_RENAMED[name]}",
+                      DeprecationWarning, stacklevel=2)
+        return globals()[_RENAMED[name]]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

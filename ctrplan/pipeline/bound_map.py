@@ -1,5 +1,5 @@
 """Stage 2 of a plan: the bound map the planner reads (:class:`BoundMapStage`), looked up or
-computed for the scenario's robot file (:func:`load_bound_map`; a coarse preview map for a robot
+computed for the scenario's robot file (:func:`prepare_bound_map`; a coarse preview map for a robot
 whose map is not computed yet, and :func:`complete_bound_map` after the plan), or handed in
 (:func:`given_bound_map`)."""
 
@@ -15,7 +15,7 @@ from ..boundmap import BoundField, find_bound_map, load_or_compute_bound_map, pr
 from ..coordinates import map_coordinates
 from .setup import PlanSetup
 
-__all__ = ["BoundMapStage", "load_bound_map", "complete_bound_map", "given_bound_map", "GIVEN"]
+__all__ = ["BoundMapStage", "prepare_bound_map", "complete_bound_map", "given_bound_map", "GIVEN"]
 
 #: ``BoundMapStage.source`` of a map handed to the plan (:func:`given_bound_map`).
 GIVEN = MapSource.GIVEN
@@ -48,7 +48,7 @@ class BoundMapStage:
 
 
 @deprecated_echo
-def load_bound_map(setup: PlanSetup, n_jobs: int = 1, echo=None, *, progress: bool = False) -> BoundMapStage:
+def prepare_bound_map(setup: PlanSetup, n_jobs: int = 1, echo=None, *, progress: bool = False) -> BoundMapStage:
     """Stage 2: the robot's bound map for the scenario's spec and model settings.
 
     A shipped or cached map with the same key is read. Otherwise, with ``[bound_field]

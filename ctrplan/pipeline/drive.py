@@ -1,14 +1,14 @@
-"""Stage 6 of a plan: the drive trajectory along the ordered path (:func:`time_parameterize`)."""
+"""Stage 6 of a plan: the drive trajectory along the ordered path (:func:`drive_trajectory`)."""
 
 from __future__ import annotations
 
 from ..errors import JointLimitError
 from .setup import PlanSetup
 
-__all__ = ["time_parameterize"]
+__all__ = ["drive_trajectory"]
 
 
-def time_parameterize(setup: PlanSetup, ordered):
+def drive_trajectory(setup: PlanSetup, ordered):
     """Stage 6: the drive trajectory along an ordered path, checked against the drive limits.
 
     Parameters

@@ -156,7 +156,7 @@ class Planner:
         scenario : path or Scenario
         bound_map : BoundField, optional, keyword-only
             Default: the shipped or cached map of the scenario's robot, else its preview map
-            (computed, :func:`ctrplan.pipeline.load_bound_map`).
+            (computed, :func:`ctrplan.pipeline.prepare_bound_map`).
         n_jobs : int, keyword-only
             Worker processes for a map that must be computed and for the roadmap.
         **kwargs
@@ -174,12 +174,12 @@ class Planner:
             As :class:`Planner`.
         """
         from ..io.scenario import load_scenario
-        from .bound_map import load_bound_map
+        from .bound_map import prepare_bound_map
         from .setup import setup_plan
 
         sc = scenario if hasattr(scenario, "robot") else load_scenario(scenario)
         setup = setup_plan(sc)
-        field = bound_map if bound_map is not None else load_bound_map(setup, n_jobs).field
+        field = bound_map if bound_map is not None else prepare_bound_map(setup, n_jobs).field
         return cls(setup, field, n_jobs=n_jobs, **kwargs)
 
     def resolve(self, goal, *, seed: int = 1) -> np.ndarray:
@@ -244,7 +244,7 @@ class Planner:
         from ..planning import BoundCostObjective, SearchSettings, bounds_given_last_motion
         from ..planning.history import end_with
         from ..planning.route import plan_route
-        from .drive import time_parameterize
+        from .drive import drive_trajectory
 
         t_all = time.perf_counter()
         sc, robot, js, checks = self.setup.scenario, self.robot, self.joint_space, self.checks
@@ -270,7 +270,7 @@ class Planner:
         bounds = bounds_given_last_motion(ordered, robot, evaluate_bound, self.setup.settings)
         t_exact = time.perf_counter() - t0
         t0 = time.perf_counter()
-        trajectory = time_parameterize(self.setup, ordered)
+        trajectory = drive_trajectory(self.setup, ordered)
         t_traj = time.perf_counter() - t0
         if move:
             self.current = q1.copy()

@@ -1,4 +1,4 @@
-"""The files of a run (:func:`write_report`: ``path.csv``, ``trajectory.csv``, the figures,
+"""The files of a run (:func:`write_plan_report`: ``path.csv``, ``trajectory.csv``, the figures,
 ``plan.html`` and ``summary.json``) and its printed summary (:func:`log_summary`).
 
 With :mod:`~ctrplan.pipeline.summary`, the only part of the pipeline that converts to millimetres
@@ -18,7 +18,7 @@ from .goals import _eta_text
 from .summary import plan_summary
 from .waypoints import WaypointTable
 
-__all__ = ["path_rows", "write_report", "log_summary"]
+__all__ = ["path_rows", "write_plan_report", "log_summary"]
 
 logger = logging.getLogger(__package__)
 
@@ -65,7 +65,7 @@ def log_summary(summary: dict) -> None:
     logger.log(progress_level(), format_summary(summary))
 
 
-def write_report(run, out_dir: str | os.PathLike | None = None, *, summary: dict | None = None) -> dict:
+def write_plan_report(run, out_dir: str | os.PathLike | None = None, *, summary: dict | None = None) -> dict:
     """Write path.csv, trajectory.csv, the figures, the interactive view ``plan.html`` and
     summary.json (last) of a run.
 

@@ -13,12 +13,12 @@ from dataclasses import dataclass
 
 from .._log import deprecated_echo
 from ..trajectory import Trajectory
-from .bound_map import BoundMapStage, load_bound_map
-from .drive import time_parameterize
+from .bound_map import BoundMapStage, prepare_bound_map
+from .drive import drive_trajectory
 from .evaluation import PlanComparison, compare_plans, goal_outcomes
 from .goals import AimedGoals, GoalCheckCounts, ResolvedGoals, aim_goals, check_start, resolve_goals
 from .refine import DEFAULT_PREVIEW_ROUNDS, ExactBound, MapRefinement, refine_plans, start_refinement
-from .report import log_summary, write_report
+from .report import log_summary, write_plan_report
 from .routes import Plans, plan_routes
 from .setup import PlanSetup, load_setup
 from .summary import plan_summary
@@ -107,7 +107,7 @@ def run_stages(setup: PlanSetup, bound_map: BoundMapStage, *, iterations: int | 
     setup : PlanSetup
         Stage 1 (:func:`~ctrplan.pipeline.setup.setup_plan`).
     bound_map : BoundMapStage
-        Stage 2 (:func:`~ctrplan.pipeline.bound_map.load_bound_map` or
+        Stage 2 (:func:`~ctrplan.pipeline.bound_map.prepare_bound_map` or
         :func:`~ctrplan.pipeline.bound_map.given_bound_map`).
     iterations : int, optional, keyword-only
         Planner iterations per leg; default ``[planner] iterations``.
@@ -147,7 +147,7 @@ def run_stages(setup: PlanSetup, bound_map: BoundMapStage, *, iterations: int | 
         plans, refinement = refine_plans(setup, state, aimed, plans, rounds=rounds, tolerance=bf.refine_tolerance,
                                          iterations=iterations)
         field = refinement.field
-    trajectory = time_parameterize(setup, plans.aware.ordered)
+    trajectory = drive_trajectory(setup, plans.aware.ordered)
     return PlanRun(setup=setup, bound_map=bound_map, goal_checks=goal_checks, resolved=resolved, aimed=aimed,
                    plans=plans, trajectory=trajectory,
                    waypoints=waypoint_table(plans.aware, setup.calibration.bound), comparison=compare_plans(plans),
@@ -204,9 +204,9 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
                   "the files) or ctrplan.plan_scenario", DeprecationWarning, stacklevel=3)
     t0 = time.perf_counter()
     setup = load_setup(scenario_path, out_dir)
-    run = run_stages(setup, load_bound_map(setup, n_jobs, progress=progress), iterations=iterations,
+    run = run_stages(setup, prepare_bound_map(setup, n_jobs, progress=progress), iterations=iterations,
                      compare_blind=compare_blind, n_jobs=n_jobs, started=t0)
     summary = plan_summary(run)
-    write_report(run, setup.out_dir, summary=summary)
+    write_plan_report(run, setup.out_dir, summary=summary)
     log_summary(summary)
     return {**summary, "output_dir": str(setup.out_dir)}

@@ -10,7 +10,7 @@ Building blocks (each usable on its own in an OMPL setup, see ``docs/planning.md
 - :class:`BoundField` (from :mod:`ctrplan.boundmap`): the friction bound of Ha, Fagogenis &
   Dupont 2019 (doi:10.1109/TRO.2018.2878906) precomputed on a grid and interpolated.
 - :class:`BoundCostObjective`: ``ob.OptimizationObjective`` = length + weight x integral of bound.
-- :func:`plan` with :data:`PLANNERS`, :class:`ValidityChecker`, :class:`SearchSettings`, :class:`SearchResult`.
+- :func:`plan_leg` with :data:`PLANNERS`, :class:`ValidityChecker`, :class:`SearchSettings`, :class:`SearchResult`.
 - :func:`order_path` (rotate, then translate) and :func:`bounds_given_last_motion`.
 - :func:`resolve_goal` for joint or tip-position goals; :func:`compensate_goal` aims a tip-position
   goal with the tip predicted for the motion that reaches it (compensated targeting).
@@ -30,7 +30,7 @@ from .goals import (CompensatedGoal, GoalSolution, IKSearch, JointGoal, TaskGoal
 from .history import DEFAULT_FINAL_MOTION, FINAL_MOTIONS, approach_history, end_with, goal_indices, path_history
 from .objective import DEFAULT_BOUND_WEIGHT, BoundCostObjective
 from .ordering import LastMotionBounds, OrderedPath, OrderedWaypoint, bounds_given_last_motion, order_path
-from .planners import PLANNERS, SearchResult, SearchSettings, ValidityChecker, plan
+from .planners import PLANNERS, SearchResult, SearchSettings, ValidityChecker, plan_leg
 from .route import CheckResolution, Route, RouteChecks, plan_route, route_checks
 from .space import DEFAULT_METERS_PER_RADIAN, JointStateSpace, unwrap_path, wrap_angle
 from .validity import BatchMotionValidator, BatchValidityChecker, use_motion_validator
@@ -41,7 +41,7 @@ __all__ = [
     "CollisionChecker", "CollisionReport",
     "BoundField", "BoundFieldKeyError", "InterpolationError", "QUANTITIES", "field_key", "interpolation_error",
     "BoundCostObjective", "DEFAULT_BOUND_WEIGHT",
-    "PLANNERS", "SearchResult", "SearchSettings", "ValidityChecker", "plan",
+    "PLANNERS", "SearchResult", "SearchSettings", "ValidityChecker", "plan_leg",
     "OrderedPath", "OrderedWaypoint", "LastMotionBounds", "order_path", "bounds_given_last_motion",
     "JointGoal", "TaskGoal", "as_goal", "GoalSolution", "IKSearch", "resolve_goal", "CompensatedGoal",
     "compensate_goal",
@@ -52,9 +52,11 @@ __all__ = [
 ]
 
 # Names this package had before each concept got one name: PlanResult (now SearchResult, distinct
-# from the user-facing ctrplan.PlanResult) and TaskSpaceGoal (now TaskGoal, the scenario's type).
+# from the user-facing ctrplan.PlanResult), TaskSpaceGoal (now TaskGoal, the scenario's type) and
+# plan (now plan_leg, distinct from ctrplan.plan, the plan of a scenario).
 _DEPRECATED = {"PlanResult": ("SearchResult", "SearchResult"),
-               "TaskSpaceGoal": ("TaskGoal(tip_position, tolerance)", "_task_space_goal")}
+               "TaskSpaceGoal": ("TaskGoal(tip_position, tolerance)", "_task_space_goal"),
+               "plan": ("plan_leg", "plan_leg")}
 
 
 def __getattr__(name):

@@ -199,7 +199,7 @@ class BoundCostObjective(ob.OptimizationObjective):
 
     @classmethod
     def factory(cls, bound=None, **kwargs):
-        """A ``(si, joint_space) -> BoundCostObjective`` callable for :func:`~ctrplan.planning.plan`."""
+        """A ``(si, joint_space) -> BoundCostObjective`` callable for :func:`~ctrplan.planning.plan_leg`."""
         def make(si, joint_space):
             return cls(si, joint_space, bound, **kwargs)
         return make

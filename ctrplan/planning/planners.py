@@ -1,6 +1,6 @@
 """Sampling-based planning in the joint space with OMPL (asymptotically optimal planners).
 
-:func:`plan` runs one OMPL planner from :data:`PLANNERS` with a Python optimization objective
+:func:`plan_leg` runs one OMPL planner from :data:`PLANNERS` with a Python optimization objective
 (e.g. :class:`~ctrplan.planning.objective.BoundCostObjective`) and a Python validity function,
 terminates on an iteration count for reproducibility (``ou.RNG.setSeed`` is called before any
 planner or sampler is created), shortcuts the path with the cost-aware
@@ -49,7 +49,7 @@ class _Allocators(Mapping):
 #: The registered planners' allocators by name (a live read-only mapping over
 #: :data:`ctrplan.planner_info.PLANNER_REGISTRY`, which users extend with
 #: :func:`ctrplan.planner_info.register_planner`). BITstar segfaulted with a *time-based*
-#: termination condition in a probe (OMPL 2.0.1 wheels); :func:`plan` always terminates it on an
+#: termination condition in a probe (OMPL 2.0.1 wheels); :func:`plan_leg` always terminates it on an
 #: iteration count, which ran fine.
 PLANNERS: Mapping = _Allocators()
 
@@ -140,7 +140,7 @@ class ValidityChecker:
 
 @dataclass
 class SearchResult:
-    """Outcome of one planner search (:func:`plan`): one leg's path and the planner's counters.
+    """Outcome of one planner search (:func:`plan_leg`): one leg's path and the planner's counters.
     The user-facing result of planning a scenario is :class:`ctrplan.PlanResult`.
 
     Attributes
@@ -202,7 +202,7 @@ def _path_to_numpy(joint_space, path) -> np.ndarray:
     return np.array([joint_space.to_numpy(path.getState(i)) for i in range(path.getStateCount())])
 
 
-#: Planner parameters that :func:`plan` and :func:`~ctrplan.planning.plan_route` also take as keywords,
+#: Planner parameters that :func:`plan_leg` and :func:`~ctrplan.planning.plan_route` also take as keywords,
 #: by their keyword (``range`` is a builtin, hence ``range_``).
 _PARAMETER_KEYWORDS = {"range_": "range", "goal_bias": "goal_bias", "rewire_factor": "rewire_factor"}
 
@@ -313,7 +313,7 @@ class SearchSettings:
         return cls.of(base, **changes)
 
 
-def plan(robot, start_q, goal_q, validity_fn, objective, settings: SearchSettings | None = None, *,
+def plan_leg(robot, start_q, goal_q, validity_fn, objective, settings: SearchSettings | None = None, *,
          joint_space: JointStateSpace | None = None, quiet: bool = True, **keywords) -> SearchResult:
     """Plan a valid, low-cost joint-space path from ``start_q`` to ``goal_q``.
 

@@ -3,7 +3,7 @@
 :func:`plan_route` is what ``ctrplan plan`` runs for each of its plans (bound-aware and
 bound-blind):
 
-1. every leg (start -> goal 1 -> goal 2 ...) is planned by OMPL (:func:`~ctrplan.planning.plan`)
+1. every leg (start -> goal 1 -> goal 2 ...) is planned by OMPL (:func:`~ctrplan.planning.plan_leg`)
    with the **search checker** (:class:`~ctrplan.planning.validity.BatchValidityChecker`):
    all states of a motion in a few compiled calls, at the search's resolution, on the standard
    model's uniform arc-length grid at twice the step, with bodies inflated as in the final check;
@@ -29,7 +29,7 @@ import numpy as np
 from ..planner_info import PLANNER_REGISTRY
 from .collision import CollisionChecker
 from .ordering import OrderedPath, order_path
-from .planners import SearchResult, SearchSettings, plan
+from .planners import SearchResult, SearchSettings, plan_leg
 from .validity import BatchValidityChecker
 from .verify import DEFAULT_MAX_BODY_STEP, DEFAULT_VERIFY_RESOLUTION, MotionVerifier
 
@@ -223,7 +223,7 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, settings
         ``objective(si, joint_space) -> ob.OptimizationObjective``, e.g.
         ``BoundCostObjective.factory(field, bound_weight=w)``.
     settings : SearchSettings, optional
-        The search of each leg (:func:`~ctrplan.planning.plan`); leg k uses ``seed + k``. Its
+        The search of each leg (:func:`~ctrplan.planning.plan_leg`); leg k uses ``seed + k``. Its
         ``rewire_factor``, when not given and the planner declares it, is
         :data:`DEFAULT_REWIRE_FACTOR`.
     joint_space : JointStateSpace, optional, keyword-only
@@ -262,7 +262,7 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, settings
         if roadmap is not None:
             res = _roadmap_leg(roadmap, q_prev, q_goal, checks.search, js, search.seed + gi)
         if res is None:
-            res = plan(robot, q_prev, q_goal, checks.search, objective, search.replace(seed=search.seed + gi),
+            res = plan_leg(robot, q_prev, q_goal, checks.search, objective, search.replace(seed=search.seed + gi),
                        joint_space=js)
         legs.append(res)
         wp = np.array(res.waypoints)
@@ -272,7 +272,7 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, settings
     repairs: list[SearchResult] = []
 
     def repair(a, b):
-        res = plan(robot, a, b, checks.repair_search, objective,
+        res = plan_leg(robot, a, b, checks.repair_search, objective,
                    search.replace(iterations=repair_iterations, seed=search.seed + 1000 + len(repairs),
                                   time_limit=None),
                    joint_space=js)

@@ -119,7 +119,7 @@ class BatchValidityChecker:
         ``JointStateSpace(robot)``.
     resolution : float, keyword-only
         Spacing of the states checked along a motion [m of the weighted joint metric], as
-        ``plan(validity_resolution=...)`` passes it to OMPL. Default 2 mm.
+        ``plan_leg(validity_resolution=...)`` passes it to OMPL. Default 2 mm.
     batch_size : int, keyword-only
         Largest number of motion states per compiled call (default
         :data:`DEFAULT_MOTION_BATCH`).
@@ -465,7 +465,7 @@ def use_motion_validator(si, joint_space: JointStateSpace, checker: BatchValidit
     """Make ``checker`` the motion and state validity checker of ``si``.
 
     Sets ``si``'s state validity checker to ``checker`` (real ``bool``), its validity-checking
-    resolution to ``checker.resolution`` (as :func:`~ctrplan.planning.plan` does) and its motion
+    resolution to ``checker.resolution`` (as :func:`~ctrplan.planning.plan_leg` does) and its motion
     validator to a :class:`BatchMotionValidator`. Call before ``si.setup()``. The validator is
     kept referenced by ``si`` (an attribute of its Python object) and by ``checker``, so it
     lives as long as either.
