@@ -30,9 +30,8 @@ LAYERS = (
     ("mechanics",),                            # the models and the bound
     ("batch", "boundmap", "trajectory"),
     ("planning",),
-    ("plots", "report"),
-    ("view",),                                 # the interactive view draws with plots' helpers
-    ("discrepancy", "pipeline"),               # pipeline: a subpackage, one module per stage and the report
+    ("plots",),                                # figure helpers shared by every report
+    ("discrepancy", "pipeline"),               # pipeline: one module per stage, and its outputs package
     ("design",),                               # experiment design from a discrepancy run's results
     ("api",),                                  # plan_scenario: the pipeline's results as arrays
     ("studies", "testing"),                    # many scenarios; assertions on plans for pytest suites

@@ -294,7 +294,7 @@ def _check_outputs(out: Path, robot, scenario_path: Path):
     assert np.all(np.diff(traj["t"]) > 0)
 
     # figures: PNGs whose pixel size is the figure's (one bound panel per plan, one row of panels
-    # per joint; figure sizes [in] of ctrplan.plots at its DPI) and that show something (dark
+    # per joint; figure sizes [in] of ctrplan.pipeline.outputs.figures at ctrplan.plots.DPI) and that show something (dark
     # pixels of lines and text: none in a blank figure, most of it in a filled one)
     import matplotlib.image as mpimg
 
@@ -339,7 +339,7 @@ def test_short_plan_outputs_are_ordered_at_rest_and_complete(tmp_path, monkeypat
     np.testing.assert_allclose(planned, [5e-4 if r["motion"] == "translation" else 1e-3 for r in rows], rtol=1e-12)
     np.testing.assert_array_equal(result.run.waypoints.planned_bound_m, planned)
     # the folder read back (the one reader of these files) is the result
-    from ctrplan.report import read_plan_folder
+    from ctrplan.pipeline.outputs import read_plan_folder
 
     folder = read_plan_folder(out)
     assert folder.joint_names == tuple(result.joint_names) and folder.motion == tuple(result.motion)
@@ -353,7 +353,7 @@ def test_short_plan_outputs_are_ordered_at_rest_and_complete(tmp_path, monkeypat
 def test_reading_a_plan_folder_names_what_is_wrong(tmp_path):
     """An unfinished run (no summary.json) and a path.csv of another kind are refused naming the
     file (catches a reader that returns empty arrays for a folder it cannot read)."""
-    from ctrplan.report import read_plan_folder
+    from ctrplan.pipeline.outputs import read_plan_folder
 
     with pytest.raises(FileNotFoundError, match="summary.json: no summary"):
         read_plan_folder(tmp_path)

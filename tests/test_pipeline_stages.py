@@ -242,7 +242,7 @@ def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, m
     goal's tip as the target."""
     import re
 
-    from ctrplan import view
+    from ctrplan.pipeline.outputs import view
 
     setup, bound_map, validity, resolved, aimed, plans, traj, run = planned
     captured = {}

@@ -1,4 +1,5 @@
-"""Figures (ctrplan.plots) and output files (ctrplan.report)."""
+"""A plan's figures and output files (ctrplan.pipeline.outputs) and the shared figure helpers
+(ctrplan.plots)."""
 
 import csv
 import json
@@ -7,9 +8,12 @@ import numpy as np
 import pytest
 
 import ctrplan.io.atomic as atomic
+import ctrplan.pipeline.outputs.figures as plan_figures
 import ctrplan.plots as plots
-from ctrplan.plots import BoundProfile, plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes, plot_xy
-from ctrplan.report import format_summary, path_columns, write_plan_outputs
+from ctrplan.pipeline.outputs.figures import (BoundProfile, plot_bound_along_path, plot_joint_trajectories,
+                                             plot_robot_shapes)
+from ctrplan.pipeline.outputs.files import format_summary, path_columns, write_plan_outputs
+from ctrplan.plots import plot_xy
 from ctrplan.drive import DriveLimits, JointLimits
 from ctrplan.trajectory import time_parameterize
 
@@ -44,7 +48,7 @@ def _shapes():
 
 @pytest.fixture
 def figures(monkeypatch):
-    """The matplotlib Figures the plot functions write, in order (``plots.save_figure`` still writes)."""
+    """The matplotlib Figures the plot functions write, in order (``save_figure`` still writes)."""
     captured = []
     save = plots.save_figure
 
@@ -53,6 +57,7 @@ def figures(monkeypatch):
         return save(fig, path)
 
     monkeypatch.setattr(plots, "save_figure", spy)
+    monkeypatch.setattr(plan_figures, "save_figure", spy)
     return captured
 
 

@@ -32,10 +32,12 @@ rad, s); :func:`ctrplan.plan` composes them and returns them all in its
 7. :func:`compare_plans` -> :class:`PlanComparison` (:class:`RouteMetrics` of both plans) and
    :func:`goal_outcomes` -> :class:`GoalOutcome` per goal.
 
-:func:`run_stages` runs stages 3 to 7 -> :class:`PlanRun`. The report is a separate layer, the
-only one with millimetres, degrees and dicts: :func:`plan_summary` (``summary.json``),
-:func:`write_plan_report` (path.csv, trajectory.csv, figures, plan.html and summary.json, written
-atomically) and :func:`log_summary`; :func:`read_plan_record` reads a summary back.
+:func:`run_stages` runs stages 3 to 7 -> :class:`PlanRun`. The outputs are a package of their own,
+:mod:`ctrplan.pipeline.outputs`, the only one with millimetres, degrees and dicts:
+:func:`plan_summary` (``summary.json``), :func:`write_plan_report` (path.csv, trajectory.csv,
+figures, plan.html and summary.json, written atomically) and :func:`log_summary`, with the
+readers beside the writers (:func:`read_plan_record`,
+:func:`ctrplan.pipeline.outputs.read_plan_folder`).
 
 The stages print nothing: they log to ``ctrplan.pipeline`` (:mod:`logging`) the lines ``ctrplan
 plan`` shows (scenario, bound map, goals, plans, then the summary) at INFO, the files written at
@@ -56,11 +58,10 @@ from .interactive import GoalPlan, Planner
 from .path_bounds import PATH_SAMPLE_SPACING, PathBounds, bounds_along_path
 from .prediction import WaypointPredictions, predict_waypoints
 from .refine import ExactBound, MapRefinement, Refinement, RefinementRound, refine_plans, start_refinement
-from .report import log_summary, path_rows, write_plan_report
 from .routes import Plans, RoutePlan, effective_bound_weight, plan_routes
 from .run import PlanRun, run_plan, run_stages
 from .setup import PlanSetup, default_out_dir, load_setup, map_spec, setup_plan
-from .summary import COMPARED, PlanRecord, plan_summary, read_plan_record
+from .outputs import COMPARED, PlanRecord, log_summary, path_rows, plan_summary, read_plan_record, write_plan_report
 from .waypoints import WaypointTable, calibrated_bound, waypoint_table
 
 __all__ = [

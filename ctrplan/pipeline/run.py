@@ -18,10 +18,10 @@ from .drive import drive_trajectory
 from .evaluation import PlanComparison, compare_plans, goal_outcomes
 from .goals import AimedGoals, GoalCheckCounts, ResolvedGoals, aim_goals, check_start, resolve_goals
 from .refine import DEFAULT_PREVIEW_ROUNDS, ExactBound, MapRefinement, refine_plans, start_refinement
-from .report import log_summary, write_plan_report
+from .outputs.writer import log_summary, write_plan_report
 from .routes import Plans, plan_routes
 from .setup import PlanSetup, load_setup
-from .summary import plan_summary
+from .outputs.summary import plan_summary
 from .waypoints import WaypointTable, waypoint_table
 
 __all__ = ["PlanRun", "run_stages", "run_plan"]

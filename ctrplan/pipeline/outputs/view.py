@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .io.atomic import atomic_path
+from ...io.atomic import atomic_path
 
 __all__ = ["PLAN_VIEW_FILE", "WaypointFrames", "plan_view_figure", "write_plan_view"]
 
@@ -101,7 +101,7 @@ def plan_view_figure(frames: WaypointFrames, *, obstacles: Sequence = (), target
     if len(labels) != K or len(notes) != K:
         raise ValueError(f"labels and notes need one entry per waypoint ({K}), got {len(labels)} and {len(notes)}")
 
-    from .plots import obstacle_triangles
+    from .figures import obstacle_triangles
 
     fig = go.Figure()
     for k, obstacle in enumerate(obstacles):
@@ -181,7 +181,7 @@ def write_plan_view(path, frames: WaypointFrames, *, obstacles: Sequence = (), t
         :class:`ctrplan.obstacles.Obstacle` instances (any registered type, e.g. a scenario's
         ``obstacles``) or dicts with a registered ``type``
         (:func:`ctrplan.obstacles.obstacle_from_dict`); each is drawn as its
-        :meth:`~ctrplan.obstacles.Obstacle.triangles` (:func:`ctrplan.plots.obstacle_triangles` at
+        :meth:`~ctrplan.obstacles.Obstacle.triangles` (:func:`~ctrplan.pipeline.outputs.figures.obstacle_triangles` at
         ``SPHERE_RESOLUTION``).
     targets : array-like, shape (G, 3), optional
         Goal tip positions [m].

@@ -43,9 +43,9 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .choices import BoundKind, MotionKind
-from .io.atomic import atomic_write_text
-from .trajectory import Trajectory
+from ...choices import BoundKind, MotionKind
+from ...io.atomic import atomic_write_text
+from ...trajectory import Trajectory
 
 __all__ = ["PATH_FILE", "TRAJECTORY_FILE", "SUMMARY_FILE", "BOUND_KINDS", "path_columns",
            "write_plan_outputs", "write_trajectory_csv", "format_summary", "jsonable", "PlanFolder",
@@ -229,7 +229,7 @@ def write_plan_outputs(out_dir, ordered_path_rows: Sequence[Mapping[str, Any]],
         Default ``trajectory.joint_names``; required without a trajectory.
     figures : mapping of str to callable, optional
         File name -> function that writes that figure to the path it is given (e.g. a partial
-        of :func:`ctrplan.plots.plot_joint_trajectories`); called with ``out_dir / name``.
+        of :func:`~ctrplan.pipeline.outputs.figures.plot_joint_trajectories`); called with ``out_dir / name``.
 
     Returns
     -------

@@ -1,9 +1,7 @@
 """The report of a run as a dict in report units, as ``summary.json`` stores it and ``ctrplan plan``
 prints it (:func:`plan_summary`), and back (:func:`read_plan_record`).
 
-This module and :mod:`~ctrplan.pipeline.report` are the only places of the pipeline where lengths
-are converted to millimetres and angles to degrees: keys ending ``_mm`` are in mm, ``_deg`` in
-degrees, ``_m`` in m and ``_s`` in s.
+Keys ending ``_mm`` are in mm, ``_deg`` in degrees, ``_m`` in m and ``_s`` in s.
 """
 
 from __future__ import annotations
@@ -17,13 +15,13 @@ from typing import Mapping
 
 import numpy as np
 
-from ..calibration import CalibratedBound
-from ..effects import REGISTRY, robot_effects
-from ..io.scenario import TaskGoal
-from .evaluation import PlanComparison, RouteMetrics
-from .goals import AimDecision, _eta_text
-from .wording import aim_reason
-from .routes import RoutePlan, effective_bound_weight
+from ...calibration import CalibratedBound
+from ...effects import REGISTRY, robot_effects
+from ...io.scenario import TaskGoal
+from ..evaluation import PlanComparison, RouteMetrics
+from ..goals import AimDecision, _eta_text
+from ..wording import aim_reason
+from ..routes import RoutePlan, effective_bound_weight
 
 __all__ = ["COMPARED", "plan_summary", "PlanRecord", "read_plan_record"]
 
@@ -121,7 +119,7 @@ def _goal_prediction(run) -> dict:
 def _robot_effects(robot) -> dict:
     """The robot file's history and measurement effects (its ``[effects]``) and what planning
     does with each (``Effect.plan``); values under keys with their unit suffix."""
-    from ..effects import file_key
+    from ...effects import file_key
 
     out = {}
     effects = robot_effects(robot)
