@@ -74,7 +74,7 @@ def accuracy(scenarios, n, jobs):
     from ctrplan.boundmap import interpolation_error, load_or_compute_bound_map
     from ctrplan.io.scenario import load_scenario
     from ctrplan.mechanics import ModelSettings, evaluate_bound
-    from ctrplan.pipeline import map_spec
+    from ctrplan.planning import map_spec
 
     seen = {}
     for path in scenarios:

@@ -55,7 +55,7 @@ def single_query(planner, q0, q1) -> tuple[float, float]:
     scenario's single-query plan from ``q0`` to ``q1``."""
     from ctrplan.mechanics import evaluate_bound
     from ctrplan.planning import BoundCostObjective, SearchSettings, bounds_given_last_motion
-    from ctrplan.planning.history import end_with
+    from ctrplan.planning.approach import end_with
     from ctrplan.planning.route import plan_route
 
     sc = planner.setup.scenario
@@ -71,7 +71,7 @@ def single_query(planner, q0, q1) -> tuple[float, float]:
 
 def run(path: Path, n_goals: int, seed: int, compare: bool, jobs: int) -> dict:
     from ctrplan.errors import CtrplanError
-    from ctrplan.pipeline.interactive import Planner
+    from ctrplan.planning.interactive import Planner
 
     t0 = time.perf_counter()
     planner = Planner.from_scenario(path, store=False, n_jobs=jobs)

@@ -11,7 +11,7 @@ planner and ``[bound_field]``) from an empty map cache in ``--out``, with ``--jo
    plan the map's bound against the exact bound given the last motion at its waypoints
    (median, max); the last plan's figures are what the plan reports;
 2. the same scenario planned again (the preview map and the refinement read from the cache);
-3. with ``--full-map``: the full map (``ctrplan.pipeline.complete_bound_map``), its
+3. with ``--full-map``: the full map (``ctrplan.planning.complete_bound_map``), its
    interpolation error against the exact bound at ``--n`` random configurations valid in the
    exact model (``ctrplan.boundmap.interpolation_error``, seed ``--seed``) beside the shipped
    six-joint map's on its own robot with the same draw, and a third plan, which reads it.
@@ -154,7 +154,7 @@ def main(argv=None) -> int:
     from ctrplan.boundmap import find_bound_map, interpolation_error
     from ctrplan.io.robot_file import load_robot
     from ctrplan.mechanics import evaluate_bound
-    from ctrplan.pipeline import complete_bound_map
+    from ctrplan.planning import complete_bound_map
 
     if args.out.exists():
         shutil.rmtree(args.out)

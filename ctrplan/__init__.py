@@ -7,7 +7,7 @@ doi:10.1109/TRO.2018.2878906.
 ``ctrplan.plan`` (the entry point: a loaded scenario, optionally its bound map, in; a typed
 result out, files only when asked), ``ctrplan.plan_scenario`` (what ``ctrplan plan`` does with a
 scenario file), ``ctrplan.PlanResult`` (:mod:`ctrplan.api`) and ``ctrplan.Planner`` (one goal
-after another on a roadmap built once, :mod:`ctrplan.pipeline.interactive`) are imported on first
+after another on a roadmap built once, :mod:`ctrplan.planning.interactive`) are imported on first
 use, so ``import ctrplan`` stays light.
 
 Messages go through the standard :mod:`logging` module, under the ``ctrplan`` logger (progress
@@ -25,8 +25,8 @@ __version__ = "0.1.0"
 
 _logging.getLogger(__name__).addHandler(_logging.NullHandler())
 
-_LAZY = {"plan": "api", "plan_scenario": "api", "PlanResult": "api", "Planner": "pipeline.interactive",
-         "GoalPlan": "pipeline.interactive"}
+_LAZY = {"plan": "api", "plan_scenario": "api", "PlanResult": "api", "Planner": "planning.interactive",
+         "GoalPlan": "planning.interactive"}
 
 
 def __getattr__(name):

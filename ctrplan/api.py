@@ -4,7 +4,7 @@
 :func:`plan` takes its inputs as objects (a loaded scenario, optionally a robot and its bound
 map) and writes no file unless given ``out_dir``; it returns a frozen :class:`PlanResult` in SI
 units (m, rad, s), for scripts and for the assertions of :mod:`ctrplan.testing`, which also holds
-every stage's result (:class:`ctrplan.pipeline.PlanRun`). Neither prints anything: the lines
+every stage's result (:class:`ctrplan.planning.PlanRun`). Neither prints anything: the lines
 ``ctrplan plan`` shows are logged at INFO under the ``ctrplan`` logger
 (``logging.basicConfig(level=logging.INFO)`` shows them).
 """
@@ -25,7 +25,7 @@ from ._log import deprecated_echo
 from .boundmap import BoundField
 from .calibration import RobotCalibration
 from .io.scenario import Scenario, load_scenario
-from .pipeline import (BoundMapStage, PlanRun, default_out_dir, given_bound_map, prepare_bound_map, log_summary,
+from .planning import (BoundMapStage, PlanRun, default_out_dir, given_bound_map, prepare_bound_map, log_summary,
                        plan_summary, run_stages, setup_plan, write_plan_report)
 from .robot import Robot
 from .trajectory import Trajectory
@@ -78,7 +78,7 @@ class PlanResult:
         Stage times [s] (``bound_map``, ``inverse_kinematics``, ``compensation``,
         ``prediction_at_waypoints``, ``plans_wall``, ``refinement``, ``plans_in_parallel`` (bool),
         ``total``).
-    run : ctrplan.pipeline.PlanRun
+    run : ctrplan.planning.PlanRun
         Every stage's result (SI units): the bound map, the resolved and aimed goals, both plans
         with their exact bounds and predictions, the map's refinement (``run.refinement``), the
         comparison of the bound-aware plan with the bound-blind one (``run.comparison``), the
@@ -104,7 +104,7 @@ class PlanResult:
     @cached_property
     def summary(self) -> dict:
         """The content of ``summary.json`` (report units: keys ending ``_mm`` in mm, ``_deg`` in
-        degrees, ``_s`` in s; :func:`ctrplan.pipeline.plan_summary`), plus ``output_dir`` when
+        degrees, ``_s`` in s; :func:`ctrplan.planning.plan_summary`), plus ``output_dir`` when
         files were written."""
         out = plan_summary(self.run)
         if self.output_dir is not None:
@@ -144,7 +144,7 @@ def plan(scenario: Scenario | str | os.PathLike, *, bound_map: BoundField | Boun
          compare_blind: bool = True, progress: bool = False) -> PlanResult:
     """Plan, order and time-parameterize one scenario, bound-aware (and bound-blind to compare).
 
-    The stages of :mod:`ctrplan.pipeline`: the start and the goals checked, task-space goals
+    The stages of :mod:`ctrplan.planning`: the start and the goals checked, task-space goals
     resolved and aimed, every leg planned with the bound as a cost (length + weight x integral
     of the bound), ordered into rotations then translations, checked, the exact bound and the
     predicted tip evaluated at its waypoints, the drive trajectory computed (Ha, Fagogenis &

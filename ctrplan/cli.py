@@ -223,7 +223,7 @@ def plan_command(scenario_paths, out_dir, jobs, scheduler, iterations, no_blind,
             logger.info(f"ROS 2 bag in {written['bag']} ({ros2_storage}, {ros2_distro} messages); trajectory for "
                         f"`ros2 topic pub` in {written['yaml']}")
         if result.run.bound_map.preview and not no_full_map:
-            from .pipeline.bound_map import complete_bound_map
+            from .planning.bound_map import complete_bound_map
 
             logger.info("the plan is written; computing the robot's full bound map now (interrupt to stop: the next "
                         "run goes on from its finished chunks)")

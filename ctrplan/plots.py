@@ -2,7 +2,7 @@
 pyplot, no window, no change to the user's backend), written as PNG atomically
 (:func:`save_figure`: a temporary file in the same folder, then ``os.replace``, so an interrupted
 run never leaves a half-written figure), and a generic line plot (:func:`plot_xy`). A plan's own
-figures are in :mod:`ctrplan.pipeline.outputs.figures`, a discrepancy run's in
+figures are in :mod:`ctrplan.planning.outputs.figures`, a discrepancy run's in
 :mod:`ctrplan.discrepancy.outputs`.
 """
 

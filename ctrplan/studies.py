@@ -10,14 +10,14 @@ reported and the others go on.
 
 A scenario whose folder holds a complete run (``summary.json``, written last) for the same inputs
 (the scenario and robot files' bytes, the options, the mechanics version) is not planned again:
-its row is read from that summary (``reused``; :func:`ctrplan.pipeline.read_plan_record`); the
+its row is read from that summary (``reused``; :func:`ctrplan.planning.read_plan_record`); the
 other rows come from the typed results of the plans (``PlanResult.run.comparison``). With
 ``n_jobs`` > 1 or a ``scheduler`` address the scenarios are spread over worker processes
 (:class:`ctrplan.parallel.Executor`: ``n_jobs`` local processes, or the workers of the Dask
 cluster at that address, which need ctrplan installed).
 
 Messages go to the ``ctrplan.studies`` logger (:mod:`logging`): one line per scenario (WARNING for
-a failed one) and the closing summary at INFO. Each scenario's own progress lines (:mod:`ctrplan.pipeline`) are DEBUG
+a failed one) and the closing summary at INFO. Each scenario's own progress lines (:mod:`ctrplan.planning`) are DEBUG
 records here; its cautions stay WARNING.
 """
 
@@ -38,7 +38,7 @@ from .cache import content_key, file_hash, mechanics_version
 from .errors import CtrplanError
 
 if TYPE_CHECKING:
-    from .pipeline import PlanComparison, PlanRecord
+    from .planning import PlanComparison, PlanRecord
 
 __all__ = ["scenario_files", "plan_many", "input_key", "StudyStatus", "StudyRow", "StudyResult", "TABLE_FILE",
            "PLOT_FILE", "COLUMNS"]
@@ -237,7 +237,7 @@ def _log_row(scenario, row: StudyRow) -> None:
 def _reusable(out: Path, key: str) -> PlanRecord | None:
     """The record of a complete run in ``out`` for the same inputs (``inputs.sha256``), else None
     (also for a summary this version cannot read)."""
-    from .pipeline import read_plan_record
+    from .planning import read_plan_record
 
     summary, stamp = out / "summary.json", out / "inputs.sha256"
     if summary.exists() and stamp.exists() and stamp.read_text().strip() == key:

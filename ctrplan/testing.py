@@ -86,7 +86,7 @@ def _plan(result_or_dir) -> _Plan:
     if not isinstance(result_or_dir, (str, os.PathLike)):
         raise TypeError(f"expected a PlanResult or an output folder, got {type(result_or_dir).__name__}")
     from .io.scenario import load_scenario
-    from .pipeline.outputs import SUMMARY_FILE, read_plan_folder
+    from .planning.outputs import SUMMARY_FILE, read_plan_folder
 
     folder = read_plan_folder(result_or_dir)
     if folder.scenario_file is None:

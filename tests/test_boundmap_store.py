@@ -161,7 +161,7 @@ def test_shipped_scenarios_find_their_map_without_computing(scenario, caplog):
     """Every shipped scenario's bound map is shipped: the main job computes no map (and says
     nothing about stale maps)."""
     from ctrplan.io.scenario import load_scenario
-    from ctrplan.pipeline import map_spec
+    from ctrplan.planning import map_spec
 
     sc = load_scenario(scenario)
     settings = ModelSettings(ds=sc.bound_field.ds) if sc.bound_field.ds else ModelSettings()

@@ -56,7 +56,7 @@ def test_checkpoint_and_study_keys_change_with_the_mechanics_version(monkeypatch
 def test_the_shipped_maps_are_found_under_their_scenarios_keys(scenario, tmp_path):
     """Catches a change of the key rule that would orphan the shipped bound maps (every plan
     would then wait for a map computed again)."""
-    from ctrplan.pipeline.setup import load_setup
+    from ctrplan.planning.setup import load_setup
 
     setup = load_setup(REPO / "scenarios" / scenario, tmp_path)
     path = setup.scenario.robot_file

@@ -21,8 +21,8 @@ from ctrplan.discrepancy.verdict import coverage
 from ctrplan.discrepancy.verdict.coverage import BoundSamples, Coverage, calibrate_bound, conformal_factor, coverage_figures
 from ctrplan.discrepancy.workflow import DiscrepancyOptions, run_discrepancy
 from ctrplan.io.robot_file import load_robot, load_robot_calibration, robot_to_toml
-from ctrplan.pipeline import AimReason, aim_decision
-from ctrplan.pipeline.wording import aim_reason
+from ctrplan.planning import AimReason, aim_decision
+from ctrplan.planning.aiming import aim_reason
 from ctrplan_reference.synth_reference import synthesize_reference
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -29,11 +29,12 @@ LAYERS = (
     ("io",),                                   # files -> robots, scenarios, tables
     ("mechanics",),                            # the models and the bound
     ("batch", "boundmap", "trajectory"),
-    ("planning",),
     ("plots",),                                # figure helpers shared by every report
-    ("discrepancy", "pipeline"),               # pipeline: one module per stage, and its outputs package
-    ("design",),                               # experiment design from a discrepancy run's results
-    ("api",),                                  # plan_scenario: the pipeline's results as arrays
+    ("discrepancy", "planning"),               # planning: the search's building blocks, a module per stage
+                                               # of a plan, and the plan's outputs package
+    ("design", "pipeline"),                    # experiment design from a discrepancy run's results;
+                                               # pipeline: the former home of the stages (names only)
+    ("api",),                                  # ctrplan.plan and plan_scenario: a plan's stages run
     ("studies", "testing"),                    # many scenarios; assertions on plans for pytest suites
     ("cli",),                                  # command line
 )

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from test_planning_helpers import fake_bound, fake_robot
 
-from ctrplan import pipeline
+from ctrplan import planning
 from ctrplan._log import details
 
 REPO = Path(__file__).resolve().parents[1]
@@ -30,20 +30,20 @@ def test_library_without_logging_configuration_prints_nothing():
     would print the warning to stderr."""
     code = ("import logging, ctrplan\n"
             "assert [type(h).__name__ for h in logging.getLogger('ctrplan').handlers] == ['NullHandler']\n"
-            "logging.getLogger('ctrplan.pipeline').warning('a caution')\n"
-            "logging.getLogger('ctrplan.pipeline').info('a progress line')\n")
+            "logging.getLogger('ctrplan.planning').warning('a caution')\n"
+            "logging.getLogger('ctrplan.planning').info('a progress line')\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO)
     assert out.returncode == 0, out.stderr
     assert out.stdout == "" and out.stderr == ""
 
 
 def test_stage_logs_info_record_and_prints_nothing(capsys, caplog):
-    """``load_setup`` logs its line at INFO under ``ctrplan.pipeline`` and prints nothing."""
+    """``load_setup`` logs its line at INFO under ``ctrplan.planning`` and prints nothing."""
     caplog.set_level(logging.INFO, logger="ctrplan")
-    setup = pipeline.load_setup(SCENARIO, "out-not-written")
+    setup = planning.load_setup(SCENARIO, "out-not-written")
     assert capsys.readouterr() == ("", "")
     assert [(r.name, r.levelno, r.getMessage()) for r in caplog.records] == [
-        ("ctrplan.pipeline", logging.INFO,
+        ("ctrplan.planning", logging.INFO,
          f"scenario task-target: robot {setup.robot.name} ({', '.join(setup.robot.joint_names)})")]
 
 
@@ -52,8 +52,8 @@ def test_progress_lines_are_debug_inside_details(caplog):
     inside the block."""
     caplog.set_level(logging.DEBUG, logger="ctrplan")
     with details():
-        pipeline.load_setup(SCENARIO, "out-not-written")
-    pipeline.load_setup(SCENARIO, "out-not-written")
+        planning.load_setup(SCENARIO, "out-not-written")
+    planning.load_setup(SCENARIO, "out-not-written")
     assert [r.levelno for r in caplog.records] == [logging.DEBUG, logging.INFO]
 
 
@@ -65,13 +65,13 @@ def test_deprecated_echo_receives_the_messages_of_its_call():
     handlers, level = list(package.handlers), package.level
     got = []
     with pytest.warns(DeprecationWarning, match="echo"):
-        setup = pipeline.load_setup(SCENARIO, "out-not-written", echo=got.append)
+        setup = planning.load_setup(SCENARIO, "out-not-written", echo=got.append)
     with pytest.warns(DeprecationWarning, match="echo"):
-        pipeline.load_setup(SCENARIO, "out-not-written", got.append)
+        planning.load_setup(SCENARIO, "out-not-written", got.append)
     line = f"scenario task-target: robot {setup.robot.name} ({', '.join(setup.robot.joint_names)})"
     assert got == [line, line]
     assert package.handlers == handlers and package.level == level
-    pipeline.load_setup(SCENARIO, "out-not-written")
+    planning.load_setup(SCENARIO, "out-not-written")
     assert got == [line, line]
 
 

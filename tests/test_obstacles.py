@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from pydantic import field_validator
 
-import ctrplan.pipeline.outputs.figures as plots
+import ctrplan.planning.outputs.figures as plots
 from ctrplan.errors import ModelFileError
 from ctrplan.io.scenario import load_scenario
 from ctrplan.mechanics import ModelSettings
@@ -27,8 +27,8 @@ from ctrplan.obstacles import (OBSTACLE_TYPES, Obstacle, PositiveFloat, Vector3,
                                register_obstacle_type, rotation_z_to, unregister_obstacle_type)
 from ctrplan.planning import (BoundCostObjective, CollisionChecker, JointStateSpace, plan_route,
                               route_checks)
-from ctrplan.pipeline.outputs.figures import plot_robot_shapes
-from ctrplan.pipeline.outputs.view import WaypointFrames, plan_view_figure
+from ctrplan.planning.outputs.figures import plot_robot_shapes
+from ctrplan.planning.outputs.view import WaypointFrames, plan_view_figure
 from test_planning_verify import dense_reference_violations  # exact model, whole body, 0.005 rad / 0.1 mm
 
 REPO = Path(__file__).resolve().parents[1]

@@ -26,7 +26,7 @@ import pytest
 import ctrplan
 from _maps import cache_constant_field, constant_field
 from _scenarios import write_scenario
-from ctrplan import cli, pipeline
+from ctrplan import cli, planning
 from ctrplan.errors import UnreachableGoalError
 from ctrplan.io.robot_file import load_robot
 from ctrplan.mechanics import ModelSettings, solve_standard
@@ -100,7 +100,7 @@ radius_m = 0.004
     def no_plan(*args, **kwargs):
         raise UnreachableGoalError("planner stopped by the test")
 
-    monkeypatch.setattr(pipeline.routes, "plan_route", no_plan)
+    monkeypatch.setattr(planning.plans, "plan_route", no_plan)
     code, _, err = _run_entry(monkeypatch, capsys, ["plan", str(_scenario(tmp_path, q, "", name="free")),
                                                     "--out", str(out), "--jobs", "1"])
     assert code == 2 and "planner stopped by the test" in err, err
@@ -114,7 +114,7 @@ def test_no_path_within_budget_fails_without_outputs(tmp_path, monkeypatch, caps
         calls.append(settings.iterations)
         raise UnreachableGoalError(f"RRTstar found no exact path in {settings.iterations} iterations")
 
-    monkeypatch.setattr(pipeline.routes, "plan_route", no_plan)
+    monkeypatch.setattr(planning.plans, "plan_route", no_plan)
     sc = _scenario(tmp_path, "{alpha_2 = 2.0, alpha_3 = 2.0, beta_3 = -0.06}")
     out = tmp_path / "out"
     code, _, err = _run_entry(monkeypatch, capsys, ["plan", str(sc), "--out", str(out), "--jobs", "1",
@@ -294,7 +294,7 @@ def _check_outputs(out: Path, robot, scenario_path: Path):
     assert np.all(np.diff(traj["t"]) > 0)
 
     # figures: PNGs whose pixel size is the figure's (one bound panel per plan, one row of panels
-    # per joint; figure sizes [in] of ctrplan.pipeline.outputs.figures at ctrplan.plots.DPI) and that show something (dark
+    # per joint; figure sizes [in] of ctrplan.planning.outputs.figures at ctrplan.plots.DPI) and that show something (dark
     # pixels of lines and text: none in a blank figure, most of it in a filled one)
     import matplotlib.image as mpimg
 
@@ -339,7 +339,7 @@ def test_short_plan_outputs_are_ordered_at_rest_and_complete(tmp_path, monkeypat
     np.testing.assert_allclose(planned, [5e-4 if r["motion"] == "translation" else 1e-3 for r in rows], rtol=1e-12)
     np.testing.assert_array_equal(result.run.waypoints.planned_bound_m, planned)
     # the folder read back (the one reader of these files) is the result
-    from ctrplan.pipeline.outputs import read_plan_folder
+    from ctrplan.planning.outputs import read_plan_folder
 
     folder = read_plan_folder(out)
     assert folder.joint_names == tuple(result.joint_names) and folder.motion == tuple(result.motion)
@@ -353,7 +353,7 @@ def test_short_plan_outputs_are_ordered_at_rest_and_complete(tmp_path, monkeypat
 def test_reading_a_plan_folder_names_what_is_wrong(tmp_path):
     """An unfinished run (no summary.json) and a path.csv of another kind are refused naming the
     file (catches a reader that returns empty arrays for a folder it cannot read)."""
-    from ctrplan.pipeline.outputs import read_plan_folder
+    from ctrplan.planning.outputs import read_plan_folder
 
     with pytest.raises(FileNotFoundError, match="summary.json: no summary"):
         read_plan_folder(tmp_path)
@@ -421,7 +421,7 @@ def test_run_plan_is_deprecated_and_returns_the_written_summary(tmp_path, monkey
     """The earlier entry point still plans and reports, with a DeprecationWarning."""
     sc = _scenario(tmp_path, MOVE)
     with pytest.warns(DeprecationWarning, match="ctrplan.plan"):
-        summary = pipeline.run_plan(sc, out_dir=tmp_path / "out", iterations=20, compare_blind=False)
+        summary = planning.run_plan(sc, out_dir=tmp_path / "out", iterations=20, compare_blind=False)
     assert summary["output_dir"] == str(tmp_path / "out") and summary["bound_map"]["source"] == "cache"
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["bound_aware"] == \
         json.loads(json.dumps(summary["bound_aware"]))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import ctrplan
-from ctrplan import pipeline
+from ctrplan import planning
 from ctrplan.errors import ModelFileError
 from ctrplan.io.scenario import load_scenario
 
@@ -79,7 +79,7 @@ def _check_goal_prediction(robot, sc, rows, final_motion):
     last = rows[-1]
     q = [float(last[n]) for n in robot.joint_names]
     alpha, beta = robot.configuration(q)
-    settings = pipeline.load_setup(sc, sc.parent / "setup-check").settings
+    settings = planning.load_setup(sc, sc.parent / "setup-check").settings
     if final_motion == "translation-last":
         sol = solve_contact(robot, alpha, beta, settings)
     else:
@@ -208,22 +208,22 @@ def test_the_effective_bound_weight_ranks_paths_as_the_calibrated_bound_does():
 
     cal = CalibratedBound(factor=1.7, target_coverage=0.9, noise_margin_m=0.4e-3)
     w, c, m = 1000.0, 1.7, 0.4e-3
-    w_eff = pipeline.effective_bound_weight(cal, w)
+    w_eff = planning.effective_bound_weight(cal, w)
     rng = np.random.default_rng(2718)
     L, I = rng.uniform(0.1, 2.0, 50), rng.uniform(0.0, 5e-3, 50)
     np.testing.assert_allclose((1 + w * c * m) * L + w * c * I, (1 + w * c * m) * (L + w_eff * I), rtol=1e-12)
-    assert pipeline.effective_bound_weight(cal, 0.0) == 0.0
-    assert pipeline.effective_bound_weight(None, w) == w
+    assert planning.effective_bound_weight(cal, 0.0) == 0.0
+    assert planning.effective_bound_weight(None, w) == w
 
 
 def test_the_aim_decision_is_an_enum_and_numbers_worded_by_the_report_layer():
     """Each way of choosing the aiming model gives its AimReason and the measured errors of the
-    model chosen; the sentence comes from ctrplan.pipeline.wording with those numbers in mm
+    model chosen; the sentence comes from ctrplan.planning.aiming with those numbers in mm
     (catches a decision that carries only prose, or a sentence that names the wrong model's
     figures)."""
     from ctrplan.calibration import PredictionValidation
-    from ctrplan.pipeline import AimReason, aim_decision
-    from ctrplan.pipeline.wording import aim_reason
+    from ctrplan.planning import AimReason, aim_decision
+    from ctrplan.planning.aiming import aim_reason
 
     better = PredictionValidation(standard_mean_m=1.52e-3, standard_max_m=3.4e-3, history_mean_m=0.91e-3,
                                   history_max_m=2.1e-3, history_beats_standard=True, difference_mean_m=-0.61e-3,

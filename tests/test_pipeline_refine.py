@@ -1,5 +1,5 @@
 """A robot without a bound map: planned with the preview map refined where the plan goes, then with
-its full map (ctrplan.pipeline.refine, ctrplan.pipeline.bound_map)."""
+its full map (ctrplan.planning.map_refinement, ctrplan.planning.bound_map)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 import ctrplan
 from ctrplan.mechanics import evaluate_bound
-from ctrplan.pipeline import complete_bound_map
+from ctrplan.planning import complete_bound_map
 from ctrplan.planning import bounds_given_last_motion
 
 REPO = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""Stage functions of :mod:`ctrplan.pipeline`: each returns a frozen result in SI values (m, rad),
+"""Stage functions of :mod:`ctrplan.planning`: each returns a frozen result in SI values (m, rad),
 and the report (``plan_summary``, ``write_plan_report``) alone converts to mm and degrees.
 
 The stages run on the Table VII robot with a synthetic constant bound field (friction 1 mm,
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctrplan import pipeline
+from ctrplan import planning
 from ctrplan.boundmap import BoundField, map_coordinates, uniform_axis
 from ctrplan.errors import UnreachableGoalError
 from ctrplan.io.robot_file import load_robot
@@ -74,13 +74,13 @@ q = {alpha_2 = 0.6, alpha_3 = -0.4, beta_3 = -0.06}
 
 def test_load_setup_keeps_the_step_in_metres_and_the_default_output_folder(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL))
+    setup = planning.load_setup(_write(tmp_path, JOINT_GOAL))
     assert setup.settings.ds == pytest.approx(0.004, rel=1e-12)       # ds_m = 0.004, not 4
     assert setup.check_settings.ds == setup.settings.ds and setup.check_settings.multistart == 0
     assert setup.spec.resolution == (4, 4, 3)
     np.testing.assert_allclose(setup.scenario.start, [0.0, 0.0, -0.07], atol=0)
     assert setup.out_dir == Path("out") / "stages"
-    assert pipeline.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "o").out_dir \
+    assert planning.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "o").out_dir \
         == tmp_path / "o"
 
 
@@ -91,7 +91,7 @@ def test_a_task_goal_given_in_metres_is_resolved_to_a_tip_within_its_tolerance_i
     robot = load_robot(TABLE7)
     q_true = np.array([1.0, 0.5, -0.05])
     alpha, beta = robot.configuration(q_true)
-    setup_probe = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="probe"))
+    setup_probe = planning.load_setup(_write(tmp_path, JOINT_GOAL, name="probe"))
     target = solve_standard(robot, alpha, beta, setup_probe.check_settings).tip_position
     goal = f"""
 [[goals]]
@@ -99,10 +99,10 @@ type = "task"
 tip_position_m = [{float(target[0])!r}, {float(target[1])!r}, {float(target[2])!r}]
 tolerance_m = 1.0e-3
 """
-    setup = pipeline.load_setup(_write(tmp_path, goal))
+    setup = planning.load_setup(_write(tmp_path, goal))
     field = _field(setup.robot)
-    validity = pipeline.check_start(setup, field)
-    resolved = pipeline.resolve_goals(setup, field, validity)
+    validity = planning.check_start(setup, field)
+    resolved = planning.resolve_goals(setup, field, validity)
     (g,) = resolved.goals
     a, b = setup.robot.configuration(g.q)
     tip = solve_standard(setup.robot, a, b, setup.check_settings).tip_position
@@ -112,18 +112,18 @@ tolerance_m = 1.0e-3
     assert g.bound == pytest.approx(SYNTHETIC[0], rel=1e-9)
     assert resolved.time_s > 0
     # joint goals come back from the aiming stage as resolved (no compensation, nothing to say)
-    setup_j = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="joint"))
-    resolved_j = pipeline.resolve_goals(setup_j, field, validity)
-    aimed = pipeline.aim_goals(setup_j, resolved_j, validity)
+    setup_j = planning.load_setup(_write(tmp_path, JOINT_GOAL, name="joint"))
+    resolved_j = planning.resolve_goals(setup_j, field, validity)
+    aimed = planning.aim_goals(setup_j, resolved_j, validity)
     np.testing.assert_array_equal(aimed.q[0], [0.6, -0.4, -0.06])
     assert aimed.compensations == (None,) and dict(aimed.errors) == {}
 
 
 def test_check_start_rejects_a_start_in_collision(tmp_path):
     robot = load_robot(TABLE7)
-    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, name="free"))
+    setup = planning.load_setup(_write(tmp_path, JOINT_GOAL, name="free"))
     field = _field(robot)
-    assert pipeline.check_start(setup, field)(setup.scenario.start)   # control: free start is valid
+    assert planning.check_start(setup, field)(setup.scenario.start)   # control: free start is valid
     alpha, beta = robot.configuration(setup.scenario.start)
     tip = solve_standard(robot, alpha, beta, setup.check_settings).tip_position
     sphere = f"""
@@ -132,27 +132,27 @@ type = "sphere"
 center_m = [{float(tip[0])!r}, {float(tip[1])!r}, {float(tip[2])!r}]
 radius_m = 0.004
 """
-    blocked = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, sphere, name="blocked"))
+    blocked = planning.load_setup(_write(tmp_path, JOINT_GOAL, sphere, name="blocked"))
     with pytest.raises(UnreachableGoalError, match="start configuration"):
-        pipeline.check_start(blocked, field)
+        planning.check_start(blocked, field)
 
 
 @pytest.fixture(scope="module")
 def planned(tmp_path_factory):
     """Stages 1-6 on a short joint-space move with the synthetic field (20 RRT* iterations)."""
     tmp_path = tmp_path_factory.mktemp("stages")
-    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "out")
-    bound_map = pipeline.given_bound_map(setup, _field(setup.robot))
-    validity = pipeline.check_start(setup, bound_map.field)
-    resolved = pipeline.resolve_goals(setup, bound_map.field, validity)
-    aimed = pipeline.aim_goals(setup, resolved, validity)
-    plans = pipeline.plan_routes(setup, bound_map.field, aimed, compare_blind=True, n_jobs=1)
-    traj = pipeline.drive_trajectory(setup, plans.aware.ordered)
-    run = pipeline.PlanRun(setup=setup, bound_map=bound_map, goal_checks=pipeline.GoalCheckCounts.of(validity),
+    setup = planning.load_setup(_write(tmp_path, JOINT_GOAL), tmp_path / "out")
+    bound_map = planning.given_bound_map(setup, _field(setup.robot))
+    validity = planning.check_start(setup, bound_map.field)
+    resolved = planning.resolve_goals(setup, bound_map.field, validity)
+    aimed = planning.aim_goals(setup, resolved, validity)
+    plans = planning.plan_routes(setup, bound_map.field, aimed, compare_blind=True, n_jobs=1)
+    traj = planning.drive_trajectory(setup, plans.aware.ordered)
+    run = planning.PlanRun(setup=setup, bound_map=bound_map, goal_checks=planning.GoalCheckCounts.of(validity),
                            resolved=resolved, aimed=aimed, plans=plans, trajectory=traj,
-                           waypoints=pipeline.waypoint_table(plans.aware, setup.calibration.bound),
-                           comparison=pipeline.compare_plans(plans),
-                           goals=pipeline.goal_outcomes(setup.robot, bound_map.field, aimed, plans.aware), time_s=1.5)
+                           waypoints=planning.waypoint_table(plans.aware, setup.calibration.bound),
+                           comparison=planning.compare_plans(plans),
+                           goals=planning.goal_outcomes(setup.robot, bound_map.field, aimed, plans.aware), time_s=1.5)
     return setup, bound_map, validity, resolved, aimed, plans, traj, run
 
 
@@ -208,10 +208,10 @@ def test_evaluation_stages_are_in_si_units(planned):
 
 def test_report_stage_converts_the_si_results_to_mm_and_degrees_once(planned):
     setup, bound_map, validity, resolved, aimed, plans, traj, run = planned
-    rows = pipeline.path_rows(run.waypoints)
+    rows = planning.path_rows(run.waypoints)
     exact = plans.aware.bounds.exact
     assert [r["bound_position_m"] for r in rows] == [float(x) for x in exact.position]
-    summary = pipeline.plan_summary(run)
+    summary = planning.plan_summary(run)
     aware = summary["bound_aware"]
     assert aware["max_bound_at_waypoints_mm"] == pytest.approx(1e3 * np.nanmax(exact.position), rel=1e-12)
     assert aware["final_bound_angle_deg"] == pytest.approx(np.degrees(exact.angle[-1]), rel=1e-12)
@@ -227,7 +227,7 @@ def test_report_stage_converts_the_si_results_to_mm_and_degrees_once(planned):
 
     path = setup.out_dir.parent / "summary-back.json"
     path.write_text(json.dumps(summary))
-    record = pipeline.read_plan_record(path)
+    record = planning.read_plan_record(path)
     assert record.time_s == 1.5
     for back, metrics in ((record.comparison.aware, run.comparison.aware),
                           (record.comparison.blind, run.comparison.blind)):
@@ -242,7 +242,7 @@ def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, m
     goal's tip as the target."""
     import re
 
-    from ctrplan.pipeline.outputs import view
+    from ctrplan.planning.outputs import view
 
     setup, bound_map, validity, resolved, aimed, plans, traj, run = planned
     captured = {}
@@ -253,7 +253,7 @@ def test_report_writes_the_plan_view_with_one_step_per_waypoint_in_mm(planned, m
         return write(path, frames, **kw)
 
     monkeypatch.setattr(view, "write_plan_view", spy)
-    written = pipeline.write_plan_report(run)
+    written = planning.write_plan_report(run)
     html = written["plan.html"].read_text(encoding="utf-8")
     K = len(plans.aware.ordered)
     assert len(re.findall(r'"method":\s*"update"', html)) == K
@@ -310,14 +310,14 @@ def test_a_plan_builds_its_checkers_and_joint_space_once_and_each_stage_counts_i
     reports another's work; and the plans equal those of checkers built afresh for each."""
     from ctrplan.planning import route_checks
 
-    setup = pipeline.load_setup(_write(tmp_path, JOINT_GOAL, SPHERE_AWAY))
+    setup = planning.load_setup(_write(tmp_path, JOINT_GOAL, SPHERE_AWAY))
     field = _field(setup.robot)
     counts = _count_builds(monkeypatch)
     route_checks(setup.robot, list(setup.obstacles), field, setup.check_settings)
     one = dict(counts)
     assert one == {"JointStateSpace": 1, "CollisionChecker": 2, "BatchValidityChecker": 2, "MotionVerifier": 1}
     counts.clear()
-    run = pipeline.run_stages(setup, pipeline.given_bound_map(setup, field), compare_blind=True, n_jobs=1)
+    run = planning.run_stages(setup, planning.given_bound_map(setup, field), compare_blind=True, n_jobs=1)
     assert counts == one
     assert setup.route_checks(field) is setup.route_checks(field)
 
@@ -337,6 +337,6 @@ def test_a_plan_builds_its_checkers_and_joint_space_once_and_each_stage_counts_i
 
     fresh = pickle.loads(pickle.dumps(setup))
     assert "_route_checks" not in fresh.__dict__ and "joint_space" not in fresh.__dict__
-    again = pipeline.plan_routes(fresh, field, run.aimed, compare_blind=True, n_jobs=1)
+    again = planning.plan_routes(fresh, field, run.aimed, compare_blind=True, n_jobs=1)
     for mode, plan in run.plans.routes.items():
         np.testing.assert_array_equal(again.routes[mode].ordered.q, plan.ordered.q)

@@ -123,19 +123,24 @@ def test_the_former_names_warn_and_give_the_one_types():
 
 def test_the_functions_renamed_to_one_meaning_per_name_warn_and_give_the_new_ones():
     """A script written against the former names still runs, warned: ``ctrplan.planning.plan``
-    (one search, not ``ctrplan.plan``), the plan stages ``load_bound_map``, ``time_parameterize``
-    and ``write_report`` of ``ctrplan.pipeline`` (not the map reader, the waypoint timing or the
-    discrepancy report) and ``ctrplan.boundmap.evaluate_configuration`` (not ``ctrplan.batch``'s)."""
+    (one search, not ``ctrplan.plan``); ``ctrplan.pipeline``'s stages, now in ``ctrplan.planning``,
+    among them ``load_bound_map``, ``time_parameterize`` and ``write_report`` under their new names
+    (not the map reader, the waypoint timing or the discrepancy report); and
+    ``ctrplan.boundmap.evaluate_configuration`` (not ``ctrplan.batch``'s)."""
     import ctrplan.boundmap as boundmap
     import ctrplan.pipeline as pipeline
     import ctrplan.planning as planning
 
     for module, old, new in ((planning, "plan", planning.plan_leg),
-                             (pipeline, "load_bound_map", pipeline.prepare_bound_map),
-                             (pipeline, "time_parameterize", pipeline.drive_trajectory),
-                             (pipeline, "write_report", pipeline.write_plan_report),
+                             (pipeline, "load_bound_map", planning.prepare_bound_map),
+                             (pipeline, "time_parameterize", planning.drive_trajectory),
+                             (pipeline, "write_report", planning.write_plan_report),
+                             (pipeline, "run_stages", planning.run_stages),
+                             (pipeline, "PlanSetup", planning.PlanSetup),
                              (boundmap, "evaluate_configuration", boundmap.node_values)):
-        with pytest.warns(DeprecationWarning, match=f"use {module.__name__}.{new.__name__}"):
+        home = "ctrplan.planning" if module is pipeline else module.__name__
+        with pytest.warns(DeprecationWarning, match=f"use {home}.{new.__name__}"):
             assert getattr(module, old) is new
-    with pytest.raises(AttributeError):
-        pipeline.no_such_stage
+    for module in (pipeline, planning, boundmap):
+        with pytest.raises(AttributeError):
+            module.no_such_stage

@@ -17,7 +17,7 @@ from ctrplan.planning.validity import BatchValidityChecker, bisection_order, use
 from test_planning_helpers import fake_robot
 
 REPO = Path(__file__).resolve().parent.parent
-# The pipeline's capsule length [m] (ctrplan.pipeline.COLLISION_SEGMENT).
+# The pipeline's capsule length [m] (ctrplan.planning.COLLISION_SEGMENT).
 SEGMENT = 5e-3
 # Obstacles added to the scenario's mesh, sphere and box so that about a third of random states
 # collide, and a capsule is among them.

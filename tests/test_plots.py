@@ -1,4 +1,4 @@
-"""A plan's figures and output files (ctrplan.pipeline.outputs) and the shared figure helpers
+"""A plan's figures and output files (ctrplan.planning.outputs) and the shared figure helpers
 (ctrplan.plots)."""
 
 import csv
@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 import ctrplan.io.atomic as atomic
-import ctrplan.pipeline.outputs.figures as plan_figures
+import ctrplan.planning.outputs.figures as plan_figures
 import ctrplan.plots as plots
-from ctrplan.pipeline.outputs.figures import (BoundProfile, plot_bound_along_path, plot_joint_trajectories,
+from ctrplan.planning.outputs.figures import (BoundProfile, plot_bound_along_path, plot_joint_trajectories,
                                              plot_robot_shapes)
-from ctrplan.pipeline.outputs.files import format_summary, path_columns, write_plan_outputs
+from ctrplan.planning.outputs.folder import format_summary, path_columns, write_plan_outputs
 from ctrplan.plots import plot_xy
 from ctrplan.drive import DriveLimits, JointLimits
 from ctrplan.trajectory import time_parameterize

@@ -1,6 +1,6 @@
 """History-aware prediction (:func:`ctrplan.mechanics.predict_tip`), the history of planned paths
-(:mod:`ctrplan.planning.history`) and compensated targeting
-(:func:`ctrplan.planning.goals.compensate_goal`); Section V-B of Ha, Fagogenis & Dupont 2019.
+(:mod:`ctrplan.planning.approach`) and compensated targeting
+(:func:`ctrplan.planning.aiming.compensate_goal`); Section V-B of Ha, Fagogenis & Dupont 2019.
 
 All on the Table II robot built in code (``tests/_robots.py``), seeded or fixed configurations;
 the whole file runs in about 10 s.
@@ -13,8 +13,8 @@ from ctrplan.errors import JointLimitError
 from ctrplan.history import PairState
 from ctrplan.mechanics import (ModelSettings, PAIR_CASES, all_eta, evaluate_bound, predict_tip, solve_clearance,
                                solve_friction)
-from ctrplan.planning.goals import compensate_goal
-from ctrplan.planning.history import approach_history, end_with, goal_indices, path_history
+from ctrplan.planning.aiming import compensate_goal
+from ctrplan.planning.approach import approach_history, end_with, goal_indices, path_history
 from ctrplan.planning.ordering import OrderedPath, OrderedWaypoint
 
 from _robots import table2_robot

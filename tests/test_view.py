@@ -1,4 +1,4 @@
-"""Interactive plan view (ctrplan.pipeline.outputs.view): a self-contained HTML file with one slider step per
+"""Interactive plan view (ctrplan.planning.outputs.view): a self-contained HTML file with one slider step per
 waypoint, coordinates in mm, every obstacle type including an STL mesh; and it renders in a
 headless Chromium without JavaScript errors (skipped where Chromium is absent)."""
 
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from ctrplan.obstacles import obstacle_from_dict
-from ctrplan.pipeline.outputs.figures import obstacle_triangles
-from ctrplan.pipeline.outputs.view import SPHERE_RESOLUTION, WaypointFrames, plan_view_figure, write_plan_view
+from ctrplan.planning.outputs.figures import obstacle_triangles
+from ctrplan.planning.outputs.view import SPHERE_RESOLUTION, WaypointFrames, plan_view_figure, write_plan_view
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..parallel import Executor
-from .compute import _run_chunks, node_values
+from .compute import _run_chunks
 from .field import QUANTITIES
 
 __all__ = ["InterpolationError", "interpolation_error", "sample_exact"]

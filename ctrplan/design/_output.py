@@ -24,7 +24,7 @@ import pandas as pd
 
 from ..choices import DesignMode, PoseFrame
 from ..io.atomic import atomic_write_text
-from ..pipeline.outputs.files import jsonable
+from ..planning.outputs.folder import jsonable
 
 #: Output files by role.
 FILES = {"trajectory": "trajectory.csv", "bag": "trajectory_bag", "samples": "samples.csv", "json": "design.json",
@@ -176,7 +176,7 @@ def write_design(result, robot, out_dir, *, command: str = "", bag: bool = True,
         ``trajectory_bag`` exists and is not a bag written by ctrplan.
     """
     from ..io.ros2 import PlanBagContent, write_plan_bag
-    from ..pipeline.outputs.files import write_trajectory_csv
+    from ..planning.outputs.folder import write_trajectory_csv
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

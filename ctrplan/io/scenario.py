@@ -241,7 +241,7 @@ class PlannerSettings:
         translation releases the friction-induced twist (clearance model), a final rotation
         leaves the friction solution of its direction (Section V-B of Ha et al. 2019). Task-space
         goals are aimed for the tip predicted after that motion
-        (:func:`ctrplan.planning.goals.compensate_goal`).
+        (:func:`ctrplan.planning.aiming.compensate_goal`).
     aim_with : AimWith
         The model task-space goals are aimed with (default ``"auto"``): ``"history"`` the
         history-aware prediction (compensated goals), ``"standard"`` the standard model,
@@ -291,7 +291,7 @@ class BoundFieldSettings:
         refined where the plan goes (``"preview"``; ``ctrplan plan`` then computes the full map),
         or compute the full map first (``"full"``).
     refine_rounds : int or None
-        Most re-plans with the map refined where the last plan went (``ctrplan.pipeline.refine``);
+        Most re-plans with the map refined where the last plan went (``ctrplan.planning.map_refinement``);
         None: 4 with a preview map, 0 with the full map.
     refine_tolerance : float
         Refinement stops when the map's bound is within this of the exact bound at every

@@ -6,8 +6,8 @@ keys of its ``[[obstacles]]`` table in a scenario file (``docs/file-formats.md``
 loader validates each table straight into the class its ``type`` names; the collision checker
 (:class:`ctrplan.planning.CollisionChecker`) takes :meth:`Obstacle.collision_object` (python-fcl)
 and :meth:`Obstacle.aabb` (its broad phase); the matplotlib figure
-(:func:`ctrplan.pipeline.outputs.plot_robot_shapes`) and the plotly view
-(:mod:`ctrplan.pipeline.outputs.view`) draw
+(:func:`ctrplan.planning.outputs.plot_robot_shapes`) and the plotly view
+(:mod:`ctrplan.planning.outputs.view`) draw
 :meth:`Obstacle.triangles`. A ``type`` name is looked up in :data:`OBSTACLE_TYPES` (scenario files,
 dicts, :func:`obstacle_from_dict`); nothing else looks at an obstacle's type, so a new type is one
 class and one :func:`register_obstacle_type` call, in any module (``docs/planning.md`` has this

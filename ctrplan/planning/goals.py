@@ -1,4 +1,6 @@
-"""Planning goals: a joint vector, or a tip position with a tolerance solved by inverse kinematics.
+"""Planning goals and stage 3 of a plan: a joint vector, or a tip position with a tolerance solved
+by inverse kinematics; the scenario's start checked (:func:`check_start`) and each goal resolved to
+one joint vector (:func:`resolve_goals` -> :class:`ResolvedGoals`).
 
 Inverse kinematics minimizes ``|p_tip(q) - p_target|^2`` with ``scipy.optimize.least_squares``
 (trust-region reflective, translation limits as bounds, periodic rotations unbounded) on the
@@ -8,15 +10,13 @@ starts), from ``max_starts`` seeded Latin-hypercube points of the joint box. All
 solutions within tolerance that pass the validity function are kept; the one with the smallest
 friction bound (from a :class:`~ctrplan.boundmap.BoundField`, or the smallest tip error without
 one) is chosen. A redundant robot (more than three joints) has a manifold of solutions, and
-more starts find lower bounds on it.
-
-:func:`compensate_goal` then moves such a solution so that the tip *predicted* for the motion
-history that reaches it (:func:`ctrplan.mechanics.predict_tip`: clearance model after a final
-translation, friction model after a final rotation, Section V-B of Ha, Fagogenis & Dupont 2019)
-is on the target, instead of the standard model's tip.
+more starts find lower bounds on it. Such a solution is then aimed (:mod:`~ctrplan.planning.aiming`).
 """
 
 from __future__ import annotations
+
+import logging
+import time
 
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -28,9 +28,13 @@ from ..choices import JointKind
 from ..errors import CtrplanError, UnreachableGoalError
 from ..io.scenario import JointGoal, TaskGoal
 from .space import wrap_angle
+from .._log import deprecated_echo, progress_level
+from .setup import PlanSetup
 
 __all__ = ["JointGoal", "TaskGoal", "GoalSolution", "IKSearch", "resolve_goal", "DEFAULT_IK_STARTS_PER_JOINT",
-           "DEFAULT_IK_MAX_STARTS", "CompensatedGoal", "compensate_goal"]
+           "DEFAULT_IK_MAX_STARTS", "ResolvedGoals", "GoalCheckCounts", "check_start", "resolve_goals"]
+
+logger = logging.getLogger(__package__)
 
 # Coarse start grid: nodes per joint (3 joints -> 27 starts, ~1-3 s with a ~1 ms model).
 DEFAULT_IK_STARTS_PER_JOINT = 3
@@ -277,255 +281,125 @@ def resolve_goal(goal, robot, validity_fn=None, field=None, solve_standard=None,
     return GoalSolution(cand[i], float(errs[i]), float(bounds[i]), cand, errs, bounds, n_eval)
 
 
-# ----------------------------------------------------------------------------- compensation
-# Compensated IK: stop when the predicted tip is this close to the target [m] (well below any
-# goal tolerance, above the contact solver's tip accuracy, ~1 um for outer_tol 1e-7 m).
-COMPENSATION_TIP_TOL = 1e-5
-# Quasi-Newton iterations before giving up.
-COMPENSATION_MAX_ITERATIONS = 15
-# Finite-difference steps of the standard-model Jacobian [rad] and [m].
-_FD_STEP_ROTATION = 1e-5
-_FD_STEP_TRANSLATION = 1e-6
-# Scale of a translation against a rotation in the minimum-norm step of a redundant robot [m/rad]
-# (the same 0.01 as the x_scale of resolve_goal's least squares).
-_TRANSLATION_SCALE = 0.01
-# Step halvings of the backtracking line search.
-_MAX_HALVINGS = 5
-
-
+# ----------------------------------------------------------------------------- stage 3
 @dataclass(frozen=True, eq=False)
-class CompensatedGoal:
-    """A task-space goal aimed with the predicted tip instead of the standard model's.
+class ResolvedGoals:
+    """Stage 3: each scenario goal as a joint vector.
 
     Attributes
     ----------
-    q : ndarray, shape (n_joints,)
-        The goal to plan to [rad or m]: ``q_compensated`` when ``accepted``, else ``q_standard``.
-    q_compensated : ndarray, shape (n_joints,)
-        Where the compensation ended (periodic angles in [-pi, pi)).
-    q_standard : ndarray, shape (n_joints,)
-        The standard-model IK solution it started from.
-    target : ndarray, shape (3,)
-        Target tip position [m].
-    eta : ndarray of int, shape (n - 1,)
-        Friction direction per pair of the assumed final approach (Eq. (39)), at the compensated goal.
-    translation_last : ndarray of bool, shape (n - 1,)
-        Per pair: a translation follows the pair's last rotation in the assumed approach.
-    state : PairState
-        The assumed history at the compensated goal (:mod:`ctrplan.history`): offsets of the
-        configuration the tubes reach (drive backlash) [rad, m], directions, release and
-        friction state per pair.
-    predicted_tip_standard : ndarray, shape (3,)
-        Predicted tip at ``q_standard`` with that history [m].
-    predicted_miss_standard : float
-        Its distance from the target [m]: the miss of standard-model IK.
-    predicted_tip : ndarray, shape (3,)
-        Predicted tip at ``q_compensated`` [m].
-    predicted_miss : float
-        Its distance from the target [m]: the compensated miss.
-    standard_tip_error : float
-        Distance of the standard model's tip at ``q_compensated`` from the target [m] (about
-        the predicted offset: the standard model now misses by design).
-    model : str
-        ``"clearance"`` or ``"friction"``: the model of the prediction.
-    converged : bool
-        ``predicted_miss`` reached the iteration's tolerance.
-    accepted : bool
-        The compensated ``q`` is used: it converged to within the goal tolerance and passed the
-        validity function.
-    iterations : int
-        Quasi-Newton iterations.
-    n_predictions : int
-        Contact-model solves (predictions).
-    message : str
-        What happened, for the report.
+    goals : tuple of GoalSolution
+        One per scenario goal, in order: ``q`` shape (n_joints,) [rad or m], ``tip_error`` [m],
+        ``bound`` (the map's friction bound there) [m], the IK ``candidates`` and
+        ``n_model_evaluations``.
+    time_s : float
+        Inverse-kinematics time [s].
     """
 
-    q: np.ndarray
-    q_compensated: np.ndarray
-    q_standard: np.ndarray
-    target: np.ndarray
-    eta: np.ndarray
-    translation_last: np.ndarray
-    state: object
-    predicted_tip_standard: np.ndarray
-    predicted_miss_standard: float
-    predicted_tip: np.ndarray
-    predicted_miss: float
-    standard_tip_error: float
-    model: str
-    converged: bool
-    accepted: bool
-    iterations: int
-    n_predictions: int
-    message: str
+    goals: tuple
+    time_s: float
 
 
-def compensate_goal(target, robot, q_standard, state, settings=None, *, tolerance: float,
-                    validity_fn=None, predict=None, tip_tol: float = COMPENSATION_TIP_TOL,
-                    max_iterations: int = COMPENSATION_MAX_ITERATIONS) -> CompensatedGoal:
-    """Joint vector whose predicted tip is on the target, for the history of its final approach.
+@dataclass(frozen=True)
+class GoalCheckCounts:
+    """Work of the validity checker that checked the start and the goals (inverse kinematics and
+    compensation included), as the summary reports it.
 
-    Quasi-Newton on the residual ``r(q) = p_pred(q; history(q)) - target``:
-    ``q <- q - D (J D)^+ r(q)`` with ``D = diag(1, 0.01 m/rad)`` (minimum-norm step of a
-    redundant robot), a backtracking line search on ``|r|`` and translations kept in their
-    limits. ``J`` starts as the standard model's tip Jacobian at ``q_standard`` (finite
-    differences, cheap: the prediction differs from the standard tip by a slowly varying offset,
-    the friction and clearance deviation of a few mm) and is corrected by Broyden's update after
-    every step. One contact solve per iteration (warm-started from the previous one).
+    Attributes
+    ----------
+    n_calls : int
+        States checked.
+    n_model : int
+        Standard-model solves.
+    collision_time_s : float
+        Time in collision checks [s].
+    """
+
+    n_calls: int
+    n_model: int
+    collision_time_s: float
+
+    @classmethod
+    def of(cls, validity) -> "GoalCheckCounts":
+        """The counters of a checker (:func:`check_start`'s) as they stand.
+
+        Parameters
+        ----------
+        validity : BatchValidityChecker
+
+        Returns
+        -------
+        GoalCheckCounts
+        """
+        return cls(n_calls=int(validity.n_calls), n_model=int(validity.n_model),
+                   collision_time_s=float(validity.seconds_collision))
+
+
+def check_start(setup: PlanSetup, field):
+    """Stage 3a: the search's validity checker, after checking the scenario's start with it.
 
     Parameters
     ----------
-    target : array-like, shape (3,)
-        Target tip position [m].
-    robot : Robot
-    q_standard : array-like, shape (n_joints,)
-        Standard-model IK solution to start from (:func:`resolve_goal`) [rad or m].
-    state : PairState or callable
-        The history at the goal (:class:`ctrplan.history.PairState`), or ``state(q) ->
-        PairState`` for a goal ``q`` (e.g. :func:`ctrplan.planning.history.approach_history` of
-        the approach to ``q``, so that the lag of a drive with backlash and the friction state
-        follow the goal as it moves).
-    settings : ModelSettings, optional
-    tolerance : float, keyword-only
-        Goal tolerance [m], > 0: the compensated solution is accepted only within it.
-    validity_fn : callable, optional, keyword-only
-        ``validity_fn(q) -> bool`` (limits, stability, collisions); an invalid compensated
-        configuration is not accepted.
-    predict : callable, optional, keyword-only
-        ``predict(robot, alpha, beta, settings=..., state=..., warm_start=...) -> Prediction``;
-        default :func:`ctrplan.mechanics.predict_tip`.
-    tip_tol : float, keyword-only
-        Stop when the predicted miss is below this [m] (default 10 um).
-    max_iterations : int, keyword-only
+    setup : PlanSetup
+    field : BoundField
+        Its validity flags reject states near unstable or failed map nodes.
 
     Returns
     -------
-    CompensatedGoal
-        With the predicted miss of ``q_standard`` and of ``q_compensated``. When the iteration
-        does not reach ``tolerance`` or the result is invalid, ``accepted`` is False, ``q`` is
-        ``q_standard`` and ``message`` says why.
+    BatchValidityChecker
+        The planning search's checker (``setup.route_checks(field).search``: collision with
+        ``setup.obstacles``, elastic stability, the map's valid region;
+        ``setup.check_settings``), which the plans then search with. It counts its calls
+        (``n_calls``, ``n_model``, ``seconds_collision``); taken after the goals are aimed, they are
+        the goal stages' work, which the summary reports.
 
     Raises
     ------
-    ValueError
-        ``target`` not 3 finite numbers, ``tolerance`` <= 0, a state that does not fit the robot
-        (see :func:`ctrplan.mechanics.predict_tip`), ``q_standard`` of the wrong length.
-    CtrplanError
-        The prediction fails at ``q_standard`` itself (e.g. ``ConvergenceError`` of the standard
-        model, ``PhysicalParameterError`` without clearances).
-
-    Notes
-    -----
-    Prediction: Section V-B with Sections II (clearance model) and III (friction model, Eqs.
-    (37)-(47)) of Ha, Fagogenis & Dupont, IEEE T-RO 35(2):353-370, 2019,
-    doi:10.1109/TRO.2018.2878906. A fixed ``state`` is held while q moves (a small change of the
-    goal does not change the direction of the final rotations); a callable one is re-read at
-    every trial goal.
+    UnreachableGoalError
+        The start is in collision, elastically unstable or outside the map's valid region.
     """
-    from ..mechanics import ModelSettings, predict_tip, solve_standard  # noqa: PLC0415
+    sc = setup.scenario
+    validity = setup.route_checks(field).search
+    if not validity(sc.start):
+        raise UnreachableGoalError(f"{sc.file}: start configuration {sc.joint_dict(sc.start)} is invalid "
+                                   "(collision, elastic instability or outside the bound map's valid region)")
+    return validity
 
-    settings = settings or ModelSettings()
-    predict = predict or predict_tip
-    target = np.asarray(target, dtype=float).reshape(-1)
-    if target.shape != (3,) or not np.all(np.isfinite(target)):
-        raise ValueError(f"target must be 3 finite numbers [m], got {target!r}")
-    if not np.isfinite(tolerance) or tolerance <= 0.0:
-        raise ValueError(f"tolerance must be > 0 m, got {tolerance!r}")
-    q0 = np.asarray(q_standard, dtype=float).reshape(-1)
-    nj = len(robot.joints)
-    if q0.shape != (nj,):
-        raise ValueError(f"q_standard needs {nj} values ({', '.join(robot.joint_names)}), got {q0.shape}")
-    periodic = np.array([j.periodic for j in robot.joints])
-    rot = np.array([j.kind == JointKind.ROTATION for j in robot.joints])
-    lo = np.where(periodic, -np.inf, robot.joint_lower)
-    hi = np.where(periodic, np.inf, robot.joint_upper)
-    scale = np.where(rot, 1.0, _TRANSLATION_SCALE)
-    fd = np.where(rot, _FD_STEP_ROTATION, _FD_STEP_TRANSLATION)
-    n_pred = 0
-    last = {"sol": None, "state": None}
-    state_at = state if callable(state) else (lambda q: state)
 
-    def prediction(q):
-        nonlocal n_pred
-        alpha, beta = robot.configuration(q)
-        n_pred += 1
-        s = state_at(q)
-        p = predict(robot, alpha, beta, settings=settings, state=s, warm_start=last["sol"])
-        last["sol"], last["state"] = p.solution, s
-        return p
+@deprecated_echo
+def resolve_goals(setup: PlanSetup, field, validity, echo=None) -> ResolvedGoals:
+    """Stage 3b: each scenario goal as one joint vector.
 
-    def std_tip(q):
-        alpha, beta = robot.configuration(q)
-        sol = solve_standard(robot, alpha, beta, settings, check_stability=False)
-        if not sol.diagnostics.converged:
-            raise ValueError("standard model did not converge")
-        return np.asarray(sol.tip_position, dtype=float)
+    Joint goals are checked; task-space goals are solved by inverse kinematics with the standard
+    model, keeping every valid solution within the goal's tolerance and taking the one with the
+    smallest friction bound in ``field`` (:func:`ctrplan.planning.resolve_goal`, IK seed k + 1
+    for goal k).
 
-    def jacobian(q):
-        # the standard model's tip Jacobian at the commanded q (the prediction's own standard
-        # solution may sit at another configuration, e.g. behind a drive's dead band)
-        p0 = std_tip(q)
-        J = np.empty((3, nj))
-        for j in range(nj):
-            h = fd[j] if q[j] + fd[j] <= hi[j] else -fd[j]
-            dq = np.zeros(nj)
-            dq[j] = h
-            J[:, j] = (std_tip(q + dq) - p0) / h
-        return J
+    Parameters
+    ----------
+    setup : PlanSetup
+    field : BoundField
+    validity : callable
+        State validity (:func:`check_start`'s checker).
+    echo : callable, optional
+        Deprecated (``DeprecationWarning``): receives the messages this call logs at INFO and
+        higher; configure :mod:`logging` instead (logger ``ctrplan``).
 
-    first = prediction(q0)
-    tip0 = first.tip_position.copy()
-    miss0 = float(np.linalg.norm(tip0 - target))
-    q, p, miss = q0.copy(), first, miss0
-    it, message = 0, ""
-    try:
-        J = jacobian(q) if miss > tip_tol else None
-        while miss > tip_tol and it < max_iterations:
-            it += 1
-            r = p.tip_position - target
-            step = -scale * (np.linalg.pinv(J * scale[None, :]) @ r)
-            t = 1.0
-            for _ in range(_MAX_HALVINGS + 1):
-                q_new = np.clip(q + t * step, lo, hi)
-                try:
-                    p_new = prediction(q_new)
-                    miss_new = float(np.linalg.norm(p_new.tip_position - target))
-                except (CtrplanError, ValueError, np.linalg.LinAlgError, FloatingPointError):
-                    miss_new = np.inf
-                if miss_new < miss:
-                    break
-                t *= 0.5
-            if not miss_new < miss:
-                message = f"no descent after {it} iterations"
-                break
-            # Broyden's update of the Jacobian with the step taken (the standard model's Jacobian
-            # is only the first guess of the prediction's: alone it contracts the miss by as
-            # little as 0.86 per iteration near the task-target goal)
-            dq, dr = q_new - q, (p_new.tip_position - target) - r
-            if float(dq @ dq) > 0.0:
-                J = J + np.outer(dr - J @ dq, dq) / float(dq @ dq)
-            q, p, miss = q_new, p_new, miss_new
-    except (CtrplanError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
-        message = f"stopped after {it} iterations: {type(exc).__name__}: {exc}"
-    p_state = state_at(q)
-    q = np.where(periodic, wrap_angle(q), q)
-    converged = miss <= tip_tol
-    std_err = float(np.linalg.norm(p.standard.tip_position - target))
-    accepted = miss <= tolerance and bool(p.ok)
-    if not p.ok:
-        message = message or f"the prediction at the compensated goal did not converge: {p.solution.diagnostics.message}"
-    if accepted and validity_fn is not None and not bool(validity_fn(q)):
-        accepted, message = False, "the compensated configuration is invalid (limits, stability, map or collision)"
-    if not accepted and not message:
-        message = f"predicted miss {miss * 1e3:.3g} mm is outside the tolerance {tolerance * 1e3:.3g} mm"
-    if accepted:
-        message = (f"converged in {it} iterations" if converged else
-                   f"within tolerance after {it} iterations ({message or 'iteration limit'})")
-    return CompensatedGoal(
-        q=q if accepted else q0.copy(), q_compensated=q, q_standard=q0.copy(), target=target,
-        eta=np.asarray(p_state.eta, dtype=int).copy(), translation_last=np.asarray(p_state.released, bool).copy(),
-        state=p_state,
-        predicted_tip_standard=tip0, predicted_miss_standard=miss0, predicted_tip=p.tip_position.copy(),
-        predicted_miss=miss, standard_tip_error=std_err, model=p.model, converged=converged, accepted=accepted,
-        iterations=it, n_predictions=n_pred, message=message)
+    Returns
+    -------
+    ResolvedGoals
+
+    Raises
+    ------
+    UnreachableGoalError
+        A joint goal is invalid, or no valid IK solution reaches a task goal within its tolerance.
+    """
+    t0 = time.perf_counter()
+    goals = tuple(resolve_goal(g, setup.robot, validity_fn=validity, field=field, settings=setup.check_settings,
+                               search=IKSearch(seed=k + 1))
+                  for k, g in enumerate(setup.scenario.goals))
+    seconds = time.perf_counter() - t0
+    for k, g in enumerate(goals):
+        logger.log(progress_level(), f"goal {k + 1}: q = {np.round(g.q, 4).tolist()}, tip error "
+                   f"{g.tip_error * 1e3:.3f} mm, field bound {g.bound * 1e3:.2f} mm ({len(g.candidates)} candidates)")
+    return ResolvedGoals(goals=goals, time_s=seconds)

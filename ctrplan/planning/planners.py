@@ -26,7 +26,7 @@ from ..planner_info import PLANNER_REGISTRY, check_planner_options
 from .space import JointStateSpace
 from .validity import DEFAULT_VALIDITY_RESOLUTION, use_motion_validator
 
-__all__ = ["PLANNERS", "SearchResult", "SearchSettings", "ValidityChecker", "plan", "DEFAULT_ITERATIONS",
+__all__ = ["PLANNERS", "SearchResult", "SearchSettings", "ValidityChecker", "plan_leg", "DEFAULT_ITERATIONS",
            "DEFAULT_VALIDITY_RESOLUTION"]
 
 

@@ -151,7 +151,7 @@ class ValidityCheck:
         from ctrplan.boundmap import load_or_compute_bound_map
         from ctrplan.io.scenario import load_scenario
         from ctrplan.mechanics import ModelSettings
-        from ctrplan.pipeline import map_spec
+        from ctrplan.planning import map_spec
         from ctrplan.planning import CollisionChecker, JointStateSpace, ValidityChecker
         from ctrplan.planning.route import DEFAULT_COLLISION_SEGMENT
         from ctrplan.planning.validity import BatchValidityChecker
@@ -376,7 +376,7 @@ finally:
 
 def timeraw_import():
     """``import ctrplan`` with the planning pipeline, in a fresh interpreter."""
-    return "import ctrplan.pipeline"
+    return "import ctrplan.planning"
 
 
 def timeraw_first_bound():

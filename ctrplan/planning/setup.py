@@ -98,7 +98,7 @@ class PlanSetup:
         """The robot's :class:`~ctrplan.planning.JointStateSpace`, built once per plan and process
         (its OMPL objects do not pickle: a copy of the setup in another process builds its own, as
         it does its :meth:`route_checks`)."""
-        from ..planning import JointStateSpace
+        from .space import JointStateSpace
 
         return JointStateSpace(self.robot)
 
@@ -120,7 +120,7 @@ class PlanSetup:
         -------
         ctrplan.planning.RouteChecks
         """
-        from ..planning.route import route_checks
+        from .route import route_checks
 
         built = self.__dict__.setdefault("_route_checks", {})
         hit = built.get(id(field))

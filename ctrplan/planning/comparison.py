@@ -20,8 +20,8 @@ import numpy as np
 from ..boundmap import BoundField
 from ..history import pair_friction
 from ..robot import Robot
-from .goals import AimedGoals
-from .routes import Plans, RoutePlan
+from .aiming import AimedGoals
+from .plans import Plans, RoutePlan
 
 __all__ = ["RouteMetrics", "route_metrics", "PlanComparison", "compare_plans", "GoalOutcome", "goal_outcomes"]
 
@@ -152,7 +152,7 @@ class GoalOutcome:
     waypoint : int
         Index of the ordered waypoint that reaches the goal.
     final_motion_status : str
-        How the motion reaching it ends (:func:`ctrplan.planning.history.end_with`).
+        How the motion reaching it ends (:func:`ctrplan.planning.approach.end_with`).
     planned_field_bound_m : float
         The bound map's friction bound at the planned goal [m].
     planned_eta : ndarray of int, shape (n_tubes - 1,)

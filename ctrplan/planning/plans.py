@@ -1,6 +1,6 @@
 """Stage 5 of a plan: every leg planned bound-aware (and bound-blind), ordered, checked, with the
-exact bound (:mod:`~ctrplan.pipeline.path_bounds`) and the prediction
-(:mod:`~ctrplan.pipeline.prediction`) at its waypoints (:class:`RoutePlan`, :class:`Plans`)."""
+exact bound (:mod:`~ctrplan.planning.path_bounds`) and the prediction
+(:mod:`~ctrplan.planning.path_bounds`) at its waypoints (:class:`RoutePlan`, :class:`Plans`)."""
 
 from __future__ import annotations
 
@@ -14,12 +14,13 @@ import numpy as np
 
 from .._log import deprecated_echo, progress_level
 from ..errors import CtrplanError
-from ..planning import BoundCostObjective, SearchSettings
-from ..planning.history import end_with, goal_indices
-from ..planning.route import plan_route
-from .goals import AimedGoals
+from .objective import BoundCostObjective
+from .planners import SearchSettings
+from .approach import end_with, goal_indices
+from .route import plan_route
+from .aiming import AimedGoals
 from .path_bounds import PathBounds, bounds_along_path
-from .prediction import WaypointPredictions, predict_waypoints
+from .path_bounds import WaypointPredictions, predict_waypoints
 from .setup import PlanSetup
 
 __all__ = ["RoutePlan", "Plans", "plan_routes", "effective_bound_weight"]
@@ -50,7 +51,7 @@ class RoutePlan:
     goal_indices : list of int
         Waypoint index of each goal.
     final_motion_status : list of str
-        Per goal: how the motion reaching it ends (:func:`ctrplan.planning.history.end_with`).
+        Per goal: how the motion reaching it ends (:func:`ctrplan.planning.approach.end_with`).
     """
 
     legs: list
@@ -123,7 +124,7 @@ def _plan_mode(job: _PlanJob) -> RoutePlan:
     p = setup.scenario.planner
     roadmap = None
     if job.roadmap is not None:
-        from ..planning.roadmap import motion_terms
+        from .roadmap import motion_terms
 
         roadmap = (job.roadmap, motion_terms(joint_space, field), job.weight)
     t0 = time.perf_counter()
@@ -219,7 +220,7 @@ def plan_routes(setup: PlanSetup, field, aimed: AimedGoals, *, iterations: int |
         (same result as in series).
     use_roadmap : bool, keyword-only
         Plan the legs of both plans through the scenario's roadmap
-        (:func:`~ctrplan.pipeline.roadmap.load_roadmap`, read from the cache or built here
+        (:func:`~ctrplan.planning.roadmap.load_roadmap`, read from the cache or built here
         first on ``n_jobs`` processes; the bound-aware legs with the bound weight, the bound-blind
         ones with weight 0).
     echo : callable, optional, keyword-only

@@ -93,7 +93,7 @@ class Planner:
     Parameters
     ----------
     setup : PlanSetup
-        The scenario's robot, settings and obstacles (:func:`ctrplan.pipeline.setup_plan`).
+        The scenario's robot, settings and obstacles (:func:`ctrplan.planning.setup_plan`).
     field : BoundField
         The bound map of the edge costs and of the valid region.
     n_nodes : int, optional, keyword-only
@@ -129,8 +129,8 @@ class Planner:
     def __init__(self, setup, field, *, n_nodes: int | None = None, neighbours: int | None = None,
                  seed: int | None = None, cache_dir: str | os.PathLike | None = None, store: bool = True,
                  n_jobs: int = 1):
-        from ..planning.roadmap import motion_terms
-        from .routes import effective_bound_weight
+        from .roadmap import motion_terms
+        from .plans import effective_bound_weight
 
         sc = setup.scenario
         self.setup, self.field = setup, field
@@ -156,7 +156,7 @@ class Planner:
         scenario : path or Scenario
         bound_map : BoundField, optional, keyword-only
             Default: the shipped or cached map of the scenario's robot, else its preview map
-            (computed, :func:`ctrplan.pipeline.prepare_bound_map`).
+            (computed, :func:`ctrplan.planning.prepare_bound_map`).
         n_jobs : int, keyword-only
             Worker processes for a map that must be computed and for the roadmap.
         **kwargs
@@ -205,7 +205,7 @@ class Planner:
         ValueError
             A malformed goal.
         """
-        from ..planning import IKSearch, resolve_goal
+        from .goals import IKSearch, resolve_goal
 
         names = self.robot.joint_names
         if isinstance(goal, dict) and set(goal) <= set(names) and goal:
@@ -241,10 +241,12 @@ class Planner:
             The drive trajectory violates a drive limit.
         """
         from ..mechanics import evaluate_bound
-        from ..planning import BoundCostObjective, SearchSettings, bounds_given_last_motion
-        from ..planning.history import end_with
-        from ..planning.route import plan_route
-        from .drive import drive_trajectory
+        from .objective import BoundCostObjective
+        from .ordering import bounds_given_last_motion
+        from .planners import SearchSettings
+        from .approach import end_with
+        from .route import plan_route
+        from .waypoints import drive_trajectory
 
         t_all = time.perf_counter()
         sc, robot, js, checks = self.setup.scenario, self.robot, self.joint_space, self.checks

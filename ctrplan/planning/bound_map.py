@@ -53,7 +53,7 @@ def prepare_bound_map(setup: PlanSetup, n_jobs: int = 1, echo=None, *, progress:
 
     A shipped or cached map with the same key is read. Otherwise, with ``[bound_field]
     first_plan = "preview"`` (the default), the preview map (half the nodes per coordinate) is
-    read or computed, and the plan refines it where it goes (:mod:`ctrplan.pipeline.refine`);
+    read or computed, and the plan refines it where it goes (:mod:`ctrplan.planning.map_refinement`);
     with ``"full"`` the map is computed. Maps are computed into zarr stores, and a computation
     interrupted earlier resumes from its finished chunks
     (:func:`ctrplan.boundmap.load_or_compute_bound_map`).

@@ -18,10 +18,9 @@ import numpy as np
 from ...calibration import CalibratedBound
 from ...effects import REGISTRY, robot_effects
 from ...io.scenario import TaskGoal
-from ..evaluation import PlanComparison, RouteMetrics
-from ..goals import AimDecision, _eta_text
-from ..wording import aim_reason
-from ..routes import RoutePlan, effective_bound_weight
+from ..comparison import PlanComparison, RouteMetrics
+from ..aiming import AimDecision, _eta_text, aim_reason
+from ..plans import RoutePlan, effective_bound_weight
 
 __all__ = ["COMPARED", "plan_summary", "PlanRecord", "read_plan_record"]
 
@@ -159,7 +158,7 @@ def plan_summary(run) -> dict:
     Parameters
     ----------
     run : PlanRun
-        Every stage's result (:func:`~ctrplan.pipeline.run.run_stages`).
+        Every stage's result (:func:`~ctrplan.planning.run.run_stages`).
 
     Returns
     -------

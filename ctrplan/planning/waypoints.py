@@ -1,5 +1,6 @@
 """The ordered waypoints of a plan with their bounds and predictions, one array per quantity
-(:class:`WaypointTable`): what ``path.csv`` holds, in SI units."""
+(:class:`WaypointTable`: what ``path.csv`` holds, in SI units), and stage 6, the drive trajectory
+along them (:func:`drive_trajectory`)."""
 
 from __future__ import annotations
 
@@ -7,11 +8,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..choices import BoundKind, MotionKind
 from ..calibration import CalibratedBound
-from .routes import RoutePlan
+from ..choices import BoundKind, MotionKind
+from ..errors import JointLimitError
+from .plans import RoutePlan
+from .setup import PlanSetup
 
-__all__ = ["WaypointTable", "waypoint_table", "calibrated_bound"]
+__all__ = ["WaypointTable", "waypoint_table", "calibrated_bound", "drive_trajectory"]
 
 
 def _frozen(a, dtype=None) -> np.ndarray:
@@ -125,3 +128,37 @@ def waypoint_table(plan: RoutePlan, calibration: CalibratedBound | None = None) 
         predicted_tip=_frozen(np.reshape(pred.tip, (-1, 3)), float),
         predicted_offset_m=_frozen(pred.offset, float), prediction_eta=_frozen(pred.eta_used, int),
         prediction_cases=tuple(pred.cases))
+
+
+def drive_trajectory(setup: PlanSetup, ordered):
+    """Stage 6: the drive trajectory along an ordered path, checked against the drive limits.
+
+    Parameters
+    ----------
+    setup : PlanSetup
+        Its scenario's ``[drive]`` limits [rad or m per s, s^2, s^3] and control rate [Hz].
+    ordered : OrderedPath
+        Waypoints shape (K, n_joints) [rad or m] with their motions.
+
+    Returns
+    -------
+    Trajectory or None
+        Rest-to-rest ruckig segments, stopping between phases
+        (:func:`ctrplan.trajectory.time_parameterize_robot`); None when the scenario has no
+        ``[drive]`` table.
+
+    Raises
+    ------
+    JointLimitError
+        The sampled trajectory violates a drive limit (the first five violations are named).
+    """
+    from ..trajectory import check_trajectory, time_parameterize_robot
+
+    sc = setup.scenario
+    traj = time_parameterize_robot(setup.robot, ordered.q, ordered.motions, sc.drive) \
+        if sc.drive is not None else None
+    violations = check_trajectory(traj) if traj is not None else []
+    if violations:
+        raise JointLimitError(f"{sc.file}: the time-parameterized trajectory violates the drive limits: "
+                              + "; ".join(str(v) for v in violations[:5]))
+    return traj

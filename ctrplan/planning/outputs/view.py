@@ -181,7 +181,7 @@ def write_plan_view(path, frames: WaypointFrames, *, obstacles: Sequence = (), t
         :class:`ctrplan.obstacles.Obstacle` instances (any registered type, e.g. a scenario's
         ``obstacles``) or dicts with a registered ``type``
         (:func:`ctrplan.obstacles.obstacle_from_dict`); each is drawn as its
-        :meth:`~ctrplan.obstacles.Obstacle.triangles` (:func:`~ctrplan.pipeline.outputs.figures.obstacle_triangles` at
+        :meth:`~ctrplan.obstacles.Obstacle.triangles` (:func:`~ctrplan.planning.outputs.figures.obstacle_triangles` at
         ``SPHERE_RESOLUTION``).
     targets : array-like, shape (G, 3), optional
         Goal tip positions [m].

@@ -120,7 +120,7 @@ def _draw_obstacle(ax, obstacle, k: int) -> np.ndarray:
 def obstacle_triangles(obstacle, k: int, resolution: int) -> tuple[np.ndarray, np.ndarray]:
     """The triangles of an obstacle or obstacle dict as both drawings use them
     (:meth:`~ctrplan.obstacles.Obstacle.triangles`): the figures at :data:`SPHERE_RESOLUTION`, the
-    3-D view (:mod:`~ctrplan.pipeline.outputs.view`) at its own.
+    3-D view (:mod:`~ctrplan.planning.outputs.view`) at its own.
 
     Parameters
     ----------

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..._log import progress_level
-from ..goals import _eta_text
+from ..aiming import _eta_text
 from .summary import plan_summary
 from ..waypoints import WaypointTable
 
@@ -36,7 +36,7 @@ def path_rows(table: WaypointTable) -> list[dict]:
         ``calibrated_bound_m`` [m] (NaN without a calibration in the robot file),
         ``bound_angle_rad`` [rad], ``bound_kind``, ``predicted_tip`` (shape (3,) [m]),
         ``predicted_offset_m`` [m], ``prediction_eta`` and ``prediction_cases``
-        (:func:`~ctrplan.pipeline.outputs.files.write_plan_outputs`).
+        (:func:`~ctrplan.planning.outputs.folder.write_plan_outputs`).
     """
     t = table
     return [{"motion": str(t.motion[k]), "q": t.q[k], "tip": t.tip[k], "bound_position_m": float(t.bound_position_m[k]),
@@ -49,15 +49,15 @@ def path_rows(table: WaypointTable) -> list[dict]:
 
 def log_summary(summary: dict) -> None:
     """Log the run's summary as ``ctrplan plan`` prints it: one record, one ``label: value unit``
-    line per key (:func:`~ctrplan.pipeline.outputs.files.format_summary`), at the progress level (INFO, DEBUG in a
+    line per key (:func:`~ctrplan.planning.outputs.folder.format_summary`), at the progress level (INFO, DEBUG in a
     study).
 
     Parameters
     ----------
     summary : dict
-        :func:`~ctrplan.pipeline.outputs.summary.plan_summary`.
+        :func:`~ctrplan.planning.outputs.summary.plan_summary`.
     """
-    from .files import format_summary
+    from .folder import format_summary
 
     logger.log(progress_level(), format_summary(summary))
 
@@ -66,8 +66,8 @@ def write_plan_report(run, out_dir: str | os.PathLike | None = None, *, summary:
     """Write path.csv, trajectory.csv, the figures, the interactive view ``plan.html`` and
     summary.json (last) of a run.
 
-    Every file is written atomically (:func:`~ctrplan.pipeline.outputs.files.write_plan_outputs`); the figures
-    plot bounds in mm. ``plan.html`` (:func:`~ctrplan.pipeline.outputs.view.write_plan_view`) shows the bound-aware
+    Every file is written atomically (:func:`~ctrplan.planning.outputs.folder.write_plan_outputs`); the figures
+    plot bounds in mm. ``plan.html`` (:func:`~ctrplan.planning.outputs.view.write_plan_view`) shows the bound-aware
     plan at every ordered waypoint (standard, predicted and friction-solution shapes), the
     obstacles and the goal tips (task-space targets; the standard-model tip at a joint goal's
     waypoint), with no further model solves.
@@ -75,11 +75,11 @@ def write_plan_report(run, out_dir: str | os.PathLike | None = None, *, summary:
     Parameters
     ----------
     run : PlanRun
-        Every stage's result (:func:`~ctrplan.pipeline.run.run_stages`).
+        Every stage's result (:func:`~ctrplan.planning.run.run_stages`).
     out_dir : str or path-like, optional
         Output folder (created if missing); default ``run.setup.out_dir``.
     summary : dict, optional, keyword-only
-        :func:`~ctrplan.pipeline.outputs.summary.plan_summary` of the run, if already made.
+        :func:`~ctrplan.planning.outputs.summary.plan_summary` of the run, if already made.
 
     Returns
     -------
@@ -92,7 +92,7 @@ def write_plan_report(run, out_dir: str | os.PathLike | None = None, *, summary:
         No output folder: neither ``out_dir`` nor ``run.setup.out_dir``.
     """
     from .figures import BoundProfile, plot_bound_along_path, plot_joint_trajectories, plot_robot_shapes
-    from .files import write_plan_outputs
+    from .folder import write_plan_outputs
     from .view import PLAN_VIEW_FILE, WaypointFrames, write_plan_view
 
     out = Path(out_dir) if out_dir is not None else run.setup.out_dir

@@ -35,9 +35,9 @@ from ..boundmap import (BoundField, ExactSamples, cell_nodes, evaluate_nodes, ma
                         with_nodes)
 from ..io.atomic import atomic_savez
 from .bound_map import GIVEN, BoundMapStage
-from .goals import AimedGoals
+from .aiming import AimedGoals
 from .path_bounds import bounds_along_path
-from .routes import Plans, RoutePlan, plan_routes
+from .plans import Plans, RoutePlan, plan_routes
 from .setup import PlanSetup
 
 __all__ = ["RefinementRound", "MapRefinement", "Refinement", "ExactBound", "start_refinement", "refine_plans",
@@ -172,8 +172,8 @@ class Refinement:
 
     def add(self, route: RoutePlan) -> int:
         """The exact bounds of a plan's waypoints, and of the nodes of the cells its path crosses
-        (the samples of its :class:`~ctrplan.pipeline.path_bounds.PathBounds`, at most
-        :data:`~ctrplan.pipeline.path_bounds.PATH_SAMPLE_SPACING` apart, and the waypoints),
+        (the samples of its :class:`~ctrplan.planning.path_bounds.PathBounds`, at most
+        :data:`~ctrplan.planning.path_bounds.PATH_SAMPLE_SPACING` apart, and the waypoints),
         into the map. Returns the number of waypoints not seen before."""
         new = ExactSamples.from_results(self.base, route.ordered.q, route.bounds.exact.results)
         before = self.samples.n
@@ -268,7 +268,7 @@ def refine_plans(setup: PlanSetup, state: Refinement, aimed: AimedGoals, plans: 
     aimed : AimedGoals
         The joint goals planned to.
     plans : Plans
-        The plans with ``state.field`` (:func:`~ctrplan.pipeline.routes.plan_routes`).
+        The plans with ``state.field`` (:func:`~ctrplan.planning.plans.plan_routes`).
     rounds : int
         Most re-plans (>= 0).
     tolerance : float

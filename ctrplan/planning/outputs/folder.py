@@ -229,7 +229,7 @@ def write_plan_outputs(out_dir, ordered_path_rows: Sequence[Mapping[str, Any]],
         Default ``trajectory.joint_names``; required without a trajectory.
     figures : mapping of str to callable, optional
         File name -> function that writes that figure to the path it is given (e.g. a partial
-        of :func:`~ctrplan.pipeline.outputs.figures.plot_joint_trajectories`); called with ``out_dir / name``.
+        of :func:`~ctrplan.planning.outputs.figures.plot_joint_trajectories`); called with ``out_dir / name``.
 
     Returns
     -------

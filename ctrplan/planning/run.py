@@ -14,12 +14,13 @@ from dataclasses import dataclass
 from .._log import deprecated_echo
 from ..trajectory import Trajectory
 from .bound_map import BoundMapStage, prepare_bound_map
-from .drive import drive_trajectory
-from .evaluation import PlanComparison, compare_plans, goal_outcomes
-from .goals import AimedGoals, GoalCheckCounts, ResolvedGoals, aim_goals, check_start, resolve_goals
-from .refine import DEFAULT_PREVIEW_ROUNDS, ExactBound, MapRefinement, refine_plans, start_refinement
+from .waypoints import drive_trajectory
+from .comparison import PlanComparison, compare_plans, goal_outcomes
+from .aiming import AimedGoals, aim_goals
+from .goals import GoalCheckCounts, ResolvedGoals, check_start, resolve_goals
+from .map_refinement import DEFAULT_PREVIEW_ROUNDS, ExactBound, MapRefinement, refine_plans, start_refinement
 from .outputs.writer import log_summary, write_plan_report
-from .routes import Plans, plan_routes
+from .plans import Plans, plan_routes
 from .setup import PlanSetup, load_setup
 from .outputs.summary import plan_summary
 from .waypoints import WaypointTable, waypoint_table
@@ -95,20 +96,20 @@ class PlanRun:
 def run_stages(setup: PlanSetup, bound_map: BoundMapStage, *, iterations: int | None = None,
                compare_blind: bool = True, n_jobs: int = 1, started: float | None = None) -> PlanRun:
     """Stages 3 to 7 of a plan: check the start, resolve and aim the goals, plan bound-aware (and
-    bound-blind; through the roadmap of :class:`~ctrplan.pipeline.interactive.Planner` with
+    bound-blind; through the roadmap of :class:`~ctrplan.planning.interactive.Planner` with
     ``[planner] roadmap``, by default with two goals or more and a complete map), refine the map
     where the plan goes and plan again (``[bound_field]
-    refine_rounds``; by default with a preview map only, :mod:`ctrplan.pipeline.refine`; task
+    refine_rounds``; by default with a preview map only, :mod:`ctrplan.planning.map_refinement`; task
     goals are then resolved with the exact bound), time-parameterize, evaluate. Writes nothing;
     logs the progress lines.
 
     Parameters
     ----------
     setup : PlanSetup
-        Stage 1 (:func:`~ctrplan.pipeline.setup.setup_plan`).
+        Stage 1 (:func:`~ctrplan.planning.setup.setup_plan`).
     bound_map : BoundMapStage
-        Stage 2 (:func:`~ctrplan.pipeline.bound_map.prepare_bound_map` or
-        :func:`~ctrplan.pipeline.bound_map.given_bound_map`).
+        Stage 2 (:func:`~ctrplan.planning.bound_map.prepare_bound_map` or
+        :func:`~ctrplan.planning.bound_map.given_bound_map`).
     iterations : int, optional, keyword-only
         Planner iterations per leg; default ``[planner] iterations``.
     compare_blind : bool, keyword-only
@@ -200,7 +201,7 @@ def run_plan(scenario_path, out_dir=None, n_jobs: int = 1, iterations: int | Non
     DeprecationWarning
         Always.
     """
-    warnings.warn("ctrplan.pipeline.run_plan is deprecated: use ctrplan.plan (a typed PlanResult; out_dir= writes "
+    warnings.warn("ctrplan.planning.run_plan is deprecated: use ctrplan.plan (a typed PlanResult; out_dir= writes "
                   "the files) or ctrplan.plan_scenario", DeprecationWarning, stacklevel=3)
     t0 = time.perf_counter()
     setup = load_setup(scenario_path, out_dir)
