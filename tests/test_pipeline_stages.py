@@ -340,3 +340,35 @@ def test_a_plan_builds_its_checkers_and_joint_space_once_and_each_stage_counts_i
     again = planning.plan_routes(fresh, field, run.aimed, compare_blind=True, n_jobs=1)
     for mode, plan in run.plans.routes.items():
         np.testing.assert_array_equal(again.routes[mode].ordered.q, plan.ordered.q)
+
+
+def test_the_checkers_of_a_refined_map_share_the_collision_tests_and_decide_as_new_ones(tmp_path, monkeypatch):
+    """A second map read by the same plan (a refined one) gets checkers of its own (its validity
+    flags, an empty cache) that reuse the first checkers' collision tests and joint space instead
+    of building them again, and that accept and reject the same states and motions as checkers
+    built afresh for that map (catches a derived checker that keeps the first map's flags or cache,
+    or loses its collision test)."""
+    from ctrplan.planning import route_checks
+
+    setup = planning.load_setup(_write(tmp_path, JOINT_GOAL, SPHERE_AWAY))
+    first, second = _field(setup.robot), _field(setup.robot)
+    valid = np.array(second.valid, copy=True)
+    valid.reshape(-1)[::3] = False                       # the refined map rejects other nodes
+    second = type(second)(second.axes, second.periodic, second.values, valid, key="second",
+                          coordinates=second.coordinates)
+    a = setup.route_checks(first)
+    counts = _count_builds(monkeypatch)
+    b = setup.route_checks(second)
+    assert counts.get("CollisionChecker", 0) == 0 and counts.get("JointStateSpace", 0) == 0
+    assert b.search.collision is a.search.collision and b.final.collision is a.final.collision
+    assert b.search.field is second and b.final.field is second and b.search.joint_space is setup.joint_space
+    fresh = route_checks(setup.robot, list(setup.obstacles), second, setup.check_settings)
+    rng = np.random.default_rng(7)
+    lo, hi = setup.robot.joint_lower, setup.robot.joint_upper
+    q = rng.uniform(np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi), (60, len(lo)))
+    got, want = b.search.check(q), fresh.search.check(q)
+    np.testing.assert_array_equal(got, want)
+    assert 0 < want.sum() < len(want)                     # both kinds of state occur
+    assert not np.array_equal(a.search.check(q), want)    # the first map decides otherwise
+    for q0, q1 in zip(q[:8], q[8:16]):
+        assert b.final.check(q0, q1).valid == fresh.final.check(q0, q1).valid

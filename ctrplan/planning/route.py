@@ -81,6 +81,28 @@ class RouteChecks:
     repair_search: BatchValidityChecker
     final: MotionVerifier
 
+    def for_field(self, field) -> "RouteChecks":
+        """The same checks with ``field``'s validity flags: new search, repair and final checkers
+        (their caches and counters start empty) sharing these ones' collision tests and joint space.
+
+        Parameters
+        ----------
+        field : BoundField or None
+
+        Returns
+        -------
+        RouteChecks
+        """
+        def batch(c):
+            return BatchValidityChecker(c.robot, c.collision, field, c.settings, check_stability=c.check_stability,
+                                        joint_space=c.joint_space, resolution=c.resolution, batch_size=c.batch_size)
+
+        f = self.final
+        final = MotionVerifier(f.robot, (), field, f.settings, joint_space=f.joint_space, resolution=f.resolution,
+                               max_body_step=f.max_body_step, max_refinements=f.max_refinements,
+                               collision=f.collision)
+        return RouteChecks(batch(self.search), batch(self.repair_search), final)
+
     def counters(self, since: dict | None = None) -> dict:
         """Work of the three checkers (states, motions, model and collision seconds).
 

@@ -106,9 +106,10 @@ class PlanSetup:
         """The search, repair and final checkers of this plan with ``field``'s validity flags
         (:func:`ctrplan.planning.route_checks` of the robot, the obstacles and
         ``check_settings``, on :attr:`joint_space`), built once per map and process and shared by
-        every stage that checks states: the start, the goals, the roadmap and both plans. Their
-        counters therefore add up over the stages; a stage reports its own share as a difference
-        (:meth:`ctrplan.planning.RouteChecks.counters`).
+        every stage that checks states: the start, the goals, the roadmap and both plans; the
+        checkers of another map (a refined one) share the collision tests
+        (:meth:`~ctrplan.planning.RouteChecks.for_field`). Their counters add up over the stages;
+        a stage reports its own share as a difference (:meth:`ctrplan.planning.RouteChecks.counters`).
 
         Parameters
         ----------
@@ -125,8 +126,10 @@ class PlanSetup:
         built = self.__dict__.setdefault("_route_checks", {})
         hit = built.get(id(field))
         if hit is None or hit[0] is not field:
-            hit = built[id(field)] = (field, route_checks(self.robot, list(self.obstacles), field, self.check_settings,
-                                                          joint_space=self.joint_space))
+            other = next(iter(built.values()), None)
+            checks = (route_checks(self.robot, list(self.obstacles), field, self.check_settings,
+                                   joint_space=self.joint_space) if other is None else other[1].for_field(field))
+            hit = built[id(field)] = (field, checks)
         return hit[1]
 
     def __getstate__(self):

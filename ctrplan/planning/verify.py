@@ -136,6 +136,10 @@ class MotionVerifier:
         Extra inflation of every body [m], on top of half the body step.
     max_refinements : int, keyword-only
         Bisections of an interval before a still-jumping body is rejected.
+    collision : CollisionChecker, keyword-only, optional
+        The collision test of ``obstacles`` already built with these bodies' padding
+        (``padding + max_body_step / 2``) and ``segment_length``, e.g. another verifier's
+        ``collision``; default: built here.
 
     Attributes
     ----------
@@ -148,7 +152,7 @@ class MotionVerifier:
     def __init__(self, robot, obstacles=(), field=None, settings=None, *, joint_space: JointStateSpace | None = None,
                  resolution: float = DEFAULT_VERIFY_RESOLUTION, max_body_step: float = DEFAULT_MAX_BODY_STEP,
                  segment_length: float | None = None, padding: float = 0.0,
-                 max_refinements: int = DEFAULT_MAX_REFINEMENTS):
+                 max_refinements: int = DEFAULT_MAX_REFINEMENTS, collision=None):
         from ..mechanics import ModelSettings
         from .collision import DEFAULT_SEGMENT_LENGTH, CollisionChecker
 
@@ -162,9 +166,9 @@ class MotionVerifier:
         self.max_body_step = float(max_body_step)
         self.max_refinements = int(max_refinements)
         obstacles = list(obstacles)
-        self.collision = CollisionChecker(
+        self.collision = collision if collision is not None or not obstacles else CollisionChecker(
             obstacles, segment_length=DEFAULT_SEGMENT_LENGTH if segment_length is None else segment_length,
-            padding=float(padding) + 0.5 * self.max_body_step) if obstacles else None
+            padding=float(padding) + 0.5 * self.max_body_step)
         self.n_motions = 0
         self.n_states = 0
         self.seconds = 0.0
