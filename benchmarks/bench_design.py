@@ -1,44 +1,62 @@
-"""Benchmark: does a designed experiment settle what a short recording left open?
+"""Benchmark: does a designed follow-up settle what a short pilot recording left open, where a random
+follow-up or more of the same recording does not?
 
-Each case hides one effect (the truth) in data of a robot, with a second effect that a short
-recording confuses with it (the alternative):
+**The rule, fixed before any case is drawn.** Candidate case k (k = 0, 1, ...) is seeded by
+``FIRST_SEED + k``; its robot and pair of confusable effects are ``COMBOS[k % 7]``: three robots
+(the Table I tube pair, the Table II robot with six joints, whose outer tube rotates, the Table VII
+three-tube robot) and three pairs (off-plane precurvature against a rotation of the tracker frame,
+``registration``; drive backlash against torsional friction; a tracker lag, ``time_offset``,
+against gradually developing friction), every pair on every robot except off-plane precurvature
+against a registration where the outer tube does not rotate: there no motion of the drive tells a
+tilted bending plane of the fixed outer tube from a tracker frame turned about the base axis, and
+the workflow calls them not separable on any recording. The first effect of the pair is hidden in
+the data (the truth), each of its parameters log-uniform in :data:`SHARE_RANGE` of the effect
+registry's typical range. Its
+pilot is a 20-s recording (200 samples at 10 Hz) of rotations of the inner tubes at the home
+insertion, the outer tube held (the reference synthesizer's seeded motion with its translation
+steps and the outer tube's steps removed), on which ``ctrplan
+discrepancy`` fits both effects (``--effects truth,alternative``). A case is **kept** when the pilot
+leaves it open: it does not name the truth alone (its verdict is ambiguous, it names an effect
+other than the truth, or it names nothing). Candidates are
+drawn until :data:`OPEN_CASES` are kept (at most :data:`MAX_DRAWS`).
 
-- off-plane precurvature against a rotation of the tracker frame (``registration``);
-- drive backlash against torsional friction;
-- a tracker lag (``time_offset``) against gradually developing friction.
+**The follow-ups.** For each kept case, from the pilot's ``results.json``, ``ctrplan.design`` plans a
+follow-up of half the pilot's duration (:data:`FOLLOW_UP_S`) that separates the two fitted
+hypotheses; the truth is synthesized along three follow-ups of that duration: the designed motion,
+a random one (random primitives within the same drive limits and budget, the design's own
+comparison) and the pilot's first half repeated (new noise). ``ctrplan discrepancy`` runs on the
+pilot and each follow-up together (``--data`` once per recording). A run names the truth when its
+verdict names the truth alone. Beside each verdict stands the comparison's strength: the ratio of
+the alternative's out-of-fold error to the truth's, its interval and p-value.
 
-Per case: a 20-s pilot recording (200 samples at 10 Hz) of tube rotations at the home insertion
-(the reference synthesizer's seeded motion with its translation steps removed) is synthesized with
-the truth. Such a recording leaves each pair open: what the registry's ``separated_by`` names for
-them (translations after rotations, tips near and far from the base, rests and passes at several
-speeds) is missing or scarce in it. ``ctrplan discrepancy`` fits both candidates
-(``--effects truth,alternative``); from its ``results.json`` ``ctrplan.design`` plans a follow-up
-motion of :data:`BUDGET_S` (three times the pilot) that separates the two fitted hypotheses. The
-truth is then synthesized along three follow-ups of that budget: the designed motion, a random one
-(random primitives within the same limits, drawn by the design's own comparison) and three
-repetitions of the pilot (new noise each), and ``ctrplan discrepancy`` runs on the pilot and each
-follow-up together (``--data`` once per recording). A run names the truth when its verdict names
-the truth alone.
+**Targets** (:func:`summarize`): the truth named alone after the designed follow-up in at least
+:data:`TARGET_RIGHT` of the kept cases, and in at least :data:`TARGET_MARGIN` more of them than
+after either alternative.
 
 The data are made by the reference synthesizer of ``tests/ctrplan_reference`` (independent of the code
 that fits), along the given motions: its ``reference_motion`` is replaced by the designed, random
 or recorded motion (each segment a minimum-jerk move with the duration ruckig gave it). The truth
 robots are built by ``bench_discrepancy_sweep._truth_robot`` (no ``ctrplan.discrepancy`` or
-``ctrplan.effects``).
+``ctrplan.effects``); the sizes are drawn from the effect registry's typical ranges as the sweep
+draws them.
 
 Usage::
 
-    python benchmarks/bench_design.py [--cases 10] [--jobs 2] [--out out/bench-design]
+    python benchmarks/bench_design.py [--open-cases 10] [--jobs 2] [--out out/bench-design]
                                       [--results benchmarks/results/design.json]
 
-Cases are stored one per line in ``<out>/cases.jsonl``; a rerun skips the cases there.
+Every candidate is one line of ``<out>/draws.jsonl`` (its pilot's verdict; kept or not) and every
+kept case one line of ``<out>/cases.jsonl``; a rerun goes on from them, and each ``ctrplan
+discrepancy`` run is reused from its ``results.json``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
+import math
 import os
 import sys
 import time
@@ -49,28 +67,57 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))  # the frozen reference ctrplan_reference (tests/, not installed)
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
-#: The cases: robot, truth, alternative, hidden values (SI), seed. Two robots (the Table I tube pair
-#: and the Table VII three-tube robot), three confusable pairs.
-CASES = (
-    ("pair", "offplane", "registration", {"offplane": {"precurvature_x_1": 1.0, "precurvature_x_2": 1.0}}, 101),
-    ("pair", "backlash", "friction", {"backlash": {"backlash_2": np.deg2rad(3.0)}}, 102),
-    ("pair", "time_offset", "gradual_friction", {"time_offset": {"time_offset": 0.15}}, 103),
-    ("three-tube", "offplane", "registration", {"offplane": {"precurvature_x_3": 1.5}}, 104),
-    ("pair", "offplane", "registration", {"offplane": {"precurvature_x_1": 0.6, "precurvature_x_2": 0.6}}, 105),
-    ("pair", "backlash", "friction", {"backlash": {"backlash_2": np.deg2rad(2.0)}}, 106),
-    ("pair", "time_offset", "gradual_friction", {"time_offset": {"time_offset": 0.10}}, 107),
-    ("three-tube", "backlash", "friction", {"backlash": {"backlash_2": np.deg2rad(2.0),
-                                                         "backlash_3": np.deg2rad(2.0)}}, 108),
-    ("pair", "offplane", "registration", {"offplane": {"precurvature_x_1": -0.8, "precurvature_x_2": 0.8}}, 109),
-    ("three-tube", "time_offset", "gradual_friction", {"time_offset": {"time_offset": 0.12}}, 110),
-)
+#: Robot files of the candidates, in the order of the cycle.
+ROBOT_FILES = {"pair": ROOT / "model" / "ha2019-table1-tube-pair.toml",
+               "six-joint": ROOT / "model" / "ha2019-table2-six-joint.toml",
+               "three-tube": ROOT / "model" / "ha2019-table7-calibrated.toml"}
+ROBOTS = ("pair", "six-joint", "three-tube")
+#: Confusable pairs (truth, alternative).
+PAIRS = (("offplane", "registration"), ("backlash", "friction"), ("time_offset", "gradual_friction"))
+#: Candidate k's robot and pair: COMBOS[k % len(COMBOS)].
+COMBOS = (("six-joint", PAIRS[0]), ("pair", PAIRS[1]), ("three-tube", PAIRS[2]), ("six-joint", PAIRS[1]),
+          ("pair", PAIRS[2]), ("three-tube", PAIRS[1]), ("six-joint", PAIRS[2]))
+#: Size of each hidden parameter: log-uniform in this share of its typical range (of the half-width
+#: for a range symmetric about zero, with a random sign).
+SHARE_RANGE = (0.2, 1.5)
+FIRST_SEED = 3000
+OPEN_CASES = 10
+MAX_DRAWS = 60
 SAMPLES = 200
 RATE_HZ = 10.0
-#: Budget of the follow-up experiment [s]: three times the pilot recording.
-BUDGET_S = 3 * SAMPLES / RATE_HZ
-REPEATS = 3
+#: Duration of every follow-up [s]: half the pilot's.
+FOLLOW_UP_S = 0.5 * SAMPLES / RATE_HZ
 NOISE_M = 0.5e-3
+#: Targets over the kept cases: right after the designed follow-up in at least this many ...
+TARGET_RIGHT = 8
+#: ... and in at least this many more than after the random follow-up or the repetition.
+TARGET_MARGIN = 3
+FOLLOW_UPS = ("designed", "random", "repeated")
+
+
+def draw(k: int) -> dict:
+    """Candidate ``k`` by the rule of the module docstring: ``{"draw", "seed", "robot", "truth",
+    "alternative", "hidden" (SI), "shares"}``."""
+    from bench_discrepancy_sweep import _draw_size
+
+    from ctrplan.effects import REGISTRY
+    from ctrplan.io.robot_file import load_robot
+
+    seed = FIRST_SEED + k
+    rng = np.random.default_rng(seed)
+    robot_key, (truth, alternative) = COMBOS[k % len(COMBOS)]
+    robot = load_robot(ROBOT_FILES[robot_key])
+    specs = {p.name: p for p in REGISTRY[truth].parameters(robot)}
+    if truth == "backlash":
+        rotating = sorted({j.tube for j in robot.joints if j.kind == "rotation"})
+        specs = {f"backlash_{i + 1}": specs[f"backlash_{i + 1}"] for i in rotating if f"backlash_{i + 1}" in specs}
+    lo, hi = SHARE_RANGE
+    shares = {n: float(math.exp(rng.uniform(math.log(lo), math.log(hi)))) for n in specs}
+    hidden = {truth: {n: _draw_size(spec, shares[n], rng) for n, spec in specs.items()}}
+    return {"draw": k, "seed": seed, "robot": robot_key, "truth": truth, "alternative": alternative,
+            "hidden": hidden, "shares": shares}
 
 
 def _synthesize(truth_robot, hidden: dict, seed: int, motion=None):
@@ -93,14 +140,13 @@ def _synthesize(truth_robot, hidden: dict, seed: int, motion=None):
 
 def _pilot_motion(truth_robot, seed: int):
     """The reference synthesizer's seeded motion of SAMPLES samples with every translation step
-    removed: rotations of the tubes at the home insertion."""
-    import dataclasses
-
+    and every step of the outer tube (tube 1) removed: rotations of the inner tubes at the home
+    insertion, the outer tube held."""
     import ctrplan_reference.synth_reference as sr
 
     m = sr.reference_motion(truth_robot, samples=SAMPLES, rate_hz=RATE_HZ, seed=seed)
-    steps = np.where(m.rotation[None, :], m.steps, 0.0)
-    return dataclasses.replace(m, steps=steps)
+    inner = np.array([j.kind == "rotation" and j.tube > 0 for j in truth_robot.joints])
+    return dataclasses.replace(m, steps=np.where(inner[None, :], m.steps, 0.0))
 
 
 def _reference_motion(robot, traj, sample_times):
@@ -147,98 +193,141 @@ def _named_right(res: dict, truth: str) -> bool:
     return res.get("verdict") == "named" and list(res.get("named_effects") or []) == [truth]
 
 
-def run_case(index: int, out: Path, jobs: int) -> dict:
-    """Case ``index`` of :data:`CASES`, its line of ``cases.jsonl``."""
-    from bench_discrepancy_sweep import _truth_robot
+def _verdict(res: dict, truth: str, alternative: str) -> dict:
+    """What a run says: its verdict, the named effects, the rival of an ambiguous verdict, whether it
+    names the truth alone, and the comparison of the truth against the alternative."""
+    return {"verdict": res["verdict"], "named_effects": list(res.get("named_effects") or []),
+            "ambiguous_with": res.get("ambiguous_with"), "right": _named_right(res, truth),
+            "comparison": _comparison(res, truth, alternative)}
 
-    from ctrplan.design import (DesignSearch, ExperimentLimits, SensorNoise, design_experiment, result_hypotheses,
-                                sample, trajectory)
-    from ctrplan.discrepancy import load_measured_data
+
+def _is_open(pilot: dict, truth: str) -> bool:
+    """The pilot leaves the case open: it does not name the truth alone (an ambiguous verdict, an
+    effect named that is not the truth, or nothing named)."""
+    return not pilot["right"]
+
+
+def _truth_and_base(cand: dict):
+    import bench_discrepancy_sweep as sweep
+
+    sweep.ROBOTS.update(ROBOT_FILES)      # the six-joint robot beside the sweep's
+    return sweep._truth_robot({"robot": cand["robot"], "tube_errors": {}, "hidden": cand["hidden"]})
+
+
+def _effects(truth: str, alternative: str) -> tuple:
+    # gradual friction is fitted on top of friction (Effect.after): its run needs both
+    return (truth, alternative) + (("friction",) if "gradual_friction" in (truth, alternative) else ())
+
+
+def run_pilot(cand: dict, out: Path, jobs: int) -> dict:
+    """Candidate ``cand``'s pilot: its data, the discrepancy run on it, whether the case is kept;
+    ``cand`` with ``pilot`` (duration of motion [s], samples, verdict) and ``kept``."""
     from ctrplan.io.robot_file import robot_to_toml
 
-    robot_key, truth_e, alt_e, hidden, seed = CASES[index]
-    folder = out / f"case-{index}"
-    folder.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    base, truth_robot = _truth_robot({"robot": robot_key, "tube_errors": {}, "hidden": hidden})
+    folder = out / f"draw-{cand['draw']}"
+    folder.mkdir(parents=True, exist_ok=True)
+    base, truth_robot = _truth_and_base(cand)
     model = folder / "base.toml"
     model.write_text(robot_to_toml(base, header="design benchmark base file: candidate effects off"))
-    recorded = folder / "recorded.csv"
-    frame, rec_truth = _synthesize(truth_robot, hidden, seed, _pilot_motion(truth_robot, seed))
-    frame.to_csv(recorded, index=False)
-    # gradual friction is fitted on top of friction (Effect.after): its run needs both
-    effects = (truth_e, alt_e) + (("friction",) if "gradual_friction" in (truth_e, alt_e) else ())
-    first = _discrepancy(model, [recorded], folder / "recorded", effects, jobs, seed)
-    hyps = result_hypotheses(first, [truth_e, alt_e])
-    data = load_measured_data(recorded, base)
-    noise = first["noise"]["noise"]
-    t1 = time.perf_counter()
-    design = design_experiment(base, data, hyps,
-                               noise=SensorNoise.from_estimate(noise),
-                               limits=ExperimentLimits(duration=BUDGET_S), search=DesignSearch(n_random=1, seed=seed))
-    design_s = time.perf_counter() - t1
-    runs, files = {}, {}
-    motions = {"designed": design.primitives, "random": design.random_primitives[0]}
-    drive = None
-    for key, prims in motions.items():
-        from ctrplan.design import drive_from_data
+    pilot = folder / "pilot.csv"
+    motion = _pilot_motion(truth_robot, cand["seed"])
+    if not pilot.exists():
+        frame, _ = _synthesize(truth_robot, cand["hidden"], cand["seed"], motion)
+        frame.to_csv(pilot, index=False)
+    res = _discrepancy(model, [pilot], folder / "pilot", _effects(cand["truth"], cand["alternative"]), jobs,
+                       cand["seed"])
+    verdict = _verdict(res, cand["truth"], cand["alternative"])
+    return {**cand, "pilot": {"duration_s": float(motion.times[-1] - motion.times[0]), "samples": SAMPLES, **verdict},
+            "kept": _is_open(verdict, cand["truth"]), "pilot_seconds": time.perf_counter() - t0}
 
-        drive = drive or drive_from_data(base, data)
+
+def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
+    """A kept case's three follow-ups of :data:`FOLLOW_UP_S` and the discrepancy run on the pilot
+    with each; its line of ``cases.jsonl``."""
+    from ctrplan.design import (DesignSearch, ExperimentLimits, SensorNoise, design_experiment, drive_from_data,
+                                result_hypotheses, sample, trajectory)
+    from ctrplan.discrepancy import load_measured_data
+
+    t0 = time.perf_counter()
+    truth_e, alt_e, seed = cand["truth"], cand["alternative"], cand["seed"]
+    folder = out / f"draw-{cand['draw']}"
+    base, truth_robot = _truth_and_base(cand)
+    model, pilot = folder / "base.toml", folder / "pilot.csv"
+    effects = _effects(truth_e, alt_e)
+    first = _discrepancy(model, [pilot], folder / "pilot", effects, jobs, seed)
+    hyps = result_hypotheses(first, [truth_e, alt_e])
+    data = load_measured_data(pilot, base)
+    t1 = time.perf_counter()
+    design = design_experiment(base, data, hyps, noise=SensorNoise.from_estimate(first["noise"]["noise"]),
+                               limits=ExperimentLimits(duration=FOLLOW_UP_S),
+                               search=DesignSearch(n_random=1, seed=seed))
+    design_s = time.perf_counter() - t1
+    drive = drive_from_data(base, data)
+    runs, files = {}, {}
+    for key, prims in (("designed", design.primitives), ("random", design.random_primitives[0])):
+        path = folder / f"{key}.csv"
         traj = trajectory(base, list(prims), drive)
         times, _ = sample(traj, 1.0 / RATE_HZ)
-        new, _ = _synthesize(truth_robot, hidden, seed + 1000, _reference_motion(base, traj, times))
-        path = folder / f"{key}.csv"
+        if not path.exists():
+            new, _ = _synthesize(truth_robot, cand["hidden"], seed + 1000, _reference_motion(base, traj, times))
+            new.to_csv(path, index=False)
+        files[key] = path
+        runs[key] = {"duration_s": float(traj.duration), "samples": int(len(times))}
+    # the pilot's first half again, with new noise
+    whole = _pilot_motion(truth_robot, seed)
+    half = dataclasses.replace(whole, times=whole.times[: SAMPLES // 2],
+                               end_time=float(whole.times[SAMPLES // 2 - 1]))
+    path = folder / "repeated.csv"
+    if not path.exists():
+        new, _ = _synthesize(truth_robot, cand["hidden"], seed + 2000, half)
         new.to_csv(path, index=False)
-        files[key] = [path]
-        runs[key] = {"duration_s": float(traj.duration), "samples": int(len(new))}
-    rep = rec_truth["motion"]
-    files["repeated"] = []
-    for r in range(REPEATS):
-        new, _ = _synthesize(truth_robot, hidden, seed + 2000 + r, rep)
-        files["repeated"].append(folder / f"repeated-{r + 1}.csv")
-        new.to_csv(files["repeated"][-1], index=False)
-    runs["repeated"] = {"duration_s": REPEATS * float(rep.end_time), "samples": REPEATS * int(len(new))}
-    for key in runs:
-        res = _discrepancy(model, [recorded, *files[key]], folder / key, effects, jobs, seed)
-        runs[key].update(verdict=res["verdict"], named=res["named_effect"], named_effects=res["named_effects"],
-                         ambiguous_with=res["ambiguous_with"], right=_named_right(res, truth_e),
-                         comparison=_comparison(res, truth_e, alt_e))
-    sep = design.separation
-    return {"index": index, "robot": robot_key, "truth": truth_e, "alternative": alt_e, "hidden": hidden,
-            "seed": seed, "budget_s": BUDGET_S,
-            "recorded": {"verdict": first["verdict"], "named": first["named_effect"],
-                                       "named_effects": first["named_effects"],
-                                       "ambiguous_with": first["ambiguous_with"],
-                                       "right": _named_right(first, truth_e),
-                                       "comparison": _comparison(first, truth_e, alt_e)},
-            "predicted_separation": {k: (min(v.values()) if isinstance(v, dict) else [min(x.values()) for x in v])
-                                     for k, v in sep.items()},
-            "runs": runs, "primitives": [p.describe(base.joint_names) for p in design.primitives],
-            "design_seconds": design_s, "seconds": time.perf_counter() - t0}
+    files["repeated"] = path
+    runs["repeated"] = {"duration_s": float(half.times[-1] - half.times[0]), "samples": SAMPLES // 2}
+    for key in FOLLOW_UPS:
+        res = _discrepancy(model, [pilot, files[key]], folder / key, effects, jobs, seed)
+        runs[key].update(_verdict(res, truth_e, alt_e))
+    pred = {k: (min(v.values()) if isinstance(v, dict) else [min(x.values()) for x in v])
+            for k, v in design.separation.items()}
+    return {**cand, "follow_up_s": FOLLOW_UP_S, "predicted_separation": pred, "predicted_power": design.power,
+            "noise_lower_bound": design.noise_lower_bound, "runs": runs,
+            "primitives": [p.describe(base.joint_names) for p in design.primitives],
+            "design_seconds": design_s, "seconds": cand["pilot_seconds"] + time.perf_counter() - t0}
 
 
-def summarize(cases: list) -> dict:
+def summarize(draws: list, cases: list) -> dict:
+    """Counts of the draws and the kept cases, the right verdicts after each follow-up with their 90 %
+    intervals, the median comparison ratio per follow-up, and the targets."""
     from bench_discrepancy_sweep import clopper_pearson
 
     n = len(cases)
-    out = {"n_cases": n}
-    for key in ("designed", "random", "repeated"):
-        k = sum(1 for c in cases if c["runs"][key]["right"])
-        out[f"{key}_right"] = k
-        out[f"{key}_right_interval_90"] = clopper_pearson(k, n, 0.90) if n else None
-    out["recorded_right"] = sum(1 for c in cases if c["recorded"]["right"])
-    out["recorded_ambiguous"] = sum(1 for c in cases if c["recorded"]["verdict"] == "ambiguous")
-    # the cases the pilot recording left open (not named right by it alone)
-    open_cases = [c for c in cases if not c["recorded"]["right"]]
-    out["n_open"] = len(open_cases)
-    for key in ("designed", "random", "repeated"):
-        k = sum(1 for c in open_cases if c["runs"][key]["right"])
-        out[f"open_{key}_right"] = k
-        out[f"open_{key}_right_interval_90"] = clopper_pearson(k, len(open_cases), 0.90) if open_cases else None
-    for key in ("recorded", "designed", "random", "repeated"):
-        ratios = [(c["recorded"] if key == "recorded" else c["runs"][key]).get("comparison") for c in cases]
-        ratios = [r["ratio"] for r in ratios if r and r.get("ratio") is not None]
+    out = {"n_draws": len(draws), "n_kept": n,
+           "kept_by_robot": {r: sum(c["robot"] == r for c in cases) for r in ROBOTS},
+           "kept_by_pair": {f"{t} vs {a}": sum(c["truth"] == t for c in cases) for t, a in PAIRS},
+           "pilot_verdicts_kept": {v: sum(c["pilot"]["verdict"] == v for c in cases)
+                                   for v in sorted({c["pilot"]["verdict"] for c in cases})}}
+    right = {}
+    for key in FOLLOW_UPS:
+        right[key] = sum(1 for c in cases if c["runs"][key]["right"])
+        out[f"{key}_right"] = right[key]
+        out[f"{key}_right_interval_90"] = clopper_pearson(right[key], n, 0.90) if n else None
+        ratios = [c["runs"][key]["comparison"]["ratio"] for c in cases
+                  if c["runs"][key].get("comparison") and c["runs"][key]["comparison"].get("ratio") is not None]
         out[f"{key}_ratio_median"] = float(np.median(ratios)) if ratios else None
+    out["targets"] = {
+        f"designed right in >= {TARGET_RIGHT} of the kept cases": bool(n and right["designed"] >= TARGET_RIGHT),
+        f"designed right in >= {TARGET_MARGIN} more than random and repeated":
+            bool(n and right["designed"] >= max(right["random"], right["repeated"]) + TARGET_MARGIN)}
+    return out
+
+
+def _read(path: Path, key: str) -> dict:
+    out = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                c = json.loads(line)
+                out[c[key]] = c
     return out
 
 
@@ -246,7 +335,8 @@ def main(argv=None):
     from _records import run_record
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", type=int, default=len(CASES))
+    ap.add_argument("--open-cases", type=int, default=OPEN_CASES, help="kept cases to reach")
+    ap.add_argument("--max-draws", type=int, default=MAX_DRAWS)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "out" / "bench-design"))
     ap.add_argument("--results", default=str(ROOT / "benchmarks" / "results" / "design.json"))
@@ -254,26 +344,32 @@ def main(argv=None):
     logging.getLogger("ctrplan").setLevel(logging.WARNING)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    store = out / "cases.jsonl"
-    done = {}
-    if store.exists():
-        for line in store.read_text().splitlines():
-            c = json.loads(line)
-            done[c["index"]] = c
+    draws_file, cases_file = out / "draws.jsonl", out / "cases.jsonl"
+    draws, cases = _read(draws_file, "draw"), _read(cases_file, "draw")
     load0 = os.getloadavg()
-    for i in range(min(args.cases, len(CASES))):
-        if i in done:
-            continue
-        c = run_case(i, out, args.jobs)
-        done[i] = c
-        with store.open("a") as f:
-            f.write(json.dumps(c) + "\n")
-        print(f"case {i}: {c['robot']} {c['truth']} vs {c['alternative']}: recorded {c['recorded']['verdict']} "
-              f"{c['recorded']['named_effects']}; designed {c['runs']['designed']['right']}, random "
-              f"{c['runs']['random']['right']}, repeated {c['runs']['repeated']['right']} ({c['seconds']:.0f} s)",
-              flush=True)
-    cases = [done[i] for i in sorted(done)]
-    results = {"summary": summarize(cases), "cases": cases,
+    k = 0
+    while sum(d["kept"] for d in draws.values()) < args.open_cases and k < args.max_draws:
+        if k not in draws:
+            d = run_pilot(draw(k), out, args.jobs)
+            draws[k] = d
+            with draws_file.open("a") as f:
+                f.write(json.dumps(d) + "\n")
+            print(f"draw {k}: {d['robot']} {d['truth']} vs {d['alternative']}: pilot {d['pilot']['verdict']} "
+                  f"{d['pilot']['named_effects']} -> {'kept' if d['kept'] else 'not kept'} "
+                  f"({d['pilot_seconds']:.0f} s)", flush=True)
+        k += 1
+    for k in sorted(draws):
+        d = draws[k]
+        if d["kept"] and k not in cases:
+            c = run_follow_ups(d, out, args.jobs)
+            cases[k] = c
+            with cases_file.open("a") as f:
+                f.write(json.dumps(c, default=float) + "\n")
+            print(f"case {k}: " + ", ".join(f"{key} {c['runs'][key]['verdict']} {c['runs'][key]['named_effects']}"
+                                            for key in FOLLOW_UPS) + f" ({c['seconds']:.0f} s)", flush=True)
+    kept = [cases[k] for k in sorted(cases)]
+    results = {"summary": summarize(list(draws.values()), kept), "draws": [draws[k] for k in sorted(draws)],
+               "cases": kept,
                "run": run_record("python benchmarks/bench_design.py " + " ".join(argv or sys.argv[1:]), load0,
                                  os.getloadavg())}
     Path(args.results).write_text(json.dumps(results, indent=1, default=float) + "\n")
