@@ -290,6 +290,7 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
     pred = {k: (min(v.values()) if isinstance(v, dict) else [min(x.values()) for x in v])
             for k, v in design.separation.items()}
     return {**cand, "follow_up_s": FOLLOW_UP_S, "predicted_separation": pred, "predicted_power": design.power,
+            "predicted_preference": design.preference,
             "noise_lower_bound": design.noise_lower_bound, "runs": runs,
             "primitives": [p.describe(base.joint_names) for p in design.primitives],
             "design_seconds": design_s, "seconds": cand["pilot_seconds"] + time.perf_counter() - t0}

@@ -399,6 +399,9 @@ def test_cli_writes_a_trajectory_ready_to_run(tmp_path):
     # the run's 3-D noise rms is weighed as the noise per coordinate it stands for
     assert summary["noise_position_m"] == pytest.approx(SIGMA, rel=1e-12)
     assert set(summary["separation"]) == {"recorded", "designed", "repeated", "random", "designed_alone"}
+    pref = summary["preference"]
+    assert set(pref) == {"recorded", "designed"} and set(pref["designed"]) == set(summary["separation"]["designed"])
+    assert all(v is None or 0.0 <= v <= 1.0 for k in pref for v in pref[k].values())   # None: too few samples
     samples = pd.read_csv(out / "samples.csv")
     assert {"time", "alpha_2", "tip_x__offplane", "tip_z__registration"} <= set(samples.columns)
     traj = read_joint_trajectory(out / "trajectory_bag")
@@ -484,3 +487,57 @@ def test_settings_given_reach_the_checks_and_the_predictions():
     assert coarse.separation["designed"].keys() == default.separation["designed"].keys()
     for pair, t in coarse.separation["designed"].items():
         assert t == pytest.approx(default.separation["designed"][pair], rel=0.2)
+
+
+def _sens(tip, jac):
+    from ctrplan.design._criteria import Sensitivities
+
+    tip = np.asarray(tip, float)
+    return Sensitivities(tip=tip, jacobian=np.asarray(jac, float), ok=np.ones(len(tip), bool), evaluations=0)
+
+
+def test_what_the_rival_cannot_reproduce_is_the_residual_after_its_refit():
+    """The rival's linearized refit takes out every part of the difference its Jacobian spans and
+    nothing else (catches a difference kept whole, or one refitted per recording instead of over
+    all of them)."""
+    from ctrplan.design._verdict import unexplained
+
+    rng = np.random.default_rng(3)
+    K = 60
+    J = rng.standard_normal((K, 3, 2)) * 1e-3
+    delta = np.array([0.4, -1.2])
+    spanned = (J @ delta).reshape(K, 3)
+    other = rng.standard_normal((K, 3)) * 1e-4
+    flat = J.reshape(-1, 2)
+    other = other - (flat @ np.linalg.lstsq(flat, other.reshape(-1), rcond=None)[0]).reshape(K, 3)
+    truth = [_sens(spanned + other, np.zeros((K, 3, 1)))]
+    rival = [_sens(np.zeros((K, 3)), J)]
+    np.testing.assert_allclose(unexplained(truth, rival), other, atol=1e-15)
+    # two recordings refitted together: the same as one recording of both
+    half = K // 2
+    parts_t = [_sens((spanned + other)[:half], np.zeros((half, 3, 1))), _sens((spanned + other)[half:], np.zeros((K - half, 3, 1)))]
+    parts_r = [_sens(np.zeros((half, 3)), J[:half]), _sens(np.zeros((K - half, 3)), J[half:])]
+    np.testing.assert_allclose(unexplained(parts_t, parts_r), other, atol=1e-15)
+
+
+def test_the_workflows_preference_grows_with_what_the_rival_misses_and_falls_with_correlated_noise():
+    """Simulated with the workflow's own fold test: a signature the noise hides is almost never
+    preferred (at most the level, with a margin for 400 draws), one of several noise widths almost
+    always, the probability grows with the signature's size, and noise correlated in time (the
+    same variance) lowers it. Catches the two errors passed the wrong way round (the true
+    hypothesis then never wins), a one-sided test read the other way, and a noise model whose
+    correlation is ignored."""
+    from ctrplan.design._verdict import preference_probability
+
+    K, s = 400, 0.3e-3
+    wave = np.zeros((K, 3))
+    wave[:, 0] = np.sin(np.linspace(0.0, 25.0, K))
+    white = SensorNoise(s)
+    probs = [preference_probability(a * s * wave, white, level=0.01, draws=300) for a in (0.05, 0.3, 1.0, 3.0)]
+    assert probs[0] <= 0.03 and probs[-1] >= 0.99
+    assert all(p <= q + 0.02 for p, q in zip(probs, probs[1:])) and probs[2] - probs[0] > 0.3
+    slow = SensorNoise(s, lag1=0.95, correlated_share=0.8)
+    assert preference_probability(1.0 * s * wave, slow, level=0.01, draws=300) < probs[2] - 0.2
+    assert np.isnan(preference_probability(wave[:30], white, level=0.01))        # fewer than two blocks
+    with pytest.raises(ValueError, match="level"):
+        preference_probability(wave, white, level=1.5)

@@ -25,6 +25,7 @@ from ..drive import DriveLimits
 from ._criteria import (Information, ds_criterion, information, long_run_factor, noise_weight, prior_precision,
                         sensitivities)
 from ._hypotheses import DesignInputError
+from ._verdict import preference_probability, unexplained
 from ._motions import feasible, joint_configurations, motion_data, primitives, sample, trajectory
 
 logger = logging.getLogger(__name__)
@@ -88,6 +89,13 @@ class DesignResult:
     power : dict
         Separate mode: the same keys, the smallest predicted power over the pairs of a 1-degree-of-
         freedom likelihood-ratio test at level :data:`POWER_LEVEL`.
+    preference : dict
+        Separate mode: ``"recorded"`` and ``"designed"`` (recorded and designed together), each
+        ``{"a>b": probability}`` per ordered pair [-]: that the discrepancy workflow's fold
+        comparison finds a's error significantly lower than b's at :data:`POWER_LEVEL` when a is
+        true (:func:`~ctrplan.design._verdict.preference_probability`; the recording as the
+        samples the design evaluated, at most :data:`MAX_RECORDED_SAMPLES` of it). Empty in
+        parameters mode.
     noise_position : float
         Sensor noise per coordinate used [m].
     noise_inflation : float
@@ -128,6 +136,7 @@ class DesignResult:
     evaluations: int = 0
     random_primitives: tuple = ()
     confounded: dict = field(default_factory=dict)
+    preference: dict = field(default_factory=dict)
 
     @property
     def duration(self) -> float:
@@ -458,7 +467,8 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
     t0 = time.perf_counter()
     K = data.n_samples
     rows = np.unique(np.linspace(0, K - 1, min(K, MAX_RECORDED_SAMPLES)).round().astype(int))
-    recorded = ev.info(data.take(rows))
+    recorded_sens = ev.sens(data.take(rows))
+    recorded = information(recorded_sens, weight)
     recorded = recorded.scaled(K / max(recorded.n_samples, 1)) if recorded.n_samples else recorded
     seconds["recorded"] = time.perf_counter() - t0
 
@@ -588,6 +598,13 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
                 cov = i.covariance(0, prior)
                 ses.append({n: float(np.sqrt(cov[j, j])) for n, j in zip(interest, interest_idx)})
             stderr[key] = ses if key == "random" else ses[0]
+    preference = {}
+    if mode == DesignMode.SEPARATE:
+        pairs = [(a, b) for a in range(len(hyps)) for b in range(len(hyps)) if a != b]
+        for key, parts in (("recorded", [recorded_sens]), ("designed", [recorded_sens, sens])):
+            preference[key] = {_pair_name(hyps, a, b): preference_probability(
+                unexplained([p[a] for p in parts], [p[b] for p in parts]), noise, level=POWER_LEVEL, seed=seed)
+                for a, b in pairs}
     confounded = {}
     if mode == DesignMode.PARAMETERS:
         cov = designed.covariance(0, prior)
@@ -602,4 +619,4 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
                         trajectory=traj, time=ts, joints=qs, tips=tips, separation=separation, stderr=stderr,
                         power=power, noise_position=float(noise_position), noise_inflation=float(inflation),
                         budget=budget, noise_lower_bound=bool(noise.lower_bound), seconds=seconds, evaluations=ev.evaluations,
-                        random_primitives=tuple(random_walks), confounded=confounded)
+                        random_primitives=tuple(random_walks), confounded=confounded, preference=preference)

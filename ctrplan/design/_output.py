@@ -44,7 +44,8 @@ def design_dict(result, robot, *, command: str = "") -> dict:
         "mode": result.mode, "criterion": criterion, "hypotheses": hyps, "interest": list(result.interest),
         "duration_s": result.duration, "budget_s": result.budget, "n_samples": int(len(result.time)),
         "primitives": [p.describe(robot.joint_names) for p in result.primitives],
-        "separation": result.separation, "power": result.power, "stderr": result.stderr,
+        "separation": result.separation, "power": result.power, "preference": result.preference,
+        "stderr": result.stderr,
         "confounded": result.confounded,
         "noise_position_m": result.noise_position, "noise_inflation": result.noise_inflation,
         "noise_lower_bound": result.noise_lower_bound,
@@ -105,6 +106,11 @@ def _plot(result, path: Path) -> None:
     save_figure(fig, path)
 
 
+def _share(p) -> str:
+    """A probability for the report; ``n/a`` where it could not be made (too few samples)."""
+    return "n/a" if p is None or not np.isfinite(p) else f"{p:.2f}"
+
+
 def _markdown(d: dict) -> str:
     lines = [f"# Designed experiment ({d['mode']})", "", f"Criterion: {d['criterion']}.", "",
              f"Duration {d['duration_s']:.1f} s of a budget of {d['budget_s']:.1f} s, {d['n_samples']} sensor samples; "
@@ -129,6 +135,13 @@ def _markdown(d: dict) -> str:
         lines += ["", f"Smallest predicted power over the pairs (1-df likelihood-ratio test at 0.01): recorded "
                       f"{d['power']['recorded']:.3f}, designed {d['power']['designed']:.3f}, repeated "
                       f"{d['power']['repeated']:.3f}, random median {np.median(rnd) if rnd else float('nan'):.3f}."]
+        pref = d.get("preference") or {}
+        if pref:
+            lines += ["", "Probability that the discrepancy workflow's fold comparison prefers the true hypothesis "
+                          "(the first of the pair) at 0.01 (simulated on the linearized hypotheses; the comparison "
+                          "of the two, not the whole verdict): "
+                      + "; ".join(f"{pair}: recorded {_share(pref['recorded'][pair])}, with the design "
+                                  f"{_share(pref['designed'][pair])}" for pair in pref.get("designed", {})) + "."]
     else:
         lines += ["| parameter | recorded | designed alone | recorded + designed | recorded + repeated | "
                   "recorded + random (median) |", "| --- | --- | --- | --- | --- | --- |"]

@@ -1,0 +1,136 @@
+"""The probability that the discrepancy workflow prefers the true hypothesis over a rival after a
+motion, judged as the workflow judges it: its fold comparison, simulated on the linearized
+hypotheses.
+
+With hypothesis A true and B refitted to A's predicted tips over the whole motion (the recording
+and the follow-up together), B keeps the part of A's signature its parameters cannot reproduce,
+``u_k = r_k - J_B,k delta`` at sample k (``r = y_A - y_B``, ``delta`` B's least-squares step; the
+same linearization as the separation ``T = sum |u_k|^2 / s^2`` of :mod:`._criteria`). A simulated
+recording draws the sensor noise ``n_k`` of :class:`~ctrplan.design.SensorNoise` (a white part and
+an AR(1) part, per tip coordinate); A's error at sample k is ``|n_k|`` and B's ``|n_k + u_k|``. The
+samples are cut in time order into blocks of :data:`BLOCK_SAMPLES`, dealt to :data:`N_FOLDS` folds
+(the workflow's development split, :mod:`ctrplan.discrepancy.measured.split`), and the workflow's
+own test decides: :func:`ctrplan.discrepancy.verdict.statistics.cv_comparison`, the corrected
+resampled t test of the folds' log error ratios, one-sided at ``level``. The probability is the share
+of :data:`DRAWS` simulated recordings in which A's error is significantly lower.
+
+What it leaves out: the test split held back before any fit (the folds here use every sample), the
+refits per fold (B is refitted once, on all samples: its out-of-fold error is a little larger in
+the workflow), the tangent angles the workflow's error also holds where the tracker measures them,
+and the other gates of naming (each candidate against the baseline, Holm's adjustment over the
+candidates, the separability of the leading two). It is a probability of the comparison between
+the two, not of the whole verdict.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["unexplained", "preference_probability", "BLOCK_SAMPLES", "N_FOLDS", "DRAWS"]
+
+#: Samples per time block of the simulated split [-] (the workflow's development blocks are at
+#: least 20 samples long).
+BLOCK_SAMPLES = 20
+#: Folds the blocks are dealt to [-] (the workflow's cross-validation folds).
+N_FOLDS = 10
+#: Simulated recordings per probability [-].
+DRAWS = 400
+
+
+def unexplained(sens_true, sens_rival) -> np.ndarray:
+    """What the rival hypothesis cannot reproduce of the true one's tips after its best linearized
+    refit over all the samples given.
+
+    Parameters
+    ----------
+    sens_true, sens_rival : sequence of Sensitivities
+        The two hypotheses' predicted tips and Jacobians (:func:`~ctrplan.design._criteria.sensitivities`),
+        one per recording, the same samples for both (the recording, then the follow-up).
+
+    Returns
+    -------
+    ndarray, shape (K, 3)
+        ``u_k`` [m] at every sample where both converged, in the order given.
+    """
+    ra, jb = [], []
+    for sa, sb in zip(sens_true, sens_rival):
+        ok = sa.ok & sb.ok
+        ra.append(sa.tip[ok] - sb.tip[ok])
+        jb.append(sb.jacobian[ok])
+    r = np.concatenate(ra) if ra else np.zeros((0, 3))
+    J = np.concatenate(jb) if jb else np.zeros((0, 3, 0))
+    if not r.size:
+        return r.reshape(0, 3)
+    flat_j = J.reshape(-1, J.shape[2])
+    if flat_j.shape[1]:
+        delta = np.linalg.lstsq(flat_j, r.reshape(-1), rcond=None)[0]
+        r = r - (flat_j @ delta).reshape(r.shape)
+    return r
+
+
+def preference_probability(u, noise, *, level: float, draws: int = DRAWS, block: int = BLOCK_SAMPLES,
+                           n_folds: int = N_FOLDS, seed: int = 0) -> float:
+    """Probability that the workflow's fold comparison finds the true hypothesis's error lower than
+    the rival's at ``level`` (module docstring).
+
+    Parameters
+    ----------
+    u : array-like, shape (K, 3)
+        What the rival cannot reproduce at each sample, in time order [m] (:func:`unexplained`).
+    noise : SensorNoise
+        Noise per tip coordinate [m], its lag-one correlation and the share of its variance in the
+        correlated part.
+    level : float
+        One-sided level of the comparison, in (0, 1).
+    draws : int
+        Simulated recordings.
+    block, n_folds : int
+        Samples per time block, and the most folds the blocks are dealt to in turn (fewer where
+        there are fewer blocks).
+    seed : int
+        Seed of the simulated noise.
+
+    Returns
+    -------
+    float
+        In [0, 1]; NaN when the samples make fewer than two blocks.
+
+    Raises
+    ------
+    ValueError
+        ``level`` outside (0, 1), ``u`` not of shape (K, 3), or ``draws``, ``block`` or ``n_folds``
+        below 1.
+    """
+    from ..discrepancy.verdict.statistics import cv_comparison
+
+    u = np.asarray(u, dtype=float)
+    if u.ndim != 2 or u.shape[1] != 3:
+        raise ValueError(f"u needs shape (K, 3) [m], got {u.shape}")
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level {level!r} must be in (0, 1)")
+    if min(draws, block, n_folds) < 1:
+        raise ValueError(f"draws, block and n_folds must be >= 1, got {draws}, {block}, {n_folds}")
+    u = u[np.all(np.isfinite(u), axis=1)]
+    K = u.shape[0]
+    n_folds = min(n_folds, K // block)      # a short recording has fewer folds, as in the workflow
+    if n_folds < 2:
+        return float("nan")
+    fold = (np.arange(K) // block) % n_folds
+    rng = np.random.default_rng(seed)
+    s = float(noise.position)
+    phi = float(noise.lag1) if noise.lag1 else 0.0
+    share = float(noise.correlated_share) if phi else 0.0
+    white = rng.standard_normal((K, draws, 3)) * (s * math.sqrt(1.0 - share))
+    corr = np.empty((K, draws, 3))
+    innov = rng.standard_normal((K, draws, 3)) * (s * math.sqrt(share))
+    corr[0] = innov[0]
+    step = math.sqrt(max(1.0 - phi * phi, 0.0))
+    for k in range(1, K):                    # stationary AR(1) of variance s^2 share
+        corr[k] = phi * corr[k - 1] + step * innov[k]
+    n = white + corr
+    err_true = np.linalg.norm(n, axis=2)
+    err_rival = np.linalg.norm(n + u[:, None, :], axis=2)
+    hits = sum(cv_comparison(err_rival[:, d], err_true[:, d], fold).p_value < level for d in range(draws))
+    return hits / draws
