@@ -24,12 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from .._log import deprecated_echo, progress_level
 from ..choices import JointKind
 from ..errors import CtrplanError, UnreachableGoalError
 from ..io.scenario import JointGoal, TaskGoal
-from .space import wrap_angle
-from .._log import deprecated_echo, progress_level
 from .setup import PlanSetup
+from .space import wrap_angle
 
 __all__ = ["JointGoal", "TaskGoal", "GoalSolution", "IKSearch", "resolve_goal", "DEFAULT_IK_STARTS_PER_JOINT",
            "DEFAULT_IK_MAX_STARTS", "ResolvedGoals", "GoalCheckCounts", "check_start", "resolve_goals"]

@@ -129,8 +129,8 @@ class Planner:
     def __init__(self, setup, field, *, n_nodes: int | None = None, neighbours: int | None = None,
                  seed: int | None = None, cache_dir: str | os.PathLike | None = None, store: bool = True,
                  n_jobs: int = 1):
-        from .roadmap import motion_terms
         from .plans import effective_bound_weight
+        from .roadmap import motion_terms
 
         sc = setup.scenario
         self.setup, self.field = setup, field
@@ -241,10 +241,10 @@ class Planner:
             The drive trajectory violates a drive limit.
         """
         from ..mechanics import evaluate_bound
+        from .approach import end_with
         from .objective import BoundCostObjective
         from .ordering import bounds_given_last_motion
         from .planners import SearchSettings
-        from .approach import end_with
         from .route import plan_route
         from .waypoints import drive_trajectory
 

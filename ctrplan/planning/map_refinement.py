@@ -34,8 +34,8 @@ from .._log import progress_level
 from ..boundmap import (BoundField, ExactSamples, cell_nodes, evaluate_nodes, map_paths, refined_field, subdivided,
                         with_nodes)
 from ..io.atomic import atomic_savez
-from .bound_map import GIVEN, BoundMapStage
 from .aiming import AimedGoals
+from .bound_map import GIVEN, BoundMapStage
 from .path_bounds import bounds_along_path
 from .plans import Plans, RoutePlan, plan_routes
 from .setup import PlanSetup

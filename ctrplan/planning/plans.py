@@ -1,6 +1,6 @@
 """Stage 5 of a plan: every leg planned bound-aware (and bound-blind), ordered, checked, with the
-exact bound (:mod:`~ctrplan.planning.path_bounds`) and the prediction
-(:mod:`~ctrplan.planning.path_bounds`) at its waypoints (:class:`RoutePlan`, :class:`Plans`)."""
+exact bound and the prediction at its waypoints (:mod:`~ctrplan.planning.path_bounds`;
+:class:`RoutePlan`, :class:`Plans`)."""
 
 from __future__ import annotations
 
@@ -14,13 +14,12 @@ import numpy as np
 
 from .._log import deprecated_echo, progress_level
 from ..errors import CtrplanError
-from .objective import BoundCostObjective
-from .planners import SearchSettings
-from .approach import end_with, goal_indices
-from .route import plan_route
 from .aiming import AimedGoals
-from .path_bounds import PathBounds, bounds_along_path
-from .path_bounds import WaypointPredictions, predict_waypoints
+from .approach import end_with, goal_indices
+from .objective import BoundCostObjective
+from .path_bounds import PathBounds, WaypointPredictions, bounds_along_path, predict_waypoints
+from .planners import SearchSettings
+from .route import plan_route
 from .setup import PlanSetup
 
 __all__ = ["RoutePlan", "Plans", "plan_routes", "effective_bound_weight"]

@@ -13,17 +13,16 @@ from dataclasses import dataclass
 
 from .._log import deprecated_echo
 from ..trajectory import Trajectory
-from .bound_map import BoundMapStage, prepare_bound_map
-from .waypoints import drive_trajectory
-from .comparison import PlanComparison, compare_plans, goal_outcomes
 from .aiming import AimedGoals, aim_goals
+from .bound_map import BoundMapStage, prepare_bound_map
+from .comparison import PlanComparison, compare_plans, goal_outcomes
 from .goals import GoalCheckCounts, ResolvedGoals, check_start, resolve_goals
 from .map_refinement import DEFAULT_PREVIEW_ROUNDS, ExactBound, MapRefinement, refine_plans, start_refinement
+from .outputs.summary import plan_summary
 from .outputs.writer import log_summary, write_plan_report
 from .plans import Plans, plan_routes
 from .setup import PlanSetup, load_setup
-from .outputs.summary import plan_summary
-from .waypoints import WaypointTable, waypoint_table
+from .waypoints import WaypointTable, drive_trajectory, waypoint_table
 
 __all__ = ["PlanRun", "run_stages", "run_plan"]
 

@@ -18,8 +18,8 @@ import numpy as np
 from ...calibration import CalibratedBound
 from ...effects import REGISTRY, robot_effects
 from ...io.scenario import TaskGoal
-from ..comparison import PlanComparison, RouteMetrics
 from ..aiming import AimDecision, _eta_text, aim_reason
+from ..comparison import PlanComparison, RouteMetrics
 from ..plans import RoutePlan, effective_bound_weight
 
 __all__ = ["COMPARED", "plan_summary", "PlanRecord", "read_plan_record"]

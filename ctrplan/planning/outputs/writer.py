@@ -12,8 +12,8 @@ import numpy as np
 
 from ..._log import progress_level
 from ..aiming import _eta_text
-from .summary import plan_summary
 from ..waypoints import WaypointTable
+from .summary import plan_summary
 
 __all__ = ["path_rows", "write_plan_report", "log_summary"]
 
