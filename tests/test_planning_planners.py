@@ -35,7 +35,7 @@ def test_reproducible_and_bound_aware(setup):
     assert r1.cost <= r1.cost_before_simplification + 1e-12
     np.testing.assert_array_equal(r1.waypoints[0], START)
     blind = plan_leg(robot, START, GOAL, valid, BoundCostObjective.factory(None, bound_weight=0.0),
-                 iterations=300, seed=3)
+                     iterations=300, seed=3)
     # the bump (10.5 mm) sits between start and goal; the bound-aware path goes round it
     assert dense_max_bound(robot, field, blind.waypoints) > 8e-3
     assert dense_max_bound(robot, field, r1.waypoints) < 3e-3
@@ -51,7 +51,7 @@ def test_every_registered_planner_runs(setup, name, in_child_process):
     robot, field = setup
     valid = ValidityChecker(robot, check_stability=False)
     r = plan_leg(robot, START, GOAL, valid, BoundCostObjective.factory(field, bound_weight=1000.0),
-             planner=name, iterations=60, seed=5)
+                 planner=name, iterations=60, seed=5)
     assert r.solved and r.planner == name and r.n_vertices >= 2
 
 
@@ -65,10 +65,10 @@ def test_validity_with_model_and_unreachable(setup):
     wall = Wall(robot, solve_standard=fake_solve_standard)
     with pytest.raises(UnreachableGoalError, match="no exact path"):
         plan_leg(robot, [0, 0, -0.04], [0, 0, -0.09], wall, BoundCostObjective.factory(None, bound_weight=0.0),
-             iterations=80, seed=1)
+                 iterations=80, seed=1)
     with pytest.raises(UnreachableGoalError, match="goal configuration"):
         plan_leg(robot, [0, 0, -0.04], [0, 0, -0.055], wall, BoundCostObjective.factory(None, bound_weight=0.0),
-             iterations=10, seed=1)
+                 iterations=10, seed=1)
     with pytest.raises(ValueError, match="unknown planner"):
         plan_leg(robot, START, GOAL, wall, BoundCostObjective.factory(None, bound_weight=0.0), planner="PRM")
     assert wall([0, 0, -0.04]) and not wall([0, 0, -0.2])  # joint limit

@@ -314,7 +314,7 @@ class SearchSettings:
 
 
 def plan_leg(robot, start_q, goal_q, validity_fn, objective, settings: SearchSettings | None = None, *,
-         joint_space: JointStateSpace | None = None, quiet: bool = True, **keywords) -> SearchResult:
+             joint_space: JointStateSpace | None = None, quiet: bool = True, **keywords) -> SearchResult:
     """Plan a valid, low-cost joint-space path from ``start_q`` to ``goal_q``.
 
     Parameters

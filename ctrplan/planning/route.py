@@ -285,7 +285,7 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, settings
             res = _roadmap_leg(roadmap, q_prev, q_goal, checks.search, js, search.seed + gi)
         if res is None:
             res = plan_leg(robot, q_prev, q_goal, checks.search, objective, search.replace(seed=search.seed + gi),
-                       joint_space=js)
+                           joint_space=js)
         legs.append(res)
         wp = np.array(res.waypoints)
         offset = waypoints[-1] - wp[0]   # continue from where the previous leg ended (unwrapped angles)
@@ -295,9 +295,9 @@ def plan_route(robot, start_q, goals_q, checks: RouteChecks, objective, settings
 
     def repair(a, b):
         res = plan_leg(robot, a, b, checks.repair_search, objective,
-                   search.replace(iterations=repair_iterations, seed=search.seed + 1000 + len(repairs),
-                                  time_limit=None),
-                   joint_space=js)
+                       search.replace(iterations=repair_iterations, seed=search.seed + 1000 + len(repairs),
+                                      time_limit=None),
+                       joint_space=js)
         repairs.append(res)
         return res.waypoints
 
