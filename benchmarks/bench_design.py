@@ -22,16 +22,18 @@ drawn until :data:`OPEN_CASES` are kept (at most :data:`MAX_DRAWS`).
 
 **The follow-ups.** For each kept case, from the pilot's ``results.json``, ``ctrplan.design`` plans a
 follow-up of half the pilot's duration (:data:`FOLLOW_UP_S`) that separates the two fitted
-hypotheses; the truth is synthesized along three follow-ups of that duration: the designed motion,
+hypotheses, twice: with today's greedy search (``designed``) and with the two-step primitives
+offered too (``compound``, ``DesignSearch(compound=True)``: a move, then a reversal about the new
+value). The truth is synthesized along four follow-ups of that duration: the two designed motions,
 a random one (random primitives within the same drive limits and budget, the design's own
 comparison) and the pilot's first half repeated (new noise). ``ctrplan discrepancy`` runs on the
 pilot and each follow-up together (``--data`` once per recording). A run names the truth when its
 verdict names the truth alone. Beside each verdict stands the comparison's strength: the ratio of
 the alternative's out-of-fold error to the truth's, its interval and p-value.
 
-**Targets** (:func:`summarize`): the truth named alone after the designed follow-up in at least
-:data:`TARGET_RIGHT` of the kept cases, and in at least :data:`TARGET_MARGIN` more of them than
-after either alternative.
+**Targets** (:func:`summarize`, for each designed follow-up): the truth named alone after it in at
+least :data:`TARGET_RIGHT` of the kept cases, and in at least :data:`TARGET_MARGIN` more of them than
+after the random follow-up or the repetition.
 
 The data are made by the reference synthesizer of ``tests/ctrplan_reference`` (independent of the code
 that fits), along the given motions: its ``reference_motion`` is replaced by the designed, random
@@ -94,7 +96,9 @@ NOISE_M = 0.5e-3
 TARGET_RIGHT = 8
 #: ... and in at least this many more than after the random follow-up or the repetition.
 TARGET_MARGIN = 3
-FOLLOW_UPS = ("designed", "random", "repeated")
+FOLLOW_UPS = ("designed", "compound", "random", "repeated")
+#: The follow-ups the targets are judged for (each against the random one and the repetition).
+DESIGNED = ("designed", "compound")
 
 
 def draw(k: int) -> dict:
@@ -243,7 +247,7 @@ def run_pilot(cand: dict, out: Path, jobs: int) -> dict:
 
 
 def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
-    """A kept case's three follow-ups of :data:`FOLLOW_UP_S` and the discrepancy run on the pilot
+    """A kept case's four follow-ups of :data:`FOLLOW_UP_S` and the discrepancy run on the pilot
     with each; its line of ``cases.jsonl``."""
     from ctrplan.design import (DesignSearch, ExperimentLimits, SensorNoise, design_experiment, drive_from_data,
                                 result_hypotheses, sample, trajectory)
@@ -259,13 +263,18 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
     hyps = result_hypotheses(first, [truth_e, alt_e])
     data = load_measured_data(pilot, base)
     t1 = time.perf_counter()
-    design = design_experiment(base, data, hyps, noise=SensorNoise.from_estimate(first["noise"]["noise"]),
-                               limits=ExperimentLimits(duration=FOLLOW_UP_S),
+    noise = SensorNoise.from_estimate(first["noise"]["noise"])
+    design = design_experiment(base, data, hyps, noise=noise, limits=ExperimentLimits(duration=FOLLOW_UP_S),
                                search=DesignSearch(n_random=1, seed=seed))
     design_s = time.perf_counter() - t1
+    t1 = time.perf_counter()
+    compound = design_experiment(base, data, hyps, noise=noise, limits=ExperimentLimits(duration=FOLLOW_UP_S),
+                                 search=DesignSearch(n_random=0, seed=seed, compound=True))
+    compound_s = time.perf_counter() - t1
     drive = drive_from_data(base, data)
     runs, files = {}, {}
-    for key, prims in (("designed", design.primitives), ("random", design.random_primitives[0])):
+    for key, prims in (("designed", design.primitives), ("compound", compound.primitives),
+                       ("random", design.random_primitives[0])):
         path = folder / f"{key}.csv"
         traj = trajectory(base, list(prims), drive)
         times, _ = sample(traj, 1.0 / RATE_HZ)
@@ -287,10 +296,14 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
     for key in FOLLOW_UPS:
         res = _discrepancy(model, [pilot, files[key]], folder / key, effects, jobs, seed)
         runs[key].update(_verdict(res, truth_e, alt_e))
-    pred = {k: (min(v.values()) if isinstance(v, dict) else [min(x.values()) for x in v])
-            for k, v in design.separation.items()}
-    return {**cand, "follow_up_s": FOLLOW_UP_S, "predicted_separation": pred, "predicted_power": design.power,
-            "predicted_preference": design.preference,
+    def smallest(sep):
+        return {k: (min(v.values()) if isinstance(v, dict) else [min(x.values()) for x in v]) for k, v in sep.items()}
+
+    return {**cand, "follow_up_s": FOLLOW_UP_S, "predicted_separation": smallest(design.separation),
+            "predicted_power": design.power, "predicted_preference": design.preference,
+            "compound": {"predicted_separation": smallest(compound.separation), "predicted_power": compound.power,
+                         "predicted_preference": compound.preference, "seconds": compound_s,
+                         "primitives": [p.describe(base.joint_names) for p in compound.primitives]},
             "noise_lower_bound": design.noise_lower_bound, "runs": runs,
             "primitives": [p.describe(base.joint_names) for p in design.primitives],
             "design_seconds": design_s, "seconds": cand["pilot_seconds"] + time.perf_counter() - t0}
@@ -315,10 +328,11 @@ def summarize(draws: list, cases: list) -> dict:
         ratios = [c["runs"][key]["comparison"]["ratio"] for c in cases
                   if c["runs"][key].get("comparison") and c["runs"][key]["comparison"].get("ratio") is not None]
         out[f"{key}_ratio_median"] = float(np.median(ratios)) if ratios else None
-    out["targets"] = {
-        f"designed right in >= {TARGET_RIGHT} of the kept cases": bool(n and right["designed"] >= TARGET_RIGHT),
-        f"designed right in >= {TARGET_MARGIN} more than random and repeated":
-            bool(n and right["designed"] >= max(right["random"], right["repeated"]) + TARGET_MARGIN)}
+    out["targets"] = {}
+    for key in DESIGNED:
+        out["targets"][f"{key} right in >= {TARGET_RIGHT} of the kept cases"] = bool(n and right[key] >= TARGET_RIGHT)
+        out["targets"][f"{key} right in >= {TARGET_MARGIN} more than random and repeated"] = \
+            bool(n and right[key] >= max(right["random"], right["repeated"]) + TARGET_MARGIN)
     return out
 
 

@@ -541,3 +541,41 @@ def test_the_workflows_preference_grows_with_what_the_rival_misses_and_falls_wit
     assert np.isnan(preference_probability(wave[:30], white, level=0.01))        # fewer than two blocks
     with pytest.raises(ValueError, match="level"):
         preference_probability(wave, white, level=1.5)
+
+
+def test_a_shifted_reversal_moves_then_reverses_about_the_new_value_within_the_limits():
+    """``compound=True`` adds, per joint and direction, a move by the larger step followed by the
+    smaller step out and back about the new value, cycled as a reversal is, each segment one joint
+    and every waypoint within the limits; without it the primitives are today's (catches a
+    compound that reverses about the old value, leaves the limits, or changes the default search)."""
+    from ctrplan.design._motions import ROTATION_STEPS, TRANSLATION_STEPS, primitives, trajectory
+    from ctrplan.drive import DriveLimits
+
+    robot = load_robot(ROOT / "model" / "ha2019-table7-calibrated.toml")
+    q = robot.joint_vector(robot.home_alpha, robot.home_beta)
+    plain = primitives(robot, q)
+    assert not any(p.kind == "shifted reversal" for p in plain)
+    more = primitives(robot, q, compound=True)
+    assert [p.kind for p in more if p.kind != "shifted reversal"] == [p.kind for p in plain]
+    shifted = [p for p in more if p.kind == "shifted reversal"]
+    assert shifted
+    lower, upper = np.asarray(robot.joint_lower, float), np.asarray(robot.joint_upper, float)
+    for p in shifted:
+        W = p.waypoints
+        moved = np.flatnonzero(np.any(np.abs(np.diff(W, axis=0)) > 0, axis=0))
+        assert moved.size == 1
+        i = moved[0]
+        j = robot.joints[i]
+        large, small = ((ROTATION_STEPS[-1], ROTATION_STEPS[0]) if j.kind == "rotation" else
+                        (TRANSLATION_STEPS[-1] * (j.upper - j.lower), TRANSLATION_STEPS[0] * (j.upper - j.lower)))
+        assert abs(W[1, i] - W[0, i]) == pytest.approx(large)
+        assert abs(W[2, i] - W[1, i]) == pytest.approx(small) and W[3, i] == pytest.approx(W[1, i])
+        finite = np.isfinite(lower) & ~np.array([jj.periodic for jj in robot.joints])
+        assert np.all(W[:, finite] >= lower[finite] - 1e-12) and np.all(W[:, finite] <= upper[finite] + 1e-12)
+        assert p.describe(robot.joint_names).startswith("shifted reversal")
+    drive = DriveLimits(250.0, np.array([1.0, 1.0, 0.01]), np.array([4.0, 4.0, 0.04]), np.array([40.0, 40.0, 0.4]),
+                        tuple(robot.joint_names))
+    cycled = [p for p in primitives(robot, q, drive=drive, min_duration=20.0, compound=True)
+              if p.kind == "shifted reversal"]
+    assert all(len(p.motions) >= 5 and (len(p.motions) - 1) % 2 == 0 for p in cycled)   # the move, then cycles
+    assert trajectory(robot, [cycled[0]], drive).duration > 0

@@ -370,11 +370,16 @@ class DesignSearch:
     n_jobs : int
         Processes the candidates of each search step are evaluated on
         (:class:`ctrplan.parallel.Executor`).
+    compound : bool
+        Also offer the search two-step primitives (``shifted reversal``: a move, then a reversal
+        about the new value, :func:`~ctrplan.design._motions.primitives`), which a search adding
+        one primitive at a time does not reach when the move alone does not pay.
     """
 
     n_random: int = 3
     seed: int = 0
     n_jobs: int = 1
+    compound: bool = False
 
 
 def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: ExperimentLimits = ExperimentLimits(),
@@ -489,7 +494,8 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
             self.beta = np.zeros((0, robot.n_tubes))
 
         def candidates(self):
-            return [p for p in primitives(robot, self.q, rest, drive=drive, min_duration=target)
+            return [p for p in primitives(robot, self.q, rest, drive=drive, min_duration=target,
+                                          compound=search.compound)
                     if feasible(quick, p)]
 
         def piece(self, prim):

@@ -12,7 +12,11 @@ The kinds (the history each effect shows in):
 - ``turn``: every tube rotated together (the same relative configuration at another absolute angle:
   an off-plane precurvature turns with the tubes, a tracker frame does not);
 - ``release``: a rotation followed by a translation (a translation after the last rotation releases
-  friction-induced twist, Section V-B of Ha et al. 2019).
+  friction-induced twist, Section V-B of Ha et al. 2019);
+- ``shifted reversal`` (with ``compound=True``): a move of one joint by its larger step, then a
+  reversal of that joint about the new value: two steps a search that adds one primitive at a time
+  would take only if the move alone paid, where a reversal repeated about one value gives less and
+  less (the same history seen again).
 
 Every primitive ends with a rest (the sensor's noise and any settling are seen there).
 """
@@ -77,8 +81,13 @@ class Primitive:
             if self.kind == "reversal":
                 parts[-1] = (f"{joint_names[i]} {self.waypoints[0, i]:.4g} -> {self.waypoints[1, i]:.4g} -> "
                              f"{self.waypoints[2, i]:.4g} {unit}")
+            elif self.kind == "shifted reversal":
+                parts[-1] = (f"{joint_names[i]} {self.waypoints[0, i]:.4g} -> {self.waypoints[1, i]:.4g}, then "
+                             f"{self.waypoints[1, i]:.4g} -> {self.waypoints[2, i]:.4g} -> "
+                             f"{self.waypoints[3, i]:.4g} {unit}")
         speed = "" if self.speed == 1.0 else f" at {self.speed:g} of the drive limits"
-        cycles = len(self.motions) // 2 if self.kind == "reversal" else 1
+        cycles = (len(self.motions) // 2 if self.kind == "reversal" else
+                  (len(self.motions) - 1) // 2 if self.kind == "shifted reversal" else 1)
         return f"{self.kind} " + ", ".join(parts) + (f", {cycles} cycles" if cycles > 1 else "") + speed
 
 
@@ -89,7 +98,8 @@ def _inside(robot, q) -> bool:
     return True
 
 
-def primitives(robot, q, rest: float = 1.0, *, drive=None, min_duration: float = 0.0) -> list[Primitive]:
+def primitives(robot, q, rest: float = 1.0, *, drive=None, min_duration: float = 0.0,
+               compound: bool = False) -> list[Primitive]:
     """The primitives that start at ``q`` and stay inside the joint limits.
 
     Parameters
@@ -104,6 +114,9 @@ def primitives(robot, q, rest: float = 1.0, *, drive=None, min_duration: float =
         ``min_duration`` (at most :data:`MAX_CYCLES`), with one rest at the end.
     min_duration : float
         [s]
+    compound : bool
+        Also the ``shifted reversal`` of every joint: a move by its larger step either way, then
+        its smaller step out and back either way, cycled as a reversal is.
 
     Returns
     -------
@@ -115,17 +128,19 @@ def primitives(robot, q, rest: float = 1.0, *, drive=None, min_duration: float =
     joints = robot.joints
     kinds = [j.kind for j in joints]
 
-    def add(kind, points, motions, speed=1.0):
-        W = np.vstack([q] + [np.asarray(p, float) for p in points])
+    def add(kind, points, motions, speed=1.0, lead=()):
+        lead = [np.asarray(p, float) for p in lead]
+        W = np.vstack([q] + lead + [np.asarray(p, float) for p in points])
+        head = tuple(motions[:len(lead)])
         if all(_inside(robot, w) for w in W) and np.any(np.abs(np.diff(W, axis=0)) > 0):
             prim = Primitive(kind, W, tuple(motions), speed, rest)
-            if kind == "reversal" and drive is not None and min_duration > 0:
+            if kind in ("reversal", "shifted reversal") and drive is not None and min_duration > 0:
                 # cycles of the same reversal up to min_duration (a replicated support point)
                 one = trajectory(robot, [prim], drive).duration
                 cycles = int(min(MAX_CYCLES, max(1, min_duration // one)))
                 if cycles > 1:
-                    W = np.vstack([q] + [np.asarray(p, float) for p in points] * cycles)
-                    prim = Primitive(kind, W, tuple(motions) * cycles, speed, rest)
+                    W = np.vstack([q] + lead + [np.asarray(p, float) for p in points] * cycles)
+                    prim = Primitive(kind, W, head + tuple(motions[len(lead):]) * cycles, speed, rest)
             out.append(prim)
 
     for i, j in enumerate(joints):
@@ -142,6 +157,15 @@ def primitives(robot, q, rest: float = 1.0, *, drive=None, min_duration: float =
             p = q.copy()
             p[i] += a if _inside(robot, q + a * np.eye(len(q))[i]) else -a
             add("slow", [p], [j.kind], SLOW_FACTOR)
+        if compound:
+            small, large = steps[0], steps[-1]
+            for sign in (1.0, -1.0):
+                shifted = q.copy()
+                shifted[i] += sign * large
+                for back in (1.0, -1.0):
+                    out_p = shifted.copy()
+                    out_p[i] += back * small
+                    add("shifted reversal", [out_p, shifted], [j.kind, j.kind, j.kind], lead=[shifted])
     rot = [i for i, k in enumerate(kinds) if k == ROTATION]
     tubes_rotated = {joints[i].tube for i in rot}
     if rot and tubes_rotated == set(range(robot.n_tubes)):
