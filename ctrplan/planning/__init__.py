@@ -71,6 +71,8 @@ DEBUG, and a goal planned without its compensation at WARNING. Their ``echo`` pa
 deprecated, and so is :func:`run_plan` (use :func:`ctrplan.plan`).
 
 :class:`Planner` (:mod:`~ctrplan.planning.interactive`) plans one goal after another from the
+current configuration on a roadmap built once per robot, map and obstacles (stages 3 to 6 for
+one goal, in a fraction of a second) -> :class:`GoalPlan`.
 """
 
 from ..boundmap import (QUANTITIES, BoundField, BoundFieldKeyError, InterpolationError, field_key,
