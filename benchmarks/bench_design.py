@@ -31,6 +31,11 @@ pilot and each follow-up together (``--data`` once per recording). A run names t
 verdict names the truth alone. Beside each verdict stands the comparison's strength: the ratio of
 the alternative's out-of-fold error to the truth's, its interval and p-value.
 
+**Calibration.** Beside each follow-up's verdict stands the predicted probability that the
+workflow's comparison prefers the truth after it (``ctrplan.design.predicted_preference``; the
+designs' own figure for the designed motions): :func:`calibration` sets it against the verdicts
+over every follow-up run, and ``--figure`` draws it.
+
 **Targets** (:func:`summarize`, for each designed follow-up): the truth named alone after it in at
 least :data:`TARGET_RIGHT` of the kept cases, and in at least :data:`TARGET_MARGIN` more of them than
 after the random follow-up or the repetition.
@@ -46,6 +51,7 @@ Usage::
 
     python benchmarks/bench_design.py [--open-cases 10] [--jobs 2] [--out out/bench-design]
                                       [--results benchmarks/results/design.json]
+                                      [--figure docs/images/design-calibration.png]
 
 Every candidate is one line of ``<out>/draws.jsonl`` (its pilot's verdict; kept or not) and every
 kept case one line of ``<out>/cases.jsonl``; a rerun goes on from them, and each ``ctrplan
@@ -250,7 +256,7 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
     """A kept case's four follow-ups of :data:`FOLLOW_UP_S` and the discrepancy run on the pilot
     with each; its line of ``cases.jsonl``."""
     from ctrplan.design import (DesignSearch, ExperimentLimits, SensorNoise, design_experiment, drive_from_data,
-                                result_hypotheses, sample, trajectory)
+                                predicted_preference, result_hypotheses, sample, trajectory)
     from ctrplan.discrepancy import load_measured_data
 
     t0 = time.perf_counter()
@@ -296,6 +302,14 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
     for key in FOLLOW_UPS:
         res = _discrepancy(model, [pilot, files[key]], folder / key, effects, jobs, seed)
         runs[key].update(_verdict(res, truth_e, alt_e))
+    # the predicted probability that the workflow's comparison prefers the truth after each follow-up:
+    # the designs' own figures, and the same computation on the random and the repeated motion
+    pair = f"{truth_e}>{alt_e}"
+    runs["designed"]["predicted"] = design.preference["designed"][pair]
+    runs["compound"]["predicted"] = compound.preference["designed"][pair]
+    for key in ("random", "repeated"):
+        runs[key]["predicted"] = predicted_preference(base, data, hyps, load_measured_data(files[key], base),
+                                                      noise=noise, seed=seed)[pair]
     def smallest(sep):
         return {k: (min(v.values()) if isinstance(v, dict) else [min(x.values()) for x in v]) for k, v in sep.items()}
 
@@ -305,6 +319,7 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
                          "predicted_preference": compound.preference, "seconds": compound_s,
                          "primitives": [p.describe(base.joint_names) for p in compound.primitives]},
             "noise_lower_bound": design.noise_lower_bound, "runs": runs,
+            "pilot_predicted": design.preference["recorded"][pair],
             "primitives": [p.describe(base.joint_names) for p in design.primitives],
             "design_seconds": design_s, "seconds": cand["pilot_seconds"] + time.perf_counter() - t0}
 
@@ -328,12 +343,90 @@ def summarize(draws: list, cases: list) -> dict:
         ratios = [c["runs"][key]["comparison"]["ratio"] for c in cases
                   if c["runs"][key].get("comparison") and c["runs"][key]["comparison"].get("ratio") is not None]
         out[f"{key}_ratio_median"] = float(np.median(ratios)) if ratios else None
+    out["calibration"] = calibration(cases)
     out["targets"] = {}
     for key in DESIGNED:
         out["targets"][f"{key} right in >= {TARGET_RIGHT} of the kept cases"] = bool(n and right[key] >= TARGET_RIGHT)
         out["targets"][f"{key} right in >= {TARGET_MARGIN} more than random and repeated"] = \
             bool(n and right[key] >= max(right["random"], right["repeated"]) + TARGET_MARGIN)
     return out
+
+
+#: Bins of the predicted probability in the calibration [-].
+CALIBRATION_BINS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)
+#: Level of the comparison a prediction is checked against [-] (the workflow's default).
+LEVEL = 0.01
+
+
+def _calibration_points(cases: list) -> list:
+    """Per follow-up run with a prediction: ``(predicted, named the truth alone, the comparison of
+    the truth against the alternative significant at LEVEL)``."""
+    out = []
+    for c in cases:
+        for key in FOLLOW_UPS:
+            r = c["runs"][key]
+            p = r.get("predicted")
+            if p is None or not math.isfinite(p):
+                continue
+            comp = r.get("comparison") or {}
+            significant = comp.get("p_value") is not None and comp["p_value"] < LEVEL
+            out.append((float(p), bool(r["right"]), bool(significant)))
+    return out
+
+
+def calibration(cases: list) -> dict:
+    """Predicted probability against what the runs showed, over every follow-up run: the Brier score
+    against each outcome, and per bin of :data:`CALIBRATION_BINS` the runs, the mean prediction and
+    the observed shares with their 90 % Clopper-Pearson intervals."""
+    from bench_discrepancy_sweep import clopper_pearson
+
+    pts = _calibration_points(cases)
+    if not pts:
+        return {"n_runs": 0}
+    p, right, sig = (np.array(v, float) for v in zip(*pts))
+    bins = []
+    edges = CALIBRATION_BINS
+    for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        m = (p >= lo) & ((p < hi) if i < len(edges) - 2 else (p <= hi))
+        n = int(m.sum())
+        if not n:
+            continue
+        bins.append({"from": lo, "to": hi, "n_runs": n, "mean_predicted": float(p[m].mean()),
+                     "named_alone": int(right[m].sum()), "named_alone_interval_90": clopper_pearson(int(right[m].sum()), n, 0.90),
+                     "comparison_significant": int(sig[m].sum()),
+                     "comparison_significant_interval_90": clopper_pearson(int(sig[m].sum()), n, 0.90)})
+    return {"n_runs": len(pts), "brier_named_alone": float(np.mean((p - right) ** 2)),
+            "brier_comparison": float(np.mean((p - sig) ** 2)),
+            "brier_named_alone_at_base_rate": float(np.mean((right.mean() - right) ** 2)),
+            "bins": bins}
+
+
+def calibration_figure(cases: list, path: Path) -> None:
+    """Reliability diagram of :func:`calibration`: per bin, the observed share of runs that named the
+    truth alone and of runs whose comparison was significant against the mean prediction, with their
+    90 % intervals; the marker's area grows with the runs in the bin."""
+    from ctrplan.plots import new_figure, save_figure
+
+    cal = calibration(cases)
+    fig = new_figure((5.0, 4.2))
+    ax = fig.add_subplot(111)
+    ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls="--", label="perfect calibration")
+    for key, label, marker, dx in (("named_alone", "truth named alone", "o", -0.008),
+                                   ("comparison_significant", "truth's comparison significant", "s", 0.008)):
+        for b in cal.get("bins", []):
+            x, n = b["mean_predicted"] + dx, b["n_runs"]
+            lo, hi = b[f"{key}_interval_90"]
+            y = b[key] / n
+            ax.errorbar([x], [y], yerr=[[y - lo], [hi - y]], fmt=marker, ms=4 + 2 * math.sqrt(n), capsize=3,
+                        color="C0" if key == "named_alone" else "C1",
+                        label=label if b is cal["bins"][0] else None)
+    ax.set_xlim(-0.03, 1.03)
+    ax.set_ylim(-0.03, 1.03)
+    ax.set_xlabel("predicted probability that the comparison prefers the truth")
+    ax.set_ylabel("observed share of follow-up runs")
+    ax.set_title(f"{cal['n_runs']} follow-up runs of {len(cases)} kept case{'s' if len(cases) != 1 else ''}", fontsize=9)
+    ax.legend(fontsize=8, loc="upper left")
+    save_figure(fig, path)
 
 
 def _read(path: Path, key: str) -> dict:
@@ -355,6 +448,8 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "out" / "bench-design"))
     ap.add_argument("--results", default=str(ROOT / "benchmarks" / "results" / "design.json"))
+    ap.add_argument("--figure", default=str(ROOT / "docs" / "images" / "design-calibration.png"),
+                    help="the calibration plot of the predictions against the follow-ups' verdicts")
     args = ap.parse_args(argv)
     logging.getLogger("ctrplan").setLevel(logging.WARNING)
     out = Path(args.out)
@@ -388,6 +483,8 @@ def main(argv=None):
                "run": run_record("python benchmarks/bench_design.py " + " ".join(argv or sys.argv[1:]), load0,
                                  os.getloadavg())}
     Path(args.results).write_text(json.dumps(results, indent=1, default=float) + "\n")
+    if kept:
+        calibration_figure(kept, Path(args.figure))
     print(json.dumps(results["summary"], indent=1))
 
 

@@ -715,8 +715,10 @@ def _report_failed(result, out_dir, exc: Exception) -> None:
 @click.option("--jobs", type=int, default=None,
               help="Processes the candidate motions are evaluated on (default: all cores).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random motions.")
+@click.option("--compound", is_flag=True,
+              help="Offer the search two-step primitives too: a move, then a reversal about the new value.")
 def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, scenario_path, duration, rest, noise_mm,
-           random_motions, no_bag, jobs, seed):
+           random_motions, no_bag, jobs, seed, compound):
     """Plan the measured trajectory that best settles what a discrepancy run left open.
 
     Two or more hypotheses: the motion that best separates them, each refitted to the others'
@@ -724,51 +726,21 @@ def design(result_dir, out_dir, hypotheses, parameters, robot_path, data_path, s
     The motion is made of primitives the effects respond to, stays inside the joint limits, stable and
     clear of the scenario's obstacles, and is time-parameterized within the drive limits (ruckig).
     """
-    from .design import (DesignInputError, DesignSearch, ExperimentLimits, SensorNoise, design_experiment, read_results,
-                         result_hypotheses, write_design)
-    from .discrepancy import load_measured_data
-    from .io.robot_file import load_robot
+    from .design import DesignInputError, DesignSearch, design_from_result, write_design
 
-    results = read_results(result_dir)
-    where = str(Path(result_dir) / "results.json")
-
-    def locate(given, key):
-        if given is not None:
-            return given
-        value = results.get(key)
-        for base in (Path.cwd(), Path(result_dir).resolve().parent):
-            if value and (base / value).exists():
-                return str(base / value)
-        raise DesignInputError(f"{where}: {key} {value!r} not found; give --{key.split('_')[0]}")
-
-    robot_path = locate(robot_path, "robot_file")
-    data_path = locate(data_path, "data_file")
-    robot = load_robot(robot_path)
-    data = load_measured_data(data_path, robot, frame=results.get("frame"))
-    keys = [k.strip() for k in hypotheses.split(",") if k.strip()] if hypotheses else None
-    hyps = result_hypotheses(results, keys, where=where)
-    noise = ((results.get("noise") or {}).get("noise") or {})
-    if noise_mm is not None:
-        if not (noise_mm > 0 and noise_mm < float("inf")):
-            raise DesignInputError(f"option --noise-position-mm {noise_mm!r}: must be > 0 mm")
-        sensor = SensorNoise.from_estimate({"position_rms_m": noise_mm * 1e-3}, where="option --noise-position-mm")
-    elif noise.get("position_rms_m"):
-        sensor = SensorNoise.from_estimate(noise, where=f"{where}: noise")
-    else:
-        raise DesignInputError(f"{where}: no sensor noise estimate; give --noise-position-mm")
-    drive = obstacles = start = None
-    if scenario_path is not None:
-        from .io.scenario import load_scenario
-
-        sc = load_scenario(scenario_path)
-        drive, obstacles, start = sc.drive, sc.obstacles, sc.start
-    interest = [p.strip() for p in parameters.split(",") if p.strip()] if parameters else None
+    if noise_mm is not None and not (noise_mm > 0 and noise_mm < float("inf")):
+        raise DesignInputError(f"option --noise-position-mm {noise_mm!r}: must be > 0 mm")
     if duration is not None and not duration > 0:
         raise DesignInputError(f"option --duration {duration!r}: must be > 0 s")
-    limits = ExperimentLimits(drive=drive, obstacles=tuple(obstacles or ()), start=start, duration=duration, rest=rest)
-    search = DesignSearch(n_random=random_motions, seed=seed, n_jobs=jobs or os.cpu_count() or 1)
-    res = design_experiment(robot, data, hyps, noise=sensor, limits=limits, interest=interest,
-                            search=search)
+
+    def items(text):
+        return [k.strip() for k in text.split(",") if k.strip()] if text else None
+
+    search = DesignSearch(n_random=random_motions, seed=seed, n_jobs=jobs or os.cpu_count() or 1, compound=compound)
+    res, robot, data = design_from_result(
+        result_dir, hypotheses=items(hypotheses), parameters=items(parameters), robot_file=robot_path,
+        data_file=data_path, scenario_file=scenario_path, duration=duration, rest=rest,
+        noise_position=None if noise_mm is None else noise_mm * 1e-3, search=search)
     command = "ctrplan " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     paths = write_design(res, robot, out_dir, command=command, bag=not no_bag, frame=data.frame)
     logger.info(f"design: {res.duration:.1f} s, {len(res.primitives)} primitives; report: {paths['markdown']}")

@@ -417,6 +417,15 @@ def test_cli_writes_a_trajectory_ready_to_run(tmp_path):
     assert given.exit_code == 0, given.output
     stated = json.loads((tmp_path / "given" / "design.json").read_text())
     assert stated["noise_position_m"] == pytest.approx(2 * SIGMA) and stated["noise_lower_bound"] is False
+    assert summary["search"] == {"random_motions": 1, "seed": 0, "compound": False}
+    compound = CliRunner().invoke(main, ["design", "--result", str(folder), "--out", str(tmp_path / "compound"),
+                                         "--duration", "4", "--random-motions", "0", "--no-bag", "--compound"],
+                                  catch_exceptions=False)
+    assert compound.exit_code == 0, compound.output
+    assert json.loads((tmp_path / "compound" / "design.json").read_text())["search"]["compound"] is True
+    for opt, value in (("--noise-position-mm", "0"), ("--duration", "-1")):
+        r = CliRunner().invoke(main, ["design", "--result", str(folder), "--out", str(out), opt, value])
+        assert r.exit_code != 0 and f"option {opt}" in str(r.exception)
     bad = CliRunner().invoke(main, ["design", "--result", str(folder), "--out", str(out), "--hypotheses", "backlash"])
     assert bad.exit_code != 0 and "no fitted candidate 'backlash'" in str(bad.exception)
 
@@ -579,3 +588,28 @@ def test_a_shifted_reversal_moves_then_reverses_about_the_new_value_within_the_l
               if p.kind == "shifted reversal"]
     assert all(len(p.motions) >= 5 and (len(p.motions) - 1) % 2 == 0 for p in cycled)   # the move, then cycles
     assert trajectory(robot, [cycled[0]], drive).duration > 0
+
+
+def test_the_preference_of_any_follow_up_is_the_designs_own_figure_for_its_motion():
+    """``predicted_preference`` on the designed motion, given as samples, gives the design's own
+    probabilities, and on the recording alone its "recorded" ones (catches the two drifting apart:
+    another thinning of the recording, the follow-up's history lost, the pairs' order swapped); a
+    follow-up that only repeats the recording's motion adds less than the designed one."""
+    from ctrplan.design import predicted_preference
+
+    robot = load_robot(PAIR)
+    hyps = _pair_hypotheses(robot)
+    recorded = _sweep(robot, [[0.0], [1.5], [0.0]])
+    drive = DriveLimits(250.0, np.array([1.0]), np.array([4.0]), np.array([40.0]), ("alpha_2",))
+    noise = SensorNoise(SIGMA, lag1=0.5)
+    res = design_experiment(robot, recorded, hyps, noise=noise, limits=ExperimentLimits(drive=drive, duration=8.0),
+                            search=DesignSearch(n_random=0, seed=3))
+    follow = motion_data(robot, res.time, res.joints, frame=recorded.frame)
+    after = predicted_preference(robot, recorded, hyps, follow, noise=noise, seed=3)
+    alone = predicted_preference(robot, recorded, hyps, noise=noise, seed=3)
+    assert after == res.preference["designed"] and alone == res.preference["recorded"]
+    assert set(after) == {"offplane>registration", "registration>offplane"}
+    again = predicted_preference(robot, recorded, hyps, _sweep(robot, [[0.0], [1.5], [0.0]]), noise=noise, seed=3)
+    assert again["offplane>registration"] < after["offplane>registration"] - 0.5
+    with pytest.raises(DesignInputError, match="two or more hypotheses"):
+        predicted_preference(robot, recorded, hyps[:1], noise=noise)

@@ -25,14 +25,11 @@ from ..drive import DriveLimits
 from ._criteria import (Information, ds_criterion, information, long_run_factor, noise_weight, prior_precision,
                         sensitivities)
 from ._hypotheses import DesignInputError
-from ._verdict import preference_probability, unexplained
+from ._verdict import MAX_RECORDED_SAMPLES, _pair_name, preference_table
 from ._motions import feasible, joint_configurations, motion_data, primitives, sample, trajectory
 
 logger = logging.getLogger(__name__)
 
-#: Recorded samples the hypotheses are differentiated at, at most (evenly spaced; their sums are
-#: scaled to the whole recording).
-MAX_RECORDED_SAMPLES = 300
 #: Significance level of the predicted power [-] (the discrepancy workflow's default).
 POWER_LEVEL = 0.01
 #: Control rate of a drive derived from the recorded motion [Hz].
@@ -115,6 +112,8 @@ class DesignResult:
         Parameters mode: per parameter of interest, the other free parameters whose predicted
         correlation with it after the design is at least :data:`CONFOUNDED_CORRELATION` in magnitude
         (``{name: correlation}``): what keeps it undetermined when the design cannot shrink it.
+    search : DesignSearch or None
+        How the search ran (its random motions, seed and primitives).
     """
 
     mode: DesignMode
@@ -137,6 +136,7 @@ class DesignResult:
     random_primitives: tuple = ()
     confounded: dict = field(default_factory=dict)
     preference: dict = field(default_factory=dict)
+    search: object = None
 
     @property
     def duration(self) -> float:
@@ -193,10 +193,6 @@ def _period(data) -> float:
     if not d.size:
         raise DesignInputError(f"{data.file}: sample times do not increase")
     return float(np.median(d))
-
-
-def _pair_name(hyps, a, b) -> str:
-    return f"{hyps[a].key}>{hyps[b].key}"
 
 
 def _piece_information(robot, hyps, weight, settings, frame, t, alpha, beta, pieces) -> list:
@@ -606,11 +602,8 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
             stderr[key] = ses if key == "random" else ses[0]
     preference = {}
     if mode == DesignMode.SEPARATE:
-        pairs = [(a, b) for a in range(len(hyps)) for b in range(len(hyps)) if a != b]
         for key, parts in (("recorded", [recorded_sens]), ("designed", [recorded_sens, sens])):
-            preference[key] = {_pair_name(hyps, a, b): preference_probability(
-                unexplained([p[a] for p in parts], [p[b] for p in parts]), noise, level=POWER_LEVEL, seed=seed)
-                for a, b in pairs}
+            preference[key] = preference_table(hyps, parts, noise, level=POWER_LEVEL, seed=seed)
     confounded = {}
     if mode == DesignMode.PARAMETERS:
         cov = designed.covariance(0, prior)
@@ -625,4 +618,5 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
                         trajectory=traj, time=ts, joints=qs, tips=tips, separation=separation, stderr=stderr,
                         power=power, noise_position=float(noise_position), noise_inflation=float(inflation),
                         budget=budget, noise_lower_bound=bool(noise.lower_bound), seconds=seconds, evaluations=ev.evaluations,
-                        random_primitives=tuple(random_walks), confounded=confounded, preference=preference)
+                        random_primitives=tuple(random_walks), confounded=confounded, preference=preference,
+                        search=search)

@@ -50,6 +50,9 @@ def design_dict(result, robot, *, command: str = "") -> dict:
         "noise_position_m": result.noise_position, "noise_inflation": result.noise_inflation,
         "noise_lower_bound": result.noise_lower_bound,
         "evaluations": result.evaluations, "seconds": result.seconds, "command": command,
+        "search": (None if result.search is None else
+                   {"random_motions": result.search.n_random, "seed": result.search.seed,
+                    "compound": result.search.compound}),
         "joint_names": list(robot.joint_names),
         "drive": {"control_rate_hz": result.trajectory.control_rate_hz,
                   "max_velocity": result.trajectory.max_velocity, "max_acceleration": result.trajectory.max_acceleration,

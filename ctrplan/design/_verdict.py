@@ -28,7 +28,8 @@ import math
 
 import numpy as np
 
-__all__ = ["unexplained", "preference_probability", "BLOCK_SAMPLES", "N_FOLDS", "DRAWS"]
+__all__ = ["unexplained", "preference_probability", "predicted_preference", "preference_table", "BLOCK_SAMPLES",
+           "N_FOLDS", "DRAWS", "MAX_RECORDED_SAMPLES"]
 
 #: Samples per time block of the simulated split [-] (the workflow's development blocks are at
 #: least 20 samples long).
@@ -37,6 +38,8 @@ BLOCK_SAMPLES = 20
 N_FOLDS = 10
 #: Simulated recordings per probability [-].
 DRAWS = 400
+#: Recorded samples the hypotheses are differentiated at, at most (evenly spaced, both ends kept).
+MAX_RECORDED_SAMPLES = 300
 
 
 def unexplained(sens_true, sens_rival) -> np.ndarray:
@@ -134,3 +137,89 @@ def preference_probability(u, noise, *, level: float, draws: int = DRAWS, block:
     err_rival = np.linalg.norm(n + u[:, None, :], axis=2)
     hits = sum(cv_comparison(err_rival[:, d], err_true[:, d], fold).p_value < level for d in range(draws))
     return hits / draws
+
+
+def _pair_name(hyps, a, b) -> str:
+    return f"{hyps[a].key}>{hyps[b].key}"
+
+
+def preference_table(hyps, parts, noise, *, level: float, seed: int = 0) -> dict:
+    """:func:`preference_probability` for every ordered pair of hypotheses over recordings ``parts``.
+
+    Parameters
+    ----------
+    hyps : sequence of Hypothesis
+    parts : sequence of sequence of Sensitivities
+        Per recording, one :class:`~ctrplan.design.Sensitivities` per hypothesis, in the order of
+        ``hyps`` (the recordings in the order they are run).
+    noise : SensorNoise
+    level : float
+        One-sided level of the comparison, in (0, 1).
+    seed : int
+
+    Returns
+    -------
+    dict
+        ``{"A>B": probability}`` [-] for every ordered pair (A true, B its rival).
+    """
+    n = len(hyps)
+    return {_pair_name(hyps, a, b): preference_probability(
+        unexplained([p[a] for p in parts], [p[b] for p in parts]), noise, level=level, seed=seed)
+        for a in range(n) for b in range(n) if a != b}
+
+
+def predicted_preference(robot, recorded, hypotheses, follow_up=None, *, noise, level: float = 0.01,
+                         settings=None, n_jobs: int = 1, seed: int = 0) -> dict:
+    """Probability that the workflow's fold comparison prefers each hypothesis, when true, over each
+    rival after ``recorded`` and a follow-up recording of any motion (module docstring).
+
+    The same figure as :attr:`DesignResult.preference` for a motion of the caller's: a follow-up
+    planned by hand, a random one, a repetition of the recording. The recorded samples are thinned
+    evenly to at most :data:`MAX_RECORDED_SAMPLES`, as in :func:`~ctrplan.design.design_experiment`.
+
+    Parameters
+    ----------
+    robot : Robot
+        The robot file the hypotheses were fitted to.
+    recorded : MeasuredData
+        The recording the hypotheses were fitted on (its joints and times; its tips are not read).
+    hypotheses : sequence of Hypothesis
+        Two or more (:func:`~ctrplan.design.result_hypotheses`).
+    follow_up : MeasuredData, optional
+        The follow-up's samples with their motion history (a recording loaded with
+        :func:`ctrplan.discrepancy.load_measured_data`, or :func:`~ctrplan.design.motion_data` of a
+        planned motion); None: the recording alone.
+    noise : SensorNoise
+        Sensor noise per tip coordinate [m].
+    level : float
+        One-sided level of the comparison, in (0, 1) (the workflow's default 0.01).
+    settings : ModelSettings, optional
+    n_jobs : int
+        Processes the model evaluations run on.
+    seed : int
+        Seed of the simulated noise.
+
+    Returns
+    -------
+    dict
+        ``{"A>B": probability}`` [-] for every ordered pair of the hypotheses' keys.
+
+    Raises
+    ------
+    DesignInputError
+        Fewer than two hypotheses.
+    ValueError
+        ``level`` outside (0, 1).
+    """
+    from ._criteria import sensitivities
+    from ._hypotheses import DesignInputError
+
+    hyps = tuple(hypotheses)
+    if len(hyps) < 2:
+        raise DesignInputError(f"a preference needs two or more hypotheses, got {len(hyps)}")
+    K = recorded.n_samples
+    rows = np.unique(np.linspace(0, K - 1, min(K, MAX_RECORDED_SAMPLES)).round().astype(int))
+    parts = [[sensitivities(robot, h, recorded.take(rows), settings, n_jobs=n_jobs) for h in hyps]]
+    if follow_up is not None:
+        parts.append([sensitivities(robot, h, follow_up, settings, n_jobs=n_jobs) for h in hyps])
+    return preference_table(hyps, parts, noise, level=level, seed=seed)
