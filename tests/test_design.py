@@ -613,3 +613,35 @@ def test_the_preference_of_any_follow_up_is_the_designs_own_figure_for_its_motio
     assert again["offplane>registration"] < after["offplane>registration"] - 0.5
     with pytest.raises(DesignInputError, match="two or more hypotheses"):
         predicted_preference(robot, recorded, hyps[:1], noise=noise)
+
+
+def test_a_friction_sensitivity_is_the_derivative_not_the_solvers_tolerance():
+    """The columns of a friction hypothesis at a large friction coefficient against central
+    differences of tightly converged solves over a three times larger step (independent of the
+    design's step, tolerance and warm starts): within 1 %. Catches columns differenced at the
+    solver's default tolerance, whose stopping error over the small step is several times the
+    derivative itself at mu = 1.5 (Section III of Ha et al. 2019's friction model)."""
+    import dataclasses
+
+    from ctrplan.discrepancy.fits.parameters import parameter, read_parameters
+    from ctrplan.mechanics import ModelSettings
+
+    robot = load_robot(PAIR)
+    names = ("precurvature_y_2", "mu_1")
+    values = read_parameters(robot, names)
+    values[1] = 1.5
+    hyp = Hypothesis("friction", "torsional friction", "friction", names, values, free=names)
+    data = _sweep(robot, [[0.0], [1.5], [-0.5], [1.0]], period=0.25)
+    sens = sensitivities(robot, hyp, data)
+    tight = dataclasses.replace(ModelSettings(), outer_tol=1e-12, complementarity_tol=1e-12, max_outer_iterations=400)
+    for j, name in enumerate(names):
+        h = 3e-3 * parameter(robot, name).scale
+        up, down = values.copy(), values.copy()
+        up[j] += h
+        down[j] -= h
+        ref = (predict(robot, names, up, data, "friction", tight).tip
+               - predict(robot, names, down, data, "friction", tight).tip) / (2 * h)
+        ok = sens.ok & np.isfinite(ref).all(axis=1)
+        assert ok.sum() >= 0.9 * len(ok)
+        err = np.linalg.norm(sens.jacobian[ok, :, j] - ref[ok]) / np.linalg.norm(ref[ok])
+        assert err < 0.01, f"{name}: relative error {err:.3g}"

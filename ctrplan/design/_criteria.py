@@ -32,17 +32,26 @@ samples exceeds the white one; ``(1 + phi) / (1 - phi)`` when the noise is all A
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..discrepancy.fits.predictions import predict
 from ..discrepancy.fits.parameters import apply_parameters, needs_solve, parameter
+from ..discrepancy.fits.predictions import predict
+from ..discrepancy.fits.simulate import WarmStarts
 from ..effects import EffectSet, apply_output_effects, robot_effects
+from ..mechanics import ModelSettings
+from ..models import MODEL_INFO
 
 #: Forward-difference step of a sensitivity, as a fraction of the parameter's scale
 #: (``ParameterSpec.scale``) [-].
 SENSITIVITY_STEP = 1e-3
+#: Outer and complementarity tolerance of the contact solves a sensitivity differences [-]. A
+#: solve stops with an error of about its tolerance, and a column divides that error by the step:
+#: at the solver's default (1e-6) the friction-coefficient columns are off by 5-10 %, at 1e-11
+#: (each column's solves started from the base solution at the same sample) by 0.01-0.04 %, at
+#: 0.55-0.9 times the CPU time (``benchmarks/design_sensitivity_accuracy.py``).
+SENSITIVITY_TOL = 1e-11
 #: Relative cut-off of small singular values in ``G^+`` [-].
 PINV_RCOND = 1e-10
 
@@ -96,7 +105,16 @@ def sensitivities(robot, hyp, data, settings=None, *, n_jobs: int = 1) -> Sensit
         A hypothesis whose values give an impossible robot.
     """
     names, values = hyp.names, hyp.values
-    base = predict(robot, names, values, data, hyp.model, settings, n_jobs=n_jobs)
+    store = None
+    if MODEL_INFO[hyp.model].contact:
+        # a contact solve stops when its curvatures move less than its tolerance; a difference
+        # over a step of SENSITIVITY_STEP needs that error far below the step's effect, and each
+        # column starts from the base solution at the same sample (fewer outer iterations)
+        store = WarmStarts()
+        s0 = settings or ModelSettings()
+        settings = replace(s0, outer_tol=min(s0.outer_tol, SENSITIVITY_TOL),
+                           complementarity_tol=min(s0.complementarity_tol, SENSITIVITY_TOL))
+    base = predict(robot, names, values, data, hyp.model, settings, n_jobs=n_jobs, warm_starts=store)
     K = base.tip.shape[0]
     J = np.zeros((K, 3, len(hyp.free)))
     ok = base.ok.copy()
@@ -110,7 +128,7 @@ def sensitivities(robot, hyp, data, settings=None, *, n_jobs: int = 1) -> Sensit
         v = values.copy()
         v[i] += h
         if needs_solve(robot, name):
-            p = predict(robot, names, v, data, hyp.model, settings, n_jobs=n_jobs)
+            p = predict(robot, names, v, data, hyp.model, settings, n_jobs=n_jobs, warm_starts=store)
             tip, ok = p.tip, ok & p.ok
             evaluations += 1
         else:

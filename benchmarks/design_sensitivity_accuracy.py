@@ -1,0 +1,143 @@
+"""Accuracy and cost of the experiment design's friction sensitivities (``ctrplan.design``'s
+forward differences of the friction model's tips), against central differences of tightly
+converged solves.
+
+Two cases, both continuous rotations back and forth sampled along the motion (every sample's
+friction direction follows from the motion history, Eq. (39) of Ha, Fagogenis & Dupont 2019):
+
+- ``pair``: the Table I tube pair (``model/ha2019-table1-tube-pair.toml``), mu_1 = 1.5, free
+  parameters precurvature_y_2 and mu_1, 41 samples;
+- ``three-tube``: the calibrated Table VII robot (``model/ha2019-table7-calibrated.toml``),
+  mu = (0.6, 0.4), free parameters precurvature_y_1, precurvature_y_3, k_xy_relative_2, mu_1,
+  mu_2, 40 samples.
+
+Each column is a forward difference over 1e-3 of the parameter's scale (the design's
+``SENSITIVITY_STEP``); the reference is the central difference over three times that step of cold
+solves with outer and complementarity tolerance 1e-12 (at most 300 outer iterations). Compared:
+the solver's default tolerance (1e-6), cold, as the design differenced before, and the design's
+``SENSITIVITY_TOL`` with warm starts (:func:`ctrplan.design.sensitivities`). Printed per setting:
+the CPU time of the base solve and its columns (one process) and the relative error of each
+column (Frobenius norm over the samples), with the load average.
+
+Usage::
+
+    python benchmarks/design_sensitivity_accuracy.py [--results benchmarks/results/design-sensitivity.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+REFERENCE_TOL = 1e-12
+REFERENCE_MAX_OUTER = 300
+DEFAULT_TOL = 1e-6
+
+
+def _case(name):
+    """``(robot, names, values, data)`` of a case of the module docstring."""
+    from ctrplan.design import motion_data
+    from ctrplan.discrepancy.fits.parameters import read_parameters
+    from ctrplan.io.robot_file import load_robot
+
+    if name == "pair":
+        robot = load_robot(ROOT / "model" / "ha2019-table1-tube-pair.toml")
+        names = ("precurvature_y_2", "mu_1")
+        values = read_parameters(robot, names)
+        values[1] = 1.5
+        # alpha_2 through 0 -> 1.5 -> -0.5 -> 1.0 rad at 0.5 rad/s, sampled every 0.25 s
+        path = np.array([0.0, 1.5, -0.5, 1.0])
+        s = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(path)))])
+        t = np.arange(0.0, s[-1] / 0.5 + 1e-9, 0.25)
+        q = np.interp(t * 0.5, s, path)[:, None]
+        return robot, names, values, motion_data(robot, t, q)
+    robot = load_robot(ROOT / "model" / "ha2019-table7-calibrated.toml")
+    names = ("precurvature_y_1", "precurvature_y_3", "k_xy_relative_2", "mu_1", "mu_2")
+    values = read_parameters(robot, names)
+    values[3:] = (0.6, 0.4)
+    q0 = robot.joint_vector(robot.home_alpha, robot.home_beta)
+    t = np.arange(0.0, 8.0, 0.2)
+    q = np.tile(q0, (len(t), 1))
+    q[:, 0] += 1.5 * np.sin(2 * np.pi * t / 8)
+    q[:, 1] -= 1.0 * np.sin(2 * np.pi * t / 4)
+    return robot, names, values, motion_data(robot, t, q)
+
+
+def _columns(robot, names, values, data, settings, *, warm: bool, central: float = 0.0):
+    """Forward differences (``central`` = 0) over the design's step, or central differences over
+    ``central`` times it; returns (J (K, 3, m), CPU seconds, share of samples converged)."""
+    from ctrplan.design._criteria import SENSITIVITY_STEP
+    from ctrplan.discrepancy import predict
+    from ctrplan.discrepancy.fits.parameters import parameter
+    from ctrplan.discrepancy.fits.simulate import WarmStarts
+
+    store = WarmStarts() if warm else None
+    c0 = time.process_time()
+    base = predict(robot, names, values, data, "friction", settings, warm_starts=store)
+    ok = base.ok.copy()
+    cols = []
+    for j, name in enumerate(names):
+        h = SENSITIVITY_STEP * parameter(robot, name).scale * (central or 1.0)
+        up = values.copy()
+        up[j] += h
+        p_up = predict(robot, names, up, data, "friction", settings, warm_starts=store)
+        ok &= p_up.ok
+        if central:
+            down = values.copy()
+            down[j] -= h
+            p_down = predict(robot, names, down, data, "friction", settings, warm_starts=store)
+            ok &= p_down.ok
+            cols.append((p_up.tip - p_down.tip) / (2 * h))
+        else:
+            cols.append((p_up.tip - base.tip) / h)
+    return np.stack(cols, axis=2), time.process_time() - c0, float(ok.mean())
+
+
+def main(argv=None):
+    from _records import run_record
+
+    from ctrplan.design._criteria import SENSITIVITY_TOL
+    from ctrplan.mechanics import ModelSettings
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--results", default=None, help="write the figures to this JSON file")
+    args = ap.parse_args(argv)
+    load0 = os.getloadavg()
+    print(f"load average {load0[0]:.2f}")
+    out = {"cases": {}}
+    for case in ("pair", "three-tube"):
+        robot, names, values, data = _case(case)
+        ref_settings = dataclasses.replace(ModelSettings(), outer_tol=REFERENCE_TOL, complementarity_tol=REFERENCE_TOL,
+                                           max_outer_iterations=REFERENCE_MAX_OUTER)
+        ref, _, ref_ok = _columns(robot, names, values, data, ref_settings, warm=False, central=3.0)
+        rows = {}
+        for label, tol, warm in (("default tolerance, cold", DEFAULT_TOL, False),
+                                 ("design tolerance, warm", SENSITIVITY_TOL, True)):
+            settings = dataclasses.replace(ModelSettings(), outer_tol=tol, complementarity_tol=tol)
+            J, cpu, ok = _columns(robot, names, values, data, settings, warm=warm)
+            good = np.isfinite(J).all(axis=(1, 2)) & np.isfinite(ref).all(axis=(1, 2))
+            err = {n: float(np.linalg.norm(J[good, :, j] - ref[good, :, j]) / np.linalg.norm(ref[good, :, j]))
+                   for j, n in enumerate(names)}
+            rows[label] = {"tolerance": tol, "warm": warm, "cpu_s": cpu, "converged": ok, "relative_error": err}
+            print(f"{case:10s} {label:26s} tol {tol:.0e}: CPU {cpu:6.2f} s, converged {100 * ok:.0f} %, error "
+                  + ", ".join(f"{n} {100 * e:.3g} %" for n, e in err.items()), flush=True)
+        out["cases"][case] = {"samples": int(data.n_samples), "parameters": dict(zip(names, values.tolist())),
+                              "reference_converged": ref_ok, "settings": rows}
+    out["run"] = run_record("python benchmarks/design_sensitivity_accuracy.py", load0, os.getloadavg())
+    if args.results:
+        Path(args.results).write_text(json.dumps(out, indent=1) + "\n")
+        print(f"wrote {args.results}")
+
+
+if __name__ == "__main__":
+    main()
