@@ -51,11 +51,12 @@ Usage::
 
     python benchmarks/bench_design.py [--open-cases 10] [--jobs 2] [--out out/bench-design]
                                       [--results benchmarks/results/design.json]
-                                      [--figure docs/images/design-calibration.png]
+                                      [--figure docs/images/design-calibration.png] [--results-only]
 
 Every candidate is one line of ``<out>/draws.jsonl`` (its pilot's verdict; kept or not) and every
 kept case one line of ``<out>/cases.jsonl``; a rerun goes on from them, and each ``ctrplan
-discrepancy`` run is reused from its ``results.json``.
+discrepancy`` run is reused from its ``results.json``; ``--results-only`` writes the results of
+what is recorded without running anything.
 """
 
 from __future__ import annotations
@@ -448,6 +449,8 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "out" / "bench-design"))
     ap.add_argument("--results", default=str(ROOT / "benchmarks" / "results" / "design.json"))
+    ap.add_argument("--results-only", action="store_true",
+                    help="write the results from the draws and cases recorded in --out, running nothing")
     ap.add_argument("--figure", default=str(ROOT / "docs" / "images" / "design-calibration.png"),
                     help="the calibration plot of the predictions against the follow-ups' verdicts")
     args = ap.parse_args(argv)
@@ -458,7 +461,7 @@ def main(argv=None):
     draws, cases = _read(draws_file, "draw"), _read(cases_file, "draw")
     load0 = os.getloadavg()
     k = 0
-    while sum(d["kept"] for d in draws.values()) < args.open_cases and k < args.max_draws:
+    while not args.results_only and sum(d["kept"] for d in draws.values()) < args.open_cases and k < args.max_draws:
         if k not in draws:
             d = run_pilot(draw(k), out, args.jobs)
             draws[k] = d
@@ -470,7 +473,7 @@ def main(argv=None):
         k += 1
     for k in sorted(draws):
         d = draws[k]
-        if d["kept"] and k not in cases:
+        if d["kept"] and k not in cases and not args.results_only:
             c = run_follow_ups(d, out, args.jobs)
             cases[k] = c
             with cases_file.open("a") as f:
@@ -478,6 +481,9 @@ def main(argv=None):
             print(f"case {k}: " + ", ".join(f"{key} {c['runs'][key]['verdict']} {c['runs'][key]['named_effects']}"
                                             for key in FOLLOW_UPS) + f" ({c['seconds']:.0f} s)", flush=True)
     kept = [cases[k] for k in sorted(cases)]
+    if args.results_only:       # what was recorded: the candidates up to the last kept case run
+        last = max(cases, default=-1)
+        draws = {k: d for k, d in draws.items() if k <= last}
     results = {"summary": summarize(list(draws.values()), kept), "draws": [draws[k] for k in sorted(draws)],
                "cases": kept,
                "run": run_record("python benchmarks/bench_design.py " + " ".join(argv or sys.argv[1:]), load0,
