@@ -1,6 +1,7 @@
-"""Accuracy and cost of the experiment design's friction sensitivities (``ctrplan.design``'s
-forward differences of the friction model's tips), against central differences of tightly
-converged solves.
+"""Accuracy and cost of forward-difference columns of the friction model's tips, as the experiment
+design (``ctrplan.design.sensitivities``) and the discrepancy fits
+(``ctrplan.discrepancy.fits.objective.ComponentJacobians``) take them, against central differences
+of tightly converged solves.
 
 Two cases, both continuous rotations back and forth sampled along the motion (every sample's
 friction direction follows from the motion history, Eq. (39) of Ha, Fagogenis & Dupont 2019):
@@ -11,17 +12,23 @@ friction direction follows from the motion history, Eq. (39) of Ha, Fagogenis & 
   mu = (0.6, 0.4), free parameters precurvature_y_1, precurvature_y_3, k_xy_relative_2, mu_1,
   mu_2, 40 samples.
 
-Each column is a forward difference over 1e-3 of the parameter's scale (the design's
-``SENSITIVITY_STEP``); the reference is the central difference over three times that step of cold
-solves with outer and complementarity tolerance 1e-12 (at most 300 outer iterations). Compared:
-the solver's default tolerance (1e-6), cold, as the design differenced before, and the design's
-``SENSITIVITY_TOL`` with warm starts (:func:`ctrplan.design.sensitivities`). Printed per setting:
-the CPU time of the base solve and its columns (one process) and the relative error of each
-column (Frobenius norm over the samples), with the load average.
+The reference is the central difference over three times the design's step (1e-3 of the
+parameter's scale, ``SENSITIVITY_STEP``) of cold solves with outer and complementarity tolerance
+1e-12 (at most 300 outer iterations). Compared, each a forward difference:
+
+- the design's step at the solver's default tolerance (1e-6), cold;
+- the design's step at the design's ``SENSITIVITY_TOL``, each column's solves started from the
+  base solution (:func:`ctrplan.design.sensitivities`);
+- the fits' step (``DIFF_STEP`` times max(1, |value|), the step of ``least_squares``'s
+  ``"2-point"`` scheme) at the fits' ``WARM_OUTER_TOL`` with warm starts, as a contact fit's
+  columns are taken.
+
+Printed per setting: the CPU time of the base solve and its columns (one process) and the relative
+error of each column (Frobenius norm over the samples), with the load average.
 
 Usage::
 
-    python benchmarks/design_sensitivity_accuracy.py [--results benchmarks/results/design-sensitivity.json]
+    python benchmarks/friction_columns_accuracy.py [--results benchmarks/results/friction-columns.json]
 """
 
 from __future__ import annotations
@@ -73,11 +80,13 @@ def _case(name):
     return robot, names, values, motion_data(robot, t, q)
 
 
-def _columns(robot, names, values, data, settings, *, warm: bool, central: float = 0.0):
-    """Forward differences (``central`` = 0) over the design's step, or central differences over
-    ``central`` times it; returns (J (K, 3, m), CPU seconds, share of samples converged)."""
+def _columns(robot, names, values, data, settings, *, warm: bool, central: float = 0.0, fit_step: bool = False):
+    """Forward differences (``central`` = 0) over the design's step (the fits' with ``fit_step``),
+    or central differences over ``central`` times the design's step; returns (J (K, 3, m), CPU
+    seconds, share of samples converged)."""
     from ctrplan.design._criteria import SENSITIVITY_STEP
     from ctrplan.discrepancy import predict
+    from ctrplan.discrepancy.fits.objective import DIFF_STEP
     from ctrplan.discrepancy.fits.parameters import parameter
     from ctrplan.discrepancy.fits.simulate import WarmStarts
 
@@ -87,7 +96,12 @@ def _columns(robot, names, values, data, settings, *, warm: bool, central: float
     ok = base.ok.copy()
     cols = []
     for j, name in enumerate(names):
-        h = SENSITIVITY_STEP * parameter(robot, name).scale * (central or 1.0)
+        spec = parameter(robot, name)
+        if fit_step:
+            h = DIFF_STEP * max(1.0, abs(values[j])) * (1.0 if values[j] >= 0 else -1.0)
+            h = h if spec.within_limit(values[j] + h) else -h
+        else:
+            h = SENSITIVITY_STEP * spec.scale * (central or 1.0)
         up = values.copy()
         up[j] += h
         p_up = predict(robot, names, up, data, "friction", settings, warm_starts=store)
@@ -107,6 +121,7 @@ def main(argv=None):
     from _records import run_record
 
     from ctrplan.design._criteria import SENSITIVITY_TOL
+    from ctrplan.discrepancy.fits.simulate import WARM_OUTER_TOL
     from ctrplan.mechanics import ModelSettings
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -121,19 +136,21 @@ def main(argv=None):
                                            max_outer_iterations=REFERENCE_MAX_OUTER)
         ref, _, ref_ok = _columns(robot, names, values, data, ref_settings, warm=False, central=3.0)
         rows = {}
-        for label, tol, warm in (("default tolerance, cold", DEFAULT_TOL, False),
-                                 ("design tolerance, warm", SENSITIVITY_TOL, True)):
+        for label, tol, warm, fit_step in (("design step, default tol", DEFAULT_TOL, False, False),
+                                           ("design step, design tol", SENSITIVITY_TOL, True, False),
+                                           ("fit step, fit tol", WARM_OUTER_TOL, True, True)):
             settings = dataclasses.replace(ModelSettings(), outer_tol=tol, complementarity_tol=tol)
-            J, cpu, ok = _columns(robot, names, values, data, settings, warm=warm)
+            J, cpu, ok = _columns(robot, names, values, data, settings, warm=warm, fit_step=fit_step)
             good = np.isfinite(J).all(axis=(1, 2)) & np.isfinite(ref).all(axis=(1, 2))
             err = {n: float(np.linalg.norm(J[good, :, j] - ref[good, :, j]) / np.linalg.norm(ref[good, :, j]))
                    for j, n in enumerate(names)}
-            rows[label] = {"tolerance": tol, "warm": warm, "cpu_s": cpu, "converged": ok, "relative_error": err}
-            print(f"{case:10s} {label:26s} tol {tol:.0e}: CPU {cpu:6.2f} s, converged {100 * ok:.0f} %, error "
+            rows[label] = {"tolerance": tol, "warm": warm, "step": "fit" if fit_step else "design", "cpu_s": cpu,
+                           "converged": ok, "relative_error": err}
+            print(f"{case:10s} {label:25s} tol {tol:.0e}: CPU {cpu:6.2f} s, converged {100 * ok:.0f} %, error "
                   + ", ".join(f"{n} {100 * e:.3g} %" for n, e in err.items()), flush=True)
         out["cases"][case] = {"samples": int(data.n_samples), "parameters": dict(zip(names, values.tolist())),
                               "reference_converged": ref_ok, "settings": rows}
-    out["run"] = run_record("python benchmarks/design_sensitivity_accuracy.py", load0, os.getloadavg())
+    out["run"] = run_record("python benchmarks/friction_columns_accuracy.py", load0, os.getloadavg())
     if args.results:
         Path(args.results).write_text(json.dumps(out, indent=1) + "\n")
         print(f"wrote {args.results}")
