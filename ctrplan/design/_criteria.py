@@ -83,7 +83,9 @@ def sensitivities(robot, hyp, data, settings=None, *, n_jobs: int = 1) -> Sensit
     derivatives with respect to its free parameters (backward at a parameter's upper limit).
 
     Parameters that act only on the measurement (registration) are differentiated on the computed
-    tips without solving the model again.
+    tips without solving the model again. A contact model (clearance, friction; Sections II-III of
+    Ha, Fagogenis & Dupont 2019) is solved at the outer and complementarity tolerance
+    :data:`SENSITIVITY_TOL`, each column's solves started from the base solution at the same sample.
 
     Parameters
     ----------
@@ -98,6 +100,7 @@ def sensitivities(robot, hyp, data, settings=None, *, n_jobs: int = 1) -> Sensit
     Returns
     -------
     Sensitivities
+        Tips (K, 3) [m] and their derivatives (K, 3, p) [m per parameter unit] at the K samples.
 
     Raises
     ------

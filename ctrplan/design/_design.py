@@ -25,7 +25,7 @@ from ..drive import DriveLimits
 from ._criteria import (Information, ds_criterion, information, long_run_factor, noise_weight, prior_precision,
                         sensitivities)
 from ._hypotheses import DesignInputError
-from ._verdict import MAX_RECORDED_SAMPLES, _pair_name, preference_table
+from ._verdict import _pair_name, preference_table, recorded_rows
 from ._motions import feasible, joint_configurations, motion_data, primitives, sample, trajectory
 
 logger = logging.getLogger(__name__)
@@ -91,7 +91,7 @@ class DesignResult:
         ``{"a>b": probability}`` per ordered pair [-]: that the discrepancy workflow's fold
         comparison finds a's error significantly lower than b's at :data:`POWER_LEVEL` when a is
         true (:func:`~ctrplan.design._verdict.preference_probability`; the recording as the
-        samples the design evaluated, at most :data:`MAX_RECORDED_SAMPLES` of it). Empty in
+        samples the design evaluated, :func:`~ctrplan.design._verdict.recorded_rows`). Empty in
         parameters mode.
     noise_position : float
         Sensor noise per coordinate used [m].
@@ -467,7 +467,7 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
     # the recorded trajectory's information (a subsample standing for every sample)
     t0 = time.perf_counter()
     K = data.n_samples
-    rows = np.unique(np.linspace(0, K - 1, min(K, MAX_RECORDED_SAMPLES)).round().astype(int))
+    rows = recorded_rows(K)
     recorded_sens = ev.sens(data.take(rows))
     recorded = information(recorded_sens, weight)
     recorded = recorded.scaled(K / max(recorded.n_samples, 1)) if recorded.n_samples else recorded

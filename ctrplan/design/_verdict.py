@@ -28,8 +28,8 @@ import math
 
 import numpy as np
 
-__all__ = ["unexplained", "preference_probability", "predicted_preference", "preference_table", "BLOCK_SAMPLES",
-           "N_FOLDS", "DRAWS", "MAX_RECORDED_SAMPLES"]
+__all__ = ["unexplained", "preference_probability", "predicted_preference", "preference_table", "recorded_rows",
+           "BLOCK_SAMPLES", "N_FOLDS", "DRAWS", "MAX_RECORDED_SAMPLES"]
 
 #: Samples per time block of the simulated split [-] (the workflow's development blocks are at
 #: least 20 samples long).
@@ -40,6 +40,12 @@ N_FOLDS = 10
 DRAWS = 400
 #: Recorded samples the hypotheses are differentiated at, at most (evenly spaced, both ends kept).
 MAX_RECORDED_SAMPLES = 300
+
+
+def recorded_rows(n_samples: int) -> np.ndarray:
+    """The recorded samples the hypotheses are differentiated at: at most
+    :data:`MAX_RECORDED_SAMPLES`, evenly spaced with both ends kept; indices, shape (k,)."""
+    return np.unique(np.linspace(0, n_samples - 1, min(n_samples, MAX_RECORDED_SAMPLES)).round().astype(int))
 
 
 def unexplained(sens_true, sens_rival) -> np.ndarray:
@@ -217,9 +223,8 @@ def predicted_preference(robot, recorded, hypotheses, follow_up=None, *, noise, 
     hyps = tuple(hypotheses)
     if len(hyps) < 2:
         raise DesignInputError(f"a preference needs two or more hypotheses, got {len(hyps)}")
-    K = recorded.n_samples
-    rows = np.unique(np.linspace(0, K - 1, min(K, MAX_RECORDED_SAMPLES)).round().astype(int))
-    parts = [[sensitivities(robot, h, recorded.take(rows), settings, n_jobs=n_jobs) for h in hyps]]
+    thinned = recorded.take(recorded_rows(recorded.n_samples))
+    parts = [[sensitivities(robot, h, thinned, settings, n_jobs=n_jobs) for h in hyps]]
     if follow_up is not None:
         parts.append([sensitivities(robot, h, follow_up, settings, n_jobs=n_jobs) for h in hyps])
     return preference_table(hyps, parts, noise, level=level, seed=seed)
