@@ -50,7 +50,7 @@ SENSITIVITY_STEP = 1e-3
 #: solve stops with an error of about its tolerance, and a column divides that error by the step:
 #: at the solver's default (1e-6) the friction-coefficient columns are off by 5-10 %, at 1e-11
 #: (each column's solves started from the base solution at the same sample) by 0.01-0.04 %, at
-#: half to three quarters of the CPU time (``benchmarks/friction_columns_accuracy.py``).
+#: 0.6-0.85 times the CPU time (``benchmarks/friction_columns_accuracy.py``).
 SENSITIVITY_TOL = 1e-11
 #: Relative cut-off of small singular values in ``G^+`` [-].
 PINV_RCOND = 1e-10
