@@ -3,7 +3,9 @@ its options, so that a results file can be tied to the code that made it.
 
 The code is every Python source file of the packages whose behaviour the figures depend on
 (:data:`SOURCE_PACKAGES`: the discrepancy workflow, the effects, the motion history and the
-mechanics) and the modules they take numbers and the robot from (:data:`SOURCE_MODULES`). The
+mechanics) and the modules they take numbers and the robot from (:data:`SOURCE_MODULES`), less the
+modules that only format figures already computed (:data:`FORMAT_ONLY`: ``report.md`` is written
+from ``results.json`` alone, so its wording cannot move a figure). The
 digest is a SHA-256 over their paths (relative to the ``ctrplan`` package) and their **code**: the
 syntax tree of each file with its docstrings left out (comments and layout never reach it), in
 sorted order. It changes with any change that can change what runs, and not with a corrected
@@ -19,7 +21,7 @@ import json
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 
-__all__ = ["SOURCE_PACKAGES", "SOURCE_MODULES", "source_digest", "code_digest", "options_digest", "provenance"]
+__all__ = ["SOURCE_PACKAGES", "SOURCE_MODULES", "FORMAT_ONLY", "source_digest", "code_digest", "options_digest", "provenance"]
 
 #: Subpackages of ``ctrplan`` whose code can move a discrepancy result's figures.
 SOURCE_PACKAGES = ("discrepancy", "effects", "history", "mechanics")
@@ -27,6 +29,9 @@ SOURCE_PACKAGES = ("discrepancy", "effects", "history", "mechanics")
 #: choices the workflow's records hold, the registry of mechanics models, and the robot file that
 #: the workflow reads and writes.
 SOURCE_MODULES = ("constants.py", "robot.py", "choices.py", "models.py", "io/robot_file.py")
+#: Modules inside :data:`SOURCE_PACKAGES` left out: they format ``results.json`` into ``report.md``
+#: (:func:`ctrplan.discrepancy.outputs.report.report_markdown`) and compute nothing a results file holds.
+FORMAT_ONLY = ("discrepancy/outputs/report.py",)
 
 
 def _root() -> Path:
@@ -67,8 +72,8 @@ def code_digest(source: str, filename: str = "<source>") -> str:
     return hashlib.sha256(ast.dump(tree, annotate_fields=False).encode()).hexdigest()
 
 
-def source_digest(packages=SOURCE_PACKAGES, modules=SOURCE_MODULES) -> str:
-    """SHA-256 (hex) of the code of ``packages`` and ``modules``: their paths and
+def source_digest(packages=SOURCE_PACKAGES, modules=SOURCE_MODULES, excluded=FORMAT_ONLY) -> str:
+    """SHA-256 (hex) of the code of ``packages`` and ``modules`` less ``excluded``: their paths and
     :func:`code_digest`, sorted by path.
 
     Parameters
@@ -77,6 +82,8 @@ def source_digest(packages=SOURCE_PACKAGES, modules=SOURCE_MODULES) -> str:
         Subpackages of ``ctrplan``.
     modules : sequence of str
         Module files of ``ctrplan`` (paths relative to the package).
+    excluded : sequence of str
+        Module files inside ``packages`` left out (paths relative to the package).
 
     Returns
     -------
@@ -84,7 +91,8 @@ def source_digest(packages=SOURCE_PACKAGES, modules=SOURCE_MODULES) -> str:
         64 hexadecimal digits.
     """
     root = _root()
-    paths = [p for pkg in packages for p in (root / pkg).rglob("*.py")] + [root / m for m in modules]
+    paths = [p for pkg in packages for p in (root / pkg).rglob("*.py")
+             if p.relative_to(root).as_posix() not in excluded] + [root / m for m in modules]
     h = hashlib.sha256()
     for path in sorted(paths, key=lambda p: p.relative_to(root).as_posix()):
         rel = path.relative_to(root).as_posix()
@@ -101,7 +109,8 @@ def options_digest(options) -> str:
 def provenance(options=None) -> dict:
     """``{"source_sha256", "source_packages", "options_sha256"}`` for a results file."""
     out = {"source_sha256": source_digest(),
-           "source_packages": [f"ctrplan/{p}" for p in SOURCE_PACKAGES] + [f"ctrplan/{m}" for m in SOURCE_MODULES]}
+           "source_packages": [f"ctrplan/{p}" for p in SOURCE_PACKAGES] + [f"ctrplan/{m}" for m in SOURCE_MODULES],
+           "source_excluded": [f"ctrplan/{m}" for m in FORMAT_ONLY]}
     if options is not None:
         out["options_sha256"] = options_digest(options)
     return out
