@@ -97,17 +97,18 @@ def test_source_digest_covers_the_records_the_models_and_the_robot_file(tmp_path
 
 
 def test_the_report_formatting_is_left_out_and_the_outputs_computing_figures_are_not(tmp_path, monkeypatch):
-    """``report.md`` is formatted from ``results.json`` alone, so a change of its wording leaves the
-    digest as it is; the modules beside it that compute the test split's figures and the updated
+    """``report.md`` is formatted from ``results.json`` alone and its plots are images, so a change
+    of their code leaves the digest as it is; the modules beside it that compute the test split's figures and the updated
     model (``outputs/output.py``) and the results' record (``outputs/results.py``) still move it.
     Catches an exclusion that reaches past the formatting (a results file would then pass its check
     after a change of what it quotes)."""
     copy = _tree(tmp_path)
     monkeypatch.setattr(provenance, "_root", lambda: copy)
     before = source_digest()
-    report = copy / "discrepancy" / "outputs" / "report.py"
-    report.write_text(report.read_text() + "\nEXTRA = 1\n")
-    assert source_digest() == before
+    for name in ("report.py", "report_plots.py"):
+        target = copy / "discrepancy" / "outputs" / name
+        target.write_text(target.read_text() + "\nEXTRA = 1\n")
+        assert source_digest() == before, name
     for name in ("output.py", "results.py"):
         target = copy / "discrepancy" / "outputs" / name
         text = target.read_text()

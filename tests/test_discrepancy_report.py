@@ -15,6 +15,7 @@ from __future__ import annotations
 import copy
 import json
 import logging
+import math
 import re
 from pathlib import Path
 from types import SimpleNamespace
@@ -519,3 +520,49 @@ def test_a_report_that_cannot_be_written_says_how_to_write_it(monkeypatch, tmp_p
     else:
         assert not (out / "results.json").exists()
         assert "run the same command again to write it (finished stages are reused" in res.output
+
+
+def _with_fit(results, stderr):
+    """``results`` whose named friction fit has free parameters with the standard errors ``stderr``."""
+    results["candidates"]["friction"]["fit"] = {"model": "friction", "parameters": {n: 0.1 for n in stderr},
+                                                "fixed": {}, "stderr": dict(stderr)}
+    return results
+
+
+def test_parameters_the_recording_leaves_undetermined_get_the_design_command(monkeypatch, tmp_path):
+    """A written parameter whose standard error is infinite, or whose 95 % interval is wider than
+    its typical range (here 0..0.5: a standard error above 0.5 / 3.92 = 0.1276), is listed with
+    the ``ctrplan design`` command of the report's folder; one just inside the range is not, nor is
+    one without a typical range. Catches a rule that drops the factor 2 x 1.96 (0.127 listed or
+    0.13 left out) and a report that stays silent about what the data left open."""
+    stderr = {"mu_1": math.inf, "precurvature_y_1": 0.13, "mu_2": 0.127, "registration_rz": 5.0}
+    results = _with_fit(_results(), stderr)
+    results["candidates"]["friction"]["parameter_table"].append(_parameter("mu_2", 0.1, "-", 0.127))
+    assert report.undetermined_parameters(results) == {"mu_1": "not determined",
+                                                       "precurvature_y_1": "wider than typical"}
+    text = _write(monkeypatch, tmp_path, results)
+    line = next(x for x in text.splitlines() if x.startswith("**Left undetermined by this recording:**"))
+    assert "mu_1 (not determined by the data)" in line and "precurvature_y_1 (its 95 % interval" in line
+    assert "mu_2" not in line and "registration_rz" not in line
+    assert "`ctrplan design --result /data/out --out DESIGN_DIR`" in line
+
+
+def test_the_undetermined_parameters_are_the_written_models(monkeypatch, tmp_path):
+    """The parameters listed are those of the model the robot file gets: the named pair's fit when a
+    second effect is named, the baseline's when nothing is, none when the verdict is ambiguous (the
+    ambiguous verdict prints its own design command). Catches a list taken from a fit that is not
+    written."""
+    results = _with_fit(_results(), {"mu_1": math.inf})
+    results["combination"]["named"] = "clearance"
+    results["combination"]["tried"]["clearance"]["fit"] = {"parameters": {"clearance_2": 1e-4}, "fixed": {},
+                                                           "stderr": {"clearance_2": math.inf}}
+    assert report.undetermined_parameters(results) == {"clearance_2": "not determined"}
+    results = _with_fit(_results(), {"mu_1": math.inf})
+    results["decision"]["verdict"] = results["verdict"] = "none"
+    results["named_effect"] = None
+    results["baseline"]["fit"]["stderr"] = {"precurvature_y_1": 1.0}
+    assert report.undetermined_parameters(results) == {"precurvature_y_1": "wider than typical"}
+    results["decision"]["verdict"] = "ambiguous"
+    assert report.undetermined_parameters(results) == {}
+    ok = _results()
+    assert "Left undetermined" not in _write(monkeypatch, tmp_path, ok)

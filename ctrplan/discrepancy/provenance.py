@@ -4,8 +4,8 @@ its options, so that a results file can be tied to the code that made it.
 The code is every Python source file of the packages whose behaviour the figures depend on
 (:data:`SOURCE_PACKAGES`: the discrepancy workflow, the effects, the motion history and the
 mechanics) and the modules they take numbers and the robot from (:data:`SOURCE_MODULES`), less the
-modules that only format figures already computed (:data:`FORMAT_ONLY`: ``report.md`` is written
-from ``results.json`` alone, so its wording cannot move a figure). The
+modules that only present figures already computed (:data:`FORMAT_ONLY`: ``report.md`` is written
+from ``results.json`` alone and the plots beside it are images, so neither can move a figure). The
 digest is a SHA-256 over their paths (relative to the ``ctrplan`` package) and their **code**: the
 syntax tree of each file with its docstrings left out (comments and layout never reach it), in
 sorted order. It changes with any change that can change what runs, and not with a corrected
@@ -30,8 +30,9 @@ SOURCE_PACKAGES = ("discrepancy", "effects", "history", "mechanics")
 #: the workflow reads and writes.
 SOURCE_MODULES = ("constants.py", "robot.py", "choices.py", "models.py", "io/robot_file.py")
 #: Modules inside :data:`SOURCE_PACKAGES` left out: they format ``results.json`` into ``report.md``
-#: (:func:`ctrplan.discrepancy.outputs.report.report_markdown`) and compute nothing a results file holds.
-FORMAT_ONLY = ("discrepancy/outputs/report.py",)
+#: (:func:`ctrplan.discrepancy.outputs.report.report_markdown`) and draw its plots
+#: (:func:`ctrplan.discrepancy.outputs.report_plots.write_plots`), and compute nothing a results file holds.
+FORMAT_ONLY = ("discrepancy/outputs/report.py", "discrepancy/outputs/report_plots.py")
 
 
 def _root() -> Path:

@@ -30,9 +30,10 @@ from ..fits.estimates import display_value
 from .logtext import UNDEFINED, defined  # how the report prints a figure the data leave undefined (null or NaN)
 from ..options import CONFIDENCE
 from .results import json_default, results_dict
+from .report_plots import write_plots as _plots
 from . import words
 
-__all__ = ["write_report", "write_report_from_results", "report_markdown", "TABLE_VIII", "UNDEFINED"]
+__all__ = ["write_report", "write_report_from_results", "report_markdown", "undetermined_parameters", "TABLE_VIII", "UNDEFINED"]
 
 logger = logging.getLogger(__name__)
 
@@ -217,74 +218,6 @@ def _value(row) -> str:
     return text
 
 
-def _tangential(residual, tip):
-    """Residual component along e_z x tip direction (rotation about the base axis) [m]."""
-    t = np.column_stack([-tip[:, 1], tip[:, 0], np.zeros(len(tip))])
-    t /= np.linalg.norm(t, axis=1, keepdims=True) + 1e-300
-    return np.einsum("ij,ij->i", residual, t)
-
-
-def _errors_arrays(e) -> dict:
-    return {"position": e.position, "angle": e.angle, "residual": e.residual_base, "tip_base": e.tip_base}
-
-
-def _arrays(result) -> dict:
-    """The arrays the plots draw [SI]."""
-    split, data, final = result.split, result.setup.data, result.final
-    return {"dev_eta": data.take(split.dev_rows).eta, "test_eta": data.take(split.test_rows).eta,
-            "oof": _errors_arrays(result.baseline.oof),
-            "oof_final": None if final is None else _errors_arrays(final.oof),
-            "test_before": _errors_arrays(result.test.baseline), "test_after": _errors_arrays(result.test.final),
-            "test_file": _errors_arrays(result.test.file)}
-
-
-def _plots(result, out: Path) -> list[str]:
-    from ...plots import new_figure, save_figure
-
-    a = _arrays(result)
-    files = []
-    fig = new_figure((10, 3.8))
-    axes = fig.subplots(1, 2)
-    before, after = a["test_before"]["position"] * 1e3, a["test_after"]["position"] * 1e3
-    top = np.nanmax(np.concatenate([before, after]))
-    bins = np.linspace(0, top if np.isfinite(top) and top > 0 else 1.0, 40)
-    final = result.test.label
-    axes[0].hist(before[np.isfinite(before)], bins, alpha=0.6, label="baseline (standard, calibrated)")
-    axes[0].hist(after[np.isfinite(after)], bins, alpha=0.6, label=final)
-    axes[0].set_xlabel("test-split tip position error [mm]")
-    axes[0].set_ylabel("samples")
-    axes[0].legend(fontsize=8)
-    ab, aa = np.rad2deg(a["test_before"]["angle"]), np.rad2deg(a["test_after"]["angle"])
-    if np.isfinite(ab).any():
-        top = np.nanmax(np.concatenate([ab, aa]))
-        bins = np.linspace(0, top if top > 0 else 1.0, 40)
-        axes[1].hist(ab[np.isfinite(ab)], bins, alpha=0.6, label="baseline")
-        axes[1].hist(aa[np.isfinite(aa)], bins, alpha=0.6, label="final")
-        axes[1].legend(fontsize=8)
-    axes[1].set_xlabel("test-split tip tangent error [deg]")
-    fig.suptitle("Error histograms on the untouched test split, before and after")
-    files.append(save_figure(fig, out / "error_histograms.png").name)
-
-    eta = np.asarray(a["dev_eta"], int)
-    combos = sorted({tuple(e) for e in eta}, reverse=True)
-    fig = new_figure((10, 3.8))
-    axes = fig.subplots(1, 2, sharey=True)
-    panels = [(axes[0], a["oof"], "baseline"), (axes[1], a["oof_final"] or a["oof"], "final model")]
-    for ax, arr, title in panels:
-        tang = _tangential(np.asarray(arr["residual"]), np.asarray(arr["tip_base"])) * 1e3
-        data = [tang[np.all(eta == np.array(c), axis=1) & np.isfinite(tang)] for c in combos]
-        ax.boxplot(data, showfliers=False)
-        ax.set_xticks(range(1, len(combos) + 1))
-        ax.set_xticklabels([",".join("+" if v > 0 else "-" if v < 0 else "0" for v in c) for c in combos])
-        ax.axhline(0.0, color="k", lw=0.5)
-        ax.set_xlabel("direction of the last relative rotation eta (pair 1, pair 2, ...)")
-        ax.set_title(title)
-    axes[0].set_ylabel("out-of-fold residual about the base axis [mm]")
-    fig.suptitle("Out-of-fold residual (tangential component) by direction of the last relative rotation")
-    files.append(save_figure(fig, out / "residuals_by_direction.png").name)
-    return files
-
-
 def _label(results: dict, effect) -> str:
     """The report label of a candidate effect of ``results`` (its name where it has none)."""
     c = (results.get("candidates") or {}).get(effect) or {}
@@ -314,8 +247,7 @@ def _verdict_lines(results: dict) -> list[str]:
         a, b = _label(results, d["named"]), _label(results, d["ambiguous_with"])
         why = ("their fitted tip displacement fields on this motion are collinear, so the motion cannot tell them "
                "apart" if d.get("inseparable") else "the data cannot tell them apart within their uncertainty")
-        folder = Path(results["updated_model_file"]).parent if results.get("updated_model_file") else "DIR"
-        design = f" A motion that separates them: `ctrplan design --result {folder} --out DESIGN_DIR`."
+        design = f" A motion that separates them: {_design_command(results)}."
         head = (f"**Ambiguous: {a} or {b}.** Both lower the cross-validated error, and {why}. Data that would "
                 f"separate them: {words.separated_by(d, words.labels_of(results.get('candidates')))}.{design} The "
                 f"updated model file carries neither ({ts['label']}).{caution}")
@@ -325,6 +257,63 @@ def _verdict_lines(results: dict) -> list[str]:
     else:
         head = f"**Named missing effect{'s' if comb.get('named') else ''}: {ts['label']}.**{caution}"
     return [head + " " + gain, ""]
+
+
+def _design_command(results: dict) -> str:
+    """The ``ctrplan design`` command that plans a follow-up from this report's folder."""
+    folder = Path(results["updated_model_file"]).parent if results.get("updated_model_file") else "DIR"
+    return f"`ctrplan design --result {folder} --out DESIGN_DIR`"
+
+
+def _written_fit(results: dict) -> tuple[dict, dict]:
+    """The fit of the model the updated robot file carries (the named pair, the named effect, else
+    the baseline) and the parameter table beside it."""
+    comb, named = results.get("combination") or {}, results.get("named_effect")
+    entry = ((comb.get("tried") or {}).get(comb["named"]) if comb.get("named") else
+             (results.get("candidates") or {}).get(named) if named else results.get("baseline")) or {}
+    return entry.get("fit") or {}, entry
+
+
+def undetermined_parameters(results: dict) -> dict:
+    """Free parameters of the written model that the recording leaves undetermined: a standard
+    error that is infinite, or a 95 % interval (+-1.96 standard errors) wider than the parameter's
+    typical range (the rule of :meth:`ctrplan.design.Hypothesis.undetermined`).
+
+    Parameters
+    ----------
+    results : dict
+        ``results.json`` of ``ctrplan discrepancy``; an ambiguous verdict writes no effect and
+        gives ``{}``.
+
+    Returns
+    -------
+    dict
+        ``{name: "not determined" | "wider than typical"}``, in the fit's order.
+    """
+    if results["decision"]["verdict"] == "ambiguous":
+        return {}
+    fit, entry = _written_fit(results)
+    rows = [*(results.get("baseline") or {}).get("parameter_table", ()), *entry.get("parameter_table", ())]
+    typical = {r["name"]: r.get("typical") for r in rows}
+    out = {}
+    for name in fit.get("parameters") or {}:
+        se, rng = _number((fit.get("stderr") or {}).get(name)), typical.get(name)
+        if se is not None and not math.isfinite(se):
+            out[name] = "not determined"
+        elif se is not None and rng and 2 * 1.96 * se > abs(rng[1] - rng[0]):
+            out[name] = "wider than typical"
+    return out
+
+
+def _follow_up_lines(results: dict) -> list[str]:
+    loose = undetermined_parameters(results)
+    if not loose:
+        return []
+    why = {"not determined": "not determined by the data",
+           "wider than typical": "its 95 % interval is wider than its typical range"}
+    return [f"**Left undetermined by this recording:** {'; '.join(f'{n} ({why[k]})' for n, k in loose.items())}. "
+            f"A motion that determines them (the follow-up that shrinks their standard errors most within the drive's "
+            f"limits): {_design_command(results)}.", ""]
 
 
 def _split_lines(results: dict) -> list[str]:
@@ -647,8 +636,8 @@ def _plot_lines(results: dict, out: Path) -> list[str]:
 
 
 #: The report's sections after its title, in order; each formats ``results.json`` alone.
-_SECTIONS = (_verdict_lines, _cautions_lines, _noise_lines, _split_lines, _candidate_lines, _combination_lines,
-             _baseline_lines, _signature_lines, _prediction_lines, _prediction_check_lines, _bound_lines,
+_SECTIONS = (_verdict_lines, _follow_up_lines, _cautions_lines, _noise_lines, _split_lines, _candidate_lines,
+             _combination_lines, _baseline_lines, _signature_lines, _prediction_lines, _prediction_check_lines, _bound_lines,
              _updated_model_lines, _time_lines)
 
 
