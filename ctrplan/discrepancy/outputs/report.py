@@ -33,7 +33,8 @@ from .results import json_default, results_dict
 from .report_plots import write_plots as _plots
 from . import words
 
-__all__ = ["write_report", "write_report_from_results", "report_markdown", "undetermined_parameters", "TABLE_VIII", "UNDEFINED"]
+__all__ = ["write_report", "write_report_from_results", "report_markdown", "undetermined_parameters", "TABLE_VIII",
+           "UNDEFINED"]
 
 logger = logging.getLogger(__name__)
 
