@@ -31,10 +31,13 @@ pilot and each follow-up together (``--data`` once per recording). A run names t
 verdict names the truth alone. Beside each verdict stands the comparison's strength: the ratio of
 the alternative's out-of-fold error to the truth's, its interval and p-value.
 
-**Calibration.** Beside each follow-up's verdict stands the predicted probability that the
-workflow's comparison prefers the truth after it (``ctrplan.design.predicted_preference``; the
-designs' own figure for the designed motions): :func:`calibration` sets it against the verdicts
-over every follow-up run, and ``--figure`` draws it.
+**Calibration.** Beside each follow-up's verdict stand two predictions: that the workflow's
+comparison prefers the truth over the alternative after it (``ctrplan.design.predicted_preference``;
+the designs' own figure for the designed motions), and that the workflow names the truth alone
+(``ctrplan.design.predicted_naming``: also below the pilot's calibrated baseline at Holm's first step
+over the pilot's candidates; computed on every follow-up as synthesized). :func:`calibration` sets
+the first against the comparison's significance and the second against the verdict, over every
+follow-up run, and ``--figure`` draws both.
 
 **Targets** (:func:`summarize`, for each designed follow-up): the truth named alone after it in at
 least :data:`TARGET_RIGHT` of the kept cases, and in at least :data:`TARGET_MARGIN` more of them than
@@ -278,6 +281,8 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
     compound = design_experiment(base, data, hyps, noise=noise, limits=ExperimentLimits(duration=FOLLOW_UP_S),
                                  search=DesignSearch(n_random=0, seed=seed, compound=True))
     compound_s = time.perf_counter() - t1
+    # (the designs are made without a baseline: their naming probability is computed below, for every
+    # follow-up alike, by predict_naming)
     drive = drive_from_data(base, data)
     runs, files = {}, {}
     for key, prims in (("designed", design.primitives), ("compound", compound.primitives),
@@ -325,6 +330,32 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
             "design_seconds": design_s, "seconds": cand["pilot_seconds"] + time.perf_counter() - t0}
 
 
+def predict_naming(case: dict, out: Path, jobs: int) -> dict:
+    """``case`` with ``runs[key]["predicted_named"]`` for every follow-up: the probability that the
+    workflow names the truth alone after the pilot and that follow-up
+    (:func:`ctrplan.design.predicted_naming`: the truth's error significantly below the pilot's
+    calibrated baseline at Holm's first step over the pilot's candidates, and below the alternative's),
+    computed on the follow-up as synthesized."""
+    from ctrplan.design import SensorNoise, predicted_naming, result_hypotheses
+    from ctrplan.discrepancy import load_measured_data
+
+    folder = out / f"draw-{case['draw']}"
+    base, _ = _truth_and_base(case)
+    first = json.loads((folder / "pilot" / "results.json").read_text())
+    hyps = result_hypotheses(first, [case["truth"], case["alternative"]])
+    baseline = result_hypotheses(first, ["baseline"])[0]
+    family = first["decision"].get("family") or [case["truth"], case["alternative"]]
+    data = load_measured_data(folder / "pilot.csv", base)
+    noise = SensorNoise.from_estimate(first["noise"]["noise"])
+    for key in FOLLOW_UPS:
+        follow_up = load_measured_data(folder / f"{key}.csv", base)
+        case["runs"][key]["predicted_named"] = predicted_naming(
+            base, data, hyps, baseline, follow_up, noise=noise, level=LEVEL, n_candidates=len(family), n_jobs=jobs,
+            seed=case["seed"])[case["truth"]]
+    case["n_candidates"] = len(family)
+    return case
+
+
 def summarize(draws: list, cases: list) -> dict:
     """Counts of the draws and the kept cases, the right verdicts after each follow-up with their 90 %
     intervals, the median comparison ratio per follow-up, and the targets."""
@@ -359,73 +390,84 @@ CALIBRATION_BINS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)
 LEVEL = 0.01
 
 
-def _calibration_points(cases: list) -> list:
-    """Per follow-up run with a prediction: ``(predicted, named the truth alone, the comparison of
-    the truth against the alternative significant at LEVEL)``."""
+#: The predictions checked, each against the outcome it predicts: ``(name, prediction key of a run,
+#: outcome)``. The comparison's preference against the comparison's significance at LEVEL; the
+#: naming probability against the truth named alone.
+CALIBRATIONS = (("comparison", "predicted", "comparison significant"),
+                ("naming", "predicted_named", "truth named alone"))
+
+
+def _calibration_points(cases: list, prediction: str) -> list:
+    """Per follow-up run with the prediction ``prediction``: ``(predicted, outcome)``, the outcome
+    the comparison significant at LEVEL (``"predicted"``) or the truth named alone
+    (``"predicted_named"``)."""
     out = []
     for c in cases:
         for key in FOLLOW_UPS:
             r = c["runs"][key]
-            p = r.get("predicted")
+            p = r.get(prediction)
             if p is None or not math.isfinite(p):
                 continue
-            comp = r.get("comparison") or {}
-            significant = comp.get("p_value") is not None and comp["p_value"] < LEVEL
-            out.append((float(p), bool(r["right"]), bool(significant)))
+            if prediction == "predicted":
+                comp = r.get("comparison") or {}
+                outcome = comp.get("p_value") is not None and comp["p_value"] < LEVEL
+            else:
+                outcome = r["right"]
+            out.append((float(p), bool(outcome)))
     return out
 
 
 def calibration(cases: list) -> dict:
-    """Predicted probability against what the runs showed, over every follow-up run: the Brier score
-    against each outcome, and per bin of :data:`CALIBRATION_BINS` the runs, the mean prediction and
-    the observed shares with their 90 % Clopper-Pearson intervals."""
+    """Each prediction of :data:`CALIBRATIONS` against its outcome over every follow-up run: the
+    Brier score, the Brier score of the outcome's base rate, and per bin of
+    :data:`CALIBRATION_BINS` the runs, the mean prediction and the observed share with its 90 %
+    Clopper-Pearson interval."""
     from bench_discrepancy_sweep import clopper_pearson
 
-    pts = _calibration_points(cases)
-    if not pts:
-        return {"n_runs": 0}
-    p, right, sig = (np.array(v, float) for v in zip(*pts))
-    bins = []
-    edges = CALIBRATION_BINS
-    for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
-        m = (p >= lo) & ((p < hi) if i < len(edges) - 2 else (p <= hi))
-        n = int(m.sum())
-        if not n:
+    result = {}
+    for name, prediction, outcome in CALIBRATIONS:
+        pts = _calibration_points(cases, prediction)
+        if not pts:
+            result[name] = {"n_runs": 0, "outcome": outcome}
             continue
-        bins.append({"from": lo, "to": hi, "n_runs": n, "mean_predicted": float(p[m].mean()),
-                     "named_alone": int(right[m].sum()), "named_alone_interval_90": clopper_pearson(int(right[m].sum()), n, 0.90),
-                     "comparison_significant": int(sig[m].sum()),
-                     "comparison_significant_interval_90": clopper_pearson(int(sig[m].sum()), n, 0.90)})
-    return {"n_runs": len(pts), "brier_named_alone": float(np.mean((p - right) ** 2)),
-            "brier_comparison": float(np.mean((p - sig) ** 2)),
-            "brier_named_alone_at_base_rate": float(np.mean((right.mean() - right) ** 2)),
-            "bins": bins}
+        p, y = (np.array(v, float) for v in zip(*pts))
+        bins = []
+        edges = CALIBRATION_BINS
+        for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+            m = (p >= lo) & ((p < hi) if i < len(edges) - 2 else (p <= hi))
+            n = int(m.sum())
+            if n:
+                bins.append({"from": lo, "to": hi, "n_runs": n, "mean_predicted": float(p[m].mean()),
+                             "observed": int(y[m].sum()), "observed_interval_90": clopper_pearson(int(y[m].sum()), n, 0.90)})
+        result[name] = {"outcome": outcome, "n_runs": len(pts), "brier": float(np.mean((p - y) ** 2)),
+                        "brier_at_base_rate": float(np.mean((y.mean() - y) ** 2)), "bins": bins}
+    return result
 
 
 def calibration_figure(cases: list, path: Path) -> None:
-    """Reliability diagram of :func:`calibration`: per bin, the observed share of runs that named the
-    truth alone and of runs whose comparison was significant against the mean prediction, with their
-    90 % intervals; the marker's area grows with the runs in the bin."""
+    """Reliability diagram of :func:`calibration`: per bin, the observed share of each prediction's
+    outcome against the mean prediction, with its 90 % interval; the marker's area grows with the
+    runs in the bin."""
     from ctrplan.plots import new_figure, save_figure
 
     cal = calibration(cases)
     fig = new_figure((5.0, 4.2))
     ax = fig.add_subplot(111)
     ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls="--", label="perfect calibration")
-    for key, label, marker, dx in (("named_alone", "truth named alone", "o", -0.008),
-                                   ("comparison_significant", "truth's comparison significant", "s", 0.008)):
-        for b in cal.get("bins", []):
+    for (name, _, outcome), marker, color, dx in zip(CALIBRATIONS, "so", ("C1", "C0"), (0.008, -0.008)):
+        label = {"comparison": "comparison's preference: significant", "naming": "naming: truth named alone"}[name]
+        for b in cal[name].get("bins", []):
             x, n = b["mean_predicted"] + dx, b["n_runs"]
-            lo, hi = b[f"{key}_interval_90"]
-            y = b[key] / n
+            lo, hi = b["observed_interval_90"]
+            y = b["observed"] / n
             ax.errorbar([x], [y], yerr=[[y - lo], [hi - y]], fmt=marker, ms=4 + 2 * math.sqrt(n), capsize=3,
-                        color="C0" if key == "named_alone" else "C1",
-                        label=label if b is cal["bins"][0] else None)
+                        color=color, label=label if b is cal[name]["bins"][0] else None)
     ax.set_xlim(-0.03, 1.03)
     ax.set_ylim(-0.03, 1.03)
-    ax.set_xlabel("predicted probability that the comparison prefers the truth")
+    ax.set_xlabel("predicted probability")
     ax.set_ylabel("observed share of follow-up runs")
-    ax.set_title(f"{cal['n_runs']} follow-up runs of {len(cases)} kept case{'s' if len(cases) != 1 else ''}", fontsize=9)
+    n_runs = max(c["n_runs"] for c in cal.values())
+    ax.set_title(f"{n_runs} follow-up runs of {len(cases)} kept case{'s' if len(cases) != 1 else ''}", fontsize=9)
     ax.legend(fontsize=8, loc="upper left")
     save_figure(fig, path)
 
@@ -480,6 +522,12 @@ def main(argv=None):
                 f.write(json.dumps(c, default=float) + "\n")
             print(f"case {k}: " + ", ".join(f"{key} {c['runs'][key]['verdict']} {c['runs'][key]['named_effects']}"
                                             for key in FOLLOW_UPS) + f" ({c['seconds']:.0f} s)", flush=True)
+    for k in sorted(cases):
+        if not args.results_only and any("predicted_named" not in r for r in cases[k]["runs"].values()):
+            cases[k] = predict_naming(cases[k], out, args.jobs)
+            cases_file.write_text("".join(json.dumps(cases[j], default=float) + "\n" for j in sorted(cases)))
+            print(f"case {k}: predicted naming " + ", ".join(f"{key} {cases[k]['runs'][key]['predicted_named']:.2f}"
+                                                          for key in FOLLOW_UPS), flush=True)
     kept = [cases[k] for k in sorted(cases)]
     if args.results_only:       # what was recorded: the candidates up to the last kept case run
         last = max(cases, default=-1)

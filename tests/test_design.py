@@ -319,8 +319,11 @@ def _results_json(tmp_path, robot_file, data_file):
         return {"model": h.model, "parameters": dict(zip(h.names, h.values.tolist())), "fixed": {},
                 "stderr": {n: 0.1 for n in h.free}}
 
+    base = ("precurvature_y_1", "precurvature_y_2", "k_xy_relative_2")
+    baseline = Hypothesis("baseline", "baseline", "standard", base, np.array((6.8, 6.9, 1.0)), free=base)
     res = {"robot_file": str(robot_file), "data_file": str(data_file), "frame": "robot", "verdict": "ambiguous",
-           "named_effect": "offplane", "ambiguous_with": "registration",
+           "named_effect": "offplane", "ambiguous_with": "registration", "baseline": {"fit": fit(baseline)},
+           "decision": {"family": ["offplane", "registration", "backlash"]},
            "candidates": {"offplane": {"label": "off-plane precurvature", "fit": fit(offplane)},
                           "registration": {"label": "registration", "fit": fit(registration)}},
            "noise": {"noise": {"position_rms_m": float(np.sqrt(3.0)) * SIGMA, "lag1_correlation": 0.2,
@@ -402,6 +405,9 @@ def test_cli_writes_a_trajectory_ready_to_run(tmp_path):
     pref = summary["preference"]
     assert set(pref) == {"recorded", "designed"} and set(pref["designed"]) == set(summary["separation"]["designed"])
     assert all(v is None or 0.0 <= v <= 1.0 for k in pref for v in pref[k].values())   # None: too few samples
+    # the result's baseline gives the probability of naming each hypothesis alone
+    assert set(summary["naming"]) == {"recorded", "designed"}
+    assert set(summary["naming"]["designed"]) == {"offplane", "registration"}
     samples = pd.read_csv(out / "samples.csv")
     assert {"time", "alpha_2", "tip_x__offplane", "tip_z__registration"} <= set(samples.columns)
     traj = read_joint_trajectory(out / "trajectory_bag")
@@ -550,6 +556,63 @@ def test_the_workflows_preference_grows_with_what_the_rival_misses_and_falls_wit
     assert np.isnan(preference_probability(wave[:30], white, level=0.01))        # fewer than two blocks
     with pytest.raises(ValueError, match="level"):
         preference_probability(wave, white, level=1.5)
+
+
+def test_naming_also_needs_the_baseline_beaten_at_holms_first_step():
+    """On the same simulated recordings the naming probability is never above the comparison's
+    preference (its event is the preference's and more), it falls to about the level where the
+    truth's signature over the baseline is hidden in the noise however clearly the rival is beaten,
+    rises to 1 when both are plain, and falls as the Holm family grows (a stricter first step).
+    Catches the baseline's test dropped or read the other way, noise drawn anew for the naming
+    (the inequality then fails on some sizes), and the Holm level applied to the wrong test."""
+    from ctrplan.design._verdict import naming_probability, preference_probability
+
+    K, s = 400, 0.3e-3
+    wave = np.zeros((K, 3))
+    wave[:, 0] = np.sin(np.linspace(0.0, 25.0, K))
+    other = np.zeros((K, 3))
+    other[:, 1] = np.cos(np.linspace(0.0, 17.0, K))
+    noise = SensorNoise(s)
+    for a, b in ((0.3, 1.0), (1.0, 0.3), (1.0, 1.0), (3.0, 0.5)):
+        named = naming_probability(b * s * other, [a * s * wave], noise, level=0.01, n_candidates=2, draws=200)
+        assert named <= preference_probability(a * s * wave, noise, level=0.01, draws=200) + 1e-12
+    assert naming_probability(0.02 * s * other, [3.0 * s * wave], noise, level=0.01, n_candidates=2,
+                              draws=200) <= 0.03
+    assert naming_probability(3.0 * s * other, [3.0 * s * wave], noise, level=0.01, n_candidates=2,
+                              draws=200) >= 0.99
+    one, eight = (naming_probability(0.8 * s * other, [3.0 * s * wave], noise, level=0.01, n_candidates=m,
+                                     draws=300) for m in (1, 8))
+    assert eight < one - 0.1
+    assert np.isnan(naming_probability(other[:30], [wave[:30]], noise, level=0.01, n_candidates=2))
+    with pytest.raises(ValueError, match="n_candidates"):
+        naming_probability(other, [wave], noise, level=0.01, n_candidates=0)
+    with pytest.raises(ValueError, match="one K"):
+        naming_probability(other, [wave[:200]], noise, level=0.01, n_candidates=2)
+
+
+def test_the_naming_of_any_follow_up_is_the_designs_own_figure_for_its_motion():
+    """``predicted_naming`` on the designed motion, given as samples, gives the design's own
+    naming probabilities (the baseline differentiated on the same samples as the hypotheses), never
+    above the comparison's preference for the same truth; the baseline given among the hypotheses
+    is refused."""
+    from ctrplan.design import predicted_naming
+
+    robot = load_robot(PAIR)
+    hyps = _pair_hypotheses(robot)
+    base = ("precurvature_y_1", "precurvature_y_2", "k_xy_relative_2")
+    baseline = Hypothesis("baseline", "baseline (no effect)", "standard", base, np.array((6.8, 6.9, 1.0)), free=base)
+    recorded = _sweep(robot, [[0.0], [1.5], [0.0]])
+    drive = DriveLimits(250.0, np.array([1.0]), np.array([4.0]), np.array([40.0]), ("alpha_2",))
+    noise = SensorNoise(SIGMA, lag1=0.5)
+    res = design_experiment(robot, recorded, hyps, noise=noise, limits=ExperimentLimits(drive=drive, duration=8.0),
+                            search=DesignSearch(n_random=0, seed=3), baseline=baseline, n_candidates=2)
+    follow = motion_data(robot, res.time, res.joints, frame=recorded.frame)
+    after = predicted_naming(robot, recorded, hyps, baseline, follow, noise=noise, n_candidates=2, seed=3)
+    assert after == res.naming["designed"]
+    assert set(after) == {"offplane", "registration"}
+    assert after["offplane"] <= res.preference["designed"]["offplane>registration"] + 1e-12
+    with pytest.raises(DesignInputError, match="baseline"):
+        predicted_naming(robot, recorded, (*hyps, baseline), hyps[0], noise=noise)
 
 
 def test_a_shifted_reversal_moves_then_reverses_about_the_new_value_within_the_limits():

@@ -25,7 +25,7 @@ from ..drive import DriveLimits
 from ._criteria import (Information, ds_criterion, information, long_run_factor, noise_weight, prior_precision,
                         sensitivities)
 from ._hypotheses import DesignInputError
-from ._verdict import _pair_name, preference_table, recorded_rows
+from ._verdict import _pair_name, naming_table, preference_table, recorded_rows
 from ._motions import feasible, joint_configurations, motion_data, primitives, sample, trajectory
 
 logger = logging.getLogger(__name__)
@@ -93,6 +93,11 @@ class DesignResult:
         true (:func:`~ctrplan.design._verdict.preference_probability`; the recording as the
         samples the design evaluated, :func:`~ctrplan.design._verdict.recorded_rows`). Empty in
         parameters mode.
+    naming : dict
+        Separate mode with a baseline given: ``"recorded"`` and ``"designed"``, each ``{key:
+        probability}`` per hypothesis [-]: that the workflow names it alone when it is true, its
+        error significantly below the baseline's (Holm's first step) and every rival's
+        (:func:`~ctrplan.design._verdict.naming_probability`). Empty otherwise.
     noise_position : float
         Sensor noise per coordinate used [m].
     noise_inflation : float
@@ -137,6 +142,7 @@ class DesignResult:
     confounded: dict = field(default_factory=dict)
     preference: dict = field(default_factory=dict)
     search: object = None
+    naming: dict = field(default_factory=dict)
 
     @property
     def duration(self) -> float:
@@ -230,6 +236,12 @@ class _Evaluator:
     def sens(self, data):
         out = [sensitivities(self.robot, h, data, self.settings, n_jobs=self.n_jobs) for h in self.hyps]
         self.evaluations += sum(s.evaluations for s in out)
+        return out
+
+    def sens_of(self, hyp, data):
+        """:func:`sensitivities` of one hypothesis (counted)."""
+        out = sensitivities(self.robot, hyp, data, self.settings, n_jobs=self.n_jobs)
+        self.evaluations += out.evaluations
         return out
 
     def info(self, data) -> Information:
@@ -379,7 +391,8 @@ class DesignSearch:
 
 
 def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: ExperimentLimits = ExperimentLimits(),
-                      interest=None, settings=None, search: DesignSearch = DesignSearch()) -> DesignResult:
+                      interest=None, settings=None, search: DesignSearch = DesignSearch(), baseline=None,
+                      n_candidates: int | None = None) -> DesignResult:
     """Design the next measured trajectory.
 
     Parameters
@@ -402,6 +415,13 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
     settings : ModelSettings, optional
     search : DesignSearch
         Random motions to compare with, their seed, worker processes.
+    baseline : Hypothesis, optional
+        Separate mode: the model with no effect as the recording's run fitted it
+        (``result_hypotheses(results, ["baseline"])[0]``); given, the result's ``naming`` holds the
+        probability that the workflow names each hypothesis alone. It does not change the search.
+    n_candidates : int, optional
+        With ``baseline``: the candidates the workflow tries alone (its Holm family,
+        ``results.json["decision"]["family"]``); default the number of hypotheses.
 
     Returns
     -------
@@ -410,9 +430,9 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
     Raises
     ------
     DesignInputError
-        No hypothesis, a parameter of interest the hypothesis does not fit, data without times, a
-        start that is not valid (outside the limits, unstable, in collision), or no feasible
-        primitive from the start.
+        No hypothesis, the baseline among the hypotheses, a parameter of interest the hypothesis
+        does not fit, data without times, a start that is not valid (outside the limits, unstable,
+        in collision), or no feasible primitive from the start.
     """
     from ..planning.collision import CollisionChecker
     from ..planning.planners import ValidityChecker
@@ -422,6 +442,8 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
     hyps = tuple(hypotheses)
     if not hyps:
         raise DesignInputError("no hypothesis to design for")
+    if baseline is not None and any(h.key == baseline.key for h in hyps):
+        raise DesignInputError(f"the baseline {baseline.key!r} is given among the hypotheses")
     mode = DesignMode.SEPARATE if len(hyps) > 1 else DesignMode.PARAMETERS
     noise_position, drive, obstacles, start, duration, rest = (noise.position, limits.drive, limits.obstacles,
                                                                limits.start, limits.duration, limits.rest)
@@ -600,10 +622,18 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
                 cov = i.covariance(0, prior)
                 ses.append({n: float(np.sqrt(cov[j, j])) for n, j in zip(interest, interest_idx)})
             stderr[key] = ses if key == "random" else ses[0]
-    preference = {}
+    preference, naming = {}, {}
     if mode == DesignMode.SEPARATE:
         for key, parts in (("recorded", [recorded_sens]), ("designed", [recorded_sens, sens])):
             preference[key] = preference_table(hyps, parts, noise, level=POWER_LEVEL, seed=seed)
+        if baseline is not None:
+            t0 = time.perf_counter()
+            base_recorded, base_designed = ev.sens_of(baseline, data.take(rows)), ev.sens_of(baseline, d)
+            m = len(hyps) if n_candidates is None else int(n_candidates)
+            for key, parts in (("recorded", [[*recorded_sens, base_recorded]]),
+                               ("designed", [[*recorded_sens, base_recorded], [*sens, base_designed]])):
+                naming[key] = naming_table(hyps, parts, noise, level=POWER_LEVEL, n_candidates=m, seed=seed)
+            seconds["naming"] = time.perf_counter() - t0
     confounded = {}
     if mode == DesignMode.PARAMETERS:
         cov = designed.covariance(0, prior)
@@ -619,4 +649,4 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
                         power=power, noise_position=float(noise_position), noise_inflation=float(inflation),
                         budget=budget, noise_lower_bound=bool(noise.lower_bound), seconds=seconds, evaluations=ev.evaluations,
                         random_primitives=tuple(random_walks), confounded=confounded, preference=preference,
-                        search=search)
+                        search=search, naming=naming)

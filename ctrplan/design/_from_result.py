@@ -96,6 +96,14 @@ def design_from_result(result_dir, *, hypotheses=None, parameters=None, robot_fi
         sc = load_scenario(scenario_file)
         drive, obstacles, start = sc.drive, sc.obstacles, sc.start
     limits = ExperimentLimits(drive=drive, obstacles=tuple(obstacles or ()), start=start, duration=duration, rest=rest)
+    baseline = family = None
+    if len(hyps) > 1 and all(h.key != "baseline" for h in hyps):
+        try:
+            baseline = result_hypotheses(results, ["baseline"], where=where)[0]
+        except DesignInputError:
+            baseline = None     # a result without a baseline fit: no naming probability
+        family = ((results.get("decision") or {}).get("family")) or None
     res = design_experiment(robot, data, hyps, noise=noise, limits=limits,
-                            interest=list(parameters) if parameters else None, search=search)
+                            interest=list(parameters) if parameters else None, search=search, baseline=baseline,
+                            n_candidates=len(family) if family else None)
     return res, robot, data

@@ -17,9 +17,13 @@ of :data:`DRAWS` simulated recordings in which A's error is significantly lower.
 What it leaves out: the test split held back before any fit (the folds here use every sample), the
 refits per fold (B is refitted once, on all samples: its out-of-fold error is a little larger in
 the workflow), the tangent angles the workflow's error also holds where the tracker measures them,
-and the other gates of naming (each candidate against the baseline, Holm's adjustment over the
-candidates, the separability of the leading two). It is a probability of the comparison between
-the two, not of the whole verdict.
+and the other gates of naming. :func:`naming_probability` adds the first of them: on the same
+simulated recordings, the true hypothesis's error must also be significantly lower than the
+baseline's (the model with no effect, its tube parameters refitted) at ``level / m``, Holm's first
+step over the ``m`` candidates the workflow tried alone. What the naming probability still leaves
+out: the later steps of Holm's procedure (a rival significant against the baseline only at a looser
+step), the separability check of the leading two (their fields' correlation on the motion), the
+second-effect stage (which may add a rival beside the truth) and the test split.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import math
 import numpy as np
 
 __all__ = ["unexplained", "preference_probability", "predicted_preference", "preference_table", "recorded_rows",
+           "naming_probability", "predicted_naming", "naming_table",
            "BLOCK_SAMPLES", "N_FOLDS", "DRAWS", "MAX_RECORDED_SAMPLES"]
 
 #: Samples per time block of the simulated split [-] (the workflow's development blocks are at
@@ -117,16 +122,28 @@ def preference_probability(u, noise, *, level: float, draws: int = DRAWS, block:
     u = np.asarray(u, dtype=float)
     if u.ndim != 2 or u.shape[1] != 3:
         raise ValueError(f"u needs shape (K, 3) [m], got {u.shape}")
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level {level!r} must be in (0, 1)")
-    if min(draws, block, n_folds) < 1:
-        raise ValueError(f"draws, block and n_folds must be >= 1, got {draws}, {block}, {n_folds}")
+    _checked(level, draws, block, n_folds)
     u = u[np.all(np.isfinite(u), axis=1)]
-    K = u.shape[0]
-    n_folds = min(n_folds, K // block)      # a short recording has fewer folds, as in the workflow
-    if n_folds < 2:
+    folds = _folds(u.shape[0], block, n_folds)
+    if folds is None:
         return float("nan")
-    fold = (np.arange(K) // block) % n_folds
+    n = _noise_draws(u.shape[0], noise, draws, seed)
+    err_true = np.linalg.norm(n, axis=2)
+    err_rival = np.linalg.norm(n + u[:, None, :], axis=2)
+    hits = sum(cv_comparison(err_rival[:, d], err_true[:, d], folds).p_value < level for d in range(draws))
+    return hits / draws
+
+
+def _folds(K: int, block: int, n_folds: int):
+    """Fold of each of K samples in time order (blocks of ``block`` dealt in turn to at most
+    ``n_folds`` folds), or None when they make fewer than two folds."""
+    n_folds = min(n_folds, K // block)      # a short recording has fewer folds, as in the workflow
+    return None if n_folds < 2 else (np.arange(K) // block) % n_folds
+
+
+def _noise_draws(K: int, noise, draws: int, seed: int) -> np.ndarray:
+    """``draws`` simulated noise records of K samples, shape (K, draws, 3) [m]: a white part and a
+    stationary AR(1) part of :class:`~ctrplan.design.SensorNoise`."""
     rng = np.random.default_rng(seed)
     s = float(noise.position)
     phi = float(noise.lag1) if noise.lag1 else 0.0
@@ -138,10 +155,68 @@ def preference_probability(u, noise, *, level: float, draws: int = DRAWS, block:
     step = math.sqrt(max(1.0 - phi * phi, 0.0))
     for k in range(1, K):                    # stationary AR(1) of variance s^2 share
         corr[k] = phi * corr[k - 1] + step * innov[k]
-    n = white + corr
+    return white + corr
+
+
+def _checked(level: float, draws: int, block: int, n_folds: int) -> None:
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level {level!r} must be in (0, 1)")
+    if min(draws, block, n_folds) < 1:
+        raise ValueError(f"draws, block and n_folds must be >= 1, got {draws}, {block}, {n_folds}")
+
+
+def naming_probability(u_baseline, u_rivals, noise, *, level: float, n_candidates: int, draws: int = DRAWS,
+                       block: int = BLOCK_SAMPLES, n_folds: int = N_FOLDS, seed: int = 0) -> float:
+    """Probability that the workflow names the true hypothesis alone, as far as its fold
+    comparisons decide it: on one simulated recording, the truth's error is significantly lower than
+    the baseline's at ``level / n_candidates`` (Holm's first step) and than every rival's at
+    ``level`` (module docstring for what is left out).
+
+    Parameters
+    ----------
+    u_baseline : array-like, shape (K, 3)
+        What the baseline cannot reproduce of the truth at each sample, in time order [m]
+        (:func:`unexplained`).
+    u_rivals : sequence of array-like, each shape (K, 3)
+        The same for each rival hypothesis, at the same samples [m].
+    noise : SensorNoise
+    level : float
+        The workflow's significance level, in (0, 1).
+    n_candidates : int
+        Candidates the workflow tries alone (its Holm family), >= 1.
+    draws, block, n_folds, seed : int
+        As :func:`preference_probability`.
+
+    Returns
+    -------
+    float
+        In [0, 1]; NaN when the samples make fewer than two blocks.
+
+    Raises
+    ------
+    ValueError
+        ``level`` outside (0, 1), ``n_candidates`` below 1, arrays not of shape (K, 3) for one K, or
+        ``draws``, ``block`` or ``n_folds`` below 1.
+    """
+    from ..discrepancy.verdict.statistics import cv_comparison
+
+    _checked(level, draws, block, n_folds)
+    if n_candidates < 1:
+        raise ValueError(f"n_candidates must be >= 1, got {n_candidates}")
+    us = [np.asarray(u, dtype=float) for u in (u_baseline, *u_rivals)]
+    if any(u.ndim != 2 or u.shape[1] != 3 or u.shape[0] != us[0].shape[0] for u in us):
+        raise ValueError(f"every u needs shape (K, 3) [m] for one K, got {[u.shape for u in us]}")
+    keep = np.all([np.all(np.isfinite(u), axis=1) for u in us], axis=0)
+    us = [u[keep] for u in us]
+    folds = _folds(int(keep.sum()), block, n_folds)
+    if folds is None:
+        return float("nan")
+    n = _noise_draws(int(keep.sum()), noise, draws, seed)
     err_true = np.linalg.norm(n, axis=2)
-    err_rival = np.linalg.norm(n + u[:, None, :], axis=2)
-    hits = sum(cv_comparison(err_rival[:, d], err_true[:, d], fold).p_value < level for d in range(draws))
+    errs = [np.linalg.norm(n + u[:, None, :], axis=2) for u in us]
+    levels = [level / n_candidates] + [level] * (len(us) - 1)
+    hits = sum(all(cv_comparison(e[:, d], err_true[:, d], folds).p_value < lv for e, lv in zip(errs, levels))
+               for d in range(draws))
     return hits / draws
 
 
@@ -228,3 +303,107 @@ def predicted_preference(robot, recorded, hypotheses, follow_up=None, *, noise, 
     if follow_up is not None:
         parts.append([sensitivities(robot, h, follow_up, settings, n_jobs=n_jobs) for h in hyps])
     return preference_table(hyps, parts, noise, level=level, seed=seed)
+
+
+def _on_common_samples(sens: list) -> list:
+    """The hypotheses' sensitivities of one recording, each marked converged only where all are."""
+    from dataclasses import replace
+
+    ok = np.all([s.ok for s in sens], axis=0)
+    return [replace(s, ok=ok) for s in sens]
+
+
+def naming_table(hyps, parts, noise, *, level: float, n_candidates: int, seed: int = 0) -> dict:
+    """:func:`naming_probability` with each hypothesis true and the others its rivals.
+
+    Parameters
+    ----------
+    hyps : sequence of Hypothesis
+        Two or more.
+    parts : sequence of sequence of Sensitivities
+        Per recording, one :class:`~ctrplan.design.Sensitivities` per hypothesis in the order of
+        ``hyps``, then the baseline's (the model with no effect,
+        ``result_hypotheses(results, ["baseline"])``).
+    noise : SensorNoise
+    level : float
+        The workflow's significance level, in (0, 1).
+    n_candidates : int
+        Candidates the workflow tries alone (its Holm family).
+    seed : int
+
+    Returns
+    -------
+    dict
+        ``{key: probability}`` [-] per hypothesis.
+    """
+    n = len(hyps)
+    parts = [_on_common_samples(list(p)) for p in parts]
+    out = {}
+    for a in range(n):
+        truth = [p[a] for p in parts]
+        u_base = unexplained(truth, [p[n] for p in parts])
+        u_rivals = [unexplained(truth, [p[b] for p in parts]) for b in range(n) if b != a]
+        out[hyps[a].key] = naming_probability(u_base, u_rivals, noise, level=level, n_candidates=n_candidates,
+                                              seed=seed)
+    return out
+
+
+def predicted_naming(robot, recorded, hypotheses, baseline, follow_up=None, *, noise, level: float = 0.01,
+                     n_candidates: int | None = None, settings=None, n_jobs: int = 1, seed: int = 0) -> dict:
+    """Probability that the discrepancy workflow names each hypothesis alone, when it is true, after
+    ``recorded`` and a follow-up recording of any motion: its error significantly below the
+    baseline's (Holm's first step) and below every rival's (:func:`naming_probability`).
+
+    Parameters
+    ----------
+    robot : Robot
+        The robot file the hypotheses were fitted to.
+    recorded : MeasuredData
+        The recording the hypotheses were fitted on (its joints and times; its tips are not read).
+    hypotheses : sequence of Hypothesis
+        Two or more, the baseline not among them (:func:`~ctrplan.design.result_hypotheses`).
+    baseline : Hypothesis
+        The model with no effect, as the recording's run fitted it
+        (``result_hypotheses(results, ["baseline"])[0]``).
+    follow_up : MeasuredData, optional
+        The follow-up's samples with their motion history; None: the recording alone.
+    noise : SensorNoise
+        Sensor noise per tip coordinate [m].
+    level : float
+        The workflow's significance level, in (0, 1) (its default 0.01).
+    n_candidates : int, optional
+        Candidates the workflow tries alone (``results.json["decision"]["family"]``); default the
+        number of hypotheses.
+    settings : ModelSettings, optional
+    n_jobs : int
+        Processes the model evaluations run on.
+    seed : int
+        Seed of the simulated noise.
+
+    Returns
+    -------
+    dict
+        ``{key: probability}`` [-] per hypothesis.
+
+    Raises
+    ------
+    DesignInputError
+        Fewer than two hypotheses, or the baseline among them.
+    ValueError
+        ``level`` outside (0, 1) or ``n_candidates`` below 1.
+    """
+    from ._criteria import sensitivities
+    from ._hypotheses import DesignInputError
+
+    hyps = tuple(hypotheses)
+    if len(hyps) < 2:
+        raise DesignInputError(f"a naming probability needs two or more hypotheses, got {len(hyps)}")
+    if any(h.key == baseline.key for h in hyps):
+        raise DesignInputError(f"the baseline {baseline.key!r} is given among the hypotheses")
+    every = (*hyps, baseline)
+    thinned = recorded.take(recorded_rows(recorded.n_samples))
+    parts = [[sensitivities(robot, h, thinned, settings, n_jobs=n_jobs) for h in every]]
+    if follow_up is not None:
+        parts.append([sensitivities(robot, h, follow_up, settings, n_jobs=n_jobs) for h in every])
+    return naming_table(hyps, parts, noise, level=level,
+                        n_candidates=len(hyps) if n_candidates is None else n_candidates, seed=seed)
