@@ -533,6 +533,8 @@ def test_what_the_rival_cannot_reproduce_is_the_residual_after_its_refit():
     parts_t = [_sens((spanned + other)[:half], np.zeros((half, 3, 1))), _sens((spanned + other)[half:], np.zeros((K - half, 3, 1)))]
     parts_r = [_sens(np.zeros((half, 3)), J[:half]), _sens(np.zeros((K - half, 3)), J[half:])]
     np.testing.assert_allclose(unexplained(parts_t, parts_r), other, atol=1e-15)
+    # a rival with no free parameter (a baseline held at the robot file's values) keeps the whole difference
+    np.testing.assert_array_equal(unexplained(truth, [_sens(np.zeros((K, 3)), np.zeros((K, 3, 0)))]), spanned + other)
 
 
 def test_the_workflows_preference_grows_with_what_the_rival_misses_and_falls_with_correlated_noise():

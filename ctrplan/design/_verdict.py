@@ -77,8 +77,8 @@ def unexplained(sens_true, sens_rival) -> np.ndarray:
     J = np.concatenate(jb) if jb else np.zeros((0, 3, 0))
     if not r.size:
         return r.reshape(0, 3)
-    flat_j = J.reshape(-1, J.shape[2])
-    if flat_j.shape[1]:
+    if J.shape[2]:              # a rival without free parameters (a baseline held at the robot file) is not refitted
+        flat_j = J.reshape(-1, J.shape[2])
         delta = np.linalg.lstsq(flat_j, r.reshape(-1), rcond=None)[0]
         r = r - (flat_j @ delta).reshape(r.shape)
     return r
