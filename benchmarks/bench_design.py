@@ -260,7 +260,7 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
     """A kept case's four follow-ups of :data:`FOLLOW_UP_S` and the discrepancy run on the pilot
     with each; its line of ``cases.jsonl``."""
     from ctrplan.design import (DesignSearch, ExperimentLimits, SensorNoise, design_experiment, drive_from_data,
-                                predicted_preference, result_hypotheses, sample, trajectory)
+                                result_hypotheses, sample, trajectory)
     from ctrplan.discrepancy import load_measured_data
 
     t0 = time.perf_counter()
@@ -308,14 +308,6 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
     for key in FOLLOW_UPS:
         res = _discrepancy(model, [pilot, files[key]], folder / key, effects, jobs, seed)
         runs[key].update(_verdict(res, truth_e, alt_e))
-    # the predicted probability that the workflow's comparison prefers the truth after each follow-up:
-    # the designs' own figures, and the same computation on the random and the repeated motion
-    pair = f"{truth_e}>{alt_e}"
-    runs["designed"]["predicted"] = design.preference["designed"][pair]
-    runs["compound"]["predicted"] = compound.preference["designed"][pair]
-    for key in ("random", "repeated"):
-        runs[key]["predicted"] = predicted_preference(base, data, hyps, load_measured_data(files[key], base),
-                                                      noise=noise, seed=seed)[pair]
     def smallest(sep):
         return {k: (min(v.values()) if isinstance(v, dict) else [min(x.values()) for x in v]) for k, v in sep.items()}
 
@@ -325,18 +317,23 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
                          "predicted_preference": compound.preference, "seconds": compound_s,
                          "primitives": [p.describe(base.joint_names) for p in compound.primitives]},
             "noise_lower_bound": design.noise_lower_bound, "runs": runs,
-            "pilot_predicted": design.preference["recorded"][pair],
             "primitives": [p.describe(base.joint_names) for p in design.primitives],
             "design_seconds": design_s, "seconds": cand["pilot_seconds"] + time.perf_counter() - t0}
 
 
-def predict_naming(case: dict, out: Path, jobs: int) -> dict:
-    """``case`` with ``runs[key]["predicted_named"]`` for every follow-up: the probability that the
-    workflow names the truth alone after the pilot and that follow-up
-    (:func:`ctrplan.design.predicted_naming`: the truth's error significantly below the pilot's
-    calibrated baseline at Holm's first step over the pilot's candidates, and below the alternative's),
-    computed on the follow-up as synthesized."""
-    from ctrplan.design import SensorNoise, predicted_naming, result_hypotheses
+#: What the predictions of :func:`predict` simulate; a case recorded with other predictions is
+#: predicted again.
+PREDICTIONS = "workflow split, naming"
+
+
+def predict(case: dict, out: Path, jobs: int) -> dict:
+    """``case`` with two predictions for every follow-up, computed alike on the follow-up as
+    synthesized: ``runs[key]["predicted"]``, that the workflow's comparison prefers the truth over
+    the alternative (:func:`ctrplan.design.predicted_preference`), and
+    ``runs[key]["predicted_named"]``, that the workflow names the truth alone
+    (:func:`ctrplan.design.predicted_naming`: also below the pilot's calibrated baseline at Holm's
+    first step over the pilot's candidates)."""
+    from ctrplan.design import SensorNoise, predicted_naming, predicted_preference, result_hypotheses
     from ctrplan.discrepancy import load_measured_data
 
     folder = out / f"draw-{case['draw']}"
@@ -347,12 +344,16 @@ def predict_naming(case: dict, out: Path, jobs: int) -> dict:
     family = first["decision"].get("family") or [case["truth"], case["alternative"]]
     data = load_measured_data(folder / "pilot.csv", base)
     noise = SensorNoise.from_estimate(first["noise"]["noise"])
+    pair = f"{case['truth']}>{case['alternative']}"
     for key in FOLLOW_UPS:
         follow_up = load_measured_data(folder / f"{key}.csv", base)
-        case["runs"][key]["predicted_named"] = predicted_naming(
-            base, data, hyps, baseline, follow_up, noise=noise, level=LEVEL, n_candidates=len(family), n_jobs=jobs,
-            seed=case["seed"])[case["truth"]]
-    case["n_candidates"] = len(family)
+        run = case["runs"][key]
+        run["predicted"] = predicted_preference(base, data, hyps, follow_up, noise=noise, level=LEVEL, n_jobs=jobs,
+                                                seed=case["seed"])[pair]
+        run["predicted_named"] = predicted_naming(base, data, hyps, baseline, follow_up, noise=noise, level=LEVEL,
+                                                  n_candidates=len(family), n_jobs=jobs, seed=case["seed"])[case["truth"]]
+    case["pilot_predicted"] = predicted_preference(base, data, hyps, noise=noise, level=LEVEL, seed=case["seed"])[pair]
+    case["n_candidates"], case["predictions"] = len(family), PREDICTIONS
     return case
 
 
@@ -472,6 +473,52 @@ def calibration_figure(cases: list, path: Path) -> None:
     save_figure(fig, path)
 
 
+#: Short names of the effects in the table of :func:`markdown_table`.
+SHORT = {"offplane": "off-plane", "registration": "registration", "backlash": "backlash", "friction": "friction",
+         "time_offset": "lag", "gradual_friction": "gradual friction"}
+
+
+def _size(hidden: dict) -> str:
+    """The hidden effect's values in report units (deg for angles, s, 1/m)."""
+    parts = []
+    for values in hidden.values():
+        for name, v in values.items():
+            if name.startswith("backlash"):
+                parts.append(f"{math.degrees(v):.1f} deg")
+            elif name == "time_offset":
+                parts.append(f"{v:+.2f} s")
+            else:
+                parts.append(f"{v:+.2f} 1/m")
+    return ", ".join(parts)
+
+
+def _cell(run: dict) -> str:
+    """A run's verdict (the named effects, bold when the truth alone), its comparison ratio and the
+    predicted probability of naming the truth alone."""
+    v = run["verdict"]
+    text = ("ambiguous" if v == "ambiguous" else "nothing" if v == "none" else
+            " + ".join(SHORT.get(e, e) for e in run["named_effects"]))
+    if run.get("right"):
+        text = f"**{text}**"
+    ratio = (run.get("comparison") or {}).get("ratio")
+    pred = run.get("predicted_named")
+    return (text + (f", {ratio:.2f}" if ratio is not None else "")
+            + (f" ({pred:.2f})" if pred is not None and math.isfinite(pred) else ""))
+
+
+def markdown_table(cases: list) -> str:
+    """The kept cases as a markdown table: robot, truth against the alternative with the hidden
+    values, the pilot's verdict and each follow-up's (:func:`_cell`), the greedy design's seconds."""
+    lines = ["| case | robot | truth (hidden) vs alternative | pilot | + designed | + compound | + random | "
+             "+ repeated | design [s] |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for c in cases:
+        cells = [_cell(c["runs"][k]) for k in FOLLOW_UPS]
+        pilot = _cell({**c["pilot"], "predicted_named": None})
+        lines.append(f"| {c['draw']} | {c['robot']} | {SHORT[c['truth']]} ({_size(c['hidden'])}) vs "
+                     f"{SHORT[c['alternative']]} | {pilot} | " + " | ".join(cells) + f" | {c['design_seconds']:.0f} |")
+    return "\n".join(lines)
+
+
 def _read(path: Path, key: str) -> dict:
     out = {}
     if path.exists():
@@ -523,11 +570,12 @@ def main(argv=None):
             print(f"case {k}: " + ", ".join(f"{key} {c['runs'][key]['verdict']} {c['runs'][key]['named_effects']}"
                                             for key in FOLLOW_UPS) + f" ({c['seconds']:.0f} s)", flush=True)
     for k in sorted(cases):
-        if not args.results_only and any("predicted_named" not in r for r in cases[k]["runs"].values()):
-            cases[k] = predict_naming(cases[k], out, args.jobs)
+        if not args.results_only and cases[k].get("predictions") != PREDICTIONS:
+            cases[k] = predict(cases[k], out, args.jobs)
             cases_file.write_text("".join(json.dumps(cases[j], default=float) + "\n" for j in sorted(cases)))
-            print(f"case {k}: predicted naming " + ", ".join(f"{key} {cases[k]['runs'][key]['predicted_named']:.2f}"
-                                                          for key in FOLLOW_UPS), flush=True)
+            print(f"case {k}: predicted (comparison, naming) " + ", ".join(
+                f"{key} {cases[k]['runs'][key]['predicted']:.2f}, {cases[k]['runs'][key]['predicted_named']:.2f}"
+                for key in FOLLOW_UPS), flush=True)
     kept = [cases[k] for k in sorted(cases)]
     if args.results_only:       # what was recorded: the candidates up to the last kept case run
         last = max(cases, default=-1)
@@ -540,6 +588,7 @@ def main(argv=None):
     if kept:
         calibration_figure(kept, Path(args.figure))
     print(json.dumps(results["summary"], indent=1))
+    print(markdown_table(kept))
 
 
 if __name__ == "__main__":

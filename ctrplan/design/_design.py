@@ -25,7 +25,7 @@ from ..drive import DriveLimits
 from ._criteria import (Information, ds_criterion, information, long_run_factor, noise_weight, prior_precision,
                         sensitivities)
 from ._hypotheses import DesignInputError
-from ._verdict import _pair_name, naming_table, preference_table, recorded_rows
+from ._verdict import _pair_name, naming_table, preference_table, recorded_rows, workflow_split
 from ._motions import feasible, joint_configurations, motion_data, primitives, sample, trajectory
 
 logger = logging.getLogger(__name__)
@@ -624,15 +624,17 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
             stderr[key] = ses if key == "random" else ses[0]
     preference, naming = {}, {}
     if mode == DesignMode.SEPARATE:
+        plans = {"recorded": workflow_split(K, len(rows)), "designed": workflow_split([K, len(ts)], len(rows) + len(ts))}
         for key, parts in (("recorded", [recorded_sens]), ("designed", [recorded_sens, sens])):
-            preference[key] = preference_table(hyps, parts, noise, level=POWER_LEVEL, seed=seed)
+            preference[key] = preference_table(hyps, parts, noise, level=POWER_LEVEL, plan=plans[key], seed=seed)
         if baseline is not None:
             t0 = time.perf_counter()
             base_recorded, base_designed = ev.sens_of(baseline, data.take(rows)), ev.sens_of(baseline, d)
             m = len(hyps) if n_candidates is None else int(n_candidates)
             for key, parts in (("recorded", [[*recorded_sens, base_recorded]]),
                                ("designed", [[*recorded_sens, base_recorded], [*sens, base_designed]])):
-                naming[key] = naming_table(hyps, parts, noise, level=POWER_LEVEL, n_candidates=m, seed=seed)
+                naming[key] = naming_table(hyps, parts, noise, level=POWER_LEVEL, n_candidates=m, plan=plans[key],
+                                           seed=seed)
             seconds["naming"] = time.perf_counter() - t0
     confounded = {}
     if mode == DesignMode.PARAMETERS:

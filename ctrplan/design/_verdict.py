@@ -8,15 +8,16 @@ and the follow-up together), B keeps the part of A's signature its parameters ca
 same linearization as the separation ``T = sum |u_k|^2 / s^2`` of :mod:`._criteria`). A simulated
 recording draws the sensor noise ``n_k`` of :class:`~ctrplan.design.SensorNoise` (a white part and
 an AR(1) part, per tip coordinate); A's error at sample k is ``|n_k|`` and B's ``|n_k + u_k|``. The
-samples are cut in time order into blocks of :data:`BLOCK_SAMPLES`, dealt to :data:`N_FOLDS` folds
-(the workflow's development split, :mod:`ctrplan.discrepancy.measured.split`), and the workflow's
-own test decides: :func:`ctrplan.discrepancy.verdict.statistics.cv_comparison`, the corrected
+samples are split as the workflow splits a record of their number (:func:`workflow_split`, the rule
+of :mod:`ctrplan.discrepancy.measured.split`): time blocks, those spread over the motion held back
+as the test split, the others dealt in turn to the cross-validation folds; and the workflow's own
+test decides: :func:`ctrplan.discrepancy.verdict.statistics.cv_comparison`, the corrected
 resampled t test of the folds' log error ratios, one-sided at ``level``. The probability is the share
 of :data:`DRAWS` simulated recordings in which A's error is significantly lower.
 
-What it leaves out: the test split held back before any fit (the folds here use every sample), the
-refits per fold (B is refitted once, on all samples: its out-of-fold error is a little larger in
-the workflow), the tangent angles the workflow's error also holds where the tracker measures them,
+What it leaves out: the longer blocks the workflow cuts where the residuals stay correlated past
+half a block, the buffers beside each validated block, the refits per fold (B is refitted once, on
+all samples: its out-of-fold error is a little larger in the workflow), the tangent angles the workflow's error also holds where the tracker measures them,
 and the other gates of naming. :func:`naming_probability` adds the first of them: on the same
 simulated recordings, the true hypothesis's error must also be significantly lower than the
 baseline's (the model with no effect, its tube parameters refitted) at ``level / m``, Holm's first
@@ -29,18 +30,14 @@ second-effect stage (which may add a rival beside the truth) and the test split.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 __all__ = ["unexplained", "preference_probability", "predicted_preference", "preference_table", "recorded_rows",
            "naming_probability", "predicted_naming", "naming_table",
-           "BLOCK_SAMPLES", "N_FOLDS", "DRAWS", "MAX_RECORDED_SAMPLES"]
+           "workflow_split", "FoldPlan", "DRAWS", "MAX_RECORDED_SAMPLES"]
 
-#: Samples per time block of the simulated split [-] (the workflow's development blocks are at
-#: least 20 samples long).
-BLOCK_SAMPLES = 20
-#: Folds the blocks are dealt to [-] (the workflow's cross-validation folds).
-N_FOLDS = 10
 #: Simulated recordings per probability [-].
 DRAWS = 400
 #: Recorded samples the hypotheses are differentiated at, at most (evenly spaced, both ends kept).
@@ -84,8 +81,8 @@ def unexplained(sens_true, sens_rival) -> np.ndarray:
     return r
 
 
-def preference_probability(u, noise, *, level: float, draws: int = DRAWS, block: int = BLOCK_SAMPLES,
-                           n_folds: int = N_FOLDS, seed: int = 0) -> float:
+def preference_probability(u, noise, *, level: float, draws: int = DRAWS, plan: "FoldPlan | None" = None,
+                           seed: int = 0) -> float:
     """Probability that the workflow's fold comparison finds the true hypothesis's error lower than
     the rival's at ``level`` (module docstring).
 
@@ -100,45 +97,108 @@ def preference_probability(u, noise, *, level: float, draws: int = DRAWS, block:
         One-sided level of the comparison, in (0, 1).
     draws : int
         Simulated recordings.
-    block, n_folds : int
-        Samples per time block, and the most folds the blocks are dealt to in turn (fewer where
-        there are fewer blocks).
+    plan : FoldPlan, optional
+        The split in ``u``'s samples; default :func:`workflow_split` of their number.
     seed : int
         Seed of the simulated noise.
 
     Returns
     -------
     float
-        In [0, 1]; NaN when the samples make fewer than two blocks.
+        In [0, 1]; NaN when the samples make fewer than two folds.
 
     Raises
     ------
     ValueError
-        ``level`` outside (0, 1), ``u`` not of shape (K, 3), or ``draws``, ``block`` or ``n_folds``
-        below 1.
+        ``level`` outside (0, 1), ``u`` not of shape (K, 3), or ``draws`` below 1.
     """
     from ..discrepancy.verdict.statistics import cv_comparison
 
     u = np.asarray(u, dtype=float)
     if u.ndim != 2 or u.shape[1] != 3:
         raise ValueError(f"u needs shape (K, 3) [m], got {u.shape}")
-    _checked(level, draws, block, n_folds)
+    _checked(level, draws)
     u = u[np.all(np.isfinite(u), axis=1)]
-    folds = _folds(u.shape[0], block, n_folds)
+    folds = _folds(u.shape[0], plan)
     if folds is None:
         return float("nan")
-    n = _noise_draws(u.shape[0], noise, draws, seed)
+    n = _noise_draws(u.shape[0], noise, draws, seed)[folds >= 0]
+    u, folds = u[folds >= 0], folds[folds >= 0]
     err_true = np.linalg.norm(n, axis=2)
     err_rival = np.linalg.norm(n + u[:, None, :], axis=2)
     hits = sum(cv_comparison(err_rival[:, d], err_true[:, d], folds).p_value < level for d in range(draws))
     return hits / draws
 
 
-def _folds(K: int, block: int, n_folds: int):
-    """Fold of each of K samples in time order (blocks of ``block`` dealt in turn to at most
-    ``n_folds`` folds), or None when they make fewer than two folds."""
-    n_folds = min(n_folds, K // block)      # a short recording has fewer folds, as in the workflow
-    return None if n_folds < 2 else (np.arange(K) // block) % n_folds
+class FoldPlan(NamedTuple):
+    """The workflow's split of a record, in samples of the record the prediction evaluates.
+
+    Attributes
+    ----------
+    block : int
+        Samples per time block (a unit), >= 1.
+    n_folds : int
+        Cross-validation folds the development blocks are dealt to.
+    n_test : int
+        Blocks held back as the test split.
+    """
+
+    block: int
+    n_folds: int
+    n_test: int
+
+
+def workflow_split(n_samples, evaluated: int | None = None, *, test_fraction: float = 0.2) -> FoldPlan:
+    """The split the discrepancy workflow makes of continuous recordings of ``n_samples`` samples
+    (:func:`ctrplan.discrepancy.measured.split.make_split` with its defaults): at most
+    ``MAX_BLOCKS`` time blocks of at least ``MIN_BLOCK_SAMPLES`` over all the samples, each
+    recording cut into blocks of that length; a test split of at least ``MIN_TEST_UNITS`` blocks
+    and ``test_fraction`` of them; the other blocks dealt to at most ``MAX_FOLDS`` folds of at
+    least ``MIN_UNITS_PER_FOLD`` blocks.
+
+    Parameters
+    ----------
+    n_samples : int or sequence of int
+        Samples of each recording the workflow will split together (the recording, then the
+        follow-up).
+    evaluated : int, optional
+        Samples the prediction evaluates of them all (fewer where the recording is thinned,
+        :func:`recorded_rows`): the block is scaled to them. Default all.
+    test_fraction : float
+        The workflow's ``test_fraction`` [-].
+
+    Returns
+    -------
+    FoldPlan
+        ``n_folds`` below 2 when the recordings are too short for the workflow's comparison.
+    """
+    from ..discrepancy.measured.split import (MAX_BLOCKS, MAX_FOLDS, MIN_BLOCK_SAMPLES, MIN_TEST_UNITS,
+                                              MIN_UNITS_PER_FOLD)
+
+    lengths = [int(n) for n in np.atleast_1d(n_samples)]
+    total = sum(lengths)
+    block = max(MIN_BLOCK_SAMPLES, math.ceil(total / max(2, min(MAX_BLOCKS, total // MIN_BLOCK_SAMPLES))))
+    n_units = sum(math.ceil(n / block) for n in lengths)
+    n_test = max(MIN_TEST_UNITS, int(round(test_fraction * n_units)))
+    n_folds = min(MAX_FOLDS, max(n_units - n_test, 0) // MIN_UNITS_PER_FOLD)
+    evaluated = total if evaluated is None else int(evaluated)
+    return FoldPlan(max(1, round(block * evaluated / max(total, 1))), n_folds, n_test)
+
+
+def _folds(K: int, plan: "FoldPlan | None"):
+    """Fold of each of K samples in time order under ``plan`` (default :func:`workflow_split` of
+    K): -1 for the test split's blocks (evenly spread), the others' blocks dealt in turn to the
+    folds; None when that gives fewer than two folds."""
+    plan = workflow_split(K) if plan is None else plan
+    n_blocks = math.ceil(K / plan.block) if K else 0
+    if plan.n_folds < 2 or n_blocks - plan.n_test < 2:
+        return None
+    unit = np.arange(K) // plan.block
+    test = np.unique(np.linspace(0, n_blocks - 1, plan.n_test).round().astype(int))
+    dev = np.setdiff1d(np.arange(n_blocks), test)
+    fold_of_block = np.full(n_blocks, -1)
+    fold_of_block[dev] = np.arange(dev.size) % min(plan.n_folds, dev.size)
+    return fold_of_block[unit]
 
 
 def _noise_draws(K: int, noise, draws: int, seed: int) -> np.ndarray:
@@ -158,15 +218,15 @@ def _noise_draws(K: int, noise, draws: int, seed: int) -> np.ndarray:
     return white + corr
 
 
-def _checked(level: float, draws: int, block: int, n_folds: int) -> None:
+def _checked(level: float, draws: int) -> None:
     if not 0.0 < level < 1.0:
         raise ValueError(f"level {level!r} must be in (0, 1)")
-    if min(draws, block, n_folds) < 1:
-        raise ValueError(f"draws, block and n_folds must be >= 1, got {draws}, {block}, {n_folds}")
+    if draws < 1:
+        raise ValueError(f"draws must be >= 1, got {draws}")
 
 
 def naming_probability(u_baseline, u_rivals, noise, *, level: float, n_candidates: int, draws: int = DRAWS,
-                       block: int = BLOCK_SAMPLES, n_folds: int = N_FOLDS, seed: int = 0) -> float:
+                       plan: "FoldPlan | None" = None, seed: int = 0) -> float:
     """Probability that the workflow names the true hypothesis alone, as far as its fold
     comparisons decide it: on one simulated recording, the truth's error is significantly lower than
     the baseline's at ``level / n_candidates`` (Holm's first step) and than every rival's at
@@ -184,23 +244,23 @@ def naming_probability(u_baseline, u_rivals, noise, *, level: float, n_candidate
         The workflow's significance level, in (0, 1).
     n_candidates : int
         Candidates the workflow tries alone (its Holm family), >= 1.
-    draws, block, n_folds, seed : int
+    draws, plan, seed
         As :func:`preference_probability`.
 
     Returns
     -------
     float
-        In [0, 1]; NaN when the samples make fewer than two blocks.
+        In [0, 1]; NaN when the samples make fewer than two folds.
 
     Raises
     ------
     ValueError
         ``level`` outside (0, 1), ``n_candidates`` below 1, arrays not of shape (K, 3) for one K, or
-        ``draws``, ``block`` or ``n_folds`` below 1.
+        ``draws`` below 1.
     """
     from ..discrepancy.verdict.statistics import cv_comparison
 
-    _checked(level, draws, block, n_folds)
+    _checked(level, draws)
     if n_candidates < 1:
         raise ValueError(f"n_candidates must be >= 1, got {n_candidates}")
     us = [np.asarray(u, dtype=float) for u in (u_baseline, *u_rivals)]
@@ -208,10 +268,11 @@ def naming_probability(u_baseline, u_rivals, noise, *, level: float, n_candidate
         raise ValueError(f"every u needs shape (K, 3) [m] for one K, got {[u.shape for u in us]}")
     keep = np.all([np.all(np.isfinite(u), axis=1) for u in us], axis=0)
     us = [u[keep] for u in us]
-    folds = _folds(int(keep.sum()), block, n_folds)
+    folds = _folds(int(keep.sum()), plan)
     if folds is None:
         return float("nan")
-    n = _noise_draws(int(keep.sum()), noise, draws, seed)
+    n = _noise_draws(int(keep.sum()), noise, draws, seed)[folds >= 0]
+    us, folds = [u[folds >= 0] for u in us], folds[folds >= 0]
     err_true = np.linalg.norm(n, axis=2)
     errs = [np.linalg.norm(n + u[:, None, :], axis=2) for u in us]
     levels = [level / n_candidates] + [level] * (len(us) - 1)
@@ -224,7 +285,7 @@ def _pair_name(hyps, a, b) -> str:
     return f"{hyps[a].key}>{hyps[b].key}"
 
 
-def preference_table(hyps, parts, noise, *, level: float, seed: int = 0) -> dict:
+def preference_table(hyps, parts, noise, *, level: float, plan: "FoldPlan | None" = None, seed: int = 0) -> dict:
     """:func:`preference_probability` for every ordered pair of hypotheses over recordings ``parts``.
 
     Parameters
@@ -236,6 +297,8 @@ def preference_table(hyps, parts, noise, *, level: float, seed: int = 0) -> dict
     noise : SensorNoise
     level : float
         One-sided level of the comparison, in (0, 1).
+    plan : FoldPlan, optional
+        The workflow's split (:func:`workflow_split`); default that of the samples given.
     seed : int
 
     Returns
@@ -245,7 +308,7 @@ def preference_table(hyps, parts, noise, *, level: float, seed: int = 0) -> dict
     """
     n = len(hyps)
     return {_pair_name(hyps, a, b): preference_probability(
-        unexplained([p[a] for p in parts], [p[b] for p in parts]), noise, level=level, seed=seed)
+        unexplained([p[a] for p in parts], [p[b] for p in parts]), noise, level=level, plan=plan, seed=seed)
         for a in range(n) for b in range(n) if a != b}
 
 
@@ -302,7 +365,13 @@ def predicted_preference(robot, recorded, hypotheses, follow_up=None, *, noise, 
     parts = [[sensitivities(robot, h, thinned, settings, n_jobs=n_jobs) for h in hyps]]
     if follow_up is not None:
         parts.append([sensitivities(robot, h, follow_up, settings, n_jobs=n_jobs) for h in hyps])
-    return preference_table(hyps, parts, noise, level=level, seed=seed)
+    return preference_table(hyps, parts, noise, level=level, plan=_plan(recorded, thinned, follow_up), seed=seed)
+
+
+def _plan(recorded, thinned, follow_up) -> FoldPlan:
+    """The workflow's split of the recording and the follow-up, in the samples evaluated."""
+    more = [] if follow_up is None else [follow_up.n_samples]
+    return workflow_split([recorded.n_samples, *more], thinned.n_samples + sum(more))
 
 
 def _on_common_samples(sens: list) -> list:
@@ -313,7 +382,8 @@ def _on_common_samples(sens: list) -> list:
     return [replace(s, ok=ok) for s in sens]
 
 
-def naming_table(hyps, parts, noise, *, level: float, n_candidates: int, seed: int = 0) -> dict:
+def naming_table(hyps, parts, noise, *, level: float, n_candidates: int, plan: "FoldPlan | None" = None,
+                 seed: int = 0) -> dict:
     """:func:`naming_probability` with each hypothesis true and the others its rivals.
 
     Parameters
@@ -329,6 +399,8 @@ def naming_table(hyps, parts, noise, *, level: float, n_candidates: int, seed: i
         The workflow's significance level, in (0, 1).
     n_candidates : int
         Candidates the workflow tries alone (its Holm family).
+    plan : FoldPlan, optional
+        The workflow's split (:func:`workflow_split`); default that of the samples given.
     seed : int
 
     Returns
@@ -344,7 +416,7 @@ def naming_table(hyps, parts, noise, *, level: float, n_candidates: int, seed: i
         u_base = unexplained(truth, [p[n] for p in parts])
         u_rivals = [unexplained(truth, [p[b] for p in parts]) for b in range(n) if b != a]
         out[hyps[a].key] = naming_probability(u_base, u_rivals, noise, level=level, n_candidates=n_candidates,
-                                              seed=seed)
+                                              plan=plan, seed=seed)
     return out
 
 
@@ -406,4 +478,5 @@ def predicted_naming(robot, recorded, hypotheses, baseline, follow_up=None, *, n
     if follow_up is not None:
         parts.append([sensitivities(robot, h, follow_up, settings, n_jobs=n_jobs) for h in every])
     return naming_table(hyps, parts, noise, level=level,
-                        n_candidates=len(hyps) if n_candidates is None else n_candidates, seed=seed)
+                        n_candidates=len(hyps) if n_candidates is None else n_candidates,
+                        plan=_plan(recorded, thinned, follow_up), seed=seed)
