@@ -469,7 +469,7 @@ def calibration_figure(cases: list, path: Path) -> None:
     ax.set_ylabel("observed share of follow-up runs")
     n_runs = max(c["n_runs"] for c in cal.values())
     ax.set_title(f"{n_runs} follow-up runs of {len(cases)} kept case{'s' if len(cases) != 1 else ''}", fontsize=9)
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(fontsize=8, loc="upper left", markerscale=0.5)
     save_figure(fig, path)
 
 

@@ -739,3 +739,46 @@ def test_a_friction_sensitivity_is_the_derivative_not_the_solvers_tolerance():
         assert ok.sum() >= 0.9 * len(ok)
         err = np.linalg.norm(sens.jacobian[ok, :, j] - ref[ok]) / np.linalg.norm(ref[ok])
         assert err < 0.01, f"{name}: relative error {err:.3g}"
+
+
+def test_a_sample_whose_derivative_is_not_finite_is_left_out_and_the_report_still_written(monkeypatch):
+    """A solve that reports success with a non-finite tip for one column's parameter leaves that
+    sample out of the hypothesis's sensitivities (it would make every criterion NaN), and a
+    ``design.json`` with an undefined separation or power (null) still gives its report, the
+    random motions' median over the defined ones. Catches a NaN that reaches ``T`` and a report
+    that fails on a null."""
+    import dataclasses
+
+    from ctrplan.design import _criteria
+    from ctrplan.design._output import _markdown
+
+    robot = load_robot(PAIR)
+    hyp = _pair_hypotheses(robot)[0]
+    data = _sweep(robot, [[0.0], [1.0]])
+    real = _criteria.predict
+    calls = []
+
+    def flaky(robot_, names, values, data_, model, *args, **kwargs):
+        out = real(robot_, names, values, data_, model, *args, **kwargs)
+        calls.append(1)
+        if len(calls) == 2:                      # the first column: one sample's tip is NaN, reported converged
+            tip = np.array(out.tip, float)
+            tip[3] = np.nan
+            out = dataclasses.replace(out, tip=tip)
+        return out
+
+    monkeypatch.setattr(_criteria, "predict", flaky)
+    sens = _criteria.sensitivities(robot, hyp, data)
+    assert not sens.ok[3] and sens.ok.sum() == data.n_samples - 1
+    assert np.all(np.isfinite(sens.jacobian[sens.ok])) and np.all(np.isfinite(sens.tip[sens.ok]))
+    d = {"mode": "separate", "criterion": "T", "duration_s": 5.0, "budget_s": 5.0, "n_samples": 50,
+         "noise_position_m": 1e-4, "noise_inflation": 1.0, "noise_lower_bound": False,
+         "hypotheses": [{"key": "a", "label": "a", "model": "standard", "free": ["x"]},
+                        {"key": "b", "label": "b", "model": "standard", "free": ["y"]}],
+         "primitives": ["move alpha_2 0 -> 1 rad"],
+         "separation": {"recorded": {"a>b": 3.0}, "designed_alone": {"a>b": 5.0}, "designed": {"a>b": 8.0},
+                        "repeated": {"a>b": None}, "random": [{"a>b": 4.0}, {"a>b": None}, {"a>b": 6.0}]},
+         "power": {"recorded": 0.5, "designed": 0.9, "repeated": None, "random": [0.7, None, 0.8]},
+         "preference": {}, "naming": {}, "evaluations": 10, "seconds": {"total": 1.0}}
+    text = _markdown(d)
+    assert "| a>b | 3 | 5 | 8 | n/a | 5 |" in text and "random median 0.750" in text

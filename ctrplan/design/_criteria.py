@@ -139,6 +139,8 @@ def sensitivities(robot, hyp, data, settings=None, *, n_jobs: int = 1) -> Sensit
             effects, _ = EffectSet.from_parameters(robot, names, v)
             tip, _ = apply_output_effects(base.tip_base, base.tangent_base, robot_effects(robot_v).merged(effects))
         J[:, :, j] = (np.asarray(tip) - base.tip) / h
+    # a sample whose tip or derivative is not finite counts as not converged
+    ok &= np.all(np.isfinite(base.tip), axis=1) & np.all(np.isfinite(J), axis=(1, 2))
     tip = np.where(ok[:, None], base.tip, np.nan)
     J[~ok] = np.nan
     return Sensitivities(tip=tip, jacobian=J, ok=ok, evaluations=evaluations)

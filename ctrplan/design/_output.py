@@ -115,6 +115,17 @@ def _share(p) -> str:
     return "n/a" if p is None or not np.isfinite(p) else f"{p:.2f}"
 
 
+def _g(x, spec: str = ".3g") -> str:
+    """A figure for the report; ``n/a`` where it is undefined (null in ``design.json``)."""
+    return "n/a" if x is None or not np.isfinite(x) else format(x, spec)
+
+
+def _median(values) -> float:
+    """Median of the defined values (NaN when none is)."""
+    v = [x for x in values if x is not None and np.isfinite(x)]
+    return float(np.median(v)) if v else float("nan")
+
+
 def _markdown(d: dict) -> str:
     lines = [f"# Designed experiment ({d['mode']})", "", f"Criterion: {d['criterion']}.", "",
              f"Duration {d['duration_s']:.1f} s of a budget of {d['budget_s']:.1f} s, {d['n_samples']} sensor samples; "
@@ -132,13 +143,13 @@ def _markdown(d: dict) -> str:
                   "recorded + random (median) |", "| --- | --- | --- | --- | --- | --- |"]
         for pair, t in d["separation"]["recorded"].items():
             rnd = [r[pair] for r in d["separation"]["random"]]
-            lines.append(f"| {pair} | {t:.3g} | {d['separation']['designed_alone'][pair]:.3g} | "
-                         f"{d['separation']['designed'][pair]:.3g} | {d['separation']['repeated'][pair]:.3g} | "
-                         f"{np.median(rnd) if rnd else float('nan'):.3g} |")
+            lines.append(f"| {pair} | {_g(t)} | {_g(d['separation']['designed_alone'][pair])} | "
+                         f"{_g(d['separation']['designed'][pair])} | {_g(d['separation']['repeated'][pair])} | "
+                         f"{_g(_median(rnd))} |")
         rnd = d["power"]["random"]
         lines += ["", f"Smallest predicted power over the pairs (1-df likelihood-ratio test at 0.01): recorded "
-                      f"{d['power']['recorded']:.3f}, designed {d['power']['designed']:.3f}, repeated "
-                      f"{d['power']['repeated']:.3f}, random median {np.median(rnd) if rnd else float('nan'):.3f}."]
+                      f"{_g(d['power']['recorded'], '.3f')}, designed {_g(d['power']['designed'], '.3f')}, repeated "
+                      f"{_g(d['power']['repeated'], '.3f')}, random median {_g(_median(rnd), '.3f')}."]
         pref = d.get("preference") or {}
         if pref:
             lines += ["", "Probability that the discrepancy workflow's fold comparison prefers the true hypothesis "
@@ -158,8 +169,8 @@ def _markdown(d: dict) -> str:
                   "recorded + random (median) |", "| --- | --- | --- | --- | --- | --- |"]
         for n, se in d["stderr"]["recorded"].items():
             rnd = [r[n] for r in d["stderr"]["random"]]
-            lines.append(f"| {n} | {se:.3g} | {d['stderr']['designed_alone'][n]:.3g} | {d['stderr']['designed'][n]:.3g} | "
-                         f"{d['stderr']['repeated'][n]:.3g} | {np.median(rnd) if rnd else float('nan'):.3g} |")
+            lines.append(f"| {n} | {_g(se)} | {_g(d['stderr']['designed_alone'][n])} | {_g(d['stderr']['designed'][n])} | "
+                         f"{_g(d['stderr']['repeated'][n])} | {_g(_median(rnd))} |")
         lines += ["", "Predicted standard errors, SI units (prior-limited where the recorded data determine nothing)."]
         for n, others in d.get("confounded", {}).items():
             if others:
