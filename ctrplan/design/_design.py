@@ -530,11 +530,9 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
             a, b = joint_configurations(robot, qs)
             return traj.duration, ts, a, b
 
-        def evaluate(self, pieces, *, every_sample: bool = False) -> list:
+        def evaluate(self, pieces) -> list:
             """The :class:`Information` of each piece's samples after this prefix: summed over at
-            most :data:`PIECE_SAMPLES` of them and scaled to all, unless ``every_sample``."""
-            if every_sample:
-                return ev.pieces(data.frame, self.t, self.alpha, self.beta, pieces)
+            most :data:`PIECE_SAMPLES` of them and scaled to all."""
             thin, factors = zip(*(_thinned(p) for p in pieces)) if pieces else ((), ())
             infos = ev.pieces(data.frame, self.t, self.alpha, self.beta, list(thin))
             return [i if f == 1.0 else i.scaled(f) for i, f in zip(infos, factors)]
@@ -598,8 +596,11 @@ def design_experiment(robot, data, hypotheses, *, noise: SensorNoise, limits: Ex
             piece = walk.piece(prim)
             if piece is None:
                 break
-            rinfo = rinfo + walk.evaluate([piece], every_sample=True)[0]
             walk.append(prim, piece)
+        if walk.prims:
+            # evaluated whole, as the designed motion is (one continuous sequence, as it would be run)
+            wts, wqs = sample(trajectory(robot, list(walk.prims), drive), period)
+            rinfo = recorded + ev.info(motion_data(robot, wts, wqs, frame=data.frame))
         randoms.append(rinfo)
         random_walks.append(tuple(walk.prims))
     rec_duration = float(rec_t[-1] - rec_t[0])
