@@ -31,11 +31,11 @@ pilot and each follow-up together (``--data`` once per recording). A run names t
 verdict names the truth alone. Beside each verdict stands the comparison's strength: the ratio of
 the alternative's out-of-fold error to the truth's, its interval and p-value.
 
-**Calibration.** Beside each follow-up's verdict stand two predictions: that the workflow's
-comparison prefers the truth over the alternative after it (``ctrplan.design.predicted_preference``;
-the designs' own figure for the designed motions), and that the workflow names the truth alone
-(``ctrplan.design.predicted_naming``: also below the pilot's calibrated baseline at Holm's first step
-over the pilot's candidates; computed on every follow-up as synthesized). :func:`calibration` sets
+**Calibration.** Beside each follow-up's verdict stand two predictions, computed alike on every
+follow-up as synthesized (:func:`predict`): that the workflow's comparison prefers the truth over
+the alternative after it (``ctrplan.design.predicted_preference``), and that the workflow names the
+truth alone (``ctrplan.design.predicted_naming``: also below the pilot's calibrated baseline at
+Holm's first step over the pilot's candidates). :func:`calibration` sets
 the first against the comparison's significance and the second against the verdict, over every
 follow-up run, and ``--figure`` draws both.
 
@@ -281,8 +281,7 @@ def run_follow_ups(cand: dict, out: Path, jobs: int) -> dict:
     compound = design_experiment(base, data, hyps, noise=noise, limits=ExperimentLimits(duration=FOLLOW_UP_S),
                                  search=DesignSearch(n_random=0, seed=seed, compound=True))
     compound_s = time.perf_counter() - t1
-    # (the designs are made without a baseline: their naming probability is computed below, for every
-    # follow-up alike, by predict_naming)
+    # the predictions for every follow-up, computed alike on it as synthesized, are predict's
     drive = drive_from_data(base, data)
     runs, files = {}, {}
     for key, prims in (("designed", design.primitives), ("compound", compound.primitives),
@@ -350,8 +349,9 @@ def predict(case: dict, out: Path, jobs: int) -> dict:
         run = case["runs"][key]
         run["predicted"] = predicted_preference(base, data, hyps, follow_up, noise=noise, level=LEVEL, n_jobs=jobs,
                                                 seed=case["seed"])[pair]
-        run["predicted_named"] = predicted_naming(base, data, hyps, baseline, follow_up, noise=noise, level=LEVEL,
-                                                  n_candidates=len(family), n_jobs=jobs, seed=case["seed"])[case["truth"]]
+        run["predicted_named"] = predicted_naming(
+            base, data, hyps, baseline, follow_up, noise=noise, level=LEVEL, n_candidates=len(family), n_jobs=jobs,
+            seed=case["seed"])[case["truth"]]
     case["pilot_predicted"] = predicted_preference(base, data, hyps, noise=noise, level=LEVEL, seed=case["seed"])[pair]
     case["n_candidates"], case["predictions"] = len(family), PREDICTIONS
     return case
@@ -438,8 +438,9 @@ def calibration(cases: list) -> dict:
             m = (p >= lo) & ((p < hi) if i < len(edges) - 2 else (p <= hi))
             n = int(m.sum())
             if n:
+                hits = int(y[m].sum())
                 bins.append({"from": lo, "to": hi, "n_runs": n, "mean_predicted": float(p[m].mean()),
-                             "observed": int(y[m].sum()), "observed_interval_90": clopper_pearson(int(y[m].sum()), n, 0.90)})
+                             "observed": hits, "observed_interval_90": clopper_pearson(hits, n, 0.90)})
         result[name] = {"outcome": outcome, "n_runs": len(pts), "brier": float(np.mean((p - y) ** 2)),
                         "brier_at_base_rate": float(np.mean((y.mean() - y) ** 2)), "bins": bins}
     return result

@@ -17,14 +17,17 @@ of :data:`DRAWS` simulated recordings in which A's error is significantly lower.
 
 What it leaves out: the longer blocks the workflow cuts where the residuals stay correlated past
 half a block, the buffers beside each validated block, the refits per fold (B is refitted once, on
-all samples: its out-of-fold error is a little larger in the workflow), the tangent angles the workflow's error also holds where the tracker measures them,
-and the other gates of naming. :func:`naming_probability` adds the first of them: on the same
+all samples: its out-of-fold error is a little larger in the workflow), the tangent angles the
+workflow's error also holds where the tracker measures them, and the other gates of naming. :func:`naming_probability` adds the first of them: on the same
 simulated recordings, the true hypothesis's error must also be significantly lower than the
 baseline's (the model with no effect, its tube parameters refitted) at ``level / m``, Holm's first
 step over the ``m`` candidates the workflow tried alone. What the naming probability still leaves
 out: the later steps of Holm's procedure (a rival significant against the baseline only at a looser
-step), the separability check of the leading two (their fields' correlation on the motion), the
-second-effect stage (which may add a rival beside the truth) and the test split.
+step), the separability check of the leading two (their fields' correlation on the motion) and
+the second-effect stage (which may add a rival beside the truth). Its baseline is refitted once
+over every sample, where the workflow refits it without each fold: on a lag hidden in a motion
+with rests, the linearized refit keeps part of the signature in every block and the prediction
+is overconfident (``docs/design.md``, the benchmark's calibration).
 """
 
 from __future__ import annotations
