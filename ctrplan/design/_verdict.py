@@ -24,9 +24,9 @@ baseline's (the model with no effect, its tube parameters refitted) at ``level /
 step over the ``m`` candidates the workflow tried alone. What the naming probability still leaves
 out: the later steps of Holm's procedure (a rival significant against the baseline only at a looser
 step), the separability check of the leading two (their fields' correlation on the motion) and
-the second-effect stage (which may add a rival beside the truth). Its baseline is refitted once
-over every sample, where the workflow refits it without each fold: on a lag hidden in a motion
-with rests, the linearized refit keeps part of the signature in every block and the prediction
+the second-effect stage (which may add a rival beside the truth). Its baseline is refitted
+linearly, without the workflow's prior toward the robot file's tube parameters: on a lag hidden
+in a motion with rests, the refit keeps part of the signature in every block and the prediction
 is overconfident (``docs/design.md``, the benchmark's calibration).
 """
 
