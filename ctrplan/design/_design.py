@@ -234,9 +234,7 @@ class _Evaluator:
         self.evaluations = 0
 
     def sens(self, data):
-        out = [sensitivities(self.robot, h, data, self.settings, n_jobs=self.n_jobs) for h in self.hyps]
-        self.evaluations += sum(s.evaluations for s in out)
-        return out
+        return [self.sens_of(h, data) for h in self.hyps]
 
     def sens_of(self, hyp, data):
         """:func:`sensitivities` of one hypothesis (counted)."""

@@ -150,20 +150,17 @@ def _markdown(d: dict) -> str:
         lines += ["", f"Smallest predicted power over the pairs (1-df likelihood-ratio test at 0.01): recorded "
                       f"{_g(d['power']['recorded'], '.3f')}, designed {_g(d['power']['designed'], '.3f')}, repeated "
                       f"{_g(d['power']['repeated'], '.3f')}, random median {_g(_median(rnd), '.3f')}."]
-        pref = d.get("preference") or {}
-        if pref:
-            lines += ["", "Probability that the discrepancy workflow's fold comparison prefers the true hypothesis "
-                          "(the first of the pair) at 0.01 (simulated on the linearized hypotheses; the comparison "
-                          "of the two, not the whole verdict): "
-                      + "; ".join(f"{pair}: recorded {_share(pref['recorded'][pair])}, with the design "
-                                  f"{_share(pref['designed'][pair])}" for pair in pref.get("designed", {})) + "."]
-        naming = d.get("naming") or {}
-        if naming:
-            lines += ["", "Probability that the workflow names the hypothesis alone when it is true (its error "
-                          "significantly below the baseline's at Holm's first step and below every rival's at "
-                          "0.01; simulated on the linearized hypotheses): "
-                      + "; ".join(f"{key}: recorded {_share(naming['recorded'][key])}, with the design "
-                                  f"{_share(naming['designed'][key])}" for key in naming.get("designed", {})) + "."]
+        for key, text in (("preference", "Probability that the discrepancy workflow's fold comparison prefers the "
+                                         "true hypothesis (the first of the pair) at 0.01 (simulated on the "
+                                         "linearized hypotheses; the comparison of the two, not the whole verdict): "),
+                          ("naming", "Probability that the workflow names the hypothesis alone when it is true "
+                                     "(its error significantly below the baseline's at Holm's first step and below "
+                                     "every rival's at 0.01; simulated on the linearized hypotheses): ")):
+            table = d.get(key) or {}
+            if table:
+                lines += ["", text + "; ".join(f"{k}: recorded {_share(table['recorded'][k])}, with the design "
+                                               f"{_share(table['designed'][k])}" for k in table.get("designed", {}))
+                          + "."]
     else:
         lines += ["| parameter | recorded | designed alone | recorded + designed | recorded + repeated | "
                   "recorded + random (median) |", "| --- | --- | --- | --- | --- | --- |"]

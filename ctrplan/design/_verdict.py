@@ -115,21 +115,34 @@ def preference_probability(u, noise, *, level: float, draws: int = DRAWS, plan: 
     ValueError
         ``level`` outside (0, 1), ``u`` not of shape (K, 3), or ``draws`` below 1.
     """
-    from ..discrepancy.verdict.statistics import cv_comparison
-
     u = np.asarray(u, dtype=float)
     if u.ndim != 2 or u.shape[1] != 3:
         raise ValueError(f"u needs shape (K, 3) [m], got {u.shape}")
-    _checked(level, draws)
-    u = u[np.all(np.isfinite(u), axis=1)]
-    folds = _folds(u.shape[0], plan)
+    return _all_significant([u], [level], noise, draws=draws, plan=plan, seed=seed)
+
+
+def _all_significant(us, levels, noise, *, draws: int, plan, seed: int) -> float:
+    """Share of ``draws`` simulated recordings in which the truth's error (the noise alone) is
+    significantly below every rival's (the noise plus ``us[i]``, shape (K, 3) [m]) at
+    ``levels[i]`` by the workflow's fold comparison; samples where any ``u`` is not finite left
+    out; NaN when the samples make fewer than two folds."""
+    from ..discrepancy.verdict.statistics import cv_comparison
+
+    bad = [lv for lv in levels if not 0.0 < lv < 1.0]
+    if bad:
+        raise ValueError(f"level {bad[-1]!r} must be in (0, 1)")
+    if draws < 1:
+        raise ValueError(f"draws must be >= 1, got {draws}")
+    keep = np.all([np.all(np.isfinite(u), axis=1) for u in us], axis=0)
+    folds = _folds(int(keep.sum()), plan)
     if folds is None:
         return float("nan")
-    n = _noise_draws(u.shape[0], noise, draws, seed)[folds >= 0]
-    u, folds = u[folds >= 0], folds[folds >= 0]
+    n = _noise_draws(int(keep.sum()), noise, draws, seed)[folds >= 0]
+    us, folds = [u[keep][folds >= 0] for u in us], folds[folds >= 0]
     err_true = np.linalg.norm(n, axis=2)
-    err_rival = np.linalg.norm(n + u[:, None, :], axis=2)
-    hits = sum(cv_comparison(err_rival[:, d], err_true[:, d], folds).p_value < level for d in range(draws))
+    errs = [np.linalg.norm(n + u[:, None, :], axis=2) for u in us]
+    hits = sum(all(cv_comparison(e[:, d], err_true[:, d], folds).p_value < lv for e, lv in zip(errs, levels))
+               for d in range(draws))
     return hits / draws
 
 
@@ -221,13 +234,6 @@ def _noise_draws(K: int, noise, draws: int, seed: int) -> np.ndarray:
     return white + corr
 
 
-def _checked(level: float, draws: int) -> None:
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level {level!r} must be in (0, 1)")
-    if draws < 1:
-        raise ValueError(f"draws must be >= 1, got {draws}")
-
-
 def naming_probability(u_baseline, u_rivals, noise, *, level: float, n_candidates: int, draws: int = DRAWS,
                        plan: "FoldPlan | None" = None, seed: int = 0) -> float:
     """Probability that the workflow names the true hypothesis alone, as far as its fold
@@ -261,27 +267,13 @@ def naming_probability(u_baseline, u_rivals, noise, *, level: float, n_candidate
         ``level`` outside (0, 1), ``n_candidates`` below 1, arrays not of shape (K, 3) for one K, or
         ``draws`` below 1.
     """
-    from ..discrepancy.verdict.statistics import cv_comparison
-
-    _checked(level, draws)
     if n_candidates < 1:
         raise ValueError(f"n_candidates must be >= 1, got {n_candidates}")
     us = [np.asarray(u, dtype=float) for u in (u_baseline, *u_rivals)]
     if any(u.ndim != 2 or u.shape[1] != 3 or u.shape[0] != us[0].shape[0] for u in us):
         raise ValueError(f"every u needs shape (K, 3) [m] for one K, got {[u.shape for u in us]}")
-    keep = np.all([np.all(np.isfinite(u), axis=1) for u in us], axis=0)
-    us = [u[keep] for u in us]
-    folds = _folds(int(keep.sum()), plan)
-    if folds is None:
-        return float("nan")
-    n = _noise_draws(int(keep.sum()), noise, draws, seed)[folds >= 0]
-    us, folds = [u[folds >= 0] for u in us], folds[folds >= 0]
-    err_true = np.linalg.norm(n, axis=2)
-    errs = [np.linalg.norm(n + u[:, None, :], axis=2) for u in us]
-    levels = [level / n_candidates] + [level] * (len(us) - 1)
-    hits = sum(all(cv_comparison(e[:, d], err_true[:, d], folds).p_value < lv for e, lv in zip(errs, levels))
-               for d in range(draws))
-    return hits / draws
+    return _all_significant(us, [level / n_candidates] + [level] * (len(us) - 1), noise, draws=draws, plan=plan,
+                            seed=seed)
 
 
 def _pair_name(hyps, a, b) -> str:
@@ -358,23 +350,25 @@ def predicted_preference(robot, recorded, hypotheses, follow_up=None, *, noise, 
     ValueError
         ``level`` outside (0, 1).
     """
-    from ._criteria import sensitivities
     from ._hypotheses import DesignInputError
 
     hyps = tuple(hypotheses)
     if len(hyps) < 2:
         raise DesignInputError(f"a preference needs two or more hypotheses, got {len(hyps)}")
+    parts, plan = _parts(robot, recorded, hyps, follow_up, settings, n_jobs)
+    return preference_table(hyps, parts, noise, level=level, plan=plan, seed=seed)
+
+
+def _parts(robot, recorded, hyps, follow_up, settings, n_jobs) -> tuple:
+    """The hypotheses' sensitivities on the thinned recording (:func:`recorded_rows`) and on the
+    follow-up, one list per recording, and the workflow's split of the two in those samples."""
+    from ._criteria import sensitivities
+
     thinned = recorded.take(recorded_rows(recorded.n_samples))
-    parts = [[sensitivities(robot, h, thinned, settings, n_jobs=n_jobs) for h in hyps]]
-    if follow_up is not None:
-        parts.append([sensitivities(robot, h, follow_up, settings, n_jobs=n_jobs) for h in hyps])
-    return preference_table(hyps, parts, noise, level=level, plan=_plan(recorded, thinned, follow_up), seed=seed)
-
-
-def _plan(recorded, thinned, follow_up) -> FoldPlan:
-    """The workflow's split of the recording and the follow-up, in the samples evaluated."""
+    recordings = [thinned] if follow_up is None else [thinned, follow_up]
+    parts = [[sensitivities(robot, h, d, settings, n_jobs=n_jobs) for h in hyps] for d in recordings]
     more = [] if follow_up is None else [follow_up.n_samples]
-    return workflow_split([recorded.n_samples, *more], thinned.n_samples + sum(more))
+    return parts, workflow_split([recorded.n_samples, *more], thinned.n_samples + sum(more))
 
 
 def _on_common_samples(sens: list) -> list:
@@ -467,7 +461,6 @@ def predicted_naming(robot, recorded, hypotheses, baseline, follow_up=None, *, n
     ValueError
         ``level`` outside (0, 1) or ``n_candidates`` below 1.
     """
-    from ._criteria import sensitivities
     from ._hypotheses import DesignInputError
 
     hyps = tuple(hypotheses)
@@ -475,11 +468,6 @@ def predicted_naming(robot, recorded, hypotheses, baseline, follow_up=None, *, n
         raise DesignInputError(f"a naming probability needs two or more hypotheses, got {len(hyps)}")
     if any(h.key == baseline.key for h in hyps):
         raise DesignInputError(f"the baseline {baseline.key!r} is given among the hypotheses")
-    every = (*hyps, baseline)
-    thinned = recorded.take(recorded_rows(recorded.n_samples))
-    parts = [[sensitivities(robot, h, thinned, settings, n_jobs=n_jobs) for h in every]]
-    if follow_up is not None:
-        parts.append([sensitivities(robot, h, follow_up, settings, n_jobs=n_jobs) for h in every])
+    parts, plan = _parts(robot, recorded, (*hyps, baseline), follow_up, settings, n_jobs)
     return naming_table(hyps, parts, noise, level=level,
-                        n_candidates=len(hyps) if n_candidates is None else n_candidates,
-                        plan=_plan(recorded, thinned, follow_up), seed=seed)
+                        n_candidates=len(hyps) if n_candidates is None else n_candidates, plan=plan, seed=seed)
