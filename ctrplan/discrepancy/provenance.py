@@ -5,7 +5,8 @@ The code is every Python source file of the packages whose behaviour the figures
 (:data:`SOURCE_PACKAGES`: the discrepancy workflow, the effects, the motion history and the
 mechanics) and the modules they take numbers and the robot from (:data:`SOURCE_MODULES`), less the
 modules that only present figures already computed (:data:`FORMAT_ONLY`: ``report.md`` is written
-from ``results.json`` alone and the plots beside it are images, so neither can move a figure). The
+from ``results.json`` alone and the plots beside it are images, so neither can move a figure) and
+those no module of the digest imports (:data:`NOT_IMPORTED`). The
 digest is a SHA-256 over their paths (relative to the ``ctrplan`` package) and their **code**: the
 syntax tree of each file with its docstrings left out (comments and layout never reach it), in
 sorted order. It changes with any change that can change what runs, and not with a corrected
@@ -21,7 +22,7 @@ import json
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 
-__all__ = ["SOURCE_PACKAGES", "SOURCE_MODULES", "FORMAT_ONLY", "source_digest", "code_digest", "options_digest", "provenance"]
+__all__ = ["SOURCE_PACKAGES", "SOURCE_MODULES", "FORMAT_ONLY", "NOT_IMPORTED", "source_digest", "source_files", "code_digest", "options_digest", "provenance"]
 
 #: Subpackages of ``ctrplan`` whose code can move a discrepancy result's figures.
 SOURCE_PACKAGES = ("discrepancy", "effects", "history", "mechanics")
@@ -33,6 +34,11 @@ SOURCE_MODULES = ("constants.py", "robot.py", "choices.py", "models.py", "io/rob
 #: (:func:`ctrplan.discrepancy.outputs.report.report_markdown`) and draw its plots
 #: (:func:`ctrplan.discrepancy.outputs.report_plots.write_plots`), and compute nothing a results file holds.
 FORMAT_ONLY = ("discrepancy/outputs/report.py", "discrepancy/outputs/report_plots.py")
+#: Modules inside :data:`SOURCE_PACKAGES` that no module of the digest imports or names (the
+#: implicit-function derivatives of the contact models, for benchmarks and users' code): they
+#: cannot move a figure. ``tests/test_discrepancy_provenance.py`` checks that no module of the
+#: digest names them; one that starts to use them must leave this list.
+NOT_IMPORTED = ("mechanics/contact_sensitivity.py", "mechanics/_contact_sensitivity_kernels.py")
 
 
 def _root() -> Path:
@@ -73,7 +79,21 @@ def code_digest(source: str, filename: str = "<source>") -> str:
     return hashlib.sha256(ast.dump(tree, annotate_fields=False).encode()).hexdigest()
 
 
-def source_digest(packages=SOURCE_PACKAGES, modules=SOURCE_MODULES, excluded=FORMAT_ONLY) -> str:
+def source_files(packages=SOURCE_PACKAGES, modules=SOURCE_MODULES, excluded=FORMAT_ONLY + NOT_IMPORTED) -> list:
+    """The files of the digest (:func:`source_digest`), sorted by their path relative to the
+    ``ctrplan`` package.
+
+    Returns
+    -------
+    list of pathlib.Path
+    """
+    root = _root()
+    paths = [p for pkg in packages for p in (root / pkg).rglob("*.py")
+             if p.relative_to(root).as_posix() not in excluded] + [root / m for m in modules]
+    return sorted(paths, key=lambda p: p.relative_to(root).as_posix())
+
+
+def source_digest(packages=SOURCE_PACKAGES, modules=SOURCE_MODULES, excluded=FORMAT_ONLY + NOT_IMPORTED) -> str:
     """SHA-256 (hex) of the code of ``packages`` and ``modules`` less ``excluded``: their paths and
     :func:`code_digest`, sorted by path.
 
@@ -92,10 +112,8 @@ def source_digest(packages=SOURCE_PACKAGES, modules=SOURCE_MODULES, excluded=FOR
         64 hexadecimal digits.
     """
     root = _root()
-    paths = [p for pkg in packages for p in (root / pkg).rglob("*.py")
-             if p.relative_to(root).as_posix() not in excluded] + [root / m for m in modules]
     h = hashlib.sha256()
-    for path in sorted(paths, key=lambda p: p.relative_to(root).as_posix()):
+    for path in source_files(packages, modules, excluded):
         rel = path.relative_to(root).as_posix()
         h.update(rel.encode() + b"\0" + code_digest(path.read_text(), rel).encode() + b"\0")
     return h.hexdigest()
@@ -111,7 +129,7 @@ def provenance(options=None) -> dict:
     """``{"source_sha256", "source_packages", "options_sha256"}`` for a results file."""
     out = {"source_sha256": source_digest(),
            "source_packages": [f"ctrplan/{p}" for p in SOURCE_PACKAGES] + [f"ctrplan/{m}" for m in SOURCE_MODULES],
-           "source_excluded": [f"ctrplan/{m}" for m in FORMAT_ONLY]}
+           "source_excluded": [f"ctrplan/{m}" for m in FORMAT_ONLY + NOT_IMPORTED]}
     if options is not None:
         out["options_sha256"] = options_digest(options)
     return out
