@@ -209,6 +209,20 @@ def _vector(x, n, name):
     return a
 
 
+_BLAS = []
+
+
+def _one_blas_thread():
+    """A context that holds BLAS to one thread: its products here are of a few hundred by a few
+    tens, where OpenBLAS's threads cost more than they save (a derivative took 5.9 ms of such
+    products with the default threads on two cores, 1.1 ms with one)."""
+    if not _BLAS:
+        from threadpoolctl import ThreadpoolController
+
+        _BLAS.append(ThreadpoolController())
+    return _BLAS[0].limit(limits=1, user_api="blas")
+
+
 def contact_tip_jacobian(robot, alpha, beta, solution, settings: ModelSettings | None = None, *,
                          directions=None, standard=None) -> ContactTipJacobian:
     """Derivatives of a clearance or friction solution's tip along directions in the tube
@@ -255,6 +269,11 @@ def contact_tip_jacobian(robot, alpha, beta, solution, settings: ModelSettings |
     full Jacobian per column), more than a forward difference of a warm-started solve
     (``benchmarks/contact_derivatives.py``, docs/mechanics.md): the point is accuracy.
     """
+    with _one_blas_thread():
+        return _contact_tip_jacobian(robot, alpha, beta, solution, settings, directions, standard)
+
+
+def _contact_tip_jacobian(robot, alpha, beta, solution, settings, directions, standard):
     settings = settings or ModelSettings()
     n = robot.n_tubes
     alpha = _vector(alpha, n, "alpha")
