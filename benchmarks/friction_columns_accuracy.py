@@ -21,7 +21,12 @@ parameter's scale, ``SENSITIVITY_STEP``) of cold solves with outer and complemen
   base solution (:func:`ctrplan.design.sensitivities`);
 - the fits' step (``DIFF_STEP`` times max(1, |value|), the step of ``least_squares``'s
   ``"2-point"`` scheme) at the fits' ``WARM_OUTER_TOL`` with warm starts, as a contact fit's
-  columns are taken.
+  columns are taken;
+
+and, not a difference, the implicit-function derivatives of the solutions
+(:func:`ctrplan.mechanics.contact_tip_derivatives`) at the solver's default tolerance, chained to
+the named parameters (a precurvature_y_i scales every curved section of tube i; k_xy_relative_i
+moves k_xy_i with the Poisson ratio held; mu_k acts where the history applies friction).
 
 Printed per setting: the CPU time of the base solve and its columns (one process) and the relative
 error of each column (Frobenius norm over the samples), with the load average.
@@ -117,6 +122,75 @@ def _columns(robot, names, values, data, settings, *, warm: bool, central: float
     return np.stack(cols, axis=2), time.process_time() - c0, float(ok.mean())
 
 
+def _directions(robot, names, rob):
+    """(P, m) combinations of the tube parameters (``contact_parameter_columns``) that the named
+    parameters move, at the robot ``rob`` with the values set; a mu column is per unit of the
+    friction applied (scaled per sample)."""
+    from ctrplan.discrepancy.fits.parameters import parameter
+    from ctrplan.mechanics.contact_sensitivity import contact_parameter_columns
+
+    cols = {c: i for i, c in enumerate(contact_parameter_columns(rob))}
+    D = np.zeros((len(cols), len(names)))
+    for j, name in enumerate(names):
+        spec = parameter(robot, name)
+        i = spec.index
+        if spec.kind == "precurvature_y":
+            curved = [(jj, sec) for jj, sec in enumerate(rob.tubes[i].sections) if not sec.is_straight]
+            ref = curved[0][1].precurvature[1]
+            for jj, sec in curved:
+                D[cols[("precurvature", i, jj, 1)], j] = sec.precurvature[1] / ref
+        elif spec.kind == "k_xy_relative":
+            k_ref = rob.tubes[0].k_xy
+            D[cols[("k_xy", i)], j] = k_ref
+            D[cols[("k_z", i)], j] = k_ref / (1.0 + rob.tubes[i].poisson_ratio)
+        elif name.startswith("mu_"):
+            D[cols[("mu", i)], j] = 1.0
+        else:
+            raise ValueError(f"no implicit column for {name!r} in this benchmark")
+    return D
+
+
+def _implicit_columns(robot, names, values, data, settings):
+    """Implicit-function columns (module docstring): (J (K, 3, m), CPU seconds, share of samples
+    whose solve and derivative succeeded)."""
+    from ctrplan.discrepancy.fits.parameters import apply_parameters
+    from ctrplan.effects import EffectSet
+    from ctrplan.errors import CtrplanError
+    from ctrplan.mechanics import solve_contact, solve_standard
+    from ctrplan.mechanics.contact_sensitivity import contact_tip_jacobian
+
+    c0 = time.process_time()
+    rob = apply_parameters(robot, names, values)
+    effects, _ = EffectSet.from_parameters(robot, names, values)
+    state = data.state(rob, effects)
+    eta, mu = state.applied(rob.friction_coefficients)
+    mu_robot = np.asarray(rob.friction_coefficients, float)
+    D = _directions(robot, names, rob)
+    is_mu = np.array([name.startswith("mu_") for name in names])
+    K = state.alpha.shape[0]
+    J = np.full((K, 3, len(names)), np.nan)
+    prev = None
+    for k in range(K):
+        a, b = state.alpha[k], state.beta[k]
+        friction = bool(np.any(mu[k] > 0))
+        try:
+            std = solve_standard(rob, a, b, settings, check_stability=False)
+            sol = solve_contact(rob, a, b, settings, eta=eta[k] if friction else None, mu=mu[k] if friction else None,
+                                standard=std, warm_start=prev)
+            prev = sol
+            # the friction applied at this sample per unit of the robot's coefficient
+            scale = np.ones(len(names))
+            for j in np.nonzero(is_mu)[0]:
+                i = int(names[j].rpartition("_")[2]) - 1
+                scale[j] = mu[k, i] / mu_robot[i] if mu_robot[i] > 0 else 0.0
+            jac = contact_tip_jacobian(rob, a, b, sol, settings, directions=D * scale[None, :], standard=std)
+        except CtrplanError:
+            prev = None
+            continue
+        J[k] = jac.d_position
+    return J, time.process_time() - c0, float(np.isfinite(J).all(axis=(1, 2)).mean())
+
+
 def main(argv=None):
     from _records import run_record
 
@@ -138,13 +212,17 @@ def main(argv=None):
         rows = {}
         for label, tol, warm, fit_step in (("design step, default tol", DEFAULT_TOL, False, False),
                                            ("design step, design tol", SENSITIVITY_TOL, True, False),
-                                           ("fit step, fit tol", WARM_OUTER_TOL, True, True)):
+                                           ("fit step, fit tol", WARM_OUTER_TOL, True, True),
+                                           ("implicit, default tol", DEFAULT_TOL, False, None)):
             settings = dataclasses.replace(ModelSettings(), outer_tol=tol, complementarity_tol=tol)
-            J, cpu, ok = _columns(robot, names, values, data, settings, warm=warm, fit_step=fit_step)
+            if fit_step is None:
+                J, cpu, ok = _implicit_columns(robot, names, values, data, settings)
+            else:
+                J, cpu, ok = _columns(robot, names, values, data, settings, warm=warm, fit_step=fit_step)
             good = np.isfinite(J).all(axis=(1, 2)) & np.isfinite(ref).all(axis=(1, 2))
             err = {n: float(np.linalg.norm(J[good, :, j] - ref[good, :, j]) / np.linalg.norm(ref[good, :, j]))
                    for j, n in enumerate(names)}
-            rows[label] = {"tolerance": tol, "warm": warm, "step": "fit" if fit_step else "design", "cpu_s": cpu,
+            rows[label] = {"tolerance": tol, "warm": warm, "step": {True: "fit", False: "design", None: "implicit"}[fit_step], "cpu_s": cpu,
                            "converged": ok, "relative_error": err}
             print(f"{case:10s} {label:25s} tol {tol:.0e}: CPU {cpu:6.2f} s, converged {100 * ok:.0f} %, error "
                   + ", ".join(f"{n} {100 * e:.3g} %" for n, e in err.items()), flush=True)
