@@ -28,8 +28,9 @@ and, not a difference, the implicit-function derivatives of the solutions
 the named parameters (a precurvature_y_i scales every curved section of tube i; k_xy_relative_i
 moves k_xy_i with the Poisson ratio held; mu_k acts where the history applies friction).
 
-Printed per setting: the CPU time of the base solve and its columns (one process) and the relative
-error of each column (Frobenius norm over the samples), with the load average.
+Printed per setting: the CPU time of the base solve and its columns (one process; for the
+implicit columns also that of the derivatives alone) and the relative error of each column
+(Frobenius norm over the samples), with the load average.
 
 Usage::
 
@@ -152,7 +153,7 @@ def _directions(robot, names, rob):
 
 def _implicit_columns(robot, names, values, data, settings):
     """Implicit-function columns (module docstring): (J (K, 3, m), CPU seconds, share of samples
-    whose solve and derivative succeeded)."""
+    whose solve and derivative succeeded, CPU seconds of the derivatives alone)."""
     from ctrplan.discrepancy.fits.parameters import apply_parameters
     from ctrplan.effects import EffectSet
     from ctrplan.errors import CtrplanError
@@ -170,6 +171,7 @@ def _implicit_columns(robot, names, values, data, settings):
     K = state.alpha.shape[0]
     J = np.full((K, 3, len(names)), np.nan)
     prev = None
+    cpu_derivative = 0.0
     for k in range(K):
         a, b = state.alpha[k], state.beta[k]
         friction = bool(np.any(mu[k] > 0))
@@ -183,12 +185,14 @@ def _implicit_columns(robot, names, values, data, settings):
             for j in np.nonzero(is_mu)[0]:
                 i = int(names[j].rpartition("_")[2]) - 1
                 scale[j] = mu[k, i] / mu_robot[i] if mu_robot[i] > 0 else 0.0
+            c1 = time.process_time()
             jac = contact_tip_jacobian(rob, a, b, sol, settings, directions=D * scale[None, :], standard=std)
+            cpu_derivative += time.process_time() - c1
         except CtrplanError:
             prev = None
             continue
         J[k] = jac.d_position
-    return J, time.process_time() - c0, float(np.isfinite(J).all(axis=(1, 2)).mean())
+    return J, time.process_time() - c0, float(np.isfinite(J).all(axis=(1, 2)).mean()), cpu_derivative
 
 
 def main(argv=None):
@@ -215,8 +219,9 @@ def main(argv=None):
                                            ("fit step, fit tol", WARM_OUTER_TOL, True, True),
                                            ("implicit, default tol", DEFAULT_TOL, False, None)):
             settings = dataclasses.replace(ModelSettings(), outer_tol=tol, complementarity_tol=tol)
+            cpu_derivative = None
             if fit_step is None:
-                J, cpu, ok = _implicit_columns(robot, names, values, data, settings)
+                J, cpu, ok, cpu_derivative = _implicit_columns(robot, names, values, data, settings)
             else:
                 J, cpu, ok = _columns(robot, names, values, data, settings, warm=warm, fit_step=fit_step)
             good = np.isfinite(J).all(axis=(1, 2)) & np.isfinite(ref).all(axis=(1, 2))
@@ -224,7 +229,10 @@ def main(argv=None):
                    for j, n in enumerate(names)}
             rows[label] = {"tolerance": tol, "warm": warm, "step": {True: "fit", False: "design", None: "implicit"}[fit_step], "cpu_s": cpu,
                            "converged": ok, "relative_error": err}
-            print(f"{case:10s} {label:25s} tol {tol:.0e}: CPU {cpu:6.2f} s, converged {100 * ok:.0f} %, error "
+            if cpu_derivative is not None:
+                rows[label]["derivative_cpu_s"] = cpu_derivative
+            part = "" if cpu_derivative is None else f" (derivatives {cpu_derivative:.2f} s)"
+            print(f"{case:10s} {label:25s} tol {tol:.0e}: CPU {cpu:6.2f} s{part}, converged {100 * ok:.0f} %, error "
                   + ", ".join(f"{n} {100 * e:.3g} %" for n, e in err.items()), flush=True)
         out["cases"][case] = {"samples": int(data.n_samples), "parameters": dict(zip(names, values.tolist())),
                               "reference_converged": ref_ok, "settings": rows}
