@@ -24,6 +24,9 @@ What they time (in-process unless said otherwise):
 - ``Design.time_design``: one ``ctrplan.design.design_experiment`` search separating drive
   backlash from torsional friction on the Table I tube pair (a 10-s motion after a 12-s
   recording, no random comparison);
+- ``ContactDerivatives.time_jacobian``: the implicit-function derivatives of friction solutions'
+  tips with respect to every tube parameter (``contact_tip_jacobian``) at 8 configurations of the
+  Table VII robot's grid (skipped on commits without them);
 - ``timeraw_*``: importing ctrplan, the first bound, and the Quick start's plan
   (``ctrplan plan scenarios/obstacles.toml`` with its files: summary, plots, 3-D view) in a fresh
   interpreter (the compiled kernels read from their cache; the plan's bound map read from the
@@ -360,6 +363,37 @@ class Design:
     def time_design(self):
         self.design.design_experiment(self.robot, self.data, self.hypotheses, noise=self.noise, limits=self.limits,
                                       settings=self.settings, search=self.design.DesignSearch(n_random=0))
+
+
+class ContactDerivatives:
+    """Tip derivatives of friction solutions (all columns) at 8 configurations of the 4x4x4 grid
+    of the Table VII robot."""
+
+    timeout = 300
+
+    def setup(self):
+        try:
+            from ctrplan.mechanics.contact_sensitivity import contact_tip_jacobian
+        except ImportError:
+            raise NotImplementedError("no contact_tip_jacobian on this commit") from None
+        from ctrplan.io.robot_file import load_robot
+        from ctrplan.mechanics import ModelSettings, solve_contact, solve_standard
+
+        robot = load_robot(REPO / "model" / "ha2019-table7-calibrated.toml")
+        settings = ModelSettings()
+        cases = []
+        for q in _grid_configurations(robot):
+            alpha, beta = robot.configuration(q)
+            std = solve_standard(robot, alpha, beta, settings, check_stability=False)
+            sol = solve_contact(robot, alpha, beta, settings, eta=np.ones(robot.n_tubes - 1), standard=std)
+            if sol.diagnostics.converged:
+                cases.append((alpha, beta, sol, std))
+        self.robot, self.settings, self.cases, self.jacobian = robot, settings, cases, contact_tip_jacobian
+        self.time_jacobian()   # compiled kernels loaded
+
+    def time_jacobian(self):
+        for alpha, beta, sol, std in self.cases:
+            self.jacobian(self.robot, alpha, beta, sol, self.settings, standard=std)
 
 
 def timeraw_quickstart_plan():
