@@ -55,9 +55,9 @@ __all__ = ["ContactTipDerivatives", "ContactTipJacobian", "contact_tip_derivativ
 _GCR_RTOL = 1e-10
 _GCR_MAXIT = 200
 # largest curvature residual |F1| of a solution to differentiate, relative to its largest curvature:
-# converged solutions at the default tolerance leave up to 1.6e-3 (torsion, which the outer loop's
-# centerline test does not see: 0.026 1/m at 16 1/m on the Table VII robot's grid), a solution of
-# another configuration or robot leaves O(1)
+# converged solutions at the default tolerance leave up to 1.6e-3 (0.026 1/m at 16 1/m at the
+# Table VII robot's grid configurations, whose tips are within 2 um of solves at 2e-9 m), a
+# solution of another configuration or robot leaves O(1)
 _EQUILIBRIUM_TOL = 1e-2
 # relative step of the central differences of F along a direction (F is explicit, no solve)
 _JVP_STEP = 1e-5
