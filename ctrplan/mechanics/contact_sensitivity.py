@@ -36,11 +36,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from . import _contact_kernels as ck
 from ._contact_fast import FlatProblem
-from ._contact_sensitivity_kernels import equilibrium_residual, jacobian_rows
+from ._contact_sensitivity_kernels import equilibrium_residual, frozen_factors, frozen_solve, gcr_solve, jacobian_rows
 from ._sensitivity_kernels import section_index
 from .packed import pack_robot
 from .results import ModelSettings
@@ -166,47 +165,6 @@ class _Equilibrium:
         return F1, F2
 
 
-def _gcr(apply, rhs, rtol, maxit):
-    """Solve apply(x) = b for every column b of ``rhs`` (size, P) by the generalized conjugate
-    residual method with one memory for all columns: the directions z_i and their images
-    w_i = apply(z_i) (orthonormal) found for earlier columns start the later ones, which share
-    the operator's slow modes. Returns (x (size, P), products of ``apply`` used, largest
-    relative residual)."""
-    size, P = rhs.shape
-    Z = np.empty((size, maxit))
-    W = np.empty((size, maxit))
-    k = 0
-    out = np.zeros((size, P))
-    worst = 0.0
-    for col in range(P):
-        b = rhs[:, col]
-        nb = float(np.linalg.norm(b))
-        if nb == 0.0:
-            continue
-        c = W[:, :k].T @ b
-        x = Z[:, :k] @ c
-        r = b - W[:, :k] @ c
-        while np.linalg.norm(r) > rtol * nb and k < maxit:
-            z = r.copy()
-            w = apply(z)
-            for _ in range(2):     # modified Gram-Schmidt, twice
-                h = W[:, :k].T @ w
-                w -= W[:, :k] @ h
-                z -= Z[:, :k] @ h
-            nw = float(np.linalg.norm(w))
-            if nw <= 1e-14 * nb:
-                break
-            W[:, k] = w / nw
-            Z[:, k] = z / nw
-            a = W[:, k] @ r
-            x += a * Z[:, k]
-            r -= a * W[:, k]
-            k += 1
-        out[:, col] = x
-        worst = max(worst, float(np.linalg.norm(r)) / nb)
-    return out, k, worst
-
-
 def _vector(x, n, name):
     a = np.asarray(x, dtype=float)
     if a.shape != (n,) or not np.all(np.isfinite(a)):
@@ -321,7 +279,7 @@ def _contact_tip_jacobian(robot, alpha, beta, solution, settings, directions, st
             raise ValueError(f"directions must have shape ({rhs.shape[1]}, Q) (contact_parameter_columns), "
                              f"got {directions.shape}")
         rhs = rhs @ directions
-    sol, products, res = frozen.solve_exact(u, lam, scale, rhs)
+    sol, products, res = frozen.solve_exact(u, lam, rhs)
     if not res <= 1e-6:
         raise ConvergenceError(f"derivatives of the contact solution at alpha={np.round(alpha, 4)} rad, "
                                f"beta={np.round(beta * 1e3, 3)} mm: linear solve stopped at relative residual {res:.3g}")
@@ -400,86 +358,39 @@ class _FrozenJacobian:
         [I + U L A   -Y] [x]   [r1]          [I + A U L   -A Y] [z]   [A r1]
         [  D A        0] [y] = [r2]   via    [    D         0 ] [y] = [ r2 ],  x = r1 - U L z + Y y
 
-    (the Woodbury reduction of Appendix A of Ha et al. 2019 onto the active contacts)."""
+    (the Woodbury reduction of Appendix A of Ha et al. 2019 onto the active contacts; compiled,
+    ``_contact_sensitivity_kernels.frozen_factors``)."""
 
     def __init__(self, eq, R, d, lam, Jp, Jw):
         arr, act = eq.arr, eq.act
-        m = act.size
         self.eq = eq
-        self.m = m
-        self.S3 = S3 = 3 * eq.prob.S
-        kinv = arr.kinv.reshape(-1)
-        B = eq.scr.B[act]
-        self.A = A = np.einsum("mrq,mrx->mqx", B, Jp[:m] - Jp[m:2 * m]).reshape(2 * m, S3)
-        ta = R[arr.jo[act]][:, :, 2]
-        tb = R[arr.ji[act]][:, :, 2]
-        Zr = (arr.tq_out[act][:, None] * np.einsum("mr,mrx->mx", ta, Jw[:m])
-              + arr.tq_in[act][:, None] * np.einsum("mr,mrx->mx", tb, Jw[m:2 * m]))
-        Mb = arr.Mblk[act]
-        lam_a = lam[act]
-        da = d[act]
-        U = (A * kinv[None, :]).T
-        L = np.zeros((2 * m, 2 * m))
-        D = np.zeros((m, 2 * m))
-        for i in range(m):
-            L[2 * i:2 * i + 2, 2 * i:2 * i + 2] = lam_a[i] * Mb[i]
-            D[i, 2 * i:2 * i + 2] = da[i]
-        Md = -np.einsum("mqr,mr->mq", Mb, da)
-        self.Y = Y = np.einsum("xmq,mq->xm", U.reshape(S3, m, 2), Md) + kinv[:, None] * Zr.T
-        small = np.zeros((3 * m, 3 * m))
-        small[:2 * m, :2 * m] = np.eye(2 * m) + A @ U @ L
-        small[:2 * m, 2 * m:] = -A @ Y
-        small[2 * m:, :2 * m] = D
-        self.lu = scipy.linalg.lu_factor(small) if m else None
-        self.UL = U @ L
+        self.m = act.size
+        self.S3 = 3 * eq.prob.S
+        self.A, self.ULt, self.Y, self.LU, self.piv, ok = frozen_factors(
+            act, lam, np.ascontiguousarray(d), R, eq.scr.B, Jp, Jw, arr.jo, arr.ji,
+            np.ascontiguousarray(arr.kinv.reshape(-1)), arr.tq_out, arr.tq_in, arr.Mblk)
+        if not ok:
+            raise ConvergenceError("the solver's linearization at the contact solution is singular: "
+                                   "no derivative on this contact set")
         # multipliers are solved for in units of the largest one: the preconditioned operator is
         # then well conditioned (in N/m it is not)
-        self.lam_scale = float(lam_a.max()) if m else 1.0
+        self.lam_scale = float(lam[act].max()) if self.m else 1.0
 
     def solve(self, r):
         """The frozen linearization's solution for the right-hand side r (3S + m,)."""
-        S3, m = self.S3, self.m
-        r1, r2 = r[:S3], r[S3:]
-        if m == 0:
-            return r1.copy()
-        z = scipy.linalg.lu_solve(self.lu, np.concatenate([self.A @ r1, r2]))
-        return np.concatenate([r1 - self.UL @ z[:2 * m] + self.Y @ z[2 * m:], z[2 * m:]])
+        out = np.empty(self.S3 + self.m)
+        frozen_solve(self.A, self.ULt, self.Y, self.LU, self.piv, np.ascontiguousarray(r, dtype=float), out)
+        return out
 
-    def solve_exact(self, u, lam, scale, rhs):
+    def solve_exact(self, u, lam, rhs):
         """Columns of the full Jacobian's solution for ``rhs`` (3S + m, P): GCR on the
         left-preconditioned system, products with the full Jacobian by central differences of
-        the explicit equilibrium. Returns (solution, products, largest relative residual)."""
-        S3, eq, Y = self.S3, self.eq, self.Y
-        u_flat = u.reshape(-1)
-
-        def full(v):
-            vu = v[:S3]
-            out = np.zeros(S3 + self.m)
-            nv = float(np.max(np.abs(vu)))
-            if nv > 0.0:
-                eps = _JVP_STEP * scale / nv
-                Fp1, Fp2 = eq.residual((u_flat + eps * vu).reshape(-1, 3), lam)
-                Fm1, Fm2 = eq.residual((u_flat - eps * vu).reshape(-1, 3), lam)
-                out[:S3] = (Fp1 - Fm1).reshape(-1) / (2 * eps)
-                out[S3:] = (Fp2 - Fm2) / (2 * eps)
-            out[:S3] -= Y @ v[S3:]    # F1 is linear in the multipliers
-            return out
-
-        def preconditioned(v):
-            x = v.copy()
-            x[S3:] *= self.lam_scale
-            y = self.solve(full(x))
-            y[S3:] /= self.lam_scale
-            return y
-
-        pre = np.zeros_like(rhs)
-        for j in range(rhs.shape[1]):
-            if np.any(rhs[:, j]):
-                pre[:, j] = self.solve(rhs[:, j])
-        pre[S3:] /= self.lam_scale
-        sol, products, res = _gcr(preconditioned, pre, _GCR_RTOL, _GCR_MAXIT)
-        sol[S3:] *= self.lam_scale
-        return sol, products, res
+        the explicit equilibrium (``_contact_sensitivity_kernels.gcr_solve``). Returns
+        (solution, products, largest relative residual)."""
+        eq = self.eq
+        return gcr_solve(np.ascontiguousarray(u), lam, eq.act, eq.arr, eq.scr, self.A, self.ULt, self.Y, self.LU,
+                         self.piv, self.lam_scale, np.ascontiguousarray(rhs, dtype=float), _JVP_STEP, _GCR_RTOL,
+                         _GCR_MAXIT)
 
 
 def _parameter_rhs(robot, prob, standard, beta, u, lam, act, d, R, Jp, Jw, friction, eta):
