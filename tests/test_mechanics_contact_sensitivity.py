@@ -60,7 +60,8 @@ def _with_precurvature(robot, i, j, comp, h):
 
 
 def _perturbations(robot, friction):
-    """(label, robot(h), step, analytic column from a ContactTipDerivatives) of every parameter."""
+    """(label, robot(h) or ("alpha", tube), step, analytic column from a ContactTipDerivatives) of
+    every parameter."""
     out = []
     for i, tube in enumerate(robot.tubes):
         for j, sec in enumerate(tube.sections):
@@ -76,6 +77,9 @@ def _perturbations(robot, friction):
         out.append((f"nu {i}", lambda h, i=i, nu=nu: _with_tube(robot, i, poisson_ratio=nu + h), 1e-4,
                     lambda d, i=i, k=k, nu=nu: -k / (1 + nu) ** 2 * d.d_position_d_k_z[:, i]))
     c0 = np.asarray(robot.clearances, float)
+    for i in range(robot.n_tubes):
+        # a base rotation: the configuration, not the robot, moves (see _compare)
+        out.append((f"alpha {i}", ("alpha", i), 1e-5, lambda d, i=i: d.d_position_d_alpha[:, i]))
     for i in range(robot.n_tubes - 1):
         out.append((f"clearance {i}",
                     lambda h, i=i: robot.replace(clearances_override=tuple(c0 + h * (np.arange(c0.size) == i))),
@@ -96,8 +100,12 @@ def _compare(robot, alpha, beta, eta, der, sol):
     for label, make, h, analytic in _perturbations(robot, eta is not None):
         tips, same = [], True
         for step in (h, -h):
-            rob = make(step)
-            _, s = _solve(rob, alpha, beta, eta, warm_start=sol)
+            rob, a = robot, alpha
+            if isinstance(make, tuple):
+                a = alpha + step * (np.arange(robot.n_tubes) == make[1])
+            else:
+                rob = make(step)
+            _, s = _solve(rob, a, beta, eta, warm_start=sol)
             tips.append(s.tip_position)
             same &= np.array_equal(s.multipliers > 0, act)
         ref = (tips[0] - tips[1]) / (2 * h)
@@ -287,3 +295,20 @@ def test_the_taylor_remainder_falls_as_h_squared(name, seed):
         rem.append(np.linalg.norm(s.tip_position - sol.tip_position - h * jac.d_position[:, 0]))
     slopes = np.diff(np.log(rem)) / np.diff(np.log(hs))
     assert np.all((slopes > 1.9) & (slopes < 2.1)), (rem, slopes)
+
+
+def test_a_common_base_rotation_turns_the_tip_about_the_axis():
+    """Rotating every tube's base by the same angle rotates the whole solution about the z axis
+    (nothing else changes), so sum_i d tip / d alpha_i = e_z x tip and the same for the tangent,
+    computed without differences. Catches a missing direct term of the tip tube's rotation or a
+    wrong alpha column of the equilibrium."""
+    for name, seed in (("ha2019-table1-tube-pair.toml", 3), ("ha2019-table7-calibrated.toml", 2)):
+        robot = load_robot(MODEL / name)
+        alpha, beta, eta = _configuration(robot, seed, True)
+        std, sol = _solve(robot, alpha, beta, eta)
+        der = contact_tip_derivatives(robot, alpha, beta, sol, TIGHT, standard=std)
+        ez = np.array([0.0, 0.0, 1.0])
+        scale = np.linalg.norm(der.d_position_d_alpha, axis=0).max()
+        assert np.allclose(der.d_position_d_alpha.sum(axis=1), np.cross(ez, sol.tip_position), rtol=0, atol=1e-6 * scale)
+        assert np.allclose(der.d_tangent_d_alpha.sum(axis=1), np.cross(ez, sol.tip_tangent), rtol=0,
+                           atol=1e-6 * np.linalg.norm(der.d_tangent_d_alpha, axis=0).max())

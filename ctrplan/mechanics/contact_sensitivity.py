@@ -58,6 +58,8 @@ _GCR_MAXIT = 200
 # Table VII robot's grid configurations, whose tips are within 2 um of solves at 2e-9 m), a
 # solution of another configuration or robot leaves O(1)
 _EQUILIBRIUM_TOL = 1e-2
+# step of the central differences of F in a base rotation [rad] (F is explicit in them, no solve)
+_ALPHA_STEP = 1e-5
 # relative step of the central differences of F along a direction (F is explicit, no solve)
 _JVP_STEP = 1e-5
 
@@ -83,6 +85,8 @@ class ContactTipDerivatives:
         Radial clearance c_i of pair i [m/m], [1/m].
     d_position_d_mu, d_tangent_d_mu : ndarray, shape (3, n - 1)
         Friction coefficient mu_i of pair i (zero columns without friction on the pair) [m], [-].
+    d_position_d_alpha, d_tangent_d_alpha : ndarray, shape (3, n)
+        Base rotation alpha_i, the friction directions held [m/rad], [1/rad].
     active : int
         Number of active contacts (lambda > 0).
     set_margin : float
@@ -105,6 +109,8 @@ class ContactTipDerivatives:
     d_tangent_d_clearance: np.ndarray
     d_position_d_mu: np.ndarray
     d_tangent_d_mu: np.ndarray
+    d_position_d_alpha: np.ndarray
+    d_tangent_d_alpha: np.ndarray
     active: int
     set_margin: float
     jacobian_products: int
@@ -273,6 +279,7 @@ def _contact_tip_jacobian(robot, alpha, beta, solution, settings, directions, st
     Jp, Jw = jacobian_rows(nodes, p, eq.scr.Omega, eq.scr.base, prob.node_off)
     frozen = _FrozenJacobian(eq, R, d, lam, Jp, Jw)
     rhs = _parameter_rhs(robot, prob, standard, beta, u, lam, act, d, R, Jp, Jw, friction, eta)
+    rhs_cols = rhs.shape[1]
     if directions is not None:
         directions = np.asarray(directions, dtype=float)
         if directions.ndim != 2 or directions.shape[0] != rhs.shape[1]:
@@ -285,9 +292,16 @@ def _contact_tip_jacobian(robot, alpha, beta, solution, settings, directions, st
                                f"beta={np.round(beta * 1e3, 3)} mm: linear solve stopped at relative residual {res:.3g}")
     du = sol[:3 * prob.S]
     t_tip = R[tip_node][:, 2]
+    # the tip tube's base rotation also turns its tip about the z axis at fixed curvatures
+    direct_p = np.zeros((3, rhs_cols))
+    direct_t = np.zeros((3, rhs_cols))
+    direct_p[:, rhs_cols - n + tip_tube] = np.cross([0.0, 0.0, 1.0], p[tip_node])
+    direct_t[:, rhs_cols - n + tip_tube] = np.cross([0.0, 0.0, 1.0], t_tip)
+    if directions is not None:
+        direct_p, direct_t = direct_p @ directions, direct_t @ directions
     return ContactTipJacobian(
-        tip_position=p[tip_node].copy(), tip_tangent=t_tip.copy(), d_position=Jp[-1] @ du,
-        d_tangent=np.cross(Jw[-1] @ du, t_tip, axis=0), active=int(act.size),
+        tip_position=p[tip_node].copy(), tip_tangent=t_tip.copy(), d_position=Jp[-1] @ du + direct_p,
+        d_tangent=np.cross(Jw[-1] @ du, t_tip, axis=0) + direct_t, active=int(act.size),
         set_margin=_set_margin(lam, act, d, eq.arr.c), jacobian_products=int(products))
 
 
@@ -306,7 +320,7 @@ def contact_tip_derivatives(robot, alpha, beta, solution, settings: ModelSetting
     n = robot.n_tubes
     Ssec = pack_robot(robot).precurvature.shape[1]
     c0 = n * Ssec * 2
-    c1, c2, c3 = c0 + n, c0 + 2 * n, c0 + 2 * n + (n - 1)
+    c1, c2, c3, c4 = c0 + n, c0 + 2 * n, c0 + 2 * n + (n - 1), c0 + 2 * n + 2 * (n - 1)
     dp, dt = jac.d_position, jac.d_tangent
     return ContactTipDerivatives(
         tip_position=jac.tip_position, tip_tangent=jac.tip_tangent,
@@ -315,7 +329,8 @@ def contact_tip_derivatives(robot, alpha, beta, solution, settings: ModelSetting
         d_position_d_k_xy=dp[:, c0:c1], d_tangent_d_k_xy=dt[:, c0:c1],
         d_position_d_k_z=dp[:, c1:c2], d_tangent_d_k_z=dt[:, c1:c2],
         d_position_d_clearance=dp[:, c2:c3], d_tangent_d_clearance=dt[:, c2:c3],
-        d_position_d_mu=dp[:, c3:], d_tangent_d_mu=dt[:, c3:],
+        d_position_d_mu=dp[:, c3:c4], d_tangent_d_mu=dt[:, c3:c4],
+        d_position_d_alpha=dp[:, c4:], d_tangent_d_alpha=dt[:, c4:],
         active=jac.active, set_margin=jac.set_margin, jacobian_products=jac.jacobian_products)
 
 
@@ -324,18 +339,20 @@ def contact_parameter_columns(robot) -> list[tuple]:
     tube, section, component)`` for every tube, section slot and component (x, y) (S the largest
     number of sections; slots past a tube's last section give zero columns), then
     ``("k_xy", tube)``, ``("k_z", tube)`` for every tube, ``("clearance", pair)`` and
-    ``("mu", pair)`` for every pair (0-based indices).
+    ``("mu", pair)`` for every pair, then the base rotations ``("alpha", tube)`` (0-based
+    indices; not the translations beta, which move the grid nodes).
 
     Returns
     -------
     list of tuple
-        P = n (2 S + 2) + 2 (n - 1) labels.
+        P = n (2 S + 3) + 2 (n - 1) labels.
     """
     n = robot.n_tubes
     Ssec = pack_robot(robot).precurvature.shape[1]
     cols = [("precurvature", i, j, c) for i in range(n) for j in range(Ssec) for c in range(2)]
     cols += [("k_xy", i) for i in range(n)] + [("k_z", i) for i in range(n)]
     cols += [("clearance", i) for i in range(n - 1)] + [("mu", i) for i in range(n - 1)]
+    cols += [("alpha", i) for i in range(n)]
     return cols
 
 
@@ -393,17 +410,38 @@ class _FrozenJacobian:
                          _GCR_MAXIT)
 
 
+def _alpha_rhs(prob, u, lam, act, out):
+    """-dF/dalpha (3S + m, n) into ``out``: the base rotations move the tubes' frames, so F depends
+    on them through the kinematics alone; central differences of the explicit F over
+    :data:`_ALPHA_STEP` (no solve). Evaluated on a copy of the problem's scratch arrays."""
+    arr = prob.outer_arrays()
+    scr = type(prob.outer_scratch())(*(a.copy() for a in prob.outer_scratch()))
+    S3 = 3 * prob.S
+    F1 = np.empty_like(u)
+    F2 = np.empty(act.size)
+    for i in range(prob.n):
+        cols = []
+        for sign in (1.0, -1.0):
+            a = arr.alpha.copy()
+            a[i] += sign * _ALPHA_STEP
+            equilibrium_residual(u, lam, act, arr._replace(alpha=a), scr, F1, F2)
+            cols.append(np.concatenate([F1.reshape(-1), F2]))
+        out[:, i] = -(cols[0] - cols[1]) / (2 * _ALPHA_STEP)
+    assert out.shape[0] == S3 + act.size
+
+
 def _parameter_rhs(robot, prob, standard, beta, u, lam, act, d, R, Jp, Jw, friction, eta):
     """-dF/dq (3S + m, P) for the columns precurvature (n, S, 2), k_xy (n), k_z (n),
-    clearance (n - 1), mu (n - 1)."""
+    clearance (n - 1), mu (n - 1), alpha (n) (:func:`contact_parameter_columns`)."""
     n = prob.n
     arr = prob.outer_arrays()
     pk = pack_robot(robot)
     Ssec = pk.precurvature.shape[1]
     S3 = 3 * prob.S
     m = act.size
-    P = n * Ssec * 2 + 2 * n + 2 * (n - 1)
+    P = n * Ssec * 2 + 2 * n + 2 * (n - 1) + n
     rhs = np.zeros((S3 + m, P))
+    _alpha_rhs(prob, u, lam, act, rhs[:, P - n:])
     g = standard.grid
     first = np.asarray(g.first, dtype=np.int64)
     sec = section_index(np.ascontiguousarray(g.s, dtype=float), np.ascontiguousarray(g.present, dtype=bool),
@@ -558,10 +596,10 @@ def bound_derivatives(robot, alpha, beta, settings: ModelSettings | None = None,
     Ssec = pack_robot(robot).precurvature.shape[1]
     # the standard tip's columns in contact_parameter_columns order (no clearance or mu columns)
     std_p = np.concatenate([sd.d_position_d_precurvature.reshape(3, -1), sd.d_position_d_k_xy, sd.d_position_d_k_z,
-                            np.zeros((3, 2 * (n - 1)))], axis=1) @ D
+                            np.zeros((3, 2 * (n - 1))), sd.d_position_d_alpha], axis=1) @ D
     std_t = np.concatenate([sd.d_tangent_d_precurvature.reshape(3, -1), sd.d_tangent_d_k_xy, sd.d_tangent_d_k_z,
-                            np.zeros((3, 2 * (n - 1)))], axis=1) @ D
-    assert std_p.shape[0] == 3 and Ssec * 2 * n + 2 * n + 2 * (n - 1) == len(labels)
+                            np.zeros((3, 2 * (n - 1))), sd.d_tangent_d_alpha], axis=1) @ D
+    assert std_p.shape[0] == 3 and Ssec * 2 * n + 3 * n + 2 * (n - 1) == len(labels)
     jac = {}
 
     def of(sol):
