@@ -186,7 +186,9 @@ def _implicit_columns(robot, names, values, data, settings):
         friction = bool(np.any(mu[k] > 0))
         try:
             std = solve_standard(rob, a, b, settings, check_stability=False)
-            sol = solve_contact(rob, a, b, settings, eta=eta[k] if friction else None, mu=mu[k] if friction else None,
+            # a pair the history has not rotated yet carries no friction: any direction (as simulate)
+            eta_k = np.where(eta[k] == 0, 1, eta[k])
+            sol = solve_contact(rob, a, b, settings, eta=eta_k if friction else None, mu=mu[k] if friction else None,
                                 standard=std, warm_start=prev)
             prev = sol
             # the friction applied at this sample per unit of the robot's coefficient
