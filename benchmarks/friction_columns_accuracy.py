@@ -190,7 +190,8 @@ def _implicit_columns(robot, names, values, data, settings):
             eta_k = np.where(eta[k] == 0, 1, eta[k])
             sol = solve_contact(rob, a, b, settings, eta=eta_k if friction else None, mu=mu[k] if friction else None,
                                 standard=std, warm_start=prev)
-            if friction and not sol.diagnostics.converged:
+            finite = np.all(np.isfinite(np.concatenate(sol.curvatures)))
+            if friction and not (sol.diagnostics.converged and finite):
                 # started from the clearance solution here instead, as simulate does
                 start = solve_contact(rob, a, b, settings, standard=std)
                 sol = solve_contact(rob, a, b, settings, eta=eta_k, mu=mu[k], standard=std, warm_start=start)

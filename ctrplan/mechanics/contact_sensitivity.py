@@ -230,8 +230,8 @@ def contact_tip_jacobian(robot, alpha, beta, solution, settings: ModelSettings |
         grid (its curvatures do not have the grid's shape, or it is not an equilibrium of this
         robot: a curvature residual above 1e-2 of the largest curvature).
     ConvergenceError
-        The solution is flagged as not converged, or the linear solve of the derivatives did
-        not reach a relative residual of 1e-6.
+        The solution is flagged as not converged or is not finite, or the linear solve of the
+        derivatives did not reach a relative residual of 1e-6.
 
     Notes
     -----
@@ -266,6 +266,10 @@ def _contact_tip_jacobian(robot, alpha, beta, solution, settings, directions, st
                          "configuration or grid step")
     u = np.ascontiguousarray(np.concatenate(solution.curvatures), dtype=float)
     lam = np.asarray(solution.multipliers, dtype=float)
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(lam))):
+        # the outer loop's centerline test passes NaN centerlines (docs/mechanics.md, Sec. 11)
+        raise ConvergenceError(f"contact solution at alpha={np.round(alpha, 4)} rad, beta={np.round(beta * 1e3, 3)} mm "
+                               "is flagged converged but its curvatures or multipliers are not finite")
     act = np.nonzero(lam > 0.0)[0]
     eq = _Equilibrium(prob, act)
     F1, _ = eq.residual(u, lam)
