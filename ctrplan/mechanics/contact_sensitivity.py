@@ -237,7 +237,7 @@ def contact_tip_jacobian(robot, alpha, beta, solution, settings: ModelSettings |
     -----
     Equilibrium (34)-(36), (41) and constraints (19)-(24) of Ha, Fagogenis & Dupont 2019 on the
     active set; preconditioner from the Woodbury reduction of Appendix A (Eqs. (50)-(56)).
-    Cost: about five products with the full Jacobian per column, 1-2 ms per column on the
+    Cost: about five products with the full Jacobian per column, 0.7-1.6 ms per column on the
     shipped robots, about what a forward difference of a warm-started solve costs
     (``benchmarks/friction_columns_accuracy.py``, docs/mechanics.md Sec. 6); the gain is
     accuracy (1e-5 where such differences are off by 0.1-30 %).
