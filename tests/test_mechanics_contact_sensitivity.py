@@ -234,6 +234,8 @@ def test_bad_input_is_refused():
     flagged = dataclasses.replace(sol, diagnostics=dataclasses.replace(sol.diagnostics, converged=False))
     with pytest.raises(ConvergenceError, match="did not converge"):
         contact_tip_jacobian(robot, alpha, beta, flagged, TIGHT, standard=std)
+    with pytest.raises(ValueError, match="multipliers do not match"):
+        contact_tip_jacobian(robot, alpha, beta, dataclasses.replace(sol, multipliers=None), TIGHT, standard=std)
     # a solution flagged converged whose curvatures are NaN (the outer loop's test lets them pass)
     nan = dataclasses.replace(sol, curvatures=[np.full_like(c, np.nan) for c in sol.curvatures])
     with pytest.raises(ConvergenceError, match="not finite"):

@@ -227,8 +227,8 @@ def contact_tip_jacobian(robot, alpha, beta, solution, settings: ModelSettings |
     ------
     ValueError
         Malformed joints, or a solution that does not belong to this robot, configuration and
-        grid (its curvatures do not have the grid's shape, or it is not an equilibrium of this
-        robot: a curvature residual above 1e-2 of the largest curvature).
+        grid (its curvatures or multipliers do not have the grid's shapes, or it is not an
+        equilibrium of this robot: a curvature residual above 1e-2 of the largest curvature).
     ConvergenceError
         The solution is flagged as not converged or is not finite, or the linear solve of the
         derivatives did not reach a relative residual of 1e-6.
@@ -264,6 +264,9 @@ def _contact_tip_jacobian(robot, alpha, beta, solution, settings, directions, st
     if len(solution.curvatures) != n or any(c.shape != q.shape for c, q in zip(solution.curvatures, parts)):
         raise ValueError("solution's curvatures do not have the grid's shape: it belongs to another robot, "
                          "configuration or grid step")
+    if solution.multipliers is None or np.shape(solution.multipliers) != (prob.M,):
+        raise ValueError(f"solution's multipliers do not match the grid's {prob.M} contacts: pass a ContactSolution "
+                         "of solve_contact for this robot and configuration")
     u = np.ascontiguousarray(np.concatenate(solution.curvatures), dtype=float)
     lam = np.asarray(solution.multipliers, dtype=float)
     if not (np.all(np.isfinite(u)) and np.all(np.isfinite(lam))):
