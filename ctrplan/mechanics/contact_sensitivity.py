@@ -42,7 +42,7 @@ import numpy as np
 
 from . import _contact_kernels as ck
 from ._contact_fast import FlatProblem
-from ._contact_sensitivity_kernels import equilibrium_residual, frozen_factors, frozen_solve, gcr_solve, jacobian_rows
+from ._contact_sensitivity_kernels import equilibrium_residual, frozen_factors, gcr_solve, jacobian_rows
 from ._sensitivity_kernels import section_index
 from .packed import pack_robot
 from .results import ModelSettings
@@ -305,8 +305,9 @@ def _contact_tip_jacobian(robot, alpha, beta, solution, settings, directions, st
     # the tip tube's base rotation also turns its tip about the z axis at fixed curvatures
     direct_p = np.zeros((3, rhs_cols))
     direct_t = np.zeros((3, rhs_cols))
-    direct_p[:, rhs_cols - n + tip_tube] = np.cross([0.0, 0.0, 1.0], p[tip_node])
-    direct_t[:, rhs_cols - n + tip_tube] = np.cross([0.0, 0.0, 1.0], t_tip)
+    tip_alpha = contact_parameter_columns(robot).index(("alpha", tip_tube))
+    direct_p[:, tip_alpha] = np.cross([0.0, 0.0, 1.0], p[tip_node])
+    direct_t[:, tip_alpha] = np.cross([0.0, 0.0, 1.0], t_tip)
     if directions is not None:
         direct_p, direct_t = direct_p @ directions, direct_t @ directions
     return ContactTipJacobian(
@@ -328,19 +329,16 @@ def contact_tip_derivatives(robot, alpha, beta, solution, settings: ModelSetting
     """
     jac = contact_tip_jacobian(robot, alpha, beta, solution, settings, standard=standard)
     n = robot.n_tubes
-    Ssec = pack_robot(robot).precurvature.shape[1]
-    c0 = n * Ssec * 2
-    c1, c2, c3, c4 = c0 + n, c0 + 2 * n, c0 + 2 * n + (n - 1), c0 + 2 * n + 2 * (n - 1)
+    block = _blocks(contact_parameter_columns(robot))
     dp, dt = jac.d_position, jac.d_tangent
+    pc = block["precurvature"]
+    Ssec = (pc.stop - pc.start) // (2 * n)
     return ContactTipDerivatives(
         tip_position=jac.tip_position, tip_tangent=jac.tip_tangent,
-        d_position_d_precurvature=dp[:, :c0].reshape(3, n, Ssec, 2),
-        d_tangent_d_precurvature=dt[:, :c0].reshape(3, n, Ssec, 2),
-        d_position_d_k_xy=dp[:, c0:c1], d_tangent_d_k_xy=dt[:, c0:c1],
-        d_position_d_k_z=dp[:, c1:c2], d_tangent_d_k_z=dt[:, c1:c2],
-        d_position_d_clearance=dp[:, c2:c3], d_tangent_d_clearance=dt[:, c2:c3],
-        d_position_d_mu=dp[:, c3:c4], d_tangent_d_mu=dt[:, c3:c4],
-        d_position_d_alpha=dp[:, c4:], d_tangent_d_alpha=dt[:, c4:],
+        d_position_d_precurvature=dp[:, pc].reshape(3, n, Ssec, 2),
+        d_tangent_d_precurvature=dt[:, pc].reshape(3, n, Ssec, 2),
+        **{f"d_{what}_d_{kind}": x[:, block[kind]] for kind in ("k_xy", "k_z", "clearance", "mu", "alpha")
+           for what, x in (("position", dp), ("tangent", dt))},
         active=jac.active, set_margin=jac.set_margin, jacobian_products=jac.jacobian_products)
 
 
@@ -364,6 +362,14 @@ def contact_parameter_columns(robot) -> list[tuple]:
     cols += [("clearance", i) for i in range(n - 1)] + [("mu", i) for i in range(n - 1)]
     cols += [("alpha", i) for i in range(n)]
     return cols
+
+
+def _blocks(labels) -> dict:
+    """``{kind: slice}`` of the columns of each kind in ``labels`` (:func:`contact_parameter_columns`)."""
+    out = {}
+    for i, label in enumerate(labels):
+        out[label[0]] = slice(out[label[0]].start if label[0] in out else i, i + 1)
+    return out
 
 
 def _set_margin(lam, act, d, c):
@@ -391,8 +397,6 @@ class _FrozenJacobian:
     def __init__(self, eq, R, d, lam, Jp, Jw):
         arr, act = eq.arr, eq.act
         self.eq = eq
-        self.m = act.size
-        self.S3 = 3 * eq.prob.S
         self.A, self.ULt, self.Y, self.LU, self.piv, ok = frozen_factors(
             act, lam, np.ascontiguousarray(d), R, eq.scr.B, Jp, Jw, arr.jo, arr.ji,
             np.ascontiguousarray(arr.kinv.reshape(-1)), arr.tq_out, arr.tq_in, arr.Mblk)
@@ -401,13 +405,7 @@ class _FrozenJacobian:
                                    "no derivative on this contact set")
         # multipliers are solved for in units of the largest one: the preconditioned operator is
         # then well conditioned (in N/m it is not)
-        self.lam_scale = float(lam[act].max()) if self.m else 1.0
-
-    def solve(self, r):
-        """The frozen linearization's solution for the right-hand side r (3S + m,)."""
-        out = np.empty(self.S3 + self.m)
-        frozen_solve(self.A, self.ULt, self.Y, self.LU, self.piv, np.ascontiguousarray(r, dtype=float), out)
-        return out
+        self.lam_scale = float(lam[act].max()) if act.size else 1.0
 
     def solve_exact(self, u, lam, rhs):
         """Columns of the full Jacobian's solution for ``rhs`` (3S + m, P): GCR on the
@@ -447,9 +445,10 @@ def _parameter_rhs(robot, prob, standard, beta, u, lam, act, d, R, Jp, Jw, frict
     Ssec = pk.precurvature.shape[1]
     S3 = 3 * prob.S
     m = act.size
-    P = n * Ssec * 2 + 2 * n + 2 * (n - 1) + n
-    rhs = np.zeros((S3 + m, P))
-    _alpha_rhs(prob, u, lam, act, rhs[:, P - n:])
+    labels = contact_parameter_columns(robot)
+    col = {label: i for i, label in enumerate(labels)}
+    rhs = np.zeros((S3 + m, len(labels)))
+    _alpha_rhs(prob, u, lam, act, rhs[:, _blocks(labels)["alpha"]])
     g = standard.grid
     first = np.asarray(g.first, dtype=np.int64)
     sec = section_index(np.ascontiguousarray(g.s, dtype=float), np.ascontiguousarray(g.present, dtype=bool),
@@ -462,12 +461,12 @@ def _parameter_rhs(robot, prob, standard, beta, u, lam, act, d, R, Jp, Jw, frict
         for j in range(Ssec):
             rows = np.arange(k0, k1)[secs == j]
             for comp in range(2):
-                rhs[3 * rows + comp, (t * Ssec + j) * 2 + comp] = 1.0    # dF1/duhat = -I
+                rhs[3 * rows + comp, col[("precurvature", t, j, comp)]] = 1.0    # dF1/duhat = -I
         # F1 = u - uhat - K^-1 g, K^-1 = 1 / (k h): dF1/dk = (u - uhat) / k
         seg = np.arange(k0, k1)
         for comp in range(2):
-            rhs[3 * seg + comp, n * Ssec * 2 + t] = -w[seg, comp] / pk.k_xy[t]
-        rhs[3 * seg + 2, n * Ssec * 2 + n + t] = -w[seg, 2] / pk.k_z[t]
+            rhs[3 * seg + comp, col[("k_xy", t)]] = -w[seg, comp] / pk.k_xy[t]
+        rhs[3 * seg + 2, col[("k_z", t)]] = -w[seg, 2] / pk.k_z[t]
     if m == 0:
         return rhs
     jo, ji, pair = arr.jo[act], arr.ji[act], arr.pair[act]
@@ -478,21 +477,19 @@ def _parameter_rhs(robot, prob, standard, beta, u, lam, act, d, R, Jp, Jw, frict
     Jwa, Jwb = Jw[:m], Jw[m:2 * m]
     B = prob.outer_scratch().B[act]
     c = arr.c[act]
-    col_c = n * Ssec * 2 + 2 * n
-    col_mu = col_c + (n - 1)
     r_in, r_out = (pk.contact_radii(robot) if friction else (np.zeros(n - 1), np.zeros(n - 1)))
     for i in range(n - 1):
         on = pair == i
         if not np.any(on):
             continue
         # clearance: F2 = (|d|^2 - c^2) / 2 -> dF2/dc = -c; torques eta mu c r lam are linear in c
-        rhs[S3 + np.nonzero(on)[0], col_c + i] = c[on]
+        rhs[S3 + np.nonzero(on)[0], col[("clearance", i)]] = c[on]
         if friction and eta[i] != 0.0:
             tq_o = arr.tq_out[act][on] / c[on]
             tq_i = arr.tq_in[act][on] / c[on]
             gen = (np.einsum("m,mr,mrx->x", lam_a[on] * tq_o, ta[on], Jwa[on])
                    + np.einsum("m,mr,mrx->x", lam_a[on] * tq_i, tb[on], Jwb[on]))
-            rhs[:S3, col_c + i] += kinv * gen
+            rhs[:S3, col[("clearance", i)]] += kinv * gen
             # mu: M = I + eta mu J -> dphi/dmu = -lam eta J d; torques eta c r lam
             Jd = np.stack([-d[act][on, 1], d[act][on, 0]], axis=1)      # J d, J the +90 deg rotation
             dphi = -(lam_a[on] * eta[i])[:, None] * Jd                  # (k, 2)
@@ -500,7 +497,7 @@ def _parameter_rhs(robot, prob, standard, beta, u, lam, act, d, R, Jp, Jw, frict
             gen = np.einsum("mr,mrx->x", force, Jpa[on] - Jpb[on])
             gen += (np.einsum("m,mr,mrx->x", lam_a[on] * eta[i] * c[on] * r_in[i], ta[on], Jwa[on])
                     - np.einsum("m,mr,mrx->x", lam_a[on] * eta[i] * c[on] * r_out[i], tb[on], Jwb[on]))
-            rhs[:S3, col_mu + i] = kinv * gen
+            rhs[:S3, col[("mu", i)]] = kinv * gen
     return rhs
 
 
@@ -601,13 +598,11 @@ def bound_derivatives(robot, alpha, beta, settings: ModelSettings | None = None,
     D = np.eye(len(labels)) if directions is None else np.asarray(directions, dtype=float)
     st = bound.standard
     sd = standard_tip_derivatives(robot, alpha, beta, settings, solution=st)
-    Ssec = pack_robot(robot).precurvature.shape[1]
     # the standard tip's columns in contact_parameter_columns order (no clearance or mu columns)
     std_p = np.concatenate([sd.d_position_d_precurvature.reshape(3, -1), sd.d_position_d_k_xy, sd.d_position_d_k_z,
                             np.zeros((3, 2 * (n - 1))), sd.d_position_d_alpha], axis=1) @ D
     std_t = np.concatenate([sd.d_tangent_d_precurvature.reshape(3, -1), sd.d_tangent_d_k_xy, sd.d_tangent_d_k_z,
                             np.zeros((3, 2 * (n - 1))), sd.d_tangent_d_alpha], axis=1) @ D
-    assert std_p.shape[0] == 3 and Ssec * 2 * n + 3 * n + 2 * (n - 1) == len(labels)
     jac = {}
 
     def of(sol):
