@@ -207,8 +207,12 @@ def test_a_multiplier_near_zero_is_reported_and_each_side_that_keeps_the_set_agr
     der = contact_tip_derivatives(robot, alpha, beta, sol, TIGHT, standard=std)
     assert der.set_margin < 1e-2
     lam = sol.multipliers
-    assert der.set_margin == pytest.approx(np.min(lam[lam > 0]) / lam.max(), rel=1e-12) or der.set_margin < np.min(
-        lam[lam > 0]) / lam.max()
+    # the margin from the solution's own record: multipliers, and gaps against each pair's clearance
+    clearance = np.asarray(robot.clearances, float)[sol.contact_pair]
+    off = lam == 0
+    with np.errstate(divide="ignore"):     # concentric contacts: no gap, an infinite margin
+        expected = min(np.min(lam[~off]) / lam.max(), np.min(clearance[off] / sol.contact_gap[off] - 1.0))
+    assert der.set_margin == pytest.approx(expected, rel=1e-6)
     c0 = np.asarray(robot.clearances, float)
     col = der.d_position_d_clearance[:, 0]
     for h in (1e-8, -1e-8):
